@@ -1,0 +1,2 @@
+//! `excavator-ctl`: the excavator controller.
+fn main() {}

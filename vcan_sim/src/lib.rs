@@ -1,0 +1,1 @@
+//! vcan_sim (under construction).

@@ -1,0 +1,2 @@
+//! `excavator-sim`: the simulated excavator behind its CAN gateway.
+fn main() {}
