@@ -1,0 +1,104 @@
+#!/bin/busybox sh
+# /init of the vcan-vm initramfs (built by scripts/vcan-vm setup; runs as PID 1 in the guest).
+#
+#  1. mounts proc, sys, dev; loads the CAN/9p/virtio modules listed in /etc/vcan-vm/modules, in order;
+#  2. mounts the host root read-only (9p tag "hostroot") at /newroot and the writable results share
+#     (9p tag "results") at /results, plus any read-write shares listed in /results/config;
+#  3. bind-mounts proc/sys/dev into /newroot, mounts tmpfs on /newroot/tmp and /newroot/run, binds the
+#     results share at /newroot/run/vcan-vm;
+#  4. creates and brings up the vcan interfaces, prints the guest kernel version and the interface;
+#  5. chroots into the host root, runs /run/vcan-vm/run.sh (cd + environment + command, written by the
+#     host), writes its exit status to /results/status and powers off.
+# Any failure prints "vcan-vm: FATAL: ..." (and writes /results/error when the share is mounted) and powers
+# off without a status, which the host reports as a failure.
+export PATH=/bin
+umask 022
+
+fatal() {
+  echo "vcan-vm: FATAL: $*"
+  if [ -n "$RESULTS_MOUNTED" ]; then
+    echo "$*" >/results/error
+    sync
+  fi
+  poweroff -f
+  sleep 10
+  exit 1
+}
+
+mount -t proc proc /proc || fatal "cannot mount /proc"
+mount -t sysfs sysfs /sys || fatal "cannot mount /sys"
+mount -t devtmpfs devtmpfs /dev || fatal "cannot mount devtmpfs on /dev"
+[ -e /dev/fd ] || ln -s /proc/self/fd /dev/fd
+[ -e /dev/stdin ] || ln -s /proc/self/fd/0 /dev/stdin
+[ -e /dev/stdout ] || ln -s /proc/self/fd/1 /dev/stdout
+[ -e /dev/stderr ] || ln -s /proc/self/fd/2 /dev/stderr
+# The console is the host's stdout: plain "\n" line ends, no "\r".
+stty -onlcr 2>/dev/null
+hostname vcan-vm
+
+echo "vcan-vm: guest kernel $(uname -r) ($(nproc) CPUs, $(awk '/MemTotal/ {print int($2/1024)}' /proc/meminfo) MiB)"
+
+while read -r mod; do
+  [ -n "$mod" ] || continue
+  insmod "/lib/modules/$mod" || fatal "module $mod failed to load (insmod exit $?)"
+done </etc/vcan-vm/modules
+
+P9OPTS="trans=virtio,version=9p2000.L,msize=512000"
+mkdir -p /newroot /results
+mount -t 9p -o "$P9OPTS,cache=none" results /results || fatal "cannot mount the results share (9p tag results)"
+RESULTS_MOUNTED=1
+[ -r /results/config ] || fatal "no /results/config from the host"
+# shellcheck disable=SC1091
+. /results/config
+mount -t 9p -o "$P9OPTS,cache=loose,ro" hostroot /newroot || fatal "cannot mount the host root (9p tag hostroot)"
+
+for d in proc sys dev tmp run; do
+  [ -d "/newroot/$d" ] || fatal "the host root has no /$d directory to mount on"
+done
+mount --bind /proc /newroot/proc || fatal "cannot bind /proc"
+mount --bind /sys /newroot/sys || fatal "cannot bind /sys"
+mount --bind /dev /newroot/dev || fatal "cannot bind /dev"
+[ -d /newroot/dev/pts ] || mkdir -p /dev/pts
+mount -t devpts -o gid=5,mode=620,ptmxmode=666 devpts /newroot/dev/pts 2>/dev/null
+[ -d /newroot/dev/shm ] || mkdir -p /dev/shm
+mount -t tmpfs -o mode=1777 tmpfs /newroot/dev/shm || fatal "cannot mount /dev/shm"
+mount -t tmpfs -o mode=1777 tmpfs /newroot/tmp || fatal "cannot mount tmpfs on /tmp"
+mount -t tmpfs -o mode=755 tmpfs /newroot/run || fatal "cannot mount tmpfs on /run"
+mkdir -p /newroot/run/vcan-vm
+mount --bind /results /newroot/run/vcan-vm || fatal "cannot bind the results share"
+
+# Read-write shares: VCAN_VM_RW="tag1 path1 tag2 path2 ...", paths without spaces.
+set -- $VCAN_VM_RW
+while [ $# -ge 2 ]; do
+  [ -d "/newroot$2" ] || fatal "read-write share $2 is not a directory in the host root"
+  mount -t 9p -o "$P9OPTS,cache=none" "$1" "/newroot$2" || fatal "cannot mount read-write share $2 (9p tag $1)"
+  echo "vcan-vm: $2 is writable (host share)"
+  shift 2
+done
+
+# iproute2 from the host root knows every link type; busybox ip is the fallback.
+IP="ip"
+DETAILS=""
+for p in /usr/sbin/ip /sbin/ip /usr/bin/ip /bin/ip; do
+  if [ -x "/newroot$p" ] && chroot /newroot "$p" -V >/dev/null 2>&1; then
+    IP="chroot /newroot $p"
+    DETAILS="-details"
+    break
+  fi
+done
+$IP link set dev lo up || fatal "cannot bring up lo"
+for ifc in $VCAN_VM_IFACES; do
+  $IP link add dev "$ifc" type vcan || fatal "cannot create $ifc (ip link add dev $ifc type vcan)"
+  $IP link set dev "$ifc" up || fatal "cannot bring up $ifc"
+  echo "vcan-vm: ip $DETAILS link show $ifc"
+  $IP $DETAILS link show dev "$ifc" || fatal "$ifc does not exist after creating it"
+done
+echo "vcan-vm: ready after $(cut -d' ' -f1 /proc/uptime) s of guest uptime; running in $VCAN_VM_CWD: $VCAN_VM_CMDLINE"
+
+env -i /bin/chroot /newroot /bin/sh /run/vcan-vm/run.sh </dev/null
+status=$?
+echo "$status" >/results/status || fatal "cannot write the exit status to the results share"
+sync
+echo "vcan-vm: command exited with status $status after $(cut -d' ' -f1 /proc/uptime) s of guest uptime"
+poweroff -f
+sleep 10
