@@ -1,1 +1,3 @@
 //! planner (under construction).
+
+pub mod autodig;
