@@ -1,3 +1,4 @@
 //! planner (under construction).
 
 pub mod autodig;
+pub mod cleanup;

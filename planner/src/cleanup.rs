@@ -1,0 +1,846 @@
+//! Floor cleanup (thesis 3.3, Fig. 13): bucket-tip waypoints along the floor in the dig plane, sent at a
+//! fixed rate to the gateway's closed-loop position mode, then a hand-over to Autodig in Pre-Dig.
+//!
+//! A [`Cleanup`] is a pure stepper, `step(inputs, now_s)`, like [`crate::autodig::Autodig`]:
+//!
+//! 1. **Probe** (only when the floor elevation is not known yet, or with [`FloorPolicy::DetectEveryTime`]):
+//!    the tip is lowered slowly at the start radius until it stops following (the measured tip stays
+//!    above the commanded one by `probe_lag_m` for `probe_debounce_s`); the floor elevation is the mean
+//!    measured tip elevation over that held contact and is stored in the [`FloorEstimate`].
+//!    **Descend** (floor known): the tip is lowered at the same speed to the known floor.
+//! 2. **Follow**: waypoints toward the machine along the floor. At a fixed rate the spacing sets the
+//!    speed, so the waypoints start close together and spread out, a velocity ramp up to a maximum speed
+//!    that the position control can follow better than a step (3.3).
+//! 3. **Hand-over** to Autodig in [`crate::autodig::Stage::PreDig`] when the stick reaches its angle
+//!    limit (the bucket never goes under the tracks), when any cylinder pressure stays above a threshold
+//!    for a set time, or at the end of the path (minimum radius).
+//!
+//! Detecting the floor once and reusing it is the change behind the thesis's Table 5 results; the
+//! caller keeps the [`FloorEstimate`] from [`Cleanup::floor_estimate`] between cleanups.
+//!
+//! Frames and units: base frame of docs/ARCHITECTURE.md (`x` forward from the swing axis, `z` up, the
+//! track ground at `z = 0`), m, rad, Pa, s. Absolute angles are `stick_abs = boom + stick` and
+//! `bucket_abs = boom + stick + bucket`.
+
+use crate::autodig::Joint;
+use serde::{Deserialize, Serialize};
+use std::f64::consts::PI;
+
+const MAX_ANGLE_RAD: f64 = 4.0 * PI;
+const MAX_COORD_M: f64 = 100.0;
+const MIN_PRESSURE_PA: f64 = -1.0e6;
+const MAX_PRESSURE_PA: f64 = 100.0e6;
+
+/// Whether the floor elevation is detected once and reused, or on every cleanup.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum FloorPolicy {
+    /// Detect on the first cleanup and reuse the elevation afterwards (the Table 5 system).
+    DetectOnce,
+    /// Detect on every cleanup (the older behaviour, for comparison).
+    DetectEveryTime,
+}
+
+/// The floor elevation used by cleanups, m in the base frame (`z`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FloorEstimate {
+    z_m: Option<f64>,
+    policy: FloorPolicy,
+}
+
+impl FloorEstimate {
+    /// No floor detected yet.
+    pub const fn new(policy: FloorPolicy) -> Self {
+        Self { z_m: None, policy }
+    }
+
+    /// A floor elevation known in advance (e.g. from the plan), used as if detected.
+    ///
+    /// # Errors
+    /// [`CleanupError::NonFinite`] if `z_m` is not finite.
+    pub fn known(z_m: f64, policy: FloorPolicy) -> Result<Self, CleanupError> {
+        if !z_m.is_finite() {
+            return Err(CleanupError::NonFinite { input: "floor z_m" });
+        }
+        Ok(Self {
+            z_m: Some(z_m),
+            policy,
+        })
+    }
+
+    /// The floor elevation, once detected, m.
+    pub fn z_m(&self) -> Option<f64> {
+        self.z_m
+    }
+
+    /// The policy.
+    pub fn policy(&self) -> FloorPolicy {
+        self.policy
+    }
+
+    /// Whether the next cleanup probes for the floor.
+    pub fn needs_detection(&self) -> bool {
+        self.z_m.is_none() || self.policy == FloorPolicy::DetectEveryTime
+    }
+}
+
+/// Errors of cleanup configuration and steps.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum CleanupError {
+    /// An input is NaN or infinite.
+    #[error("cleanup input {input} is not finite")]
+    NonFinite {
+        /// Name of the input.
+        input: &'static str,
+    },
+    /// An input is finite but implausible.
+    #[error("cleanup input {input} = {value} is out of range")]
+    OutOfRange {
+        /// Name of the input.
+        input: &'static str,
+        /// The offending value.
+        value: f64,
+    },
+    /// `now_s` is earlier than the previous step's.
+    #[error("cleanup time went backwards: now {now_s} s < previous {previous_s} s")]
+    TimeWentBackwards {
+        /// The time passed in.
+        now_s: f64,
+        /// The previous step's time.
+        previous_s: f64,
+    },
+    /// A configuration or plan value is invalid.
+    #[error("cleanup config {field}: {reason}")]
+    InvalidConfig {
+        /// The field.
+        field: &'static str,
+        /// What is wrong with it.
+        reason: &'static str,
+    },
+    /// The probe went `probe_max_depth_m` down without touching anything; the cleanup is abandoned
+    /// (every later step returns this error too).
+    #[error("cleanup found no floor within {depth_m} m below the start")]
+    FloorNotFound {
+        /// How far the probe went down, m.
+        depth_m: f64,
+    },
+}
+
+mod serde_deg {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub(super) fn serialize<S: Serializer>(rad: &f64, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_f64(rad.to_degrees())
+    }
+
+    pub(super) fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        f64::deserialize(d).map(f64::to_radians)
+    }
+}
+
+/// Cleanup parameters. Angles are radians in Rust, degrees in TOML/JSON.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CleanupConfig {
+    /// Waypoint period, s: one waypoint per control step. Default 0.01.
+    pub period_s: f64,
+    /// Tip speed at the first floor waypoints, m/s. Default 0.01.
+    pub initial_speed_m_per_s: f64,
+    /// Ramp acceleration, m/s^2. Default 0.1.
+    pub ramp_accel_m_per_s2: f64,
+    /// Maximum tip speed along the floor (largest spacing = this x period), m/s. Default 0.3.
+    pub max_speed_m_per_s: f64,
+    /// Lowering speed while probing for or descending to the floor, m/s. Default 0.1.
+    pub descent_speed_m_per_s: f64,
+    /// Probe contact: measured tip above the commanded one by at least this, m. Default 0.05.
+    pub probe_lag_m: f64,
+    /// Probe contact must hold this long, s. Default 0.2.
+    pub probe_debounce_s: f64,
+    /// Probe gives up this far below the start, m. Default 1.5.
+    pub probe_max_depth_m: f64,
+    /// Absolute bucket angle held along the floor. Default -150 deg.
+    #[serde(rename = "bucket_abs_deg", with = "serde_deg")]
+    pub bucket_abs_rad: f64,
+    /// Hand over when `stick_abs <= stick_limit` (stick in, bucket near the tracks). Default -115 deg.
+    #[serde(rename = "stick_limit_deg", with = "serde_deg")]
+    pub stick_limit_rad: f64,
+    /// Relief pressures `[boom, stick, bucket]`, Pa. Default 34.3e6 each.
+    pub relief_pressure_pa: [f64; 3],
+    /// Pressure threshold in percent of relief: hand over when any port (head or rod) of any cylinder
+    /// stays at or above it for `pressure_hold_s`. Default 85.
+    pub pressure_threshold_pct: f64,
+    /// How long the pressure must stay above the threshold without a break, s. Default 0.2.
+    pub pressure_hold_s: f64,
+    /// At the path end, hand over once the tip is within this of the end point, m. Default 0.05.
+    pub arrive_tolerance_m: f64,
+    /// At the path end, hand over at the latest this long after commanding the end point, s.
+    /// Default 0.5.
+    pub end_settle_s: f64,
+}
+
+impl Default for CleanupConfig {
+    fn default() -> Self {
+        Self {
+            period_s: 0.01,
+            initial_speed_m_per_s: 0.01,
+            ramp_accel_m_per_s2: 0.1,
+            max_speed_m_per_s: 0.3,
+            descent_speed_m_per_s: 0.1,
+            probe_lag_m: 0.05,
+            probe_debounce_s: 0.2,
+            probe_max_depth_m: 1.5,
+            bucket_abs_rad: (-150.0_f64).to_radians(),
+            stick_limit_rad: (-115.0_f64).to_radians(),
+            relief_pressure_pa: [34.3e6; 3],
+            pressure_threshold_pct: 85.0,
+            pressure_hold_s: 0.2,
+            arrive_tolerance_m: 0.05,
+            end_settle_s: 0.5,
+        }
+    }
+}
+
+impl CleanupConfig {
+    /// Checks ranges and finiteness.
+    ///
+    /// # Errors
+    /// [`CleanupError::InvalidConfig`] naming the field.
+    pub fn validate(&self) -> Result<(), CleanupError> {
+        let bad = |field, reason| Err(CleanupError::InvalidConfig { field, reason });
+        let positive = [
+            ("period_s", self.period_s),
+            ("initial_speed_m_per_s", self.initial_speed_m_per_s),
+            ("ramp_accel_m_per_s2", self.ramp_accel_m_per_s2),
+            ("max_speed_m_per_s", self.max_speed_m_per_s),
+            ("descent_speed_m_per_s", self.descent_speed_m_per_s),
+            ("probe_lag_m", self.probe_lag_m),
+            ("probe_max_depth_m", self.probe_max_depth_m),
+            ("pressure_threshold_pct", self.pressure_threshold_pct),
+            ("arrive_tolerance_m", self.arrive_tolerance_m),
+        ];
+        for (field, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return bad(field, "must be finite and > 0");
+            }
+        }
+        let non_negative = [
+            ("probe_debounce_s", self.probe_debounce_s),
+            ("pressure_hold_s", self.pressure_hold_s),
+            ("end_settle_s", self.end_settle_s),
+        ];
+        for (field, v) in non_negative {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(field, "must be finite and >= 0");
+            }
+        }
+        if self.initial_speed_m_per_s > self.max_speed_m_per_s {
+            return bad("initial_speed_m_per_s", "must not exceed max_speed_m_per_s");
+        }
+        for (field, a) in [
+            ("bucket_abs_deg", self.bucket_abs_rad),
+            ("stick_limit_deg", self.stick_limit_rad),
+        ] {
+            if !(a.is_finite() && a.abs() <= MAX_ANGLE_RAD) {
+                return bad(field, "must be finite and within +-720 deg");
+            }
+        }
+        if self
+            .relief_pressure_pa
+            .iter()
+            .any(|p| !(p.is_finite() && *p > 0.0))
+        {
+            return bad("relief_pressure_pa", "must be finite and > 0");
+        }
+        Ok(())
+    }
+
+    /// Distance travelled along the floor `t_s` after the ramp starts (3.3): speed rises linearly from
+    /// `initial_speed` at `ramp_accel` and is capped at `max_speed`, m.
+    pub fn ramp_distance_m(&self, t_s: f64) -> f64 {
+        let t = t_s.max(0.0);
+        let (v0, a, vmax) = (
+            self.initial_speed_m_per_s,
+            self.ramp_accel_m_per_s2,
+            self.max_speed_m_per_s,
+        );
+        let t_ramp = (vmax - v0) / a;
+        if t <= t_ramp {
+            v0 * t + 0.5 * a * t * t
+        } else {
+            v0 * t_ramp + 0.5 * a * t_ramp * t_ramp + vmax * (t - t_ramp)
+        }
+    }
+}
+
+/// Where one cleanup runs in the dig plane (from the cleanup planner).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CleanupPlan {
+    /// Radius at which the tip reaches the floor, just beyond the material boundary, m.
+    pub start_radius_m: f64,
+    /// Smallest radius the tip may reach (keeps the bucket off the tracks), m; `< start_radius_m`.
+    pub min_radius_m: f64,
+}
+
+/// Sensor inputs of one cleanup step (the caller computes the tip from the joint angles).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct CleanupInputs {
+    /// Measured bucket tip `x` in the base frame, m.
+    pub tip_x_m: f64,
+    /// Measured bucket tip `z` in the base frame, m.
+    pub tip_z_m: f64,
+    /// Absolute stick angle `boom + stick`, rad.
+    pub stick_abs_rad: f64,
+    /// Head-port pressures `[boom, stick, bucket]`, Pa.
+    pub head_pressure_pa: [f64; 3],
+    /// Rod-port pressures `[boom, stick, bucket]`, Pa.
+    pub rod_pressure_pa: [f64; 3],
+}
+
+impl CleanupInputs {
+    fn validate(&self) -> Result<(), CleanupError> {
+        const HEAD: [&str; 3] = [
+            "boom head_pressure_pa",
+            "stick head_pressure_pa",
+            "bucket head_pressure_pa",
+        ];
+        const ROD: [&str; 3] = [
+            "boom rod_pressure_pa",
+            "stick rod_pressure_pa",
+            "bucket rod_pressure_pa",
+        ];
+        let check = |input: &'static str, v: f64, lo: f64, hi: f64| {
+            if !v.is_finite() {
+                Err(CleanupError::NonFinite { input })
+            } else if v < lo || v > hi {
+                Err(CleanupError::OutOfRange { input, value: v })
+            } else {
+                Ok(())
+            }
+        };
+        check("tip_x_m", self.tip_x_m, -MAX_COORD_M, MAX_COORD_M)?;
+        check("tip_z_m", self.tip_z_m, -MAX_COORD_M, MAX_COORD_M)?;
+        check(
+            "stick_abs_rad",
+            self.stick_abs_rad,
+            -MAX_ANGLE_RAD,
+            MAX_ANGLE_RAD,
+        )?;
+        for j in 0..3 {
+            check(
+                HEAD[j],
+                self.head_pressure_pa[j],
+                MIN_PRESSURE_PA,
+                MAX_PRESSURE_PA,
+            )?;
+            check(
+                ROD[j],
+                self.rod_pressure_pa[j],
+                MIN_PRESSURE_PA,
+                MAX_PRESSURE_PA,
+            )?;
+        }
+        Ok(())
+    }
+}
+
+/// A bucket-tip setpoint for the gateway's position mode, base frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Waypoint {
+    /// Tip `x`, m.
+    pub x_m: f64,
+    /// Tip `z`, m.
+    pub z_m: f64,
+    /// Absolute bucket angle, rad.
+    pub bucket_abs_rad: f64,
+}
+
+/// Why the waypoint following ended (3.3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum HandOverReason {
+    /// The stick reached its angle limit (never under the tracks).
+    StickAngleLimit,
+    /// A port of this cylinder stayed above the pressure threshold for the hold time.
+    HighPressure(Joint),
+    /// The path ended at the minimum radius.
+    MinRadius,
+}
+
+/// Result of one cleanup step.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub enum CleanupOutput {
+    /// Send this setpoint.
+    Waypoint(Waypoint),
+    /// Stop following; start Autodig in Pre-Dig (`Autodig::starting_in(.., Stage::PreDig)`). Repeated on
+    /// every later step.
+    HandOver(HandOverReason),
+}
+
+/// Phase of a cleanup.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum CleanupPhase {
+    /// Lowering slowly at the start radius to detect the floor.
+    Probe,
+    /// Lowering to the known floor elevation.
+    Descend,
+    /// Following the floor toward the machine with the velocity ramp.
+    Follow,
+    /// Handed over to Autodig.
+    HandedOver,
+    /// No floor found; the cleanup is abandoned.
+    Failed,
+}
+
+/// The cleanup waypoint generator.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Cleanup {
+    config: CleanupConfig,
+    plan: CleanupPlan,
+    floor: FloorEstimate,
+    phase: CleanupPhase,
+    phase_start_s: Option<f64>,
+    last_now_s: Option<f64>,
+    start_z_m: Option<f64>,
+    probe_since_s: Option<f64>,
+    probe_z_sum_m: f64,
+    probe_z_count: u32,
+    high_since_s: Option<f64>,
+    end_commanded_s: Option<f64>,
+    hand_over: Option<HandOverReason>,
+    failed_depth_m: f64,
+}
+
+impl Cleanup {
+    /// A cleanup for `plan` using the floor estimate kept from earlier cleanups.
+    ///
+    /// # Errors
+    /// [`CleanupError::InvalidConfig`] for a bad config or plan (non-finite radii, or
+    /// `min_radius_m >= start_radius_m`).
+    pub fn new(
+        config: CleanupConfig,
+        plan: CleanupPlan,
+        floor: FloorEstimate,
+    ) -> Result<Self, CleanupError> {
+        config.validate()?;
+        if !(plan.start_radius_m.is_finite() && plan.min_radius_m.is_finite()) {
+            return Err(CleanupError::InvalidConfig {
+                field: "plan",
+                reason: "radii must be finite",
+            });
+        }
+        if plan.min_radius_m >= plan.start_radius_m {
+            return Err(CleanupError::InvalidConfig {
+                field: "plan.min_radius_m",
+                reason: "must be below start_radius_m",
+            });
+        }
+        let phase = if floor.needs_detection() {
+            CleanupPhase::Probe
+        } else {
+            CleanupPhase::Descend
+        };
+        Ok(Self {
+            config,
+            plan,
+            floor,
+            phase,
+            phase_start_s: None,
+            last_now_s: None,
+            start_z_m: None,
+            probe_since_s: None,
+            probe_z_sum_m: 0.0,
+            probe_z_count: 0,
+            high_since_s: None,
+            end_commanded_s: None,
+            hand_over: None,
+            failed_depth_m: 0.0,
+        })
+    }
+
+    /// The current phase.
+    pub fn phase(&self) -> CleanupPhase {
+        self.phase
+    }
+
+    /// The floor estimate, updated once the probe detects the floor; keep it for the next cleanup.
+    pub fn floor_estimate(&self) -> FloorEstimate {
+        self.floor
+    }
+
+    /// One step at time `now_s` (s, any monotonic clock; call it every `period_s`). No allocation, no
+    /// panics.
+    ///
+    /// # Errors
+    /// Bad inputs ([`CleanupError::NonFinite`], [`CleanupError::OutOfRange`],
+    /// [`CleanupError::TimeWentBackwards`]): hold position or go neutral; the state is kept but running
+    /// debounce timers restart. [`CleanupError::FloorNotFound`] once the probe gave up.
+    pub fn step(
+        &mut self,
+        inputs: &CleanupInputs,
+        now_s: f64,
+    ) -> Result<CleanupOutput, CleanupError> {
+        if self.phase == CleanupPhase::Failed {
+            return Err(CleanupError::FloorNotFound {
+                depth_m: self.failed_depth_m,
+            });
+        }
+        if let Some(reason) = self.hand_over {
+            return Ok(CleanupOutput::HandOver(reason));
+        }
+        let checked = if !now_s.is_finite() {
+            Err(CleanupError::NonFinite { input: "now_s" })
+        } else if let Some(previous_s) = self.last_now_s.filter(|&p| now_s < p) {
+            Err(CleanupError::TimeWentBackwards { now_s, previous_s })
+        } else {
+            inputs.validate()
+        };
+        if let Err(e) = checked {
+            self.probe_since_s = None;
+            self.probe_z_sum_m = 0.0;
+            self.probe_z_count = 0;
+            self.high_since_s = None;
+            return Err(e);
+        }
+        self.last_now_s = Some(now_s);
+        let start_z = *self.start_z_m.get_or_insert(inputs.tip_z_m);
+        let phase_start = *self.phase_start_s.get_or_insert(now_s);
+
+        // 3.3: the stick-angle limit ends following in every phase.
+        if inputs.stick_abs_rad <= self.config.stick_limit_rad {
+            return Ok(self.finish(HandOverReason::StickAngleLimit));
+        }
+        if self.phase != CleanupPhase::Probe
+            && let Some(joint) = self.high_pressure(inputs, now_s)
+        {
+            return Ok(self.finish(HandOverReason::HighPressure(joint)));
+        }
+
+        let cfg = self.config;
+        let t_k = self.scheduled_time(now_s, phase_start);
+        match self.phase {
+            CleanupPhase::Probe => {
+                let depth = (cfg.descent_speed_m_per_s * t_k).min(cfg.probe_max_depth_m);
+                let z_cmd = start_z - depth;
+                if inputs.tip_z_m - z_cmd >= cfg.probe_lag_m {
+                    let since = *self.probe_since_s.get_or_insert(now_s);
+                    self.probe_z_sum_m += inputs.tip_z_m;
+                    self.probe_z_count = self.probe_z_count.saturating_add(1);
+                    if now_s - since >= cfg.probe_debounce_s {
+                        let floor_z = self.probe_z_sum_m / f64::from(self.probe_z_count.max(1));
+                        self.floor.z_m = Some(floor_z);
+                        return Ok(self.begin_follow(now_s));
+                    }
+                } else {
+                    self.probe_since_s = None;
+                    self.probe_z_sum_m = 0.0;
+                    self.probe_z_count = 0;
+                    if depth >= cfg.probe_max_depth_m {
+                        self.phase = CleanupPhase::Failed;
+                        self.failed_depth_m = depth;
+                        return Err(CleanupError::FloorNotFound { depth_m: depth });
+                    }
+                }
+                Ok(self.waypoint(self.plan.start_radius_m, z_cmd))
+            }
+            CleanupPhase::Descend => {
+                let floor_z = self.floor.z_m.unwrap_or(start_z);
+                let z_cmd = start_z - cfg.descent_speed_m_per_s * t_k;
+                if z_cmd <= floor_z {
+                    return Ok(self.begin_follow(now_s));
+                }
+                Ok(self.waypoint(self.plan.start_radius_m, z_cmd))
+            }
+            CleanupPhase::Follow => {
+                let floor_z = self.floor.z_m.unwrap_or(start_z);
+                let x_cmd = self.plan.start_radius_m - cfg.ramp_distance_m(t_k);
+                if x_cmd > self.plan.min_radius_m {
+                    return Ok(self.waypoint(x_cmd, floor_z));
+                }
+                let end_s = *self.end_commanded_s.get_or_insert(now_s);
+                let arrived = (inputs.tip_x_m - self.plan.min_radius_m).abs()
+                    <= cfg.arrive_tolerance_m
+                    && (inputs.tip_z_m - floor_z).abs() <= cfg.arrive_tolerance_m;
+                if arrived || now_s - end_s >= cfg.end_settle_s {
+                    return Ok(self.finish(HandOverReason::MinRadius));
+                }
+                Ok(self.waypoint(self.plan.min_radius_m, floor_z))
+            }
+            CleanupPhase::HandedOver | CleanupPhase::Failed => {
+                // Handled above; kept total so a future phase cannot fall through to a panic.
+                Ok(self.finish(HandOverReason::MinRadius))
+            }
+        }
+    }
+
+    /// Time of the waypoint due at `now_s`: waypoints are on a fixed `period_s` grid from the phase start.
+    fn scheduled_time(&self, now_s: f64, phase_start_s: f64) -> f64 {
+        let k = ((now_s - phase_start_s) / self.config.period_s + 1e-9)
+            .floor()
+            .max(0.0);
+        k * self.config.period_s
+    }
+
+    fn begin_follow(&mut self, now_s: f64) -> CleanupOutput {
+        self.phase = CleanupPhase::Follow;
+        self.phase_start_s = Some(now_s);
+        let z = self.floor.z_m.unwrap_or_default();
+        self.waypoint(self.plan.start_radius_m, z)
+    }
+
+    fn finish(&mut self, reason: HandOverReason) -> CleanupOutput {
+        self.phase = CleanupPhase::HandedOver;
+        self.hand_over = Some(reason);
+        CleanupOutput::HandOver(reason)
+    }
+
+    fn waypoint(&self, x_m: f64, z_m: f64) -> CleanupOutput {
+        CleanupOutput::Waypoint(Waypoint {
+            x_m,
+            z_m,
+            bucket_abs_rad: self.config.bucket_abs_rad,
+        })
+    }
+
+    /// The cylinder with a port above the threshold for the hold time, if any (3.3: "exceeds some
+    /// threshold for a brief period of time").
+    fn high_pressure(&mut self, inputs: &CleanupInputs, now_s: f64) -> Option<Joint> {
+        let cfg = &self.config;
+        let high = [Joint::Boom, Joint::Stick, Joint::Bucket]
+            .into_iter()
+            .find(|j| {
+                let i = j.index();
+                let limit = cfg.pressure_threshold_pct / 100.0 * cfg.relief_pressure_pa[i];
+                inputs.head_pressure_pa[i] >= limit || inputs.rod_pressure_pa[i] >= limit
+            });
+        let Some(joint) = high else {
+            self.high_since_s = None;
+            return None;
+        };
+        let since = *self.high_since_s.get_or_insert(now_s);
+        (now_s - since >= cfg.pressure_hold_s).then_some(joint)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const DT_S: f64 = 0.01;
+    const START_RADIUS_M: f64 = 7.0;
+    const MIN_RADIUS_M: f64 = 4.0;
+    const START_Z_M: f64 = 0.2;
+    /// Where the ground actually is under the start radius.
+    const TRUE_FLOOR_Z_M: f64 = -1.0;
+    const LOW_PRESSURE_PA: f64 = 5.0e6;
+    const HIGH_PRESSURE_PA: f64 = 32.0e6;
+    const STICK_OUT_RAD: f64 = -1.0;
+
+    fn plan() -> CleanupPlan {
+        CleanupPlan {
+            start_radius_m: START_RADIUS_M,
+            min_radius_m: MIN_RADIUS_M,
+        }
+    }
+
+    fn inputs_at(x: f64, z: f64) -> CleanupInputs {
+        CleanupInputs {
+            tip_x_m: x,
+            tip_z_m: z,
+            stick_abs_rad: STICK_OUT_RAD,
+            head_pressure_pa: [LOW_PRESSURE_PA; 3],
+            rod_pressure_pa: [LOW_PRESSURE_PA; 3],
+        }
+    }
+
+    /// A perfect position controller on ground at `TRUE_FLOOR_Z_M`: the tip follows the last waypoint
+    /// but cannot go below the ground.
+    fn simulate(cleanup: &mut Cleanup, max_s: f64) -> (Vec<Waypoint>, Option<HandOverReason>, f64) {
+        let mut tip = (START_RADIUS_M, START_Z_M);
+        let mut points = Vec::new();
+        let mut t = 0.0;
+        while t < max_s {
+            match cleanup
+                .step(&inputs_at(tip.0, tip.1), t)
+                .expect("valid step")
+            {
+                CleanupOutput::Waypoint(w) => {
+                    tip = (w.x_m, w.z_m.max(TRUE_FLOOR_Z_M));
+                    points.push(w);
+                }
+                CleanupOutput::HandOver(r) => return (points, Some(r), t),
+            }
+            t += DT_S;
+        }
+        (points, None, t)
+    }
+
+    #[test]
+    fn ramp_spacing_grows_monotonically_to_the_cap() {
+        let cfg = CleanupConfig::default();
+        let floor = FloorEstimate::known(TRUE_FLOOR_Z_M, FloorPolicy::DetectOnce).expect("finite");
+        let mut c = Cleanup::new(cfg, plan(), floor).expect("valid");
+        let (points, reason, _) = simulate(&mut c, 60.0);
+        assert_eq!(reason, Some(HandOverReason::MinRadius));
+        let floor_pts: Vec<f64> = points
+            .iter()
+            .filter(|w| w.z_m == TRUE_FLOOR_Z_M && w.x_m > MIN_RADIUS_M)
+            .map(|w| w.x_m)
+            .collect();
+        let spacing: Vec<f64> = floor_pts.windows(2).map(|w| w[0] - w[1]).collect();
+        let cap = cfg.max_speed_m_per_s * cfg.period_s;
+        assert!(
+            spacing[0] < 0.1 * cap,
+            "first spacing {} should be small",
+            spacing[0]
+        );
+        for w in spacing.windows(2) {
+            assert!(w[1] >= w[0] - 1e-12, "spacing shrank: {} -> {}", w[0], w[1]);
+        }
+        assert!(spacing.iter().all(|&s| s <= cap + 1e-12));
+        assert!(
+            spacing.iter().any(|&s| (s - cap).abs() < 1e-9),
+            "spacing reaches the cap"
+        );
+    }
+
+    #[test]
+    fn probe_detects_floor_once_and_reuses_it() {
+        let cfg = CleanupConfig::default();
+        let mut c =
+            Cleanup::new(cfg, plan(), FloorEstimate::new(FloorPolicy::DetectOnce)).expect("valid");
+        assert_eq!(c.phase(), CleanupPhase::Probe);
+        let (_, reason, _) = simulate(&mut c, 60.0);
+        assert_eq!(reason, Some(HandOverReason::MinRadius));
+        let floor = c.floor_estimate();
+        let z = floor.z_m().expect("detected");
+        assert!((z - TRUE_FLOOR_Z_M).abs() < 1e-9, "floor {z}");
+        assert!(!floor.needs_detection());
+        let next = Cleanup::new(cfg, plan(), floor).expect("valid");
+        assert_eq!(next.phase(), CleanupPhase::Descend);
+
+        let every = FloorEstimate::known(z, FloorPolicy::DetectEveryTime).expect("finite");
+        assert!(every.needs_detection());
+        assert_eq!(
+            Cleanup::new(cfg, plan(), every).expect("valid").phase(),
+            CleanupPhase::Probe
+        );
+    }
+
+    #[test]
+    fn probe_without_ground_fails() {
+        let cfg = CleanupConfig::default();
+        let mut c =
+            Cleanup::new(cfg, plan(), FloorEstimate::new(FloorPolicy::DetectOnce)).expect("valid");
+        let mut t = 0.0;
+        let mut result = Ok(CleanupOutput::HandOver(HandOverReason::MinRadius));
+        // The tip follows every waypoint: nothing is under it.
+        let mut tip = (START_RADIUS_M, START_Z_M);
+        for _ in 0..5000 {
+            result = c.step(&inputs_at(tip.0, tip.1), t);
+            match result {
+                Ok(CleanupOutput::Waypoint(w)) => tip = (w.x_m, w.z_m),
+                _ => break,
+            }
+            t += DT_S;
+        }
+        assert!(matches!(result, Err(CleanupError::FloorNotFound { .. })));
+        assert!(matches!(
+            c.step(&inputs_at(tip.0, tip.1), t + DT_S),
+            Err(CleanupError::FloorNotFound { .. })
+        ));
+    }
+
+    #[test]
+    fn stick_limit_hands_over() {
+        let floor = FloorEstimate::known(TRUE_FLOOR_Z_M, FloorPolicy::DetectOnce).expect("finite");
+        let cfg = CleanupConfig::default();
+        let mut c = Cleanup::new(cfg, plan(), floor).expect("valid");
+        let mut i = inputs_at(START_RADIUS_M, START_Z_M);
+        assert!(matches!(c.step(&i, 0.0), Ok(CleanupOutput::Waypoint(_))));
+        i.stick_abs_rad = cfg.stick_limit_rad - 0.01;
+        assert_eq!(
+            c.step(&i, DT_S),
+            Ok(CleanupOutput::HandOver(HandOverReason::StickAngleLimit))
+        );
+        assert_eq!(c.phase(), CleanupPhase::HandedOver);
+        // Sticky.
+        i.stick_abs_rad = STICK_OUT_RAD;
+        assert_eq!(
+            c.step(&i, 2.0 * DT_S),
+            Ok(CleanupOutput::HandOver(HandOverReason::StickAngleLimit))
+        );
+    }
+
+    #[test]
+    fn pressure_condition_needs_the_hold_time() {
+        let floor = FloorEstimate::known(START_Z_M, FloorPolicy::DetectOnce).expect("finite");
+        let cfg = CleanupConfig::default();
+        let mut c = Cleanup::new(cfg, plan(), floor).expect("valid");
+        let low = inputs_at(START_RADIUS_M, START_Z_M);
+        let mut high = low;
+        high.rod_pressure_pa[1] = HIGH_PRESSURE_PA; // 93 % of relief on the stick rod port
+        let mut t = 0.0;
+        assert!(matches!(c.step(&low, t), Ok(CleanupOutput::Waypoint(_))));
+        // A spike shorter than the hold time, interrupted by a normal reading.
+        let spike_steps = (cfg.pressure_hold_s / DT_S) as usize / 2;
+        for _ in 0..spike_steps {
+            t += DT_S;
+            assert!(matches!(c.step(&high, t), Ok(CleanupOutput::Waypoint(_))));
+        }
+        t += DT_S;
+        assert!(matches!(c.step(&low, t), Ok(CleanupOutput::Waypoint(_))));
+        // Held for the hold time: hand over.
+        let t0 = t + DT_S;
+        let mut out = c.step(&high, t0).expect("valid");
+        while t < t0 + cfg.pressure_hold_s + DT_S {
+            t += DT_S;
+            out = c.step(&high, t).expect("valid");
+            if matches!(out, CleanupOutput::HandOver(_)) {
+                assert!(
+                    t - t0 >= cfg.pressure_hold_s - 1e-9,
+                    "handed over after {} s",
+                    t - t0
+                );
+                break;
+            }
+        }
+        assert_eq!(
+            out,
+            CleanupOutput::HandOver(HandOverReason::HighPressure(Joint::Stick))
+        );
+    }
+
+    #[test]
+    fn bad_inputs_are_errors_and_bad_plans_rejected() {
+        let floor = FloorEstimate::new(FloorPolicy::DetectOnce);
+        let cfg = CleanupConfig::default();
+        let mut c = Cleanup::new(cfg, plan(), floor).expect("valid");
+        let mut i = inputs_at(START_RADIUS_M, START_Z_M);
+        i.tip_z_m = f64::NAN;
+        assert_eq!(
+            c.step(&i, 0.0),
+            Err(CleanupError::NonFinite { input: "tip_z_m" })
+        );
+        i.tip_z_m = START_Z_M;
+        i.head_pressure_pa[2] = 1.0e9;
+        assert!(matches!(
+            c.step(&i, 0.0),
+            Err(CleanupError::OutOfRange { .. })
+        ));
+        i.head_pressure_pa[2] = LOW_PRESSURE_PA;
+        assert!(c.step(&i, 1.0).is_ok());
+        assert!(matches!(
+            c.step(&i, 0.5),
+            Err(CleanupError::TimeWentBackwards { .. })
+        ));
+        let backwards = CleanupPlan {
+            start_radius_m: 3.0,
+            min_radius_m: 4.0,
+        };
+        assert!(Cleanup::new(cfg, backwards, floor).is_err());
+        let nan_cfg = CleanupConfig {
+            max_speed_m_per_s: f64::NAN,
+            ..cfg
+        };
+        assert!(Cleanup::new(nan_cfg, plan(), floor).is_err());
+        assert!(FloorEstimate::known(f64::INFINITY, FloorPolicy::DetectOnce).is_err());
+    }
+}
