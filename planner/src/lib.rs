@@ -1,4 +1,19 @@
-//! planner (under construction).
+//! planner: excavator physics and planning after Cannon (CMU 1999).
+//!
+//! Layout (data flows top to bottom):
+//! - [`machine`]: the machine description (`config/machine.toml`): geometry, cylinders, masses, hydraulics.
+//! - [`kinematics`]: joint angles <-> cylinder lengths, forward/inverse kinematics, Jacobian, gravity and
+//!   tip forces <-> cylinder forces (Appendix, Eqs. A1-A23).
+//! - [`terrain`]: the 2.5-D elevation grid, section profiles, cutting, spoil piles and the swept-volume
+//!   integrator (thesis 3.2).
+//! - [`soil`]: soil-tool force models, analytical (modified FEE, Eqs. 14-19) and empirical (Eq. 21), and
+//!   the bucket-terrain intersection geometry Gamma.
+//! - [`autodig`]: the Autodig state machine and its pressure-to-command maps (thesis 3.1-3.2, Figs. 9-11).
+//! - [`cleanup`]: floor-cleanup waypoints and the hand-over to Autodig (thesis 3.3, Fig. 13).
 
 pub mod autodig;
 pub mod cleanup;
+pub mod kinematics;
+pub mod machine;
+pub mod soil;
+pub mod terrain;

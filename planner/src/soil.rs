@@ -1,0 +1,1 @@
+//! Soil-tool force models (under construction).

@@ -1,0 +1,1 @@
+//! Terrain: the 2.5-D elevation grid (under construction).
