@@ -12,9 +12,7 @@ use std::sync::mpsc;
 use std::thread;
 use std::time::{Duration, Instant};
 
-use socketcan::{
-    CanFrame, CanSocket, EmbeddedFrame, ExtendedId, Frame, Id, Socket, StandardId,
-};
+use socketcan::{CanFrame, CanSocket, EmbeddedFrame, ExtendedId, Frame, Id, Socket, StandardId};
 
 /// How long to wait for a frame or for candump's output; generous because the VM runs under TCG.
 const WAIT: Duration = Duration::from_secs(20);
@@ -31,17 +29,27 @@ fn vcan_iface() -> String {
          sudo ip link set up {iface}"
     );
     let kind = std::fs::read_to_string(sys.join("type")).unwrap_or_default();
-    assert_eq!(kind.trim(), "280", "{iface} is not a CAN interface (ARPHRD type {})", kind.trim());
+    assert_eq!(
+        kind.trim(),
+        "280",
+        "{iface} is not a CAN interface (ARPHRD type {})",
+        kind.trim()
+    );
     let flags = std::fs::read_to_string(sys.join("flags")).unwrap_or_default();
     let flags = u32::from_str_radix(flags.trim().trim_start_matches("0x"), 16).unwrap_or(0);
-    assert!(flags & 1 == 1, "{iface} is down: sudo ip link set up {iface}");
+    assert!(
+        flags & 1 == 1,
+        "{iface} is down: sudo ip link set up {iface}"
+    );
     iface
 }
 
 fn open(iface: &str) -> CanSocket {
     let socket = CanSocket::open(iface)
         .unwrap_or_else(|e| panic!("cannot open a SocketCAN socket on {iface}: {e}"));
-    socket.set_read_timeout(Duration::from_millis(200)).expect("set_read_timeout");
+    socket
+        .set_read_timeout(Duration::from_millis(200))
+        .expect("set_read_timeout");
     socket
 }
 
@@ -82,7 +90,9 @@ fn require_tool(name: &str) -> String {
             return candidate.to_string_lossy().into_owned();
         }
     }
-    panic!("{name} (can-utils) is not on PATH: apt-get install can-utils (scripts/vcan-vm setup does)");
+    panic!(
+        "{name} (can-utils) is not on PATH: apt-get install can-utils (scripts/vcan-vm setup does)"
+    );
 }
 
 #[test]
@@ -91,11 +101,17 @@ fn extended_frame_travels_between_two_sockets() {
     let iface = vcan_iface();
     let rx = open(&iface);
     let tx = open(&iface);
-    let sent = extended(0x0CFE_3027, &[0x01, 0x02, 0x03, 0x04, 0xA5, 0x5A, 0xFE, 0xFF]);
+    let sent = extended(
+        0x0CFE_3027,
+        &[0x01, 0x02, 0x03, 0x04, 0xA5, 0x5A, 0xFE, 0xFF],
+    );
     tx.write_frame(&sent).expect("write_frame");
 
     let got = receive_id(&rx, sent.id());
-    assert!(got.is_extended(), "the received frame lost its extended (29-bit) id");
+    assert!(
+        got.is_extended(),
+        "the received frame lost its extended (29-bit) id"
+    );
     assert_eq!(got.raw_id(), 0x0CFE_3027);
     assert_eq!(got.data(), sent.data());
     assert_eq!(got.dlc(), 8);
@@ -111,7 +127,10 @@ fn cansend_frame_reaches_a_socket() {
         .args([iface.as_str(), "18FEF180#1122334455"])
         .status()
         .expect("run cansend");
-    assert!(status.success(), "cansend {iface} 18FEF180#1122334455 failed: {status}");
+    assert!(
+        status.success(),
+        "cansend {iface} 18FEF180#1122334455 failed: {status}"
+    );
 
     let want = Id::Extended(ExtendedId::new(0x18FE_F180).expect("29-bit id"));
     let got = receive_id(&rx, want);
@@ -134,10 +153,12 @@ fn parse_candump_line<'a>(line: &'a str, iface: &str) -> &'a str {
     let rest = line
         .strip_prefix('(')
         .unwrap_or_else(|| panic!("candump line does not start with '(': {line:?}"));
-    let (stamp, rest) =
-        rest.split_once(") ").unwrap_or_else(|| panic!("no ') ' after the timestamp: {line:?}"));
-    let (secs, micros) =
-        stamp.split_once('.').unwrap_or_else(|| panic!("timestamp without '.': {line:?}"));
+    let (stamp, rest) = rest
+        .split_once(") ")
+        .unwrap_or_else(|| panic!("no ') ' after the timestamp: {line:?}"));
+    let (secs, micros) = stamp
+        .split_once('.')
+        .unwrap_or_else(|| panic!("timestamp without '.': {line:?}"));
     assert!(
         !secs.is_empty()
             && secs.bytes().all(|b| b.is_ascii_digit())
@@ -147,7 +168,9 @@ fn parse_candump_line<'a>(line: &'a str, iface: &str) -> &'a str {
     );
     let mut fields = rest.split_whitespace();
     assert_eq!(fields.next(), Some(iface), "interface field: {line:?}");
-    let frame = fields.next().unwrap_or_else(|| panic!("no ID#DATA field: {line:?}"));
+    let frame = fields
+        .next()
+        .unwrap_or_else(|| panic!("no ID#DATA field: {line:?}"));
     assert_eq!(fields.next(), None, "trailing fields: {line:?}");
     frame
 }
@@ -187,10 +210,19 @@ fn candump_log_format_shows_sent_frames() {
             }
         }
     }
-    assert!(synced, "candump -L {iface} printed no marker frame within {WAIT:?}");
+    assert!(
+        synced,
+        "candump -L {iface} printed no marker frame within {WAIT:?}"
+    );
 
     let frames = [
-        (extended(0x0CFE_3027, &[0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07, 0x08]), "0CFE3027#0102030405060708"),
+        (
+            extended(
+                0x0CFE_3027,
+                &[0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07, 0x08],
+            ),
+            "0CFE3027#0102030405060708",
+        ),
         (standard(0x123, &[0xDE, 0xAD, 0xBE, 0xEF]), "123#DEADBEEF"),
         (extended(0x18FE_F180, &[]), "18FEF180#"),
     ];
@@ -208,13 +240,19 @@ fn candump_log_format_shows_sent_frames() {
         }
     }
     let want: Vec<&str> = frames.iter().map(|(_, text)| *text).collect();
-    assert_eq!(seen, want, "candump -L {iface} output differs from the frames sent");
+    assert_eq!(
+        seen, want,
+        "candump -L {iface} output differs from the frames sent"
+    );
 }
 
 #[test]
 fn candump_line_parser_accepts_the_log_format() {
     assert_eq!(
-        parse_candump_line("(1700000000.123456) vcan0 0CFE3027#0102030405060708", "vcan0"),
+        parse_candump_line(
+            "(1700000000.123456) vcan0 0CFE3027#0102030405060708",
+            "vcan0"
+        ),
         "0CFE3027#0102030405060708"
     );
 }
