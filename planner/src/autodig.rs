@@ -465,7 +465,19 @@ impl AutodigMaps {
             "#1b9e77", "#d95f02", "#7570b3", "#e7298a", "#66a61e", "#e6ab02",
         ];
         let px = |x: f64| L + PW * x / 100.0;
-        let py = |y: f64| T + PH * (100.0 - y) / 200.0; // y from -100 (bottom) to 100 (top)
+        // y spans 0..100 unless some curve commands retraction, then -100..100.
+        let any_negative = self
+            .predig_stick
+            .points()
+            .iter()
+            .chain(self.sets.iter().flat_map(|set| {
+                [&set.predig_boom, &set.dig_boom, &set.dig_bucket]
+                    .into_iter()
+                    .flat_map(|c| c.points())
+            }))
+            .any(|p| p[1] < 0.0);
+        let y_lo = if any_negative { -100.0 } else { 0.0 };
+        let py = |y: f64| T + PH * (100.0 - y) / (100.0 - y_lo);
         let mut s = String::new();
         // Writing into a String cannot fail, so the fmt::Results below are ignored.
         let _ = write!(
@@ -486,7 +498,12 @@ impl AutodigMaps {
                 T + PH + 14.0
             );
         }
-        for v in [-100.0, -50.0, 0.0, 50.0, 100.0] {
+        let y_ticks = if any_negative {
+            [-100.0, -50.0, 0.0, 50.0, 100.0]
+        } else {
+            [0.0, 25.0, 50.0, 75.0, 100.0]
+        };
+        for v in y_ticks {
             let _ = writeln!(
                 s,
                 "<line x1=\"{0:.1}\" y1=\"{1:.1}\" x2=\"{2:.1}\" y2=\"{1:.1}\" stroke=\"#ddd\"/>\
