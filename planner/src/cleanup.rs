@@ -622,6 +622,7 @@ impl Cleanup {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
 
     const DT_S: f64 = 0.01;
     const START_RADIUS_M: f64 = 7.0;
@@ -842,5 +843,48 @@ mod tests {
         };
         assert!(Cleanup::new(nan_cfg, plan(), floor).is_err());
         assert!(FloorEstimate::known(f64::INFINITY, FloorPolicy::DetectOnce).is_err());
+    }
+
+    fn arb_f64() -> impl Strategy<Value = f64> {
+        prop_oneof![
+            4 => -50.0..50.0f64,
+            3 => -1.0e8..1.0e8f64,
+            1 => Just(f64::NAN),
+            1 => Just(f64::INFINITY),
+        ]
+    }
+
+    proptest! {
+        #[test]
+        fn arbitrary_inputs_never_panic_and_waypoints_are_finite(
+            detect in any::<bool>(),
+            steps in proptest::collection::vec(
+                (arb_f64(), arb_f64(), arb_f64(), proptest::array::uniform3(arb_f64()),
+                 proptest::array::uniform3(arb_f64()), 0.0..0.05f64),
+                1..200,
+            ),
+        ) {
+            let floor = if detect {
+                FloorEstimate::new(FloorPolicy::DetectEveryTime)
+            } else {
+                FloorEstimate::known(TRUE_FLOOR_Z_M, FloorPolicy::DetectOnce).expect("finite")
+            };
+            let mut c = Cleanup::new(CleanupConfig::default(), plan(), floor).expect("valid");
+            let mut t = 0.0;
+            for (x, z, stick, head, rod, dt) in steps {
+                t += dt;
+                let i = CleanupInputs {
+                    tip_x_m: x,
+                    tip_z_m: z,
+                    stick_abs_rad: stick,
+                    head_pressure_pa: head,
+                    rod_pressure_pa: rod,
+                };
+                if let Ok(CleanupOutput::Waypoint(w)) = c.step(&i, t) {
+                    prop_assert!(w.x_m.is_finite() && w.z_m.is_finite() && w.bucket_abs_rad.is_finite());
+                    prop_assert!(w.x_m >= MIN_RADIUS_M - 1e-9 && w.x_m <= START_RADIUS_M + 1e-9);
+                }
+            }
+        }
     }
 }
