@@ -1,0 +1,540 @@
+//! Bench scenarios (`config/bench.toml`): the terrain the machine digs, its soil, hard inclusions,
+//! the spoil pile, the machine's start pose, the noise seed and optional hidden effects.
+//!
+//! The world frame is `x` east, `y` north, `z` up (docs/ARCHITECTURE.md). The machine stands on the
+//! ground plane `z = 0`; the bench is a block of soil of the given height ahead of it, with a sloped
+//! face; digging should stop at `floor_elevation_m`.
+//!
+//! Errors name the file, the line and the field: parse errors come with toml's span, validation errors
+//! with the line of the offending key.
+
+use std::path::Path;
+
+use serde::Deserialize;
+
+use crate::effects::{EffectError, EffectSet};
+
+/// Errors reading a scenario.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ScenarioError {
+    /// The file could not be read.
+    #[error("{origin}: cannot read: {reason}")]
+    Io {
+        /// File name.
+        origin: String,
+        /// The I/O error text.
+        reason: String,
+    },
+    /// Bad TOML or a schema mismatch (the message names the field).
+    #[error("{origin}:{line}: {message}")]
+    Parse {
+        /// File name or `<string>`.
+        origin: String,
+        /// 1-based line (0 when unknown).
+        line: usize,
+        /// Parser message.
+        message: String,
+    },
+    /// A field has an invalid value.
+    #[error("{origin}:{line}: field `{field}`: {reason}")]
+    Invalid {
+        /// File name or `<string>`.
+        origin: String,
+        /// 1-based line (0 when unknown).
+        line: usize,
+        /// Dotted field path.
+        field: String,
+        /// Why it is rejected.
+        reason: String,
+    },
+}
+
+/// Result alias for scenario parsing.
+pub type Result<T> = std::result::Result<T, ScenarioError>;
+
+/// Soil properties of the modified FEE (Eq. 17, Psi = (gamma, beta, phi, delta, c)).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SoilSpec {
+    /// Bank density gamma (kg/m^3).
+    pub density_kg_per_m3: f64,
+    /// Cohesion c (Pa).
+    pub cohesion_pa: f64,
+    /// Soil-soil internal friction angle phi (degrees).
+    pub friction_angle_deg: f64,
+    /// Soil-tool friction angle delta (degrees).
+    pub tool_friction_angle_deg: f64,
+    /// Failure-surface angle beta (degrees).
+    pub failure_angle_deg: f64,
+}
+
+impl Default for SoilSpec {
+    fn default() -> Self {
+        Self {
+            density_kg_per_m3: 1700.0,
+            cohesion_pa: 8000.0,
+            friction_angle_deg: 35.0,
+            tool_friction_angle_deg: 20.0,
+            failure_angle_deg: 30.0,
+        }
+    }
+}
+
+/// A rectangular region (world x/y) with its own soil.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SoilRegion {
+    /// West edge (m).
+    pub x_min_m: f64,
+    /// East edge (m).
+    pub x_max_m: f64,
+    /// South edge (m).
+    pub y_min_m: f64,
+    /// North edge (m).
+    pub y_max_m: f64,
+    /// The soil inside.
+    pub soil: SoilSpec,
+}
+
+/// The bench geometry.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BenchSpec {
+    /// Height of the bench top above the ground plane (m).
+    pub height_m: f64,
+    /// Width across the machine's heading, world `y` (m), centred on `center_y_m`.
+    pub width_m: f64,
+    /// Length along world `x` from the crest of the face (m).
+    pub length_m: f64,
+    /// World `x` of the toe of the face (m).
+    pub face_x_m: f64,
+    /// World `y` of the bench centre line (m).
+    pub center_y_m: f64,
+    /// Face angle to the horizontal (degrees).
+    pub face_slope_deg: f64,
+    /// Elevation of the floor to dig down to (m, world z).
+    pub floor_elevation_m: f64,
+}
+
+impl Default for BenchSpec {
+    fn default() -> Self {
+        Self {
+            height_m: 2.0,
+            width_m: 10.0,
+            length_m: 10.0,
+            face_x_m: 5.0,
+            center_y_m: 0.0,
+            face_slope_deg: 45.0,
+            floor_elevation_m: 0.0,
+        }
+    }
+}
+
+/// The terrain grid.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GridSpec {
+    /// Cell size (m).
+    pub cell_m: f64,
+    /// West edge of the map (m).
+    pub x_min_m: f64,
+    /// South edge of the map (m).
+    pub y_min_m: f64,
+    /// Map size along x (m).
+    pub size_x_m: f64,
+    /// Map size along y (m).
+    pub size_y_m: f64,
+}
+
+impl Default for GridSpec {
+    fn default() -> Self {
+        Self {
+            cell_m: 0.1,
+            x_min_m: -8.0,
+            y_min_m: -10.0,
+            size_x_m: 24.0,
+            size_y_m: 20.0,
+        }
+    }
+}
+
+/// A hard inclusion: a sphere of rock the bucket cannot cut.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Boulder {
+    /// Centre x (m).
+    pub x_m: f64,
+    /// Centre y (m).
+    pub y_m: f64,
+    /// Centre z (m).
+    pub z_m: f64,
+    /// Radius (m).
+    pub radius_m: f64,
+}
+
+/// Hard inclusions: listed ones plus `random_count` drawn from the scenario seed inside the bench.
+#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct BoulderSpec {
+    /// Number of random boulders inside the bench volume.
+    pub random_count: u32,
+    /// Smallest random radius (m).
+    pub min_radius_m: f64,
+    /// Largest random radius (m).
+    pub max_radius_m: f64,
+    /// Explicit boulders.
+    pub list: Vec<Boulder>,
+}
+
+/// Where the bucket is emptied.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SpoilSpec {
+    /// Pile centre x (m).
+    pub x_m: f64,
+    /// Pile centre y (m).
+    pub y_m: f64,
+    /// Angle of repose of the dumped material (degrees).
+    pub repose_deg: f64,
+}
+
+impl Default for SpoilSpec {
+    fn default() -> Self {
+        Self {
+            x_m: 0.0,
+            y_m: -6.0,
+            repose_deg: 37.0,
+        }
+    }
+}
+
+/// The machine's start pose in the world and its joint angles (degrees).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StartPose {
+    /// Swing-axis x (m).
+    pub x_m: f64,
+    /// Swing-axis y (m).
+    pub y_m: f64,
+    /// Heading of the tracks, counter-clockwise from world x (degrees).
+    pub heading_deg: f64,
+    /// Boom angle (degrees, docs/ARCHITECTURE.md).
+    pub boom_deg: f64,
+    /// Stick angle relative to the boom (degrees).
+    pub stick_deg: f64,
+    /// Bucket angle relative to the stick (degrees).
+    pub bucket_deg: f64,
+    /// Swing angle (degrees).
+    pub swing_deg: f64,
+}
+
+impl Default for StartPose {
+    fn default() -> Self {
+        Self {
+            x_m: 0.0,
+            y_m: 0.0,
+            heading_deg: 0.0,
+            boom_deg: 20.0,
+            stick_deg: -100.0,
+            bucket_deg: -60.0,
+            swing_deg: 0.0,
+        }
+    }
+}
+
+/// One bench scenario.
+#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct Scenario {
+    /// Human-readable name.
+    pub name: String,
+    /// Seed for sensor noise and random boulders.
+    pub seed: u64,
+    /// Bench geometry.
+    pub bench: BenchSpec,
+    /// Terrain grid.
+    pub grid: GridSpec,
+    /// Default soil.
+    pub soil: SoilSpec,
+    /// Regions with other soil (later ones win).
+    pub soil_regions: Vec<SoilRegion>,
+    /// Hard inclusions.
+    pub boulders: BoulderSpec,
+    /// Spoil pile.
+    pub spoil: SpoilSpec,
+    /// Machine start pose.
+    pub start: StartPose,
+    /// Hidden effects (`name = value`), off when absent.
+    pub effects: std::collections::BTreeMap<String, f64>,
+}
+
+/// The bundled default scenario (`config/bench.toml`).
+pub const DEFAULT_BENCH_TOML: &str = include_str!("../../config/bench.toml");
+
+fn line_of_offset(text: &str, offset: usize) -> usize {
+    text.get(..offset.min(text.len()))
+        .map_or(0, |s| s.bytes().filter(|&b| b == b'\n').count())
+        + 1
+}
+
+/// 1-based line of a dotted field in TOML text, also inside `[[array]]` tables (best effort).
+fn locate(text: &str, field: &str) -> usize {
+    let mut parts: Vec<&str> = field.split('.').collect();
+    let Some(key) = parts.pop() else {
+        return 0;
+    };
+    // Array indices (`soil_regions.1.x_min_m`) are dropped: the first table of that name is used.
+    let table: Vec<&str> = parts
+        .into_iter()
+        .filter(|p| p.parse::<usize>().is_err())
+        .collect();
+    let table = table.join(".");
+    let mut in_table = table.is_empty();
+    let mut header = 0;
+    for (i, raw) in text.lines().enumerate() {
+        let line = raw.trim();
+        if line.starts_with('[') {
+            let name = line.trim_matches(|c| c == '[' || c == ']').trim();
+            in_table = name == table;
+            if in_table && header == 0 {
+                header = i + 1;
+            }
+            continue;
+        }
+        if in_table
+            && let Some((k, _)) = line.split_once('=')
+            && k.trim() == key
+        {
+            return i + 1;
+        }
+    }
+    header
+}
+
+impl Scenario {
+    /// The default bench (`config/bench.toml`, compiled in).
+    ///
+    /// # Errors
+    /// Only if the bundled file is broken, which the tests rule out.
+    pub fn default_bench() -> Result<Self> {
+        Self::from_toml_str_named(DEFAULT_BENCH_TOML, "config/bench.toml")
+    }
+
+    /// Reads a scenario file.
+    ///
+    /// # Errors
+    /// [`ScenarioError::Io`], [`ScenarioError::Parse`] or [`ScenarioError::Invalid`], naming the file.
+    pub fn from_toml_file(path: &Path) -> Result<Self> {
+        let origin = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| ScenarioError::Io {
+            origin: origin.clone(),
+            reason: e.to_string(),
+        })?;
+        Self::from_toml_str_named(&text, &origin)
+    }
+
+    /// Parses and validates scenario text; errors name `origin`, the line and the field.
+    ///
+    /// # Errors
+    /// [`ScenarioError::Parse`] or [`ScenarioError::Invalid`].
+    pub fn from_toml_str_named(text: &str, origin: &str) -> Result<Self> {
+        let scenario: Self = toml::from_str(text).map_err(|e| ScenarioError::Parse {
+            origin: origin.to_owned(),
+            line: e.span().map_or(0, |s| line_of_offset(text, s.start)),
+            message: e.message().trim().to_owned(),
+        })?;
+        scenario
+            .validate()
+            .map_err(|(field, reason)| ScenarioError::Invalid {
+                origin: origin.to_owned(),
+                line: locate(text, &field),
+                field,
+                reason,
+            })?;
+        Ok(scenario)
+    }
+
+    /// The hidden effects set in the file.
+    ///
+    /// # Errors
+    /// An unknown name or out-of-range value (already rejected by validation).
+    pub fn effect_set(&self) -> std::result::Result<EffectSet, EffectError> {
+        let mut set = EffectSet::nominal();
+        for (name, value) in &self.effects {
+            set.set_by_name(name, *value)?;
+        }
+        Ok(set)
+    }
+
+    /// Checks every value; returns `(field path, reason)` for the first problem.
+    ///
+    /// # Errors
+    /// The first invalid field.
+    pub fn validate(&self) -> std::result::Result<(), (String, String)> {
+        fn positive(field: &str, v: f64) -> std::result::Result<(), (String, String)> {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err((field.to_owned(), format!("must be positive, got {v}")))
+            }
+        }
+        fn within(
+            field: &str,
+            v: f64,
+            lo: f64,
+            hi: f64,
+        ) -> std::result::Result<(), (String, String)> {
+            if v.is_finite() && (lo..=hi).contains(&v) {
+                Ok(())
+            } else {
+                Err((
+                    field.to_owned(),
+                    format!("must be in [{lo}, {hi}], got {v}"),
+                ))
+            }
+        }
+        fn soil(prefix: &str, s: &SoilSpec) -> std::result::Result<(), (String, String)> {
+            within(
+                &format!("{prefix}.density_kg_per_m3"),
+                s.density_kg_per_m3,
+                500.0,
+                3000.0,
+            )?;
+            within(&format!("{prefix}.cohesion_pa"), s.cohesion_pa, 0.0, 1.0e6)?;
+            within(
+                &format!("{prefix}.friction_angle_deg"),
+                s.friction_angle_deg,
+                5.0,
+                60.0,
+            )?;
+            within(
+                &format!("{prefix}.tool_friction_angle_deg"),
+                s.tool_friction_angle_deg,
+                0.0,
+                45.0,
+            )?;
+            within(
+                &format!("{prefix}.failure_angle_deg"),
+                s.failure_angle_deg,
+                5.0,
+                80.0,
+            )
+        }
+        let b = &self.bench;
+        within("bench.height_m", b.height_m, 0.0, 20.0)?;
+        positive("bench.width_m", b.width_m)?;
+        positive("bench.length_m", b.length_m)?;
+        within("bench.face_slope_deg", b.face_slope_deg, 10.0, 90.0)?;
+        within("bench.floor_elevation_m", b.floor_elevation_m, -5.0, 5.0)?;
+        within("bench.face_x_m", b.face_x_m, -1.0e3, 1.0e3)?;
+        within("bench.center_y_m", b.center_y_m, -1.0e3, 1.0e3)?;
+        let g = &self.grid;
+        within("grid.cell_m", g.cell_m, 0.02, 1.0)?;
+        positive("grid.size_x_m", g.size_x_m)?;
+        positive("grid.size_y_m", g.size_y_m)?;
+        let cells = (g.size_x_m / g.cell_m) * (g.size_y_m / g.cell_m);
+        if cells > 4.0e6 {
+            return Err((
+                "grid.cell_m".into(),
+                format!("grid would have {cells:.0} cells (max 4e6)"),
+            ));
+        }
+        soil("soil", &self.soil)?;
+        for (i, r) in self.soil_regions.iter().enumerate() {
+            soil(&format!("soil_regions.{i}.soil"), &r.soil)?;
+            if !(r.x_max_m > r.x_min_m && r.y_max_m > r.y_min_m) {
+                return Err((format!("soil_regions.{i}.x_max_m"), "empty region".into()));
+            }
+        }
+        let bo = &self.boulders;
+        if bo.random_count > 0 {
+            positive("boulders.min_radius_m", bo.min_radius_m)?;
+            if bo.max_radius_m < bo.min_radius_m {
+                return Err((
+                    "boulders.max_radius_m".into(),
+                    "must be >= min_radius_m".into(),
+                ));
+            }
+        }
+        if bo.random_count > 1000 {
+            return Err(("boulders.random_count".into(), "at most 1000".into()));
+        }
+        for (i, boulder) in bo.list.iter().enumerate() {
+            within(
+                &format!("boulders.list.{i}.radius_m"),
+                boulder.radius_m,
+                0.01,
+                5.0,
+            )?;
+        }
+        within("spoil.repose_deg", self.spoil.repose_deg, 10.0, 60.0)?;
+        let s = &self.start;
+        within("start.boom_deg", s.boom_deg, -90.0, 90.0)?;
+        within("start.stick_deg", s.stick_deg, -180.0, 0.0)?;
+        within("start.bucket_deg", s.bucket_deg, -180.0, 90.0)?;
+        within("start.swing_deg", s.swing_deg, -360.0, 360.0)?;
+        within("start.heading_deg", s.heading_deg, -360.0, 360.0)?;
+        for (name, value) in &self.effects {
+            EffectSet::nominal()
+                .set_by_name(name, *value)
+                .map_err(|e| (format!("effects.{name}"), e.to_string()))?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bundled_bench_parses() {
+        let s = Scenario::default_bench().unwrap();
+        assert!(s.bench.height_m > 0.0);
+        assert!(s.effect_set().unwrap().active().is_empty());
+    }
+
+    #[test]
+    fn parse_error_names_file_line_and_field() {
+        let text = "seed = 1\n[bench]\nheight_m = \"tall\"\n";
+        let err = Scenario::from_toml_str_named(text, "b.toml").unwrap_err();
+        let msg = err.to_string();
+        assert!(msg.starts_with("b.toml:3:"), "{msg}");
+        let text = "seed = 1\n[bench]\nhieght_m = 2.0\n";
+        let msg = Scenario::from_toml_str_named(text, "b.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.starts_with("b.toml:3:") && msg.contains("hieght_m"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn invalid_value_names_file_line_and_field() {
+        let text = "seed = 1\n\n[bench]\nwidth_m = 3.0\nheight_m = -2.0\n";
+        let err = Scenario::from_toml_str_named(text, "b.toml").unwrap_err();
+        assert_eq!(
+            err,
+            ScenarioError::Invalid {
+                origin: "b.toml".into(),
+                line: 5,
+                field: "bench.height_m".into(),
+                reason: "must be in [0, 20], got -2".into(),
+            }
+        );
+        let text = "[effects]\nbogus = 1.0\n";
+        let msg = Scenario::from_toml_str_named(text, "b.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(msg.starts_with("b.toml:2: field `effects.bogus`"), "{msg}");
+    }
+
+    #[test]
+    fn effects_in_file_become_an_effect_set() {
+        let text = "[effects]\ntransport_delay = 0.05\n";
+        let s = Scenario::from_toml_str_named(text, "b.toml").unwrap();
+        let set = s.effect_set().unwrap();
+        assert_eq!(set.get(crate::effects::Effect::TransportDelay), 0.05);
+    }
+}
