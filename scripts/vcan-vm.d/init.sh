@@ -3,9 +3,9 @@
 #
 #  1. mounts proc, sys, dev; loads the CAN/9p/virtio modules listed in /etc/vcan-vm/modules, in order;
 #  2. mounts the host root read-only (9p tag "hostroot") at /newroot and the writable results share
-#     (9p tag "results") at /results, plus any read-write shares listed in /results/config;
+#     (9p tag "results") at /results;
 #  3. bind-mounts proc/sys/dev into /newroot, mounts tmpfs on /newroot/tmp and /newroot/run, binds the
-#     results share at /newroot/run/vcan-vm;
+#     results share at /newroot/run/vcan-vm, mounts the extra --rw/--ro shares at their host paths;
 #  4. creates and brings up the vcan interfaces, prints the guest kernel version and the interface;
 #  5. chroots into the host root, runs /run/vcan-vm/run.sh (cd + environment + command, written by the
 #     host), writes its exit status to /results/status and powers off.
@@ -67,13 +67,17 @@ mount -t tmpfs -o mode=755 tmpfs /newroot/run || fatal "cannot mount tmpfs on /r
 mkdir -p /newroot/run/vcan-vm
 mount --bind /results /newroot/run/vcan-vm || fatal "cannot bind the results share"
 
-# Read-write shares: VCAN_VM_RW="tag1 path1 tag2 path2 ...", paths without spaces.
-set -- $VCAN_VM_RW
-while [ $# -ge 2 ]; do
-  [ -d "/newroot$2" ] || fatal "read-write share $2 is not a directory in the host root"
-  mount -t 9p -o "$P9OPTS,cache=none" "$1" "/newroot$2" || fatal "cannot mount read-write share $2 (9p tag $1)"
-  echo "vcan-vm: $2 is writable (host share)"
-  shift 2
+# Extra shares at the same path as on the host: VCAN_VM_SHARES="tag mode path ...", mode ro or rw.
+# Under the guest's tmpfs (/tmp, /run) the mount point is created first.
+set -- $VCAN_VM_SHARES
+while [ $# -ge 3 ]; do
+  mkdir -p "/newroot$3" 2>/dev/null
+  [ -d "/newroot$3" ] || fatal "share $3 has no mount point in the guest"
+  opts="$P9OPTS,cache=none"
+  [ "$2" = ro ] && opts="$P9OPTS,cache=loose,ro"
+  mount -t 9p -o "$opts" "$1" "/newroot$3" || fatal "cannot mount the $2 share $3 (9p tag $1)"
+  echo "vcan-vm: $3 is shared from the host ($2)"
+  shift 3
 done
 
 # iproute2 from the host root knows every link type; busybox ip is the fallback.
