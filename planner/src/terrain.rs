@@ -50,7 +50,9 @@ pub enum TerrainError {
     #[error("no scan point falls inside the grid")]
     NoPoints,
     /// An occlusion gap larger than the interpolation allows.
-    #[error("occlusion gap of {cells} cells near ({x_m:.2}, {y_m:.2}) exceeds the {max_cells}-cell limit")]
+    #[error(
+        "occlusion gap of {cells} cells near ({x_m:.2}, {y_m:.2}) exceeds the {max_cells}-cell limit"
+    )]
     LargeGap {
         /// Gap length in cells (the shorter of the two grid directions).
         cells: usize,
@@ -87,7 +89,14 @@ impl TerrainGrid {
     /// # Errors
     /// [`TerrainError::InvalidGrid`] for zero/huge sizes or a non-positive resolution,
     /// [`TerrainError::NonFinite`] for a non-finite origin or height.
-    pub fn new_flat(origin_x_m: f64, origin_y_m: f64, resolution_m: f64, nx: usize, ny: usize, height_m: f64) -> Result<Self> {
+    pub fn new_flat(
+        origin_x_m: f64,
+        origin_y_m: f64,
+        resolution_m: f64,
+        nx: usize,
+        ny: usize,
+        height_m: f64,
+    ) -> Result<Self> {
         if !height_m.is_finite() {
             return Err(TerrainError::NonFinite { what: "height" });
         }
@@ -100,17 +109,36 @@ impl TerrainGrid {
     ///
     /// # Errors
     /// As [`Self::new_flat`].
-    pub fn new_unknown(origin_x_m: f64, origin_y_m: f64, resolution_m: f64, nx: usize, ny: usize) -> Result<Self> {
+    pub fn new_unknown(
+        origin_x_m: f64,
+        origin_y_m: f64,
+        resolution_m: f64,
+        nx: usize,
+        ny: usize,
+    ) -> Result<Self> {
         if !(origin_x_m.is_finite() && origin_y_m.is_finite()) {
-            return Err(TerrainError::NonFinite { what: "grid origin" });
+            return Err(TerrainError::NonFinite {
+                what: "grid origin",
+            });
         }
         if !(resolution_m.is_finite() && resolution_m > 0.0) {
-            return Err(TerrainError::InvalidGrid { reason: format!("resolution {resolution_m} m") });
+            return Err(TerrainError::InvalidGrid {
+                reason: format!("resolution {resolution_m} m"),
+            });
         }
         if nx < 2 || ny < 2 || nx.saturating_mul(ny) > MAX_CELLS {
-            return Err(TerrainError::InvalidGrid { reason: format!("{nx} x {ny} cells") });
+            return Err(TerrainError::InvalidGrid {
+                reason: format!("{nx} x {ny} cells"),
+            });
         }
-        Ok(Self { origin_x_m, origin_y_m, resolution_m, nx, ny, heights: vec![f64::NAN; nx * ny] })
+        Ok(Self {
+            origin_x_m,
+            origin_y_m,
+            resolution_m,
+            nx,
+            ny,
+            heights: vec![f64::NAN; nx * ny],
+        })
     }
 
     /// A grid whose cells take `f(x, y)` at their centres (non-finite values become unknown).
@@ -202,11 +230,17 @@ impl TerrainGrid {
     /// [`TerrainError::InvalidArgument`] outside the grid, [`TerrainError::NonFinite`] for a NaN height.
     pub fn set_cell(&mut self, i: usize, j: usize, height_m: Option<f64>) -> Result<()> {
         if i >= self.nx || j >= self.ny {
-            return Err(TerrainError::InvalidArgument { what: "cell index outside the grid" });
+            return Err(TerrainError::InvalidArgument {
+                what: "cell index outside the grid",
+            });
         }
         let v = match height_m {
             Some(h) if h.is_finite() => h,
-            Some(_) => return Err(TerrainError::NonFinite { what: "cell height" }),
+            Some(_) => {
+                return Err(TerrainError::NonFinite {
+                    what: "cell height",
+                });
+            }
             None => f64::NAN,
         };
         self.heights[j * self.nx + i] = v;
@@ -226,13 +260,17 @@ impl TerrainGrid {
     /// [`TerrainError::NonFinite`].
     pub fn height_at(&self, x_m: f64, y_m: f64) -> Result<f64> {
         if !(x_m.is_finite() && y_m.is_finite()) {
-            return Err(TerrainError::NonFinite { what: "query point" });
+            return Err(TerrainError::NonFinite {
+                what: "query point",
+            });
         }
         if self.cell_index(x_m, y_m).is_none() {
             return Err(TerrainError::OutOfGrid { x_m, y_m });
         }
-        let fx = ((x_m - self.origin_x_m) / self.resolution_m - 0.5).clamp(0.0, (self.nx - 1) as f64);
-        let fy = ((y_m - self.origin_y_m) / self.resolution_m - 0.5).clamp(0.0, (self.ny - 1) as f64);
+        let fx =
+            ((x_m - self.origin_x_m) / self.resolution_m - 0.5).clamp(0.0, (self.nx - 1) as f64);
+        let fy =
+            ((y_m - self.origin_y_m) / self.resolution_m - 0.5).clamp(0.0, (self.ny - 1) as f64);
         let i0 = (fx.floor() as usize).min(self.nx - 2);
         let j0 = (fy.floor() as usize).min(self.ny - 2);
         let (tx, ty) = (fx - i0 as f64, fy - j0 as f64);
@@ -243,7 +281,9 @@ impl TerrainGrid {
                 if w <= 0.0 {
                     continue;
                 }
-                let h = self.cell(i0 + di, j0 + dj).ok_or(TerrainError::Unknown { x_m, y_m })?;
+                let h = self
+                    .cell(i0 + di, j0 + dj)
+                    .ok_or(TerrainError::Unknown { x_m, y_m })?;
                 sum += w * h;
             }
         }
@@ -256,16 +296,33 @@ impl TerrainGrid {
     /// # Errors
     /// [`TerrainError::InvalidArgument`] for a bad range or step, or the first failing
     /// [`Self::height_at`].
-    pub fn section(&self, pose: &MachinePose, swing_rad: f64, r_start_m: f64, r_end_m: f64, step_m: f64) -> Result<SectionProfile> {
-        if !(r_start_m.is_finite() && r_end_m.is_finite() && step_m.is_finite() && swing_rad.is_finite()) {
-            return Err(TerrainError::NonFinite { what: "section range" });
+    pub fn section(
+        &self,
+        pose: &MachinePose,
+        swing_rad: f64,
+        r_start_m: f64,
+        r_end_m: f64,
+        step_m: f64,
+    ) -> Result<SectionProfile> {
+        if !(r_start_m.is_finite()
+            && r_end_m.is_finite()
+            && step_m.is_finite()
+            && swing_rad.is_finite())
+        {
+            return Err(TerrainError::NonFinite {
+                what: "section range",
+            });
         }
         if step_m <= 0.0 || r_end_m <= r_start_m {
-            return Err(TerrainError::InvalidArgument { what: "section needs step > 0 and end > start" });
+            return Err(TerrainError::InvalidArgument {
+                what: "section needs step > 0 and end > start",
+            });
         }
         let n = ((r_end_m - r_start_m) / step_m).floor() as usize + 1;
         if n > MAX_CELLS {
-            return Err(TerrainError::InvalidArgument { what: "section has too many samples" });
+            return Err(TerrainError::InvalidArgument {
+                what: "section has too many samples",
+            });
         }
         let mut heights = Vec::with_capacity(n);
         for k in 0..n {
@@ -328,7 +385,12 @@ impl TerrainGrid {
                 let Some(gap) = best else { continue };
                 if gap.len > max_gap_cells {
                     let [x_m, y_m] = g.cell_center(i, j);
-                    return Err(TerrainError::LargeGap { cells: gap.len, max_cells: max_gap_cells, x_m, y_m });
+                    return Err(TerrainError::LargeGap {
+                        cells: gap.len,
+                        max_cells: max_gap_cells,
+                        x_m,
+                        y_m,
+                    });
                 }
                 g.heights[j * nx + i] = gap.value;
             }
@@ -355,14 +417,30 @@ impl TerrainGrid {
     ///
     /// # Errors
     /// [`TerrainError::NonFinite`], [`TerrainError::InvalidArgument`] for a negative width.
-    pub fn cut(&mut self, from: [f64; 3], to: [f64; 3], azimuth_rad: f64, width_m: f64) -> Result<f64> {
-        if !(from.iter().chain(to.iter()).all(|v| v.is_finite()) && azimuth_rad.is_finite() && width_m.is_finite()) {
-            return Err(TerrainError::NonFinite { what: "cutting edge" });
+    pub fn cut(
+        &mut self,
+        from: [f64; 3],
+        to: [f64; 3],
+        azimuth_rad: f64,
+        width_m: f64,
+    ) -> Result<f64> {
+        if !(from.iter().chain(to.iter()).all(|v| v.is_finite())
+            && azimuth_rad.is_finite()
+            && width_m.is_finite())
+        {
+            return Err(TerrainError::NonFinite {
+                what: "cutting edge",
+            });
         }
         if width_m < 0.0 {
-            return Err(TerrainError::InvalidArgument { what: "cutting width must not be negative" });
+            return Err(TerrainError::InvalidArgument {
+                what: "cutting width must not be negative",
+            });
         }
-        let (u, v) = ([azimuth_rad.cos(), azimuth_rad.sin()], [-azimuth_rad.sin(), azimuth_rad.cos()]);
+        let (u, v) = (
+            [azimuth_rad.cos(), azimuth_rad.sin()],
+            [-azimuth_rad.sin(), azimuth_rad.cos()],
+        );
         let proj = |p: [f64; 2]| (p[0] * u[0] + p[1] * u[1], p[0] * v[0] + p[1] * v[1]);
         let (s0, t0) = proj([from[0], from[1]]);
         let (s1, t1) = proj([to[0], to[1]]);
@@ -380,15 +458,29 @@ impl TerrainGrid {
             let b = (((hi - o) / self.resolution_m).ceil().max(0.0) as usize).min(n);
             (a, b)
         };
-        let (i0, i1) = range(fold(&xs, f64::min), fold(&xs, f64::max), self.origin_x_m, self.nx);
-        let (j0, j1) = range(fold(&ys, f64::min), fold(&ys, f64::max), self.origin_y_m, self.ny);
+        let (i0, i1) = range(
+            fold(&xs, f64::min),
+            fold(&xs, f64::max),
+            self.origin_x_m,
+            self.nx,
+        );
+        let (j0, j1) = range(
+            fold(&ys, f64::min),
+            fold(&ys, f64::max),
+            self.origin_y_m,
+            self.ny,
+        );
         let area = self.cell_area();
         let mut removed = 0.0;
         for j in j0..j1 {
             for i in i0..i1 {
                 let (sc, tc) = proj(self.cell_center(i, j));
                 // Half-open in the direction of travel: [start, end).
-                let inside = if s1 < s0 { sc > smin && sc <= smax } else { sc >= smin && sc < smax };
+                let inside = if s1 < s0 {
+                    sc > smin && sc <= smax
+                } else {
+                    sc >= smin && sc < smax
+                };
                 if !inside {
                     continue;
                 }
@@ -417,14 +509,19 @@ impl TerrainGrid {
     /// [`TerrainError::NonFinite`], [`TerrainError::InvalidArgument`] for a negative volume or a repose
     /// angle outside (0, 90) degrees, [`TerrainError::OutOfGrid`] if the centre is outside the grid.
     pub fn deposit(&mut self, x_m: f64, y_m: f64, volume_m3: f64, repose_rad: f64) -> Result<f64> {
-        if !(x_m.is_finite() && y_m.is_finite() && volume_m3.is_finite() && repose_rad.is_finite()) {
+        if !(x_m.is_finite() && y_m.is_finite() && volume_m3.is_finite() && repose_rad.is_finite())
+        {
             return Err(TerrainError::NonFinite { what: "deposit" });
         }
         if volume_m3 < 0.0 {
-            return Err(TerrainError::InvalidArgument { what: "deposit volume must not be negative" });
+            return Err(TerrainError::InvalidArgument {
+                what: "deposit volume must not be negative",
+            });
         }
         if !(repose_rad > 0.0 && repose_rad < std::f64::consts::FRAC_PI_2 - 1e-6) {
-            return Err(TerrainError::InvalidArgument { what: "angle of repose must lie in (0, 90) degrees" });
+            return Err(TerrainError::InvalidArgument {
+                what: "angle of repose must lie in (0, 90) degrees",
+            });
         }
         if self.cell_index(x_m, y_m).is_none() {
             return Err(TerrainError::OutOfGrid { x_m, y_m });
@@ -445,8 +542,17 @@ impl TerrainGrid {
         if cells.is_empty() {
             return Err(TerrainError::Unknown { x_m, y_m });
         }
-        let added = |apex: f64| -> f64 { cells.iter().map(|&(_, drop, h)| (apex - drop - h).max(0.0)).sum::<f64>() * area };
-        let mut lo = cells.iter().map(|c| c.1 + c.2).fold(f64::INFINITY, f64::min);
+        let added = |apex: f64| -> f64 {
+            cells
+                .iter()
+                .map(|&(_, drop, h)| (apex - drop - h).max(0.0))
+                .sum::<f64>()
+                * area
+        };
+        let mut lo = cells
+            .iter()
+            .map(|c| c.1 + c.2)
+            .fold(f64::INFINITY, f64::min);
         let mut hi = lo + 1.0;
         for _ in 0..200 {
             if added(hi) >= volume_m3 {
@@ -456,7 +562,11 @@ impl TerrainGrid {
         }
         for _ in 0..100 {
             let mid = 0.5 * (lo + hi);
-            if added(mid) < volume_m3 { lo = mid } else { hi = mid }
+            if added(mid) < volume_m3 {
+                lo = mid
+            } else {
+                hi = mid
+            }
         }
         let apex = hi;
         let mut deposited = 0.0;
@@ -491,7 +601,10 @@ fn bounded_gap(h: &[f64], at: usize, n: usize, index: impl Fn(usize) -> usize) -
         return None;
     }
     let t = (at - a) as f64 / (b - a) as f64;
-    Some(Gap { len: b - a - 1, value: ha + t * (hb - ha) })
+    Some(Gap {
+        len: b - a - 1,
+        value: ha + t * (hb - ha),
+    })
 }
 
 /// Terrain heights along the digging plane, sampled every `step_m` from `r_start_m` (horizontal distance
@@ -510,25 +623,48 @@ impl SectionProfile {
     /// [`TerrainError::InvalidArgument`] for fewer than two samples or a non-positive step,
     /// [`TerrainError::NonFinite`] for non-finite values.
     pub fn new(r_start_m: f64, step_m: f64, heights: Vec<f64>) -> Result<Self> {
-        if !(r_start_m.is_finite() && step_m.is_finite()) || heights.iter().any(|h| !h.is_finite()) {
-            return Err(TerrainError::NonFinite { what: "section profile" });
+        if !(r_start_m.is_finite() && step_m.is_finite()) || heights.iter().any(|h| !h.is_finite())
+        {
+            return Err(TerrainError::NonFinite {
+                what: "section profile",
+            });
         }
         if step_m <= 0.0 || heights.len() < 2 {
-            return Err(TerrainError::InvalidArgument { what: "profile needs step > 0 and two samples" });
+            return Err(TerrainError::InvalidArgument {
+                what: "profile needs step > 0 and two samples",
+            });
         }
-        Ok(Self { r_start_m, step_m, heights })
+        Ok(Self {
+            r_start_m,
+            step_m,
+            heights,
+        })
     }
 
     /// A profile from a function of `r`.
     ///
     /// # Errors
     /// As [`Self::new`].
-    pub fn from_fn(r_start_m: f64, r_end_m: f64, step_m: f64, f: impl Fn(f64) -> f64) -> Result<Self> {
-        if !(step_m > 0.0 && r_end_m > r_start_m && ((r_end_m - r_start_m) / step_m) < MAX_CELLS as f64) {
-            return Err(TerrainError::InvalidArgument { what: "profile needs step > 0 and end > start" });
+    pub fn from_fn(
+        r_start_m: f64,
+        r_end_m: f64,
+        step_m: f64,
+        f: impl Fn(f64) -> f64,
+    ) -> Result<Self> {
+        if !(step_m > 0.0
+            && r_end_m > r_start_m
+            && ((r_end_m - r_start_m) / step_m) < MAX_CELLS as f64)
+        {
+            return Err(TerrainError::InvalidArgument {
+                what: "profile needs step > 0 and end > start",
+            });
         }
         let n = ((r_end_m - r_start_m) / step_m).floor() as usize + 1;
-        Self::new(r_start_m, step_m, (0..n).map(|k| f(r_start_m + k as f64 * step_m)).collect())
+        Self::new(
+            r_start_m,
+            step_m,
+            (0..n).map(|k| f(r_start_m + k as f64 * step_m)).collect(),
+        )
     }
 
     /// First sample distance, m.
@@ -551,7 +687,9 @@ impl SectionProfile {
 
     fn locate(&self, r_m: f64) -> Result<(usize, f64)> {
         if !r_m.is_finite() {
-            return Err(TerrainError::NonFinite { what: "profile distance" });
+            return Err(TerrainError::NonFinite {
+                what: "profile distance",
+            });
         }
         if r_m < self.r_start_m - 1e-9 || r_m > self.r_end_m() + 1e-9 {
             return Err(TerrainError::OutOfGrid { x_m: r_m, y_m: 0.0 });
@@ -592,7 +730,9 @@ impl SectionProfile {
                 Err(e) => return Err(e),
             }
             if !p[1].is_finite() {
-                return Err(TerrainError::NonFinite { what: "point height" });
+                return Err(TerrainError::NonFinite {
+                    what: "point height",
+                });
             }
         }
         Ok(true)
@@ -620,9 +760,17 @@ impl SweptVolume {
     /// [`TerrainError::InvalidArgument`] for a non-positive width.
     pub fn new(profile: SectionProfile, width_m: f64) -> Result<Self> {
         if !(width_m.is_finite() && width_m > 0.0) {
-            return Err(TerrainError::InvalidArgument { what: "bucket width must be positive" });
+            return Err(TerrainError::InvalidArgument {
+                what: "bucket width must be positive",
+            });
         }
-        Ok(Self { profile, width_m, area_m2: 0.0, front_r_m: f64::INFINITY, last: None })
+        Ok(Self {
+            profile,
+            width_m,
+            area_m2: 0.0,
+            front_r_m: f64::INFINITY,
+            last: None,
+        })
     }
 
     /// The pre-dig profile.
@@ -651,7 +799,9 @@ impl SweptVolume {
     /// [`TerrainError::NonFinite`]; a tip beyond the profile adds nothing.
     pub fn update(&mut self, tip_x_m: f64, tip_z_m: f64) -> Result<f64> {
         if !(tip_x_m.is_finite() && tip_z_m.is_finite()) {
-            return Err(TerrainError::NonFinite { what: "tip position" });
+            return Err(TerrainError::NonFinite {
+                what: "tip position",
+            });
         }
         let Some([r0, z0]) = self.last.replace([tip_x_m, tip_z_m]) else {
             self.front_r_m = tip_x_m;
@@ -663,9 +813,15 @@ impl SweptVolume {
             let lo = r1.max(self.profile.r_start_m()).min(hi);
             let hi_c = hi.min(self.profile.r_end_m());
             if hi_c > lo {
-                let n = (((hi_c - lo) / (0.5 * self.profile.step_m())).ceil() as usize).clamp(1, 10_000);
+                let n = (((hi_c - lo) / (0.5 * self.profile.step_m())).ceil() as usize)
+                    .clamp(1, 10_000);
                 let z_at = |r: f64| z0 + (r - r0) / (r1 - r0) * (z1 - z0);
-                let depth = |r: f64| self.profile.height_at(r).map(|h| (h - z_at(r)).max(0.0)).unwrap_or(0.0);
+                let depth = |r: f64| {
+                    self.profile
+                        .height_at(r)
+                        .map(|h| (h - z_at(r)).max(0.0))
+                        .unwrap_or(0.0)
+                };
                 let dr = (hi_c - lo) / n as f64;
                 let mut area = 0.0;
                 for k in 0..n {
@@ -698,25 +854,42 @@ mod tests {
 
     #[test]
     fn bilinear_is_exact_on_planes_and_unknown_never_leaks() {
-        let mut g = TerrainGrid::from_fn(0.0, 0.0, RES_M, 20, 20, |x, y| 0.3 * x - 0.2 * y + 1.0).expect("grid");
+        let mut g = TerrainGrid::from_fn(0.0, 0.0, RES_M, 20, 20, |x, y| 0.3 * x - 0.2 * y + 1.0)
+            .expect("grid");
         let h = g.height_at(0.77, 1.23).expect("h");
         assert!((h - (0.3 * 0.77 - 0.2 * 1.23 + 1.0)).abs() < 1e-12);
         g.set_cell(7, 12, None).expect("set");
-        assert!(matches!(g.height_at(0.75, 1.25), Err(TerrainError::Unknown { .. })));
-        assert!(matches!(g.height_at(5.0, 0.5), Err(TerrainError::OutOfGrid { .. })));
-        assert!(matches!(g.height_at(f64::NAN, 0.5), Err(TerrainError::NonFinite { .. })));
+        assert!(matches!(
+            g.height_at(0.75, 1.25),
+            Err(TerrainError::Unknown { .. })
+        ));
+        assert!(matches!(
+            g.height_at(5.0, 0.5),
+            Err(TerrainError::OutOfGrid { .. })
+        ));
+        assert!(matches!(
+            g.height_at(f64::NAN, 0.5),
+            Err(TerrainError::NonFinite { .. })
+        ));
         assert!(g.volume_above(0.0).is_finite());
     }
 
     #[test]
     fn section_follows_the_dig_plane() {
         let g = bench_grid();
-        let pose = MachinePose { x_m: 0.0, y_m: 0.0, heading_rad: 0.0 };
+        let pose = MachinePose {
+            x_m: 0.0,
+            y_m: 0.0,
+            heading_rad: 0.0,
+        };
         let p = g.section(&pose, 0.0, 1.0, 14.0, 0.05).expect("section");
         assert!((p.height_at(7.0).expect("h") - bench(7.0)).abs() < 0.02);
         assert!((p.slope_at(7.0).expect("slope") - 30f64.to_radians()).abs() < 0.02);
         // Swung 90 degrees the plane runs along +y where the grid ends at 3 m.
-        assert!(g.section(&pose, std::f64::consts::FRAC_PI_2, 1.0, 8.0, 0.1).is_err());
+        assert!(
+            g.section(&pose, std::f64::consts::FRAC_PI_2, 1.0, 8.0, 0.1)
+                .is_err()
+        );
     }
 
     #[test]
@@ -735,13 +908,18 @@ mod tests {
         }
         let after = g.volume_above(-10.0);
         assert!(removed > 1.0, "{removed}");
-        assert!((before - after - removed).abs() < 1e-9, "{before} {after} {removed}");
+        assert!(
+            (before - after - removed).abs() < 1e-9,
+            "{before} {after} {removed}"
+        );
     }
 
     #[test]
     fn deposit_conserves_volume_and_respects_repose() {
         let mut g = TerrainGrid::new_flat(0.0, 0.0, RES_M, 100, 100, 0.0).expect("grid");
-        let v = g.deposit(5.0, 5.0, 1.5, 35f64.to_radians()).expect("deposit");
+        let v = g
+            .deposit(5.0, 5.0, 1.5, 35f64.to_radians())
+            .expect("deposit");
         assert!((v - 1.5).abs() < 1e-6);
         assert!((g.volume_above(0.0) - 1.5).abs() < 1e-6);
         let tan = 35f64.to_radians().tan();
@@ -749,7 +927,9 @@ mod tests {
             for i in 0..99 {
                 let (a, b, c) = (g.cell(i, j), g.cell(i + 1, j), g.cell(i, j + 1));
                 if let (Some(a), Some(b), Some(c)) = (a, b, c) {
-                    assert!((a - b).abs() <= tan * RES_M + 1e-9 && (a - c).abs() <= tan * RES_M + 1e-9);
+                    assert!(
+                        (a - b).abs() <= tan * RES_M + 1e-9 && (a - c).abs() <= tan * RES_M + 1e-9
+                    );
                 }
             }
         }
@@ -770,12 +950,19 @@ mod tests {
         }
         let g = TerrainGrid::from_scan(&pts, 0.0, 0.0, 0.1, 40, 20, 4).expect("small gap filled");
         assert!((g.height_at(1.65, 1.0).expect("filled") - 0.825).abs() < 1e-9);
-        let big: Vec<[f64; 3]> = pts.iter().copied().filter(|p| !(1.0..2.5).contains(&p[0])).collect();
+        let big: Vec<[f64; 3]> = pts
+            .iter()
+            .copied()
+            .filter(|p| !(1.0..2.5).contains(&p[0]))
+            .collect();
         assert!(matches!(
             TerrainGrid::from_scan(&big, 0.0, 0.0, 0.1, 40, 20, 4),
             Err(TerrainError::LargeGap { .. })
         ));
-        assert!(matches!(TerrainGrid::from_scan(&[], 0.0, 0.0, 0.1, 40, 20, 4), Err(TerrainError::NoPoints)));
+        assert!(matches!(
+            TerrainGrid::from_scan(&[], 0.0, 0.0, 0.1, 40, 20, 4),
+            Err(TerrainError::NoPoints)
+        ));
     }
 
     #[test]
@@ -789,7 +976,11 @@ mod tests {
         // Backing out and re-entering counts nothing new.
         sv.update(8.0, 0.5).expect("back");
         sv.update(6.0, 0.5).expect("again");
-        assert!((sv.volume_m3() - 0.5 * 3.0 * 1.3).abs() < 1e-9, "{}", sv.volume_m3());
+        assert!(
+            (sv.volume_m3() - 0.5 * 3.0 * 1.3).abs() < 1e-9,
+            "{}",
+            sv.volume_m3()
+        );
         let p = sv.profile().clone();
         assert!(!p.is_above(&[[5.0, 0.9]]).expect("q"));
         assert!(p.is_above(&[[5.0, 1.1], [5.5, 1.2]]).expect("q"));
