@@ -7,3 +7,5 @@
 pub mod effects;
 pub mod hydraulics;
 pub mod scenario;
+pub mod linkage;
+pub mod soil_contact;
