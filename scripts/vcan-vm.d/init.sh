@@ -1,4 +1,5 @@
 #!/bin/busybox sh
+# shellcheck shell=dash
 # /init of the vcan-vm initramfs (built by scripts/vcan-vm setup; runs as PID 1 in the guest).
 #
 #  1. mounts proc, sys, dev; loads the CAN/9p/virtio modules listed in /etc/vcan-vm/modules, in order;
@@ -69,6 +70,7 @@ mount --bind /results /newroot/run/vcan-vm || fatal "cannot bind the results sha
 
 # Extra shares at the same path as on the host: VCAN_VM_SHARES="tag mode path ...", mode ro or rw.
 # Under the guest's tmpfs (/tmp, /run) the mount point is created first.
+# shellcheck disable=SC2086 # word splitting intended
 set -- $VCAN_VM_SHARES
 while [ $# -ge 3 ]; do
   mkdir -p "/newroot$3" 2>/dev/null
