@@ -1,0 +1,265 @@
+//! Bit-exact frame lengths on the wire and the bus load of a message schedule.
+//!
+//! [`stuffed_bits`] builds the actual bit sequence of a classic CAN frame (SOF, arbitration, control,
+//! data, the real CRC-15), counts the stuff bits the controller would insert (one complement bit after
+//! five equal bits, from SOF through the CRC sequence) and adds the fixed 13-bit tail (CRC delimiter,
+//! ACK slot and delimiter, 7-bit EOF, 3-bit interframe space). [`worst_case_bits`] is the textbook bound
+//! `g + 8n + 13 + floor((g + 8n - 1) / 4)` with `g = 34` (11-bit id) or `54` (29-bit id).
+//!
+//! [`SCHEDULE`] is the project's message rate table (`docs/protocol.md`); a test asserts its
+//! worst-case load at 500 kbit/s stays under 40 %.
+
+use crate::dbc::{self, MessageDesc};
+use crate::frame::{CanFrame, CanId, FrameKind};
+
+/// The bus bit rate, bit/s.
+pub const BITRATE: u32 = 500_000;
+
+/// Bits after the CRC that are never stuffed: CRC delimiter, ACK slot, ACK delimiter, EOF, IFS.
+pub const TAIL_BITS: u32 = 1 + 1 + 1 + 7 + 3;
+
+fn push_bits(bits: &mut Vec<bool>, value: u32, count: u32) {
+    for i in (0..count).rev() {
+        bits.push((value >> i) & 1 == 1);
+    }
+}
+
+/// CAN CRC-15 (polynomial 0x4599) over a bit sequence.
+pub fn crc15(bits: &[bool]) -> u16 {
+    let mut crc: u16 = 0;
+    for &bit in bits {
+        let next = bit ^ ((crc >> 14) & 1 == 1);
+        crc = (crc << 1) & 0x7FFF;
+        if next {
+            crc ^= 0x4599;
+        }
+    }
+    crc
+}
+
+/// Counts the stuff bits a transmitter inserts into `bits`.
+pub fn count_stuff_bits(bits: &[bool]) -> u32 {
+    let mut stuffed = 0;
+    let mut last: Option<bool> = None;
+    let mut run = 0;
+    for &bit in bits {
+        if Some(bit) == last {
+            run += 1;
+        } else {
+            last = Some(bit);
+            run = 1;
+        }
+        if run == 5 {
+            stuffed += 1;
+            // The stuff bit is the complement and starts a new run of length one.
+            last = Some(!bit);
+            run = 1;
+        }
+    }
+    stuffed
+}
+
+/// The unstuffed bit sequence of a classic frame from SOF through the CRC sequence; `None` for error
+/// and CAN FD frames.
+pub fn frame_bits(frame: &CanFrame) -> Option<Vec<bool>> {
+    let remote = match frame.kind() {
+        FrameKind::Data => false,
+        FrameKind::Remote => true,
+        FrameKind::Error | FrameKind::Fd { .. } => return None,
+    };
+    let mut bits = Vec::with_capacity(160);
+    bits.push(false); // SOF
+    match frame.id() {
+        CanId::Standard(id) => {
+            push_bits(&mut bits, u32::from(id), 11);
+            bits.push(remote); // RTR
+            bits.push(false); // IDE
+            bits.push(false); // r0
+        }
+        CanId::Extended(id) => {
+            push_bits(&mut bits, id >> 18, 11);
+            bits.push(true); // SRR
+            bits.push(true); // IDE
+            push_bits(&mut bits, id & 0x3_FFFF, 18);
+            bits.push(remote); // RTR
+            bits.push(false); // r1
+            bits.push(false); // r0
+        }
+    }
+    push_bits(&mut bits, frame.dlc() as u32, 4);
+    for &byte in frame.data() {
+        push_bits(&mut bits, u32::from(byte), 8);
+    }
+    let crc = crc15(&bits);
+    push_bits(&mut bits, u32::from(crc), 15);
+    Some(bits)
+}
+
+/// Exact length on the wire in bits, stuff bits and interframe space included; `None` for error and
+/// CAN FD frames.
+pub fn stuffed_bits(frame: &CanFrame) -> Option<u32> {
+    let bits = frame_bits(frame)?;
+    Some(bits.len() as u32 + count_stuff_bits(&bits) + TAIL_BITS)
+}
+
+/// Worst-case length in bits of a classic data frame with `len` data bytes.
+pub const fn worst_case_bits(extended: bool, len: u32) -> u32 {
+    let g = if extended { 54 } else { 34 };
+    g + 8 * len + TAIL_BITS + (g + 8 * len - 1) / 4
+}
+
+/// One row of the message rate table.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScheduleEntry {
+    /// DBC message name.
+    pub message: &'static str,
+    /// Frames per second.
+    pub rate_hz: f64,
+}
+
+/// The project's message schedule (`docs/protocol.md`): sensing and implement commands at 100 Hz,
+/// the rest slower. Position setpoints are counted although they replace the implement valve
+/// commands in position mode, so the figure is an upper bound.
+pub const SCHEDULE: &[ScheduleEntry] = &[
+    ScheduleEntry {
+        message: "AuxValveCommand_Boom",
+        rate_hz: 100.0,
+    },
+    ScheduleEntry {
+        message: "AuxValveCommand_Stick",
+        rate_hz: 100.0,
+    },
+    ScheduleEntry {
+        message: "AuxValveCommand_Bucket",
+        rate_hz: 100.0,
+    },
+    ScheduleEntry {
+        message: "AuxValveCommand_Swing",
+        rate_hz: 100.0,
+    },
+    ScheduleEntry {
+        message: "AuxValveCommand_LeftTrack",
+        rate_hz: 20.0,
+    },
+    ScheduleEntry {
+        message: "AuxValveCommand_RightTrack",
+        rate_hz: 20.0,
+    },
+    ScheduleEntry {
+        message: "PositionSetpoint",
+        rate_hz: 100.0,
+    },
+    ScheduleEntry {
+        message: "ControllerHeartbeat",
+        rate_hz: 20.0,
+    },
+    ScheduleEntry {
+        message: "JointAngles",
+        rate_hz: 100.0,
+    },
+    ScheduleEntry {
+        message: "JointRates",
+        rate_hz: 100.0,
+    },
+    ScheduleEntry {
+        message: "AuxValveMeasured_Boom",
+        rate_hz: 100.0,
+    },
+    ScheduleEntry {
+        message: "AuxValveMeasured_Stick",
+        rate_hz: 100.0,
+    },
+    ScheduleEntry {
+        message: "AuxValveMeasured_Bucket",
+        rate_hz: 100.0,
+    },
+    ScheduleEntry {
+        message: "PumpPressures",
+        rate_hz: 50.0,
+    },
+    ScheduleEntry {
+        message: "TrackOdometry",
+        rate_hz: 20.0,
+    },
+    ScheduleEntry {
+        message: "GatewayStatus",
+        rate_hz: 10.0,
+    },
+];
+
+/// The DBC descriptor of a schedule row.
+pub fn descriptor(entry: &ScheduleEntry) -> Option<&'static MessageDesc> {
+    dbc::MESSAGES.iter().find(|m| m.name == entry.message)
+}
+
+/// Worst-case bus load (fraction of `bitrate`) of `schedule`, every frame at its worst-case stuffing.
+/// Rows whose message is not in the DBC count as `None`.
+pub fn worst_case_load(schedule: &[ScheduleEntry], bitrate: u32) -> Option<f64> {
+    let mut bits_per_s = 0.0;
+    for entry in schedule {
+        let desc = descriptor(entry)?;
+        bits_per_s += f64::from(worst_case_bits(true, u32::from(desc.dlc))) * entry.rate_hz;
+    }
+    Some(bits_per_s / f64::from(bitrate))
+}
+
+/// Bus load of frames sent at the given rates, with their exact stuffing.
+/// Error and CAN FD frames give `None`.
+pub fn exact_load(frames: &[(CanFrame, f64)], bitrate: u32) -> Option<f64> {
+    let mut bits_per_s = 0.0;
+    for (frame, rate_hz) in frames {
+        bits_per_s += f64::from(stuffed_bits(frame)?) * rate_hz;
+    }
+    Some(bits_per_s / f64::from(bitrate))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn all_zero_standard_frame_has_six_stuff_bits() {
+        // 34 zero bits from SOF through a zero CRC: a stuff bit after every fifth.
+        let frame = CanFrame::new_standard(0, &[]).unwrap();
+        let bits = frame_bits(&frame).unwrap();
+        assert_eq!(bits.len(), 34);
+        assert!(bits.iter().all(|b| !b));
+        assert_eq!(count_stuff_bits(&bits), 6);
+        assert_eq!(stuffed_bits(&frame), Some(34 + 6 + 13));
+    }
+
+    #[test]
+    fn stuff_bits_restart_runs() {
+        // 00000 -> stuff 1; then 1111 joins the stuff bit: 1+4 = 5 ones -> another stuff bit.
+        let bits = [false, false, false, false, false, true, true, true, true];
+        assert_eq!(count_stuff_bits(&bits), 2);
+    }
+
+    #[test]
+    fn worst_case_matches_the_textbook_values() {
+        assert_eq!(worst_case_bits(false, 8), 135);
+        assert_eq!(worst_case_bits(true, 8), 160);
+    }
+
+    #[test]
+    fn exact_never_exceeds_worst_case() {
+        for id in [0u32, 0x0CFE_3027, 0x1FFF_FFFF, 0x0CFF_5080] {
+            for fill in [0x00u8, 0xFF, 0x55, 0xAA, 0x0F, 0xF0] {
+                let f = CanFrame::new_extended(id, &[fill; 8]).unwrap();
+                let n = stuffed_bits(&f).unwrap();
+                assert!((131..=160).contains(&n), "{id:#x} {fill:#x}: {n}");
+            }
+        }
+    }
+
+    #[test]
+    fn crc15_residue_of_a_frame_with_its_crc_is_zero() {
+        // A CRC without init or final XOR leaves a zero remainder over message + CRC.
+        for data in [&[0x01u8, 0x02][..], &[0xFF; 8][..], &[][..]] {
+            let frame = CanFrame::new_standard(0x123, data).unwrap();
+            let bits = frame_bits(&frame).unwrap();
+            assert_eq!(crc15(&bits), 0);
+            assert_ne!(crc15(&bits[..bits.len() - 15]), 0);
+        }
+    }
+}

@@ -1,0 +1,381 @@
+//! Signal descriptors generated from `excavator.dbc`, and the generic signal codec.
+//!
+//! `build.rs` parses the DBC with `can-dbc` and writes one module per message (for example
+//! [`joint_angles`]) holding a [`MessageDesc`] and one [`SignalDesc`] per signal. The typed messages in
+//! [`crate::messages`] use only these descriptors and the functions here to put values on the wire, so
+//! the layout, scaling and ranges exist in exactly one place: the DBC.
+//!
+//! Raw values outside a signal's `[min, max]` are classified with the J1939 conventions: for unsigned
+//! signals of 8 bits or more, a top byte of `0xFF` is "not available" and `0xFE` is an "error indicator";
+//! for shorter unsigned signals all ones is "not available" and all ones minus one is "error indicator".
+//! Signed signals (two's complement, a project choice) use the largest positive value for "not
+//! available" and the one below it for "error indicator". Anything else outside the range is
+//! "out of range".
+
+/// Description of one signal, generated from the DBC.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SignalDesc {
+    /// Signal name in the DBC.
+    pub name: &'static str,
+    /// Start bit (DBC numbering; little-endian: bit 0 is the LSB of byte 0).
+    pub start_bit: u16,
+    /// Length in bits (1..=32).
+    pub len: u16,
+    /// Byte order: always little-endian (Intel) in this project; `build.rs` rejects anything else.
+    pub little_endian: bool,
+    /// Two's complement signed.
+    pub signed: bool,
+    /// Physical value per raw bit.
+    pub factor: f64,
+    /// Physical offset.
+    pub offset: f64,
+    /// Smallest valid physical value.
+    pub min: f64,
+    /// Largest valid physical value.
+    pub max: f64,
+    /// Smallest valid raw value (from `min`).
+    pub raw_min: i64,
+    /// Largest valid raw value (from `max`).
+    pub raw_max: i64,
+    /// Unit string from the DBC.
+    pub unit: &'static str,
+}
+
+/// Description of one message, generated from the DBC.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MessageDesc {
+    /// Message name in the DBC.
+    pub name: &'static str,
+    /// The 29-bit id in the DBC: priority, PGN and the sender's source address.
+    pub default_id: u32,
+    /// Parameter group number.
+    pub pgn: u32,
+    /// Data length in bytes.
+    pub dlc: u8,
+    /// Sending node in the DBC (`Controller` or `Gateway`).
+    pub transmitter: &'static str,
+    /// Signals in DBC order.
+    pub signals: &'static [SignalDesc],
+}
+
+include!(concat!(env!("OUT_DIR"), "/dbc_generated.rs"));
+
+/// Why a frame could not be decoded. Small and `Copy` for the receive hot path.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum DecodeError {
+    /// The PGN is not one of the project's messages.
+    #[error("unknown PGN {pgn:#06X} (id {id:#010X})")]
+    UnknownPgn {
+        /// The PGN of the frame.
+        pgn: u32,
+        /// The 29-bit id.
+        id: u32,
+    },
+    /// An 11-bit id where a 29-bit J1939 id was expected.
+    #[error("standard (11-bit) id {0:#05X} where a 29-bit J1939 id was expected")]
+    StandardId(u16),
+    /// A remote transmission request.
+    #[error("remote (RTR) frame")]
+    RemoteFrame,
+    /// An error frame.
+    #[error("error frame (class {0:#010X})")]
+    ErrorFrame(u32),
+    /// A CAN FD frame (the protocol is classic CAN).
+    #[error("CAN FD frame where a classic frame was expected")]
+    FdFrame,
+    /// The payload length does not match the DBC.
+    #[error("{message}: {actual} data bytes, expected {expected}")]
+    WrongDlc {
+        /// DBC message name.
+        message: &'static str,
+        /// DLC in the DBC.
+        expected: u8,
+        /// Bytes in the frame.
+        actual: u8,
+    },
+    /// A raw value outside the signal's range that is not a J1939 special value.
+    #[error("signal {signal}: raw value {raw} out of range")]
+    OutOfRange {
+        /// DBC signal name.
+        signal: &'static str,
+        /// The raw value.
+        raw: i64,
+    },
+    /// The J1939 "not available" value.
+    #[error("signal {signal}: not available")]
+    NotAvailable {
+        /// DBC signal name.
+        signal: &'static str,
+    },
+    /// The J1939 "error indicator" value.
+    #[error("signal {signal}: error indicator")]
+    ErrorIndicator {
+        /// DBC signal name.
+        signal: &'static str,
+    },
+    /// The heartbeat checksum does not match.
+    #[error("bad checksum: received {received:#04X}, computed {computed:#04X}")]
+    BadChecksum {
+        /// Checksum in the frame.
+        received: u8,
+        /// Checksum computed over the frame.
+        computed: u8,
+    },
+}
+
+/// Why a value could not be encoded. No value is silently clamped.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum EncodeError {
+    /// The physical value is outside the signal's `[min, max]`.
+    #[error("signal {signal}: value {value} outside [{min}, {max}]")]
+    OutOfRange {
+        /// DBC signal name.
+        signal: &'static str,
+        /// The rejected value.
+        value: f64,
+        /// Smallest valid value.
+        min: f64,
+        /// Largest valid value.
+        max: f64,
+    },
+    /// NaN or infinite.
+    #[error("signal {signal}: value is not finite")]
+    NotFinite {
+        /// DBC signal name.
+        signal: &'static str,
+    },
+    /// The source address given does not fit the id (never happens for u8, kept for completeness of
+    /// id construction errors).
+    #[error("invalid identifier: {0}")]
+    Id(#[from] crate::id::IdError),
+}
+
+/// Extracts the raw bits of `sig` from `data` (sign-extended if signed). Returns `None` if the signal
+/// does not fit in `data`.
+pub fn extract_raw(sig: &SignalDesc, data: &[u8]) -> Option<i64> {
+    let start = usize::from(sig.start_bit);
+    let len = usize::from(sig.len);
+    if len == 0 || len > 32 || start + len > data.len() * 8 {
+        return None;
+    }
+    let mut value: u64 = 0;
+    for i in 0..len {
+        let bit = start + i;
+        let b = (data[bit / 8] >> (bit % 8)) & 1;
+        value |= u64::from(b) << i;
+    }
+    if sig.signed && (value >> (len - 1)) & 1 == 1 {
+        Some(value as i64 - (1i64 << len))
+    } else {
+        Some(value as i64)
+    }
+}
+
+/// Writes the raw value `raw` (two's complement if negative) into the bits of `sig`.
+/// Bits outside the signal are untouched. Returns `None` if the signal does not fit in `data`.
+pub fn insert_raw(sig: &SignalDesc, raw: i64, data: &mut [u8]) -> Option<()> {
+    let start = usize::from(sig.start_bit);
+    let len = usize::from(sig.len);
+    if len == 0 || len > 32 || start + len > data.len() * 8 {
+        return None;
+    }
+    let bits = raw as u64;
+    for i in 0..len {
+        let bit = start + i;
+        let mask = 1u8 << (bit % 8);
+        if (bits >> i) & 1 == 1 {
+            data[bit / 8] |= mask;
+        } else {
+            data[bit / 8] &= !mask;
+        }
+    }
+    Some(())
+}
+
+/// Classifies a raw value outside `[raw_min, raw_max]` with the J1939 conventions.
+fn classify_invalid(sig: &SignalDesc, raw: i64) -> DecodeError {
+    let len = u32::from(sig.len);
+    let signal = sig.name;
+    if sig.signed {
+        let max = (1i64 << (len - 1)) - 1;
+        if raw == max {
+            return DecodeError::NotAvailable { signal };
+        }
+        if raw == max - 1 {
+            return DecodeError::ErrorIndicator { signal };
+        }
+    } else if len >= 8 {
+        match (raw >> (len - 8)) & 0xFF {
+            0xFF => return DecodeError::NotAvailable { signal },
+            0xFE => return DecodeError::ErrorIndicator { signal },
+            _ => {}
+        }
+    } else {
+        let all_ones = (1i64 << len) - 1;
+        if raw == all_ones {
+            return DecodeError::NotAvailable { signal };
+        }
+        if raw == all_ones - 1 && len >= 2 {
+            return DecodeError::ErrorIndicator { signal };
+        }
+    }
+    DecodeError::OutOfRange { signal, raw }
+}
+
+/// Decodes the raw value of `sig`, checking its range.
+///
+/// # Errors
+/// [`DecodeError::NotAvailable`], [`DecodeError::ErrorIndicator`] or [`DecodeError::OutOfRange`] for raw
+/// values outside the signal's range; [`DecodeError::OutOfRange`] if the data is too short (callers
+/// check the DLC first, so this does not happen in practice).
+pub fn decode_raw(sig: &SignalDesc, data: &[u8]) -> Result<i64, DecodeError> {
+    let raw = extract_raw(sig, data).ok_or(DecodeError::OutOfRange {
+        signal: sig.name,
+        raw: -1,
+    })?;
+    if raw < sig.raw_min || raw > sig.raw_max {
+        return Err(classify_invalid(sig, raw));
+    }
+    Ok(raw)
+}
+
+/// Decodes the physical value of `sig` (`raw * factor + offset`), checking its range.
+///
+/// # Errors
+/// As [`decode_raw`].
+pub fn decode_physical(sig: &SignalDesc, data: &[u8]) -> Result<f64, DecodeError> {
+    decode_raw(sig, data).map(|raw| raw as f64 * sig.factor + sig.offset)
+}
+
+/// The raw value that encodes `value`, rounded to the nearest step.
+///
+/// # Errors
+/// [`EncodeError::NotFinite`] or [`EncodeError::OutOfRange`] (values more than half a step outside
+/// `[min, max]`; values within half a step round to the limit).
+pub fn physical_to_raw(sig: &SignalDesc, value: f64) -> Result<i64, EncodeError> {
+    if !value.is_finite() {
+        return Err(EncodeError::NotFinite { signal: sig.name });
+    }
+    let raw = ((value - sig.offset) / sig.factor).round();
+    if raw < sig.raw_min as f64 || raw > sig.raw_max as f64 {
+        return Err(EncodeError::OutOfRange {
+            signal: sig.name,
+            value,
+            min: sig.min,
+            max: sig.max,
+        });
+    }
+    Ok(raw as i64)
+}
+
+/// Encodes the physical `value` of `sig` into `data`.
+///
+/// # Errors
+/// As [`physical_to_raw`].
+pub fn encode_physical(sig: &SignalDesc, value: f64, data: &mut [u8]) -> Result<(), EncodeError> {
+    let raw = physical_to_raw(sig, value)?;
+    encode_raw(sig, raw, data)
+}
+
+/// Encodes a raw value of `sig` into `data`, checking it against the signal's raw range.
+///
+/// # Errors
+/// [`EncodeError::OutOfRange`] if `raw` is outside `[raw_min, raw_max]` or the signal does not fit
+/// `data`.
+pub fn encode_raw(sig: &SignalDesc, raw: i64, data: &mut [u8]) -> Result<(), EncodeError> {
+    let out_of_range = EncodeError::OutOfRange {
+        signal: sig.name,
+        value: raw as f64,
+        min: sig.raw_min as f64,
+        max: sig.raw_max as f64,
+    };
+    if raw < sig.raw_min || raw > sig.raw_max {
+        return Err(out_of_range);
+    }
+    insert_raw(sig, raw, data).ok_or(out_of_range)
+}
+
+/// Looks up the descriptor of a message by PGN.
+pub fn message_by_pgn(pgn: u32) -> Option<&'static MessageDesc> {
+    MESSAGES.iter().find(|m| m.pgn == pgn)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn generated_tables_match_the_documented_ids() {
+        assert_eq!(aux_valve_command_boom::MESSAGE.default_id, 0x0CFE_3027);
+        assert_eq!(aux_valve_command_boom::PGN, 65072);
+        assert_eq!(aux_valve_measured_boom::PGN, 65056);
+        assert_eq!(joint_angles::PGN, 0xFF50);
+        assert_eq!(MESSAGES.len(), 16);
+    }
+
+    #[test]
+    fn signed_fields_round_trip_at_odd_offsets() {
+        let sig = position_setpoint::STICK_SETPOINT; // 15 bits starting at bit 15
+        let mut data = [0xFFu8; 8];
+        insert_raw(&sig, -12345, &mut data).unwrap();
+        assert_eq!(extract_raw(&sig, &data), Some(-12345));
+        // Neighbours untouched.
+        assert_eq!(
+            extract_raw(&position_setpoint::BOOM_SETPOINT, &data),
+            Some(-1)
+        );
+    }
+
+    #[test]
+    fn j1939_special_values_are_classified() {
+        let flow = aux_valve_command_boom::PORT_FLOW_COMMAND;
+        assert_eq!(
+            classify_invalid(&flow, 0xFF),
+            DecodeError::NotAvailable { signal: flow.name }
+        );
+        assert_eq!(
+            classify_invalid(&flow, 0xFE),
+            DecodeError::ErrorIndicator { signal: flow.name }
+        );
+        assert_eq!(
+            classify_invalid(&flow, 0xFB),
+            DecodeError::OutOfRange {
+                signal: flow.name,
+                raw: 0xFB
+            }
+        );
+        let fine = aux_valve_command_boom::PORT_FLOW_COMMAND_FINE;
+        assert_eq!(
+            classify_invalid(&fine, 0xFF12),
+            DecodeError::NotAvailable { signal: fine.name }
+        );
+        let state = aux_valve_command_boom::VALVE_STATE;
+        assert_eq!(
+            classify_invalid(&state, 0xF),
+            DecodeError::NotAvailable { signal: state.name }
+        );
+        assert_eq!(
+            classify_invalid(&state, 0xE),
+            DecodeError::ErrorIndicator { signal: state.name }
+        );
+        let angle = joint_angles::BOOM_ANGLE;
+        assert_eq!(
+            classify_invalid(&angle, 0x7FFF),
+            DecodeError::NotAvailable { signal: angle.name }
+        );
+    }
+
+    #[test]
+    fn encoding_rejects_instead_of_clamping() {
+        let sig = joint_angles::BOOM_ANGLE;
+        assert!(matches!(
+            physical_to_raw(&sig, 3.2),
+            Err(EncodeError::OutOfRange { .. })
+        ));
+        assert!(matches!(
+            physical_to_raw(&sig, f64::NAN),
+            Err(EncodeError::NotFinite { .. })
+        ));
+        assert_eq!(physical_to_raw(&sig, std::f64::consts::PI), Ok(31416));
+    }
+}

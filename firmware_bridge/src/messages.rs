@@ -1,0 +1,988 @@
+//! Typed excavator messages and their encoding to and from CAN frames.
+//!
+//! Every message goes through the descriptors generated from `excavator.dbc` ([`crate::dbc`]); nothing
+//! here knows a bit position or a scale factor. Units are SI (`docs/ARCHITECTURE.md`) except the valve
+//! flows, which are percent of rated flow as in ISO 11783-7.
+//!
+//! Decoding ([`Message::decode`]) never panics and returns a small `Copy` [`DecodeError`]; encoding
+//! ([`Message::encode`]) rejects out-of-range values with an [`EncodeError`] instead of clamping them.
+
+use crate::dbc::{self, MessageDesc, SignalDesc};
+use crate::frame::{CanFrame, CanId, FrameKind};
+use crate::id::J1939Id;
+
+pub use crate::dbc::{DecodeError, EncodeError};
+
+/// The six valve sections, in the valve-number order of the ISO 11783-7 PGNs (PGN 65072 + number).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Valve {
+    /// Valve 0: boom cylinder.
+    Boom = 0,
+    /// Valve 1: stick cylinder.
+    Stick = 1,
+    /// Valve 2: bucket cylinder.
+    Bucket = 2,
+    /// Valve 3: swing motor.
+    Swing = 3,
+    /// Valve 4: left track motor.
+    LeftTrack = 4,
+    /// Valve 5: right track motor.
+    RightTrack = 5,
+}
+
+impl Valve {
+    /// All valves in number order (the array order of `docs/ARCHITECTURE.md`).
+    pub const ALL: [Valve; 6] = [
+        Self::Boom,
+        Self::Stick,
+        Self::Bucket,
+        Self::Swing,
+        Self::LeftTrack,
+        Self::RightTrack,
+    ];
+
+    /// The ISO 11783-7 valve number.
+    pub const fn number(self) -> u8 {
+        self as u8
+    }
+
+    /// The valve with this number.
+    pub const fn from_number(number: u8) -> Option<Self> {
+        match number {
+            0 => Some(Self::Boom),
+            1 => Some(Self::Stick),
+            2 => Some(Self::Bucket),
+            3 => Some(Self::Swing),
+            4 => Some(Self::LeftTrack),
+            5 => Some(Self::RightTrack),
+            _ => None,
+        }
+    }
+}
+
+/// The three implement cylinders that report measured flow and port pressures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Cylinder {
+    /// Valve 0: boom cylinder.
+    Boom = 0,
+    /// Valve 1: stick cylinder.
+    Stick = 1,
+    /// Valve 2: bucket cylinder.
+    Bucket = 2,
+}
+
+impl Cylinder {
+    /// All cylinders, `[boom, stick, bucket]`.
+    pub const ALL: [Cylinder; 3] = [Self::Boom, Self::Stick, Self::Bucket];
+
+    /// The ISO 11783-7 valve number.
+    pub const fn number(self) -> u8 {
+        self as u8
+    }
+}
+
+/// ISO 11783-7 valve state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ValveState {
+    /// Block (neutral): both work ports closed.
+    Block = 0,
+    /// Flow to the extend port (cylinder extends).
+    Extend = 1,
+    /// Flow to the retract port (cylinder retracts).
+    Retract = 2,
+    /// Float: both work ports to tank.
+    Float = 3,
+}
+
+impl ValveState {
+    fn from_raw(raw: i64) -> Self {
+        match raw {
+            1 => Self::Extend,
+            2 => Self::Retract,
+            3 => Self::Float,
+            // The DBC range [0|3] has been checked before this is called.
+            _ => Self::Block,
+        }
+    }
+}
+
+/// ISO 11783-7 fail-safe mode: what the valve does when commands stop arriving.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum FailSafeMode {
+    /// Go to block (neutral). The project always uses this.
+    Block = 0,
+    /// Go to float.
+    Float = 1,
+}
+
+/// Gateway operating mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum GatewayMode {
+    /// Valves held neutral; commands ignored.
+    Disarmed = 0,
+    /// Valve commands from the controller are applied.
+    ArmedValve = 1,
+    /// The gateway's closed-loop position control follows [`PositionSetpoint`].
+    ArmedPosition = 2,
+    /// A fault latched; valves neutral until the controller disarms.
+    Faulted = 3,
+}
+
+impl GatewayMode {
+    fn from_raw(raw: i64) -> Self {
+        match raw {
+            1 => Self::ArmedValve,
+            2 => Self::ArmedPosition,
+            3 => Self::Faulted,
+            _ => Self::Disarmed,
+        }
+    }
+}
+
+/// The mode the controller asks the gateway for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum RequestedMode {
+    /// Go to disarmed (valves neutral).
+    Disarm = 0,
+    /// Arm and apply valve commands.
+    ArmValve = 1,
+    /// Arm and follow position setpoints.
+    ArmPosition = 2,
+    /// Emergency stop: neutral valves and latch a fault.
+    EStop = 3,
+}
+
+impl RequestedMode {
+    fn from_raw(raw: i64) -> Self {
+        match raw {
+            1 => Self::ArmValve,
+            2 => Self::ArmPosition,
+            3 => Self::EStop,
+            _ => Self::Disarm,
+        }
+    }
+}
+
+/// Gateway fault bits (the `FaultBits` signal of `GatewayStatus`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub struct GatewayFaults(pub u16);
+
+impl GatewayFaults {
+    /// No heartbeat within the watchdog period.
+    pub const WATCHDOG_TIMEOUT: u16 = 1 << 0;
+    /// A heartbeat with a wrong checksum.
+    pub const BAD_CHECKSUM: u16 = 1 << 1;
+    /// A heartbeat or setpoint whose alive counter did not advance by one.
+    pub const BAD_ALIVE_COUNTER: u16 = 1 << 2;
+    /// A valve command or setpoint older than allowed.
+    pub const STALE_COMMAND: u16 = 1 << 3;
+    /// Emergency stop requested or wired e-stop pressed.
+    pub const E_STOP: u16 = 1 << 4;
+    /// Bus-off, error passive or other bus error.
+    pub const BUS_ERROR: u16 = 1 << 5;
+    /// A joint reached a hard limit.
+    pub const JOINT_LIMIT: u16 = 1 << 6;
+    /// A position setpoint outside the joint range.
+    pub const SETPOINT_OUT_OF_RANGE: u16 = 1 << 7;
+
+    /// True if every bit of `bits` is set.
+    pub const fn contains(self, bits: u16) -> bool {
+        self.0 & bits == bits
+    }
+
+    /// True if no fault bit is set.
+    pub const fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+
+    /// With `bits` added.
+    pub const fn with(self, bits: u16) -> Self {
+        Self(self.0 | bits)
+    }
+}
+
+/// ISO 11783-7 Auxiliary Valve Command (PGN 65072 + valve number), controller to gateway.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AuxValveCommand {
+    /// Which valve.
+    pub valve: Valve,
+    /// Port flow, percent of rated flow, `0..=100`. Sent both as the 0.4 %/bit standard byte and the
+    /// 0.0025 %/bit fine flow in bytes 4-5.
+    pub flow_percent: f64,
+    /// Valve state (direction).
+    pub state: ValveState,
+    /// Fail-safe mode.
+    pub fail_safe: FailSafeMode,
+}
+
+impl AuxValveCommand {
+    /// Neutral (block, zero flow, fail-safe block): the command sent on any fault and at shutdown.
+    pub const fn neutral(valve: Valve) -> Self {
+        Self {
+            valve,
+            flow_percent: 0.0,
+            state: ValveState::Block,
+            fail_safe: FailSafeMode::Block,
+        }
+    }
+
+    /// From a command in `[-1, 1]` (fraction of maximum cylinder velocity, positive = extend).
+    ///
+    /// # Errors
+    /// [`EncodeError::NotFinite`] or [`EncodeError::OutOfRange`] outside `[-1, 1]`.
+    pub fn from_fraction(valve: Valve, command: f64) -> Result<Self, EncodeError> {
+        let signal = "command";
+        if !command.is_finite() {
+            return Err(EncodeError::NotFinite { signal });
+        }
+        if !(-1.0..=1.0).contains(&command) {
+            return Err(EncodeError::OutOfRange {
+                signal,
+                value: command,
+                min: -1.0,
+                max: 1.0,
+            });
+        }
+        let state = if command > 0.0 {
+            ValveState::Extend
+        } else if command < 0.0 {
+            ValveState::Retract
+        } else {
+            ValveState::Block
+        };
+        Ok(Self {
+            valve,
+            flow_percent: command.abs() * 100.0,
+            state,
+            fail_safe: FailSafeMode::Block,
+        })
+    }
+
+    /// The command as a fraction in `[-1, 1]`: `+flow` for extend, `-flow` for retract, 0 for block
+    /// and float.
+    pub fn to_fraction(&self) -> f64 {
+        match self.state {
+            ValveState::Extend => self.flow_percent / 100.0,
+            ValveState::Retract => -self.flow_percent / 100.0,
+            ValveState::Block | ValveState::Float => 0.0,
+        }
+    }
+}
+
+/// ISO 11783-7 Auxiliary Valve Measured Flow (PGN 65056 + valve number), gateway to controller.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AuxValveMeasured {
+    /// Which cylinder.
+    pub cylinder: Cylinder,
+    /// Measured flow through the valve, percent of rated flow, `0..=160`.
+    pub flow_percent: f64,
+    /// Valve state the flow goes with.
+    pub state: ValveState,
+    /// Extend-port (cylinder head side) pressure, Pa, `0..=100e6`, 5 kPa resolution.
+    pub head_pressure_pa: f64,
+    /// Retract-port (cylinder rod side) pressure, Pa, `0..=100e6`, 5 kPa resolution.
+    pub rod_pressure_pa: f64,
+}
+
+/// Resolver joint angles (Proprietary B PGN 0xFF50), rad, `[-pi, pi]`, 1e-4 rad resolution.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct JointAngles {
+    /// Boom angle to base `x`.
+    pub boom_rad: f64,
+    /// Stick angle relative to the boom line.
+    pub stick_rad: f64,
+    /// Bucket angle relative to the stick line.
+    pub bucket_rad: f64,
+    /// Swing angle.
+    pub swing_rad: f64,
+}
+
+/// Joint angular rates (Proprietary B PGN 0xFF51), rad/s, `[-32, 32]`, 1e-3 rad/s resolution.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct JointRates {
+    /// Boom rate.
+    pub boom_rad_per_s: f64,
+    /// Stick rate.
+    pub stick_rad_per_s: f64,
+    /// Bucket rate.
+    pub bucket_rad_per_s: f64,
+    /// Swing rate.
+    pub swing_rad_per_s: f64,
+}
+
+/// Main pump outlet pressures (Proprietary B PGN 0xFF52), Pa, `0..=64e6`, 1 kPa resolution.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PumpPressures {
+    /// Pump 1 pressure.
+    pub pump1_pa: f64,
+    /// Pump 2 pressure.
+    pub pump2_pa: f64,
+}
+
+/// Track odometry (Proprietary B PGN 0xFF53): signed travel since power-up, m, `+/-200 km`, 0.1 mm.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TrackOdometry {
+    /// Left track travel (backwards negative).
+    pub left_m: f64,
+    /// Right track travel (backwards negative).
+    pub right_m: f64,
+}
+
+/// Gateway status (Proprietary B PGN 0xFF54), 10 Hz.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GatewayStatus {
+    /// Operating mode.
+    pub mode: GatewayMode,
+    /// Latched fault bits.
+    pub faults: GatewayFaults,
+    /// Alive counter, increments by one per status frame, wraps 255 -> 0.
+    pub alive_counter: u8,
+    /// Frames with an unknown id or from an unexpected source (saturating).
+    pub unexpected_frames: u16,
+    /// Known frames rejected (bad DLC, range, checksum, counter) (saturating).
+    pub rejected_frames: u16,
+}
+
+/// Joint position setpoints for the gateway's closed-loop position mode (Proprietary B PGN 0xFF60),
+/// rad, `[-pi, pi]`, 2e-4 rad resolution (15-bit fields so four angles and a counter fit 8 bytes).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PositionSetpoint {
+    /// Boom angle setpoint.
+    pub boom_rad: f64,
+    /// Stick angle setpoint.
+    pub stick_rad: f64,
+    /// Bucket angle setpoint.
+    pub bucket_rad: f64,
+    /// Swing angle setpoint.
+    pub swing_rad: f64,
+    /// Sequence counter `0..=15`, increments by one per setpoint.
+    pub sequence: u8,
+}
+
+/// Controller heartbeat and mode request (Proprietary B PGN 0xFF61) with a 4-bit alive counter and a
+/// CRC-8 SAE J1850 checksum (see [`heartbeat_checksum`]). The checksum is computed by
+/// [`Message::encode`] and verified by [`Message::decode`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ControllerHeartbeat {
+    /// Requested gateway mode.
+    pub mode: RequestedMode,
+    /// Alive counter `0..=15`, increments by one per heartbeat.
+    pub alive_counter: u8,
+}
+
+impl ControllerHeartbeat {
+    /// The heartbeat after this one: same mode, counter advanced by one (mod 16).
+    pub const fn next(self, mode: RequestedMode) -> Self {
+        Self {
+            mode,
+            alive_counter: (self.alive_counter + 1) % 16,
+        }
+    }
+
+    /// Builds a valid heartbeat frame from the controller.
+    ///
+    /// # Errors
+    /// [`EncodeError::OutOfRange`] if `alive_counter > 15`.
+    pub fn to_frame(self) -> Result<CanFrame, EncodeError> {
+        Message::ControllerHeartbeat(self).encode()
+    }
+
+    /// Decodes a frame that must be a valid heartbeat (id, DLC, ranges, checksum).
+    ///
+    /// # Errors
+    /// Any [`DecodeError`]; a frame of another message gives [`DecodeError::UnknownPgn`].
+    pub fn verify(frame: &CanFrame) -> Result<(J1939Id, Self), DecodeError> {
+        let decoded = Message::decode(frame)?;
+        match decoded.message {
+            Message::ControllerHeartbeat(hb) => Ok((decoded.id, hb)),
+            _ => Err(DecodeError::UnknownPgn {
+                pgn: decoded.id.pgn(),
+                id: decoded.id.raw(),
+            }),
+        }
+    }
+}
+
+/// True if `next` is the successor of `prev` for an alive counter of `bits` bits (4 or 8).
+pub const fn is_next_alive(prev: u8, next: u8, bits: u32) -> bool {
+    let modulus = 1u16 << bits;
+    (prev as u16 + 1) % modulus == next as u16
+}
+
+/// CRC-8 SAE J1850: polynomial 0x1D, initial value 0xFF, final XOR 0xFF, no reflection
+/// (check value over `"123456789"` is 0x4B).
+pub fn crc8_sae_j1850(bytes: impl IntoIterator<Item = u8>) -> u8 {
+    let mut crc: u8 = 0xFF;
+    for byte in bytes {
+        crc ^= byte;
+        for _ in 0..8 {
+            crc = if crc & 0x80 != 0 {
+                (crc << 1) ^ 0x1D
+            } else {
+                crc << 1
+            };
+        }
+    }
+    crc ^ 0xFF
+}
+
+/// The heartbeat checksum: CRC-8 SAE J1850 over the PGN (3 bytes, least significant first) followed by
+/// every data byte except the checksum byte itself, in order. Including the PGN means a frame with the
+/// same bytes under another id does not pass as a heartbeat.
+pub fn heartbeat_checksum(data: &[u8]) -> u8 {
+    let pgn = dbc::controller_heartbeat::PGN;
+    let checksum_byte = usize::from(dbc::controller_heartbeat::CHECKSUM.start_bit / 8);
+    let pgn_bytes = [
+        (pgn & 0xFF) as u8,
+        ((pgn >> 8) & 0xFF) as u8,
+        ((pgn >> 16) & 0xFF) as u8,
+    ];
+    let body = data
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| *i != checksum_byte)
+        .map(|(_, b)| *b);
+    crc8_sae_j1850(pgn_bytes.into_iter().chain(body))
+}
+
+/// Every message of the protocol. Variant names are the names in `docs/protocol.md`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Message {
+    /// ISO 11783-7 Auxiliary Valve Command.
+    AuxValveCommand(AuxValveCommand),
+    /// ISO 11783-7 Auxiliary Valve Measured Flow (with port pressures).
+    AuxValveMeasured(AuxValveMeasured),
+    /// Resolver joint angles.
+    JointAngles(JointAngles),
+    /// Joint angular rates.
+    JointRates(JointRates),
+    /// Pump pressures.
+    PumpPressures(PumpPressures),
+    /// Track odometry.
+    TrackOdometry(TrackOdometry),
+    /// Gateway status.
+    GatewayStatus(GatewayStatus),
+    /// Position setpoints.
+    PositionSetpoint(PositionSetpoint),
+    /// Controller heartbeat.
+    ControllerHeartbeat(ControllerHeartbeat),
+}
+
+/// A decoded frame: the J1939 id (so receivers can check the source address) and the message.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Decoded {
+    /// The frame's id.
+    pub id: J1939Id,
+    /// The message.
+    pub message: Message,
+}
+
+const AUX_VALVE_COMMAND: [&MessageDesc; 6] = [
+    &dbc::aux_valve_command_boom::MESSAGE,
+    &dbc::aux_valve_command_stick::MESSAGE,
+    &dbc::aux_valve_command_bucket::MESSAGE,
+    &dbc::aux_valve_command_swing::MESSAGE,
+    &dbc::aux_valve_command_left_track::MESSAGE,
+    &dbc::aux_valve_command_right_track::MESSAGE,
+];
+
+const AUX_VALVE_MEASURED: [&MessageDesc; 3] = [
+    &dbc::aux_valve_measured_boom::MESSAGE,
+    &dbc::aux_valve_measured_stick::MESSAGE,
+    &dbc::aux_valve_measured_bucket::MESSAGE,
+];
+
+// The six valve-command messages (and the three measured ones) share one layout; the boom modules'
+// signal descriptors are used for all of them. `tests::valve_messages_share_one_layout` checks it.
+mod cmd {
+    pub use crate::dbc::aux_valve_command_boom::{
+        FAIL_SAFE_MODE, PORT_FLOW_COMMAND, PORT_FLOW_COMMAND_FINE, VALVE_STATE,
+    };
+}
+mod meas {
+    pub use crate::dbc::aux_valve_measured_boom::{
+        EXTEND_PORT_PRESSURE, MEASURED_FLOW, RETRACT_PORT_PRESSURE, VALVE_STATE,
+    };
+}
+
+fn get(sig: &SignalDesc, data: &[u8]) -> Result<f64, DecodeError> {
+    dbc::decode_physical(sig, data)
+}
+
+fn raw(sig: &SignalDesc, data: &[u8]) -> Result<i64, DecodeError> {
+    dbc::decode_raw(sig, data)
+}
+
+/// Raw values of counters and bit fields fit their Rust type because the DBC range was checked.
+fn raw_u16(sig: &SignalDesc, data: &[u8]) -> Result<u16, DecodeError> {
+    let r = raw(sig, data)?;
+    u16::try_from(r).map_err(|_| DecodeError::OutOfRange {
+        signal: sig.name,
+        raw: r,
+    })
+}
+
+fn raw_u8(sig: &SignalDesc, data: &[u8]) -> Result<u8, DecodeError> {
+    let r = raw(sig, data)?;
+    u8::try_from(r).map_err(|_| DecodeError::OutOfRange {
+        signal: sig.name,
+        raw: r,
+    })
+}
+
+impl Message {
+    /// The DBC descriptor this message is sent with.
+    pub fn descriptor(&self) -> &'static MessageDesc {
+        match self {
+            Self::AuxValveCommand(m) => AUX_VALVE_COMMAND[usize::from(m.valve.number())],
+            Self::AuxValveMeasured(m) => AUX_VALVE_MEASURED[usize::from(m.cylinder.number())],
+            Self::JointAngles(_) => &dbc::joint_angles::MESSAGE,
+            Self::JointRates(_) => &dbc::joint_rates::MESSAGE,
+            Self::PumpPressures(_) => &dbc::pump_pressures::MESSAGE,
+            Self::TrackOdometry(_) => &dbc::track_odometry::MESSAGE,
+            Self::GatewayStatus(_) => &dbc::gateway_status::MESSAGE,
+            Self::PositionSetpoint(_) => &dbc::position_setpoint::MESSAGE,
+            Self::ControllerHeartbeat(_) => &dbc::controller_heartbeat::MESSAGE,
+        }
+    }
+
+    /// Encodes with the DBC's id: its priority and the sender's source address
+    /// ([`crate::id::CONTROLLER_ADDRESS`] or [`crate::id::GATEWAY_ADDRESS`]).
+    ///
+    /// # Errors
+    /// [`EncodeError`] for a value outside its signal's range; nothing is clamped.
+    pub fn encode(&self) -> Result<CanFrame, EncodeError> {
+        let desc = self.descriptor();
+        self.encode_with_id(J1939Id::from_raw(desc.default_id)?)
+    }
+
+    /// Encodes with the DBC's priority and PGN but another source address.
+    ///
+    /// # Errors
+    /// As [`Message::encode`].
+    pub fn encode_from(&self, source_address: u8) -> Result<CanFrame, EncodeError> {
+        let desc = self.descriptor();
+        self.encode_with_id(J1939Id::from_raw(desc.default_id)?.with_source_address(source_address))
+    }
+
+    fn encode_with_id(&self, id: J1939Id) -> Result<CanFrame, EncodeError> {
+        let desc = self.descriptor();
+        // Unused bits are 1, the J1939 convention for reserved bits.
+        let mut data = [0xFFu8; 8];
+        self.encode_signals(&mut data)?;
+        let len = usize::from(desc.dlc).min(data.len());
+        // The id came from a `J1939Id` (<= 29 bits) and len <= 8, so this cannot fail; map anyway.
+        CanFrame::new_data(CanId::Extended(id.raw()), &data[..len])
+            .map_err(|_| EncodeError::Id(crate::id::IdError::TooLarge(id.raw())))
+    }
+
+    fn encode_signals(&self, d: &mut [u8; 8]) -> Result<(), EncodeError> {
+        use dbc::encode_physical as put;
+        match self {
+            Self::AuxValveCommand(m) => {
+                let flow = m.flow_percent;
+                put(&cmd::PORT_FLOW_COMMAND, flow, d)?;
+                put(&cmd::PORT_FLOW_COMMAND_FINE, flow, d)?;
+                dbc::encode_raw(&cmd::VALVE_STATE, m.state as i64, d)?;
+                dbc::encode_raw(&cmd::FAIL_SAFE_MODE, m.fail_safe as i64, d)?;
+            }
+            Self::AuxValveMeasured(m) => {
+                put(&meas::MEASURED_FLOW, m.flow_percent, d)?;
+                dbc::encode_raw(&meas::VALVE_STATE, m.state as i64, d)?;
+                put(&meas::EXTEND_PORT_PRESSURE, m.head_pressure_pa, d)?;
+                put(&meas::RETRACT_PORT_PRESSURE, m.rod_pressure_pa, d)?;
+            }
+            Self::JointAngles(m) => {
+                use dbc::joint_angles as s;
+                put(&s::BOOM_ANGLE, m.boom_rad, d)?;
+                put(&s::STICK_ANGLE, m.stick_rad, d)?;
+                put(&s::BUCKET_ANGLE, m.bucket_rad, d)?;
+                put(&s::SWING_ANGLE, m.swing_rad, d)?;
+            }
+            Self::JointRates(m) => {
+                use dbc::joint_rates as s;
+                put(&s::BOOM_RATE, m.boom_rad_per_s, d)?;
+                put(&s::STICK_RATE, m.stick_rad_per_s, d)?;
+                put(&s::BUCKET_RATE, m.bucket_rad_per_s, d)?;
+                put(&s::SWING_RATE, m.swing_rad_per_s, d)?;
+            }
+            Self::PumpPressures(m) => {
+                use dbc::pump_pressures as s;
+                put(&s::PUMP1_PRESSURE, m.pump1_pa, d)?;
+                put(&s::PUMP2_PRESSURE, m.pump2_pa, d)?;
+            }
+            Self::TrackOdometry(m) => {
+                use dbc::track_odometry as s;
+                put(&s::LEFT_TRACK_TRAVEL, m.left_m, d)?;
+                put(&s::RIGHT_TRACK_TRAVEL, m.right_m, d)?;
+            }
+            Self::GatewayStatus(m) => {
+                use dbc::gateway_status as s;
+                dbc::encode_raw(&s::MODE, m.mode as i64, d)?;
+                dbc::encode_raw(&s::ALIVE_COUNTER, i64::from(m.alive_counter), d)?;
+                dbc::encode_raw(&s::FAULT_BITS, i64::from(m.faults.0), d)?;
+                dbc::encode_raw(&s::UNEXPECTED_FRAMES, i64::from(m.unexpected_frames), d)?;
+                dbc::encode_raw(&s::REJECTED_FRAMES, i64::from(m.rejected_frames), d)?;
+            }
+            Self::PositionSetpoint(m) => {
+                use dbc::position_setpoint as s;
+                put(&s::BOOM_SETPOINT, m.boom_rad, d)?;
+                put(&s::STICK_SETPOINT, m.stick_rad, d)?;
+                put(&s::BUCKET_SETPOINT, m.bucket_rad, d)?;
+                put(&s::SWING_SETPOINT, m.swing_rad, d)?;
+                dbc::encode_raw(&s::SEQUENCE_COUNTER, i64::from(m.sequence), d)?;
+            }
+            Self::ControllerHeartbeat(m) => {
+                use dbc::controller_heartbeat as s;
+                dbc::encode_raw(&s::REQUESTED_MODE, m.mode as i64, d)?;
+                dbc::encode_raw(&s::ALIVE_COUNTER, i64::from(m.alive_counter), d)?;
+                let crc = heartbeat_checksum(&d[..]);
+                dbc::encode_raw(&s::CHECKSUM, i64::from(crc), d)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Decodes a frame. Never panics.
+    ///
+    /// # Errors
+    /// [`DecodeError`]: error, remote or FD frame, 11-bit id, unknown PGN, wrong DLC, a signal out of
+    /// range or "not available"/"error indicator", or a bad heartbeat checksum.
+    pub fn decode(frame: &CanFrame) -> Result<Decoded, DecodeError> {
+        let raw_id = match (frame.kind(), frame.id()) {
+            (FrameKind::Error, _) => return Err(DecodeError::ErrorFrame(frame.error_class())),
+            (FrameKind::Remote, _) => return Err(DecodeError::RemoteFrame),
+            (FrameKind::Fd { .. }, _) => return Err(DecodeError::FdFrame),
+            (FrameKind::Data, CanId::Standard(id)) => return Err(DecodeError::StandardId(id)),
+            (FrameKind::Data, CanId::Extended(id)) => id,
+        };
+        // `CanId::Extended` never exceeds 29 bits by construction.
+        let id = J1939Id::from_raw(raw_id)
+            .map_err(|_| DecodeError::UnknownPgn { pgn: 0, id: raw_id })?;
+        let pgn = id.pgn();
+        let desc = dbc::message_by_pgn(pgn).ok_or(DecodeError::UnknownPgn { pgn, id: raw_id })?;
+        let data = frame.data();
+        if data.len() != usize::from(desc.dlc) {
+            return Err(DecodeError::WrongDlc {
+                message: desc.name,
+                expected: desc.dlc,
+                actual: data.len() as u8,
+            });
+        }
+        let message = Self::decode_body(desc, data)?;
+        Ok(Decoded { id, message })
+    }
+
+    fn decode_body(desc: &MessageDesc, d: &[u8]) -> Result<Self, DecodeError> {
+        let unknown = DecodeError::UnknownPgn {
+            pgn: desc.pgn,
+            id: desc.default_id,
+        };
+        if let Some(n) = AUX_VALVE_COMMAND.iter().position(|m| m.pgn == desc.pgn) {
+            let valve = Valve::from_number(n as u8).ok_or(unknown)?;
+            let coarse = get(&cmd::PORT_FLOW_COMMAND, d)?;
+            // Fine flow takes precedence; "not available" there means the sender only has the
+            // standard 0.4 %/bit resolution.
+            let flow_percent = match get(&cmd::PORT_FLOW_COMMAND_FINE, d) {
+                Ok(fine) => fine,
+                Err(DecodeError::NotAvailable { .. }) => coarse,
+                Err(e) => return Err(e),
+            };
+            return Ok(Self::AuxValveCommand(AuxValveCommand {
+                valve,
+                flow_percent,
+                state: ValveState::from_raw(raw(&cmd::VALVE_STATE, d)?),
+                fail_safe: if raw(&cmd::FAIL_SAFE_MODE, d)? == 1 {
+                    FailSafeMode::Float
+                } else {
+                    FailSafeMode::Block
+                },
+            }));
+        }
+        if let Some(n) = AUX_VALVE_MEASURED.iter().position(|m| m.pgn == desc.pgn) {
+            let cylinder = *Cylinder::ALL.get(n).ok_or(unknown)?;
+            return Ok(Self::AuxValveMeasured(AuxValveMeasured {
+                cylinder,
+                flow_percent: get(&meas::MEASURED_FLOW, d)?,
+                state: ValveState::from_raw(raw(&meas::VALVE_STATE, d)?),
+                head_pressure_pa: get(&meas::EXTEND_PORT_PRESSURE, d)?,
+                rod_pressure_pa: get(&meas::RETRACT_PORT_PRESSURE, d)?,
+            }));
+        }
+        Ok(match desc.pgn {
+            dbc::joint_angles::PGN => {
+                use dbc::joint_angles as s;
+                Self::JointAngles(JointAngles {
+                    boom_rad: get(&s::BOOM_ANGLE, d)?,
+                    stick_rad: get(&s::STICK_ANGLE, d)?,
+                    bucket_rad: get(&s::BUCKET_ANGLE, d)?,
+                    swing_rad: get(&s::SWING_ANGLE, d)?,
+                })
+            }
+            dbc::joint_rates::PGN => {
+                use dbc::joint_rates as s;
+                Self::JointRates(JointRates {
+                    boom_rad_per_s: get(&s::BOOM_RATE, d)?,
+                    stick_rad_per_s: get(&s::STICK_RATE, d)?,
+                    bucket_rad_per_s: get(&s::BUCKET_RATE, d)?,
+                    swing_rad_per_s: get(&s::SWING_RATE, d)?,
+                })
+            }
+            dbc::pump_pressures::PGN => {
+                use dbc::pump_pressures as s;
+                Self::PumpPressures(PumpPressures {
+                    pump1_pa: get(&s::PUMP1_PRESSURE, d)?,
+                    pump2_pa: get(&s::PUMP2_PRESSURE, d)?,
+                })
+            }
+            dbc::track_odometry::PGN => {
+                use dbc::track_odometry as s;
+                Self::TrackOdometry(TrackOdometry {
+                    left_m: get(&s::LEFT_TRACK_TRAVEL, d)?,
+                    right_m: get(&s::RIGHT_TRACK_TRAVEL, d)?,
+                })
+            }
+            dbc::gateway_status::PGN => {
+                use dbc::gateway_status as s;
+                Self::GatewayStatus(GatewayStatus {
+                    mode: GatewayMode::from_raw(raw(&s::MODE, d)?),
+                    alive_counter: raw_u8(&s::ALIVE_COUNTER, d)?,
+                    faults: GatewayFaults(raw_u16(&s::FAULT_BITS, d)?),
+                    unexpected_frames: raw_u16(&s::UNEXPECTED_FRAMES, d)?,
+                    rejected_frames: raw_u16(&s::REJECTED_FRAMES, d)?,
+                })
+            }
+            dbc::position_setpoint::PGN => {
+                use dbc::position_setpoint as s;
+                Self::PositionSetpoint(PositionSetpoint {
+                    boom_rad: get(&s::BOOM_SETPOINT, d)?,
+                    stick_rad: get(&s::STICK_SETPOINT, d)?,
+                    bucket_rad: get(&s::BUCKET_SETPOINT, d)?,
+                    swing_rad: get(&s::SWING_SETPOINT, d)?,
+                    sequence: raw_u8(&s::SEQUENCE_COUNTER, d)?,
+                })
+            }
+            dbc::controller_heartbeat::PGN => {
+                use dbc::controller_heartbeat as s;
+                let received = raw_u8(&s::CHECKSUM, d)?;
+                let computed = heartbeat_checksum(d);
+                if received != computed {
+                    return Err(DecodeError::BadChecksum { received, computed });
+                }
+                Self::ControllerHeartbeat(ControllerHeartbeat {
+                    mode: RequestedMode::from_raw(raw(&s::REQUESTED_MODE, d)?),
+                    alive_counter: raw_u8(&s::ALIVE_COUNTER, d)?,
+                })
+            }
+            _ => return Err(unknown),
+        })
+    }
+
+    /// The message's values by DBC signal name, as this decoder understands them (physical units of the
+    /// DBC; enums and counters as their raw numbers). Used to compare with other DBC tools and to print
+    /// traces. The heartbeat's `Checksum` is computed as [`Message::encode`] would send it.
+    pub fn signal_values(&self) -> Vec<(&'static str, f64)> {
+        match self {
+            Self::AuxValveCommand(m) => vec![
+                ("PortFlowCommand", m.flow_percent),
+                ("ValveState", f64::from(m.state as u8)),
+                ("FailSafeMode", f64::from(m.fail_safe as u8)),
+                ("PortFlowCommandFine", m.flow_percent),
+            ],
+            Self::AuxValveMeasured(m) => vec![
+                ("MeasuredFlow", m.flow_percent),
+                ("ValveState", f64::from(m.state as u8)),
+                ("ExtendPortPressure", m.head_pressure_pa),
+                ("RetractPortPressure", m.rod_pressure_pa),
+            ],
+            Self::JointAngles(m) => vec![
+                ("BoomAngle", m.boom_rad),
+                ("StickAngle", m.stick_rad),
+                ("BucketAngle", m.bucket_rad),
+                ("SwingAngle", m.swing_rad),
+            ],
+            Self::JointRates(m) => vec![
+                ("BoomRate", m.boom_rad_per_s),
+                ("StickRate", m.stick_rad_per_s),
+                ("BucketRate", m.bucket_rad_per_s),
+                ("SwingRate", m.swing_rad_per_s),
+            ],
+            Self::PumpPressures(m) => {
+                vec![("Pump1Pressure", m.pump1_pa), ("Pump2Pressure", m.pump2_pa)]
+            }
+            Self::TrackOdometry(m) => {
+                vec![
+                    ("LeftTrackTravel", m.left_m),
+                    ("RightTrackTravel", m.right_m),
+                ]
+            }
+            Self::GatewayStatus(m) => vec![
+                ("Mode", f64::from(m.mode as u8)),
+                ("AliveCounter", f64::from(m.alive_counter)),
+                ("FaultBits", f64::from(m.faults.0)),
+                ("UnexpectedFrames", f64::from(m.unexpected_frames)),
+                ("RejectedFrames", f64::from(m.rejected_frames)),
+            ],
+            Self::PositionSetpoint(m) => vec![
+                ("BoomSetpoint", m.boom_rad),
+                ("StickSetpoint", m.stick_rad),
+                ("BucketSetpoint", m.bucket_rad),
+                ("SwingSetpoint", m.swing_rad),
+                ("SequenceCounter", f64::from(m.sequence)),
+            ],
+            Self::ControllerHeartbeat(m) => {
+                let checksum = self
+                    .encode()
+                    .ok()
+                    .and_then(|f| f.data().get(7).copied())
+                    .map_or(f64::NAN, f64::from);
+                vec![
+                    ("RequestedMode", f64::from(m.mode as u8)),
+                    ("AliveCounter", f64::from(m.alive_counter)),
+                    ("Checksum", checksum),
+                ]
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Boom extend at 50 %: flow byte 125, reserved 0xFF, state 1 with fail-safe block and reserved bits
+    /// 4-5 set, fine flow 20000 = 0x4E20, reserved bytes 6-8.
+    const BOOM_EXTEND_HALF: [u8; 8] = [0x7D, 0xFF, 0x31, 0x20, 0x4E, 0xFF, 0xFF, 0xFF];
+
+    #[test]
+    fn boom_command_matches_the_documented_bytes() {
+        let msg =
+            Message::AuxValveCommand(AuxValveCommand::from_fraction(Valve::Boom, 0.5).unwrap());
+        let frame = msg.encode().unwrap();
+        assert_eq!(frame.id(), CanId::Extended(0x0CFE_3027));
+        assert_eq!(frame.data(), &BOOM_EXTEND_HALF);
+        let decoded = Message::decode(&frame).unwrap();
+        assert_eq!(decoded.id.source_address(), crate::id::CONTROLLER_ADDRESS);
+        assert_eq!(decoded.message, msg);
+    }
+
+    #[test]
+    fn coarse_flow_is_used_when_fine_flow_is_not_available() {
+        let mut data = BOOM_EXTEND_HALF;
+        data[3] = 0xFF;
+        data[4] = 0xFF;
+        let frame = CanFrame::new_extended(0x0CFE_3027, &data).unwrap();
+        let Message::AuxValveCommand(cmd) = Message::decode(&frame).unwrap().message else {
+            panic!("not a valve command");
+        };
+        assert_eq!(cmd.flow_percent, 50.0);
+    }
+
+    #[test]
+    fn crc8_sae_j1850_check_value() {
+        assert_eq!(crc8_sae_j1850(*b"123456789"), 0x4B);
+    }
+
+    #[test]
+    fn heartbeat_with_a_flipped_bit_is_rejected() {
+        let hb = ControllerHeartbeat {
+            mode: RequestedMode::ArmValve,
+            alive_counter: 7,
+        };
+        let frame = hb.to_frame().unwrap();
+        assert_eq!(ControllerHeartbeat::verify(&frame).unwrap().1, hb);
+        let mut data = [0u8; 8];
+        data.copy_from_slice(frame.data());
+        data[0] ^= 0x10; // alive counter 7 -> 6
+        let bad = CanFrame::new_extended(0x0CFF_6127, &data).unwrap();
+        assert!(matches!(
+            Message::decode(&bad),
+            Err(DecodeError::BadChecksum { .. })
+        ));
+    }
+
+    #[test]
+    fn alive_counter_successor() {
+        assert!(is_next_alive(15, 0, 4));
+        assert!(is_next_alive(255, 0, 8));
+        assert!(!is_next_alive(3, 5, 4));
+    }
+
+    #[test]
+    fn non_j1939_frames_give_typed_errors() {
+        let std_frame = CanFrame::new_standard(0x123, &[0; 8]).unwrap();
+        assert_eq!(
+            Message::decode(&std_frame),
+            Err(DecodeError::StandardId(0x123))
+        );
+        let rtr = CanFrame::new_remote(CanId::Extended(0x0CFE_3027), 8).unwrap();
+        assert_eq!(Message::decode(&rtr), Err(DecodeError::RemoteFrame));
+        let err = CanFrame::new_error(0x40, [0; 8]).unwrap();
+        assert_eq!(Message::decode(&err), Err(DecodeError::ErrorFrame(0x40)));
+        let short = CanFrame::new_extended(0x0CFE_3027, &[0; 4]).unwrap();
+        assert!(matches!(
+            Message::decode(&short),
+            Err(DecodeError::WrongDlc { actual: 4, .. })
+        ));
+        let unknown = CanFrame::new_extended(0x0CFE_4027, &[0; 8]).unwrap();
+        assert!(matches!(
+            Message::decode(&unknown),
+            Err(DecodeError::UnknownPgn { pgn: 0xFE40, .. })
+        ));
+    }
+
+    #[test]
+    fn not_available_angle_is_reported() {
+        let frame = CanFrame::new_extended(0x0CFF_5080, &[0xFF, 0x7F, 0, 0, 0, 0, 0, 0]).unwrap();
+        assert_eq!(
+            Message::decode(&frame),
+            Err(DecodeError::NotAvailable {
+                signal: "BoomAngle"
+            })
+        );
+    }
+
+    #[test]
+    fn valve_messages_share_one_layout() {
+        let strip = |s: &SignalDesc| {
+            (
+                s.start_bit,
+                s.len,
+                s.signed,
+                s.factor.to_bits(),
+                s.raw_min,
+                s.raw_max,
+                s.name,
+            )
+        };
+        for group in [&AUX_VALVE_COMMAND[..], &AUX_VALVE_MEASURED[..]] {
+            for (n, desc) in group.iter().enumerate() {
+                assert_eq!(desc.pgn, group[0].pgn + n as u32, "{}", desc.name);
+                let a: Vec<_> = desc.signals.iter().map(strip).collect();
+                let b: Vec<_> = group[0].signals.iter().map(strip).collect();
+                assert_eq!(a, b, "{} differs from {}", desc.name, group[0].name);
+            }
+        }
+    }
+
+    #[test]
+    fn out_of_range_values_are_not_clamped() {
+        let msg = Message::JointAngles(JointAngles {
+            boom_rad: 4.0,
+            ..Default::default()
+        });
+        assert!(matches!(
+            msg.encode(),
+            Err(EncodeError::OutOfRange {
+                signal: "BoomAngle",
+                ..
+            })
+        ));
+        let hb = ControllerHeartbeat {
+            mode: RequestedMode::Disarm,
+            alive_counter: 16,
+        };
+        assert!(hb.to_frame().is_err());
+        assert!(AuxValveCommand::from_fraction(Valve::Boom, 1.5).is_err());
+    }
+}
