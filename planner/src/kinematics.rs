@@ -1425,6 +1425,44 @@ mod tests {
         assert!((80e3..250e3).contains(&breakout_n), "{breakout_n}");
     }
 
+    #[test]
+    fn working_envelope_is_that_of_a_20_to_25_t_machine() {
+        let m = MachineConfig::default_machine().expect("default");
+        let k = Kinematics::new(&m).expect("kin");
+        let (mut reach, mut depth, mut height) = (0.0_f64, 0.0_f64, 0.0_f64);
+        let n = 40;
+        for a in 0..=n {
+            for b in 0..=n {
+                let f = |i: i32| f64::from(i) / f64::from(n);
+                let q = in_limits(&k, [f(a), f(b), 0.5]);
+                let pin = k.linkage_points(&q).bucket_pin;
+                // The bucket can point the tip straight out, down or up from its pin.
+                reach = reach.max(pin[0] + k.l4);
+                depth = depth.min(pin[1] - k.l4);
+                height = height.max(pin[1] + k.l4);
+            }
+        }
+        let relief = m.hydraulics.relief_pressure_pa;
+        let (mut bucket_n, mut stick_n) = (0.0_f64, 0.0_f64);
+        for i in 0..=n {
+            let t = f64::from(i) / f64::from(n);
+            let q = in_limits(&k, [0.5, t, t]);
+            let r = k.moment_arms(&q).expect("arms");
+            bucket_n = bucket_n.max((m.cylinders.bucket.force_n(relief, 0.0) * r[2]).abs() / k.l4);
+            stick_n =
+                stick_n.max((m.cylinders.stick.force_n(relief, 0.0) * r[1]).abs() / (k.l3 + k.l4));
+        }
+        println!(
+            "reach {reach:.2} m, dig depth {:.2} m, height {height:.2} m, bucket breakout {:.0} kN, stick crowd {:.0} kN",
+            -depth,
+            bucket_n / 1e3,
+            stick_n / 1e3
+        );
+        assert!((9.0..11.5).contains(&reach), "{reach}");
+        assert!((5.5..8.0).contains(&-depth), "{depth}");
+        assert!((100e3..200e3).contains(&bucket_n) && (70e3..160e3).contains(&stick_n));
+    }
+
     proptest! {
         #[test]
         fn angle_length_angle_round_trip(u in proptest::array::uniform3(0.0f64..=1.0)) {

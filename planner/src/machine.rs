@@ -732,12 +732,8 @@ pub fn locate_field(text: &str, field: &str) -> Option<usize> {
             }
             continue;
         }
-        if in_table {
-            if let Some((k, _)) = line.split_once('=') {
-                if k.trim() == key {
-                    return Some(i + 1);
-                }
-            }
+        if in_table && line.split_once('=').is_some_and(|(k, _)| k.trim() == key) {
+            return Some(i + 1);
         }
     }
     header_line
