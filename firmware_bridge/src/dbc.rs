@@ -244,7 +244,19 @@ pub fn decode_raw(sig: &SignalDesc, data: &[u8]) -> Result<i64, DecodeError> {
 /// # Errors
 /// As [`decode_raw`].
 pub fn decode_physical(sig: &SignalDesc, data: &[u8]) -> Result<f64, DecodeError> {
-    decode_raw(sig, data).map(|raw| raw as f64 * sig.factor + sig.offset)
+    decode_raw(sig, data).map(|raw| raw_to_physical(sig, raw))
+}
+
+/// `raw * factor + offset`. For factors like 0.0001 whose reciprocal is an integer it divides by the
+/// reciprocal instead, which is correctly rounded (5236 -> 0.5236, not 0.5236000000000001).
+pub fn raw_to_physical(sig: &SignalDesc, raw: i64) -> f64 {
+    let inverse = 1.0 / sig.factor;
+    let scaled = if sig.factor < 1.0 && (inverse - inverse.round()).abs() < 1e-9 {
+        raw as f64 / inverse.round()
+    } else {
+        raw as f64 * sig.factor
+    };
+    scaled + sig.offset
 }
 
 /// The raw value that encodes `value`, rounded to the nearest step.

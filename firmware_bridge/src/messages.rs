@@ -580,9 +580,17 @@ impl Message {
         use dbc::encode_physical as put;
         match self {
             Self::AuxValveCommand(m) => {
-                let flow = m.flow_percent;
-                put(&cmd::PORT_FLOW_COMMAND, flow, d)?;
-                put(&cmd::PORT_FLOW_COMMAND_FINE, flow, d)?;
+                // The standard byte is derived from the fine raw value (not from the float) so that
+                // decode -> encode reproduces the same bytes even at rounding ties.
+                let fine_raw = dbc::physical_to_raw(&cmd::PORT_FLOW_COMMAND_FINE, m.flow_percent)?;
+                let ratio = (cmd::PORT_FLOW_COMMAND.factor / cmd::PORT_FLOW_COMMAND_FINE.factor)
+                    .round() as i64;
+                dbc::encode_raw(
+                    &cmd::PORT_FLOW_COMMAND,
+                    (fine_raw + ratio / 2) / ratio.max(1),
+                    d,
+                )?;
+                dbc::encode_raw(&cmd::PORT_FLOW_COMMAND_FINE, fine_raw, d)?;
                 dbc::encode_raw(&cmd::VALVE_STATE, m.state as i64, d)?;
                 dbc::encode_raw(&cmd::FAIL_SAFE_MODE, m.fail_safe as i64, d)?;
             }
@@ -876,6 +884,19 @@ mod tests {
             panic!("not a valve command");
         };
         assert_eq!(cmd.flow_percent, 50.0);
+    }
+
+    #[test]
+    fn coarse_flow_byte_is_stable_at_a_rounding_tie() {
+        // 40.5995 % quantizes to a fine value of 40.6 %, which sits exactly between two 0.4 % steps;
+        // re-encoding the decoded command once flipped the standard byte from 101 to 102.
+        let msg = Message::AuxValveCommand(AuxValveCommand {
+            flow_percent: 40.599_544,
+            ..AuxValveCommand::neutral(Valve::Boom)
+        });
+        let frame = msg.encode().unwrap();
+        let again = Message::decode(&frame).unwrap().message.encode().unwrap();
+        assert_eq!(again, frame);
     }
 
     #[test]

@@ -1,0 +1,48 @@
+//! The documented schedule fits: worst-case bus load at 500 kbit/s under 40 %.
+
+mod common;
+
+use firmware_bridge::busload::{self, BITRATE, SCHEDULE};
+use firmware_bridge::dbc;
+
+#[test]
+fn schedule_bus_load_at_500_kbit_is_under_40_percent() {
+    let worst =
+        busload::worst_case_load(SCHEDULE, BITRATE).expect("every scheduled message is in the DBC");
+    // Exact stuffing of the sample frames at the scheduled rates (each DBC message once).
+    let samples: Vec<_> = common::sample_messages()
+        .iter()
+        .map(|m| m.encode().expect("encodes"))
+        .collect();
+    let mut exact_rows = Vec::new();
+    for entry in SCHEDULE {
+        let desc = busload::descriptor(entry).expect("in DBC");
+        let frame = samples
+            .iter()
+            .find(|f| f.id().raw() & !0xFF == desc.default_id & !0xFF)
+            .expect("a sample for every scheduled message");
+        exact_rows.push((*frame, entry.rate_hz));
+    }
+    let exact = busload::exact_load(&exact_rows, BITRATE).expect("classic frames");
+    let frames_per_s: f64 = SCHEDULE.iter().map(|e| e.rate_hz).sum();
+    println!(
+        "bus load at {} kbit/s: {:.1} % worst-case stuffing, {:.1} % with the sample frames' exact stuffing ({frames_per_s} frames/s)",
+        BITRATE / 1000,
+        worst * 100.0,
+        exact * 100.0
+    );
+    assert!(exact <= worst);
+    assert!(
+        worst < 0.40,
+        "worst-case bus load {:.1} % is not under 40 %",
+        worst * 100.0
+    );
+    // Every DBC message is scheduled.
+    for desc in dbc::MESSAGES {
+        assert!(
+            SCHEDULE.iter().any(|e| e.message == desc.name),
+            "{} has no rate",
+            desc.name
+        );
+    }
+}
