@@ -6,7 +6,11 @@ use firmware_bridge::trace::{ReadMode, TraceReader, parse_line};
 use firmware_bridge::{CanFrame, CanId, dbc};
 use proptest::prelude::*;
 
-const ANGLE: std::ops::RangeInclusive<f64> = -3.1416..=3.1416;
+/// The angle range of the DBC (the same for angles and setpoints).
+fn angle() -> std::ops::RangeInclusive<f64> {
+    let sig = dbc::joint_angles::BOOM_ANGLE;
+    sig.min..=sig.max
+}
 
 fn valve() -> impl Strategy<Value = Valve> {
     (0u8..6).prop_map(|n| Valve::from_number(n).expect("0..6 are valves"))
@@ -57,12 +61,14 @@ fn message() -> impl Strategy<Value = Message> {
                     rod_pressure_pa: rod,
                 })
             ),
-        (ANGLE, ANGLE, ANGLE, ANGLE).prop_map(|(a, b, c, d)| Message::JointAngles(JointAngles {
-            boom_rad: a,
-            stick_rad: b,
-            bucket_rad: c,
-            swing_rad: d
-        })),
+        (angle(), angle(), angle(), angle()).prop_map(|(a, b, c, d)| Message::JointAngles(
+            JointAngles {
+                boom_rad: a,
+                stick_rad: b,
+                bucket_rad: c,
+                swing_rad: d
+            }
+        )),
         (
             -32.0..=32.0f64,
             -32.0..=32.0f64,
@@ -108,7 +114,7 @@ fn message() -> impl Strategy<Value = Message> {
                     }
                 )
             ),
-        (ANGLE, ANGLE, ANGLE, ANGLE, 0u8..16).prop_map(|(a, b, c, d, seq)| {
+        (angle(), angle(), angle(), angle(), 0u8..16).prop_map(|(a, b, c, d, seq)| {
             Message::PositionSetpoint(PositionSetpoint {
                 boom_rad: a,
                 stick_rad: b,

@@ -1,5 +1,7 @@
 //! Fixtures shared by the integration tests.
 #![allow(dead_code)]
+// Values like 3.1416 are the DBC range limits and on-grid fixtures, not approximations of pi.
+#![allow(clippy::approx_constant)]
 
 use firmware_bridge::messages::*;
 
