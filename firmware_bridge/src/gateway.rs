@@ -1,0 +1,700 @@
+//! The gateway firmware logic: what the machine's CAN gateway does with the controller's frames.
+//!
+//! Pure logic, no physics, no clock of its own and no I/O: the caller feeds received frames with
+//! [`Gateway::on_frame`] and calls [`Gateway::tick`] at its control rate with the measured joint
+//! angles; the returned [`GatewayOutputs`] carry the per-valve commands in `[-1, 1]` for the valve
+//! drivers and the [`GatewayStatus`] to report. The same code runs in the simulator (`vcan_sim`) and on
+//! a real gateway computer bridging CAN to valve drivers.
+//!
+//! # Modes and arming (the exact rule)
+//!
+//! - The gateway boots **Disarmed**: valves neutral, commands ignored.
+//! - A valid controller heartbeat requesting `ArmValve` or `ArmPosition` arms it (**ArmedValve** /
+//!   **ArmedPosition**) when it is Disarmed. A heartbeat requesting `Disarm` returns it to Disarmed.
+//!   Switching directly between the two armed modes is allowed (valves go neutral for that tick).
+//! - A fault moves it to **Faulted**: valves neutral, the fault bits reported. It stays Faulted, whatever
+//!   the controller requests, until a valid heartbeat requests `Disarm`; that acknowledges the fault,
+//!   clears the bits and returns to Disarmed. Motion then needs a fresh arm request. Hence after any
+//!   fault the controller must send at least one `Disarm` heartbeat, then an `Arm*` heartbeat.
+//! - `EStop` in a valid heartbeat latches the `E_STOP` fault in any mode.
+//!
+//! # Watchdog and checks (armed modes latch a fault; while Disarmed they only count)
+//!
+//! - No valid heartbeat for [`GatewayConfig::heartbeat_timeout_s`] (100 ms): `WATCHDOG_TIMEOUT`.
+//! - A heartbeat with a bad checksum: `BAD_CHECKSUM`. A heartbeat whose 4-bit alive counter is neither
+//!   the previous one (a replay: rejected and ignored) nor its successor: `BAD_ALIVE_COUNTER`.
+//! - ArmedValve: a non-neutral valve command older than [`GatewayConfig::command_timeout_s`]:
+//!   `STALE_COMMAND`. ArmedPosition: no setpoint for `command_timeout_s`: `STALE_COMMAND`; a setpoint
+//!   outside [`GatewayConfig::setpoint_range_rad`]: `SETPOINT_OUT_OF_RANGE`.
+//! - A CAN error frame while armed: `BUS_ERROR`.
+//!
+//! # Frames it does not act on
+//!
+//! Counted and reported in the status frame, never acted on:
+//! - **unexpected**: ids it does not consume (unknown PGN, 11-bit ids, remote and FD frames, the
+//!   gateway's own messages from another node);
+//! - **rejected**: messages it consumes that fail a check (wrong source address, wrong DLC, signal out
+//!   of range or not available, bad checksum, replayed heartbeat, a setpoint with a repeated sequence
+//!   counter, a command of the wrong kind for the mode).
+//!
+//! # Position mode
+//!
+//! Per joint a PI position loop with anti-windup turns `setpoint - measured` into a valve command,
+//! clamped to `max_command` and rate limited to `rate_limit_per_s`; the sign maps joint angle to
+//! cylinder direction (`docs/ARCHITECTURE.md`: stick and bucket extension lowers their angles).
+
+use crate::frame::CanFrame;
+use crate::id::CONTROLLER_ADDRESS;
+use crate::messages::{
+    DecodeError, GatewayFaults, GatewayMode, GatewayStatus, Message, RequestedMode,
+    heartbeat_checksum, is_next_alive,
+};
+
+/// Number of valve outputs: boom, stick, bucket, swing, left track, right track.
+pub const VALVES: usize = 6;
+/// Number of position-controlled joints: boom, stick, bucket, swing.
+pub const JOINTS: usize = 4;
+
+/// Gateway parameters.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GatewayConfig {
+    /// Heartbeat watchdog (s).
+    pub heartbeat_timeout_s: f64,
+    /// Age after which a non-neutral valve command or a setpoint is stale (s).
+    pub command_timeout_s: f64,
+    /// Position loop proportional gain (command per rad), per joint.
+    pub kp: [f64; JOINTS],
+    /// Position loop integral gain (command per rad s), per joint.
+    pub ki: [f64; JOINTS],
+    /// Largest position-mode valve command magnitude.
+    pub max_command: f64,
+    /// Largest change of a position-mode valve command per second.
+    pub rate_limit_per_s: f64,
+    /// Valve direction per joint: +1 when extension raises the joint angle (boom, swing), -1 otherwise.
+    pub joint_sign: [f64; JOINTS],
+    /// Accepted setpoint range `(min, max)` per joint (rad).
+    pub setpoint_range_rad: [(f64, f64); JOINTS],
+}
+
+impl Default for GatewayConfig {
+    fn default() -> Self {
+        Self {
+            heartbeat_timeout_s: 0.1,
+            command_timeout_s: 0.1,
+            kp: [4.0, 3.0, 3.0, 3.0],
+            ki: [0.5, 0.5, 0.5, 0.2],
+            max_command: 1.0,
+            rate_limit_per_s: 5.0,
+            joint_sign: [1.0, -1.0, -1.0, 1.0],
+            setpoint_range_rad: [
+                (-1.6, 1.6),
+                (-3.0, 0.0),
+                (-3.0, 1.0),
+                (-std::f64::consts::PI, std::f64::consts::PI),
+            ],
+        }
+    }
+}
+
+/// What the gateway drives this tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GatewayOutputs {
+    /// Per-valve commands in `[-1, 1]` (positive extends), all 0 unless armed and healthy.
+    pub valve_commands: [f64; VALVES],
+    /// Status to report (the alive counter advances each [`Gateway::tick`]).
+    pub status: GatewayStatus,
+}
+
+/// The gateway firmware state machine.
+#[derive(Debug, Clone)]
+pub struct Gateway {
+    config: GatewayConfig,
+    mode: GatewayMode,
+    faults: GatewayFaults,
+    last_heartbeat_s: Option<f64>,
+    last_alive: Option<u8>,
+    armed_at_s: f64,
+    valve_cmd: [f64; VALVES],
+    valve_cmd_at_s: [Option<f64>; VALVES],
+    setpoint: Option<[f64; JOINTS]>,
+    setpoint_at_s: Option<f64>,
+    last_sequence: Option<u8>,
+    integral: [f64; JOINTS],
+    position_cmd: [f64; JOINTS],
+    last_tick_s: Option<f64>,
+    alive_counter: u8,
+    unexpected: u16,
+    rejected: u16,
+}
+
+impl Default for Gateway {
+    fn default() -> Self {
+        Self::new(GatewayConfig::default())
+    }
+}
+
+/// Outcome of handling one frame, for logs and tests.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrameVerdict {
+    /// Consumed.
+    Accepted,
+    /// Counted as unexpected.
+    Unexpected,
+    /// Counted as rejected.
+    Rejected,
+}
+
+impl Gateway {
+    /// A gateway in Disarmed mode.
+    pub fn new(config: GatewayConfig) -> Self {
+        Self {
+            config,
+            mode: GatewayMode::Disarmed,
+            faults: GatewayFaults(0),
+            last_heartbeat_s: None,
+            last_alive: None,
+            armed_at_s: 0.0,
+            valve_cmd: [0.0; VALVES],
+            valve_cmd_at_s: [None; VALVES],
+            setpoint: None,
+            setpoint_at_s: None,
+            last_sequence: None,
+            integral: [0.0; JOINTS],
+            position_cmd: [0.0; JOINTS],
+            last_tick_s: None,
+            alive_counter: 0,
+            unexpected: 0,
+            rejected: 0,
+        }
+    }
+
+    /// The current mode.
+    pub fn mode(&self) -> GatewayMode {
+        self.mode
+    }
+
+    /// The latched faults.
+    pub fn faults(&self) -> GatewayFaults {
+        self.faults
+    }
+
+    /// Counts of unexpected and rejected frames.
+    pub fn frame_counts(&self) -> (u16, u16) {
+        (self.unexpected, self.rejected)
+    }
+
+    fn is_armed(&self) -> bool {
+        matches!(
+            self.mode,
+            GatewayMode::ArmedValve | GatewayMode::ArmedPosition
+        )
+    }
+
+    fn unexpected(&mut self) -> FrameVerdict {
+        self.unexpected = self.unexpected.saturating_add(1);
+        FrameVerdict::Unexpected
+    }
+
+    fn reject(&mut self) -> FrameVerdict {
+        self.rejected = self.rejected.saturating_add(1);
+        FrameVerdict::Rejected
+    }
+
+    /// Latches a fault: Faulted, valves neutral. Only in armed modes, except the e-stop.
+    fn fault(&mut self, bits: u16) {
+        if self.is_armed() || bits == GatewayFaults::E_STOP || self.mode == GatewayMode::Faulted {
+            self.faults = self.faults.with(bits);
+            self.mode = GatewayMode::Faulted;
+            self.clear_commands();
+        }
+    }
+
+    fn clear_commands(&mut self) {
+        self.valve_cmd = [0.0; VALVES];
+        self.valve_cmd_at_s = [None; VALVES];
+        self.setpoint = None;
+        self.setpoint_at_s = None;
+        self.integral = [0.0; JOINTS];
+        self.position_cmd = [0.0; JOINTS];
+    }
+
+    /// Handles one received frame at time `now_s` (the bus's clock).
+    pub fn on_frame(&mut self, frame: &CanFrame, now_s: f64) -> FrameVerdict {
+        let decoded = match Message::decode(frame) {
+            Ok(d) => d,
+            Err(DecodeError::ErrorFrame(_)) => {
+                self.fault(GatewayFaults::BUS_ERROR);
+                return self.reject();
+            }
+            Err(DecodeError::BadChecksum { .. }) => {
+                self.fault(GatewayFaults::BAD_CHECKSUM);
+                return self.reject();
+            }
+            Err(
+                DecodeError::UnknownPgn { .. }
+                | DecodeError::StandardId(_)
+                | DecodeError::RemoteFrame
+                | DecodeError::FdFrame,
+            ) => return self.unexpected(),
+            Err(_) => return self.reject(),
+        };
+        let from_controller = decoded.id.source_address() == CONTROLLER_ADDRESS;
+        match decoded.message {
+            Message::ControllerHeartbeat(hb) => {
+                if !from_controller {
+                    return self.reject();
+                }
+                // The checksum was verified by decode; check it again in case the codec changes.
+                let data = frame.data();
+                if data.len() == 8 && heartbeat_checksum(data) != data[7] {
+                    self.fault(GatewayFaults::BAD_CHECKSUM);
+                    return self.reject();
+                }
+                match self.last_alive {
+                    Some(prev) if prev == hb.alive_counter => return self.reject(),
+                    Some(prev) if !is_next_alive(prev, hb.alive_counter, 4) => {
+                        self.last_alive = Some(hb.alive_counter);
+                        self.fault(GatewayFaults::BAD_ALIVE_COUNTER);
+                        return self.reject();
+                    }
+                    _ => {}
+                }
+                self.last_alive = Some(hb.alive_counter);
+                self.last_heartbeat_s = Some(now_s);
+                self.on_request(hb.mode, now_s);
+                FrameVerdict::Accepted
+            }
+            Message::AuxValveCommand(cmd) => {
+                if !from_controller || self.mode != GatewayMode::ArmedValve {
+                    return self.reject();
+                }
+                let i = usize::from(cmd.valve.number());
+                if i >= VALVES {
+                    return self.reject();
+                }
+                let u = cmd.to_fraction();
+                if !u.is_finite() {
+                    return self.reject();
+                }
+                self.valve_cmd[i] = u.clamp(-1.0, 1.0);
+                self.valve_cmd_at_s[i] = Some(now_s);
+                FrameVerdict::Accepted
+            }
+            Message::PositionSetpoint(sp) => {
+                if !from_controller || self.mode != GatewayMode::ArmedPosition {
+                    return self.reject();
+                }
+                if self.last_sequence == Some(sp.sequence) {
+                    return self.reject();
+                }
+                self.last_sequence = Some(sp.sequence);
+                let target = [sp.boom_rad, sp.stick_rad, sp.bucket_rad, sp.swing_rad];
+                let in_range = target
+                    .iter()
+                    .zip(self.config.setpoint_range_rad)
+                    .all(|(v, (lo, hi))| v.is_finite() && *v >= lo && *v <= hi);
+                if !in_range {
+                    self.fault(GatewayFaults::SETPOINT_OUT_OF_RANGE);
+                    return self.reject();
+                }
+                self.setpoint = Some(target);
+                self.setpoint_at_s = Some(now_s);
+                FrameVerdict::Accepted
+            }
+            // The gateway's own messages coming from someone else.
+            _ => self.unexpected(),
+        }
+    }
+
+    fn on_request(&mut self, requested: RequestedMode, now_s: f64) {
+        match (requested, self.mode) {
+            (RequestedMode::EStop, _) => self.fault(GatewayFaults::E_STOP),
+            (RequestedMode::Disarm, _) => {
+                self.mode = GatewayMode::Disarmed;
+                self.faults = GatewayFaults(0);
+                self.clear_commands();
+            }
+            (_, GatewayMode::Faulted) => {}
+            (RequestedMode::ArmValve, m) if m != GatewayMode::ArmedValve => {
+                self.clear_commands();
+                self.mode = GatewayMode::ArmedValve;
+                self.armed_at_s = now_s;
+            }
+            (RequestedMode::ArmPosition, m) if m != GatewayMode::ArmedPosition => {
+                self.clear_commands();
+                self.mode = GatewayMode::ArmedPosition;
+                self.armed_at_s = now_s;
+                self.last_sequence = None;
+            }
+            _ => {}
+        }
+    }
+
+    /// Runs the watchdog and the position loop at `now_s` with the measured joint angles
+    /// `[boom, stick, bucket, swing]` (None when the resolvers are unavailable: valves neutral in
+    /// position mode), and returns the valve commands and the status.
+    pub fn tick(&mut self, now_s: f64, measured: Option<[f64; JOINTS]>) -> GatewayOutputs {
+        let dt = self
+            .last_tick_s
+            .map_or(0.0, |t| (now_s - t).clamp(0.0, 1.0));
+        self.last_tick_s = Some(now_s);
+        if self.is_armed() {
+            let hb_age = self.last_heartbeat_s.map_or(f64::INFINITY, |t| now_s - t);
+            if !(hb_age <= self.config.heartbeat_timeout_s) {
+                self.fault(GatewayFaults::WATCHDOG_TIMEOUT);
+                // A new heartbeat sequence may start at any counter after a timeout.
+                self.last_alive = None;
+            }
+        }
+        let mut out = [0.0; VALVES];
+        match self.mode {
+            GatewayMode::ArmedValve => {
+                let timeout = self.config.command_timeout_s;
+                let stale = (0..VALVES).any(|i| {
+                    self.valve_cmd[i] != 0.0
+                        && self.valve_cmd_at_s[i].is_none_or(|t| now_s - t > timeout)
+                });
+                if stale {
+                    self.fault(GatewayFaults::STALE_COMMAND);
+                } else {
+                    out = self.valve_cmd;
+                }
+            }
+            GatewayMode::ArmedPosition => {
+                let fresh = self
+                    .setpoint_at_s
+                    .is_some_and(|t| now_s - t <= self.config.command_timeout_s);
+                let waiting = self.setpoint_at_s.is_none()
+                    && now_s - self.armed_at_s <= self.config.command_timeout_s;
+                if !fresh && !waiting {
+                    self.fault(GatewayFaults::STALE_COMMAND);
+                } else if let (Some(sp), Some(q)) = (self.setpoint, measured) {
+                    out[..JOINTS].copy_from_slice(&self.position_loop(sp, q, dt));
+                } else {
+                    self.position_cmd = [0.0; JOINTS];
+                }
+            }
+            GatewayMode::Disarmed | GatewayMode::Faulted => {}
+        }
+        let out = out.map(|u| {
+            if u.is_finite() {
+                u.clamp(-1.0, 1.0)
+            } else {
+                0.0
+            }
+        });
+        self.alive_counter = self.alive_counter.wrapping_add(1);
+        GatewayOutputs {
+            valve_commands: out,
+            status: self.status(),
+        }
+    }
+
+    fn position_loop(&mut self, sp: [f64; JOINTS], q: [f64; JOINTS], dt: f64) -> [f64; JOINTS] {
+        let c = self.config;
+        let mut out = [0.0; JOINTS];
+        for j in 0..JOINTS {
+            if !q[j].is_finite() {
+                self.integral[j] = 0.0;
+                self.position_cmd[j] = 0.0;
+                continue;
+            }
+            let error = sp[j] - q[j];
+            let unsat = c.kp[j] * error + c.ki[j] * self.integral[j];
+            // Anti-windup: integrate only while the output is not saturated in the error's direction.
+            if unsat.abs() < c.max_command || unsat.signum() != error.signum() {
+                self.integral[j] += error * dt;
+            }
+            let target = c.joint_sign[j] * (c.kp[j] * error + c.ki[j] * self.integral[j]);
+            let target = target.clamp(-c.max_command, c.max_command);
+            let step = c.rate_limit_per_s * dt;
+            let prev = self.position_cmd[j];
+            self.position_cmd[j] = prev + (target - prev).clamp(-step, step);
+            out[j] = self.position_cmd[j];
+        }
+        out
+    }
+
+    /// The status as it stands (mode, faults, alive counter, frame counters).
+    pub fn status(&self) -> GatewayStatus {
+        GatewayStatus {
+            mode: self.mode,
+            faults: self.faults,
+            alive_counter: self.alive_counter,
+            unexpected_frames: self.unexpected,
+            rejected_frames: self.rejected,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::id::GATEWAY_ADDRESS;
+    use crate::messages::{
+        AuxValveCommand, ControllerHeartbeat, JointAngles, PositionSetpoint, Valve,
+    };
+    use proptest::prelude::*;
+
+    const PERIOD_S: f64 = 0.01;
+
+    fn hb(mode: RequestedMode, alive: u8) -> CanFrame {
+        ControllerHeartbeat {
+            mode,
+            alive_counter: alive % 16,
+        }
+        .to_frame()
+        .unwrap()
+    }
+
+    fn valve(v: Valve, u: f64) -> CanFrame {
+        Message::AuxValveCommand(AuxValveCommand::from_fraction(v, u).unwrap())
+            .encode()
+            .unwrap()
+    }
+
+    fn setpoint(q: [f64; 4], seq: u8) -> CanFrame {
+        Message::PositionSetpoint(PositionSetpoint {
+            boom_rad: q[0],
+            stick_rad: q[1],
+            bucket_rad: q[2],
+            swing_rad: q[3],
+            sequence: seq % 16,
+        })
+        .encode()
+        .unwrap()
+    }
+
+    /// A gateway armed in valve mode at t = 0 with heartbeat counter 0.
+    fn armed() -> Gateway {
+        let mut g = Gateway::default();
+        assert_eq!(
+            g.on_frame(&hb(RequestedMode::ArmValve, 0), 0.0),
+            FrameVerdict::Accepted
+        );
+        assert_eq!(g.mode(), GatewayMode::ArmedValve);
+        g
+    }
+
+    #[test]
+    fn boots_disarmed_and_ignores_commands() {
+        let mut g = Gateway::default();
+        assert_eq!(
+            g.on_frame(&valve(Valve::Boom, 0.5), 0.0),
+            FrameVerdict::Rejected
+        );
+        assert_eq!(g.tick(0.0, None).valve_commands, [0.0; VALVES]);
+        assert_eq!(g.mode(), GatewayMode::Disarmed);
+    }
+
+    #[test]
+    fn armed_valve_mode_applies_commands() {
+        let mut g = armed();
+        g.on_frame(&valve(Valve::Stick, -0.25), 0.005);
+        let out = g.tick(0.01, None);
+        assert!((out.valve_commands[1] + 0.25).abs() < 1e-3);
+        assert_eq!(out.status.mode, GatewayMode::ArmedValve);
+    }
+
+    #[test]
+    fn missing_heartbeat_neutralises_within_100_ms_and_needs_disarm_then_arm() {
+        let mut g = armed();
+        let mut t = 0.0;
+        let mut alive = 0;
+        // Heartbeats and commands every 10 ms for 0.5 s.
+        while t < 0.5 {
+            t += PERIOD_S;
+            alive += 1;
+            g.on_frame(&hb(RequestedMode::ArmValve, alive), t);
+            g.on_frame(&valve(Valve::Boom, 1.0), t);
+            assert_eq!(g.tick(t, None).valve_commands[0], 1.0);
+        }
+        // Heartbeats stop; commands keep coming.
+        let last_hb = t;
+        let mut neutral_at = None;
+        while t < 1.0 {
+            t += 0.001;
+            g.on_frame(&valve(Valve::Boom, 1.0), t);
+            if g.tick(t, None).valve_commands == [0.0; VALVES] && neutral_at.is_none() {
+                neutral_at = Some(t);
+            }
+        }
+        let neutral_at = neutral_at.unwrap();
+        assert!(
+            neutral_at - last_hb <= 0.1 + 1e-9,
+            "{}",
+            neutral_at - last_hb
+        );
+        assert_eq!(g.mode(), GatewayMode::Faulted);
+        assert!(g.faults().contains(GatewayFaults::WATCHDOG_TIMEOUT));
+        // Arm requests alone do not clear the fault.
+        g.on_frame(&hb(RequestedMode::ArmValve, 3), t);
+        g.on_frame(&hb(RequestedMode::ArmValve, 4), t + 0.01);
+        assert_eq!(g.mode(), GatewayMode::Faulted);
+        // Disarm acknowledges, then a fresh arm request re-arms.
+        g.on_frame(&hb(RequestedMode::Disarm, 5), t + 0.02);
+        assert_eq!(g.mode(), GatewayMode::Disarmed);
+        assert!(g.faults().is_empty());
+        g.on_frame(&hb(RequestedMode::ArmValve, 6), t + 0.03);
+        assert_eq!(g.mode(), GatewayMode::ArmedValve);
+        // The old command does not come back: valves stay neutral until a new one arrives.
+        assert_eq!(g.tick(t + 0.035, None).valve_commands, [0.0; VALVES]);
+    }
+
+    #[test]
+    fn stale_command_faults() {
+        let mut g = armed();
+        g.on_frame(&valve(Valve::Bucket, 0.6), 0.0);
+        for k in 1..=9 {
+            g.on_frame(&hb(RequestedMode::ArmValve, k), 0.01 * f64::from(k));
+        }
+        assert_eq!(g.tick(0.09, None).valve_commands[2], 0.6);
+        let out = g.tick(0.11, None);
+        assert_eq!(out.valve_commands, [0.0; VALVES]);
+        assert!(out.status.faults.contains(GatewayFaults::STALE_COMMAND));
+    }
+
+    #[test]
+    fn bad_checksum_faults_and_is_rejected() {
+        let mut g = armed();
+        let frame = hb(RequestedMode::ArmValve, 1);
+        let mut data = [0u8; 8];
+        data.copy_from_slice(frame.data());
+        data[7] ^= 0x5A;
+        let bad = CanFrame::new_data(frame.id(), &data).unwrap();
+        assert_eq!(g.on_frame(&bad, 0.01), FrameVerdict::Rejected);
+        assert!(g.faults().contains(GatewayFaults::BAD_CHECKSUM));
+        assert_eq!(g.tick(0.01, None).status.rejected_frames, 1);
+    }
+
+    #[test]
+    fn skipped_alive_counter_faults_and_replay_is_rejected_only() {
+        let mut g = armed();
+        assert_eq!(
+            g.on_frame(&hb(RequestedMode::ArmValve, 0), 0.005),
+            FrameVerdict::Rejected
+        );
+        assert_eq!(
+            g.mode(),
+            GatewayMode::ArmedValve,
+            "a replay is ignored, not a fault"
+        );
+        assert_eq!(
+            g.on_frame(&hb(RequestedMode::ArmValve, 2), 0.01),
+            FrameVerdict::Rejected
+        );
+        assert!(g.faults().contains(GatewayFaults::BAD_ALIVE_COUNTER));
+    }
+
+    #[test]
+    fn e_stop_latches_in_any_mode() {
+        let mut g = Gateway::default();
+        g.on_frame(&hb(RequestedMode::EStop, 0), 0.0);
+        assert_eq!(g.mode(), GatewayMode::Faulted);
+        assert!(g.faults().contains(GatewayFaults::E_STOP));
+    }
+
+    #[test]
+    fn foreign_source_address_and_unknown_frames_are_counted_not_acted_on() {
+        let mut g = armed();
+        let foreign =
+            Message::AuxValveCommand(AuxValveCommand::from_fraction(Valve::Boom, 1.0).unwrap())
+                .encode_from(0x33)
+                .unwrap();
+        assert_eq!(g.on_frame(&foreign, 0.001), FrameVerdict::Rejected);
+        let unknown = CanFrame::new_extended(0x18FEEE00, &[1, 2, 3]).unwrap();
+        assert_eq!(g.on_frame(&unknown, 0.002), FrameVerdict::Unexpected);
+        let standard = CanFrame::new_standard(0x123, &[0; 8]).unwrap();
+        assert_eq!(g.on_frame(&standard, 0.002), FrameVerdict::Unexpected);
+        let own = Message::JointAngles(JointAngles {
+            boom_rad: 0.0,
+            stick_rad: 0.0,
+            bucket_rad: 0.0,
+            swing_rad: 0.0,
+        })
+        .encode_from(GATEWAY_ADDRESS)
+        .unwrap();
+        assert_eq!(g.on_frame(&own, 0.003), FrameVerdict::Unexpected);
+        let good = valve(Valve::Boom, 1.0);
+        let short = CanFrame::new_data(good.id(), &good.data()[..4]).unwrap();
+        assert_eq!(g.on_frame(&short, 0.004), FrameVerdict::Rejected);
+        let out = g.tick(0.005, None);
+        assert_eq!(out.valve_commands, [0.0; VALVES]);
+        assert_eq!(out.status.mode, GatewayMode::ArmedValve);
+        assert_eq!(
+            (out.status.unexpected_frames, out.status.rejected_frames),
+            (3, 2)
+        );
+    }
+
+    #[test]
+    fn position_mode_drives_toward_the_setpoint_with_rate_limit() {
+        let mut g = Gateway::default();
+        g.on_frame(&hb(RequestedMode::ArmPosition, 0), 0.0);
+        assert_eq!(g.mode(), GatewayMode::ArmedPosition);
+        g.on_frame(&setpoint([0.5, -1.0, -1.0, 0.0], 0), 0.0);
+        let q = [0.0, -1.5, -0.5, 0.0];
+        let first = g.tick(0.0, Some(q)).valve_commands;
+        assert_eq!(first, [0.0; VALVES], "rate limited from zero");
+        g.on_frame(&hb(RequestedMode::ArmPosition, 1), 0.01);
+        g.on_frame(&setpoint([0.5, -1.0, -1.0, 0.0], 1), 0.01);
+        let out = g.tick(0.01, Some(q)).valve_commands;
+        assert!((out[0] - 0.05).abs() < 1e-9, "boom up: extend, {out:?}");
+        assert!(out[1] < 0.0, "stick angle must rise: retract, {out:?}");
+        assert!(out[2] > 0.0, "bucket angle must fall: extend, {out:?}");
+        assert_eq!(out[3], 0.0);
+        // Same sequence counter again: a replay, rejected.
+        assert_eq!(
+            g.on_frame(&setpoint([0.5, -1.0, -1.0, 0.0], 1), 0.015),
+            FrameVerdict::Rejected
+        );
+    }
+
+    #[test]
+    fn position_mode_faults_on_stale_or_out_of_range_setpoints() {
+        let mut g = Gateway::default();
+        g.on_frame(&hb(RequestedMode::ArmPosition, 0), 0.0);
+        g.on_frame(&hb(RequestedMode::ArmPosition, 1), 0.09);
+        g.tick(0.09, Some([0.0; 4]));
+        assert_eq!(
+            g.mode(),
+            GatewayMode::ArmedPosition,
+            "grace period after arming"
+        );
+        g.tick(0.11, Some([0.0; 4]));
+        assert!(g.faults().contains(GatewayFaults::STALE_COMMAND));
+        let mut g = Gateway::default();
+        g.on_frame(&hb(RequestedMode::ArmPosition, 0), 0.0);
+        g.on_frame(&setpoint([0.0, 0.0, 0.0, 0.0], 0), 0.0);
+        g.on_frame(&setpoint([0.0, -1.0, 2.0, 0.0], 1), 0.0);
+        assert!(g.faults().contains(GatewayFaults::SETPOINT_OUT_OF_RANGE));
+    }
+
+    proptest! {
+        /// Garbage frames never panic and never produce motion from a disarmed gateway.
+        #[test]
+        fn garbage_frames_never_panic(
+            frames in proptest::collection::vec(
+                (any::<u32>(), proptest::collection::vec(any::<u8>(), 0..=8), any::<bool>()),
+                0..50
+            ),
+            measured in proptest::array::uniform4(any::<f64>()),
+        ) {
+            let mut g = Gateway::default();
+            let mut t = 0.0;
+            for (id, data, extended) in frames {
+                let frame = if extended {
+                    CanFrame::new_extended(id & 0x1FFF_FFFF, &data)
+                } else {
+                    CanFrame::new_standard((id & 0x7FF) as u16, &data)
+                };
+                if let Ok(frame) = frame {
+                    g.on_frame(&frame, t);
+                }
+                t += 0.003;
+                let out = g.tick(t, Some(measured));
+                prop_assert!(out.valve_commands.iter().all(|u| u.is_finite() && u.abs() <= 1.0));
+            }
+        }
+    }
+}
