@@ -33,6 +33,7 @@
 pub mod busload;
 pub mod dbc;
 pub mod frame;
+pub mod gateway;
 pub mod id;
 pub mod messages;
 pub mod trace;
