@@ -43,6 +43,7 @@ while read -r mod; do
   [ -n "$mod" ] || continue
   insmod "/lib/modules/$mod" || fatal "module $mod failed to load (insmod exit $?)"
 done </etc/vcan-vm/modules
+MODULES_AT=$(cut -d' ' -f1 /proc/uptime)
 
 P9OPTS="trans=virtio,version=9p2000.L,msize=512000"
 mkdir -p /newroot /results
@@ -82,24 +83,26 @@ while [ $# -ge 3 ]; do
   shift 3
 done
 
-# iproute2 from the host root knows every link type; busybox ip is the fallback.
-IP="ip"
-DETAILS=""
+# busybox ip creates and raises the links (no exec over 9p); the host's iproute2, if any, shows the details.
+ip link set dev lo up || fatal "cannot bring up lo"
+for ifc in $VCAN_VM_IFACES; do
+  ip link add dev "$ifc" type vcan || fatal "cannot create $ifc (ip link add dev $ifc type vcan)"
+  ip link set dev "$ifc" up || fatal "cannot bring up $ifc"
+done
+HOSTIP=""
 for p in /usr/sbin/ip /sbin/ip /usr/bin/ip /bin/ip; do
-  if [ -x "/newroot$p" ] && chroot /newroot "$p" -V >/dev/null 2>&1; then
-    IP="chroot /newroot $p"
-    DETAILS="-details"
-    break
+  [ -x "/newroot$p" ] && HOSTIP="$p" && break
+done
+for ifc in $VCAN_VM_IFACES; do
+  if [ -n "$HOSTIP" ]; then
+    echo "vcan-vm: ip -details link show $ifc"
+    chroot /newroot "$HOSTIP" -details link show dev "$ifc" || fatal "$ifc does not exist after creating it"
+  else
+    echo "vcan-vm: ip link show $ifc"
+    ip link show dev "$ifc" || fatal "$ifc does not exist after creating it"
   fi
 done
-$IP link set dev lo up || fatal "cannot bring up lo"
-for ifc in $VCAN_VM_IFACES; do
-  $IP link add dev "$ifc" type vcan || fatal "cannot create $ifc (ip link add dev $ifc type vcan)"
-  $IP link set dev "$ifc" up || fatal "cannot bring up $ifc"
-  echo "vcan-vm: ip $DETAILS link show $ifc"
-  $IP $DETAILS link show dev "$ifc" || fatal "$ifc does not exist after creating it"
-done
-echo "vcan-vm: ready after $(cut -d' ' -f1 /proc/uptime) s of guest uptime; running in $VCAN_VM_CWD: $VCAN_VM_CMDLINE"
+echo "vcan-vm: ready after $(cut -d' ' -f1 /proc/uptime) s of guest uptime (modules loaded at $MODULES_AT s); running in $VCAN_VM_CWD: $VCAN_VM_CMDLINE"
 
 env -i /bin/chroot /newroot /bin/sh /run/vcan-vm/run.sh </dev/null
 status=$?
