@@ -904,6 +904,17 @@ mod tests {
         assert_eq!(crc8_sae_j1850(*b"123456789"), 0x4B);
     }
 
+    /// Arm-valve, alive counter 5 (the fixture in docs/protocol.md).
+    const HEARTBEAT_ARM_VALVE_5: [u8; 8] = [0x51, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0x16];
+
+    #[test]
+    fn heartbeat_matches_the_documented_bytes() {
+        let hb = ControllerHeartbeat { mode: RequestedMode::ArmValve, alive_counter: 5 };
+        let frame = hb.to_frame().unwrap();
+        assert_eq!(frame.id(), CanId::Extended(0x0CFF_6127));
+        assert_eq!(frame.data(), &HEARTBEAT_ARM_VALVE_5);
+    }
+
     #[test]
     fn heartbeat_with_a_flipped_bit_is_rejected() {
         let hb = ControllerHeartbeat {
