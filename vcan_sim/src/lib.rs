@@ -6,6 +6,8 @@
 //! - [`hydraulics`]: pumps, open-centre valves, relief valves, chambers and cylinders (Eqs. 1-3).
 pub mod effects;
 pub mod hydraulics;
-pub mod scenario;
 pub mod linkage;
+pub mod plant;
+pub mod scenario;
+pub mod sensors;
 pub mod soil_contact;

@@ -123,14 +123,12 @@ impl Linkage {
     /// Cylinder forces that hold gravity, payload and the soil force (soil on bucket, base frame):
     /// `tau = G - J^T f` (Eq. A2), `F = tau / r` (Eqs. A7, A19). Positive pushes toward extension.
     pub fn cylinder_loads(&self, s: &LinkageState, soil: &TipForce, payload_kg: f64) -> [f64; 3] {
-        let tau = self.kin.joint_torques_from_tip_force(&s.q, soil, payload_kg);
+        let tau = self
+            .kin
+            .joint_torques_from_tip_force(&s.q, soil, payload_kg);
         [0, 1, 2].map(|i| {
             let r = s.arms[i];
-            if r.abs() < 1e-4 {
-                0.0
-            } else {
-                tau[i] / r
-            }
+            if r.abs() < 1e-4 { 0.0 } else { tau[i] / r }
         })
     }
 

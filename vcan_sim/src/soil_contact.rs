@@ -118,7 +118,8 @@ impl World {
             for i in 0..nx {
                 let [x, y] = terrain.cell_center(i, j);
                 for r in &s.soil_regions {
-                    if (r.x_min_m..=r.x_max_m).contains(&x) && (r.y_min_m..=r.y_max_m).contains(&y) {
+                    if (r.x_min_m..=r.x_max_m).contains(&x) && (r.y_min_m..=r.y_max_m).contains(&y)
+                    {
                         soil[j * nx + i] = SoilCell::from(&r.soil);
                     }
                 }
@@ -234,7 +235,11 @@ impl World {
         }
         // Scale the last bisection step away so the placed volume matches exactly.
         let placed = added(hi);
-        let scale = if placed > 0.0 { volume_m3 / placed } else { 0.0 };
+        let scale = if placed > 0.0 {
+            volume_m3 / placed
+        } else {
+            0.0
+        };
         let mut total = 0.0;
         for &(i, j, drop, h) in &cells {
             let add = (hi - drop - h).max(0.0) * scale;
@@ -339,7 +344,8 @@ impl SoilContact {
             }
             // Rake angle (Fig. 25): between the blade and the terrain surface behind the edge.
             let blade_from_travel = b[1].atan2(b[0] * travel_sign);
-            let rho = (std::f64::consts::PI - blade_from_travel + alpha * travel_sign).clamp(0.1, std::f64::consts::PI - 0.1);
+            let rho = (std::f64::consts::PI - blade_from_travel + alpha * travel_sign)
+                .clamp(0.1, std::f64::consts::PI - 0.1);
             let f = fee_force(&soil, d, alpha, rho, input.width_m, self.content.volume_m3);
             let speed = v[0].hypot(v[1]);
             let mobilised = f * (speed / CREEP_SPEED_M_PER_S).tanh();
@@ -425,7 +431,11 @@ impl SoilContact {
             }
         }
         // Boulder cells are not cut: the edge rides over them (the contact force stops it).
-        if world.terrain.cut(from, to, input.azimuth_rad, input.width_m).is_err() {
+        if world
+            .terrain
+            .cut(from, to, input.azimuth_rad, input.width_m)
+            .is_err()
+        {
             return;
         }
         let area = res * res;
@@ -505,7 +515,8 @@ pub fn fee_force(soil: &SoilCell, d: f64, alpha: f64, rho: f64, w: f64, swept_m3
     }
     let gamma_g = soil.density_kg_per_m3 * GRAVITY_M_PER_S2;
     // Eq. 17.
-    let n_w = ((cot(beta) - alpha.tan()).max(0.0) * (alpha.cos() + alpha.sin() * cbp)) / (2.0 * denom);
+    let n_w =
+        ((cot(beta) - alpha.tan()).max(0.0) * (alpha.cos() + alpha.sin() * cbp)) / (2.0 * denom);
     let n_c = (1.0 + cot(beta) * cbp) / denom;
     let n_q = (alpha.cos() + alpha.sin() * cbp) / denom;
     let f = d * d * w * gamma_g * n_w + soil.cohesion_pa * w * d * n_c + swept_m3 * gamma_g * n_q;
@@ -585,7 +596,10 @@ mod tests {
         let effects = SoilEffects::default();
         contact.step(&mut w, &input_at(9.0, 1.5), 1e-3, &effects);
         let f = contact.step(&mut w, &input_at(8.9995, 1.5), 1e-3, &effects);
-        assert!(f.fx_n > 1000.0, "soil pushes back against travel toward the machine: {f:?}");
+        assert!(
+            f.fx_n > 1000.0,
+            "soil pushes back against travel toward the machine: {f:?}"
+        );
         w.boulders.push(Boulder {
             x_m: 8.0,
             y_m: 0.0,

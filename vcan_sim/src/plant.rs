@@ -1,0 +1,591 @@
+//! The whole machine as a pure physics plant: valve commands in, motion, pressures, terrain change and
+//! sensor readings out, stepped at 1 kHz by [`Plant::step`].
+//!
+//! Per step: hidden command effects (dead band) -> fixed transport delay -> spool lag (plus the
+//! `hydraulic_lag` effect) -> linkage state from cylinder extensions -> soil contact (cutting, filling,
+//! FEE force) -> cylinder loads (gravity, payload, soil; Appendix) -> hydraulics (Eqs. 1-3) -> tracks.
+
+use std::collections::VecDeque;
+
+use planner::kinematics::{Joint, JointAngles, MachinePose, TipForce};
+use planner::machine::MachineConfig;
+use serde::Serialize;
+
+use crate::effects::{Effect, EffectSet};
+use crate::hydraulics::{
+    ActuatorLoad, BOOM, BUCKET, HydraulicEffects, HydraulicParams, Hydraulics, N_ACTUATORS, STICK,
+    SWING,
+};
+use crate::linkage::{Linkage, LinkageState};
+use crate::scenario::Scenario;
+use crate::sensors::{
+    Scan, ScanRequest, SensedTruth, SensorEffects, SensorReadings, SensorSpec, Sensors,
+};
+use crate::soil_contact::{ContactInput, MassLedger, SoilContact, SoilEffects, World};
+
+/// Physics step (s): 1 kHz.
+pub const PHYSICS_DT_S: f64 = 1.0e-3;
+/// Track speed time constant (s).
+const TRACK_TIME_CONSTANT_S: f64 = 0.3;
+/// Table resolution for angle(length) and arm(length) lookups.
+const TABLE_POINTS: usize = 2001;
+
+/// Errors building a plant.
+#[derive(Debug, thiserror::Error)]
+pub enum PlantError {
+    /// The machine geometry is inconsistent.
+    #[error("machine geometry: {0}")]
+    Kinematics(#[from] planner::kinematics::KinematicsError),
+    /// The scenario's terrain could not be built.
+    #[error("terrain: {0}")]
+    Terrain(#[from] planner::terrain::TerrainError),
+    /// The start pose is outside the cylinder strokes.
+    #[error("start pose: {0}")]
+    StartPose(String),
+}
+
+impl HydraulicParams {
+    /// Hydraulic parameters for a machine file: cylinders, relief, pumps, valve areas, crossover and
+    /// bulk modulus from `[cylinders]` and `[hydraulics]`, the rest from [`HydraulicParams::default`].
+    pub fn from_machine(cfg: &MachineConfig) -> Self {
+        let mut p = Self::default();
+        let h = &cfg.hydraulics;
+        let cyl = [
+            &cfg.cylinders.boom,
+            &cfg.cylinders.stick,
+            &cfg.cylinders.bucket,
+        ];
+        for (dst, src) in p.cylinders.iter_mut().zip(cyl) {
+            dst.bore_m = src.bore_m;
+            dst.rod_m = src.rod_m;
+            dst.stroke_m = src.stroke_m;
+            dst.count = src.count.max(1);
+        }
+        p.fluid.tank_pressure_pa = h.tank_pressure_pa;
+        p.fluid.bulk_modulus_pa = h.bulk_modulus_pa;
+        // The machine file gives Cd sqrt(2 / rho) (Eq. 1 folds the density into the constant).
+        p.fluid.discharge_coefficient =
+            h.valve_discharge_coefficient / (2.0 / p.fluid.density_kg_per_m3).sqrt();
+        let pumps = f64::from(h.pump_count.max(1));
+        for pump in &mut p.pumps {
+            pump.max_flow_m3_per_s = h.pump_max_flow_m3_per_s;
+            pump.power_w = h.max_engine_power_w / pumps;
+            pump.main_relief_pa = h.relief_pressure_pa;
+        }
+        p.port_relief_pa = h.relief_pressure_pa * 1.08;
+        for (i, valve) in p.valves.iter_mut().enumerate() {
+            // The boom section passes two cylinders' worth of flow.
+            let scale = if i == BOOM { 1.3 } else { 1.0 };
+            valve.meter_in_area_m2 = h.valve_max_area_m2 * scale;
+            valve.meter_out_area_m2 = 1.6 * h.valve_max_area_m2 * scale;
+            valve.bypass_area_m2 = h.valve_bleed_area_m2 * 2.0_f64.sqrt();
+        }
+        p.crossover_start = h.crossover_command.clamp(0.05, 0.95);
+        p.crossover_full = (h.crossover_command + 0.2).min(1.0);
+        p
+    }
+}
+
+/// Lookup of joint angle and moment arm by cylinder extension (uniform samples, linear interpolation).
+#[derive(Debug, Clone)]
+struct StrokeTable {
+    stroke_m: f64,
+    angle: Vec<f64>,
+    arm: Vec<f64>,
+}
+
+impl StrokeTable {
+    fn lookup(&self, x: f64) -> (f64, f64) {
+        let n = self.angle.len() - 1;
+        let f = (x / self.stroke_m).clamp(0.0, 1.0) * n as f64;
+        let i = (f.floor() as usize).min(n - 1);
+        let t = f - i as f64;
+        (
+            self.angle[i] + t * (self.angle[i + 1] - self.angle[i]),
+            self.arm[i] + t * (self.arm[i + 1] - self.arm[i]),
+        )
+    }
+}
+
+/// The machine's true state, for state logs and tests (never sent on the bus).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct TrueState {
+    /// Simulation time (s).
+    pub time_s: f64,
+    /// `[boom, stick, bucket, swing]` (rad).
+    pub angles_rad: [f64; 4],
+    /// Their rates (rad/s).
+    pub rates_rad_per_s: [f64; 4],
+    /// Cylinder extensions from fully retracted `[boom, stick, bucket]` (m).
+    pub extensions_m: [f64; 3],
+    /// Head pressures (Pa).
+    pub head_pa: [f64; 3],
+    /// Rod pressures (Pa).
+    pub rod_pa: [f64; 3],
+    /// Pump pressures (Pa).
+    pub pump_pa: [f64; 2],
+    /// Machine pose `[x, y, heading]` in the world.
+    pub pose: [f64; 3],
+    /// Bucket tip in the world `[x, y, z]`.
+    pub tip_world: [f64; 3],
+    /// Bucket content (kg).
+    pub payload_kg: f64,
+    /// Soil force on the bucket `[Fx, Fz]` in the base frame (N).
+    pub soil_force_n: [f64; 2],
+}
+
+/// The whole simulated machine.
+#[derive(Debug, Clone)]
+pub struct Plant {
+    cfg: MachineConfig,
+    linkage: Linkage,
+    tables: [StrokeTable; 3],
+    /// Hydraulic system state.
+    pub hydraulics: Hydraulics,
+    /// The true world (terrain, soil, boulders).
+    pub world: World,
+    /// Bucket-soil state (content, mass ledger).
+    pub contact: SoilContact,
+    effects: EffectSet,
+    pose: MachinePose,
+    track_speed: [f64; 2],
+    odometry_m: [f64; 2],
+    delay: VecDeque<[f64; 6]>,
+    spool: [f64; 6],
+    spool2: [f64; 6],
+    link: LinkageState,
+    soil_force: TipForce,
+    sensors: Sensors,
+    time_s: f64,
+    /// Gravity on or off (off for no-load hydraulic tests).
+    pub gravity: bool,
+}
+
+impl Plant {
+    /// Builds the machine on a scenario with hidden effects.
+    ///
+    /// # Errors
+    /// [`PlantError`] for an inconsistent machine, a bad grid or an unreachable start pose.
+    pub fn new(
+        cfg: &MachineConfig,
+        scenario: &Scenario,
+        effects: EffectSet,
+    ) -> Result<Self, PlantError> {
+        let linkage = Linkage::new(cfg)?;
+        let kin = linkage.kinematics();
+        let strokes = linkage.strokes_m();
+        let mut tables = Vec::with_capacity(3);
+        for (i, joint) in Joint::ALL.iter().enumerate() {
+            let (lo, _) = kin.stroke(*joint);
+            let mut angle = Vec::with_capacity(TABLE_POINTS);
+            let mut arm = Vec::with_capacity(TABLE_POINTS);
+            for k in 0..TABLE_POINTS {
+                let x = strokes[i] * k as f64 / (TABLE_POINTS - 1) as f64;
+                let a = kin.joint_angle(*joint, lo + x)?;
+                angle.push(a);
+                arm.push(kin.moment_arm(*joint, a)?);
+            }
+            tables.push(StrokeTable {
+                stroke_m: strokes[i],
+                angle,
+                arm,
+            });
+        }
+        let tables: [StrokeTable; 3] = tables
+            .try_into()
+            .map_err(|_| PlantError::StartPose("table construction".into()))?;
+        let st = &scenario.start;
+        let q0 = JointAngles {
+            boom_rad: st.boom_deg.to_radians(),
+            stick_rad: st.stick_deg.to_radians(),
+            bucket_rad: st.bucket_deg.to_radians(),
+        };
+        let x0 = linkage
+            .extensions(&q0)
+            .map_err(|e| PlantError::StartPose(e.to_string()))?;
+        let hparams = HydraulicParams::from_machine(cfg);
+        let hydraulics = Hydraulics::new(hparams, [x0[0], x0[1], x0[2], st.swing_deg.to_radians()]);
+        let world = World::from_scenario(scenario)?;
+        let link = linkage.state(x0)?;
+        let delay_steps = ((cfg.hydraulics.transport_delay_s + effects.get(Effect::TransportDelay))
+            / PHYSICS_DT_S)
+            .round()
+            .max(0.0) as usize;
+        let mut plant = Self {
+            cfg: cfg.clone(),
+            linkage,
+            tables,
+            hydraulics,
+            world,
+            contact: SoilContact::default(),
+            effects,
+            pose: MachinePose {
+                x_m: st.x_m,
+                y_m: st.y_m,
+                heading_rad: st.heading_deg.to_radians(),
+            },
+            track_speed: [0.0; 2],
+            odometry_m: [0.0; 2],
+            delay: VecDeque::from(vec![[0.0; 6]; delay_steps]),
+            spool: [0.0; 6],
+            spool2: [0.0; 6],
+            link,
+            soil_force: TipForce::default(),
+            sensors: Sensors::new(SensorSpec::default(), scenario.seed),
+            time_s: 0.0,
+            gravity: true,
+        };
+        plant.settle();
+        Ok(plant)
+    }
+
+    /// Pressurises the cylinders to hold the start pose, so the run starts at rest.
+    fn settle(&mut self) {
+        let loads = self.loads();
+        let tank = self.hydraulics.params().fluid.tank_pressure_pa;
+        for i in 0..3 {
+            let (ah, ar) = (
+                self.hydraulics.params().cylinders[i].head_area_m2(),
+                self.hydraulics.params().cylinders[i].rod_area_m2(),
+            );
+            let a = &mut self.hydraulics.actuators[i];
+            let f = loads[i].force;
+            if f >= 0.0 {
+                a.head_pa = (f + tank * ar) / ah;
+                a.rod_pa = tank;
+            } else {
+                a.head_pa = tank;
+                a.rod_pa = (-f + tank * ah) / ar;
+            }
+        }
+    }
+
+    /// Simulation time (s).
+    pub fn time_s(&self) -> f64 {
+        self.time_s
+    }
+
+    /// The machine description.
+    pub fn config(&self) -> &MachineConfig {
+        &self.cfg
+    }
+
+    /// The hidden effects in force.
+    pub fn effects(&self) -> &EffectSet {
+        &self.effects
+    }
+
+    /// The linkage model.
+    pub fn linkage(&self) -> &Linkage {
+        &self.linkage
+    }
+
+    /// Machine pose in the world.
+    pub fn pose(&self) -> MachinePose {
+        self.pose
+    }
+
+    /// Current joint angles of the implement.
+    pub fn joint_angles(&self) -> JointAngles {
+        self.link.q
+    }
+
+    /// Mass bookkeeping of the soil the bucket moved.
+    pub fn mass_ledger(&self) -> MassLedger {
+        self.contact.ledger
+    }
+
+    fn payload_kg(&self) -> f64 {
+        self.contact.content.mass_kg
+    }
+
+    fn update_link(&mut self) {
+        let mut arms = [0.0; 3];
+        let mut angles = [0.0; 3];
+        for i in 0..3 {
+            let (a, r) = self.tables[i].lookup(self.hydraulics.actuators[i].position);
+            angles[i] = a;
+            arms[i] = r;
+        }
+        self.link = LinkageState {
+            q: JointAngles {
+                boom_rad: angles[0],
+                stick_rad: angles[1],
+                bucket_rad: angles[2],
+            },
+            arms,
+        };
+    }
+
+    fn loads(&self) -> [ActuatorLoad; N_ACTUATORS] {
+        let payload = self.payload_kg();
+        let forces = if self.gravity {
+            self.linkage
+                .cylinder_loads(&self.link, &self.soil_force, payload)
+        } else {
+            let tau = -(self.linkage.kinematics().jacobian(&self.link.q).transpose()
+                * self.soil_force.to_vector());
+            [0, 1, 2].map(|i| {
+                if self.link.arms[i].abs() < 1e-4 {
+                    0.0
+                } else {
+                    tau[i] / self.link.arms[i]
+                }
+            })
+        };
+        let masses = self.linkage.cylinder_masses(&self.link, payload);
+        let tip = self.linkage.kinematics().forward(&self.link.q);
+        let swing_inertia = self.cfg.swing.inertia_kg_m2 + payload * tip.x_m * tip.x_m;
+        [
+            ActuatorLoad {
+                force: forces[0],
+                mass: masses[0],
+                ..ActuatorLoad::default()
+            },
+            ActuatorLoad {
+                force: forces[1],
+                mass: masses[1],
+                ..ActuatorLoad::default()
+            },
+            ActuatorLoad {
+                force: forces[2],
+                mass: masses[2],
+                ..ActuatorLoad::default()
+            },
+            ActuatorLoad {
+                force: 0.0,
+                mass: swing_inertia,
+                ..ActuatorLoad::default()
+            },
+        ]
+    }
+
+    /// Advances the machine by one physics step [`PHYSICS_DT_S`] with the valve commands
+    /// `[boom, stick, bucket, swing, left track, right track]` in `[-1, 1]` (non-finite -> 0).
+    pub fn step(&mut self, commands: [f64; 6]) {
+        let dt = PHYSICS_DT_S;
+        let fx = self.effects;
+        // Hidden effect: valve dead band.
+        let deadband = fx.get(Effect::ValveDeadband);
+        let cmd = commands.map(|u| {
+            let u = if u.is_finite() {
+                u.clamp(-1.0, 1.0)
+            } else {
+                0.0
+            };
+            u.signum() * (u.abs() - deadband).max(0.0)
+        });
+        // Fixed transport delay (nominal plus the hidden effect).
+        let delayed = if self.delay.is_empty() {
+            cmd
+        } else {
+            self.delay.push_back(cmd);
+            self.delay.pop_front().unwrap_or(cmd)
+        };
+        // Spool (pilot and main stage) lag, then the hidden extra lag in series.
+        let tau = self.cfg.hydraulics.lag_time_constant_s.max(dt);
+        let extra = fx.get(Effect::HydraulicLag);
+        for i in 0..6 {
+            self.spool[i] += (delayed[i] - self.spool[i]) * (dt / tau).min(1.0);
+            self.spool2[i] = if extra > 0.0 {
+                self.spool2[i] + (self.spool[i] - self.spool2[i]) * (dt / extra).min(1.0)
+            } else {
+                self.spool[i]
+            };
+        }
+        let spools = self.spool2;
+
+        // Soil contact at the current pose.
+        let kin = self.linkage.kinematics();
+        let points = kin.linkage_points(&self.link.q);
+        let rates = self.linkage.joint_rates(
+            &self.link,
+            [0, 1, 2].map(|i| self.hydraulics.actuators[i].velocity),
+        );
+        let tip_v = self.linkage.tip_velocity(&self.link, rates);
+        let swing = self.hydraulics.actuators[SWING].position;
+        let input = ContactInput {
+            tip_world: self
+                .pose
+                .world_from_base(swing, points.tip[0], points.tip[1]),
+            tip_base: points.tip,
+            pin_base: points.bucket_pin,
+            tip_velocity_base: tip_v,
+            bucket_abs_rad: self.link.q.bucket_abs_rad(),
+            azimuth_rad: self.pose.dig_plane_azimuth_rad(swing),
+            machine_xy: [self.pose.x_m, self.pose.y_m],
+            width_m: self.cfg.bucket.width_m,
+            capacity_m3: self.cfg.bucket.capacity_m3,
+        };
+        let soil_fx = SoilEffects {
+            cohesion_pa: fx.get(Effect::SoilCohesion),
+            density_kg_per_m3: fx.get(Effect::SoilDensity),
+        };
+        self.soil_force = self.contact.step(&mut self.world, &input, dt, &soil_fx);
+
+        // Hydraulics with the loads of gravity, payload and soil.
+        let loads = self.loads();
+        let hfx = HydraulicEffects {
+            flow_sharing: fx.get(Effect::FlowSharing),
+            pump_saturation: fx.get(Effect::PumpSaturation),
+            coulomb_friction_n: fx.get(Effect::CoulombFriction),
+            viscous_friction_n_s_per_m: fx.get(Effect::ViscousFriction),
+            internal_leakage: fx.get(Effect::InternalLeakage),
+        };
+        self.hydraulics.step(
+            dt,
+            [spools[BOOM], spools[STICK], spools[BUCKET], spools[SWING]],
+            &loads,
+            &hfx,
+        );
+        self.update_link();
+
+        // Tracks: speed follows the command with a lag; odometry and pose by differential drive.
+        let vmax = self.cfg.tracks.max_speed_m_per_s;
+        for (k, speed) in self.track_speed.iter_mut().enumerate() {
+            *speed += (spools[4 + k] * vmax - *speed) * (dt / TRACK_TIME_CONSTANT_S);
+            self.odometry_m[k] += *speed * dt;
+        }
+        let v = 0.5 * (self.track_speed[0] + self.track_speed[1]);
+        let omega = (self.track_speed[1] - self.track_speed[0]) / self.cfg.tracks.gauge_m.max(0.1);
+        self.pose.heading_rad += omega * dt;
+        self.pose.x_m += v * self.pose.heading_rad.cos() * dt;
+        self.pose.y_m += v * self.pose.heading_rad.sin() * dt;
+        self.time_s += dt;
+    }
+
+    /// The true values the sensors see.
+    pub fn sensed_truth(&self) -> SensedTruth {
+        let a = &self.hydraulics.actuators;
+        let rates = self
+            .linkage
+            .joint_rates(&self.link, [a[0].velocity, a[1].velocity, a[2].velocity]);
+        SensedTruth {
+            angles_rad: [
+                self.link.q.boom_rad,
+                self.link.q.stick_rad,
+                self.link.q.bucket_rad,
+                a[SWING].position,
+            ],
+            rates_rad_per_s: [rates[0], rates[1], rates[2], a[SWING].velocity],
+            head_pa: [a[0].head_pa, a[1].head_pa, a[2].head_pa],
+            rod_pa: [a[0].rod_pa, a[1].rod_pa, a[2].rod_pa],
+            pump_pa: self.hydraulics.pump_pa,
+            odometry_m: self.odometry_m,
+        }
+    }
+
+    /// Reads every sensor (noise, quantisation and the sensor hidden effects applied).
+    pub fn read_sensors(&mut self) -> SensorReadings {
+        let truth = self.sensed_truth();
+        let fx = SensorEffects {
+            pressure_offset_pa: self.effects.get(Effect::PressureSensorOffset),
+            resolver_offset_rad: self.effects.get(Effect::ResolverOffset),
+        };
+        self.sensors.read(&truth, &fx)
+    }
+
+    /// Scans the terrain from the range sensor on the cab (machine file `[sensor]`), pointing along
+    /// the digging plane.
+    pub fn scan(&mut self, request: &ScanRequest) -> Scan {
+        let s = &self.cfg.sensor;
+        let swing = self.hydraulics.actuators[SWING].position;
+        let az = self.pose.dig_plane_azimuth_rad(swing);
+        let mount_az = az + s.bearing_rad;
+        let origin = [
+            self.pose.x_m + s.radial_offset_m * mount_az.cos(),
+            self.pose.y_m + s.radial_offset_m * mount_az.sin(),
+            s.height_m,
+        ];
+        self.sensors
+            .scan(&self.world, origin, az, request, self.time_s)
+    }
+
+    /// The true state (for state logs and tests).
+    pub fn true_state(&self) -> TrueState {
+        let t = self.sensed_truth();
+        let a = &self.hydraulics.actuators;
+        let swing = a[SWING].position;
+        let tip = self.linkage.kinematics().forward(&self.link.q);
+        TrueState {
+            time_s: self.time_s,
+            angles_rad: t.angles_rad,
+            rates_rad_per_s: t.rates_rad_per_s,
+            extensions_m: [a[0].position, a[1].position, a[2].position],
+            head_pa: t.head_pa,
+            rod_pa: t.rod_pa,
+            pump_pa: t.pump_pa,
+            pose: [self.pose.x_m, self.pose.y_m, self.pose.heading_rad],
+            tip_world: self.pose.world_from_base(swing, tip.x_m, tip.z_m),
+            payload_kg: self.payload_kg(),
+            soil_force_n: [self.soil_force.fx_n, self.soil_force.fz_n],
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plant(effects: EffectSet) -> Plant {
+        Plant::new(
+            &MachineConfig::default_machine().unwrap(),
+            &Scenario::default_bench().unwrap(),
+            effects,
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn starts_at_the_scenario_pose_and_holds_it_at_neutral() {
+        let mut p = plant(EffectSet::nominal());
+        let q0 = p.joint_angles();
+        assert!((q0.boom_rad - 20f64.to_radians()).abs() < 1e-3);
+        for _ in 0..2000 {
+            p.step([0.0; 6]);
+        }
+        let q = p.joint_angles();
+        assert!((q.boom_rad - q0.boom_rad).abs() < 5e-3, "{q:?} vs {q0:?}");
+        assert!((q.stick_rad - q0.stick_rad).abs() < 5e-3);
+        assert!((q.bucket_rad - q0.bucket_rad).abs() < 5e-3);
+    }
+
+    #[test]
+    fn commands_move_joints_in_the_documented_directions() {
+        let mut p = plant(EffectSet::nominal());
+        let q0 = p.joint_angles();
+        for _ in 0..1000 {
+            p.step([0.5, 0.5, 0.5, 0.5, 0.5, 0.5]);
+        }
+        let q = p.joint_angles();
+        assert!(q.boom_rad > q0.boom_rad, "boom extension raises the boom");
+        assert!(
+            q.stick_rad < q0.stick_rad,
+            "stick extension pulls the stick in"
+        );
+        assert!(q.bucket_rad < q0.bucket_rad, "bucket extension curls");
+        assert!(p.true_state().angles_rad[3] > 0.0);
+        assert!(p.pose().x_m > 0.0, "tracks forward");
+    }
+
+    #[test]
+    fn transport_delay_effect_delays_motion() {
+        let moved_at = |fx: EffectSet| {
+            let mut p = plant(fx);
+            let x0 = p.hydraulics.actuators[STICK].position;
+            for k in 0..1000 {
+                p.step([0.0, 1.0, 0.0, 0.0, 0.0, 0.0]);
+                if (p.hydraulics.actuators[STICK].position - x0).abs() > 1e-3 {
+                    return k;
+                }
+            }
+            1000
+        };
+        let nominal = moved_at(EffectSet::nominal());
+        let delayed = moved_at(EffectSet::from_args(&["transport_delay=0.1"]).unwrap());
+        assert!(
+            (delayed as i64 - nominal as i64 - 100).abs() <= 3,
+            "{nominal} {delayed}"
+        );
+    }
+}

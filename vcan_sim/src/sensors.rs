@@ -1,0 +1,368 @@
+//! Sensors: what the machine measures of itself (resolvers, pressures, odometry) and the range sensor
+//! that scans the terrain. Noise comes from a seeded RNG so a run is reproducible for a seed; the
+//! `pressure_sensor_offset` and `resolver_offset` hidden effects act here.
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+use serde::{Deserialize, Serialize};
+
+use crate::soil_contact::World;
+
+/// Sensor noise and resolution.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SensorSpec {
+    /// Resolver resolution: 14 bits per turn (rad).
+    pub angle_quantum_rad: f64,
+    /// Resolver noise, standard deviation (rad).
+    pub angle_noise_rad: f64,
+    /// Rate noise, standard deviation (rad/s).
+    pub rate_noise_rad_per_s: f64,
+    /// Pressure transducer noise, standard deviation (Pa).
+    pub pressure_noise_pa: f64,
+    /// Pressure transducer full scale (Pa); readings are clamped to `[0, full scale]`.
+    pub pressure_full_scale_pa: f64,
+    /// Track odometry resolution (m).
+    pub odometry_quantum_m: f64,
+    /// Range-sensor noise along the ray, standard deviation (m).
+    pub range_noise_m: f64,
+}
+
+impl Default for SensorSpec {
+    fn default() -> Self {
+        Self {
+            angle_quantum_rad: std::f64::consts::TAU / 16384.0,
+            angle_noise_rad: 2.0e-4,
+            rate_noise_rad_per_s: 2.0e-3,
+            pressure_noise_pa: 5.0e4,
+            pressure_full_scale_pa: 60.0e6,
+            odometry_quantum_m: 1.0e-3,
+            range_noise_m: 0.02,
+        }
+    }
+}
+
+/// True values the sensors look at.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SensedTruth {
+    /// `[boom, stick, bucket, swing]` angles (rad).
+    pub angles_rad: [f64; 4],
+    /// Their rates (rad/s).
+    pub rates_rad_per_s: [f64; 4],
+    /// Head pressures `[boom, stick, bucket]` (Pa).
+    pub head_pa: [f64; 3],
+    /// Rod pressures (Pa).
+    pub rod_pa: [f64; 3],
+    /// Pump gallery pressures (Pa).
+    pub pump_pa: [f64; 2],
+    /// Track travel `[left, right]` (m).
+    pub odometry_m: [f64; 2],
+}
+
+/// One set of readings, as the gateway would put them on the bus.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SensorReadings {
+    /// Resolver angles (rad).
+    pub angles_rad: [f64; 4],
+    /// Joint rates (rad/s).
+    pub rates_rad_per_s: [f64; 4],
+    /// Head pressures (Pa).
+    pub head_pa: [f64; 3],
+    /// Rod pressures (Pa).
+    pub rod_pa: [f64; 3],
+    /// Pump pressures (Pa).
+    pub pump_pa: [f64; 2],
+    /// Track odometry (m).
+    pub odometry_m: [f64; 2],
+}
+
+/// Sensor offsets (hidden effects).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SensorEffects {
+    /// Added to every pressure (Pa).
+    pub pressure_offset_pa: f64,
+    /// Added to boom, stick and bucket angles (rad).
+    pub resolver_offset_rad: f64,
+}
+
+/// The machine's sensors with their noise generator.
+#[derive(Debug, Clone)]
+pub struct Sensors {
+    spec: SensorSpec,
+    rng: ChaCha8Rng,
+}
+
+fn quantise(v: f64, q: f64) -> f64 {
+    if q > 0.0 { (v / q).round() * q } else { v }
+}
+
+fn wrap(a: f64) -> f64 {
+    let t = std::f64::consts::TAU;
+    let w = a.rem_euclid(t);
+    if w > std::f64::consts::PI { w - t } else { w }
+}
+
+impl Sensors {
+    /// Sensors with noise seeded from `seed`.
+    pub fn new(spec: SensorSpec, seed: u64) -> Self {
+        Self {
+            spec,
+            rng: ChaCha8Rng::seed_from_u64(seed ^ 0x5E45_0125),
+        }
+    }
+
+    fn noise(&mut self, std: f64) -> f64 {
+        match Normal::new(0.0, std) {
+            Ok(n) if std > 0.0 => n.sample(&mut self.rng),
+            _ => 0.0,
+        }
+    }
+
+    /// Reads every sensor once.
+    pub fn read(&mut self, truth: &SensedTruth, effects: &SensorEffects) -> SensorReadings {
+        let s = self.spec;
+        let mut r = SensorReadings::default();
+        for i in 0..4 {
+            let offset = if i < 3 {
+                effects.resolver_offset_rad
+            } else {
+                0.0
+            };
+            let a = truth.angles_rad[i] + offset + self.noise(s.angle_noise_rad);
+            r.angles_rad[i] = wrap(quantise(a, s.angle_quantum_rad));
+            r.rates_rad_per_s[i] = truth.rates_rad_per_s[i] + self.noise(s.rate_noise_rad_per_s);
+        }
+        let pressure = |p: f64, rng: &mut Self| {
+            (p + effects.pressure_offset_pa + rng.noise(s.pressure_noise_pa))
+                .clamp(0.0, s.pressure_full_scale_pa)
+        };
+        for i in 0..3 {
+            r.head_pa[i] = pressure(truth.head_pa[i], self);
+            r.rod_pa[i] = pressure(truth.rod_pa[i], self);
+        }
+        for i in 0..2 {
+            r.pump_pa[i] = pressure(truth.pump_pa[i], self);
+            r.odometry_m[i] = quantise(truth.odometry_m[i], s.odometry_quantum_m);
+        }
+        r
+    }
+
+    /// Scans the terrain from a sensor at `origin` (world) looking along `heading_rad`, by ray
+    /// casting over the grid: the first crossing of the terrain surface is the hit, so nearer terrain
+    /// occludes what lies behind it. Range noise is added along the ray.
+    pub fn scan(
+        &mut self,
+        world: &World,
+        origin: [f64; 3],
+        heading_rad: f64,
+        request: &ScanRequest,
+        time_s: f64,
+    ) -> Scan {
+        let req = request.sanitised();
+        let step = 0.5 * world.terrain.resolution_m();
+        let mut points = Vec::with_capacity(req.azimuth_count * req.elevation_count);
+        for ia in 0..req.azimuth_count {
+            let fa = if req.azimuth_count > 1 {
+                ia as f64 / (req.azimuth_count - 1) as f64
+            } else {
+                0.5
+            };
+            let az = heading_rad
+                + req.azimuth_min_rad
+                + fa * (req.azimuth_max_rad - req.azimuth_min_rad);
+            for ie in 0..req.elevation_count {
+                let fe = if req.elevation_count > 1 {
+                    ie as f64 / (req.elevation_count - 1) as f64
+                } else {
+                    0.5
+                };
+                let el =
+                    req.elevation_min_rad + fe * (req.elevation_max_rad - req.elevation_min_rad);
+                let dir = [el.cos() * az.cos(), el.cos() * az.sin(), el.sin()];
+                let at = |t: f64| {
+                    [
+                        origin[0] + t * dir[0],
+                        origin[1] + t * dir[1],
+                        origin[2] + t * dir[2],
+                    ]
+                };
+                let above = |t: f64| {
+                    let p = at(t);
+                    world.terrain.height_at(p[0], p[1]).map(|h| p[2] - h)
+                };
+                let mut t_prev = 0.0;
+                let mut t = step;
+                let mut hit = None;
+                while t <= req.max_range_m {
+                    match above(t) {
+                        Ok(d) if d <= 0.0 => {
+                            // Refine the crossing by bisection.
+                            let (mut lo, mut hi) = (t_prev, t);
+                            for _ in 0..20 {
+                                let mid = 0.5 * (lo + hi);
+                                match above(mid) {
+                                    Ok(d) if d > 0.0 => lo = mid,
+                                    _ => hi = mid,
+                                }
+                            }
+                            hit = Some(hi);
+                            break;
+                        }
+                        Ok(_) => {}
+                        Err(_) => break, // left the map: no return
+                    }
+                    t_prev = t;
+                    t += step;
+                }
+                if let Some(range) = hit {
+                    let noisy = (range + self.noise(self.spec.range_noise_m)).max(0.0);
+                    points.push(at(noisy));
+                }
+            }
+        }
+        Scan {
+            time_s,
+            sensor: SensorPose {
+                x_m: origin[0],
+                y_m: origin[1],
+                z_m: origin[2],
+                heading_rad,
+            },
+            points,
+        }
+    }
+}
+
+/// What to scan, relative to the sensor's heading (radians, counts).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct ScanRequest {
+    /// First azimuth relative to the sensor heading (rad, counter-clockwise).
+    pub azimuth_min_rad: f64,
+    /// Last azimuth.
+    pub azimuth_max_rad: f64,
+    /// Number of azimuths (1..=2000).
+    pub azimuth_count: usize,
+    /// Lowest elevation (rad, negative looks down).
+    pub elevation_min_rad: f64,
+    /// Highest elevation.
+    pub elevation_max_rad: f64,
+    /// Number of elevations (1..=2000).
+    pub elevation_count: usize,
+    /// Maximum range (m).
+    pub max_range_m: f64,
+}
+
+impl Default for ScanRequest {
+    fn default() -> Self {
+        Self {
+            azimuth_min_rad: -0.7,
+            azimuth_max_rad: 0.7,
+            azimuth_count: 121,
+            elevation_min_rad: -1.2,
+            elevation_max_rad: -0.05,
+            elevation_count: 81,
+            max_range_m: 30.0,
+        }
+    }
+}
+
+impl ScanRequest {
+    /// The request with counts and ranges clamped to what the emulator serves.
+    pub fn sanitised(&self) -> Self {
+        let finite = |v: f64, d: f64| if v.is_finite() { v } else { d };
+        let d = Self::default();
+        Self {
+            azimuth_min_rad: finite(self.azimuth_min_rad, d.azimuth_min_rad).clamp(-3.2, 3.2),
+            azimuth_max_rad: finite(self.azimuth_max_rad, d.azimuth_max_rad).clamp(-3.2, 3.2),
+            azimuth_count: self.azimuth_count.clamp(1, 2000),
+            elevation_min_rad: finite(self.elevation_min_rad, d.elevation_min_rad)
+                .clamp(-1.57, 1.57),
+            elevation_max_rad: finite(self.elevation_max_rad, d.elevation_max_rad)
+                .clamp(-1.57, 1.57),
+            elevation_count: self.elevation_count.clamp(1, 2000),
+            max_range_m: finite(self.max_range_m, d.max_range_m).clamp(0.5, 100.0),
+        }
+    }
+}
+
+/// The range sensor's pose in the world.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SensorPose {
+    /// East (m).
+    pub x_m: f64,
+    /// North (m).
+    pub y_m: f64,
+    /// Up (m).
+    pub z_m: f64,
+    /// Heading of the scan centre (rad, counter-clockwise from east).
+    pub heading_rad: f64,
+}
+
+/// One terrain scan: world points `[x, y, z]` (m) and the sensor pose.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Scan {
+    /// Simulation time of the scan (s).
+    pub time_s: f64,
+    /// Where the sensor was.
+    pub sensor: SensorPose,
+    /// Hits, world frame.
+    pub points: Vec<[f64; 3]>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenario::Scenario;
+
+    #[test]
+    fn readings_are_quantised_noisy_offset_and_reproducible() {
+        let truth = SensedTruth {
+            angles_rad: [0.3, -1.5, -1.0, 0.2],
+            head_pa: [10.0e6; 3],
+            ..SensedTruth::default()
+        };
+        let fx = SensorEffects {
+            pressure_offset_pa: 1.0e6,
+            resolver_offset_rad: 0.05,
+        };
+        let mut a = Sensors::new(SensorSpec::default(), 7);
+        let mut b = Sensors::new(SensorSpec::default(), 7);
+        let ra = a.read(&truth, &fx);
+        assert_eq!(ra, b.read(&truth, &fx));
+        assert!((ra.angles_rad[0] - 0.35).abs() < 2e-3);
+        assert!((ra.angles_rad[3] - 0.2).abs() < 2e-3, "no offset on swing");
+        assert!((ra.head_pa[0] - 11.0e6).abs() < 3e5);
+        let q = SensorSpec::default().angle_quantum_rad;
+        assert!(((ra.angles_rad[1] / q) - (ra.angles_rad[1] / q).round()).abs() < 1e-6);
+    }
+
+    #[test]
+    fn scan_hits_the_terrain_and_the_face_occludes_the_bench_top_behind() {
+        let s = Scenario::default_bench().unwrap();
+        let world = World::from_scenario(&s).unwrap();
+        let mut sensors = Sensors::new(SensorSpec::default(), 1);
+        let scan = sensors.scan(&world, [0.0, 0.0, 3.1], 0.0, &ScanRequest::default(), 0.0);
+        assert!(scan.points.len() > 1000);
+        for p in &scan.points {
+            let h = world.height(p[0], p[1]);
+            assert!((p[2] - h).abs() < 0.2, "{p:?} vs {h}");
+        }
+        // From 3.1 m the bench top (2 m) hides the ground just behind its far edge.
+        let low = ScanRequest {
+            azimuth_count: 1,
+            azimuth_min_rad: 0.0,
+            azimuth_max_rad: 0.0,
+            elevation_count: 1,
+            elevation_min_rad: -0.08,
+            elevation_max_rad: -0.08,
+            ..ScanRequest::default()
+        };
+        let hit = sensors.scan(&world, [0.0, 0.0, 3.1], 0.0, &low, 0.0);
+        assert_eq!(hit.points.len(), 1);
+        assert!(
+            hit.points[0][2] > 1.5,
+            "hit the bench, not the ground behind: {hit:?}"
+        );
+    }
+}
