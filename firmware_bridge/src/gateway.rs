@@ -101,7 +101,8 @@ impl Default for GatewayConfig {
 pub struct GatewayOutputs {
     /// Per-valve commands in `[-1, 1]` (positive extends), all 0 unless armed and healthy.
     pub valve_commands: [f64; VALVES],
-    /// Status to report (the alive counter advances each [`Gateway::tick`]).
+    /// The status as it stands (report it with [`Gateway::next_status`], which advances the alive
+    /// counter once per status frame).
     pub status: GatewayStatus,
 }
 
@@ -415,6 +416,12 @@ impl Gateway {
         out
     }
 
+    /// The status for the next status frame: advances the 8-bit alive counter by one.
+    pub fn next_status(&mut self) -> GatewayStatus {
+        self.alive_counter = self.alive_counter.wrapping_add(1);
+        self.status()
+    }
+
     /// The status as it stands (mode, faults, alive counter, frame counters).
     pub fn status(&self) -> GatewayStatus {
         GatewayStatus {
@@ -565,6 +572,8 @@ mod tests {
         assert_eq!(g.on_frame(&bad, 0.01), FrameVerdict::Rejected);
         assert!(g.faults().contains(GatewayFaults::BAD_CHECKSUM));
         assert_eq!(g.tick(0.01, None).status.rejected_frames, 1);
+        let (a, b) = (g.next_status().alive_counter, g.next_status().alive_counter);
+        assert_eq!(b, a.wrapping_add(1));
     }
 
     #[test]
