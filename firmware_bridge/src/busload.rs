@@ -213,6 +213,32 @@ pub fn exact_load(frames: &[(CanFrame, f64)], bitrate: u32) -> Option<f64> {
     Some(bits_per_s / f64::from(bitrate))
 }
 
+/// Bus load measured over a sequence of timestamped frames (for example a trace): exact bits of the
+/// classic frames divided by the bits the bus could carry between the first and last timestamp.
+/// Error and CAN FD frames are not counted. `None` for fewer than two frames or a zero time span.
+pub fn measured_load(
+    frames: impl IntoIterator<Item = (u64, CanFrame)>,
+    bitrate: u32,
+) -> Option<f64> {
+    let mut first: Option<u64> = None;
+    let mut last = 0u64;
+    let mut bits = 0u64;
+    let mut count = 0u64;
+    for (timestamp_ns, frame) in frames {
+        first = Some(first.map_or(timestamp_ns, |f| f.min(timestamp_ns)));
+        last = last.max(timestamp_ns);
+        bits += u64::from(stuffed_bits(&frame).unwrap_or(0));
+        count += 1;
+    }
+    let span_s = last.checked_sub(first?)? as f64 * 1e-9;
+    if count < 2 || span_s <= 0.0 {
+        return None;
+    }
+    // The last frame's bits fall after its start time; scale by the intervals seen, not the frames.
+    let per_frame = bits as f64 / count as f64;
+    Some(per_frame * (count - 1) as f64 / span_s / f64::from(bitrate))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -233,6 +259,17 @@ mod tests {
         // 00000 -> stuff 1; then 1111 joins the stuff bit: 1+4 = 5 ones -> another stuff bit.
         let bits = [false, false, false, false, false, true, true, true, true];
         assert_eq!(count_stuff_bits(&bits), 2);
+    }
+
+    #[test]
+    fn measured_load_of_a_steady_stream() {
+        // 1000 identical frames at 1 kHz: load = bits * 1000 / 500k.
+        let frame = CanFrame::new_extended(0x0CFF_5080, &[0x55; 8]).unwrap();
+        let bits = f64::from(stuffed_bits(&frame).unwrap());
+        let frames = (0..1000u64).map(|n| (n * 1_000_000, frame));
+        let load = measured_load(frames, BITRATE).unwrap();
+        assert!((load - bits * 1000.0 / 500_000.0).abs() < 1e-9, "{load}");
+        assert_eq!(measured_load([(0, frame)], BITRATE), None);
     }
 
     #[test]

@@ -5,7 +5,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 
 use tokio::sync::Notify;
 
-use super::{Bus, Clock, Result, TimestampedFrame, VirtualClock};
+use super::{Bus, BusFault, Clock, Error, Result, TimestampedFrame, VirtualClock};
 use crate::frame::CanFrame;
 use crate::trace::{Direction, Recorder};
 
@@ -78,6 +78,34 @@ struct Shared {
 /// stay structurally valid, and a test panic must not cascade into every other node).
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// Delivers `frame` to every node except `except`, applying fault injection; returns the send time.
+fn deliver(shared: &Shared, frame: CanFrame, except: Option<u64>) -> u64 {
+    let now = shared.clock.now_ns();
+    let mut state = lock(&shared.state);
+    state.frames_sent += 1;
+    let faults = state.faults;
+    let deliver_at = now.saturating_add(faults.latency_ns);
+    let nodes = state.nodes.clone();
+    for node in nodes.iter().filter(|n| Some(n.node_id) != except) {
+        if faults.loss_probability > 0.0 && state.rng.next_f64() < faults.loss_probability {
+            state.frames_lost += 1;
+            continue;
+        }
+        let mut frames = lock(&node.frames);
+        if frames.len() >= node.capacity {
+            *lock(&node.dropped) += 1;
+            continue;
+        }
+        frames.push_back(TimestampedFrame {
+            timestamp_ns: deliver_at,
+            frame,
+        });
+        drop(frames);
+        node.arrived.notify_one();
+    }
+    now
 }
 
 /// An in-process CAN bus. Clone it to share; [`InProcessBus::attach`] adds a node.
@@ -161,6 +189,19 @@ impl InProcessBus {
         }
     }
 
+    /// Delivers an error frame (as a CAN controller driver would report one) to every node, for fault
+    /// tests: the async `recv` returns it as [`Error::Fault`], `try_recv` as the frame itself.
+    ///
+    /// # Errors
+    /// [`Error::Unsupported`] if `frame` is not an error frame.
+    pub fn inject_error(&self, frame: CanFrame) -> Result<()> {
+        if !frame.is_error() {
+            return Err(Error::Unsupported("inject_error needs an error frame"));
+        }
+        deliver(&self.shared, frame, None);
+        Ok(())
+    }
+
     /// Frames sent so far and deliveries lost by fault injection.
     pub fn stats(&self) -> (u64, u64) {
         let state = lock(&self.shared.state);
@@ -197,38 +238,16 @@ impl InProcessNode {
     /// # Errors
     /// Never fails today; the `Result` keeps the signature of a real transport.
     pub fn send(&self, frame: CanFrame) -> Result<()> {
-        let now = self.shared.clock.now_ns();
-        {
-            let mut state = lock(&self.shared.state);
-            state.frames_sent += 1;
-            let faults = state.faults;
-            let deliver_at = now.saturating_add(faults.latency_ns);
-            let nodes = state.nodes.clone();
-            for node in nodes.iter().filter(|n| n.node_id != self.queue.node_id) {
-                if faults.loss_probability > 0.0 && state.rng.next_f64() < faults.loss_probability {
-                    state.frames_lost += 1;
-                    continue;
-                }
-                let mut frames = lock(&node.frames);
-                if frames.len() >= node.capacity {
-                    *lock(&node.dropped) += 1;
-                    continue;
-                }
-                frames.push_back(TimestampedFrame {
-                    timestamp_ns: deliver_at,
-                    frame,
-                });
-                drop(frames);
-                node.arrived.notify_one();
-            }
-        }
+        let now = deliver(&self.shared, frame, Some(self.queue.node_id));
         if let Some(rec) = &self.recorder {
             rec.record(now, Direction::Transmit, &frame);
         }
         Ok(())
     }
 
-    /// The next frame whose delivery time has come, without waiting.
+    /// The next frame whose delivery time has come, without waiting. Error frames (see
+    /// [`InProcessBus::inject_error`]) are returned as frames; map them with
+    /// [`BusFault::from_error_frame`].
     pub fn try_recv(&self) -> Option<TimestampedFrame> {
         let now = self.shared.clock.now_ns();
         let got = {
@@ -260,7 +279,10 @@ impl InProcessNode {
             tokio::pin!(arrived);
             arrived.as_mut().enable();
             if let Some(f) = self.try_recv() {
-                return Ok(f);
+                return match BusFault::from_error_frame(&f.frame) {
+                    Some(fault) => Err(Error::Fault(fault)),
+                    None => Ok(f),
+                };
             }
             match (self.next_delivery_ns(), &self.shared.clock) {
                 (None, _) => arrived.await,
@@ -420,6 +442,23 @@ mod tests {
         Bus::send(&a, frame(9)).await.unwrap();
         let got = tokio::time::timeout(std::time::Duration::from_secs(10), waiter).await;
         assert_eq!(got.unwrap().unwrap().unwrap(), frame(9));
+    }
+
+    #[tokio::test]
+    async fn injected_error_frames_surface_as_faults() {
+        let bus = InProcessBus::with_virtual_clock("t", VirtualClock::new());
+        let a = bus.attach();
+        let b = bus.attach();
+        bus.inject_error(CanFrame::new_error(0x40, [0; 8]).unwrap())
+            .unwrap();
+        a.send(frame(1)).unwrap();
+        assert!(matches!(
+            Bus::recv(&b).await,
+            Err(Error::Fault(BusFault::BusOff))
+        ));
+        assert_eq!(Bus::recv(&b).await.unwrap().frame, frame(1));
+        assert!(a.try_recv().unwrap().frame.is_error());
+        assert!(bus.inject_error(frame(2)).is_err());
     }
 
     #[tokio::test]
