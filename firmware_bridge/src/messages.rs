@@ -909,7 +909,10 @@ mod tests {
 
     #[test]
     fn heartbeat_matches_the_documented_bytes() {
-        let hb = ControllerHeartbeat { mode: RequestedMode::ArmValve, alive_counter: 5 };
+        let hb = ControllerHeartbeat {
+            mode: RequestedMode::ArmValve,
+            alive_counter: 5,
+        };
         let frame = hb.to_frame().unwrap();
         assert_eq!(frame.id(), CanId::Extended(0x0CFF_6127));
         assert_eq!(frame.data(), &HEARTBEAT_ARM_VALVE_5);
