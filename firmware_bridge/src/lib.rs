@@ -27,8 +27,8 @@
 //!                       \--> Recorder (candump -L log) on both sides
 //! ```
 //!
-//! The gateway firmware logic (modes, arming, watchdog) lives in its own module beside these and uses
-//! only their public API.
+//! The gateway firmware logic (modes, arming, watchdog) lives in [`gateway`], beside these layers, and
+//! uses only their public API. The wire protocol itself is documented in `docs/protocol.md`.
 
 pub mod busload;
 pub mod dbc;

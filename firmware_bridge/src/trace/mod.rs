@@ -576,6 +576,47 @@ mod tests {
         );
     }
 
+    /// Produces `lines` copies of a line on demand, so the test never holds the whole text.
+    struct Endless {
+        line: &'static [u8],
+        lines: u64,
+        pos: usize,
+    }
+
+    impl io::Read for Endless {
+        fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+            if self.lines == 0 {
+                return Ok(0);
+            }
+            let n = buf.len().min(self.line.len() - self.pos);
+            buf[..n].copy_from_slice(&self.line[self.pos..self.pos + n]);
+            self.pos += n;
+            if self.pos == self.line.len() {
+                self.pos = 0;
+                self.lines -= 1;
+            }
+            Ok(n)
+        }
+    }
+
+    #[test]
+    fn reader_streams_long_inputs() {
+        const LINES: u64 = 50_000;
+        let input = Endless {
+            line: b"(1700000000.123456) vcan0 0CFE3027#7DFF31204EFFFFFF T\n",
+            lines: LINES,
+            pos: 0,
+        };
+        let mut reader = TraceReader::new(io::BufReader::new(input), ReadMode::Stop);
+        let mut count = 0u64;
+        for record in reader.by_ref() {
+            record.unwrap();
+            count += 1;
+        }
+        assert_eq!(count, LINES);
+        assert_eq!(reader.lines_read(), LINES);
+    }
+
     #[test]
     fn truncated_last_line_is_reported_after_the_good_lines() {
         let text = format!("{BOOM_LINE}\n{BOOM_LINE}\n(1700000000.1234");
