@@ -46,3 +46,51 @@ async fn every_message_crosses_vcan() {
         common::assert_same(&decoded.message, msg);
     }
 }
+
+#[tokio::test]
+#[ignore = "needs a vcan interface (run with --ignored where vcan exists)"]
+async fn canplayer_replays_a_project_log() {
+    use firmware_bridge::trace::{Direction, Recorder};
+    if !common::tool_available(
+        "canplayer (can-utils)",
+        "sh",
+        &["-c", "command -v canplayer"],
+        "apt-get install can-utils",
+    ) {
+        return;
+    }
+    let iface = iface();
+    let dir = tempfile::tempdir().expect("tempdir");
+    let log = dir.path().join("replay.log");
+    let samples = common::sample_messages();
+    let frames: Vec<_> = samples
+        .iter()
+        .map(|m| m.encode().expect("encodes"))
+        .collect();
+    let rec = Recorder::create(&log, &iface).expect("create log");
+    for (n, f) in frames.iter().enumerate() {
+        rec.record(
+            1_700_000_000_000_000_000 + n as u64 * 1_000_000,
+            Direction::Transmit,
+            f,
+        );
+    }
+    rec.close().expect("close log");
+
+    let rx = SocketCanBus::open(&iface).expect("open vcan");
+    // Blocking is fine here: the receiving socket buffers the few replayed frames.
+    let status = std::process::Command::new("canplayer")
+        .args(["-t", "-I"])
+        .arg(&log)
+        .status()
+        .expect("run canplayer");
+    assert!(status.success(), "canplayer failed: {status}");
+    for (frame, msg) in frames.iter().zip(&samples) {
+        let got = tokio::time::timeout(Duration::from_secs(2), Bus::recv(&rx))
+            .await
+            .expect("replayed frame in time")
+            .expect("no bus error");
+        assert_eq!(got.frame, *frame);
+        common::assert_same(&Message::decode(&got.frame).expect("decodes").message, msg);
+    }
+}
