@@ -144,8 +144,8 @@ pub enum EncodeError {
         /// DBC signal name.
         signal: &'static str,
     },
-    /// The source address given does not fit the id (never happens for u8, kept for completeness of
-    /// id construction errors).
+    /// A J1939 identifier could not be built. Ids come from the DBC and source addresses are `u8`, so
+    /// this does not happen in practice; the variant lets id errors propagate instead of panicking.
     #[error("invalid identifier: {0}")]
     Id(#[from] crate::id::IdError),
 }

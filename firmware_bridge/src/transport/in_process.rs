@@ -13,6 +13,10 @@ use crate::trace::{Direction, Recorder};
 pub const DEFAULT_RX_QUEUE: usize = 4096;
 
 /// Faults injected on an [`InProcessBus`] for fault tests.
+///
+/// Latency is measured on the bus clock. With a [`VirtualClock`] frames become due when the simulation
+/// advances the clock; with the wall clock the async `recv` waits with tokio timers, so do not combine
+/// a wall-clock bus with latency and tokio's paused clock (use a virtual clock for such tests).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FaultInjection {
     /// Delay from send to delivery, in bus clock nanoseconds (fixed, so order is kept).
