@@ -185,6 +185,10 @@ pub const SCHEDULE: &[ScheduleEntry] = &[
         message: "GatewayStatus",
         rate_hz: 10.0,
     },
+    ScheduleEntry {
+        message: "ControllerStatus",
+        rate_hz: 20.0,
+    },
 ];
 
 /// The DBC descriptor of a schedule row.

@@ -445,6 +445,100 @@ pub fn heartbeat_checksum(data: &[u8]) -> u8 {
     crc8_sae_j1850(pgn_bytes.into_iter().chain(body))
 }
 
+/// What the controller is doing (the `Activity` signal of [`ControllerStatus`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum Activity {
+    /// Not moving the machine.
+    #[default]
+    Idle = 0,
+    /// Taking a range scan.
+    Scan = 1,
+    /// Swinging to the dig location.
+    SwingToDig = 2,
+    /// Autodig.
+    Dig = 3,
+    /// Floor cleanup (waypoint following, then Autodig from Pre-Dig).
+    Cleanup = 4,
+    /// Swinging to the spoil pile or truck.
+    SwingToDump = 5,
+    /// Dumping.
+    Dump = 6,
+    /// Returning from the dump.
+    Return = 7,
+    /// Tracking (driving) the machine.
+    Track = 8,
+    /// Halted by a fault; valves neutral.
+    Faulted = 9,
+}
+
+impl Activity {
+    fn from_raw(raw: i64) -> Self {
+        match raw {
+            1 => Self::Scan,
+            2 => Self::SwingToDig,
+            3 => Self::Dig,
+            4 => Self::Cleanup,
+            5 => Self::SwingToDump,
+            6 => Self::Dump,
+            7 => Self::Return,
+            8 => Self::Track,
+            9 => Self::Faulted,
+            _ => Self::Idle,
+        }
+    }
+}
+
+/// Autodig stage as sent on the bus (the `AutodigStage` signal of [`ControllerStatus`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum AutodigStageCode {
+    /// Autodig not running.
+    #[default]
+    None = 0,
+    /// Lowering the boom to the ground.
+    BoomDown = 1,
+    /// Pre-Dig: curling the bucket into the material.
+    PreDig = 2,
+    /// Dig: stick in, boom and bucket regulating load.
+    Dig = 3,
+    /// Capture: boom and bucket up.
+    Capture = 4,
+    /// Finished.
+    Done = 5,
+}
+
+impl AutodigStageCode {
+    fn from_raw(raw: i64) -> Self {
+        match raw {
+            1 => Self::BoomDown,
+            2 => Self::PreDig,
+            3 => Self::Dig,
+            4 => Self::Capture,
+            5 => Self::Done,
+            _ => Self::None,
+        }
+    }
+}
+
+/// Controller status (Proprietary B PGN 0xFF62, priority 6), 20 Hz: what the controller is doing, so
+/// that a trace alone shows the work cycle and the Autodig stage of every sample.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ControllerStatus {
+    /// Current activity of the work cycle.
+    pub activity: Activity,
+    /// Current Autodig stage.
+    pub stage: AutodigStageCode,
+    /// Number of the current dig (0 before the first), `0..=64255`.
+    pub dig_index: u16,
+    /// Autodig soil hardness index in use, `0..=12.5`, 0.05 resolution.
+    pub hardness_index: f64,
+    /// Swept volume integrated so far in this dig, m^3, `0..=6.4`, 1e-4 resolution.
+    pub swept_volume_m3: f64,
+    /// 0 when healthy, otherwise the controller's fault code (`0..=250`).
+    pub fault_reason: u8,
+    /// Alive counter `0..=15`.
+    pub alive_counter: u8,
+}
+
 /// Every message of the protocol. Variant names are the names in `docs/protocol.md`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Message {
@@ -466,6 +560,8 @@ pub enum Message {
     PositionSetpoint(PositionSetpoint),
     /// Controller heartbeat.
     ControllerHeartbeat(ControllerHeartbeat),
+    /// Controller status (activity, Autodig stage).
+    ControllerStatus(ControllerStatus),
 }
 
 /// A decoded frame: the J1939 id (so receivers can check the source address) and the message.
@@ -543,6 +639,7 @@ impl Message {
             Self::GatewayStatus(_) => &dbc::gateway_status::MESSAGE,
             Self::PositionSetpoint(_) => &dbc::position_setpoint::MESSAGE,
             Self::ControllerHeartbeat(_) => &dbc::controller_heartbeat::MESSAGE,
+            Self::ControllerStatus(_) => &dbc::controller_status::MESSAGE,
         }
     }
 
@@ -646,6 +743,16 @@ impl Message {
                 dbc::encode_raw(&s::ALIVE_COUNTER, i64::from(m.alive_counter), d)?;
                 let crc = heartbeat_checksum(&d[..]);
                 dbc::encode_raw(&s::CHECKSUM, i64::from(crc), d)?;
+            }
+            Self::ControllerStatus(m) => {
+                use dbc::controller_status as s;
+                dbc::encode_raw(&s::ACTIVITY, m.activity as i64, d)?;
+                dbc::encode_raw(&s::AUTODIG_STAGE, m.stage as i64, d)?;
+                dbc::encode_raw(&s::DIG_INDEX, i64::from(m.dig_index), d)?;
+                put(&s::HARDNESS_INDEX, m.hardness_index, d)?;
+                put(&s::SWEPT_VOLUME, m.swept_volume_m3, d)?;
+                dbc::encode_raw(&s::FAULT_REASON, i64::from(m.fault_reason), d)?;
+                dbc::encode_raw(&s::ALIVE_COUNTER, i64::from(m.alive_counter), d)?;
             }
         }
         Ok(())
@@ -782,6 +889,18 @@ impl Message {
                     alive_counter: raw_u8(&s::ALIVE_COUNTER, d)?,
                 })
             }
+            dbc::controller_status::PGN => {
+                use dbc::controller_status as s;
+                Self::ControllerStatus(ControllerStatus {
+                    activity: Activity::from_raw(raw(&s::ACTIVITY, d)?),
+                    stage: AutodigStageCode::from_raw(raw(&s::AUTODIG_STAGE, d)?),
+                    dig_index: raw_u16(&s::DIG_INDEX, d)?,
+                    hardness_index: get(&s::HARDNESS_INDEX, d)?,
+                    swept_volume_m3: get(&s::SWEPT_VOLUME, d)?,
+                    fault_reason: raw_u8(&s::FAULT_REASON, d)?,
+                    alive_counter: raw_u8(&s::ALIVE_COUNTER, d)?,
+                })
+            }
             _ => return Err(unknown),
         })
     }
@@ -850,6 +969,15 @@ impl Message {
                     ("Checksum", checksum),
                 ]
             }
+            Self::ControllerStatus(m) => vec![
+                ("Activity", f64::from(m.activity as u8)),
+                ("AutodigStage", f64::from(m.stage as u8)),
+                ("DigIndex", f64::from(m.dig_index)),
+                ("HardnessIndex", m.hardness_index),
+                ("SweptVolume", m.swept_volume_m3),
+                ("FaultReason", f64::from(m.fault_reason)),
+                ("AliveCounter", f64::from(m.alive_counter)),
+            ],
         }
     }
 }

@@ -61,6 +61,15 @@ fn varied_messages() -> Vec<Message> {
             swing_rad: angle(13),
             sequence: (i % 16) as u8,
         }));
+        out.push(Message::ControllerStatus(ControllerStatus {
+            activity: Activity::Dig,
+            stage: AutodigStageCode::PreDig,
+            dig_index: (i * 37) as u16,
+            hardness_index: f64::from((i % 250) as u8) * 0.05,
+            swept_volume_m3: f * 0.0001,
+            fault_reason: (i % 7) as u8,
+            alive_counter: (i % 16) as u8,
+        }));
         out.push(Message::ControllerHeartbeat(ControllerHeartbeat {
             mode: [
                 RequestedMode::Disarm,

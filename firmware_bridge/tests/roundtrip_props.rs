@@ -134,8 +134,50 @@ fn message() -> impl Strategy<Value = Message> {
                 alive_counter: alive,
             })
         }),
+        (
+            0u8..10,
+            0u8..6,
+            0u16..=64255,
+            0u8..=250,
+            0u16..=64000,
+            0u8..=250,
+            0u8..16
+        )
+            .prop_map(|(activity, stage, dig, hardness, swept, fault, alive)| {
+                Message::ControllerStatus(ControllerStatus {
+                    activity: ACTIVITIES[usize::from(activity)],
+                    stage: STAGES[usize::from(stage)],
+                    dig_index: dig,
+                    hardness_index: f64::from(hardness) * 0.05,
+                    swept_volume_m3: f64::from(swept) * 0.0001,
+                    fault_reason: fault,
+                    alive_counter: alive,
+                })
+            }),
     ]
 }
+
+const ACTIVITIES: [Activity; 10] = [
+    Activity::Idle,
+    Activity::Scan,
+    Activity::SwingToDig,
+    Activity::Dig,
+    Activity::Cleanup,
+    Activity::SwingToDump,
+    Activity::Dump,
+    Activity::Return,
+    Activity::Track,
+    Activity::Faulted,
+];
+
+const STAGES: [AutodigStageCode; 6] = [
+    AutodigStageCode::None,
+    AutodigStageCode::BoomDown,
+    AutodigStageCode::PreDig,
+    AutodigStageCode::Dig,
+    AutodigStageCode::Capture,
+    AutodigStageCode::Done,
+];
 
 /// Half the resolution of the named signal, plus float slack.
 fn tolerance(desc: &dbc::MessageDesc, signal: &str) -> f64 {

@@ -78,6 +78,15 @@ pub fn sample_messages() -> Vec<Message> {
         mode: RequestedMode::EStop,
         alive_counter: 15,
     }));
+    out.push(Message::ControllerStatus(ControllerStatus {
+        activity: Activity::Cleanup,
+        stage: AutodigStageCode::Capture,
+        dig_index: 64255,
+        hardness_index: 2.35,
+        swept_volume_m3: 1.2345,
+        fault_reason: 17,
+        alive_counter: 9,
+    }));
     out
 }
 
