@@ -11,6 +11,7 @@
 //! - [`autodig`]: the Autodig state machine and its pressure-to-command maps (thesis 3.1-3.2, Figs. 9-11).
 //! - [`cleanup`]: floor-cleanup waypoints and the hand-over to Autodig (thesis 3.3, Fig. 13).
 
+pub mod actuator;
 pub mod autodig;
 pub mod cleanup;
 pub mod kinematics;
