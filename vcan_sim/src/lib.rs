@@ -1,13 +1,221 @@
-//! `vcan_sim`: the excavator emulated behind its CAN gateway.
+//! `vcan_sim`: the excavator emulated behind its CAN gateway (`excavator-sim`).
 //!
-//! Layout (physics is pure; I/O only in `realtime`, `embedded` and the binary):
+//! # Layout
 //!
-//! - [`effects`]: the registry of hidden physical effects (`--effect NAME=VALUE`).
+//! Physics is pure (no I/O, no clocks):
 //! - [`hydraulics`]: pumps, open-centre valves, relief valves, chambers and cylinders (Eqs. 1-3).
+//! - [`linkage`]: cylinder extension <-> joint angle, loads and inertia on each cylinder (Appendix).
+//! - [`soil_contact`]: the true terrain and soil, cutting, bucket fill, spill and dump, FEE forces
+//!   (Eqs. 14-18).
+//! - [`sensors`]: resolvers, pressures, odometry and the range-sensor emulation (ray casting).
+//! - [`plant`]: the whole machine stepped at 1 kHz.
+//! - [`effects`]: the hidden-effects registry; [`scenario`]: bench scenarios (`config/bench.toml`).
+//! - [`node`]: the gateway firmware ([`firmware_bridge::gateway`]) in front of the plant: frames in,
+//!   frames out, still without I/O.
+//!
+//! I/O lives only in [`embedded`] (in-process bus, virtual time), [`realtime`] (SocketCAN, tokio,
+//! scan socket) and the binary.
+//!
+//! # Data flow
+//!
+//! ```text
+//! controller frames -> Gateway::on_frame -> Gateway::tick -> valve commands -> Plant::step (1 kHz)
+//!   -> sensors -> JointAngles, JointRates, AuxValveMeasured, PumpPressures, GatewayStatus, ...
+//! scan requests (socket or function call) -> Plant::scan -> world points
+//! ```
+
+use std::path::Path;
+
+use planner::machine::{ConfigError, MachineConfig};
+
 pub mod effects;
+pub mod embedded;
 pub mod hydraulics;
 pub mod linkage;
+pub mod node;
 pub mod plant;
+pub mod realtime;
 pub mod scenario;
 pub mod sensors;
 pub mod soil_contact;
+
+use effects::{EffectError, EffectSet};
+use plant::{Plant, PlantError};
+use scenario::{Scenario, ScenarioError};
+
+/// Errors of the simulator library.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    /// The machine file.
+    #[error(transparent)]
+    Machine(#[from] ConfigError),
+    /// The scenario file.
+    #[error(transparent)]
+    Scenario(#[from] ScenarioError),
+    /// An effect setting.
+    #[error("{origin}: {source}")]
+    Effect {
+        /// Where it came from (`--effect`, a file name).
+        origin: String,
+        /// The error.
+        source: EffectError,
+    },
+    /// Building the plant.
+    #[error(transparent)]
+    Plant(#[from] PlantError),
+    /// I/O (sockets, state log).
+    #[error("{context}: {source}")]
+    Io {
+        /// What was being done.
+        context: String,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// The CAN bus.
+    #[error("CAN bus: {0}")]
+    Bus(String),
+}
+
+/// Result alias for the simulator library.
+pub type Result<T> = std::result::Result<T, SimError>;
+
+/// Everything needed to build a plant: machine, scenario and hidden effects.
+#[derive(Debug, Clone)]
+pub struct SimConfig {
+    /// The machine.
+    pub machine: MachineConfig,
+    /// The bench scenario.
+    pub scenario: Scenario,
+    /// Hidden effects (machine file, then scenario file, then command line).
+    pub effects: EffectSet,
+}
+
+/// Splits an `[effects]` table out of machine-file text, keeping line numbers (its lines become blank
+/// in the returned machine text). Returns `(machine text, effects text)`.
+fn split_effects(text: &str) -> (String, String) {
+    let mut machine = String::with_capacity(text.len());
+    let mut effects = String::new();
+    let mut in_effects = false;
+    for line in text.lines() {
+        let t = line.trim();
+        if t.starts_with('[') {
+            in_effects = t.trim_start_matches('[').trim_end_matches(']').trim() == "effects";
+        }
+        if in_effects {
+            effects.push_str(line);
+            machine.push('\n');
+        } else {
+            machine.push_str(line);
+            machine.push('\n');
+        }
+        if in_effects {
+            effects.push('\n');
+        }
+    }
+    (machine, effects)
+}
+
+fn effects_from_table(text: &str, origin: &str) -> Result<EffectSet> {
+    #[derive(serde::Deserialize)]
+    struct Wrapper {
+        #[serde(default)]
+        effects: std::collections::BTreeMap<String, f64>,
+    }
+    let w: Wrapper = toml::from_str(text).map_err(|e| SimError::Effect {
+        origin: origin.to_owned(),
+        source: EffectError::Syntax(e.message().to_owned()),
+    })?;
+    let mut set = EffectSet::nominal();
+    for (name, value) in w.effects {
+        set.set_by_name(&name, value)
+            .map_err(|source| SimError::Effect {
+                origin: format!("{origin}: [effects] {name}"),
+                source,
+            })?;
+    }
+    Ok(set)
+}
+
+impl SimConfig {
+    /// Loads the machine (default `config/machine.toml`, compiled in) and the bench (default
+    /// `config/bench.toml`, compiled in), overrides the seed, and applies `NAME=VALUE` effects.
+    ///
+    /// # Errors
+    /// [`SimError`] naming the file, line and field, or the bad effect argument.
+    pub fn load<S: AsRef<str>>(
+        machine: Option<&Path>,
+        bench: Option<&Path>,
+        seed: Option<u64>,
+        effect_args: &[S],
+    ) -> Result<Self> {
+        let (machine, mut effects) = match machine {
+            Some(path) => {
+                let origin = path.display().to_string();
+                let text = std::fs::read_to_string(path).map_err(|source| SimError::Io {
+                    context: format!("reading {origin}"),
+                    source,
+                })?;
+                let (machine_text, effects_text) = split_effects(&text);
+                let cfg = MachineConfig::from_toml_str_named(&machine_text, &origin)?;
+                (cfg, effects_from_table(&effects_text, &origin)?)
+            }
+            None => (MachineConfig::default_machine()?, EffectSet::nominal()),
+        };
+        let mut scenario = match bench {
+            Some(path) => Scenario::from_toml_file(path)?,
+            None => Scenario::default_bench()?,
+        };
+        if let Some(seed) = seed {
+            scenario.seed = seed;
+        }
+        let from_bench = scenario.effect_set().map_err(|source| SimError::Effect {
+            origin: "bench [effects]".into(),
+            source,
+        })?;
+        effects.merge(&from_bench);
+        for arg in effect_args {
+            effects
+                .apply_arg(arg.as_ref())
+                .map_err(|source| SimError::Effect {
+                    origin: "--effect".into(),
+                    source,
+                })?;
+        }
+        Ok(Self {
+            machine,
+            scenario,
+            effects,
+        })
+    }
+
+    /// Builds the plant.
+    ///
+    /// # Errors
+    /// [`SimError::Plant`].
+    pub fn build(&self) -> Result<Plant> {
+        Ok(Plant::new(&self.machine, &self.scenario, self.effects)?)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn machine_file_effects_table_is_split_out_keeping_lines() {
+        let text = "a = 1\n[effects]\nvalve_deadband = 0.1\n[b]\nc = 2\n";
+        let (m, e) = split_effects(text);
+        assert_eq!(m.lines().count(), 5);
+        assert!(!m.contains("valve_deadband") && m.contains("[b]"));
+        let set = effects_from_table(&e, "m.toml").unwrap();
+        assert_eq!(set.get(effects::Effect::ValveDeadband), 0.1);
+    }
+
+    #[test]
+    fn load_defaults_and_reject_bad_effects() {
+        let cfg = SimConfig::load::<&str>(None, None, Some(3), &[]).unwrap();
+        assert_eq!(cfg.scenario.seed, 3);
+        let err = SimConfig::load(None, None, None, &["nope=1"]).unwrap_err();
+        assert!(err.to_string().contains("unknown effect"), "{err}");
+    }
+}

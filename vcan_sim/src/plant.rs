@@ -540,7 +540,7 @@ mod tests {
     fn starts_at_the_scenario_pose_and_holds_it_at_neutral() {
         let mut p = plant(EffectSet::nominal());
         let q0 = p.joint_angles();
-        assert!((q0.boom_rad - 20f64.to_radians()).abs() < 1e-3);
+        assert!((q0.boom_rad - 41f64.to_radians()).abs() < 1e-3);
         for _ in 0..2000 {
             p.step([0.0; 6]);
         }

@@ -354,8 +354,8 @@ mod tests {
             azimuth_min_rad: 0.0,
             azimuth_max_rad: 0.0,
             elevation_count: 1,
-            elevation_min_rad: -0.08,
-            elevation_max_rad: -0.08,
+            elevation_min_rad: -0.12,
+            elevation_max_rad: -0.12,
             ..ScanRequest::default()
         };
         let hit = sensors.scan(&world, [0.0, 0.0, 3.1], 0.0, &low, 0.0);

@@ -1,0 +1,202 @@
+//! The machine as a CAN node, without I/O: the gateway firmware ([`firmware_bridge::gateway`]) in
+//! front of the [`Plant`]. Frames go in with [`MachineNode::on_frame`]; [`MachineNode::step`] runs one
+//! 1 kHz physics step and returns the frames to transmit. Both the real-time loop and the in-process
+//! embedded machine drive this same code.
+//!
+//! Transmit schedule (gateway source address `0x80`):
+//! - every 10 ms (100 Hz): `JointAngles`, `JointRates`, `AuxValveMeasured` for boom, stick, bucket,
+//!   `PumpPressures`;
+//! - every 50 ms (20 Hz): `GatewayStatus`, `TrackOdometry`.
+//!
+//! Only sensor readings and the gateway status go out; nothing reveals the hidden effects.
+
+use firmware_bridge::CanFrame;
+use firmware_bridge::gateway::{Gateway, GatewayConfig};
+use firmware_bridge::messages::{
+    AuxValveMeasured, Cylinder, JointAngles, JointRates, Message, PumpPressures, TrackOdometry,
+    ValveState,
+};
+
+use crate::plant::{PHYSICS_DT_S, Plant};
+use crate::sensors::{Scan, ScanRequest, SensorReadings};
+
+/// Steps between sensor frames (10 ms).
+pub const SENSOR_PERIOD_STEPS: u64 = 10;
+/// Steps between status and odometry frames (50 ms).
+pub const STATUS_PERIOD_STEPS: u64 = 50;
+
+/// The gateway and the plant behind it.
+#[derive(Debug, Clone)]
+pub struct MachineNode {
+    plant: Plant,
+    gateway: Gateway,
+    readings: Option<SensorReadings>,
+    steps: u64,
+    valve_commands: [f64; 6],
+    encode_errors: u64,
+}
+
+impl MachineNode {
+    /// A node with the default gateway configuration.
+    pub fn new(plant: Plant) -> Self {
+        Self::with_gateway(plant, GatewayConfig::default())
+    }
+
+    /// A node with a given gateway configuration.
+    pub fn with_gateway(plant: Plant, config: GatewayConfig) -> Self {
+        Self {
+            plant,
+            gateway: Gateway::new(config),
+            readings: None,
+            steps: 0,
+            valve_commands: [0.0; 6],
+            encode_errors: 0,
+        }
+    }
+
+    /// Simulation time (s).
+    pub fn time_s(&self) -> f64 {
+        self.plant.time_s()
+    }
+
+    /// The plant.
+    pub fn plant(&self) -> &Plant {
+        &self.plant
+    }
+
+    /// The plant, mutably (tests and tools).
+    pub fn plant_mut(&mut self) -> &mut Plant {
+        &mut self.plant
+    }
+
+    /// The gateway firmware.
+    pub fn gateway(&self) -> &Gateway {
+        &self.gateway
+    }
+
+    /// The valve commands the gateway applied in the last step.
+    pub fn valve_commands(&self) -> [f64; 6] {
+        self.valve_commands
+    }
+
+    /// Frames that could not be encoded (values outside the DBC ranges); they are not sent.
+    pub fn encode_errors(&self) -> u64 {
+        self.encode_errors
+    }
+
+    /// Hands a received frame to the gateway.
+    pub fn on_frame(&mut self, frame: &CanFrame) {
+        let now = self.time_s();
+        self.gateway.on_frame(frame, now);
+    }
+
+    /// A terrain scan from the cab's range sensor.
+    pub fn scan(&mut self, request: &ScanRequest) -> Scan {
+        self.plant.scan(request)
+    }
+
+    /// One physics step: gateway tick, plant step, and the frames due now (appended to `out`).
+    pub fn step(&mut self, out: &mut Vec<CanFrame>) {
+        if self.steps.is_multiple_of(SENSOR_PERIOD_STEPS) {
+            self.readings = Some(self.plant.read_sensors());
+        }
+        let now = self.time_s();
+        let measured = self.readings.map(|r| r.angles_rad);
+        let outputs = self.gateway.tick(now, measured);
+        self.valve_commands = outputs.valve_commands;
+        self.plant.step(outputs.valve_commands);
+        self.steps += 1;
+        if self.steps.is_multiple_of(SENSOR_PERIOD_STEPS)
+            && let Some(r) = self.readings
+        {
+            self.sensor_frames(&r, out);
+        }
+        if self.steps.is_multiple_of(STATUS_PERIOD_STEPS) {
+            let status = self.gateway.next_status();
+            self.push(Message::GatewayStatus(status), out);
+            let odo = |v: f64| v.clamp(-199_999.0, 199_999.0);
+            self.push(
+                Message::TrackOdometry(TrackOdometry {
+                    left_m: self.readings.map_or(0.0, |r| odo(r.odometry_m[0])),
+                    right_m: self.readings.map_or(0.0, |r| odo(r.odometry_m[1])),
+                }),
+                out,
+            );
+        }
+    }
+
+    /// Runs `n` physics steps, collecting the frames to send.
+    pub fn run_steps(&mut self, n: u64, out: &mut Vec<CanFrame>) {
+        for _ in 0..n {
+            self.step(out);
+        }
+    }
+
+    fn push(&mut self, msg: Message, out: &mut Vec<CanFrame>) {
+        match msg.encode() {
+            Ok(frame) => out.push(frame),
+            Err(_) => self.encode_errors += 1,
+        }
+    }
+
+    fn sensor_frames(&mut self, r: &SensorReadings, out: &mut Vec<CanFrame>) {
+        let angle = |a: f64| a.clamp(-3.1415, 3.1415);
+        let rate = |w: f64| w.clamp(-31.9, 31.9);
+        self.push(
+            Message::JointAngles(JointAngles {
+                boom_rad: angle(r.angles_rad[0]),
+                stick_rad: angle(r.angles_rad[1]),
+                bucket_rad: angle(r.angles_rad[2]),
+                swing_rad: angle(r.angles_rad[3]),
+            }),
+            out,
+        );
+        self.push(
+            Message::JointRates(JointRates {
+                boom_rad_per_s: rate(r.rates_rad_per_s[0]),
+                stick_rad_per_s: rate(r.rates_rad_per_s[1]),
+                bucket_rad_per_s: rate(r.rates_rad_per_s[2]),
+                swing_rad_per_s: rate(r.rates_rad_per_s[3]),
+            }),
+            out,
+        );
+        let rated = self.plant.hydraulics.params().pumps[0].max_flow_m3_per_s;
+        for (i, cylinder) in Cylinder::ALL.iter().enumerate() {
+            let h = &self.plant.hydraulics;
+            let a = h.actuators[i];
+            let cmd = self.valve_commands[i];
+            let (state, area) = if cmd > 0.0 {
+                (ValveState::Extend, h.head_area_m2(i))
+            } else if cmd < 0.0 {
+                (ValveState::Retract, h.rod_area_m2(i))
+            } else {
+                (ValveState::Block, 0.0)
+            };
+            let flow = (a.velocity.abs() * area / rated * 100.0).clamp(0.0, 160.0);
+            let msg = Message::AuxValveMeasured(AuxValveMeasured {
+                cylinder: *cylinder,
+                flow_percent: flow,
+                state,
+                head_pressure_pa: r.head_pa[i],
+                rod_pressure_pa: r.rod_pa[i],
+            });
+            self.push(msg, out);
+        }
+        self.push(
+            Message::PumpPressures(PumpPressures {
+                pump1_pa: r.pump_pa[0],
+                pump2_pa: r.pump_pa[1],
+            }),
+            out,
+        );
+    }
+}
+
+/// Number of physics steps in `dt_s` seconds (rounded to the nearest step).
+pub fn steps_in(dt_s: f64) -> u64 {
+    if dt_s.is_finite() && dt_s > 0.0 {
+        (dt_s / PHYSICS_DT_S).round() as u64
+    } else {
+        0
+    }
+}

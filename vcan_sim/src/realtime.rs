@@ -1,0 +1,175 @@
+//! The simulator in real time on a SocketCAN interface (tokio), with the optional JSON-lines state log
+//! and the range-sensor scan socket (docs/scan-protocol.md).
+//!
+//! Every 10 ms the loop steps the physics as many 1 ms steps as wall time requires (catching up after a
+//! late wake-up, at most 200 steps at once), sends the frames due, and handles received frames and
+//! scan requests in between. Shutdown is passed in and `select!`ed on.
+
+use std::future::Future;
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use firmware_bridge::transport::{Bus, SocketCanBus};
+use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
+use tokio::net::TcpListener;
+use tokio::sync::{mpsc, oneshot};
+
+use crate::node::MachineNode;
+use crate::plant::PHYSICS_DT_S;
+use crate::sensors::{Scan, ScanRequest};
+use crate::{Result, SimError};
+
+/// Options of a real-time run.
+#[derive(Debug, Clone, Default)]
+pub struct RealtimeOptions {
+    /// CAN interface (`vcan0`, `can0`).
+    pub iface: String,
+    /// JSON-lines log of the true state every 10 ms.
+    pub state_log: Option<PathBuf>,
+    /// `HOST:PORT` for the scan socket (loopback TCP, JSON lines).
+    pub scan_socket: Option<String>,
+}
+
+/// What a run did.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RunSummary {
+    /// Simulated time (s).
+    pub simulated_s: f64,
+    /// Frames received.
+    pub frames_received: u64,
+    /// Frames sent.
+    pub frames_sent: u64,
+    /// Send failures.
+    pub send_errors: u64,
+}
+
+type ScanJob = (ScanRequest, oneshot::Sender<Scan>);
+
+/// Serves scan requests: one JSON object per line in, one JSON line out.
+async fn serve_scans(listener: TcpListener, jobs: mpsc::Sender<ScanJob>) {
+    loop {
+        let Ok((stream, _)) = listener.accept().await else {
+            continue;
+        };
+        let jobs = jobs.clone();
+        tokio::spawn(async move {
+            let (read, mut write) = stream.into_split();
+            let mut lines = BufReader::new(read).lines();
+            while let Ok(Some(line)) = lines.next_line().await {
+                let reply = match serde_json::from_str::<ScanRequest>(&line) {
+                    Ok(request) => {
+                        let (tx, rx) = oneshot::channel();
+                        if jobs.send((request, tx)).await.is_err() {
+                            break;
+                        }
+                        match rx.await {
+                            Ok(scan) => serde_json::to_string(&scan)
+                                .unwrap_or_else(|e| error_json(&e.to_string())),
+                            Err(_) => break,
+                        }
+                    }
+                    Err(e) => error_json(&format!("bad request: {e}")),
+                };
+                if write.write_all(reply.as_bytes()).await.is_err()
+                    || write.write_all(b"\n").await.is_err()
+                {
+                    break;
+                }
+            }
+        });
+    }
+}
+
+fn error_json(message: &str) -> String {
+    serde_json::json!({ "error": message }).to_string()
+}
+
+/// Runs the node on a SocketCAN interface until `shutdown` completes.
+///
+/// # Errors
+/// [`SimError::Bus`] if the interface cannot be opened, [`SimError::Io`] for the state log or the
+/// scan socket.
+pub async fn run(
+    mut node: MachineNode,
+    options: RealtimeOptions,
+    shutdown: impl Future<Output = ()>,
+) -> Result<RunSummary> {
+    let bus = SocketCanBus::open(&options.iface)
+        .map_err(|e| SimError::Bus(format!("{}: {e}", options.iface)))?;
+    let mut log = match &options.state_log {
+        Some(path) => Some(std::io::BufWriter::new(
+            std::fs::File::create(path).map_err(|source| SimError::Io {
+                context: format!("creating {}", path.display()),
+                source,
+            })?,
+        )),
+        None => None,
+    };
+    let (scan_tx, mut scan_rx) = mpsc::channel::<ScanJob>(8);
+    if let Some(addr) = &options.scan_socket {
+        let listener = TcpListener::bind(addr)
+            .await
+            .map_err(|source| SimError::Io {
+                context: format!("binding the scan socket {addr}"),
+                source,
+            })?;
+        tracing::info!(%addr, "scan socket listening");
+        tokio::spawn(serve_scans(listener, scan_tx));
+    } else {
+        drop(scan_tx);
+    }
+    let mut summary = RunSummary::default();
+    let mut interval = tokio::time::interval(Duration::from_millis(10));
+    interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    let start = Instant::now();
+    let mut steps_done: u64 = 0;
+    let mut out = Vec::with_capacity(64);
+    tokio::pin!(shutdown);
+    loop {
+        tokio::select! {
+            _ = &mut shutdown => break,
+            received = bus.recv() => match received {
+                Ok(f) => {
+                    summary.frames_received += 1;
+                    node.on_frame(&f.frame);
+                }
+                Err(e) => tracing::warn!("CAN receive: {e}"),
+            },
+            Some((request, reply)) = scan_rx.recv() => {
+                let _ = reply.send(node.scan(&request));
+            }
+            _ = interval.tick() => {
+                let due = (start.elapsed().as_secs_f64() / PHYSICS_DT_S) as u64;
+                let n = due.saturating_sub(steps_done).min(200);
+                steps_done = due;
+                out.clear();
+                for _ in 0..n {
+                    node.step(&mut out);
+                }
+                for frame in out.drain(..) {
+                    match bus.send(frame).await {
+                        Ok(()) => summary.frames_sent += 1,
+                        Err(_) => summary.send_errors += 1,
+                    }
+                }
+                if let Some(log) = log.as_mut()
+                    && let Ok(line) = serde_json::to_string(&node.plant().true_state())
+                {
+                    writeln!(log, "{line}").map_err(|source| SimError::Io {
+                        context: "writing the state log".into(),
+                        source,
+                    })?;
+                }
+            }
+        }
+    }
+    if let Some(mut log) = log {
+        log.flush().map_err(|source| SimError::Io {
+            context: "flushing the state log".into(),
+            source,
+        })?;
+    }
+    summary.simulated_s = node.time_s();
+    Ok(summary)
+}
