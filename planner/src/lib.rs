@@ -14,6 +14,7 @@
 pub mod actuator;
 pub mod autodig;
 pub mod cleanup;
+pub mod estimate;
 pub mod kinematics;
 pub mod machine;
 pub mod soil;
