@@ -341,7 +341,9 @@ impl Gateway {
         self.last_tick_s = Some(now_s);
         if self.is_armed() {
             let hb_age = self.last_heartbeat_s.map_or(f64::INFINITY, |t| now_s - t);
-            if !(hb_age + 1e-9 < self.config.heartbeat_timeout_s) {
+            // Written so a NaN or infinite age counts as expired.
+            let alive = hb_age + 1e-9 < self.config.heartbeat_timeout_s;
+            if !alive {
                 self.fault(GatewayFaults::WATCHDOG_TIMEOUT);
                 // A new heartbeat sequence may start at any counter after a timeout.
                 self.last_alive = None;

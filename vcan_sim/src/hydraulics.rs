@@ -535,7 +535,7 @@ impl Hydraulics {
         loads: &[ActuatorLoad; N_ACTUATORS],
         effects: &HydraulicEffects,
     ) {
-        if !(dt_s > 0.0) {
+        if dt_s.is_nan() || dt_s <= 0.0 {
             return;
         }
         let p = self.params;

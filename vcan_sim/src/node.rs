@@ -140,7 +140,8 @@ impl MachineNode {
     }
 
     fn sensor_frames(&mut self, r: &SensorReadings, out: &mut Vec<CanFrame>) {
-        let angle = |a: f64| a.clamp(-3.1415, 3.1415);
+        // Inside the DBC range [-3.1416, 3.1416].
+        let angle = |a: f64| a.clamp(-std::f64::consts::PI + 1e-4, std::f64::consts::PI - 1e-4);
         let rate = |w: f64| w.clamp(-31.9, 31.9);
         self.push(
             Message::JointAngles(JointAngles {

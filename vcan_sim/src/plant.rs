@@ -243,13 +243,13 @@ impl Plant {
     fn settle(&mut self) {
         let loads = self.loads();
         let tank = self.hydraulics.params().fluid.tank_pressure_pa;
-        for i in 0..3 {
+        for (i, load) in loads.iter().enumerate().take(3) {
             let (ah, ar) = (
                 self.hydraulics.params().cylinders[i].head_area_m2(),
                 self.hydraulics.params().cylinders[i].rod_area_m2(),
             );
             let a = &mut self.hydraulics.actuators[i];
-            let f = loads[i].force;
+            let f = load.force;
             if f >= 0.0 {
                 a.head_pa = (f + tank * ar) / ah;
                 a.rod_pa = tank;
@@ -385,8 +385,8 @@ impl Plant {
         // Spool (pilot and main stage) lag, then the hidden extra lag in series.
         let tau = self.cfg.hydraulics.lag_time_constant_s.max(dt);
         let extra = fx.get(Effect::HydraulicLag);
-        for i in 0..6 {
-            self.spool[i] += (delayed[i] - self.spool[i]) * (dt / tau).min(1.0);
+        for (i, target) in delayed.iter().enumerate() {
+            self.spool[i] += (target - self.spool[i]) * (dt / tau).min(1.0);
             self.spool2[i] = if extra > 0.0 {
                 self.spool2[i] + (self.spool[i] - self.spool2[i]) * (dt / extra).min(1.0)
             } else {
