@@ -1371,4 +1371,31 @@ mod tests {
                 .all(|d| d.window_samples == 2 * DIG_SAMPLES)
         );
     }
+
+    /// The thesis's 23-dig test on synthetic FEE digs:
+    /// `cargo test -p planner --release estimate_experiment -- --ignored --nocapture`.
+    #[test]
+    #[ignore = "experiment, prints figures"]
+    fn estimate_experiment() {
+        let digs = fee_digs(23, 1000.0, 23);
+        let config = AnalyticalFitConfig {
+            bucket_width_m: WIDTH_M,
+            ..Default::default()
+        };
+        for (name, kind) in [
+            ("empirical", SoilModelKind::Empirical),
+            ("analytical", SoilModelKind::Analytical(config)),
+        ] {
+            let start = std::time::Instant::now();
+            let r = cross_validate(&digs, DEFAULT_WINDOW_SAMPLES, &kind).unwrap();
+            eprintln!(
+                "{name}: MAE {:.0} N (std {:.0} N) = {:.2} % of peak {:.0} N, in {:.2?}",
+                r.mae_n,
+                r.std_n,
+                r.mae_percent_of_peak,
+                r.peak_force_n,
+                start.elapsed()
+            );
+        }
+    }
 }

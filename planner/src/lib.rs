@@ -8,6 +8,10 @@
 //!   integrator (thesis 3.2).
 //! - [`soil`]: soil-tool force models, analytical (modified FEE, Eqs. 14-19) and empirical (Eq. 21), and
 //!   the bucket-terrain intersection geometry Gamma.
+//! - [`actuator`]: the recurrent-network actuator model (thesis 4.2, Figs. 17-18, Eq. 4), training and
+//!   `actuator.json`.
+//! - [`estimate`]: soil-tool property estimation, empirical by least squares and analytical by annealing
+//!   and Powell's method (Eqs. 22-24), and the thesis's cross-validation (4.3.4-4.3.5).
 //! - [`autodig`]: the Autodig state machine and its pressure-to-command maps (thesis 3.1-3.2, Figs. 9-11).
 //! - [`cleanup`]: floor-cleanup waypoints and the hand-over to Autodig (thesis 3.3, Fig. 13).
 
