@@ -448,7 +448,8 @@ fn solve_decreasing(mut f: impl FnMut(f64) -> (f64, f64), guess: f64, lo: f64, h
         } else {
             0.5 * (lo + hi)
         };
-        if (next - p).abs() < 1.0 || hi - lo < 1.0 {
+        // 10 Pa is far below sensor resolution (5 kPa on the bus).
+        if (next - p).abs() < 10.0 || hi - lo < 10.0 {
             return next;
         }
         p = next;

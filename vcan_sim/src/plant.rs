@@ -25,6 +25,9 @@ use crate::soil_contact::{ContactInput, MassLedger, SoilContact, SoilEffects, Wo
 
 /// Physics step (s): 1 kHz.
 pub const PHYSICS_DT_S: f64 = 1.0e-3;
+/// Soil contact (cutting, fill, FEE force) and the linkage loads run every this many physics steps
+/// (5 ms, 200 Hz) and are held in between; the hydraulics runs every step. The bucket edge moves ~1-3 mm in that time, far below a terrain cell.
+pub const SOIL_SUBSTEPS: u64 = 5;
 /// Track speed time constant (s).
 const TRACK_TIME_CONSTANT_S: f64 = 0.3;
 /// Table resolution for angle(length) and arm(length) lookups.
@@ -157,6 +160,8 @@ pub struct Plant {
     soil_force: TipForce,
     sensors: Sensors,
     time_s: f64,
+    steps: u64,
+    cached_loads: [ActuatorLoad; N_ACTUATORS],
     /// Gravity on or off (off for no-load hydraulic tests).
     pub gravity: bool,
 }
@@ -233,6 +238,8 @@ impl Plant {
             soil_force: TipForce::default(),
             sensors: Sensors::new(SensorSpec::default(), scenario.seed),
             time_s: 0.0,
+            steps: 0,
+            cached_loads: [ActuatorLoad::default(); N_ACTUATORS],
             gravity: true,
         };
         plant.settle();
@@ -360,6 +367,36 @@ impl Plant {
         ]
     }
 
+    fn soil_contact(&mut self, dt: f64) {
+        let fx = self.effects;
+        let kin = self.linkage.kinematics();
+        let points = kin.linkage_points(&self.link.q);
+        let rates = self.linkage.joint_rates(
+            &self.link,
+            [0, 1, 2].map(|i| self.hydraulics.actuators[i].velocity),
+        );
+        let tip_v = self.linkage.tip_velocity(&self.link, rates);
+        let swing = self.hydraulics.actuators[SWING].position;
+        let input = ContactInput {
+            tip_world: self
+                .pose
+                .world_from_base(swing, points.tip[0], points.tip[1]),
+            tip_base: points.tip,
+            pin_base: points.bucket_pin,
+            tip_velocity_base: tip_v,
+            bucket_abs_rad: self.link.q.bucket_abs_rad(),
+            azimuth_rad: self.pose.dig_plane_azimuth_rad(swing),
+            machine_xy: [self.pose.x_m, self.pose.y_m],
+            width_m: self.cfg.bucket.width_m,
+            capacity_m3: self.cfg.bucket.capacity_m3,
+        };
+        let soil_fx = SoilEffects {
+            cohesion_pa: fx.get(Effect::SoilCohesion),
+            density_kg_per_m3: fx.get(Effect::SoilDensity),
+        };
+        self.soil_force = self.contact.step(&mut self.world, &input, dt, &soil_fx);
+    }
+
     /// Advances the machine by one physics step [`PHYSICS_DT_S`] with the valve commands
     /// `[boom, stick, bucket, swing, left track, right track]` in `[-1, 1]` (non-finite -> 0).
     pub fn step(&mut self, commands: [f64; 6]) {
@@ -395,36 +432,14 @@ impl Plant {
         }
         let spools = self.spool2;
 
-        // Soil contact at the current pose.
-        let kin = self.linkage.kinematics();
-        let points = kin.linkage_points(&self.link.q);
-        let rates = self.linkage.joint_rates(
-            &self.link,
-            [0, 1, 2].map(|i| self.hydraulics.actuators[i].velocity),
-        );
-        let tip_v = self.linkage.tip_velocity(&self.link, rates);
-        let swing = self.hydraulics.actuators[SWING].position;
-        let input = ContactInput {
-            tip_world: self
-                .pose
-                .world_from_base(swing, points.tip[0], points.tip[1]),
-            tip_base: points.tip,
-            pin_base: points.bucket_pin,
-            tip_velocity_base: tip_v,
-            bucket_abs_rad: self.link.q.bucket_abs_rad(),
-            azimuth_rad: self.pose.dig_plane_azimuth_rad(swing),
-            machine_xy: [self.pose.x_m, self.pose.y_m],
-            width_m: self.cfg.bucket.width_m,
-            capacity_m3: self.cfg.bucket.capacity_m3,
-        };
-        let soil_fx = SoilEffects {
-            cohesion_pa: fx.get(Effect::SoilCohesion),
-            density_kg_per_m3: fx.get(Effect::SoilDensity),
-        };
-        self.soil_force = self.contact.step(&mut self.world, &input, dt, &soil_fx);
-
-        // Hydraulics with the loads of gravity, payload and soil.
-        let loads = self.loads();
+        // Soil contact at the current pose and the loads of gravity, payload and soil on the
+        // cylinders (Appendix), at 200 Hz: they depend on the pose, which moves little in 5 ms.
+        if self.steps.is_multiple_of(SOIL_SUBSTEPS) {
+            self.soil_contact(dt * SOIL_SUBSTEPS as f64);
+            self.cached_loads = self.loads();
+        }
+        self.steps += 1;
+        let loads = self.cached_loads;
         let hfx = HydraulicEffects {
             flow_sharing: fx.get(Effect::FlowSharing),
             pump_saturation: fx.get(Effect::PumpSaturation),

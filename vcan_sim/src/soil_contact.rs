@@ -177,7 +177,7 @@ impl World {
         self.terrain.height_at(x_m, y_m).unwrap_or(0.0)
     }
 
-    /// Deposits `volume_m3` as a cone at the angle of repose centred on `(x, y)`, within 4 m.
+    /// Deposits `volume_m3` as a cone at the angle of repose centred on `(x, y)`, within 2.5 m.
     /// Returns the volume actually placed (0 when the point is off the map).
     pub fn deposit_local(&mut self, x_m: f64, y_m: f64, volume_m3: f64) -> f64 {
         if !(volume_m3 > 0.0 && x_m.is_finite() && y_m.is_finite()) {
@@ -187,7 +187,7 @@ impl World {
         let Some((ci, cj)) = self.terrain.cell_index(x_m, y_m) else {
             return 0.0;
         };
-        let reach = (4.0 / res).ceil() as isize;
+        let reach = (2.5 / res).ceil() as isize;
         let slope = self.repose_rad.tan();
         let mut cells = Vec::new();
         for dj in -reach..=reach {
@@ -284,6 +284,7 @@ pub struct SoilContact {
     last_tip: Option<[f64; 3]>,
     pending_spill_m3: f64,
     pending_at: [f64; 2],
+    pending_age_s: f64,
     /// Whether the edge was in the soil in the last step.
     pub in_contact: bool,
 }
@@ -313,6 +314,13 @@ impl SoilContact {
             self.cut(world, prev, tip, input, effects);
         }
         self.last_tip = Some(tip);
+
+        // Fast path: the edge well above the ground around it and nothing in the bucket to spill.
+        let ground = world.height(tip[0], tip[1]);
+        if tip[2] > ground + 0.6 && self.content.volume_m3 <= 0.0 && self.pending_spill_m3 <= 0.0 {
+            self.in_contact = false;
+            return self.boulder_force(world, input);
+        }
 
         // 2. Soil geometry at the edge (Gamma = (d, alpha, rho, V_s)).
         let u = [input.azimuth_rad.cos(), input.azimuth_rad.sin()];
@@ -364,7 +372,24 @@ impl SoilContact {
                 force[1] += bearing * (-v[1] / CREEP_SPEED_M_PER_S).tanh();
             }
         }
-        // 4. Boulders: a stiff obstacle the edge cannot cut.
+        let boulder = self.boulder_force(world, input);
+        force[0] += boulder.fx_n;
+        force[1] += boulder.fz_n;
+        // 3. Capacity, spill and dump.
+        self.spill(world, input, dt_s);
+        TipForce {
+            fx_n: force[0],
+            fz_n: force[1],
+            my_nm: 0.0,
+        }
+    }
+
+    /// Boulders: a stiff obstacle the edge cannot cut (penalty force along the outward normal).
+    fn boulder_force(&self, world: &World, input: &ContactInput) -> TipForce {
+        let tip = input.tip_world;
+        let u = [input.azimuth_rad.cos(), input.azimuth_rad.sin()];
+        let v = input.tip_velocity_base;
+        let mut force = [0.0, 0.0];
         for boulder in &world.boulders {
             let rel = [
                 tip[0] - boulder.x_m,
@@ -382,8 +407,6 @@ impl SoilContact {
                 force[1] += push * normal_z;
             }
         }
-        // 3. Capacity, spill and dump.
-        self.spill(world, input, dt_s);
         TipForce {
             fx_n: force[0],
             fz_n: force[1],
@@ -488,8 +511,14 @@ impl SoilContact {
             self.pending_spill_m3 += out;
             self.pending_at = [input.tip_world[0], input.tip_world[1]];
         }
-        let moved = self.pending_spill_m3 > 0.0;
-        if moved && (self.pending_spill_m3 > 0.05 || c.volume_m3 <= 1e-9) {
+        if self.pending_spill_m3 > 0.0 {
+            self.pending_age_s += dt_s.max(0.0);
+        }
+        // Deposit in batches (a cone fit is costly): 0.05 m^3 or every 0.25 s.
+        if self.pending_spill_m3 > 0.05
+            || (self.pending_spill_m3 > 0.0 && self.pending_age_s > 0.25)
+        {
+            self.pending_age_s = 0.0;
             let placed = world.deposit_local(
                 self.pending_at[0],
                 self.pending_at[1],
