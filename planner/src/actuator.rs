@@ -38,6 +38,8 @@ pub const ACTUATOR_FORMAT: &str = "excavator-actuator-model";
 pub const ACTUATOR_FORMAT_VERSION: u32 = 1;
 /// Largest command delay in steps (the size of the ring buffer in [`ActuatorState`]).
 pub const MAX_DELAY_STEPS: usize = 64;
+/// Longest dig in steps after resampling (an hour at 100 Hz); longer means a bad time stamp.
+pub const MAX_DIG_STEPS: usize = 360_000;
 /// Largest number of hidden units per network.
 pub const MAX_HIDDEN: usize = 16;
 /// Inputs of the boom network (the stick and bucket networks use the first three).
@@ -105,6 +107,16 @@ pub enum ActuatorError {
         steps: usize,
         /// Steps needed.
         needed: usize,
+    },
+    /// A dig spans more steps than [`MAX_DIG_STEPS`] at the model period (a time stamp far off).
+    #[error("dig {dig} spans {steps} steps at the model period, at most {max} allowed")]
+    DigTooLong {
+        /// Dig index.
+        dig: usize,
+        /// Steps after resampling.
+        steps: usize,
+        /// Largest allowed.
+        max: usize,
     },
     /// Too few digs for the train/validation/test split.
     #[error("{count} digs given, training needs at least {needed}")]
@@ -1002,6 +1014,13 @@ fn resample(dig: &ActuatorDig, index: usize, dt_s: f64) -> Result<Sequence, Actu
             needed: 2,
         });
     }
+    if steps > MAX_DIG_STEPS {
+        return Err(ActuatorError::DigTooLong {
+            dig: index,
+            steps,
+            max: MAX_DIG_STEPS,
+        });
+    }
     let mut seq = Sequence {
         t0: first.time_s,
         command: Vec::with_capacity(steps),
@@ -1620,6 +1639,12 @@ mod tests {
         assert!(matches!(
             train(&short, &config, |_| {}),
             Err(ActuatorError::DigTooShort { dig: 3, .. })
+        ));
+        let mut long = digs.clone();
+        long[1].samples.last_mut().unwrap().time_s = 1e12;
+        assert!(matches!(
+            train(&long, &config, |_| {}),
+            Err(ActuatorError::DigTooLong { dig: 1, .. })
         ));
         let mut still = digs.clone();
         for dig in &mut still {

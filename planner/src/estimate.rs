@@ -797,7 +797,8 @@ impl SoilWindow {
         let capacity = capacity.max(1);
         Self {
             capacity,
-            samples: VecDeque::with_capacity(capacity),
+            // A huge capacity must not allocate (or abort) up front.
+            samples: VecDeque::with_capacity(capacity.min(4096)),
         }
     }
 
@@ -960,11 +961,12 @@ pub fn cross_validate(
             }
         })?;
     }
+    let total_samples = digs.iter().map(Vec::len).sum::<usize>();
     let per_dig: Vec<(DigError, Vec<f64>)> = (0..digs.len())
         .into_par_iter()
         .map(|i| -> Result<(DigError, Vec<f64>)> {
             // Walk back from dig i - 1, wrapping, until the window is full; oldest first.
-            let mut window: Vec<SoilSample> = Vec::with_capacity(window_samples);
+            let mut window: Vec<SoilSample> = Vec::with_capacity(window_samples.min(total_samples));
             for back in 1..digs.len() {
                 let dig = &digs[(i + digs.len() - back) % digs.len()];
                 let take = (window_samples - window.len()).min(dig.len());
@@ -1363,7 +1365,7 @@ mod tests {
             Err(EstimateError::NotEnoughDigs { .. })
         ));
         // Windows smaller than the other digs together wrap round without the predicted dig.
-        let small = cross_validate(&digs[..3], 300, &SoilModelKind::Empirical).unwrap();
+        let small = cross_validate(&digs[..3], usize::MAX, &SoilModelKind::Empirical).unwrap();
         assert!(
             small
                 .digs
