@@ -53,7 +53,7 @@ pub enum SimError {
     #[error(transparent)]
     Scenario(#[from] ScenarioError),
     /// An effect setting.
-    #[error("{origin}: {source}")]
+    #[error("{origin}")]
     Effect {
         /// Where it came from (`--effect`, a file name).
         origin: String,
@@ -64,7 +64,7 @@ pub enum SimError {
     #[error(transparent)]
     Plant(#[from] PlantError),
     /// I/O (sockets, state log).
-    #[error("{context}: {source}")]
+    #[error("{context}")]
     Io {
         /// What was being done.
         context: String,
@@ -216,6 +216,6 @@ mod tests {
         let cfg = SimConfig::load::<&str>(None, None, Some(3), &[]).unwrap();
         assert_eq!(cfg.scenario.seed, 3);
         let err = SimConfig::load(None, None, None, &["nope=1"]).unwrap_err();
-        assert!(err.to_string().contains("unknown effect"), "{err}");
+        assert!(format!("{err:#}").contains("unknown effect"), "{err:#}");
     }
 }

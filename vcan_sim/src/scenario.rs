@@ -277,6 +277,27 @@ fn line_of_offset(text: &str, offset: usize) -> usize {
         + 1
 }
 
+/// The dotted field defined on a 1-based line (`table.key`), if that line is a `key = value` line.
+fn field_at_line(text: &str, line: usize) -> Option<String> {
+    let mut table = String::new();
+    for (i, raw) in text.lines().enumerate() {
+        let t = raw.trim();
+        if t.starts_with('[') {
+            table = t.trim_matches(|c| c == '[' || c == ']').trim().to_owned();
+        }
+        if i + 1 == line {
+            let (key, _) = t.split_once('=')?;
+            let key = key.trim();
+            return Some(if table.is_empty() {
+                key.to_owned()
+            } else {
+                format!("{table}.{key}")
+            });
+        }
+    }
+    None
+}
+
 /// 1-based line of a dotted field in TOML text, also inside `[[array]]` tables (best effort).
 fn locate(text: &str, field: &str) -> usize {
     let mut parts: Vec<&str> = field.split('.').collect();
@@ -338,10 +359,19 @@ impl Scenario {
     /// # Errors
     /// [`ScenarioError::Parse`] or [`ScenarioError::Invalid`].
     pub fn from_toml_str_named(text: &str, origin: &str) -> Result<Self> {
-        let scenario: Self = toml::from_str(text).map_err(|e| ScenarioError::Parse {
-            origin: origin.to_owned(),
-            line: e.span().map_or(0, |s| line_of_offset(text, s.start)),
-            message: e.message().trim().to_owned(),
+        let scenario: Self = toml::from_str(text).map_err(|e| {
+            let line = e.span().map_or(0, |s| line_of_offset(text, s.start));
+            let mut message = e.message().trim().to_owned();
+            if let Some(field) = field_at_line(text, line)
+                && !message.contains(&field)
+            {
+                message = format!("field `{field}`: {message}");
+            }
+            ScenarioError::Parse {
+                origin: origin.to_owned(),
+                line,
+                message,
+            }
         })?;
         scenario
             .validate()
@@ -499,7 +529,10 @@ mod tests {
         let text = "seed = 1\n[bench]\nheight_m = \"tall\"\n";
         let err = Scenario::from_toml_str_named(text, "b.toml").unwrap_err();
         let msg = err.to_string();
-        assert!(msg.starts_with("b.toml:3:"), "{msg}");
+        assert!(
+            msg.starts_with("b.toml:3:") && msg.contains("bench.height_m"),
+            "{msg}"
+        );
         let text = "seed = 1\n[bench]\nhieght_m = 2.0\n";
         let msg = Scenario::from_toml_str_named(text, "b.toml")
             .unwrap_err()
