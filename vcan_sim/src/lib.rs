@@ -216,6 +216,7 @@ mod tests {
         let cfg = SimConfig::load::<&str>(None, None, Some(3), &[]).unwrap();
         assert_eq!(cfg.scenario.seed, 3);
         let err = SimConfig::load(None, None, None, &["nope=1"]).unwrap_err();
-        assert!(format!("{err:#}").contains("unknown effect"), "{err:#}");
+        let cause = std::error::Error::source(&err).map(ToString::to_string);
+        assert!(cause.unwrap_or_default().contains("unknown effect"), "{err}");
     }
 }
