@@ -1,1 +1,61 @@
-//! controller (under construction).
+//! `controller`: the excavator controller behind `excavator-ctl`.
+//!
+//! # Layout
+//!
+//! - [`estimate`]: the machine state from the gateway's frames (Appendix A.2): angles, filtered rates,
+//!   pressures, cylinder forces (A20), joint torques (A21, A22), tip forces (A23), tip pose, odometry,
+//!   the static payload estimate, and per-signal timestamps.
+//! - [`safety`]: the safety layer as a pure state machine: arming handshake and heartbeat, stale data,
+//!   decode errors, joint limits, e-stop, gateway and bus faults, listen-only.
+//! - [`cycle`]: the work cycle: scan, swing to the dig, Autodig with the perception enhancements or
+//!   cleanup, weigh, swing to the spoil pile, dump, return; tracking backwards; per-dig statistics.
+//! - [`node`]: [`ControllerNode`], the synchronous, clock-agnostic control step combining the three:
+//!   frames in, frames out, no I/O.
+//! - [`run`]: the real-time loop over SocketCAN (tokio drives a 10 ms interval around the node).
+//! - [`cli`]: the command line of `excavator-ctl`.
+//!
+//! # Data flow (one 10 ms step)
+//!
+//! ```text
+//! received frames --decode--> Estimator (+ safety: decode errors, unexpected frames, bus faults)
+//!        Estimator --> Safety::observe (staleness, limits, gateway status)
+//!        Estimator --> WorkCycle::step (Autodig / cleanup / P-controllers) --> wanted mode + command
+//!        Safety::tick (handshake, faults) --> frames: valve commands or a setpoint, then the heartbeat
+//! ```
+
+pub mod cli;
+pub mod cycle;
+pub mod estimate;
+pub mod node;
+pub mod run;
+pub mod safety;
+
+pub use cycle::{Action, CycleConfig, DigStats, WorkCycle};
+pub use estimate::{Estimator, MachineState};
+pub use node::{ControllerConfig, ControllerNode, Outbox};
+pub use safety::{ArmMode, Fault, Safety, SafetyConfig};
+
+/// Errors building the controller.
+#[derive(Debug, thiserror::Error)]
+pub enum ControllerError {
+    /// The machine geometry is inconsistent.
+    #[error("machine geometry: {0}")]
+    Kinematics(#[from] planner::kinematics::KinematicsError),
+    /// The Autodig configuration is invalid.
+    #[error("autodig: {0}")]
+    Autodig(#[from] planner::autodig::AutodigError),
+    /// The cleanup configuration is invalid.
+    #[error("cleanup: {0}")]
+    Cleanup(#[from] planner::cleanup::CleanupError),
+    /// A configuration value is invalid.
+    #[error("config {field}: {reason}")]
+    Config {
+        /// The field.
+        field: &'static str,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+/// Result alias of this crate.
+pub type Result<T> = std::result::Result<T, ControllerError>;

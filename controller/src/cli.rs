@@ -1,0 +1,101 @@
+//! The command line of `excavator-ctl` (clap).
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand};
+
+use crate::run::RunOptions;
+
+/// The excavator controller: Autodig, cleanup and the work cycle over CAN (after Cannon, CMU 1999).
+#[derive(Debug, Parser)]
+#[command(name = "excavator-ctl", version, about)]
+pub struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// Subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Run on a CAN interface in real time (SocketCAN): arm, dig, dump; Ctrl-C leaves the valves
+    /// neutral and the gateway disarmed.
+    Run(RunArgs),
+}
+
+/// Arguments of `excavator-ctl run`.
+#[derive(Debug, Args)]
+pub struct RunArgs {
+    /// CAN interface, e.g. can0 (the machine) or vcan0 (excavator-sim).
+    #[arg(long)]
+    pub iface: String,
+    /// Decode and log the bus but never transmit (first contact with a machine).
+    #[arg(long)]
+    pub listen_only: bool,
+    /// Machine file (default: the built-in config/machine.toml).
+    #[arg(long, value_name = "FILE")]
+    pub machine: Option<PathBuf>,
+    /// Autodig maps (default: the built-in config/autodig_maps.toml).
+    #[arg(long, value_name = "FILE")]
+    pub maps: Option<PathBuf>,
+    /// Controller config: safety, plan, Autodig and cleanup parameters (TOML; see docs/controller.md).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Record a candump -L log of every frame sent and received.
+    #[arg(long, value_name = "FILE")]
+    pub trace: Option<PathBuf>,
+    /// Stop after this many digs (then swing home, neutral, disarm).
+    #[arg(long, value_name = "N")]
+    pub digs: Option<u32>,
+    /// Range-scan service address (host:port) for the perception enhancements.
+    #[arg(long, value_name = "ADDR")]
+    pub scan_addr: Option<String>,
+}
+
+impl From<RunArgs> for RunOptions {
+    fn from(a: RunArgs) -> Self {
+        RunOptions {
+            iface: a.iface,
+            listen_only: a.listen_only,
+            machine: a.machine,
+            maps: a.maps,
+            config: a.config,
+            trace: a.trace,
+            digs: a.digs,
+            scan_addr: a.scan_addr,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn cli_is_consistent() {
+        Cli::command().debug_assert();
+    }
+
+    #[test]
+    fn run_arguments_parse() {
+        let cli = Cli::try_parse_from([
+            "excavator-ctl",
+            "run",
+            "--iface",
+            "vcan0",
+            "--listen-only",
+            "--digs",
+            "3",
+            "--trace",
+            "t.log",
+        ])
+        .unwrap();
+        let Command::Run(a) = cli.command;
+        let o = RunOptions::from(a);
+        assert_eq!(o.iface, "vcan0");
+        assert!(o.listen_only);
+        assert_eq!(o.digs, Some(3));
+        assert!(Cli::try_parse_from(["excavator-ctl", "run"]).is_err());
+    }
+}

@@ -1,0 +1,1490 @@
+//! The work cycle (thesis chapters 3 and 6): scan, swing to the dig, Autodig or cleanup, weigh, swing to
+//! the spoil pile, dump, return; and tracking backwards.
+//!
+//! Until the dig planner lands, the plan is a fixed, configurable list of [`Action`]s (dig at a swing
+//! angle from a start pose, cleanup, track back a distance), repeated until the requested number of
+//! digs. Per action the [`WorkCycle`] runs these phases:
+//!
+//! ```text
+//! Dig / Cleanup:  Scan -> MoveToDig -> Autodig | Cleanup -> Autodig (Pre-Dig) -> Weigh -> SwingToDump
+//!                 -> Dump -> (next action; its MoveToDig is the return swing)
+//! TrackBack:      TrackBack
+//! after the last: Return -> Finished
+//! ```
+//!
+//! - **Scan**: asks the caller for a range scan ([`WorkCycle::take_scan_request`]) and waits for the
+//!   terrain ([`WorkCycle::provide_terrain`]) up to a timeout; without one, Autodig runs with its plain
+//!   angle rules.
+//! - **Autodig** (planner's pure state machine) with the perception enhancements of 3.2: the pre-dig
+//!   terrain section along the digging plane is kept, the volume swept over the cutting edge is
+//!   integrated ([`planner::terrain::SweptVolume`]), Dig ends at bucket capacity x spill allowance and
+//!   Capture ends as soon as the bucket is above that terrain.
+//! - **Cleanup** (3.3): waypoints from [`planner::cleanup::Cleanup`] through inverse kinematics to the
+//!   gateway's position mode, with the floor elevation detected on the first cleanup and reused
+//!   ([`planner::cleanup::FloorEstimate`]), then the hand-over to Autodig in Pre-Dig.
+//! - Swing, the implement moves and the tracks are closed by P-controllers on the valve commands.
+//!
+//! Per dig it records [`DigStats`]: weight (static payload estimate after Capture, Appendix A.2 with the
+//! gravity model), time, energy (thesis 6.1: cylinder force times displacement, integrated), swept
+//! volume, time in the ground and the action type.
+//!
+//! The cycle does no I/O and reads no clock; it moves only while the safety layer reports the machine
+//! armed in the mode the current phase needs, and holds (neutral) otherwise.
+
+use planner::autodig::{Autodig, AutodigConfig, AutodigInputs, AutodigMaps, EndReason, Stage};
+use planner::cleanup::{
+    Cleanup, CleanupConfig, CleanupInputs, CleanupOutput, CleanupPlan, FloorEstimate, FloorPolicy,
+    HandOverReason,
+};
+use planner::kinematics::{BucketPose, JointAngles, Kinematics, wrap_angle};
+use planner::terrain::{SweptVolume, TerrainGrid};
+use serde::{Deserialize, Serialize};
+
+use crate::ControllerError;
+use crate::estimate::Estimator;
+use crate::safety::{ArmMode, ControlFault};
+
+/// Valve direction per implement joint: +1 when cylinder extension raises the joint angle
+/// (docs/ARCHITECTURE.md: boom up; stick and bucket extension lower their angles).
+pub const JOINT_SIGN: [f64; 3] = [1.0, -1.0, -1.0];
+
+/// Where a dig or cleanup starts, before Autodig's Boom-Down (or the cleanup probe).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum StartPose {
+    /// Joint angles, degrees in files.
+    Joints {
+        /// Boom angle.
+        #[serde(rename = "boom_deg", with = "planner::machine::degrees")]
+        boom_rad: f64,
+        /// Stick angle (relative to the boom).
+        #[serde(rename = "stick_deg", with = "planner::machine::degrees")]
+        stick_rad: f64,
+        /// Bucket angle (relative to the stick).
+        #[serde(rename = "bucket_deg", with = "planner::machine::degrees")]
+        bucket_rad: f64,
+    },
+    /// A bucket tip pose in the base frame, solved by inverse kinematics.
+    Tip {
+        /// Tip `x`, m.
+        x_m: f64,
+        /// Tip `z`, m.
+        z_m: f64,
+        /// Absolute bucket angle, degrees in files.
+        #[serde(rename = "bucket_abs_deg", with = "planner::machine::degrees")]
+        bucket_abs_rad: f64,
+    },
+}
+
+impl StartPose {
+    /// The joint angles of this pose.
+    ///
+    /// # Errors
+    /// [`ControllerError::Kinematics`] if the tip pose is out of reach or beyond the limits.
+    pub fn resolve(&self, kin: &Kinematics) -> Result<JointAngles, ControllerError> {
+        match *self {
+            StartPose::Joints {
+                boom_rad,
+                stick_rad,
+                bucket_rad,
+            } => Ok(JointAngles {
+                boom_rad,
+                stick_rad,
+                bucket_rad,
+            }),
+            StartPose::Tip {
+                x_m,
+                z_m,
+                bucket_abs_rad,
+            } => Ok(kin.inverse(&BucketPose {
+                x_m,
+                z_m,
+                bucket_abs_rad,
+            })?),
+        }
+    }
+}
+
+/// One step of the plan.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Action {
+    /// Autodig from `start` at swing angle `swing_rad`.
+    Dig {
+        /// Swing angle of the digging plane (degrees in files).
+        #[serde(rename = "swing_deg", with = "planner::machine::degrees")]
+        swing_rad: f64,
+        /// Start pose above the dig.
+        start: StartPose,
+    },
+    /// Floor cleanup along `plan`, then Autodig from Pre-Dig.
+    Cleanup {
+        /// Swing angle of the digging plane (degrees in files).
+        #[serde(rename = "swing_deg", with = "planner::machine::degrees")]
+        swing_rad: f64,
+        /// Start pose above the floor at the start radius.
+        start: StartPose,
+        /// Start and minimum radius of the floor path.
+        plan: CleanupPlan,
+    },
+    /// Track straight backwards by `distance_m` (> 0).
+    TrackBack {
+        /// Distance, m.
+        distance_m: f64,
+    },
+}
+
+/// The kind of an action, as reported in the statistics.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ActionKind {
+    /// Autodig.
+    Dig,
+    /// Cleanup followed by Autodig.
+    Cleanup,
+    /// Tracking backwards.
+    TrackBack,
+}
+
+impl Action {
+    /// The action's kind.
+    pub fn kind(&self) -> ActionKind {
+        match self {
+            Action::Dig { .. } => ActionKind::Dig,
+            Action::Cleanup { .. } => ActionKind::Cleanup,
+            Action::TrackBack { .. } => ActionKind::TrackBack,
+        }
+    }
+
+    fn swing_rad(&self) -> Option<f64> {
+        match self {
+            Action::Dig { swing_rad, .. } | Action::Cleanup { swing_rad, .. } => Some(*swing_rad),
+            Action::TrackBack { .. } => None,
+        }
+    }
+}
+
+/// A P-controller on one valve: `command = sign * clamp(kp * error, +-max)`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PGain {
+    /// Proportional gain, command per unit of error (per rad or per m).
+    pub kp: f64,
+    /// Largest command magnitude, `(0, 1]`.
+    pub max_command: f64,
+    /// The target counts as reached within this error (rad or m).
+    pub tolerance: f64,
+}
+
+impl PGain {
+    fn command(&self, error: f64) -> f64 {
+        let u = self.kp * error;
+        if u.is_finite() {
+            u.clamp(-self.max_command, self.max_command)
+        } else {
+            0.0
+        }
+    }
+}
+
+/// The grid a range scan is binned into (world frame).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ScanGrid {
+    /// West edge, m. Default -8.
+    pub x_min_m: f64,
+    /// South edge, m. Default -10.
+    pub y_min_m: f64,
+    /// Cell size, m. Default 0.1.
+    pub cell_m: f64,
+    /// Extent east, m. Default 24.
+    pub size_x_m: f64,
+    /// Extent north, m. Default 20.
+    pub size_y_m: f64,
+    /// Longest occlusion gap filled by interpolation, cells. Default 20.
+    pub max_gap_cells: usize,
+}
+
+impl Default for ScanGrid {
+    fn default() -> Self {
+        Self {
+            x_min_m: -8.0,
+            y_min_m: -10.0,
+            cell_m: 0.1,
+            size_x_m: 24.0,
+            size_y_m: 20.0,
+            max_gap_cells: 20,
+        }
+    }
+}
+
+impl ScanGrid {
+    /// Bins world points `[x, y, z]` into a terrain map (planner::terrain, thesis 3.2). Allocates; call
+    /// it outside the control step.
+    ///
+    /// # Errors
+    /// [`ControllerError::Config`] with the terrain error's text (no points, gaps too large).
+    pub fn terrain(&self, points: &[[f64; 3]]) -> Result<TerrainGrid, ControllerError> {
+        let n = |size: f64| (size / self.cell_m).round().max(1.0) as usize;
+        TerrainGrid::from_scan(
+            points,
+            self.x_min_m,
+            self.y_min_m,
+            self.cell_m,
+            n(self.size_x_m),
+            n(self.size_y_m),
+            self.max_gap_cells,
+        )
+        .map_err(|e| ControllerError::Config {
+            field: "scan",
+            reason: e.to_string(),
+        })
+    }
+}
+
+/// Work cycle parameters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CycleConfig {
+    /// The plan. Default: three digs into the default bench, straight ahead and 7 degrees to each side.
+    pub actions: Vec<Action>,
+    /// Start over at the first action after the last one. Default true.
+    pub repeat: bool,
+    /// Stop after this many digs (dig and cleanup actions). Default none (`repeat` false: one pass).
+    pub max_digs: Option<u32>,
+    /// Swing angle of the spoil pile, degrees in files. Default -90 (the default bench's pile).
+    #[serde(rename = "dump_swing_deg", with = "planner::machine::degrees")]
+    pub dump_swing_rad: f64,
+    /// Swing angle to return to after the last action, degrees in files. Default 0.
+    #[serde(rename = "home_swing_deg", with = "planner::machine::degrees")]
+    pub home_swing_rad: f64,
+    /// Boom angle to raise to before swinging with a load, degrees in files. Default 30.
+    #[serde(rename = "carry_boom_deg", with = "planner::machine::degrees")]
+    pub carry_boom_rad: f64,
+    /// Bucket joint angle (relative to the stick) that empties the bucket, degrees in files. Default 20.
+    #[serde(rename = "dump_bucket_deg", with = "planner::machine::degrees")]
+    pub dump_bucket_rad: f64,
+    /// Hold the dump pose this long, s. Default 1.0.
+    pub dump_hold_s: f64,
+    /// Implement P-controllers (error in rad). Default kp 2, max 0.8, tolerance 0.03 rad.
+    pub joint: PGain,
+    /// Swing P-controller (error in rad). Default kp 1.5, max 0.7, tolerance 0.03 rad.
+    pub swing: PGain,
+    /// Track P-controller (error in m). Default kp 1.0, max 0.6, tolerance 0.05 m.
+    pub track: PGain,
+    /// A target must hold this long to count as reached, s. Default 0.2.
+    pub settle_s: f64,
+    /// A move (to the dig, to the dump, the dump itself, tracking) that takes longer is a fault, s.
+    /// Default 40.
+    pub move_timeout_s: f64,
+    /// Ask for a range scan before each dig. Default true.
+    pub scan: bool,
+    /// Wait this long for the scan, then dig without perception, s. Default 5.
+    pub scan_timeout_s: f64,
+    /// Use the perception enhancements when a terrain map is available. Default true.
+    pub perception: bool,
+    /// Pre-dig section along the digging plane: from this radius, m. Default 1.
+    pub section_r_min_m: f64,
+    /// Pre-dig section: to this radius, m. Default 12.
+    pub section_r_max_m: f64,
+    /// Pre-dig section: sample spacing, m. Default 0.05.
+    pub section_step_m: f64,
+    /// Wait this long after Capture before weighing, s. Default 0.8.
+    pub weigh_settle_s: f64,
+    /// Average the payload estimate over this window, s. Default 0.3.
+    pub weigh_window_s: f64,
+    /// Detect the floor on the first cleanup and reuse it (Table 5), or every time.
+    pub floor_policy: FloorPolicy,
+    /// The grid scans are binned into.
+    pub scan_grid: ScanGrid,
+}
+
+impl Default for CycleConfig {
+    fn default() -> Self {
+        let dig = |swing_deg: f64| Action::Dig {
+            swing_rad: swing_deg.to_radians(),
+            // Tip about 0.5 m above the default bench's 45-degree face, stick at -62 degrees to the
+            // horizontal (inside Table 1's -87..-50), bucket at -90 degrees.
+            start: StartPose::Joints {
+                boom_rad: 38.0_f64.to_radians(),
+                stick_rad: (-100.0_f64).to_radians(),
+                bucket_rad: (-25.0_f64).to_radians(),
+            },
+        };
+        Self {
+            actions: vec![dig(0.0), dig(7.0), dig(-7.0)],
+            repeat: true,
+            max_digs: None,
+            dump_swing_rad: (-90.0_f64).to_radians(),
+            home_swing_rad: 0.0,
+            carry_boom_rad: 30.0_f64.to_radians(),
+            dump_bucket_rad: 20.0_f64.to_radians(),
+            dump_hold_s: 1.0,
+            joint: PGain {
+                kp: 2.0,
+                max_command: 0.8,
+                tolerance: 0.03,
+            },
+            swing: PGain {
+                kp: 1.5,
+                max_command: 0.7,
+                tolerance: 0.03,
+            },
+            track: PGain {
+                kp: 1.0,
+                max_command: 0.6,
+                tolerance: 0.05,
+            },
+            settle_s: 0.2,
+            move_timeout_s: 40.0,
+            scan: true,
+            scan_timeout_s: 5.0,
+            perception: true,
+            section_r_min_m: 1.0,
+            section_r_max_m: 12.0,
+            section_step_m: 0.05,
+            weigh_settle_s: 0.8,
+            weigh_window_s: 0.3,
+            floor_policy: FloorPolicy::DetectOnce,
+            scan_grid: ScanGrid::default(),
+        }
+    }
+}
+
+impl CycleConfig {
+    /// Checks ranges and finiteness.
+    ///
+    /// # Errors
+    /// [`ControllerError::Config`] naming the field.
+    pub fn validate(&self) -> Result<(), ControllerError> {
+        let bad = |field: &'static str, reason: &str| {
+            Err(ControllerError::Config {
+                field,
+                reason: reason.to_string(),
+            })
+        };
+        let positive = [
+            ("dump_hold_s", self.dump_hold_s),
+            ("settle_s", self.settle_s),
+            ("move_timeout_s", self.move_timeout_s),
+            ("scan_timeout_s", self.scan_timeout_s),
+            ("section_step_m", self.section_step_m),
+            ("weigh_window_s", self.weigh_window_s),
+        ];
+        for (field, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return bad(field, "must be finite and > 0");
+            }
+        }
+        if !(self.weigh_settle_s.is_finite() && self.weigh_settle_s >= 0.0) {
+            return bad("weigh_settle_s", "must be finite and >= 0");
+        }
+        if !(self.section_r_max_m > self.section_r_min_m && self.section_r_min_m.is_finite()) {
+            return bad("section_r_max_m", "must exceed section_r_min_m");
+        }
+        for (field, g) in [
+            ("joint", self.joint),
+            ("swing", self.swing),
+            ("track", self.track),
+        ] {
+            if !(g.kp.is_finite()
+                && g.kp > 0.0
+                && g.max_command > 0.0
+                && g.max_command <= 1.0
+                && g.tolerance.is_finite()
+                && g.tolerance > 0.0)
+            {
+                return bad(field, "kp > 0, max_command in (0, 1], tolerance > 0");
+            }
+        }
+        for (field, a) in [
+            ("dump_swing_deg", self.dump_swing_rad),
+            ("home_swing_deg", self.home_swing_rad),
+            ("carry_boom_deg", self.carry_boom_rad),
+            ("dump_bucket_deg", self.dump_bucket_rad),
+        ] {
+            if !a.is_finite() {
+                return bad(field, "must be finite");
+            }
+        }
+        for a in &self.actions {
+            match a {
+                Action::TrackBack { distance_m } if !(distance_m.is_finite() && *distance_m > 0.0) => {
+                    return bad("actions.track_back.distance_m", "must be finite and > 0");
+                }
+                Action::Dig { swing_rad, .. } | Action::Cleanup { swing_rad, .. }
+                    if !swing_rad.is_finite() =>
+                {
+                    return bad("actions.swing_deg", "must be finite");
+                }
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Statistics of one dig or cleanup (thesis 6.1, Tables 3 and 4).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct DigStats {
+    /// Dig number, from 0.
+    pub index: u32,
+    /// Dig or cleanup.
+    pub action: ActionKind,
+    /// Swing angle of the digging plane, rad.
+    pub swing_rad: f64,
+    /// When the dig began (Boom-Down or the cleanup probe), s (bus time).
+    pub start_time_s: f64,
+    /// Duration from the start of Boom-Down (or of the cleanup) to the end of Capture, s.
+    pub time_s: f64,
+    /// Time the bucket tip was below the pre-dig terrain, s (thesis 6.1); 0 without a terrain map.
+    pub ground_contact_time_s: f64,
+    /// Energy: the integral of |cylinder force x cylinder displacement| summed over the three
+    /// cylinders during the dig, J (thesis 6.1; energy spent lowering against a holding pressure counts
+    /// too, as the pumps deliver it).
+    pub energy_j: f64,
+    /// Volume swept over the cutting edge (3.2), m^3; 0 without a terrain map.
+    pub swept_volume_m3: f64,
+    /// Weight of the material from the static payload estimate after Capture, N (`None` if the
+    /// estimate was unavailable).
+    pub weight_n: Option<f64>,
+    /// Why Autodig ended.
+    pub end_reason: Option<EndReason>,
+    /// Why cleanup waypoint following ended (cleanups only).
+    pub hand_over: Option<HandOverReason>,
+    /// The floor elevation used by a cleanup, m (base frame).
+    pub floor_z_m: Option<f64>,
+    /// Whether the perception enhancements were active.
+    pub perception: bool,
+}
+
+impl DigStats {
+    /// Energy in kJ (the unit of the thesis's tables).
+    pub fn energy_kj(&self) -> f64 {
+        self.energy_j * 1e-3
+    }
+}
+
+/// The phase of the work cycle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum Phase {
+    /// Not started.
+    Idle,
+    /// Waiting for a range scan.
+    Scan,
+    /// Swinging to the dig and moving the implement to the start pose.
+    MoveToDig,
+    /// Autodig running.
+    Autodig,
+    /// Cleanup waypoints in position mode.
+    Cleanup,
+    /// Holding still after Capture to weigh the payload.
+    Weigh,
+    /// Raising the boom and swinging to the spoil pile.
+    SwingToDump,
+    /// Uncurling the bucket over the pile.
+    Dump,
+    /// Tracking backwards.
+    TrackBack,
+    /// Swinging home after the last action.
+    Return,
+    /// All done.
+    Finished,
+}
+
+impl Phase {
+    /// The gateway mode this phase needs (`None`: stay disarmed).
+    pub const fn mode(self) -> Option<ArmMode> {
+        match self {
+            Phase::Idle | Phase::Finished => None,
+            Phase::Cleanup => Some(ArmMode::Position),
+            _ => Some(ArmMode::Valve),
+        }
+    }
+}
+
+/// What the cycle wants sent this period.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum CycleCommand {
+    /// All valves neutral.
+    Neutral,
+    /// Valve commands `[boom, stick, bucket, swing, left track, right track]` in `[-1, 1]`.
+    Valves([f64; 6]),
+    /// Position setpoints `[boom, stick, bucket, swing]`, rad.
+    Position([f64; 4]),
+}
+
+/// The cycle's output for one period.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CycleOutput {
+    /// The gateway mode needed now.
+    pub want: Option<ArmMode>,
+    /// The command (meaningful only when armed in `want`).
+    pub command: CycleCommand,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct DigRecord {
+    stats: DigStats,
+    last_lengths_m: Option<[f64; 3]>,
+    last_s: Option<f64>,
+    weight_sum_n: f64,
+    weight_samples: u32,
+}
+
+/// The work cycle state machine.
+#[derive(Debug, Clone)]
+pub struct WorkCycle {
+    config: CycleConfig,
+    autodig_config: AutodigConfig,
+    maps: AutodigMaps,
+    cleanup_config: CleanupConfig,
+    bucket_width_m: f64,
+    starts: Vec<JointAngles>,
+    started: bool,
+    phase: Phase,
+    phase_since_s: f64,
+    settle_since_s: Option<f64>,
+    action_index: usize,
+    digs_done: u32,
+    autodig: Option<Autodig>,
+    cleanup: Option<Cleanup>,
+    swept: Option<SweptVolume>,
+    floor: FloorEstimate,
+    terrain: Option<TerrainGrid>,
+    terrain_fresh: bool,
+    scan_request: bool,
+    record: Option<DigRecord>,
+    stats: Vec<DigStats>,
+    track_target_m: f64,
+    last_now_s: f64,
+}
+
+impl WorkCycle {
+    /// A cycle for the machine of `kin` (resolves the start poses).
+    ///
+    /// # Errors
+    /// [`ControllerError`] for an invalid config, an unreachable start pose, or invalid Autodig or
+    /// cleanup parameters.
+    pub fn new(
+        config: CycleConfig,
+        autodig_config: AutodigConfig,
+        maps: AutodigMaps,
+        cleanup_config: CleanupConfig,
+        bucket_width_m: f64,
+        kin: &Kinematics,
+    ) -> Result<Self, ControllerError> {
+        config.validate()?;
+        autodig_config.validate()?;
+        cleanup_config.validate()?;
+        let mut starts = Vec::with_capacity(config.actions.len());
+        for a in &config.actions {
+            starts.push(match a {
+                Action::Dig { start, .. } | Action::Cleanup { start, .. } => start.resolve(kin)?,
+                Action::TrackBack { .. } => JointAngles::default(),
+            });
+        }
+        let floor = FloorEstimate::new(config.floor_policy);
+        Ok(Self {
+            config,
+            autodig_config,
+            maps,
+            cleanup_config,
+            bucket_width_m,
+            starts,
+            started: false,
+            phase: Phase::Idle,
+            phase_since_s: 0.0,
+            settle_since_s: None,
+            action_index: 0,
+            digs_done: 0,
+            autodig: None,
+            cleanup: None,
+            swept: None,
+            floor,
+            terrain: None,
+            terrain_fresh: false,
+            scan_request: false,
+            record: None,
+            stats: Vec::new(),
+            track_target_m: 0.0,
+            last_now_s: 0.0,
+        })
+    }
+
+    /// Starts (or resumes) the plan at the next step.
+    pub fn start(&mut self) {
+        self.started = true;
+    }
+
+    /// Ends the plan: the machine holds neutral and disarms.
+    pub fn stop(&mut self) {
+        self.started = false;
+        self.autodig = None;
+        self.cleanup = None;
+        self.phase = Phase::Finished;
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &CycleConfig {
+        &self.config
+    }
+
+    /// The current phase.
+    pub fn phase(&self) -> Phase {
+        self.phase
+    }
+
+    /// Autodig's stage while it runs.
+    pub fn autodig_stage(&self) -> Option<Stage> {
+        self.autodig.as_ref().map(Autodig::stage)
+    }
+
+    /// The index of the current action in the plan.
+    pub fn action_index(&self) -> usize {
+        self.action_index
+    }
+
+    /// The current action.
+    pub fn action(&self) -> Option<&Action> {
+        self.config.actions.get(self.action_index)
+    }
+
+    /// Digs completed (dig and cleanup actions).
+    pub fn digs_done(&self) -> u32 {
+        self.digs_done
+    }
+
+    /// Statistics of the completed digs.
+    pub fn stats(&self) -> &[DigStats] {
+        &self.stats
+    }
+
+    /// The floor estimate kept between cleanups.
+    pub fn floor(&self) -> FloorEstimate {
+        self.floor
+    }
+
+    /// The terrain map in use.
+    pub fn terrain(&self) -> Option<&TerrainGrid> {
+        self.terrain.as_ref()
+    }
+
+    /// The swept volume of the running dig, m^3.
+    pub fn swept_volume_m3(&self) -> Option<f64> {
+        self.swept.as_ref().map(SweptVolume::volume_m3)
+    }
+
+    /// True once after the cycle asked for a range scan.
+    pub fn take_scan_request(&mut self) -> bool {
+        std::mem::take(&mut self.scan_request)
+    }
+
+    /// Hands over a terrain map (from a range scan); used by the next dig.
+    pub fn provide_terrain(&mut self, terrain: TerrainGrid) {
+        self.terrain = Some(terrain);
+        self.terrain_fresh = true;
+    }
+
+    /// Called by the node when a fault stopped motion: a failed action is abandoned (its partial
+    /// statistics are dropped) and the plan goes on with the next one after the re-arm; any other fault
+    /// pauses the current phase, which resumes after the re-arm.
+    pub fn on_fault(&mut self, control: bool) {
+        if let Some(r) = &mut self.record {
+            // The motion stopped: do not integrate across the gap.
+            r.last_lengths_m = None;
+            r.last_s = None;
+        }
+        self.settle_since_s = None;
+        if control {
+            self.autodig = None;
+            self.cleanup = None;
+            self.swept = None;
+            self.record = None;
+            if matches!(
+                self.phase,
+                Phase::MoveToDig | Phase::Autodig | Phase::Cleanup | Phase::Weigh
+            ) {
+                // Raise and empty whatever is in the bucket before going on.
+                self.phase = Phase::SwingToDump;
+            } else {
+                self.action_index += 1;
+                self.phase = Phase::Idle;
+            }
+        }
+    }
+
+    fn set_phase(&mut self, phase: Phase, now_s: f64) {
+        tracing::debug!(?phase, "work cycle phase");
+        self.phase = phase;
+        self.phase_since_s = now_s;
+        self.settle_since_s = None;
+    }
+
+    fn hold(&self) -> CycleOutput {
+        CycleOutput {
+            want: self.phase.mode(),
+            command: CycleCommand::Neutral,
+        }
+    }
+
+    /// True when `done` has held for `settle_s`.
+    fn settled(&mut self, done: bool, now_s: f64) -> bool {
+        if !done {
+            self.settle_since_s = None;
+            return false;
+        }
+        let since = *self.settle_since_s.get_or_insert(now_s);
+        now_s - since >= self.config.settle_s
+    }
+
+    fn timed_out(&self, now_s: f64) -> bool {
+        now_s - self.phase_since_s > self.config.move_timeout_s
+    }
+
+    /// One period at `now_s` with the estimate; `armed` is the mode the safety layer allows motion in.
+    ///
+    /// # Errors
+    /// [`ControlFault`] when Autodig or cleanup reject their inputs, a waypoint is out of reach, or a
+    /// move times out: send neutral, then call [`Self::on_fault`] with `control = true`.
+    pub fn step(
+        &mut self,
+        now_s: f64,
+        est: &Estimator,
+        armed: Option<ArmMode>,
+    ) -> Result<CycleOutput, ControlFault> {
+        self.last_now_s = now_s;
+        if self.phase == Phase::Idle {
+            if !self.started {
+                return Ok(self.hold());
+            }
+            self.begin_action(now_s, est);
+        }
+        let want = self.phase.mode();
+        if want.is_some() && armed != want && self.phase != Phase::Scan {
+            // Not (yet) allowed to move: hold, and keep the phase's clock from counting the wait.
+            self.phase_since_s = now_s;
+            self.settle_since_s = None;
+            if let Some(r) = &mut self.record {
+                r.last_lengths_m = None;
+                r.last_s = None;
+            }
+            return Ok(self.hold());
+        }
+        let command = match self.phase {
+            Phase::Idle | Phase::Finished => CycleCommand::Neutral,
+            Phase::Scan => self.step_scan(now_s),
+            Phase::MoveToDig => self.step_move_to_dig(now_s, est)?,
+            Phase::Autodig => self.step_autodig(now_s, est)?,
+            Phase::Cleanup => self.step_cleanup(now_s, est)?,
+            Phase::Weigh => self.step_weigh(now_s, est),
+            Phase::SwingToDump => self.step_swing_to(now_s, est, self.config.dump_swing_rad)?,
+            Phase::Dump => self.step_dump(now_s, est)?,
+            Phase::TrackBack => self.step_track(now_s, est)?,
+            Phase::Return => self.step_swing_to(now_s, est, self.config.home_swing_rad)?,
+        };
+        Ok(CycleOutput {
+            want: self.phase.mode(),
+            command,
+        })
+    }
+
+    fn finished_digs(&self) -> bool {
+        self.config.max_digs.is_some_and(|n| self.digs_done >= n)
+    }
+
+    fn begin_action(&mut self, now_s: f64, est: &Estimator) {
+        if self.action_index >= self.config.actions.len() {
+            if self.config.repeat && !self.config.actions.is_empty() && !self.finished_digs() {
+                self.action_index = 0;
+            } else {
+                self.set_phase(Phase::Return, now_s);
+                return;
+            }
+        }
+        if self.finished_digs() {
+            self.set_phase(Phase::Return, now_s);
+            return;
+        }
+        match self.config.actions.get(self.action_index) {
+            Some(Action::TrackBack { distance_m }) => {
+                let [l, r] = est.state().track_travel_m;
+                self.track_target_m = 0.5 * (l + r) - distance_m;
+                tracing::info!(distance_m, "tracking backwards");
+                self.set_phase(Phase::TrackBack, now_s);
+            }
+            Some(_) => {
+                if self.config.scan {
+                    self.scan_request = true;
+                    self.terrain_fresh = false;
+                    self.set_phase(Phase::Scan, now_s);
+                } else {
+                    self.set_phase(Phase::MoveToDig, now_s);
+                }
+            }
+            None => self.set_phase(Phase::Return, now_s),
+        }
+    }
+
+    fn next_action(&mut self, now_s: f64) {
+        self.action_index += 1;
+        self.phase = Phase::Idle;
+        self.phase_since_s = now_s;
+    }
+
+    fn step_scan(&mut self, now_s: f64) -> CycleCommand {
+        if self.terrain_fresh {
+            self.set_phase(Phase::MoveToDig, now_s);
+        } else if now_s - self.phase_since_s > self.config.scan_timeout_s {
+            tracing::warn!("no range scan in time: digging without the perception enhancements");
+            self.set_phase(Phase::MoveToDig, now_s);
+        }
+        CycleCommand::Neutral
+    }
+
+    fn implement_toward(&self, q: &JointAngles, target: &JointAngles) -> ([f64; 3], bool) {
+        let err = [
+            target.boom_rad - q.boom_rad,
+            target.stick_rad - q.stick_rad,
+            target.bucket_rad - q.bucket_rad,
+        ];
+        let g = self.config.joint;
+        let cmd = [0, 1, 2].map(|i| JOINT_SIGN[i] * g.command(err[i]));
+        (cmd, err.iter().all(|e| e.abs() <= g.tolerance))
+    }
+
+    fn swing_toward(&self, swing_rad: f64, target_rad: f64) -> (f64, bool) {
+        let err = wrap_angle(target_rad - swing_rad);
+        (
+            self.config.swing.command(err),
+            err.abs() <= self.config.swing.tolerance,
+        )
+    }
+
+    fn step_move_to_dig(&mut self, now_s: f64, est: &Estimator) -> Result<CycleCommand, ControlFault> {
+        let (Some(action), Some(target)) = (
+            self.config.actions.get(self.action_index).copied(),
+            self.starts.get(self.action_index).copied(),
+        ) else {
+            self.next_action(now_s);
+            return Ok(CycleCommand::Neutral);
+        };
+        if self.timed_out(now_s) {
+            return Err(ControlFault::Timeout("move to the dig"));
+        }
+        let s = est.state();
+        let (implement, implement_done) = self.implement_toward(&s.joints, &target);
+        // Lift before swinging: the swing waits until the boom is up near its start angle.
+        let boom_clear = s.joints.boom_rad >= target.boom_rad - 3.0 * self.config.joint.tolerance;
+        let (swing, swing_done) = match action.swing_rad() {
+            Some(t) if boom_clear => self.swing_toward(s.swing_rad, t),
+            Some(_) => (0.0, false),
+            None => (0.0, true),
+        };
+        if self.settled(implement_done && swing_done, now_s) {
+            self.begin_dig(now_s, est, &action);
+            return Ok(CycleCommand::Neutral);
+        }
+        Ok(CycleCommand::Valves([
+            implement[0],
+            implement[1],
+            implement[2],
+            swing,
+            0.0,
+            0.0,
+        ]))
+    }
+
+    fn begin_dig(&mut self, now_s: f64, est: &Estimator, action: &Action) {
+        let s = est.state();
+        let swing_rad = action.swing_rad().unwrap_or(s.swing_rad);
+        // 3.2: keep the pre-dig terrain section along the digging plane.
+        self.swept = None;
+        if self.config.perception
+            && let Some(terrain) = &self.terrain
+        {
+            match terrain
+                .section(
+                    &s.pose,
+                    s.swing_rad,
+                    self.config.section_r_min_m,
+                    self.config.section_r_max_m,
+                    self.config.section_step_m,
+                )
+                .and_then(|p| SweptVolume::new(p, self.bucket_width_m))
+            {
+                Ok(sv) => self.swept = Some(sv),
+                Err(e) => tracing::warn!(error = %e, "no pre-dig section: digging without perception"),
+            }
+        }
+        let perception = self.swept.is_some();
+        let mut cfg = self.autodig_config;
+        cfg.perception.end_dig_on_swept_volume = perception;
+        cfg.perception.end_capture_above_terrain = perception;
+        let kind = action.kind();
+        self.record = Some(DigRecord {
+            stats: DigStats {
+                index: self.digs_done,
+                action: kind,
+                swing_rad,
+                start_time_s: now_s,
+                time_s: 0.0,
+                ground_contact_time_s: 0.0,
+                energy_j: 0.0,
+                swept_volume_m3: 0.0,
+                weight_n: None,
+                end_reason: None,
+                hand_over: None,
+                floor_z_m: None,
+                perception,
+            },
+            last_lengths_m: None,
+            last_s: None,
+            weight_sum_n: 0.0,
+            weight_samples: 0,
+        });
+        match action {
+            Action::Cleanup { plan, .. } => {
+                match Cleanup::new(self.cleanup_config, *plan, self.floor) {
+                    Ok(c) => {
+                        self.cleanup = Some(c);
+                        tracing::info!(dig = self.digs_done, "cleanup");
+                        self.set_phase(Phase::Cleanup, now_s);
+                    }
+                    Err(e) => {
+                        // Validated at construction except for the plan; skip the action.
+                        tracing::warn!(error = %e, "invalid cleanup plan: skipped");
+                        self.record = None;
+                        self.next_action(now_s);
+                    }
+                }
+            }
+            _ => match Autodig::new(cfg, self.maps.clone()) {
+                Ok(a) => {
+                    self.autodig = Some(a);
+                    tracing::info!(dig = self.digs_done, perception, "autodig");
+                    self.set_phase(Phase::Autodig, now_s);
+                }
+                Err(e) => {
+                    tracing::warn!(error = %e, "autodig config rejected: skipped");
+                    self.record = None;
+                    self.next_action(now_s);
+                }
+            },
+        }
+    }
+
+    /// Energy (|F dL| summed over the cylinders) and ground-contact time since the last step.
+    fn integrate(&mut self, now_s: f64, est: &Estimator, depth_m: Option<f64>) {
+        let s = est.state();
+        let Some(r) = &mut self.record else { return };
+        if !s.derived_valid {
+            r.last_lengths_m = None;
+            return;
+        }
+        if let Some(prev) = r.last_lengths_m {
+            let e: f64 = (0..3)
+                .map(|i| (s.cylinder_force_n[i] * (s.cylinder_length_m[i] - prev[i])).abs())
+                .sum();
+            if e.is_finite() {
+                r.stats.energy_j += e;
+            }
+        }
+        if let (Some(t), Some(d)) = (r.last_s, depth_m)
+            && d > 0.0
+        {
+            r.stats.ground_contact_time_s += (now_s - t).max(0.0);
+        }
+        r.last_lengths_m = Some(s.cylinder_length_m);
+        r.last_s = Some(now_s);
+    }
+
+    fn step_autodig(&mut self, now_s: f64, est: &Estimator) -> Result<CycleCommand, ControlFault> {
+        let s = est.state();
+        let (mut swept_m3, mut depth_m) = (None, None);
+        if let Some(sv) = &mut self.swept {
+            swept_m3 = sv.update(s.tip.x_m, s.tip.z_m).ok();
+            depth_m = sv.depth_m(s.tip.x_m, s.tip.z_m).ok();
+        }
+        self.integrate(now_s, est, depth_m);
+        let inputs = AutodigInputs {
+            joint_rad: [s.joints.boom_rad, s.joints.stick_rad, s.joints.bucket_rad],
+            head_pressure_pa: s.head_pressure_pa,
+            rod_pressure_pa: s.rod_pressure_pa,
+            extension_fraction: s.extension_fraction,
+            swept_volume_m3: swept_m3,
+            bucket_depth_m: depth_m,
+        };
+        let Some(autodig) = &mut self.autodig else {
+            self.set_phase(Phase::Weigh, now_s);
+            return Ok(CycleCommand::Neutral);
+        };
+        let out = autodig.step(&inputs, now_s).map_err(ControlFault::Autodig)?;
+        if let Some(end) = out.stage_end {
+            tracing::info!(stage = ?end.stage, reason = ?end.reason, "autodig stage ended");
+        }
+        if out.stage == Stage::Done {
+            if let Some(r) = &mut self.record {
+                r.stats.end_reason = out.end_reason;
+                r.stats.time_s = now_s - r.stats.start_time_s;
+                r.stats.swept_volume_m3 = swept_m3.unwrap_or(0.0);
+            }
+            self.autodig = None;
+            self.set_phase(Phase::Weigh, now_s);
+            return Ok(CycleCommand::Neutral);
+        }
+        let c = out.command;
+        Ok(CycleCommand::Valves([c[0], c[1], c[2], 0.0, 0.0, 0.0]))
+    }
+
+    fn step_cleanup(&mut self, now_s: f64, est: &Estimator) -> Result<CycleCommand, ControlFault> {
+        let s = est.state();
+        self.integrate(now_s, est, None);
+        let swing = self
+            .config
+            .actions
+            .get(self.action_index)
+            .and_then(Action::swing_rad)
+            .unwrap_or(s.swing_rad);
+        let inputs = CleanupInputs {
+            tip_x_m: s.tip.x_m,
+            tip_z_m: s.tip.z_m,
+            stick_abs_rad: s.joints.stick_abs_rad(),
+            head_pressure_pa: s.head_pressure_pa,
+            rod_pressure_pa: s.rod_pressure_pa,
+        };
+        let Some(cleanup) = &mut self.cleanup else {
+            self.set_phase(Phase::Weigh, now_s);
+            return Ok(CycleCommand::Neutral);
+        };
+        match cleanup.step(&inputs, now_s).map_err(ControlFault::Cleanup)? {
+            CleanupOutput::Waypoint(w) => {
+                let q = est
+                    .kinematics()
+                    .inverse(&BucketPose {
+                        x_m: w.x_m,
+                        z_m: w.z_m,
+                        bucket_abs_rad: w.bucket_abs_rad,
+                    })
+                    .map_err(|_| ControlFault::Kinematics("cleanup waypoint out of reach"))?;
+                Ok(CycleCommand::Position([
+                    q.boom_rad,
+                    q.stick_rad,
+                    q.bucket_rad,
+                    swing,
+                ]))
+            }
+            CleanupOutput::HandOver(reason) => {
+                self.floor = cleanup.floor_estimate();
+                tracing::info!(?reason, floor_z_m = ?self.floor.z_m(), "cleanup hand-over to Autodig");
+                if let Some(r) = &mut self.record {
+                    r.stats.hand_over = Some(reason);
+                    r.stats.floor_z_m = self.floor.z_m();
+                }
+                self.cleanup = None;
+                // Hand over in Pre-Dig (3.3), with the perception enhancements if a section exists.
+                let mut cfg = self.autodig_config;
+                let perception = self.swept.is_some();
+                cfg.perception.end_dig_on_swept_volume = perception;
+                cfg.perception.end_capture_above_terrain = perception;
+                let a = Autodig::starting_in(cfg, self.maps.clone(), Stage::PreDig)
+                    .map_err(ControlFault::Autodig)?;
+                self.autodig = Some(a);
+                self.set_phase(Phase::Autodig, now_s);
+                Ok(CycleCommand::Neutral)
+            }
+        }
+    }
+
+    fn step_weigh(&mut self, now_s: f64, est: &Estimator) -> CycleCommand {
+        let elapsed = now_s - self.phase_since_s;
+        if elapsed >= self.config.weigh_settle_s {
+            if let (Some(r), Some(w)) = (&mut self.record, est.payload_weight_n()) {
+                r.weight_sum_n += w;
+                r.weight_samples += 1;
+            }
+            if elapsed >= self.config.weigh_settle_s + self.config.weigh_window_s {
+                if let Some(r) = &mut self.record
+                    && r.weight_samples > 0
+                {
+                    r.stats.weight_n = Some(r.weight_sum_n / f64::from(r.weight_samples));
+                }
+                self.set_phase(Phase::SwingToDump, now_s);
+            }
+        }
+        CycleCommand::Neutral
+    }
+
+    /// Raise the boom to the carry angle, then swing to `target_rad`; Dump (or Finished) when there.
+    fn step_swing_to(
+        &mut self,
+        now_s: f64,
+        est: &Estimator,
+        target_rad: f64,
+    ) -> Result<CycleCommand, ControlFault> {
+        if self.timed_out(now_s) {
+            return Err(ControlFault::Timeout("swing"));
+        }
+        let s = est.state();
+        let carry = self.config.carry_boom_rad;
+        let boom_err = carry - s.joints.boom_rad;
+        let boom = if boom_err > 0.0 {
+            self.config.joint.command(boom_err)
+        } else {
+            0.0
+        };
+        let boom_clear = s.joints.boom_rad >= carry - 3.0 * self.config.joint.tolerance;
+        let (swing, swing_done) = if boom_clear {
+            self.swing_toward(s.swing_rad, target_rad)
+        } else {
+            (0.0, false)
+        };
+        let rate_small = s.rates_rad_per_s[3].abs() < 0.05;
+        if self.settled(swing_done && rate_small, now_s) {
+            if self.phase == Phase::Return {
+                tracing::info!(digs = self.digs_done, "work cycle finished");
+                self.set_phase(Phase::Finished, now_s);
+            } else {
+                self.set_phase(Phase::Dump, now_s);
+            }
+            return Ok(CycleCommand::Neutral);
+        }
+        Ok(CycleCommand::Valves([boom, 0.0, 0.0, swing, 0.0, 0.0]))
+    }
+
+    fn step_dump(&mut self, now_s: f64, est: &Estimator) -> Result<CycleCommand, ControlFault> {
+        if self.timed_out(now_s) {
+            return Err(ControlFault::Timeout("dump"));
+        }
+        let s = est.state();
+        let err = self.config.dump_bucket_rad - s.joints.bucket_rad;
+        let open = err <= self.config.joint.tolerance;
+        if self.settled(open, now_s)
+            && now_s - self.settle_since_s.unwrap_or(now_s) >= self.config.dump_hold_s
+        {
+            if let Some(r) = self.record.take() {
+                tracing::info!(
+                    dig = r.stats.index,
+                    weight_n = ?r.stats.weight_n,
+                    time_s = r.stats.time_s,
+                    energy_kj = r.stats.energy_kj(),
+                    swept_m3 = r.stats.swept_volume_m3,
+                    "dig done"
+                );
+                self.stats.push(r.stats);
+                self.digs_done += 1;
+            }
+            self.swept = None;
+            self.next_action(now_s);
+            return Ok(CycleCommand::Neutral);
+        }
+        // Uncurl: the bucket cylinder retracts to open the bucket.
+        let bucket = if open {
+            0.0
+        } else {
+            JOINT_SIGN[2] * self.config.joint.max_command
+        };
+        Ok(CycleCommand::Valves([0.0, 0.0, bucket, 0.0, 0.0, 0.0]))
+    }
+
+    fn step_track(&mut self, now_s: f64, est: &Estimator) -> Result<CycleCommand, ControlFault> {
+        if self.timed_out(now_s) {
+            return Err(ControlFault::Timeout("track back"));
+        }
+        let [l, r] = est.state().track_travel_m;
+        let err = self.track_target_m - 0.5 * (l + r);
+        let g = self.config.track;
+        if self.settled(err.abs() <= g.tolerance, now_s) {
+            self.terrain = None; // the machine moved: the old map's frame no longer fits the section
+            self.next_action(now_s);
+            return Ok(CycleCommand::Neutral);
+        }
+        let u = if err.abs() <= g.tolerance {
+            0.0
+        } else {
+            g.command(err)
+        };
+        Ok(CycleCommand::Valves([0.0, 0.0, 0.0, 0.0, u, u]))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::estimate::EstimatorConfig;
+    use firmware_bridge::messages::{
+        AuxValveMeasured, Cylinder, JointRates, Message, TrackOdometry, ValveState,
+    };
+    use planner::machine::MachineConfig;
+
+    fn kin() -> (Kinematics, MachineConfig) {
+        let m = MachineConfig::default_machine().unwrap();
+        (Kinematics::new(&m).unwrap(), m)
+    }
+
+    fn cycle(config: CycleConfig) -> WorkCycle {
+        let (k, m) = kin();
+        WorkCycle::new(
+            config,
+            AutodigConfig::default(),
+            AutodigMaps::builtin().unwrap(),
+            CleanupConfig::default(),
+            m.bucket.width_m,
+            &k,
+        )
+        .unwrap()
+    }
+
+    /// An estimator that sees the machine at joint angles `q` (and swing) with `odo` travel.
+    fn est_at(q: [f64; 4], odo: f64, t: f64) -> Estimator {
+        let (k, m) = kin();
+        let mut e = Estimator::new(k, m.tracks.gauge_m, EstimatorConfig::default());
+        feed(&mut e, q, odo, t);
+        e
+    }
+
+    fn feed(e: &mut Estimator, q: [f64; 4], odo: f64, t: f64) {
+        e.on_message(
+            &Message::JointAngles(firmware_bridge::messages::JointAngles {
+                boom_rad: q[0],
+                stick_rad: q[1],
+                bucket_rad: q[2],
+                swing_rad: q[3],
+            }),
+            t,
+        );
+        e.on_message(&Message::JointRates(JointRates::default()), t);
+        e.on_message(
+            &Message::TrackOdometry(TrackOdometry {
+                left_m: odo,
+                right_m: odo,
+            }),
+            t,
+        );
+        for c in Cylinder::ALL {
+            e.on_message(
+                &Message::AuxValveMeasured(AuxValveMeasured {
+                    cylinder: c,
+                    flow_percent: 0.0,
+                    state: ValveState::Block,
+                    head_pressure_pa: 8e6,
+                    rod_pressure_pa: 1e6,
+                }),
+                t,
+            );
+        }
+        e.update();
+    }
+
+    #[test]
+    fn default_start_pose_is_reachable_and_inside_the_limits() {
+        let (k, _) = kin();
+        for a in CycleConfig::default().actions {
+            if let Action::Dig { start, .. } = a {
+                let q = start.resolve(&k).expect("reachable");
+                k.check_limits(&q).expect("limits");
+                let stick_abs = q.stick_abs_rad().to_degrees();
+                assert!((-100.0..-40.0).contains(&stick_abs), "{stick_abs}");
+            }
+        }
+    }
+
+    #[test]
+    fn idle_until_started_and_wants_no_arming() {
+        let mut c = cycle(CycleConfig::default());
+        let e = est_at([0.3, -1.6, -0.9, 0.0], 0.0, 0.0);
+        let out = c.step(0.0, &e, None).unwrap();
+        assert_eq!(out.want, None);
+        assert_eq!(out.command, CycleCommand::Neutral);
+        c.start();
+        let out = c.step(0.01, &e, None).unwrap();
+        assert_eq!(c.phase(), Phase::Scan);
+        assert!(c.take_scan_request());
+        assert!(!c.take_scan_request());
+        assert_eq!(out.want, Some(ArmMode::Valve));
+    }
+
+    #[test]
+    fn holds_neutral_until_armed() {
+        let mut c = cycle(CycleConfig {
+            scan: false,
+            ..CycleConfig::default()
+        });
+        c.start();
+        let e = est_at([0.0, -1.6, -0.9, 0.5], 0.0, 0.0);
+        let out = c.step(0.0, &e, None).unwrap();
+        assert_eq!(c.phase(), Phase::MoveToDig);
+        assert_eq!(out.command, CycleCommand::Neutral);
+        let out = c.step(0.01, &e, Some(ArmMode::Valve)).unwrap();
+        let CycleCommand::Valves(v) = out.command else {
+            panic!("{out:?}")
+        };
+        // Boom below the start pose: raise first (extend), no swing yet.
+        assert!(v[0] > 0.0, "{v:?}");
+    }
+
+    #[test]
+    fn p_controllers_have_the_documented_signs() {
+        let c = cycle(CycleConfig::default());
+        let q = JointAngles {
+            boom_rad: 0.0,
+            stick_rad: -1.0,
+            bucket_rad: -1.0,
+        };
+        let target = JointAngles {
+            boom_rad: 0.1,
+            stick_rad: -1.1,
+            bucket_rad: -0.9,
+        };
+        let (cmd, done) = c.implement_toward(&q, &target);
+        assert!(!done);
+        // Boom up = extend; stick angle down = extend; bucket angle up (open) = retract.
+        assert!(cmd[0] > 0.0 && cmd[1] > 0.0 && cmd[2] < 0.0, "{cmd:?}");
+        let (s, _) = c.swing_toward(0.0, -1.0);
+        assert!(s < 0.0 && s >= -0.7);
+        let (s, _) = c.swing_toward(3.0, -3.0);
+        assert!(s > 0.0, "wraps the short way");
+    }
+
+    #[test]
+    fn track_back_moves_the_tracks_backwards_until_the_distance() {
+        let mut c = cycle(CycleConfig {
+            actions: vec![Action::TrackBack { distance_m: 1.0 }],
+            repeat: false,
+            ..CycleConfig::default()
+        });
+        c.start();
+        let e = est_at([0.3, -1.6, -0.9, 0.0], 5.0, 0.0);
+        let out = c.step(0.0, &e, Some(ArmMode::Valve)).unwrap();
+        assert_eq!(c.phase(), Phase::TrackBack);
+        let CycleCommand::Valves(v) = out.command else {
+            panic!()
+        };
+        assert!(v[4] < 0.0 && v[4] == v[5]);
+        let mut t = 0.01;
+        let mut e = est_at([0.3, -1.6, -0.9, 0.0], 4.0, t);
+        while c.phase() != Phase::Return && t < 1.0 {
+            feed(&mut e, [0.3, -1.6, -0.9, 0.0], 4.0, t);
+            c.step(t, &e, Some(ArmMode::Valve)).unwrap();
+            t += 0.01;
+        }
+        assert_eq!(c.phase(), Phase::Return);
+    }
+
+    #[test]
+    fn weighing_averages_the_static_payload_estimate() {
+        let mut c = cycle(CycleConfig::default());
+        c.phase = Phase::Weigh;
+        c.phase_since_s = 0.0;
+        c.record = Some(DigRecord {
+            stats: DigStats {
+                index: 0,
+                action: ActionKind::Dig,
+                swing_rad: 0.0,
+                start_time_s: 0.0,
+                time_s: 5.0,
+                ground_contact_time_s: 0.0,
+                energy_j: 0.0,
+                swept_volume_m3: 0.0,
+                weight_n: None,
+                end_reason: None,
+                hand_over: None,
+                floor_z_m: None,
+                perception: false,
+            },
+            last_lengths_m: None,
+            last_s: None,
+            weight_sum_n: 0.0,
+            weight_samples: 0,
+        });
+        let e = est_at([0.3, -1.6, -0.9, 0.0], 0.0, 0.0);
+        let expect = e.payload_weight_n().unwrap();
+        let mut t = 0.0;
+        while c.phase() == Phase::Weigh && t < 3.0 {
+            c.step(t, &e, Some(ArmMode::Valve)).unwrap();
+            t += 0.01;
+        }
+        assert_eq!(c.phase(), Phase::SwingToDump);
+        let w = c.record.unwrap().stats.weight_n.unwrap();
+        assert!((w - expect).abs() < 1e-6);
+    }
+
+    #[test]
+    fn swing_to_dump_raises_the_boom_before_swinging() {
+        let mut c = cycle(CycleConfig::default());
+        c.phase = Phase::SwingToDump;
+        let e = est_at([0.0, -1.6, -0.9, 0.0], 0.0, 0.0);
+        let CycleCommand::Valves(v) = c.step(0.0, &e, Some(ArmMode::Valve)).unwrap().command else {
+            panic!()
+        };
+        assert!(v[0] > 0.0 && v[3] == 0.0, "{v:?}");
+        let e = est_at([0.6, -1.6, -0.9, 0.0], 0.0, 0.0);
+        let CycleCommand::Valves(v) = c.step(0.01, &e, Some(ArmMode::Valve)).unwrap().command else {
+            panic!()
+        };
+        assert!(v[0] == 0.0 && v[3] < 0.0, "{v:?}");
+    }
+
+    #[test]
+    fn a_control_fault_abandons_the_dig_and_empties_the_bucket() {
+        let mut c = cycle(CycleConfig {
+            scan: false,
+            ..CycleConfig::default()
+        });
+        c.start();
+        let e = est_at([0.3, -1.6, -0.9, 0.0], 0.0, 0.0);
+        c.step(0.0, &e, Some(ArmMode::Valve)).unwrap();
+        assert_eq!(c.phase(), Phase::MoveToDig);
+        c.on_fault(true);
+        assert_eq!(c.phase(), Phase::SwingToDump);
+        assert!(c.stats().is_empty());
+    }
+
+    #[test]
+    fn moves_time_out() {
+        let mut c = cycle(CycleConfig {
+            scan: false,
+            move_timeout_s: 1.0,
+            ..CycleConfig::default()
+        });
+        c.start();
+        let e = est_at([-0.5, -1.6, -0.9, 1.0], 0.0, 0.0);
+        c.step(0.0, &e, Some(ArmMode::Valve)).unwrap();
+        let err = c.step(2.0, &e, Some(ArmMode::Valve)).unwrap_err();
+        assert_eq!(err, ControlFault::Timeout("move to the dig"));
+    }
+
+    #[test]
+    fn config_round_trips_through_toml() {
+        let cfg = CycleConfig {
+            actions: vec![
+                Action::Cleanup {
+                    swing_rad: 0.1,
+                    start: StartPose::Joints {
+                        boom_rad: 0.2,
+                        stick_rad: -1.5,
+                        bucket_rad: -1.0,
+                    },
+                    plan: CleanupPlan {
+                        start_radius_m: 7.0,
+                        min_radius_m: 4.0,
+                    },
+                },
+                Action::TrackBack { distance_m: 2.0 },
+            ],
+            ..CycleConfig::default()
+        };
+        let text = toml::to_string(&cfg).unwrap();
+        let back: CycleConfig = toml::from_str(&text).unwrap();
+        assert_eq!(back.actions.len(), 2);
+        assert!((back.dump_swing_rad - cfg.dump_swing_rad).abs() < 1e-12);
+        assert!(
+            matches!(back.actions[1], Action::TrackBack { distance_m } if distance_m == 2.0)
+        );
+        let bad = CycleConfig {
+            actions: vec![Action::TrackBack { distance_m: -1.0 }],
+            ..CycleConfig::default()
+        };
+        assert!(bad.validate().is_err());
+    }
+}

@@ -1,0 +1,1044 @@
+//! The safety layer: a pure state machine between the work cycle and the bus.
+//!
+//! It owns the arming handshake with the gateway (`firmware_bridge::gateway`), the heartbeat, and every
+//! rule that stops motion. It does no I/O and reads no clock: the node reports events
+//! ([`Safety::report`]), lets it check the estimate ([`Safety::observe`]) and asks once per control
+//! period what to do ([`Safety::tick`]).
+//!
+//! # States
+//!
+//! ```text
+//!             want arm, healthy,             GatewayStatus
+//!             gateway Disarmed               confirms the mode
+//! Disarmed ---------------------> Arming(m) -----------------> Armed(m)
+//!    ^                               |                           |
+//!    |  cause clear for clear_hold_s |  any fault                | any fault
+//!    +------------ Faulted <---------+---------------------------+
+//! ListenOnly: decodes and logs, never transmits.  Shutdown: terminal.
+//! ```
+//!
+//! # Rules (each one ends in neutral valves and a logged reason)
+//!
+//! - Stale or missing sensor data: a control signal (angles, rates, the three cylinder pressures) older
+//!   than [`SafetyConfig::sensor_max_age_s`] (3 control periods by default), or the gateway status older
+//!   than [`SafetyConfig::status_max_age_s`], while arming or armed.
+//! - A decode error of a frame of the protocol, any frame from the gateway's address that the gateway
+//!   does not send, or a frame of the protocol from another address (the node reports these).
+//! - A joint beyond its configured limit by more than [`SafetyConfig::joint_limit_margin_rad`].
+//! - An e-stop request ([`Safety::request_estop`]): latched, the heartbeat requests `EStop` until
+//!   [`Safety::reset`].
+//! - A gateway that reports a fault or leaves the armed mode on its own; an arm request the gateway does
+//!   not confirm within [`SafetyConfig::arm_timeout_s`].
+//! - CAN error frames: bus-off, error passive, no-ack, transmit timeout, controller overflow, protocol and
+//!   transceiver errors (warnings and lost arbitration are only logged).
+//! - Errors of the work cycle (Autodig, cleanup, kinematics, timeouts), and shutdown.
+//!
+//! On a fault the state becomes `Faulted`: every period the node sends neutral valve commands for all
+//! six valves (at least for [`SafetyConfig::neutral_hold_s`] and as long as the gateway still reports an
+//! armed mode) followed by a `Disarm` heartbeat, which also acknowledges a gateway fault. Motion resumes
+//! only through a fresh arming handshake, once the cause has cleared: sensors fresh, gateway status fresh
+//! and `Disarmed` without fault bits, joints inside their limits, and no new fault event for
+//! [`SafetyConfig::clear_hold_s`]. With [`SafetyConfig::auto_rearm`] off (and always after an e-stop or
+//! more than [`SafetyConfig::max_auto_rearms`] re-arms in a row) it waits for [`Safety::reset`].
+
+use firmware_bridge::messages::{
+    ControllerHeartbeat, DecodeError, GatewayFaults, GatewayMode, RequestedMode,
+};
+use firmware_bridge::transport::BusFault;
+use planner::autodig::AutodigError;
+use planner::cleanup::CleanupError;
+use planner::kinematics::Joint;
+use serde::{Deserialize, Serialize};
+
+use crate::estimate::{Estimator, Signal, joint_angle};
+
+/// The gateway mode the controller arms for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum ArmMode {
+    /// Valve commands (Autodig, swing, tracks).
+    Valve,
+    /// Position setpoints (cleanup).
+    Position,
+}
+
+impl ArmMode {
+    /// The heartbeat request for this mode.
+    pub const fn request(self) -> RequestedMode {
+        match self {
+            ArmMode::Valve => RequestedMode::ArmValve,
+            ArmMode::Position => RequestedMode::ArmPosition,
+        }
+    }
+
+    /// The gateway mode that confirms it.
+    pub const fn gateway_mode(self) -> GatewayMode {
+        match self {
+            ArmMode::Valve => GatewayMode::ArmedValve,
+            ArmMode::Position => GatewayMode::ArmedPosition,
+        }
+    }
+}
+
+/// An error of the work cycle that stops motion.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum ControlFault {
+    /// Autodig rejected its inputs.
+    #[error("autodig: {0}")]
+    Autodig(AutodigError),
+    /// Cleanup rejected its inputs or found no floor.
+    #[error("cleanup: {0}")]
+    Cleanup(CleanupError),
+    /// A kinematics computation failed (e.g. a cleanup waypoint out of reach).
+    #[error("kinematics: {0}")]
+    Kinematics(&'static str),
+    /// A motion did not finish in time.
+    #[error("timeout: {0}")]
+    Timeout(&'static str),
+}
+
+/// Why motion stopped.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum Fault {
+    /// A sensor signal is older than allowed (or never arrived).
+    #[error("stale sensor data: {signal} is {age_s:.3} s old")]
+    StaleSensor {
+        /// Which signal.
+        signal: Signal,
+        /// Its age, s (infinite if never received).
+        age_s: f64,
+    },
+    /// A frame of the protocol failed to decode.
+    #[error("decode error on {id:#010X}: {error}")]
+    Decode {
+        /// The 29-bit (or 11-bit) id, without flags.
+        id: u32,
+        /// What was wrong.
+        error: DecodeError,
+    },
+    /// A frame that must not appear: from the gateway's address but not a gateway message, with the
+    /// controller's own address, or a protocol message from an unknown address.
+    #[error("unexpected frame {id:#010X} from source address {source_address:#04X}")]
+    UnexpectedFrame {
+        /// The 29-bit id.
+        id: u32,
+        /// Its J1939 source address.
+        source_address: u8,
+    },
+    /// A joint beyond its limit.
+    #[error("{joint} joint at {angle_rad:.4} rad is beyond its limit")]
+    JointLimit {
+        /// Which joint.
+        joint: Joint,
+        /// Its angle, rad.
+        angle_rad: f64,
+    },
+    /// Emergency stop requested.
+    #[error("emergency stop")]
+    EStop,
+    /// The gateway reported fault bits.
+    #[error("gateway fault bits {:#06x}", .0.0)]
+    GatewayFault(GatewayFaults),
+    /// The gateway left the armed mode on its own.
+    #[error("gateway reports {reported:?} while {expected:?} was confirmed")]
+    GatewayMode {
+        /// The confirmed mode.
+        expected: GatewayMode,
+        /// What it reports now.
+        reported: GatewayMode,
+    },
+    /// The gateway did not confirm an arm request in time.
+    #[error("gateway did not confirm {0:?} in time")]
+    ArmTimeout(ArmMode),
+    /// A CAN error frame.
+    #[error("CAN bus fault: {0:?}")]
+    Bus(BusFault),
+    /// The work cycle failed.
+    #[error("control: {0}")]
+    Control(ControlFault),
+    /// The program is shutting down.
+    #[error("shutdown")]
+    Shutdown,
+}
+
+impl Fault {
+    /// Whether only [`Safety::reset`] clears it.
+    pub const fn latches(&self) -> bool {
+        matches!(self, Fault::EStop | Fault::Shutdown)
+    }
+}
+
+/// How serious a bus condition is.
+pub fn bus_fault_stops_motion(fault: BusFault) -> bool {
+    !matches!(
+        fault,
+        BusFault::ErrorWarning
+            | BusFault::ArbitrationLost
+            | BusFault::Restarted
+            | BusFault::ErrorActive
+    )
+}
+
+/// Safety parameters.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SafetyConfig {
+    /// Decode and log, never transmit. Default false.
+    pub listen_only: bool,
+    /// Control signals older than this are stale, s. Default 0.03 (3 control periods).
+    pub sensor_max_age_s: f64,
+    /// The gateway status (10 Hz) older than this is stale, s. Default 0.35.
+    pub status_max_age_s: f64,
+    /// The gateway must confirm an arm request within this, s. Default 1.0.
+    pub arm_timeout_s: f64,
+    /// A cause counts as cleared after this long without a new fault event, s. Default 0.5.
+    pub clear_hold_s: f64,
+    /// After a fault, neutral valve commands are sent at least this long, s. Default 0.1.
+    pub neutral_hold_s: f64,
+    /// Tolerance beyond the configured joint limits, rad. Default 1 degree.
+    pub joint_limit_margin_rad: f64,
+    /// Re-arm automatically once the cause of a fault has cleared. Default true.
+    pub auto_rearm: bool,
+    /// After this many automatic re-arms without `rearm_reset_s` of clean armed time, wait for
+    /// [`Safety::reset`]. Default 5.
+    pub max_auto_rearms: u32,
+    /// Armed time without a fault that resets the re-arm count, s. Default 10.
+    pub rearm_reset_s: f64,
+}
+
+impl Default for SafetyConfig {
+    fn default() -> Self {
+        Self {
+            listen_only: false,
+            sensor_max_age_s: 0.03,
+            status_max_age_s: 0.35,
+            arm_timeout_s: 1.0,
+            clear_hold_s: 0.5,
+            neutral_hold_s: 0.1,
+            joint_limit_margin_rad: 1.0_f64.to_radians(),
+            auto_rearm: true,
+            max_auto_rearms: 5,
+            rearm_reset_s: 10.0,
+        }
+    }
+}
+
+/// The safety state.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SafetyState {
+    /// Never transmits.
+    ListenOnly,
+    /// Not armed; valves neutral at the gateway.
+    Disarmed,
+    /// Arm request sent, waiting for the gateway status to confirm it.
+    Arming {
+        /// The requested mode.
+        mode: ArmMode,
+        /// When the request started, s.
+        since_s: f64,
+    },
+    /// Armed and confirmed: motion allowed.
+    Armed {
+        /// The confirmed mode.
+        mode: ArmMode,
+        /// When it was confirmed, s.
+        since_s: f64,
+    },
+    /// Stopped by a fault.
+    Faulted {
+        /// The first fault.
+        fault: Fault,
+        /// When it happened, s.
+        since_s: f64,
+    },
+    /// Shut down: neutral and disarm, forever.
+    Shutdown,
+}
+
+/// What to do this period.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SafetyTick {
+    /// The heartbeat to send (every period unless listen-only).
+    pub heartbeat: Option<ControllerHeartbeat>,
+    /// The mode motion commands may be sent in (armed and confirmed).
+    pub motion: Option<ArmMode>,
+    /// Send neutral commands for all six valves this period (before the heartbeat).
+    pub send_neutral: bool,
+    /// Send a position setpoint holding the measured joints (arming position mode: the gateway faults
+    /// if no setpoint follows the arm request within its command timeout).
+    pub hold_position: bool,
+}
+
+/// The safety state machine.
+#[derive(Debug, Clone)]
+pub struct Safety {
+    config: SafetyConfig,
+    limits: [(f64, f64); 3],
+    state: SafetyState,
+    alive_counter: u8,
+    last_event_s: f64,
+    neutral_until_s: f64,
+    last_fault: Option<Fault>,
+    fault_count: u64,
+    rearms: u32,
+    needs_reset: bool,
+    acked: bool,
+    estop: bool,
+    healthy: Result<(), Fault>,
+    gateway_mode: Option<GatewayMode>,
+    now_s: f64,
+}
+
+impl Safety {
+    /// A safety layer for joints with `limits` `[(min, max); 3]` (rad, `[boom, stick, bucket]`).
+    pub fn new(config: SafetyConfig, limits: [(f64, f64); 3]) -> Self {
+        Self {
+            config,
+            limits,
+            state: if config.listen_only {
+                SafetyState::ListenOnly
+            } else {
+                SafetyState::Disarmed
+            },
+            // The first heartbeat carries counter 0.
+            alive_counter: 15,
+            last_event_s: f64::NEG_INFINITY,
+            neutral_until_s: f64::NEG_INFINITY,
+            last_fault: None,
+            fault_count: 0,
+            rearms: 0,
+            needs_reset: false,
+            acked: false,
+            estop: false,
+            healthy: Err(Fault::StaleSensor {
+                signal: Signal::JointAngles,
+                age_s: f64::INFINITY,
+            }),
+            gateway_mode: None,
+            now_s: f64::NEG_INFINITY,
+        }
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &SafetyConfig {
+        &self.config
+    }
+
+    /// The current state.
+    pub fn state(&self) -> SafetyState {
+        self.state
+    }
+
+    /// The mode motion may be commanded in now.
+    pub fn motion(&self) -> Option<ArmMode> {
+        match self.state {
+            SafetyState::Armed { mode, .. } => Some(mode),
+            _ => None,
+        }
+    }
+
+    /// The most recent fault (kept after it cleared, for display).
+    pub fn last_fault(&self) -> Option<Fault> {
+        self.last_fault
+    }
+
+    /// The active fault, if faulted.
+    pub fn active_fault(&self) -> Option<Fault> {
+        match self.state {
+            SafetyState::Faulted { fault, .. } => Some(fault),
+            _ => None,
+        }
+    }
+
+    /// Faults reported so far (including repeats while faulted).
+    pub fn fault_count(&self) -> u64 {
+        self.fault_count
+    }
+
+    /// Why arming is not possible right now (`Ok` when healthy), from the last [`Self::observe`].
+    pub fn health(&self) -> Result<(), Fault> {
+        self.healthy
+    }
+
+    /// Whether the safety layer waits for [`Self::reset`] before it re-arms.
+    pub fn needs_reset(&self) -> bool {
+        self.needs_reset || self.estop
+    }
+
+    /// Reports a fault event at `now_s`. In listen-only mode it is only logged.
+    pub fn report(&mut self, now_s: f64, fault: Fault) {
+        self.fault_count = self.fault_count.saturating_add(1);
+        self.last_fault = Some(fault);
+        if now_s.is_finite() {
+            self.last_event_s = self.last_event_s.max(now_s);
+        }
+        if fault.latches() {
+            self.needs_reset = true;
+        }
+        match self.state {
+            SafetyState::ListenOnly => {
+                tracing::warn!(%fault, "listen-only: would stop motion");
+            }
+            SafetyState::Shutdown => {}
+            SafetyState::Faulted { .. } => {
+                tracing::debug!(%fault, "further fault while faulted");
+            }
+            SafetyState::Armed { .. } | SafetyState::Arming { .. } => {
+                tracing::warn!(%fault, "fault: valves neutral, disarming");
+                self.enter_fault(now_s, fault);
+            }
+            SafetyState::Disarmed => {
+                // Nothing moves; still hold off re-arming until the cause clears, and keep the
+                // reason visible.
+                tracing::warn!(%fault, "fault while disarmed");
+                self.enter_fault(now_s, fault);
+            }
+        }
+    }
+
+    fn enter_fault(&mut self, now_s: f64, fault: Fault) {
+        let t = if now_s.is_finite() { now_s } else { self.now_s };
+        self.state = SafetyState::Faulted { fault, since_s: t };
+        self.acked = false;
+        self.neutral_until_s = t + self.config.neutral_hold_s;
+    }
+
+    /// Emergency stop: neutral valves, the heartbeat requests `EStop` (the gateway latches it), and
+    /// nothing moves until [`Self::reset`].
+    pub fn request_estop(&mut self, now_s: f64) {
+        self.estop = true;
+        self.report(now_s, Fault::EStop);
+    }
+
+    /// Clears an e-stop and a latched fault (the operator's acknowledgement). Motion still needs the
+    /// cause to clear and a fresh arming handshake.
+    pub fn reset(&mut self) {
+        if self.state == SafetyState::Shutdown {
+            return;
+        }
+        tracing::info!("safety reset by operator");
+        self.estop = false;
+        self.needs_reset = false;
+        self.acked = true;
+        self.rearms = 0;
+    }
+
+    /// Shutdown: from now on neutral valves and `Disarm` heartbeats only.
+    pub fn shutdown(&mut self, now_s: f64) {
+        if self.state != SafetyState::ListenOnly && self.state != SafetyState::Shutdown {
+            tracing::info!("shutdown: valves neutral, disarming");
+            self.last_fault = Some(Fault::Shutdown);
+            self.state = SafetyState::Shutdown;
+            self.neutral_until_s = now_s;
+        }
+    }
+
+    /// Checks the estimate at `now_s`: staleness, joint limits and the gateway status. A failed check
+    /// while arming or armed is a fault; otherwise it only blocks arming.
+    pub fn observe(&mut self, now_s: f64, est: &Estimator) {
+        if now_s.is_finite() {
+            self.now_s = now_s;
+        }
+        self.healthy = self.check(now_s, est);
+        let status = est.state().gateway;
+        self.gateway_mode = status.map(|s| s.mode);
+        let fresh_status =
+            est.age_s(Signal::GatewayStatus, now_s) <= self.config.status_max_age_s;
+        match self.state {
+            SafetyState::Armed { mode, since_s } => {
+                if let Err(fault) = self.healthy {
+                    self.report(now_s, fault);
+                } else if let Some(s) = status.filter(|_| fresh_status)
+                    && est
+                        .last_received_s(Signal::GatewayStatus)
+                        .is_some_and(|t| t >= since_s)
+                    && s.mode != mode.gateway_mode()
+                {
+                    let fault = if s.faults.is_empty() {
+                        Fault::GatewayMode {
+                            expected: mode.gateway_mode(),
+                            reported: s.mode,
+                        }
+                    } else {
+                        Fault::GatewayFault(s.faults)
+                    };
+                    self.report(now_s, fault);
+                } else if now_s - since_s >= self.config.rearm_reset_s {
+                    self.rearms = 0;
+                }
+            }
+            SafetyState::Arming { mode, since_s } => {
+                if let Err(fault) = self.healthy {
+                    self.report(now_s, fault);
+                } else if let Some(s) = status
+                    && est
+                        .last_received_s(Signal::GatewayStatus)
+                        .is_some_and(|t| t >= since_s)
+                    && s.mode == mode.gateway_mode()
+                {
+                    tracing::info!(?mode, "armed: gateway confirmed");
+                    self.state = SafetyState::Armed {
+                        mode,
+                        since_s: now_s,
+                    };
+                } else if let Some(s) = status
+                    && s.mode == GatewayMode::Faulted
+                    && est
+                        .last_received_s(Signal::GatewayStatus)
+                        .is_some_and(|t| t >= since_s)
+                {
+                    self.report(now_s, Fault::GatewayFault(s.faults));
+                } else if now_s - since_s > self.config.arm_timeout_s {
+                    self.report(now_s, Fault::ArmTimeout(mode));
+                }
+            }
+            SafetyState::Disarmed
+            | SafetyState::Faulted { .. }
+            | SafetyState::ListenOnly
+            | SafetyState::Shutdown => {}
+        }
+    }
+
+    /// Staleness, joint limits, gateway status: `Ok` when arming would be allowed (given a gateway
+    /// that is `Disarmed` or already in the requested mode).
+    fn check(&self, now_s: f64, est: &Estimator) -> Result<(), Fault> {
+        let (signal, age_s) = est.stalest_control_signal(now_s);
+        if !(age_s <= self.config.sensor_max_age_s) {
+            return Err(Fault::StaleSensor { signal, age_s });
+        }
+        let status_age = est.age_s(Signal::GatewayStatus, now_s);
+        if !(status_age <= self.config.status_max_age_s) {
+            return Err(Fault::StaleSensor {
+                signal: Signal::GatewayStatus,
+                age_s: if status_age.is_nan() {
+                    f64::INFINITY
+                } else {
+                    status_age
+                },
+            });
+        }
+        let q = est.state().joints;
+        let m = self.config.joint_limit_margin_rad;
+        for joint in Joint::ALL {
+            let (lo, hi) = self.limits[joint.index()];
+            let a = joint_angle(&q, joint);
+            if !(a >= lo - m && a <= hi + m) {
+                return Err(Fault::JointLimit {
+                    joint,
+                    angle_rad: a,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    fn next_heartbeat(&mut self, mode: RequestedMode) -> ControllerHeartbeat {
+        self.alive_counter = (self.alive_counter + 1) % 16;
+        ControllerHeartbeat {
+            mode,
+            alive_counter: self.alive_counter,
+        }
+    }
+
+    fn gateway_armed(&self) -> bool {
+        matches!(
+            self.gateway_mode,
+            Some(GatewayMode::ArmedValve | GatewayMode::ArmedPosition)
+        )
+    }
+
+    /// One control period at `now_s`: `want` is the mode the work cycle needs (`None`: stay disarmed).
+    /// Advances the arming handshake and the fault recovery and says what to send.
+    pub fn tick(&mut self, now_s: f64, want: Option<ArmMode>) -> SafetyTick {
+        if now_s.is_finite() {
+            self.now_s = now_s;
+        }
+        let quiet = SafetyTick {
+            heartbeat: None,
+            motion: None,
+            send_neutral: false,
+            hold_position: false,
+        };
+        match self.state {
+            SafetyState::ListenOnly => quiet,
+            SafetyState::Shutdown => SafetyTick {
+                heartbeat: Some(self.next_heartbeat(RequestedMode::Disarm)),
+                send_neutral: true,
+                ..quiet
+            },
+            SafetyState::Faulted { fault, since_s } => {
+                let send_neutral = now_s <= self.neutral_until_s || self.gateway_armed();
+                let request = if self.estop {
+                    RequestedMode::EStop
+                } else {
+                    RequestedMode::Disarm
+                };
+                let cleared = self.healthy.is_ok()
+                    && self.gateway_mode == Some(GatewayMode::Disarmed)
+                    && now_s - self.last_event_s >= self.config.clear_hold_s
+                    && now_s - since_s >= self.config.clear_hold_s;
+                if cleared && !self.estop {
+                    let auto = self.config.auto_rearm
+                        && self.rearms < self.config.max_auto_rearms
+                        && !self.needs_reset;
+                    if self.acked || auto {
+                        if !self.acked {
+                            self.rearms += 1;
+                        }
+                        self.acked = false;
+                        tracing::info!(%fault, rearm = self.rearms, "cause cleared: re-arming allowed");
+                        self.state = SafetyState::Disarmed;
+                    } else if !self.needs_reset {
+                        tracing::warn!(%fault, "cause cleared: waiting for an operator reset");
+                        self.needs_reset = true;
+                    }
+                }
+                SafetyTick {
+                    heartbeat: Some(self.next_heartbeat(request)),
+                    send_neutral,
+                    ..quiet
+                }
+            }
+            SafetyState::Disarmed => {
+                let send_neutral = now_s <= self.neutral_until_s;
+                if let Some(mode) = want
+                    && self.healthy.is_ok()
+                    && self.gateway_mode == Some(GatewayMode::Disarmed)
+                    && !self.needs_reset()
+                {
+                    tracing::info!(?mode, "arming");
+                    self.state = SafetyState::Arming {
+                        mode,
+                        since_s: now_s,
+                    };
+                    return SafetyTick {
+                        heartbeat: Some(self.next_heartbeat(mode.request())),
+                        send_neutral,
+                        hold_position: mode == ArmMode::Position,
+                        ..quiet
+                    };
+                }
+                SafetyTick {
+                    heartbeat: Some(self.next_heartbeat(RequestedMode::Disarm)),
+                    send_neutral,
+                    ..quiet
+                }
+            }
+            SafetyState::Arming { mode, .. } => match want {
+                None => self.disarm(now_s),
+                Some(w) if w != mode => {
+                    self.state = SafetyState::Arming {
+                        mode: w,
+                        since_s: now_s,
+                    };
+                    SafetyTick {
+                        heartbeat: Some(self.next_heartbeat(w.request())),
+                        hold_position: w == ArmMode::Position,
+                        ..quiet
+                    }
+                }
+                Some(_) => SafetyTick {
+                    heartbeat: Some(self.next_heartbeat(mode.request())),
+                    hold_position: mode == ArmMode::Position,
+                    ..quiet
+                },
+            },
+            SafetyState::Armed { mode, .. } => match want {
+                None => self.disarm(now_s),
+                Some(w) if w != mode => {
+                    // Switching modes goes through a fresh confirmation; the gateway allows the
+                    // direct switch and holds the valves neutral for that tick.
+                    tracing::info!(from = ?mode, to = ?w, "switching gateway mode");
+                    self.state = SafetyState::Arming {
+                        mode: w,
+                        since_s: now_s,
+                    };
+                    SafetyTick {
+                        heartbeat: Some(self.next_heartbeat(w.request())),
+                        send_neutral: mode == ArmMode::Valve,
+                        hold_position: w == ArmMode::Position,
+                        ..quiet
+                    }
+                }
+                Some(_) => SafetyTick {
+                    heartbeat: Some(self.next_heartbeat(mode.request())),
+                    motion: Some(mode),
+                    ..quiet
+                },
+            },
+        }
+    }
+
+    fn disarm(&mut self, now_s: f64) -> SafetyTick {
+        tracing::info!("disarming: nothing to do");
+        self.state = SafetyState::Disarmed;
+        self.neutral_until_s = now_s + self.config.neutral_hold_s;
+        SafetyTick {
+            heartbeat: Some(self.next_heartbeat(RequestedMode::Disarm)),
+            motion: None,
+            send_neutral: true,
+            hold_position: false,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::estimate::EstimatorConfig;
+    use firmware_bridge::messages::{
+        AuxValveMeasured, Cylinder, GatewayStatus, JointAngles, JointRates, Message, ValveState,
+    };
+    use planner::kinematics::Kinematics;
+    use planner::machine::MachineConfig;
+
+    const PERIOD_S: f64 = 0.01;
+    /// A pose inside the default machine's limits.
+    const Q: [f64; 3] = [0.3, -1.6, -0.9];
+
+    struct Rig {
+        est: Estimator,
+        safety: Safety,
+        gateway_mode: GatewayMode,
+        faults: u16,
+    }
+
+    impl Rig {
+        fn new(config: SafetyConfig) -> Self {
+            let m = MachineConfig::default_machine().unwrap();
+            let kin = Kinematics::new(&m).unwrap();
+            let limits = Joint::ALL.map(|j| kin.joint_limits(j));
+            Self {
+                est: Estimator::new(kin, m.tracks.gauge_m, EstimatorConfig::default()),
+                safety: Safety::new(config, limits),
+                gateway_mode: GatewayMode::Disarmed,
+                faults: 0,
+            }
+        }
+
+        fn feed_sensors(&mut self, now_s: f64, q: [f64; 3]) {
+            let msgs = [
+                Message::JointAngles(JointAngles {
+                    boom_rad: q[0],
+                    stick_rad: q[1],
+                    bucket_rad: q[2],
+                    swing_rad: 0.0,
+                }),
+                Message::JointRates(JointRates::default()),
+            ];
+            for m in msgs {
+                self.est.on_message(&m, now_s);
+            }
+            for c in Cylinder::ALL {
+                let m = Message::AuxValveMeasured(AuxValveMeasured {
+                    cylinder: c,
+                    flow_percent: 0.0,
+                    state: ValveState::Block,
+                    head_pressure_pa: 5e6,
+                    rod_pressure_pa: 1e6,
+                });
+                self.est.on_message(&m, now_s);
+            }
+        }
+
+        fn feed_status(&mut self, now_s: f64) {
+            let s = Message::GatewayStatus(GatewayStatus {
+                mode: self.gateway_mode,
+                faults: GatewayFaults(self.faults),
+                alive_counter: 0,
+                unexpected_frames: 0,
+                rejected_frames: 0,
+            });
+            self.est.on_message(&s, now_s);
+        }
+
+        /// One period: sensors (unless `dropout`), status, observe, tick; the simulated gateway
+        /// follows the heartbeat request like `firmware_bridge::gateway`.
+        fn period(&mut self, now_s: f64, want: Option<ArmMode>, dropout: bool) -> SafetyTick {
+            if !dropout {
+                self.feed_sensors(now_s, Q);
+            }
+            self.feed_status(now_s);
+            self.est.update();
+            self.safety.observe(now_s, &self.est);
+            let t = self.safety.tick(now_s, want);
+            if let Some(hb) = t.heartbeat {
+                self.gateway_mode = match (hb.mode, self.gateway_mode) {
+                    (RequestedMode::EStop, _) => GatewayMode::Faulted,
+                    (RequestedMode::Disarm, _) => {
+                        self.faults = 0;
+                        GatewayMode::Disarmed
+                    }
+                    (_, GatewayMode::Faulted) => GatewayMode::Faulted,
+                    (RequestedMode::ArmValve, _) => GatewayMode::ArmedValve,
+                    (RequestedMode::ArmPosition, _) => GatewayMode::ArmedPosition,
+                };
+            }
+            t
+        }
+
+        /// Runs periods from `t0` for `n` periods; returns the last tick and the end time.
+        fn run(&mut self, t0: f64, n: usize, want: Option<ArmMode>) -> (SafetyTick, f64) {
+            let mut t = t0;
+            let mut last = None;
+            for _ in 0..n {
+                last = Some(self.period(t, want, false));
+                t += PERIOD_S;
+            }
+            (last.unwrap(), t)
+        }
+
+        fn armed(config: SafetyConfig) -> (Self, f64) {
+            let mut rig = Self::new(config);
+            let (tick, t) = rig.run(0.0, 5, Some(ArmMode::Valve));
+            assert_eq!(tick.motion, Some(ArmMode::Valve), "{:?}", rig.safety.state());
+            (rig, t)
+        }
+    }
+
+    #[test]
+    fn arming_waits_for_the_gateway_to_confirm() {
+        let mut rig = Rig::new(SafetyConfig::default());
+        // The first tick requests arming but motion waits for the status.
+        let t0 = rig.period(0.0, Some(ArmMode::Valve), false);
+        assert_eq!(t0.heartbeat.unwrap().mode, RequestedMode::ArmValve);
+        assert_eq!(t0.motion, None);
+        let t1 = rig.period(0.01, Some(ArmMode::Valve), false);
+        assert_eq!(t1.motion, Some(ArmMode::Valve));
+    }
+
+    #[test]
+    fn no_arming_without_fresh_sensors() {
+        let mut rig = Rig::new(SafetyConfig::default());
+        rig.feed_status(0.0);
+        rig.est.update();
+        rig.safety.observe(0.0, &rig.est);
+        let t = rig.safety.tick(0.0, Some(ArmMode::Valve));
+        assert_eq!(t.heartbeat.unwrap().mode, RequestedMode::Disarm);
+        assert!(matches!(
+            rig.safety.health(),
+            Err(Fault::StaleSensor { .. })
+        ));
+    }
+
+    #[test]
+    fn heartbeat_counter_advances_by_one_every_period() {
+        let mut rig = Rig::new(SafetyConfig::default());
+        let mut prev = None;
+        let mut t = 0.0;
+        for _ in 0..40 {
+            let hb = rig.period(t, Some(ArmMode::Valve), false).heartbeat.unwrap();
+            if let Some(p) = prev {
+                assert_eq!(hb.alive_counter, (p + 1) % 16);
+            } else {
+                assert_eq!(hb.alive_counter, 0);
+            }
+            prev = Some(hb.alive_counter);
+            t += PERIOD_S;
+        }
+    }
+
+    #[test]
+    fn sensor_dropout_stops_motion_after_the_configured_age() {
+        let (mut rig, t) = Rig::armed(SafetyConfig::default());
+        let mut now = t;
+        let mut neutral_at = None;
+        for k in 0..10 {
+            let tick = rig.period(now, Some(ArmMode::Valve), true);
+            if tick.motion.is_none() {
+                assert!(tick.send_neutral);
+                assert_eq!(tick.heartbeat.unwrap().mode, RequestedMode::Disarm);
+                neutral_at = Some(k);
+                break;
+            }
+            now += PERIOD_S;
+        }
+        // Last data at t - PERIOD; stale once older than 0.03 s (3 periods, up to rounding): neutral
+        // within one period of the configured age.
+        let k = neutral_at.expect("neutral");
+        assert!((2..=3).contains(&k), "{k}");
+        assert!(matches!(
+            rig.safety.active_fault(),
+            Some(Fault::StaleSensor { .. })
+        ));
+    }
+
+    #[test]
+    fn motion_resumes_only_after_the_cause_clears_and_a_new_handshake() {
+        let (mut rig, t) = Rig::armed(SafetyConfig::default());
+        rig.safety.report(
+            t,
+            Fault::Decode {
+                id: 0x0CFF_5080,
+                error: DecodeError::RemoteFrame,
+            },
+        );
+        let (tick, t2) = rig.run(t, 1, Some(ArmMode::Valve));
+        assert!(tick.send_neutral && tick.motion.is_none());
+        // Not before clear_hold_s.
+        let (tick, t3) = rig.run(t2, 40, Some(ArmMode::Valve));
+        assert!(tick.motion.is_none());
+        // Then Disarmed -> Arming -> Armed.
+        let mut armed_at = None;
+        let mut now = t3;
+        for _ in 0..30 {
+            let tick = rig.period(now, Some(ArmMode::Valve), false);
+            if tick.motion.is_some() {
+                armed_at = Some(now);
+                break;
+            }
+            now += PERIOD_S;
+        }
+        let armed_at = armed_at.expect("re-armed");
+        assert!(armed_at - t >= 0.5, "{armed_at} {t}");
+    }
+
+    #[test]
+    fn joint_limit_stops_motion() {
+        let (mut rig, t) = Rig::armed(SafetyConfig::default());
+        rig.feed_sensors(t, [Q[0], -3.0, Q[2]]);
+        rig.feed_status(t);
+        rig.est.update();
+        rig.safety.observe(t, &rig.est);
+        let tick = rig.safety.tick(t, Some(ArmMode::Valve));
+        assert!(tick.send_neutral && tick.motion.is_none());
+        assert!(matches!(
+            rig.safety.active_fault(),
+            Some(Fault::JointLimit {
+                joint: Joint::Stick,
+                ..
+            })
+        ));
+    }
+
+    #[test]
+    fn estop_latches_until_reset() {
+        let (mut rig, t) = Rig::armed(SafetyConfig::default());
+        rig.safety.request_estop(t);
+        let (tick, t2) = rig.run(t, 100, Some(ArmMode::Valve));
+        assert_eq!(tick.heartbeat.unwrap().mode, RequestedMode::EStop);
+        assert!(tick.motion.is_none());
+        assert_eq!(rig.gateway_mode, GatewayMode::Faulted);
+        rig.safety.reset();
+        let (tick, _) = rig.run(t2, 100, Some(ArmMode::Valve));
+        assert_eq!(tick.motion, Some(ArmMode::Valve));
+    }
+
+    #[test]
+    fn gateway_fault_bits_stop_motion_and_are_acknowledged() {
+        let (mut rig, t) = Rig::armed(SafetyConfig::default());
+        rig.gateway_mode = GatewayMode::Faulted;
+        rig.faults = GatewayFaults::WATCHDOG_TIMEOUT;
+        rig.feed_status(t);
+        rig.feed_sensors(t, Q);
+        rig.est.update();
+        rig.safety.observe(t, &rig.est);
+        assert_eq!(
+            rig.safety.active_fault(),
+            Some(Fault::GatewayFault(GatewayFaults(
+                GatewayFaults::WATCHDOG_TIMEOUT
+            )))
+        );
+        let tick = rig.safety.tick(t, Some(ArmMode::Valve));
+        assert!(tick.send_neutral);
+        assert_eq!(tick.heartbeat.unwrap().mode, RequestedMode::Disarm);
+    }
+
+    #[test]
+    fn gateway_leaving_the_mode_is_a_fault() {
+        let (mut rig, t) = Rig::armed(SafetyConfig::default());
+        rig.gateway_mode = GatewayMode::Disarmed;
+        let tick = rig.period(t, Some(ArmMode::Valve), false);
+        assert!(tick.motion.is_none());
+        assert!(matches!(
+            rig.safety.active_fault(),
+            Some(Fault::GatewayMode { .. })
+        ));
+    }
+
+    #[test]
+    fn bus_faults_stop_motion_but_warnings_do_not() {
+        assert!(bus_fault_stops_motion(BusFault::BusOff));
+        assert!(bus_fault_stops_motion(BusFault::ErrorPassive));
+        assert!(bus_fault_stops_motion(BusFault::NoAck));
+        assert!(!bus_fault_stops_motion(BusFault::ErrorWarning));
+        let (mut rig, t) = Rig::armed(SafetyConfig::default());
+        rig.safety.report(t, Fault::Bus(BusFault::BusOff));
+        let tick = rig.period(t, Some(ArmMode::Valve), false);
+        assert!(tick.send_neutral && tick.motion.is_none());
+    }
+
+    #[test]
+    fn arm_timeout_when_the_gateway_never_confirms() {
+        let mut rig = Rig::new(SafetyConfig::default());
+        let mut t = 0.0;
+        for _ in 0..150 {
+            rig.feed_sensors(t, Q);
+            // The gateway stays disarmed (e.g. its heartbeat input is broken).
+            rig.gateway_mode = GatewayMode::Disarmed;
+            rig.feed_status(t);
+            rig.est.update();
+            rig.safety.observe(t, &rig.est);
+            rig.safety.tick(t, Some(ArmMode::Valve));
+            t += PERIOD_S;
+        }
+        assert_eq!(
+            rig.safety.last_fault(),
+            Some(Fault::ArmTimeout(ArmMode::Valve))
+        );
+    }
+
+    #[test]
+    fn listen_only_never_transmits() {
+        let mut rig = Rig::new(SafetyConfig {
+            listen_only: true,
+            ..SafetyConfig::default()
+        });
+        let (tick, t) = rig.run(0.0, 10, Some(ArmMode::Valve));
+        assert_eq!(tick, SafetyTick {
+            heartbeat: None,
+            motion: None,
+            send_neutral: false,
+            hold_position: false
+        });
+        rig.safety.report(t, Fault::EStop);
+        let tick = rig.safety.tick(t, Some(ArmMode::Valve));
+        assert!(tick.heartbeat.is_none() && !tick.send_neutral);
+        assert_eq!(rig.safety.last_fault(), Some(Fault::EStop));
+    }
+
+    #[test]
+    fn without_auto_rearm_a_reset_is_needed() {
+        let (mut rig, t) = Rig::armed(SafetyConfig {
+            auto_rearm: false,
+            ..SafetyConfig::default()
+        });
+        rig.safety.report(t, Fault::Bus(BusFault::NoAck));
+        let (tick, t2) = rig.run(t, 200, Some(ArmMode::Valve));
+        assert!(tick.motion.is_none());
+        assert!(rig.safety.needs_reset());
+        rig.safety.reset();
+        let (tick, _) = rig.run(t2, 10, Some(ArmMode::Valve));
+        assert_eq!(tick.motion, Some(ArmMode::Valve));
+    }
+
+    #[test]
+    fn position_mode_arming_holds_position() {
+        let mut rig = Rig::new(SafetyConfig::default());
+        let tick = rig.period(0.0, Some(ArmMode::Position), false);
+        assert!(tick.hold_position);
+        assert_eq!(tick.heartbeat.unwrap().mode, RequestedMode::ArmPosition);
+        let tick = rig.period(0.01, Some(ArmMode::Position), false);
+        assert_eq!(tick.motion, Some(ArmMode::Position));
+    }
+
+    #[test]
+    fn shutdown_sends_neutral_and_disarm() {
+        let (mut rig, t) = Rig::armed(SafetyConfig::default());
+        rig.safety.shutdown(t);
+        let tick = rig.period(t, Some(ArmMode::Valve), false);
+        assert!(tick.send_neutral && tick.motion.is_none());
+        assert_eq!(tick.heartbeat.unwrap().mode, RequestedMode::Disarm);
+        rig.safety.reset();
+        assert_eq!(rig.safety.state(), SafetyState::Shutdown);
+    }
+}

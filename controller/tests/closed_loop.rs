@@ -1,0 +1,201 @@
+//! Closed-loop tests against the simulator in virtual time (issue 4, "done when").
+
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use common::{Loop, PERIOD_S, default_sim, has_all_neutral, has_motion, heartbeat_mode};
+use controller::cycle::{Action, Phase, StartPose};
+use controller::node::ControllerConfig;
+use controller::safety::Fault;
+use firmware_bridge::messages::{GatewayMode, RequestedMode};
+use firmware_bridge::transport::TimestampedFrame;
+use firmware_bridge::{CanFrame, GATEWAY_ADDRESS};
+use planner::autodig::Stage;
+use planner::cleanup::CleanupPlan;
+
+/// Fraction of the heaped capacity a dig must fill.
+const FILL_FRACTION: f64 = 0.8;
+/// Cleanup: the floor left along the cleaned path lies within this of the design floor (z = 0), m.
+const FLOOR_TOLERANCE_M: f64 = 0.15;
+
+fn one_dig() -> ControllerConfig {
+    let mut c = ControllerConfig::default();
+    c.cycle.actions.truncate(1);
+    c.cycle.repeat = false;
+    c.cycle.max_digs = Some(1);
+    c
+}
+
+fn run_to_stage(l: &mut Loop, stage: Stage, max_s: f64) {
+    let reached = l.run_until(max_s, |l| l.node.stage() == Some(stage));
+    assert!(
+        reached,
+        "no {stage:?} within {max_s} s: phase {:?}, fault {:?}, last {:?}",
+        l.phase(),
+        l.node.fault(),
+        l.node.last_fault()
+    );
+}
+
+#[test]
+fn autodig_fills_the_bucket_from_a_reachable_start() {
+    let sim = default_sim();
+    let capacity_kg = sim.machine.bucket.capacity_m3 * sim.scenario.soil.density_kg_per_m3;
+    let mut l = Loop::new(sim, one_dig());
+    let reached = l.run_until(120.0, |l| l.phase() == Phase::Weigh);
+    let t = l.machine.plant().true_state();
+    eprintln!(
+        "weigh at {:.2} s: payload {:.0} kg of {:.0} kg, last fault {:?}",
+        l.time_s(),
+        t.payload_kg,
+        capacity_kg,
+        l.node.last_fault()
+    );
+    assert!(reached, "phase {:?} fault {:?}", l.phase(), l.node.last_fault());
+    assert!(
+        t.payload_kg > FILL_FRACTION * capacity_kg,
+        "payload {} kg, capacity {capacity_kg} kg",
+        t.payload_kg
+    );
+    // Finish the cycle: weigh, dump, return.
+    assert!(l.run_until(120.0, |l| l.node.finished()), "{:?}", l.phase());
+    let stats = l.node.statistics();
+    assert_eq!(stats.len(), 1);
+    let d = stats[0];
+    eprintln!("{d:?}");
+    assert!(d.time_s > 0.0 && d.energy_j > 0.0);
+    assert!(d.swept_volume_m3 > 0.0, "perception active: {}", d.perception);
+    let w = d.weight_n.unwrap();
+    let truth_n = t.payload_kg * 9.81;
+    assert!((w - truth_n).abs() < 0.25 * truth_n, "weight {w} N vs {truth_n} N");
+    // After the plan the gateway is disarmed.
+    l.run_until(1.0, |_| false);
+    assert_eq!(
+        l.machine.node().gateway().mode(),
+        GatewayMode::Disarmed
+    );
+}
+
+#[test]
+fn cleanup_leaves_the_floor_within_tolerance() {
+    let mut sim = default_sim();
+    // A thin layer left on the floor: 0.2 m from x = 4 to 5.8, bare floor beyond.
+    sim.scenario.bench.height_m = 0.2;
+    sim.scenario.bench.face_x_m = 4.0;
+    sim.scenario.bench.length_m = 1.8;
+    let mut config = ControllerConfig::default();
+    config.cycle.actions = vec![Action::Cleanup {
+        swing_rad: 0.0,
+        start: StartPose::Tip {
+            x_m: 6.3,
+            z_m: 0.8,
+            bucket_abs_rad: (-150.0_f64).to_radians(),
+        },
+        plan: CleanupPlan {
+            start_radius_m: 6.3,
+            min_radius_m: 3.2,
+        },
+    }];
+    config.cycle.repeat = false;
+    config.cycle.max_digs = Some(1);
+    let mut l = Loop::new(sim, config);
+    let done = l.run_until(240.0, |l| l.node.finished());
+    eprintln!(
+        "cleanup: {:?} stats {:?} last fault {:?}",
+        l.phase(),
+        l.node.statistics(),
+        l.node.last_fault()
+    );
+    assert!(done);
+    let d = l.node.statistics()[0];
+    let floor = d.floor_z_m.unwrap();
+    assert!(floor.abs() < FLOOR_TOLERANCE_M, "detected floor {floor}");
+    let terrain = &l.machine.plant().world.terrain;
+    let mut worst: f64 = 0.0;
+    let mut x = 4.0;
+    while x <= 6.2 {
+        for y in [-0.4, 0.0, 0.4] {
+            let h = terrain.height_at(x, y).unwrap();
+            worst = worst.max(h.abs());
+        }
+        x += 0.1;
+    }
+    eprintln!("worst floor deviation {worst:.3} m");
+    assert!(worst <= FLOOR_TOLERANCE_M, "floor off by {worst} m");
+}
+
+#[test]
+fn sensor_dropout_mid_dig_neutralises_within_one_period_of_the_age_limit() {
+    let mut l = Loop::new(default_sim(), one_dig());
+    run_to_stage(&mut l, Stage::PreDig, 120.0);
+    assert!(has_motion(&l.last_out));
+    let max_age = l.node.safety().config().sensor_max_age_s;
+    let last_data_s = l.time_s();
+    l.forward = false;
+    let mut neutral_at = None;
+    for _ in 0..20 {
+        let out = l.step();
+        assert!(!has_motion(&out));
+        if has_all_neutral(&out) {
+            neutral_at = Some(l.time_s());
+            assert_eq!(heartbeat_mode(&out), Some(RequestedMode::Disarm));
+            break;
+        }
+    }
+    let at = neutral_at.expect("neutral valves");
+    eprintln!("neutral {:.3} s after the last sensor frame", at - last_data_s);
+    assert!(at - last_data_s <= max_age + PERIOD_S + 1e-9);
+    assert!(matches!(
+        l.node.fault(),
+        Some(Fault::StaleSensor { .. })
+    ));
+    // The machine stops: the gateway is disarmed and drives nothing.
+    l.step();
+    assert_eq!(l.machine.node().valve_commands(), [0.0; 6]);
+    // Data back: the controller re-arms after the hold time and the dig goes on.
+    l.forward = true;
+    assert!(l.run_until(5.0, |l| has_motion(&l.last_out)));
+}
+
+#[test]
+fn garbage_frames_mid_dig_neutralise_in_the_same_period() {
+    let mut l = Loop::new(default_sim(), one_dig());
+    run_to_stage(&mut l, Stage::Dig, 120.0);
+    assert!(has_motion(&l.last_out));
+    // A joint-angle frame from the gateway with a short payload, then one with "not available".
+    let id = 0x0CFF_5000 | u32::from(GATEWAY_ADDRESS);
+    let garbage = [
+        CanFrame::new_extended(id, &[1, 2, 3]).unwrap(),
+        CanFrame::new_extended(id, &[0xFF, 0x7F, 0, 0, 0, 0, 0, 0]).unwrap(),
+    ];
+    for g in garbage {
+        let tf = TimestampedFrame {
+            timestamp_ns: l.clock.now_ns(),
+            frame: g,
+        };
+        let out = l.step_with(&[tf]);
+        assert!(!has_motion(&out));
+        assert!(has_all_neutral(&out));
+        assert_eq!(heartbeat_mode(&out), Some(RequestedMode::Disarm));
+        assert!(matches!(l.node.fault(), Some(Fault::Decode { .. })));
+        l.step();
+        assert_eq!(l.machine.node().valve_commands(), [0.0; 6]);
+        // Recovers and re-arms.
+        assert!(l.run_until(5.0, |l| has_motion(&l.last_out)));
+    }
+}
+
+#[test]
+fn shutdown_ends_with_neutral_valves_and_a_disarm() {
+    let mut l = Loop::new(default_sim(), one_dig());
+    run_to_stage(&mut l, Stage::PreDig, 120.0);
+    let out = l.node.shutdown(l.time_s());
+    assert!(has_all_neutral(&out));
+    assert_eq!(heartbeat_mode(&out[out.len() - 1..]), Some(RequestedMode::Disarm));
+    for f in &out {
+        l.ctl.send(*f).unwrap();
+    }
+    l.machine.advance(0.002);
+    assert_eq!(l.machine.node().gateway().mode(), GatewayMode::Disarmed);
+}
