@@ -29,6 +29,7 @@ pub mod estimate;
 pub mod node;
 pub mod run;
 pub mod safety;
+pub mod trace_tool;
 
 pub use cycle::{Action, CycleConfig, DigStats, WorkCycle};
 pub use estimate::{Estimator, MachineState};
