@@ -21,6 +21,12 @@ pub enum Command {
     /// Run on a CAN interface in real time (SocketCAN): arm, dig, dump; Ctrl-C leaves the valves
     /// neutral and the gateway disarmed.
     Run(RunArgs),
+    /// candump trace tools: decode, stats, plot, convert (csv, mcap), replay, diff (docs/trace-tools.md).
+    Trace {
+        /// The trace tool.
+        #[command(subcommand)]
+        cmd: crate::trace_tool::TraceCommand,
+    },
 }
 
 /// Arguments of `excavator-ctl run`.
