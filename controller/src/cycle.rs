@@ -37,7 +37,7 @@ use planner::cleanup::{
     HandOverReason,
 };
 use planner::kinematics::{BucketPose, JointAngles, Kinematics, wrap_angle};
-use planner::terrain::{SweptVolume, TerrainGrid};
+use planner::terrain::{SectionProfile, SweptVolume, TerrainError, TerrainGrid};
 use serde::{Deserialize, Serialize};
 
 use crate::ControllerError;
@@ -172,18 +172,29 @@ pub struct PGain {
     pub kp: f64,
     /// Largest command magnitude, `(0, 1]`.
     pub max_command: f64,
+    /// Smallest command magnitude outside the tolerance, `[0, max_command]`: an open-centre valve
+    /// barely moves a loaded cylinder at small spool openings.
+    #[serde(default)]
+    pub min_command: f64,
+    /// Rate feedback, command per rad/s (or m/s): damps the swing's large inertia. Default 0.
+    #[serde(default)]
+    pub kd: f64,
     /// The target counts as reached within this error (rad or m).
     pub tolerance: f64,
 }
 
 impl PGain {
     fn command(&self, error: f64) -> f64 {
-        let u = self.kp * error;
-        if u.is_finite() {
-            u.clamp(-self.max_command, self.max_command)
-        } else {
-            0.0
+        self.command_damped(error, 0.0)
+    }
+
+    fn command_damped(&self, error: f64, rate: f64) -> f64 {
+        let u = self.kp * error - self.kd * rate;
+        if !u.is_finite() || error.abs() <= self.tolerance {
+            return 0.0;
         }
+        let floor = self.min_command.clamp(0.0, self.max_command);
+        u.abs().clamp(floor, self.max_command).copysign(u)
     }
 }
 
@@ -201,7 +212,7 @@ pub struct ScanGrid {
     pub size_x_m: f64,
     /// Extent north, m. Default 20.
     pub size_y_m: f64,
-    /// Longest occlusion gap filled by interpolation, cells. Default 20.
+    /// Longest occlusion gap filled by interpolation, cells. Default 200 (the bench top behind the crest is in the shadow).
     pub max_gap_cells: usize,
 }
 
@@ -213,7 +224,7 @@ impl Default for ScanGrid {
             cell_m: 0.1,
             size_x_m: 24.0,
             size_y_m: 20.0,
-            max_gap_cells: 20,
+            max_gap_cells: 200,
         }
     }
 }
@@ -258,9 +269,13 @@ pub struct CycleConfig {
     /// Swing angle to return to after the last action, degrees in files. Default 0.
     #[serde(rename = "home_swing_deg", with = "planner::machine::degrees")]
     pub home_swing_rad: f64,
-    /// Boom angle to raise to before swinging with a load, degrees in files. Default 30.
+    /// Boom angle to raise to before swinging, degrees in files. Default 42 (the bucket clears the
+    /// default bench's top).
     #[serde(rename = "carry_boom_deg", with = "planner::machine::degrees")]
     pub carry_boom_rad: f64,
+    /// ... or until the bucket tip is this high (base frame), whichever comes first, m. Default 2.8
+    /// (0.8 m above the default bench's top).
+    pub carry_tip_z_m: f64,
     /// Bucket joint angle (relative to the stick) that empties the bucket, degrees in files. Default 20.
     #[serde(rename = "dump_bucket_deg", with = "planner::machine::degrees")]
     pub dump_bucket_rad: f64,
@@ -303,12 +318,12 @@ impl Default for CycleConfig {
     fn default() -> Self {
         let dig = |swing_deg: f64| Action::Dig {
             swing_rad: swing_deg.to_radians(),
-            // Tip about 0.5 m above the default bench's 45-degree face, stick at -62 degrees to the
-            // horizontal (inside Table 1's -87..-50), bucket at -90 degrees.
-            start: StartPose::Joints {
-                boom_rad: 38.0_f64.to_radians(),
-                stick_rad: (-100.0_f64).to_radians(),
-                bucket_rad: (-25.0_f64).to_radians(),
+            // The default bench's start: tip 7 m out, 0.8 m above the bench top, bucket at -90
+            // degrees; Boom-Down lowers it onto the bench.
+            start: StartPose::Tip {
+                x_m: 7.0,
+                z_m: 2.8,
+                bucket_abs_rad: (-90.0_f64).to_radians(),
             },
         };
         Self {
@@ -317,22 +332,29 @@ impl Default for CycleConfig {
             max_digs: None,
             dump_swing_rad: (-90.0_f64).to_radians(),
             home_swing_rad: 0.0,
-            carry_boom_rad: 30.0_f64.to_radians(),
+            carry_boom_rad: 42.0_f64.to_radians(),
+            carry_tip_z_m: 2.8,
             dump_bucket_rad: 20.0_f64.to_radians(),
             dump_hold_s: 1.0,
             joint: PGain {
                 kp: 2.0,
                 max_command: 0.8,
+                min_command: 0.2,
+                kd: 0.0,
                 tolerance: 0.03,
             },
             swing: PGain {
                 kp: 1.5,
                 max_command: 0.7,
+                min_command: 0.15,
+                kd: 1.0,
                 tolerance: 0.03,
             },
             track: PGain {
                 kp: 1.0,
                 max_command: 0.6,
+                min_command: 0.2,
+                kd: 0.0,
                 tolerance: 0.05,
             },
             settle_s: 0.2,
@@ -401,6 +423,7 @@ impl CycleConfig {
             ("dump_swing_deg", self.dump_swing_rad),
             ("home_swing_deg", self.home_swing_rad),
             ("carry_boom_deg", self.carry_boom_rad),
+            ("carry_tip_z_m", self.carry_tip_z_m),
             ("dump_bucket_deg", self.dump_bucket_rad),
         ] {
             if !a.is_finite() {
@@ -853,10 +876,10 @@ impl WorkCycle {
         (cmd, err.iter().all(|e| e.abs() <= g.tolerance))
     }
 
-    fn swing_toward(&self, swing_rad: f64, target_rad: f64) -> (f64, bool) {
+    fn swing_toward(&self, swing_rad: f64, rate_rad_per_s: f64, target_rad: f64) -> (f64, bool) {
         let err = wrap_angle(target_rad - swing_rad);
         (
-            self.config.swing.command(err),
+            self.config.swing.command_damped(err, rate_rad_per_s),
             err.abs() <= self.config.swing.tolerance,
         )
     }
@@ -873,11 +896,18 @@ impl WorkCycle {
             return Err(ControlFault::Timeout("move to the dig"));
         }
         let s = est.state();
-        let (implement, implement_done) = self.implement_toward(&s.joints, &target);
-        // Lift before swinging: the swing waits until the boom is up near its start angle.
-        let boom_clear = s.joints.boom_rad >= target.boom_rad - 3.0 * self.config.joint.tolerance;
+        let (mut implement, implement_done) = self.implement_toward(&s.joints, &target);
+        // Lift first: while the tip is well below the start pose only the boom moves (up), so the
+        // bucket is not dragged through the ground; the swing waits until the boom is up too.
+        let target_z = est.kinematics().forward(&target).z_m;
+        let low = s.tip.z_m < target_z - 0.2;
+        if low {
+            implement = [self.config.joint.max_command, 0.0, 0.0];
+        }
+        let boom_clear =
+            !low && s.joints.boom_rad >= target.boom_rad - 3.0 * self.config.joint.tolerance;
         let (swing, swing_done) = match action.swing_rad() {
-            Some(t) if boom_clear => self.swing_toward(s.swing_rad, t),
+            Some(t) if boom_clear => self.swing_toward(s.swing_rad, s.rates_rad_per_s[3], t),
             Some(_) => (0.0, false),
             None => (0.0, true),
         };
@@ -903,15 +933,16 @@ impl WorkCycle {
         if self.config.perception
             && let Some(terrain) = &self.terrain
         {
-            match terrain
-                .section(
-                    &s.pose,
-                    s.swing_rad,
-                    self.config.section_r_min_m,
-                    self.config.section_r_max_m,
-                    self.config.section_step_m,
-                )
-                .and_then(|p| SweptVolume::new(p, self.bucket_width_m))
+            match known_section(
+                terrain,
+                &s.pose,
+                s.swing_rad,
+                s.tip.x_m,
+                self.config.section_r_min_m,
+                self.config.section_r_max_m,
+                self.config.section_step_m,
+            )
+            .and_then(|p| SweptVolume::new(p, self.bucket_width_m))
             {
                 Ok(sv) => self.swept = Some(sv),
                 Err(e) => tracing::warn!(error = %e, "no pre-dig section: digging without perception"),
@@ -1128,18 +1159,21 @@ impl WorkCycle {
         let s = est.state();
         let carry = self.config.carry_boom_rad;
         let boom_err = carry - s.joints.boom_rad;
-        let boom = if boom_err > 0.0 {
-            self.config.joint.command(boom_err)
+        let boom_clear = s.joints.boom_rad >= carry - 3.0 * self.config.joint.tolerance
+            || s.tip.z_m >= self.config.carry_tip_z_m;
+        // Full lift: at part command an open-centre valve bypasses most of the flow and the loaded
+        // boom stalls.
+        let boom = if boom_err > 0.0 && !boom_clear {
+            self.config.joint.max_command
         } else {
             0.0
         };
-        let boom_clear = s.joints.boom_rad >= carry - 3.0 * self.config.joint.tolerance;
         let (swing, swing_done) = if boom_clear {
-            self.swing_toward(s.swing_rad, target_rad)
+            self.swing_toward(s.swing_rad, s.rates_rad_per_s[3], target_rad)
         } else {
             (0.0, false)
         };
-        let rate_small = s.rates_rad_per_s[3].abs() < 0.05;
+        let rate_small = s.rates_rad_per_s[3].abs() < 0.1;
         if self.settled(swing_done && rate_small, now_s) {
             if self.phase == Phase::Return {
                 tracing::info!(digs = self.digs_done, "work cycle finished");
@@ -1206,6 +1240,56 @@ impl WorkCycle {
         };
         Ok(CycleCommand::Valves([0.0, 0.0, 0.0, 0.0, u, u]))
     }
+}
+
+/// The terrain section along the digging plane from `r_min_m` to `r_max_m`, cut to the run of known
+/// cells that contains the tip's radius `tip_r_m` (or the longest known run): the range sensor does
+/// not see the ground right under the boom, and the map has no cells beyond its scan.
+fn known_section(
+    terrain: &TerrainGrid,
+    pose: &planner::kinematics::MachinePose,
+    swing_rad: f64,
+    tip_r_m: f64,
+    r_min_m: f64,
+    r_max_m: f64,
+    step_m: f64,
+) -> Result<SectionProfile, TerrainError> {
+    let n = ((r_max_m - r_min_m) / step_m).floor().clamp(1.0, 10_000.0) as usize + 1;
+    let heights: Vec<Option<f64>> = (0..n)
+        .map(|k| {
+            let r = r_min_m + k as f64 * step_m;
+            let [x, y, _] = pose.world_from_base(swing_rad, r, 0.0);
+            terrain.height_at(x, y).ok().filter(|h| h.is_finite())
+        })
+        .collect();
+    // Runs of known samples: (start, end exclusive).
+    let mut runs = Vec::new();
+    let mut start = None;
+    for (k, h) in heights.iter().enumerate() {
+        match (h, start) {
+            (Some(_), None) => start = Some(k),
+            (None, Some(s0)) => {
+                runs.push((s0, k));
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    if let Some(s0) = start {
+        runs.push((s0, n));
+    }
+    let tip_k = ((tip_r_m - r_min_m) / step_m).round();
+    let containing = runs
+        .iter()
+        .copied()
+        .find(|&(a, b)| tip_k >= a as f64 && tip_k < b as f64);
+    let (a, b) = containing
+        .or_else(|| runs.iter().copied().max_by_key(|&(a, b)| b - a))
+        .ok_or(TerrainError::InvalidArgument {
+            what: "no known terrain along the digging plane",
+        })?;
+    let values = heights[a..b].iter().map(|h| h.unwrap_or(0.0)).collect();
+    SectionProfile::new(r_min_m + a as f64 * step_m, step_m, values)
 }
 
 #[cfg(test)]
@@ -1284,7 +1368,7 @@ mod tests {
                 let q = start.resolve(&k).expect("reachable");
                 k.check_limits(&q).expect("limits");
                 let stick_abs = q.stick_abs_rad().to_degrees();
-                assert!((-100.0..-40.0).contains(&stick_abs), "{stick_abs}");
+                assert!((-100.0..-20.0).contains(&stick_abs), "{stick_abs}");
             }
         }
     }
@@ -1340,9 +1424,9 @@ mod tests {
         assert!(!done);
         // Boom up = extend; stick angle down = extend; bucket angle up (open) = retract.
         assert!(cmd[0] > 0.0 && cmd[1] > 0.0 && cmd[2] < 0.0, "{cmd:?}");
-        let (s, _) = c.swing_toward(0.0, -1.0);
+        let (s, _) = c.swing_toward(0.0, 0.0, -1.0);
         assert!(s < 0.0 && s >= -0.7);
-        let (s, _) = c.swing_toward(3.0, -3.0);
+        let (s, _) = c.swing_toward(3.0, 0.0, -3.0);
         assert!(s > 0.0, "wraps the short way");
     }
 

@@ -147,7 +147,13 @@ impl Default for ControllerConfig {
             estimator: EstimatorConfig::default(),
             cycle: CycleConfig::default(),
             autodig: AutodigConfig::default(),
-            cleanup: CleanupConfig::default(),
+            // The gateway's position loop lags a lowering setpoint by several centimetres; a slower
+            // probe and a larger lag threshold keep that lag from passing for floor contact.
+            cleanup: CleanupConfig {
+                descent_speed_m_per_s: 0.05,
+                probe_lag_m: 0.15,
+                ..CleanupConfig::default()
+            },
             track_every_steps: 5,
             autostart: true,
         }
@@ -234,7 +240,14 @@ impl ControllerNode {
         autodig.perception.bucket_capacity_m3 = machine.bucket.capacity_m3;
         let mut cleanup = config.cleanup;
         cleanup.relief_pressure_pa = relief;
-        let limits = Joint::ALL.map(|j| kin.joint_limits(j));
+        // The safety limit is the cylinder's stroke-limited range: Autodig legitimately ends stages
+        // at the stroke ends (cylinder limits), which lie just outside the machine file's software
+        // limits; a reading beyond the stroke is a resolver or calibration fault.
+        let limits = Joint::ALL.map(|j| {
+            let (slo, shi) = kin.joint_limits(j);
+            let (rlo, rhi) = kin.stroke_limited_range(j);
+            (slo.min(rlo), shi.max(rhi))
+        });
         let cycle = {
             let mut c = WorkCycle::new(
                 config.cycle,

@@ -24,7 +24,9 @@
 //!   than [`SafetyConfig::status_max_age_s`], while arming or armed.
 //! - A decode error of a frame of the protocol, any frame from the gateway's address that the gateway
 //!   does not send, or a frame of the protocol from another address (the node reports these).
-//! - A joint beyond its configured limit by more than [`SafetyConfig::joint_limit_margin_rad`].
+//! - A joint beyond its limit by more than [`SafetyConfig::joint_limit_margin_rad`]. The node passes
+//!   the wider of the machine file's software limits and the cylinder's stroke-limited range, because
+//!   Autodig ends stages at the stroke ends; a reading beyond the stroke is a sensor fault.
 //! - An e-stop request ([`Safety::request_estop`]): latched, the heartbeat requests `EStop` until
 //!   [`Safety::reset`].
 //! - A gateway that reports a fault or leaves the armed mode on its own; an arm request the gateway does
