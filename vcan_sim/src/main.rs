@@ -62,10 +62,14 @@ enum Command {
         /// Simulated seconds per scenario.
         #[arg(long, default_value_t = 60.0)]
         seconds: f64,
+        /// Run only the cases whose name contains this text (e.g. `idle`, `digging`, `node`).
+        #[arg(long)]
+        case: Option<String>,
     },
 }
 
-fn bench(config: &SimConfig, seconds: f64) -> Result<()> {
+fn bench(config: &SimConfig, seconds: f64, case: Option<&str>) -> Result<()> {
+    let selected = |name: &str| case.is_none_or(|c| name.contains(c));
     let steps = (seconds / PHYSICS_DT_S).round() as u64;
     let scenarios: [(&str, [f64; 6]); 3] = [
         ("idle (valves neutral)", [0.0; 6]),
@@ -77,6 +81,9 @@ fn bench(config: &SimConfig, seconds: f64) -> Result<()> {
     ];
     println!("excavator-sim bench: {seconds} simulated s per case, 1 kHz physics, one core");
     for (name, commands) in scenarios {
+        if !selected(name) {
+            continue;
+        }
         let mut plant = config.build()?;
         let start = Instant::now();
         for k in 0..steps {
@@ -93,6 +100,9 @@ fn bench(config: &SimConfig, seconds: f64) -> Result<()> {
         );
     }
     // The node adds the gateway and the CAN frame encoding.
+    if !selected("node") {
+        return Ok(());
+    }
     let mut node = MachineNode::new(config.build()?);
     let mut out = Vec::new();
     let start = Instant::now();
@@ -133,8 +143,8 @@ fn real_main() -> Result<()> {
         &cli.effects,
     )
     .context("loading the simulation")?;
-    if let Some(Command::Bench { seconds }) = cli.command {
-        return bench(&config, seconds);
+    if let Some(Command::Bench { seconds, case }) = cli.command {
+        return bench(&config, seconds, case.as_deref());
     }
     let Some(iface) = cli.iface else {
         bail!("--iface is required (or use --list-effects, or the `bench` subcommand)");
