@@ -14,10 +14,13 @@
 //!   and Powell's method (Eqs. 22-24), and the thesis's cross-validation (4.3.4-4.3.5).
 //! - [`autodig`]: the Autodig state machine and its pressure-to-command maps (thesis 3.1-3.2, Figs. 9-11).
 //! - [`cleanup`]: floor-cleanup waypoints and the hand-over to Autodig (thesis 3.3, Fig. 13).
+//! - [`dig_model`]: the combined forward dig model (thesis 4.1, Fig. 14): actuator model + soil model +
+//!   the shared Autodig step, predicting a dig's trajectory, time, energy and swept volume.
 
 pub mod actuator;
 pub mod autodig;
 pub mod cleanup;
+pub mod dig_model;
 pub mod estimate;
 pub mod kinematics;
 pub mod machine;

@@ -1,0 +1,1244 @@
+//! The combined forward dig model (thesis 4.1, Fig. 14): what happens if Autodig starts from a
+//! candidate bucket pose over a terrain section.
+//!
+//! Three interlinked predictions are stepped at the control period (10 ms, 100 Hz):
+//!
+//! 1. **Actuators** ([`ActuatorDynamics`], by default the recurrent networks of
+//!    [`crate::actuator::ActuatorModel`], Eq. 4, Figs. 17-18): cylinder velocities from the commands and
+//!    cylinder forces, integrated to cylinder lengths (trapezoid), turned into joint angles through
+//!    tabulated stroke tables (Eq. A5, A8-A14) and the bucket pose by forward kinematics.
+//! 2. **Soil** ([`SoilModel`]): the bucket pose intersected with the pre-dig section gives
+//!    `Gamma = (d, alpha, rho, V_s)` ([`crate::soil::dig_geometry`], `V_s` from
+//!    [`crate::terrain::SweptVolume`]); the analytical model (modified FEE, Eqs. 14-18) or the empirical
+//!    one (Eq. 21) gives the soil force on the bucket, multiplied by the force factor of Table 2.
+//! 3. **Autodig** ([`crate::autodig::Autodig`], the very same step the controller runs, with the
+//!    perception enhancements of 3.2: swept volume and bucket-above-terrain): commands from joint
+//!    angles, cylinder extensions and head pressures.
+//!
+//! The link between them is the static analysis of the Appendix: the soil force and gravity give the
+//! joint torques `tau = G - J^T f` (Eq. A2, A4) and the cylinder forces `F = tau / r` (Eqs. A7, A19).
+//!
+//! # Pressures from forces (the inverse of Eq. A20)
+//!
+//! `F = p_head A_head - p_rod A_rod` has one equation and two unknowns. The model uses the static split
+//! the simulator settles to at rest and the machine shows under load: the loaded side carries the force
+//! and the other side sits at the return-line pressure `p_tank` (`hydraulics.tank_pressure_pa`):
+//! `F >= 0`: `p_head = (F + p_tank A_rod) / A_head`, `p_rod = p_tank`; `F < 0`: `p_head = p_tank`,
+//! `p_rod = (-F + p_tank A_head) / A_rod`. Both are clamped to the port-relief pressure (1.08 x main
+//! relief), which a real cylinder cannot exceed. Autodig's maps read head pressures (docs/autodig.md),
+//! so the meter-out back pressure of a moving cylinder, which this split leaves out, is the main
+//! difference from measured head pressures.
+//!
+//! # Payload
+//!
+//! Eq. 19's moment `M_y = -F_g x_c` is the moment about the tip of the swept material's weight. The
+//! analytical model carries that weight (force and moment) through the payload term of Eq. A4 instead,
+//! with the payload `min(V_s, capacity) x gamma`, as the simulator does; the empirical model's fitted
+//! `M_y` already contains it, so it adds no payload.
+//!
+//! # Outputs and guarantees
+//!
+//! [`DigModel::predict_into`] fills a caller-provided [`DigTrace`] (preallocated, never grown in the
+//! loop) and returns a [`DigSummary`]: time, energy `sum_i |F_i dL_i|` (the controller's dig statistic,
+//! thesis 6.1), swept volume, floor-penetration flag and end reason. [`DigModel::evaluate`] skips the
+//! trace; [`DigModel::evaluate_many`] evaluates candidate starts in parallel (rayon). A prediction is
+//! deterministic; the model is immutable and `Send + Sync`. The only allocations are per dig (a copy
+//! of the section for the swept-volume integrator and of Autodig's maps), none per step. Bad input gives
+//! a [`DigModelError`], never NaN or a panic.
+
+use crate::actuator::{ActuatorError, ActuatorModel, ActuatorState};
+use crate::autodig::{
+    Autodig, AutodigConfig, AutodigError, AutodigInputs, AutodigMaps, EndReason, MapsError, Stage,
+};
+use crate::kinematics::MachinePose;
+use crate::kinematics::{BucketPose, Joint, JointAngles, Kinematics, KinematicsError, TipForce};
+use crate::machine::{ConfigError, MachineConfig};
+use crate::soil::{
+    Contact, EmpiricalSoilModel, SoilError, SoilProperties, dig_geometry, fee_tip_force,
+};
+use crate::terrain::{SectionProfile, SweptVolume, TerrainError, TerrainGrid};
+use nalgebra::Vector3;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// The shipped dig-model settings (`config/dig_model.toml`): soil Psi, force factor, limits.
+pub const DEFAULT_DIG_MODEL_TOML: &str = include_str!("../../config/dig_model.toml");
+/// The shipped actuator networks (`config/nominal_actuator.json`), trained on simulator traces by
+/// `excavator-ctl model train`.
+pub const NOMINAL_ACTUATOR_JSON: &str = include_str!("../../config/nominal_actuator.json");
+/// Port-relief pressure as a multiple of the main relief (the simulator's overload reliefs).
+const PORT_RELIEF_FACTOR: f64 = 1.08;
+/// Points per stroke of the angle/moment-arm tables (0.6 mm spacing on a 1.2 m stroke).
+const TABLE_POINTS: usize = 2001;
+/// Longest dig the model will run, s (guards the trace buffer size).
+pub const MAX_DIG_TIME_S: f64 = 600.0;
+
+/// Dig model errors.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DigModelError {
+    /// A configuration value is invalid.
+    #[error("dig model config {field}: {reason}")]
+    Config {
+        /// The field.
+        field: &'static str,
+        /// What is wrong.
+        reason: String,
+    },
+    /// The machine file.
+    #[error(transparent)]
+    Machine(#[from] ConfigError),
+    /// The Autodig maps.
+    #[error(transparent)]
+    Maps(#[from] MapsError),
+    /// A NaN or infinite input.
+    #[error("non-finite input: {what}")]
+    NonFinite {
+        /// Which input.
+        what: &'static str,
+    },
+    /// The start pose cannot be reached (inverse kinematics, joint limits or cylinder strokes).
+    #[error("start pose unreachable: {0}")]
+    Unreachable(KinematicsError),
+    /// Kinematics failed during the dig (e.g. a singular moment arm).
+    #[error("kinematics: {0}")]
+    Kinematics(KinematicsError),
+    /// The terrain section is unusable (empty, degenerate, unknown cells in the grid).
+    #[error("terrain: {0}")]
+    Terrain(#[from] TerrainError),
+    /// The bucket tip left the terrain section (a gap in the section or too short a section).
+    #[error(
+        "bucket tip at r = {r_m:.3} m outside the terrain section [{r_start_m:.3}, {r_end_m:.3}] m"
+    )]
+    OutsideTerrain {
+        /// Tip distance from the swing axis, m.
+        r_m: f64,
+        /// Section start, m.
+        r_start_m: f64,
+        /// Section end, m.
+        r_end_m: f64,
+    },
+    /// The soil model.
+    #[error("soil model: {0}")]
+    Soil(#[from] SoilError),
+    /// The actuator model.
+    #[error("actuator model: {0}")]
+    Actuator(#[from] ActuatorError),
+    /// Autodig rejected an input or its configuration.
+    #[error("autodig: {0}")]
+    Autodig(#[from] AutodigError),
+}
+
+/// Result alias for this module.
+pub type Result<T> = std::result::Result<T, DigModelError>;
+
+/// Actuator dynamics of the dig model: cylinder velocities at the next step from this step's commands
+/// and cylinder forces (Fig. 14's "actuator model"). The recurrent networks implement it; the
+/// model-discrepancy workflow wraps it with named physical effects (dead band, delay, lag, ...).
+pub trait ActuatorDynamics: Send + Sync {
+    /// Per-dig state (delay lines, previous velocities): created per dig, stepped in place.
+    type State: Clone + Send;
+
+    /// The step period, s (the dig model steps Autodig at this period too).
+    fn dt_s(&self) -> f64;
+
+    /// A state for a machine at rest under neutral commands.
+    ///
+    /// # Errors
+    /// Implementation-defined; [`DigModelError::Actuator`] for the networks.
+    fn initial_state(&self) -> Result<Self::State>;
+
+    /// Advances one period with commands `[boom, stick, bucket]` in `[-1, 1]` and cylinder forces (N,
+    /// Eq. A20 sign), returning the cylinder velocities at the next step, m/s. Must not allocate.
+    ///
+    /// # Errors
+    /// Implementation-defined; non-finite inputs must be errors, not NaN outputs.
+    fn step(
+        &self,
+        state: &mut Self::State,
+        command: [f64; 3],
+        force_n: [f64; 3],
+    ) -> Result<[f64; 3]>;
+}
+
+impl ActuatorDynamics for ActuatorModel {
+    type State = ActuatorState;
+
+    fn dt_s(&self) -> f64 {
+        ActuatorModel::dt_s(self)
+    }
+
+    fn initial_state(&self) -> Result<ActuatorState> {
+        Ok(ActuatorModel::initial_state(self, [0.0; 3], [0.0; 3])?)
+    }
+
+    #[inline]
+    fn step(
+        &self,
+        state: &mut ActuatorState,
+        command: [f64; 3],
+        force_n: [f64; 3],
+    ) -> Result<[f64; 3]> {
+        Ok(ActuatorModel::step(self, state, command, force_n)?) // Eq. 4
+    }
+}
+
+/// The soil-tool model (thesis 4.3.3).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SoilModel {
+    /// The modified FEE with soil properties `Psi` (Eqs. 14-18).
+    Analytical(SoilProperties),
+    /// The empirical model, linear in `Gamma` (Eq. 21).
+    Empirical(EmpiricalSoilModel),
+}
+
+impl From<crate::estimate::FittedSoilModel> for SoilModel {
+    fn from(m: crate::estimate::FittedSoilModel) -> Self {
+        match m {
+            crate::estimate::FittedSoilModel::Empirical(e) => SoilModel::Empirical(e),
+            crate::estimate::FittedSoilModel::Analytical { properties, .. } => {
+                SoilModel::Analytical(properties)
+            }
+        }
+    }
+}
+
+/// Dig-model settings (`config/dig_model.toml`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct DigModelConfig {
+    /// The soil model.
+    pub soil: SoilModel,
+    /// Multiplies the soil force (thesis Table 2: 1, 2, 3). Must be finite and >= 0.
+    pub force_factor: f64,
+    /// A dig that has not ended by then ends with [`DigEnd::TimeLimit`], s.
+    pub max_time_s: f64,
+    /// Floor penetration: tip below the floor elevation minus this, m.
+    pub floor_tolerance_m: f64,
+    /// Autodig settings (relief pressures and bucket capacity are taken from the machine).
+    pub autodig: AutodigConfig,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SoilFile {
+    density_kg_per_m3: f64,
+    failure_angle_deg: f64,
+    friction_angle_deg: f64,
+    tool_friction_angle_deg: f64,
+    cohesion_pa: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ConfigFile {
+    force_factor: f64,
+    max_time_s: f64,
+    floor_tolerance_m: f64,
+    soil: SoilFile,
+    #[serde(default)]
+    autodig: AutodigConfig,
+}
+
+impl DigModelConfig {
+    /// Parses and validates the TOML of `config/dig_model.toml`.
+    ///
+    /// # Errors
+    /// [`DigModelError::Config`] naming the problem.
+    pub fn from_toml_str(text: &str) -> Result<Self> {
+        let f: ConfigFile = toml::from_str(text).map_err(|e| DigModelError::Config {
+            field: "dig_model.toml",
+            reason: e.to_string(),
+        })?;
+        let s = f.soil;
+        let cfg = Self {
+            soil: SoilModel::Analytical(SoilProperties {
+                density_kg_per_m3: s.density_kg_per_m3,
+                failure_angle_rad: s.failure_angle_deg.to_radians(),
+                friction_angle_rad: s.friction_angle_deg.to_radians(),
+                tool_friction_angle_rad: s.tool_friction_angle_deg.to_radians(),
+                cohesion_pa: s.cohesion_pa,
+            }),
+            force_factor: f.force_factor,
+            max_time_s: f.max_time_s,
+            floor_tolerance_m: f.floor_tolerance_m,
+            autodig: f.autodig,
+        };
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// The shipped settings ([`DEFAULT_DIG_MODEL_TOML`]).
+    ///
+    /// # Errors
+    /// As [`Self::from_toml_str`] (the shipped file is tested).
+    pub fn nominal() -> Result<Self> {
+        Self::from_toml_str(DEFAULT_DIG_MODEL_TOML)
+    }
+
+    /// Checks ranges and finiteness.
+    ///
+    /// # Errors
+    /// [`DigModelError::Config`] naming the field.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |field, reason: &str| {
+            Err(DigModelError::Config {
+                field,
+                reason: reason.to_owned(),
+            })
+        };
+        if !(self.force_factor.is_finite() && self.force_factor >= 0.0) {
+            return bad("force_factor", "must be finite and >= 0");
+        }
+        if !(self.max_time_s.is_finite()
+            && self.max_time_s > 0.0
+            && self.max_time_s <= MAX_DIG_TIME_S)
+        {
+            return bad("max_time_s", "must be in (0, 600] s");
+        }
+        if !(self.floor_tolerance_m.is_finite() && self.floor_tolerance_m >= 0.0) {
+            return bad("floor_tolerance_m", "must be finite and >= 0");
+        }
+        match &self.soil {
+            SoilModel::Analytical(p) => p.validate().map_err(|e| DigModelError::Config {
+                field: "soil",
+                reason: e.to_string(),
+            })?,
+            SoilModel::Empirical(m) => {
+                if m.fx
+                    .iter()
+                    .chain(&m.fz)
+                    .chain(&m.my)
+                    .any(|c| !c.is_finite())
+                {
+                    return bad("soil", "empirical coefficients must be finite");
+                }
+            }
+        }
+        self.autodig.validate().map_err(|e| DigModelError::Config {
+            field: "autodig",
+            reason: e.to_string(),
+        })
+    }
+}
+
+/// The terrain a dig is predicted over: the pre-dig section along the digging plane and the floor.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DigSite {
+    profile: SectionProfile,
+    floor_z_m: f64,
+}
+
+impl DigSite {
+    /// A site from a section profile (base-frame `x` = distance from the swing axis) and the floor
+    /// elevation in the base frame, m.
+    ///
+    /// # Errors
+    /// [`DigModelError::NonFinite`] for a non-finite floor.
+    pub fn new(profile: SectionProfile, floor_z_m: f64) -> Result<Self> {
+        if !floor_z_m.is_finite() {
+            return Err(DigModelError::NonFinite {
+                what: "floor elevation",
+            });
+        }
+        Ok(Self { profile, floor_z_m })
+    }
+
+    /// The section of a terrain map along the digging plane at `swing_rad` from `r_start_m` to
+    /// `r_end_m` every `step_m` (thesis 3.2's pre-dig section).
+    ///
+    /// # Errors
+    /// [`DigModelError::Terrain`] for unknown cells (gaps), a range outside the map or a bad range;
+    /// [`DigModelError::NonFinite`].
+    pub fn from_grid(
+        grid: &TerrainGrid,
+        pose: &MachinePose,
+        swing_rad: f64,
+        r_start_m: f64,
+        r_end_m: f64,
+        step_m: f64,
+        floor_z_m: f64,
+    ) -> Result<Self> {
+        Self::new(
+            grid.section(pose, swing_rad, r_start_m, r_end_m, step_m)?,
+            floor_z_m,
+        )
+    }
+
+    /// The pre-dig section.
+    #[must_use]
+    pub fn profile(&self) -> &SectionProfile {
+        &self.profile
+    }
+
+    /// Floor elevation, m (base frame).
+    #[must_use]
+    pub fn floor_z_m(&self) -> f64 {
+        self.floor_z_m
+    }
+}
+
+/// Where a dig starts (Autodig starts in Pre-Dig there: the bucket on the terrain, thesis 4.1).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub enum DigStart {
+    /// A bucket pose (tip and `bucket_abs`); joint angles by inverse kinematics (stick under the boom).
+    Pose(BucketPose),
+    /// Joint angles (e.g. the measured start of a recorded dig).
+    Joints(JointAngles),
+}
+
+/// Why a predicted dig ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum DigEnd {
+    /// Autodig reached Done; the reason of the last stage that ended.
+    Autodig(EndReason),
+    /// The time limit ([`DigModelConfig::max_time_s`]) was reached first.
+    TimeLimit,
+}
+
+/// One step of a predicted dig.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct DigSample {
+    /// Time since the start, s.
+    pub time_s: f64,
+    /// Autodig stage the command belongs to.
+    pub stage: Stage,
+    /// Tip `x` (distance from the swing axis), m.
+    pub tip_x_m: f64,
+    /// Tip `z`, m.
+    pub tip_z_m: f64,
+    /// Bucket angle to the horizontal, rad.
+    pub bucket_abs_rad: f64,
+    /// Joint angles `[boom, stick, bucket]`, rad.
+    pub joint_rad: [f64; 3],
+    /// Autodig commands `[boom, stick, bucket]`, fractions of maximum cylinder velocity.
+    pub command: [f64; 3],
+    /// Head pressures, Pa.
+    pub head_pa: [f64; 3],
+    /// Rod pressures, Pa.
+    pub rod_pa: [f64; 3],
+    /// Cylinder forces, N (Eq. A20 sign).
+    pub force_n: [f64; 3],
+    /// Cylinder velocities, m/s.
+    pub velocity_m_per_s: [f64; 3],
+    /// Soil force on the bucket (base frame), after the force factor.
+    pub soil_force: TipForce,
+    /// Swept volume so far, m^3.
+    pub swept_volume_m3: f64,
+}
+
+/// A preallocated trajectory buffer: [`DigModel::predict_into`] records into it without growing it.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct DigTrace {
+    samples: Vec<DigSample>,
+    truncated: bool,
+}
+
+impl DigTrace {
+    /// A buffer for `max_steps` samples (a dig of `max_time_s` needs `max_time_s / dt + 1`).
+    #[must_use]
+    pub fn with_capacity(max_steps: usize) -> Self {
+        Self {
+            samples: Vec::with_capacity(max_steps),
+            truncated: false,
+        }
+    }
+
+    /// The recorded samples.
+    #[must_use]
+    pub fn samples(&self) -> &[DigSample] {
+        &self.samples
+    }
+
+    /// Whether the dig had more steps than the buffer holds (the rest was not recorded).
+    #[must_use]
+    pub fn truncated(&self) -> bool {
+        self.truncated
+    }
+
+    fn clear(&mut self) {
+        self.samples.clear();
+        self.truncated = false;
+    }
+
+    #[inline]
+    fn push(&mut self, s: DigSample) {
+        if self.samples.len() < self.samples.capacity() {
+            self.samples.push(s);
+        } else {
+            self.truncated = true;
+        }
+    }
+}
+
+/// The statistics of a predicted dig (the dig planner's inputs, thesis 5.1.1.2).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct DigSummary {
+    /// Dig time from the start to Autodig's Done (or the time limit), s.
+    pub time_s: f64,
+    /// Energy `sum_i |F_i dL_i|` over the cylinders, J.
+    pub energy_j: f64,
+    /// Volume swept over the cutting edge (3.2), m^3.
+    pub swept_volume_m3: f64,
+    /// The tip went below the floor elevation minus the tolerance.
+    pub floor_penetration: bool,
+    /// Lowest tip elevation, m.
+    pub min_tip_z_m: f64,
+    /// Why the dig ended.
+    pub end: DigEnd,
+    /// Model steps run.
+    pub steps: usize,
+    /// Largest soil force magnitude `|(F_x, F_z)|`, N.
+    pub peak_soil_force_n: f64,
+}
+
+impl DigSummary {
+    /// Energy, kJ.
+    #[must_use]
+    pub fn energy_kj(&self) -> f64 {
+        self.energy_j * 1e-3
+    }
+}
+
+/// A predicted dig: statistics and the trajectory (tip, commands, pressures, forces per step).
+#[derive(Debug, Clone, PartialEq)]
+pub struct DigPrediction {
+    /// The statistics.
+    pub summary: DigSummary,
+    /// The trajectory.
+    pub samples: Vec<DigSample>,
+}
+
+/// Joint angle and moment arm as functions of cylinder length, tabulated over the stroke.
+#[derive(Debug, Clone, PartialEq)]
+struct StrokeTable {
+    lo_m: f64,
+    hi_m: f64,
+    step_m: f64,
+    angle_rad: Vec<f64>,
+    arm_m: Vec<f64>,
+}
+
+impl StrokeTable {
+    fn new(kin: &Kinematics, joint: Joint) -> Result<Self> {
+        let (lo, hi) = kin.stroke(joint);
+        let step = (hi - lo) / (TABLE_POINTS - 1) as f64;
+        let mut angle_rad = Vec::with_capacity(TABLE_POINTS);
+        let mut arm_m = Vec::with_capacity(TABLE_POINTS);
+        for k in 0..TABLE_POINTS {
+            let a = kin
+                .joint_angle(joint, lo + k as f64 * step)
+                .map_err(DigModelError::Kinematics)?; // Eq. A5, A8-A13
+            let r = kin
+                .moment_arm(joint, a)
+                .map_err(DigModelError::Kinematics)?; // Eqs. A6-A7, A15-A19
+            if r.abs() < 1e-6 {
+                return Err(DigModelError::Kinematics(KinematicsError::Singular {
+                    what: "zero cylinder moment arm within the stroke",
+                }));
+            }
+            angle_rad.push(a);
+            arm_m.push(r);
+        }
+        Ok(Self {
+            lo_m: lo,
+            hi_m: hi,
+            step_m: step,
+            angle_rad,
+            arm_m,
+        })
+    }
+
+    /// `(angle, moment arm)` at length `l` (clamped to the stroke), linear between table points.
+    #[inline]
+    fn lookup(&self, l: f64) -> (f64, f64) {
+        let f = ((l - self.lo_m) / self.step_m).clamp(0.0, (TABLE_POINTS - 1) as f64);
+        let k = (f as usize).min(TABLE_POINTS - 2);
+        let t = f - k as f64;
+        let lerp = |v: &[f64]| v[k] + t * (v[k + 1] - v[k]);
+        (lerp(&self.angle_rad), lerp(&self.arm_m))
+    }
+}
+
+/// The combined dig model (Fig. 14): actuator dynamics `A` + soil model + Autodig.
+#[derive(Debug, Clone)]
+pub struct DigModel<A: ActuatorDynamics = ActuatorModel> {
+    kin: Kinematics,
+    tables: [StrokeTable; 3],
+    actuator: A,
+    config: DigModelConfig,
+    maps: AutodigMaps,
+    bucket_width_m: f64,
+    capacity_m3: f64,
+    head_area_m2: [f64; 3],
+    rod_area_m2: [f64; 3],
+    tank_pa: f64,
+    port_relief_pa: f64,
+}
+
+impl DigModel<ActuatorModel> {
+    /// The nominal model the project ships: the default machine, the actuator networks of
+    /// `config/nominal_actuator.json`, the soil and limits of `config/dig_model.toml` and the built-in
+    /// Autodig maps (all compiled in).
+    ///
+    /// # Errors
+    /// Only if a shipped file is broken (tested).
+    pub fn nominal() -> Result<Self> {
+        Self::new(
+            &MachineConfig::default_machine()?,
+            ActuatorModel::from_json(NOMINAL_ACTUATOR_JSON)?,
+            AutodigMaps::builtin()?,
+            DigModelConfig::nominal()?,
+        )
+    }
+}
+
+impl<A: ActuatorDynamics> DigModel<A> {
+    /// A model for `machine` with the given actuator dynamics, Autodig maps and settings. Autodig's
+    /// relief pressures and bucket capacity are set from the machine, as the controller does.
+    ///
+    /// # Errors
+    /// [`DigModelError::Kinematics`] for an inconsistent machine, [`DigModelError::Config`] for bad
+    /// settings or an actuator period that is not positive.
+    pub fn new(
+        machine: &MachineConfig,
+        actuator: A,
+        maps: AutodigMaps,
+        mut config: DigModelConfig,
+    ) -> Result<Self> {
+        let kin = Kinematics::new(machine).map_err(DigModelError::Kinematics)?;
+        let relief = machine.hydraulics.relief_pressure_pa;
+        config.autodig.relief_pressure_pa = [relief; 3];
+        config.autodig.perception.bucket_capacity_m3 = machine.bucket.capacity_m3;
+        config.validate()?;
+        let dt = actuator.dt_s();
+        if !(dt.is_finite() && dt > 0.0 && dt <= 0.1) {
+            return Err(DigModelError::Config {
+                field: "actuator.dt_s",
+                reason: format!("{dt} s; must be in (0, 0.1]"),
+            });
+        }
+        let tables = [
+            StrokeTable::new(&kin, Joint::Boom)?,
+            StrokeTable::new(&kin, Joint::Stick)?,
+            StrokeTable::new(&kin, Joint::Bucket)?,
+        ];
+        let c = &machine.cylinders;
+        let cyl = [&c.boom, &c.stick, &c.bucket];
+        Ok(Self {
+            kin,
+            tables,
+            actuator,
+            config,
+            maps,
+            bucket_width_m: machine.bucket.width_m,
+            capacity_m3: machine.bucket.capacity_m3,
+            head_area_m2: cyl.map(|c| c.head_area_m2()),
+            rod_area_m2: cyl.map(|c| c.rod_area_m2()),
+            tank_pa: machine.hydraulics.tank_pressure_pa.max(0.0),
+            port_relief_pa: PORT_RELIEF_FACTOR * relief,
+        })
+    }
+
+    /// The settings.
+    #[must_use]
+    pub fn config(&self) -> &DigModelConfig {
+        &self.config
+    }
+
+    /// The actuator dynamics.
+    #[must_use]
+    pub fn actuator(&self) -> &A {
+        &self.actuator
+    }
+
+    /// The machine's kinematics.
+    #[must_use]
+    pub fn kinematics(&self) -> &Kinematics {
+        &self.kin
+    }
+
+    /// The same model with another actuator (e.g. one augmented with named effects).
+    ///
+    /// # Errors
+    /// As [`DigModel::new`] for the actuator period.
+    pub fn with_actuator<B: ActuatorDynamics>(self, actuator: B) -> Result<DigModel<B>> {
+        let dt = actuator.dt_s();
+        if !(dt.is_finite() && dt > 0.0 && dt <= 0.1) {
+            return Err(DigModelError::Config {
+                field: "actuator.dt_s",
+                reason: format!("{dt} s; must be in (0, 0.1]"),
+            });
+        }
+        Ok(DigModel {
+            kin: self.kin,
+            tables: self.tables,
+            actuator,
+            config: self.config,
+            maps: self.maps,
+            bucket_width_m: self.bucket_width_m,
+            capacity_m3: self.capacity_m3,
+            head_area_m2: self.head_area_m2,
+            rod_area_m2: self.rod_area_m2,
+            tank_pa: self.tank_pa,
+            port_relief_pa: self.port_relief_pa,
+        })
+    }
+
+    /// Replaces the soil model (e.g. with properties estimated online, [`crate::estimate`]).
+    ///
+    /// # Errors
+    /// [`DigModelError::Config`] for invalid properties or coefficients (the model is unchanged).
+    pub fn set_soil(&mut self, soil: SoilModel) -> Result<()> {
+        let mut cfg = self.config.clone();
+        cfg.soil = soil;
+        cfg.validate()?;
+        self.config = cfg;
+        Ok(())
+    }
+
+    /// Sets the force factor of Table 2 (multiplies the soil force).
+    ///
+    /// # Errors
+    /// [`DigModelError::Config`] unless finite and >= 0.
+    pub fn set_force_factor(&mut self, factor: f64) -> Result<()> {
+        if !(factor.is_finite() && factor >= 0.0) {
+            return Err(DigModelError::Config {
+                field: "force_factor",
+                reason: format!("{factor}; must be finite and >= 0"),
+            });
+        }
+        self.config.force_factor = factor;
+        Ok(())
+    }
+
+    /// Sets the soil hardness index Autodig uses (thesis 5.2).
+    ///
+    /// # Errors
+    /// [`DigModelError::Config`] for a non-finite index.
+    pub fn set_hardness_index(&mut self, index: f64) -> Result<()> {
+        if !index.is_finite() {
+            return Err(DigModelError::Config {
+                field: "autodig.hardness_index",
+                reason: "must be finite".to_owned(),
+            });
+        }
+        self.config.autodig.hardness_index = index;
+        Ok(())
+    }
+
+    /// The step period, s.
+    #[must_use]
+    pub fn dt_s(&self) -> f64 {
+        self.actuator.dt_s()
+    }
+
+    /// Steps a dig of the configured time limit takes, plus one: the trace capacity that never
+    /// truncates.
+    #[must_use]
+    pub fn max_steps(&self) -> usize {
+        (self.config.max_time_s / self.dt_s()).ceil() as usize + 2
+    }
+
+    /// A trace buffer large enough for any dig of this model.
+    #[must_use]
+    pub fn new_trace(&self) -> DigTrace {
+        DigTrace::with_capacity(self.max_steps())
+    }
+
+    /// The joint angles of a start, checked against joint limits and cylinder strokes.
+    ///
+    /// # Errors
+    /// [`DigModelError::NonFinite`], [`DigModelError::Unreachable`].
+    pub fn start_joints(&self, start: &DigStart) -> Result<JointAngles> {
+        let q = match start {
+            DigStart::Pose(p) => {
+                if !(p.x_m.is_finite() && p.z_m.is_finite() && p.bucket_abs_rad.is_finite()) {
+                    return Err(DigModelError::NonFinite { what: "start pose" });
+                }
+                self.kin.inverse(p).map_err(DigModelError::Unreachable)?
+            }
+            DigStart::Joints(q) => {
+                if !(q.boom_rad.is_finite() && q.stick_rad.is_finite() && q.bucket_rad.is_finite())
+                {
+                    return Err(DigModelError::NonFinite {
+                        what: "start joint angles",
+                    });
+                }
+                *q
+            }
+        };
+        self.kin
+            .cylinder_lengths(&q)
+            .map_err(DigModelError::Unreachable)?;
+        Ok(q)
+    }
+
+    /// Predicts a dig with its trajectory.
+    ///
+    /// # Errors
+    /// As [`Self::predict_into`].
+    pub fn predict(&self, start: &DigStart, site: &DigSite) -> Result<DigPrediction> {
+        let mut trace = self.new_trace();
+        let summary = self.predict_into(start, site, Some(&mut trace))?;
+        Ok(DigPrediction {
+            summary,
+            samples: trace.samples,
+        })
+    }
+
+    /// Predicts a dig's statistics only (what the dig planner needs).
+    ///
+    /// # Errors
+    /// As [`Self::predict_into`].
+    pub fn evaluate(&self, start: &DigStart, site: &DigSite) -> Result<DigSummary> {
+        self.predict_into(start, site, None)
+    }
+
+    /// Evaluates candidate starts over one site in parallel (rayon), in the order given.
+    pub fn evaluate_many(&self, starts: &[DigStart], site: &DigSite) -> Vec<Result<DigSummary>> {
+        starts.par_iter().map(|s| self.evaluate(s, site)).collect()
+    }
+
+    /// Runs the model from `start` over `site` until Autodig ends or the time limit (thesis 4.1),
+    /// recording into `trace` if given (cleared first; never grown).
+    ///
+    /// # Errors
+    /// [`DigModelError::NonFinite`] / [`DigModelError::Unreachable`] for the start,
+    /// [`DigModelError::OutsideTerrain`] if the tip leaves the section, and the errors of the actuator
+    /// dynamics or Autodig (which reject NaN rather than propagate it).
+    pub fn predict_into(
+        &self,
+        start: &DigStart,
+        site: &DigSite,
+        mut trace: Option<&mut DigTrace>,
+    ) -> Result<DigSummary> {
+        if let Some(t) = trace.as_deref_mut() {
+            t.clear();
+        }
+        let q0 = self.start_joints(start)?;
+        let lengths = self
+            .kin
+            .cylinder_lengths(&q0)
+            .map_err(DigModelError::Unreachable)?;
+        let mut len_m = [lengths.boom_m, lengths.stick_m, lengths.bucket_m];
+        let profile = site.profile();
+        let tip0 = self.kin.forward(&q0);
+        self.check_inside(profile, tip0.x_m)?;
+
+        let dt = self.dt_s();
+        let mut act = self.actuator.initial_state()?;
+        let mut autodig =
+            Autodig::starting_in(self.config.autodig, self.maps.clone(), Stage::PreDig)?;
+        let mut swept = SweptVolume::new(profile.clone(), self.bucket_width_m)?;
+        let density = match &self.config.soil {
+            SoilModel::Analytical(p) => p.density_kg_per_m3,
+            SoilModel::Empirical(_) => 0.0,
+        };
+        let floor_limit = site.floor_z_m - self.config.floor_tolerance_m;
+        let max_steps = (self.config.max_time_s / dt).ceil() as usize;
+
+        let mut velocity = [0.0; 3];
+        let mut energy_j = 0.0;
+        let mut min_z = f64::INFINITY;
+        let mut peak_force = 0.0_f64;
+        let mut floor_penetration = false;
+        let mut end = DigEnd::TimeLimit;
+        let mut steps = 0usize;
+        let mut time_s = 0.0;
+        for k in 0..=max_steps {
+            time_s = k as f64 * dt;
+            steps = k;
+            // Actuator positions -> joint angles and moment arms (Eq. A5, A8-A19).
+            let mut q_arr = [0.0; 3];
+            let mut arms = [0.0; 3];
+            for j in 0..3 {
+                let (a, r) = self.tables[j].lookup(len_m[j]);
+                q_arr[j] = a;
+                arms[j] = r;
+            }
+            let q = JointAngles {
+                boom_rad: q_arr[0],
+                stick_rad: q_arr[1],
+                bucket_rad: q_arr[2],
+            };
+            let pose = self.kin.forward(&q);
+            self.check_inside(profile, pose.x_m)?;
+            min_z = min_z.min(pose.z_m);
+            floor_penetration |= pose.z_m < floor_limit;
+
+            // Perception (3.2): swept volume and depth below the pre-dig surface.
+            let swept_m3 = swept.update(pose.x_m, pose.z_m)?;
+            let depth_m = swept.depth_m(pose.x_m, pose.z_m)?;
+
+            // Soil force (Eqs. 14-18 or 21) at Gamma, times the force factor (Table 2).
+            let v_s = swept_m3.min(self.capacity_m3);
+            let soil = self.soil_force(&pose, profile, v_s)?;
+            peak_force = peak_force.max(soil.fx_n.hypot(soil.fz_n));
+            let payload_kg = v_s * density;
+
+            // Statics: tau = G - J^T f (Eq. A2, A4), F = tau / r (Eqs. A7, A19).
+            let tau = self.kin.gravity_torques(&q, payload_kg)
+                - self.kin.jacobian(&q).transpose()
+                    * Vector3::new(soil.fx_n, soil.fz_n, soil.my_nm);
+            let mut force_n = [0.0; 3];
+            let mut head_pa = [0.0; 3];
+            let mut rod_pa = [0.0; 3];
+            let mut extension = [0.0; 3];
+            for j in 0..3 {
+                let f = tau[j] / arms[j];
+                if !f.is_finite() {
+                    return Err(DigModelError::NonFinite {
+                        what: "cylinder force",
+                    });
+                }
+                // The cylinder cannot hold more than its port relief allows.
+                force_n[j] = f.clamp(
+                    -self.port_relief_pa * self.rod_area_m2[j],
+                    self.port_relief_pa * self.head_area_m2[j],
+                );
+                (head_pa[j], rod_pa[j]) = self.pressures(j, force_n[j]);
+                let t = &self.tables[j];
+                extension[j] = ((len_m[j] - t.lo_m) / (t.hi_m - t.lo_m)).clamp(0.0, 1.0);
+            }
+
+            let inputs = AutodigInputs {
+                joint_rad: q_arr,
+                head_pressure_pa: head_pa,
+                rod_pressure_pa: rod_pa,
+                extension_fraction: extension,
+                swept_volume_m3: Some(swept_m3),
+                bucket_depth_m: Some(depth_m),
+            };
+            let out = autodig.step(&inputs, time_s)?;
+            if let Some(t) = trace.as_deref_mut() {
+                t.push(DigSample {
+                    time_s,
+                    stage: out.stage,
+                    tip_x_m: pose.x_m,
+                    tip_z_m: pose.z_m,
+                    bucket_abs_rad: pose.bucket_abs_rad,
+                    joint_rad: q_arr,
+                    command: out.command,
+                    head_pa,
+                    rod_pa,
+                    force_n,
+                    velocity_m_per_s: velocity,
+                    soil_force: soil,
+                    swept_volume_m3: swept_m3,
+                });
+            }
+            if out.stage == Stage::Done {
+                end = out.end_reason.map_or(DigEnd::TimeLimit, DigEnd::Autodig);
+                break;
+            }
+            if k == max_steps {
+                break;
+            }
+            // Actuators (Eq. 4): next velocities, integrated (trapezoid) to cylinder lengths.
+            let next = self.actuator.step(&mut act, out.command, force_n)?;
+            for j in 0..3 {
+                if !next[j].is_finite() {
+                    return Err(DigModelError::NonFinite {
+                        what: "actuator velocity",
+                    });
+                }
+                let t = &self.tables[j];
+                let new_len = (len_m[j] + 0.5 * (velocity[j] + next[j]) * dt).clamp(t.lo_m, t.hi_m);
+                energy_j += (force_n[j] * (new_len - len_m[j])).abs();
+                len_m[j] = new_len;
+            }
+            velocity = next;
+        }
+        Ok(DigSummary {
+            time_s,
+            energy_j,
+            swept_volume_m3: swept.volume_m3(),
+            floor_penetration,
+            min_tip_z_m: min_z,
+            end,
+            steps,
+            peak_soil_force_n: peak_force,
+        })
+    }
+
+    fn check_inside(&self, profile: &SectionProfile, r_m: f64) -> Result<()> {
+        if !r_m.is_finite() {
+            return Err(DigModelError::NonFinite {
+                what: "tip position",
+            });
+        }
+        if r_m < profile.r_start_m() || r_m > profile.r_end_m() {
+            return Err(DigModelError::OutsideTerrain {
+                r_m,
+                r_start_m: profile.r_start_m(),
+                r_end_m: profile.r_end_m(),
+            });
+        }
+        Ok(())
+    }
+
+    /// The soil force on the bucket with the force factor applied. Where the FEE wedge cannot fail
+    /// (Eq. 17's denominator <= 0, a bucket pushed in nearly edge-on) the wedge mechanism gives no
+    /// force, as in the simulator.
+    #[inline]
+    fn soil_force(
+        &self,
+        pose: &BucketPose,
+        profile: &SectionProfile,
+        v_s: f64,
+    ) -> Result<TipForce> {
+        let Contact::InContact(gamma) = dig_geometry(pose, profile, v_s)? else {
+            return Ok(TipForce::default());
+        };
+        let f = match &self.config.soil {
+            // Eq. 19's moment is carried by the payload term of Eq. A4 (module docs): x_c = 0 here.
+            SoilModel::Analytical(psi) => {
+                match fee_tip_force(psi, &gamma, self.bucket_width_m, 0.0) {
+                    Ok(f) => f,
+                    Err(SoilError::Singular { .. }) => TipForce::default(),
+                    Err(e) => return Err(e.into()),
+                }
+            }
+            SoilModel::Empirical(m) => m.evaluate(&gamma)?, // Eq. 21
+        };
+        let k = self.config.force_factor;
+        Ok(TipForce {
+            fx_n: k * f.fx_n,
+            fz_n: k * f.fz_n,
+            my_nm: k * f.my_nm,
+        })
+    }
+
+    /// Head and rod pressure for a cylinder force (module docs: the static split, inverse of Eq. A20).
+    #[inline]
+    fn pressures(&self, j: usize, force_n: f64) -> (f64, f64) {
+        let (ah, ar, pt) = (self.head_area_m2[j], self.rod_area_m2[j], self.tank_pa);
+        let (head, rod) = if force_n >= 0.0 {
+            ((force_n + pt * ar) / ah, pt)
+        } else {
+            (pt, (-force_n + pt * ah) / ar)
+        };
+        (
+            head.clamp(0.0, self.port_relief_pa),
+            rod.clamp(0.0, self.port_relief_pa),
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The default bench (config/bench.toml) seen from the machine at the origin: floor at 0, a
+    /// 45 degree face from 3 m to the 2 m top at 5 m.
+    fn bench_height(r: f64) -> f64 {
+        (r - 3.0).clamp(0.0, 2.0)
+    }
+
+    const START_R_M: f64 = 6.5;
+    const START_BUCKET_DEG: f64 = -85.0;
+
+    fn site() -> DigSite {
+        let p = SectionProfile::from_fn(0.5, 12.0, 0.05, bench_height).expect("profile");
+        DigSite::new(p, 0.0).expect("site")
+    }
+
+    fn start() -> DigStart {
+        DigStart::Pose(BucketPose {
+            x_m: START_R_M,
+            z_m: bench_height(START_R_M) - 0.02,
+            bucket_abs_rad: START_BUCKET_DEG.to_radians(),
+        })
+    }
+
+    const _: () = {
+        const fn assert_send_sync<T: Send + Sync>() {}
+        assert_send_sync::<DigModel>();
+        assert_send_sync::<DigSite>();
+        assert_send_sync::<DigPrediction>();
+    };
+
+    #[test]
+    fn nominal_model_loads_from_the_shipped_files() {
+        let m = DigModel::nominal().expect("nominal");
+        assert!((m.dt_s() - 0.01).abs() < 1e-12);
+        assert!(matches!(m.config().soil, SoilModel::Analytical(_)));
+        assert_eq!(m.config().force_factor, 1.0);
+    }
+
+    #[test]
+    fn a_dig_on_the_default_bench_fills_a_reasonable_volume() {
+        let m = DigModel::nominal().expect("nominal");
+        let p = m.predict(&start(), &site()).expect("prediction");
+        let s = p.summary;
+        assert!(matches!(s.end, DigEnd::Autodig(_)), "{s:?}");
+        assert!((0.5..3.0).contains(&s.swept_volume_m3), "{s:?}");
+        assert!((1.5..15.0).contains(&s.time_s), "{s:?}");
+        assert!(s.energy_kj() > 10.0 && s.energy_kj() < 1000.0, "{s:?}");
+        assert!(!s.floor_penetration, "{s:?}");
+        assert_eq!(p.samples.len(), s.steps + 1);
+        assert!(p.samples.iter().all(|x| x.tip_x_m.is_finite()
+            && x.tip_z_m.is_finite()
+            && x.head_pa.iter().chain(&x.rod_pa).all(|v| v.is_finite())));
+        // The tip ends nearer the machine than it started, and the dig went below the surface.
+        let last = p.samples.last().expect("samples");
+        assert!(last.tip_x_m < START_R_M, "{last:?}");
+        assert!(s.min_tip_z_m < bench_height(START_R_M) - 0.2, "{s:?}");
+    }
+
+    #[test]
+    fn predictions_are_deterministic_and_parallel_evaluation_matches() {
+        let m = DigModel::nominal().expect("nominal");
+        let a = m.predict(&start(), &site()).expect("a");
+        let b = m.predict(&start(), &site()).expect("b");
+        assert_eq!(a, b);
+        let starts: Vec<DigStart> = (0..6)
+            .map(|i| {
+                let r = 5.8 + 0.3 * f64::from(i);
+                DigStart::Pose(BucketPose {
+                    x_m: r,
+                    z_m: bench_height(r) - 0.02,
+                    bucket_abs_rad: START_BUCKET_DEG.to_radians(),
+                })
+            })
+            .collect();
+        let par = m.evaluate_many(&starts, &site());
+        for (s, p) in starts.iter().zip(&par) {
+            assert_eq!(&m.evaluate(s, &site()), p);
+        }
+        assert_eq!(par[0], m.evaluate(&starts[0], &site()));
+        // A trace buffer is reused without growing.
+        let mut trace = DigTrace::with_capacity(10);
+        let s = m
+            .predict_into(&start(), &site(), Some(&mut trace))
+            .expect("short");
+        assert_eq!(trace.samples().len(), 10);
+        assert!(trace.truncated() && s.steps > 10);
+    }
+
+    #[test]
+    fn floor_penetration_is_flagged_below_floor_minus_tolerance() {
+        let m = DigModel::nominal().expect("nominal");
+        let deep = m.evaluate(&start(), &site()).expect("dig");
+        let floor_above =
+            DigSite::new(site().profile().clone(), deep.min_tip_z_m + 0.2).expect("site");
+        assert!(
+            m.evaluate(&start(), &floor_above)
+                .expect("dig")
+                .floor_penetration
+        );
+        let floor_just_above = DigSite::new(
+            site().profile().clone(),
+            deep.min_tip_z_m + 0.5 * m.config().floor_tolerance_m,
+        )
+        .expect("site");
+        assert!(
+            !m.evaluate(&start(), &floor_just_above)
+                .expect("dig")
+                .floor_penetration
+        );
+    }
+
+    #[test]
+    fn bad_input_gives_typed_errors() {
+        let mut m = DigModel::nominal().expect("nominal");
+        let nan = DigStart::Pose(BucketPose {
+            x_m: f64::NAN,
+            z_m: 1.0,
+            bucket_abs_rad: -1.5,
+        });
+        assert!(matches!(
+            m.evaluate(&nan, &site()),
+            Err(DigModelError::NonFinite { .. })
+        ));
+        let far = DigStart::Pose(BucketPose {
+            x_m: 30.0,
+            z_m: 0.0,
+            bucket_abs_rad: -1.5,
+        });
+        assert!(matches!(
+            m.evaluate(&far, &site()),
+            Err(DigModelError::Unreachable(_))
+        ));
+        let bent = DigStart::Joints(JointAngles {
+            boom_rad: 3.0,
+            stick_rad: 0.0,
+            bucket_rad: 0.0,
+        });
+        assert!(matches!(
+            m.evaluate(&bent, &site()),
+            Err(DigModelError::Unreachable(_))
+        ));
+        // A section that stops short of the tip: a gap in the terrain.
+        let short = DigSite::new(
+            SectionProfile::from_fn(0.5, 4.0, 0.05, bench_height).expect("p"),
+            0.0,
+        )
+        .expect("site");
+        assert!(matches!(
+            m.evaluate(&start(), &short),
+            Err(DigModelError::OutsideTerrain { .. })
+        ));
+        assert!(DigSite::new(site().profile().clone(), f64::NAN).is_err());
+        assert!(SectionProfile::new(0.0, 0.1, vec![]).is_err());
+        assert!(SectionProfile::new(0.0, 0.1, vec![1.0, f64::NAN]).is_err());
+        // Unknown cells in a grid are a typed error, not a guessed section.
+        let mut grid = TerrainGrid::new_flat(-1.0, -2.0, 0.1, 140, 40, 0.0).expect("grid");
+        grid.set_cell(60, 20, None).expect("gap");
+        let pose = MachinePose {
+            x_m: 0.0,
+            y_m: 0.0,
+            heading_rad: 0.0,
+        };
+        assert!(matches!(
+            DigSite::from_grid(&grid, &pose, 0.0, 1.0, 12.0, 0.05, 0.0),
+            Err(DigModelError::Terrain(_))
+        ));
+        assert!(m.set_force_factor(f64::NAN).is_err());
+        assert!(m.set_force_factor(-1.0).is_err());
+        assert!(m.set_hardness_index(f64::INFINITY).is_err());
+        let bad_soil = SoilProperties {
+            failure_angle_rad: f64::NAN,
+            ..SoilProperties::typical()
+        };
+        assert!(m.set_soil(SoilModel::Analytical(bad_soil)).is_err());
+        assert!(DigModelConfig::from_toml_str("force_factor = 1").is_err());
+        // Whatever the force factor, results stay finite (the cylinders saturate at relief).
+        for factor in [0.0, 1.0, 3.0, 50.0] {
+            m.set_force_factor(factor).expect("factor");
+            let s = m.evaluate(&start(), &site()).expect("dig");
+            assert!(
+                s.time_s.is_finite() && s.energy_j.is_finite() && s.swept_volume_m3.is_finite()
+            );
+        }
+    }
+
+    #[test]
+    fn empirical_soil_model_runs_and_force_factor_scales_the_soil_force() {
+        let mut m = DigModel::nominal().expect("nominal");
+        let base = m.predict(&start(), &site()).expect("dig");
+        m.set_force_factor(2.0).expect("factor");
+        let doubled = m.predict(&start(), &site()).expect("dig");
+        // Same first contact step: twice the soil force.
+        let first = |p: &DigPrediction| {
+            p.samples
+                .iter()
+                .find(|s| s.soil_force.fx_n.abs() > 1.0)
+                .copied()
+                .expect("contact")
+        };
+        let (a, b) = (first(&base), first(&doubled));
+        assert_eq!(a.time_s, b.time_s);
+        assert!(
+            (b.soil_force.fx_n - 2.0 * a.soil_force.fx_n).abs() < 1e-6 * a.soil_force.fx_n.abs()
+        );
+        m.set_soil(SoilModel::Empirical(EmpiricalSoilModel {
+            fx: [2.0e4, 1.0e4, 5.0e3, 3.0e4],
+            fz: [-1.0e4, -5.0e3, 0.0, -2.0e4],
+            my: [0.0, 0.0, 0.0, -8.0e3],
+        }))
+        .expect("soil");
+        let e = m.evaluate(&start(), &site()).expect("empirical dig");
+        assert!(e.time_s > 0.0 && e.swept_volume_m3 > 0.0, "{e:?}");
+    }
+}
