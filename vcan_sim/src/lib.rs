@@ -217,6 +217,9 @@ mod tests {
         assert_eq!(cfg.scenario.seed, 3);
         let err = SimConfig::load(None, None, None, &["nope=1"]).unwrap_err();
         let cause = std::error::Error::source(&err).map(ToString::to_string);
-        assert!(cause.unwrap_or_default().contains("unknown effect"), "{err}");
+        assert!(
+            cause.unwrap_or_default().contains("unknown effect"),
+            "{err}"
+        );
     }
 }
