@@ -97,7 +97,9 @@ mod tests {
             "t.log",
         ])
         .unwrap();
-        let Command::Run(a) = cli.command;
+        let Command::Run(a) = cli.command else {
+            panic!("not run")
+        };
         let o = RunOptions::from(a);
         assert_eq!(o.iface, "vcan0");
         assert!(o.listen_only);

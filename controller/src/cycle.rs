@@ -693,6 +693,22 @@ impl WorkCycle {
         self.terrain.as_ref()
     }
 
+    /// The soil hardness index Autodig is configured with.
+    pub fn hardness_index(&self) -> f64 {
+        self.autodig
+            .as_ref()
+            .map_or(self.autodig_config.hardness_index, Autodig::hardness_index)
+    }
+
+    /// Whether a dig or cleanup is in progress (from the move to the dig to the end of the dump).
+    pub fn in_dig(&self) -> bool {
+        self.record.is_some()
+            || (matches!(self.phase, Phase::Scan | Phase::MoveToDig)
+                && self
+                    .action()
+                    .is_some_and(|a| a.kind() != ActionKind::TrackBack))
+    }
+
     /// The swept volume of the running dig, m^3.
     pub fn swept_volume_m3(&self) -> Option<f64> {
         self.swept.as_ref().map(SweptVolume::volume_m3)

@@ -16,14 +16,18 @@
 //! 2. The estimator derives forces and the tip; the safety layer checks staleness, limits and the
 //!    gateway status.
 //! 3. The work cycle computes the wanted mode and command; a cycle error is a fault.
-//! 4. The safety layer decides: motion commands (valves, or a position setpoint), neutral valves, and
-//!    the heartbeat, which is always the last frame of the step.
+//! 4. The safety layer decides: motion commands (valves, or a position setpoint), neutral valves, the
+//!    `ControllerStatus` (20 Hz: activity, Autodig stage, dig number, fault code) and the heartbeat,
+//!    which is always the last frame of the step.
 //!
 //! Valve commands for boom, stick, bucket and swing go out every step while armed in valve mode; the
 //! track valves every [`ControllerConfig::track_every_steps`] steps (20 Hz, docs/protocol.md), and at
 //! once when they must become neutral.
 
-use firmware_bridge::messages::{AuxValveCommand, Message, PositionSetpoint, Valve};
+use firmware_bridge::messages::{
+    Activity, AuxValveCommand, AutodigStageCode, ControllerStatus as StatusMessage, Message,
+    PositionSetpoint, Valve,
+};
 use firmware_bridge::transport::BusFault;
 use firmware_bridge::{
     CONTROLLER_ADDRESS, CanFrame, CanId, DecodeError, GATEWAY_ADDRESS, J1939Id, TimestampedFrame,
@@ -190,8 +194,7 @@ pub struct FrameCounters {
     pub outbox_overflow: u64,
 }
 
-/// The controller's status as a `ControllerStatus` message would carry it (the protocol has none yet;
-/// see the crate docs).
+/// The controller's status (sent on the bus as `ControllerStatus` at 20 Hz, with the fault code).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ControllerStatus {
     /// The work-cycle phase.
@@ -219,6 +222,7 @@ pub struct ControllerNode {
     counters: FrameCounters,
     last_motion: Option<ArmMode>,
     last_command: CycleCommand,
+    status_alive: u8,
     out: Outbox,
 }
 
@@ -273,6 +277,7 @@ impl ControllerNode {
             counters: FrameCounters::default(),
             last_motion: None,
             last_command: CycleCommand::Neutral,
+            status_alive: 15,
             out: Outbox::new().map_err(|e| ControllerError::Config {
                 field: "outbox",
                 reason: e.to_string(),
@@ -593,10 +598,54 @@ impl ControllerNode {
         if tick.send_neutral {
             self.push_neutral();
         }
+        if tick.heartbeat.is_some() && track_slot {
+            let status = self.status_message();
+            self.push_message(Message::ControllerStatus(status));
+        }
         if let Some(hb) = tick.heartbeat {
             self.push_message(Message::ControllerHeartbeat(hb));
         }
         self.out
+    }
+
+    /// The `ControllerStatus` message (20 Hz): activity, Autodig stage, dig number, hardness index,
+    /// swept volume and fault code.
+    fn status_message(&mut self) -> StatusMessage {
+        self.status_alive = (self.status_alive + 1) % 16;
+        let activity = if self.safety.active_fault().is_some() {
+            Activity::Faulted
+        } else {
+            match self.cycle.phase() {
+                Phase::Idle | Phase::Finished | Phase::Weigh => Activity::Idle,
+                Phase::Scan => Activity::Scan,
+                Phase::MoveToDig => Activity::SwingToDig,
+                Phase::Autodig => Activity::Dig,
+                Phase::Cleanup => Activity::Cleanup,
+                Phase::SwingToDump => Activity::SwingToDump,
+                Phase::Dump => Activity::Dump,
+                Phase::Return => Activity::Return,
+                Phase::TrackBack => Activity::Track,
+            }
+        };
+        let stage = match self.cycle.autodig_stage() {
+            None => AutodigStageCode::None,
+            Some(Stage::BoomDown) => AutodigStageCode::BoomDown,
+            Some(Stage::PreDig) => AutodigStageCode::PreDig,
+            Some(Stage::Dig) => AutodigStageCode::Dig,
+            Some(Stage::Capture) => AutodigStageCode::Capture,
+            Some(Stage::Done) => AutodigStageCode::Done,
+        };
+        let dig = self.cycle.digs_done() + u32::from(self.cycle.in_dig());
+        let clamp = |v: f64, hi: f64| if v.is_finite() { v.clamp(0.0, hi) } else { 0.0 };
+        StatusMessage {
+            activity,
+            stage,
+            dig_index: u16::try_from(dig.min(64_255)).unwrap_or(0),
+            hardness_index: clamp(self.cycle.hardness_index(), 12.5),
+            swept_volume_m3: clamp(self.cycle.swept_volume_m3().unwrap_or(0.0), 6.4),
+            fault_reason: self.safety.active_fault().map_or(0, |f| f.code()),
+            alive_counter: self.status_alive,
+        }
     }
 
     /// The frames to send when the program stops (Ctrl-C, error, end of the plan): neutral commands for

@@ -163,6 +163,25 @@ pub enum Fault {
 }
 
 impl Fault {
+    /// The fault code sent in `ControllerStatus.FaultReason` (0 is healthy): 1 stale sensor, 2 decode
+    /// error, 3 unexpected frame, 4 joint limit, 5 e-stop, 6 gateway fault, 7 gateway mode, 8 arm
+    /// timeout, 9 bus fault, 10 control, 11 shutdown.
+    pub const fn code(&self) -> u8 {
+        match self {
+            Fault::StaleSensor { .. } => 1,
+            Fault::Decode { .. } => 2,
+            Fault::UnexpectedFrame { .. } => 3,
+            Fault::JointLimit { .. } => 4,
+            Fault::EStop => 5,
+            Fault::GatewayFault(_) => 6,
+            Fault::GatewayMode { .. } => 7,
+            Fault::ArmTimeout(_) => 8,
+            Fault::Bus(_) => 9,
+            Fault::Control(_) => 10,
+            Fault::Shutdown => 11,
+        }
+    }
+
     /// Whether only [`Safety::reset`] clears it.
     pub const fn latches(&self) -> bool {
         matches!(self, Fault::EStop | Fault::Shutdown)
