@@ -415,9 +415,7 @@ impl Estimator {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use firmware_bridge::messages::{
-        AuxValveMeasured, JointRates, TrackOdometry, ValveState,
-    };
+    use firmware_bridge::messages::{AuxValveMeasured, JointRates, TrackOdometry, ValveState};
     use planner::machine::MachineConfig;
 
     /// A dig-like pose well inside the limits.
@@ -499,7 +497,10 @@ mod tests {
         let c = m.cylinders.stick;
         let expect = 10e6 * c.head_area_m2() - 4e6 * c.rod_area_m2(); // Eq. A20
         assert!((e.state().cylinder_force_n[1] - expect).abs() < 1e-6);
-        let r = e.kinematics().moment_arm(Joint::Stick, Q.stick_rad).expect("arm");
+        let r = e
+            .kinematics()
+            .moment_arm(Joint::Stick, Q.stick_rad)
+            .expect("arm");
         assert!((e.state().joint_torque_nm[1] - expect * r).abs() < 1e-6);
     }
 

@@ -25,7 +25,7 @@
 //! once when they must become neutral.
 
 use firmware_bridge::messages::{
-    Activity, AuxValveCommand, AutodigStageCode, ControllerStatus as StatusMessage, Message,
+    Activity, AutodigStageCode, AuxValveCommand, ControllerStatus as StatusMessage, Message,
     PositionSetpoint, Valve,
 };
 use firmware_bridge::transport::BusFault;
@@ -42,9 +42,7 @@ use serde::{Deserialize, Serialize};
 use crate::ControllerError;
 use crate::cycle::{Action, CycleCommand, CycleConfig, DigStats, Phase, WorkCycle};
 use crate::estimate::{Estimator, EstimatorConfig, MachineState};
-use crate::safety::{
-    ArmMode, Fault, Safety, SafetyConfig, SafetyState, bus_fault_stops_motion,
-};
+use crate::safety::{ArmMode, Fault, Safety, SafetyConfig, SafetyState, bus_fault_stops_motion};
 
 /// Most frames one step sends: six valve commands or a setpoint, neutral valves, and the heartbeat.
 pub const OUTBOX_CAPACITY: usize = 16;
@@ -550,7 +548,7 @@ impl ControllerNode {
             CycleCommand::Neutral
         };
         self.steps += 1;
-        let track_slot = self.steps % u64::from(self.track_every_steps) == 0;
+        let track_slot = self.steps.is_multiple_of(u64::from(self.track_every_steps));
         match (tick.motion, output.command) {
             (Some(ArmMode::Valve), CycleCommand::Valves(v)) => {
                 for (valve, u) in Valve::ALL.into_iter().zip(v).take(4) {

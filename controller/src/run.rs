@@ -18,8 +18,8 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::Context as _;
-use firmware_bridge::transport::{self, Bus, SocketCanBus, TimestampedFrame};
 use firmware_bridge::trace::Recorder;
+use firmware_bridge::transport::{self, Bus, SocketCanBus, TimestampedFrame};
 use planner::autodig::AutodigMaps;
 use planner::machine::MachineConfig;
 use tokio::time::MissedTickBehavior;
@@ -111,7 +111,9 @@ pub fn build_node(opts: &RunOptions) -> anyhow::Result<ControllerNode> {
     }
     if opts.scan_addr.is_some() {
         // docs/scan-protocol.md has not landed; dig on the plain angle rules until it does.
-        tracing::warn!("--scan-addr: the scan protocol is not implemented yet; digging without scans");
+        tracing::warn!(
+            "--scan-addr: the scan protocol is not implemented yet; digging without scans"
+        );
     }
     config.cycle.scan = false;
     ControllerNode::new(&machine, maps, config).context("controller configuration")

@@ -462,8 +462,7 @@ impl Safety {
         self.healthy = self.check(now_s, est);
         let status = est.state().gateway;
         self.gateway_mode = status.map(|s| s.mode);
-        let fresh_status =
-            est.age_s(Signal::GatewayStatus, now_s) <= self.config.status_max_age_s;
+        let fresh_status = est.age_s(Signal::GatewayStatus, now_s) <= self.config.status_max_age_s;
         match self.state {
             SafetyState::Armed { mode, since_s } => {
                 if let Err(fault) = self.healthy {
@@ -523,11 +522,11 @@ impl Safety {
     /// that is `Disarmed` or already in the requested mode).
     fn check(&self, now_s: f64, est: &Estimator) -> Result<(), Fault> {
         let (signal, age_s) = est.stalest_control_signal(now_s);
-        if !(age_s <= self.config.sensor_max_age_s) {
+        if age_s.is_nan() || age_s > self.config.sensor_max_age_s {
             return Err(Fault::StaleSensor { signal, age_s });
         }
         let status_age = est.age_s(Signal::GatewayStatus, now_s);
-        if !(status_age <= self.config.status_max_age_s) {
+        if status_age.is_nan() || status_age > self.config.status_max_age_s {
             return Err(Fault::StaleSensor {
                 signal: Signal::GatewayStatus,
                 age_s: if status_age.is_nan() {
@@ -811,7 +810,12 @@ mod tests {
         fn armed(config: SafetyConfig) -> (Self, f64) {
             let mut rig = Self::new(config);
             let (tick, t) = rig.run(0.0, 5, Some(ArmMode::Valve));
-            assert_eq!(tick.motion, Some(ArmMode::Valve), "{:?}", rig.safety.state());
+            assert_eq!(
+                tick.motion,
+                Some(ArmMode::Valve),
+                "{:?}",
+                rig.safety.state()
+            );
             (rig, t)
         }
     }
@@ -847,7 +851,10 @@ mod tests {
         let mut prev = None;
         let mut t = 0.0;
         for _ in 0..40 {
-            let hb = rig.period(t, Some(ArmMode::Valve), false).heartbeat.unwrap();
+            let hb = rig
+                .period(t, Some(ArmMode::Valve), false)
+                .heartbeat
+                .unwrap();
             if let Some(p) = prev {
                 assert_eq!(hb.alive_counter, (p + 1) % 16);
             } else {
@@ -1015,12 +1022,15 @@ mod tests {
             ..SafetyConfig::default()
         });
         let (tick, t) = rig.run(0.0, 10, Some(ArmMode::Valve));
-        assert_eq!(tick, SafetyTick {
-            heartbeat: None,
-            motion: None,
-            send_neutral: false,
-            hold_position: false
-        });
+        assert_eq!(
+            tick,
+            SafetyTick {
+                heartbeat: None,
+                motion: None,
+                send_neutral: false,
+                hold_position: false
+            }
+        );
         rig.safety.report(t, Fault::EStop);
         let tick = rig.safety.tick(t, Some(ArmMode::Valve));
         assert!(tick.heartbeat.is_none() && !tick.send_neutral);

@@ -56,7 +56,12 @@ fn autodig_fills_the_bucket_from_a_reachable_start() {
         capacity_kg,
         l.node.last_fault()
     );
-    assert!(reached, "phase {:?} fault {:?}", l.phase(), l.node.last_fault());
+    assert!(
+        reached,
+        "phase {:?} fault {:?}",
+        l.phase(),
+        l.node.last_fault()
+    );
     assert!(
         t.payload_kg > FILL_FRACTION * capacity_kg,
         "payload {} kg, capacity {capacity_kg} kg",
@@ -69,16 +74,20 @@ fn autodig_fills_the_bucket_from_a_reachable_start() {
     let d = stats[0];
     eprintln!("{d:?}");
     assert!(d.time_s > 0.0 && d.energy_j > 0.0);
-    assert!(d.swept_volume_m3 > 0.0, "perception active: {}", d.perception);
+    assert!(
+        d.swept_volume_m3 > 0.0,
+        "perception active: {}",
+        d.perception
+    );
     let w = d.weight_n.unwrap();
     let truth_n = t.payload_kg * 9.81;
-    assert!((w - truth_n).abs() < 0.25 * truth_n, "weight {w} N vs {truth_n} N");
+    assert!(
+        (w - truth_n).abs() < 0.25 * truth_n,
+        "weight {w} N vs {truth_n} N"
+    );
     // After the plan the gateway is disarmed.
     l.run_until(1.0, |_| false);
-    assert_eq!(
-        l.machine.node().gateway().mode(),
-        GatewayMode::Disarmed
-    );
+    assert_eq!(l.machine.node().gateway().mode(), GatewayMode::Disarmed);
 }
 
 fn cleanup_setup() -> (vcan_sim::SimConfig, ControllerConfig) {
@@ -119,7 +128,10 @@ fn cleanup_leaves_the_floor_within_tolerance() {
     assert!(done);
     let d = l.node.statistics()[0];
     let floor = d.floor_z_m.unwrap();
-    assert!(floor.abs() < FLOOR_DETECTION_TOLERANCE_M, "detected floor {floor}");
+    assert!(
+        floor.abs() < FLOOR_DETECTION_TOLERANCE_M,
+        "detected floor {floor}"
+    );
     let (lowest, highest) = floor_extremes(&l);
     eprintln!("floor along the path: lowest {lowest:.3} m, highest {highest:.3} m");
     // Never dug below the design floor by more than the tolerance.
@@ -173,12 +185,12 @@ fn sensor_dropout_mid_dig_neutralises_within_one_period_of_the_age_limit() {
         }
     }
     let at = neutral_at.expect("neutral valves");
-    eprintln!("neutral {:.3} s after the last sensor frame", at - last_data_s);
+    eprintln!(
+        "neutral {:.3} s after the last sensor frame",
+        at - last_data_s
+    );
     assert!(at - last_data_s <= max_age + PERIOD_S + 1e-9);
-    assert!(matches!(
-        l.node.fault(),
-        Some(Fault::StaleSensor { .. })
-    ));
+    assert!(matches!(l.node.fault(), Some(Fault::StaleSensor { .. })));
     // The machine stops: the gateway is disarmed and drives nothing.
     l.step();
     assert_eq!(l.machine.node().valve_commands(), [0.0; 6]);
@@ -221,7 +233,10 @@ fn shutdown_ends_with_neutral_valves_and_a_disarm() {
     run_to_stage(&mut l, Stage::PreDig, 120.0);
     let out = l.node.shutdown(l.time_s());
     assert!(has_all_neutral(&out));
-    assert_eq!(heartbeat_mode(&out[out.len() - 1..]), Some(RequestedMode::Disarm));
+    assert_eq!(
+        heartbeat_mode(&out[out.len() - 1..]),
+        Some(RequestedMode::Disarm)
+    );
     for f in &out {
         l.ctl.send(*f).unwrap();
     }
@@ -240,7 +255,11 @@ fn trace_first_dig() {
     };
     for j in planner::kinematics::Joint::ALL {
         let k = l.node.estimator().kinematics();
-        eprintln!("{j}: limits {:?} stroke range {:?}", k.joint_limits(j), k.stroke_limited_range(j));
+        eprintln!(
+            "{j}: limits {:?} stroke range {:?}",
+            k.joint_limits(j),
+            k.stroke_limited_range(j)
+        );
     }
     let mut next = 0.0;
     l.run_until(60.0, |l| {

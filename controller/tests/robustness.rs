@@ -24,7 +24,10 @@ fn arb_frame() -> impl Strategy<Value = CanFrame> {
     prop_oneof![
         // Extended ids: mostly the protocol's PGNs from the gateway, some from anyone.
         (
-            prop::sample::select(vec![0xFE20u32, 0xFE21, 0xFE22, 0xFF50, 0xFF51, 0xFF52, 0xFF53, 0xFF54, 0xFE30, 0xFF60, 0xFF61, 0xFF62]),
+            prop::sample::select(vec![
+                0xFE20u32, 0xFE21, 0xFE22, 0xFF50, 0xFF51, 0xFF52, 0xFF53, 0xFF54, 0xFE30, 0xFF60,
+                0xFF61, 0xFF62
+            ]),
             prop::sample::select(vec![0x80u8, 0x80, 0x80, 0x27, 0x33]),
             prop::collection::vec(any::<u8>(), 0..=8),
         )
@@ -36,8 +39,11 @@ fn arb_frame() -> impl Strategy<Value = CanFrame> {
         (0u16..0x800, prop::collection::vec(any::<u8>(), 0..=8))
             .prop_map(|(id, data)| CanFrame::new_standard(id, &data).unwrap()),
         (0u32..0x2000_0000, any::<[u8; 8]>()).prop_map(|(c, d)| CanFrame::new_error(c, d).unwrap()),
-        (0u32..0x2000_0000, 0u8..=8)
-            .prop_map(|(id, n)| CanFrame::new_remote(CanId::Extended(id), n).unwrap()),
+        (0u32..0x2000_0000, 0u8..=8).prop_map(|(id, n)| CanFrame::new_remote(
+            CanId::Extended(id),
+            n
+        )
+        .unwrap()),
     ]
 }
 
@@ -84,14 +90,10 @@ async fn the_loop_ends_with_neutral_valves_and_a_disarm_heartbeat() {
     let observer = bus.attach();
     let mut n = node();
     let shutdown = tokio::time::sleep(std::time::Duration::from_millis(60));
-    let (reason, stats) = controller::run::run_loop(
-        &ctl,
-        &mut n,
-        controller::run::CONTROL_PERIOD,
-        shutdown,
-    )
-    .await
-    .unwrap();
+    let (reason, stats) =
+        controller::run::run_loop(&ctl, &mut n, controller::run::CONTROL_PERIOD, shutdown)
+            .await
+            .unwrap();
     assert_eq!(reason, controller::run::StopReason::Signal);
     assert!(stats.steps >= 3, "{stats:?}");
     let mut frames = Vec::new();
