@@ -350,6 +350,9 @@ pub struct ActuatorState {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Hydraulics {
     params: HydraulicParams,
+    /// Derived from `params` once (they never change after construction).
+    orifice_constants: OrificeConstants,
+    chambers: [Chambers; N_ACTUATORS],
     /// Actuators: boom, stick, bucket, swing.
     pub actuators: [ActuatorState; N_ACTUATORS],
     /// Gallery (pump outlet) pressures (Pa).
@@ -359,7 +362,7 @@ pub struct Hydraulics {
 }
 
 /// Geometry of one actuator in the chamber model.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 struct Chambers {
     area_head: f64,
     area_rod: f64,
@@ -393,34 +396,103 @@ pub fn orifice_flow(fluid: &FluidParams, area_m2: f64, p_from: f64, p_to: f64) -
 
 /// Orifice flow and its derivative with respect to the pressure drop.
 fn orifice(fluid: &FluidParams, area: f64, dp: f64) -> (f64, f64) {
-    if area <= 0.0 {
-        return (0.0, 0.0);
-    }
-    // Eq. 1: Q = Cd A sqrt(2 dP / rho); the thesis folds 2/rho into the constant.
-    let k = fluid.discharge_coefficient * area * (2.0 / fluid.density_kg_per_m3).sqrt();
-    let dp_lam = fluid.laminar_dp_pa;
-    let mag = dp.abs();
-    if mag < dp_lam {
-        let slope = k / dp_lam.sqrt();
-        (slope * dp, slope)
-    } else {
-        let root = mag.sqrt();
-        (k * root * dp.signum(), k / (2.0 * root))
+    Orifice::new(&OrificeConstants::of(fluid), area).flow(dp)
+}
+
+/// The parts of Eq. 1 that depend only on the fluid, computed once per system.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct OrificeConstants {
+    discharge_coefficient: f64,
+    /// `sqrt(2 / rho)`.
+    root_two_over_rho: f64,
+    laminar_dp_pa: f64,
+    /// `sqrt(laminar_dp_pa)`.
+    root_laminar_dp: f64,
+}
+
+impl OrificeConstants {
+    fn of(fluid: &FluidParams) -> Self {
+        Self {
+            discharge_coefficient: fluid.discharge_coefficient,
+            root_two_over_rho: (2.0 / fluid.density_kg_per_m3).sqrt(),
+            laminar_dp_pa: fluid.laminar_dp_pa,
+            root_laminar_dp: fluid.laminar_dp_pa.sqrt(),
+        }
     }
 }
 
-/// Relief valve flow (linear above cracking), and its slope.
+/// One orifice of fixed area: Eq. 1 with its constant folded in, evaluated many times per step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Orifice {
+    /// `Cd A sqrt(2 / rho)`; zero when closed.
+    k: f64,
+    /// Slope of the laminar region, `k / sqrt(laminar dp)`.
+    laminar_slope: f64,
+    laminar_dp_pa: f64,
+}
+
+impl Orifice {
+    fn new(c: &OrificeConstants, area: f64) -> Self {
+        if area <= 0.0 {
+            return Self {
+                k: 0.0,
+                laminar_slope: 0.0,
+                laminar_dp_pa: c.laminar_dp_pa,
+            };
+        }
+        // Eq. 1: Q = Cd A sqrt(2 dP / rho); the thesis folds 2/rho into the constant.
+        let k = c.discharge_coefficient * area * c.root_two_over_rho;
+        Self {
+            k,
+            laminar_slope: k / c.root_laminar_dp,
+            laminar_dp_pa: c.laminar_dp_pa,
+        }
+    }
+
+    /// Flow for the pressure drop `dp` and its derivative, with a laminar region for solver slope.
+    #[inline]
+    fn flow(&self, dp: f64) -> (f64, f64) {
+        if self.k == 0.0 {
+            return (0.0, 0.0);
+        }
+        let mag = dp.abs();
+        if mag < self.laminar_dp_pa {
+            (self.laminar_slope * dp, self.laminar_slope)
+        } else {
+            let root = mag.sqrt();
+            (self.k * root * dp.signum(), self.k / (2.0 * root))
+        }
+    }
+}
+
+/// A relief valve: no flow up to `crack`, linear above it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Relief {
+    crack: f64,
+    slope: f64,
+}
+
+impl Relief {
+    fn new(crack: f64, override_pa: f64, rated_flow: f64) -> Self {
+        Self {
+            crack,
+            slope: rated_flow / override_pa.max(1.0),
+        }
+    }
+
+    #[inline]
+    fn flow(&self, p: f64) -> (f64, f64) {
+        if p <= self.crack {
+            (0.0, 0.0)
+        } else {
+            (self.slope * (p - self.crack), self.slope)
+        }
+    }
+}
+
+/// Relief valve flow (linear above cracking).
 fn relief_flow(p: f64, crack: f64, override_pa: f64, rated_flow: f64) -> f64 {
-    relief(p, crack, override_pa, rated_flow).0
-}
-
-fn relief(p: f64, crack: f64, override_pa: f64, rated_flow: f64) -> (f64, f64) {
-    if p <= crack {
-        (0.0, 0.0)
-    } else {
-        let slope = rated_flow / override_pa.max(1.0);
-        (slope * (p - crack), slope)
-    }
+    Relief::new(crack, override_pa, rated_flow).flow(p).0
 }
 
 /// Solves `f(p) = 0` for a function decreasing in `p`, by Newton steps kept inside a bracket
@@ -472,6 +544,8 @@ impl Hydraulics {
         }
         Self {
             params,
+            orifice_constants: OrificeConstants::of(&params.fluid),
+            chambers: [0, 1, 2, 3].map(|i| Self::chambers_of(&params, i)),
             actuators,
             pump_pa: [tank; 2],
             pump_flow_m3_per_s: [0.0; 2],
@@ -484,17 +558,21 @@ impl Hydraulics {
     }
 
     fn chambers(&self, i: usize) -> Chambers {
+        self.chambers[i]
+    }
+
+    fn chambers_of(params: &HydraulicParams, i: usize) -> Chambers {
         if i == SWING {
-            let d = self.params.swing.displacement_m3_per_rad;
+            let d = params.swing.displacement_m3_per_rad;
             Chambers {
                 area_head: d,
                 area_rod: d,
                 stroke: f64::INFINITY,
-                dead: self.params.swing.port_volume_m3,
+                dead: params.swing.port_volume_m3,
                 rotary: true,
             }
         } else {
-            let c = &self.params.cylinders[i];
+            let c = &params.cylinders[i];
             Chambers {
                 area_head: c.head_area_m2(),
                 area_rod: c.rod_area_m2(),
@@ -539,9 +617,9 @@ impl Hydraulics {
         if dt_s.is_nan() || dt_s <= 0.0 {
             return;
         }
-        let p = self.params;
-        let fluid = p.fluid;
-        let tank = fluid.tank_pressure_pa;
+        let p = &self.params;
+        let oc = self.orifice_constants;
+        let tank = p.fluid.tank_pressure_pa;
         let spools = spools.map(|s| {
             if s.is_finite() {
                 s.clamp(-1.0, 1.0)
@@ -600,12 +678,24 @@ impl Hydraulics {
             if spool >= 0.0 { s.head_pa } else { s.rod_pa }
         };
 
+        // Eq. 1 constants of this step's orifices (the areas are fixed within a step).
+        let meter_in_orifice = meter_in.map(|a| Orifice::new(&oc, a));
+        let meter_out_orifice = meter_out.map(|a| Orifice::new(&oc, a));
+        let bypass_orifice = bypass.map(|a| Orifice::new(&oc, a));
+        let crossover_orifice = Orifice::new(&oc, crossover_area);
+        let makeup_orifice = Orifice::new(&oc, 1.0e-4);
+
         // 1. Gallery pressures from the flow balance (monotone decreasing in p).
         let mut new_pump = self.pump_pa;
         let mut pump_flow = [0.0; 2];
         for pump in 0..2 {
             let pp = p.pumps[pump];
             let acts = &self.actuators;
+            let main_relief = Relief::new(
+                pp.main_relief_pa,
+                pp.relief_override_pa,
+                pp.max_flow_m3_per_s,
+            );
             let balance = |pg: f64| {
                 let mut value = pp.flow(pg, effects.pump_saturation);
                 let mut slope = if pp.power_w / pg.max(1.0)
@@ -615,14 +705,14 @@ impl Hydraulics {
                 } else {
                     0.0
                 };
-                let (qb, db) = orifice(&fluid, bypass[pump], pg - tank);
+                let (qb, db) = bypass_orifice[pump].flow(pg - tank);
                 value -= qb;
                 slope -= db;
                 for i in 0..N_ACTUATORS {
                     if VALVE_PUMP[i] == pump && meter_in[i] > 0.0 {
                         let dp = pg - inlet_pa(&acts[i], spools[i]);
                         if dp > 0.0 {
-                            let (q, d) = orifice(&fluid, meter_in[i], dp);
+                            let (q, d) = meter_in_orifice[i].flow(dp);
                             value -= q;
                             slope -= d;
                         }
@@ -631,17 +721,12 @@ impl Hydraulics {
                 if pump == 1 && crossover_area > 0.0 {
                     let dp = pg - inlet_pa(&acts[BOOM], spools[BOOM]);
                     if dp > 0.0 {
-                        let (q, d) = orifice(&fluid, crossover_area, dp);
+                        let (q, d) = crossover_orifice.flow(dp);
                         value -= q;
                         slope -= d;
                     }
                 }
-                let (qr, dr) = relief(
-                    pg,
-                    pp.main_relief_pa,
-                    pp.relief_override_pa,
-                    pp.max_flow_m3_per_s,
-                );
+                let (qr, dr) = main_relief.flow(pg);
                 (value - qr, slope - dr)
             };
             let hi = pp.main_relief_pa + 20.0 * pp.relief_override_pa;
@@ -667,7 +752,9 @@ impl Hydraulics {
             } else {
                 p.port_relief_pa
             };
-            let rated = p.pumps[VALVE_PUMP[i]].max_flow_m3_per_s;
+            let port_relief =
+                Relief::new(relief_pa, 1.0e6, p.pumps[VALVE_PUMP[i]].max_flow_m3_per_s);
+            let (meter_in_i, meter_out_i) = (meter_in_orifice[i], meter_out_orifice[i]);
             let leak = if i == SWING {
                 0.0
             } else {
@@ -678,13 +765,13 @@ impl Hydraulics {
                 let mut q = 0.0;
                 let mut d = 0.0;
                 if supplied {
-                    let (qi, di) = orifice(&fluid, meter_in[i], gallery - pc);
+                    let (qi, di) = meter_in_i.flow(gallery - pc);
                     if qi > 0.0 {
                         q += qi;
                         d -= di;
                     }
                     if cross.is_finite() {
-                        let (qx, dx) = orifice(&fluid, crossover_area, cross - pc);
+                        let (qx, dx) = crossover_orifice.flow(cross - pc);
                         if qx > 0.0 {
                             q += qx;
                             d -= dx;
@@ -692,16 +779,16 @@ impl Hydraulics {
                     }
                 }
                 if drained {
-                    let (qo, dout) = orifice(&fluid, meter_out[i], pc - tank);
+                    let (qo, dout) = meter_out_i.flow(pc - tank);
                     q -= qo;
                     d -= dout;
                 }
                 // Port relief to tank and anti-cavitation make-up from tank.
-                let (qr, dr) = relief(pc, relief_pa, 1.0e6, rated);
+                let (qr, dr) = port_relief.flow(pc);
                 q -= qr;
                 d -= dr;
                 if pc < tank {
-                    let (qm, dm) = orifice(&fluid, 1.0e-4, tank - pc);
+                    let (qm, dm) = makeup_orifice.flow(tank - pc);
                     q += qm;
                     d -= dm;
                 }
@@ -715,7 +802,7 @@ impl Hydraulics {
             let v = state.velocity;
             // Eq. 2 in backward Euler: P' = P + dt beta / V (Q_in(P') - dV/dt).
             let solve_chamber = |p_old: f64, volume: f64, dvdt: f64, supplied, drained, other| {
-                let c = fluid.bulk_modulus_pa * dt_s / volume.max(1e-6);
+                let c = p.fluid.bulk_modulus_pa * dt_s / volume.max(1e-6);
                 let residual = |pn: f64| {
                     let (q, d) = chamber_inflow(pn, supplied, drained, other);
                     (p_old + c * (q - dvdt) - pn, c * d - 1.0)

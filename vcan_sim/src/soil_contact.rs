@@ -11,43 +11,31 @@
 //!   when the opening tips below the horizontal, which is how a dump empties it. Spilled and dumped
 //!   material is deposited as a cone at the angle of repose under the bucket.
 //! - **Force.** The modified Fundamental Earthmoving Equation for sloped terrain with the swept-volume
-//!   surcharge (Eqs. 14-17): `F = d^2 w gamma g N_w + c w d N_c + V_s gamma g N_q`, directed at the
-//!   soil-tool friction angle `delta` from the blade normal (Eq. 18), acting at the cutting edge. The
+//!   surcharge (Eqs. 14-17), `F = d^2 w gamma g N_w + c w d N_c + V_s gamma g N_q`, from
+//!   [`planner::soil::fee_force_n`] (the same equations the planner's models use), with the geometry
+//!   `Gamma = (d, alpha, rho, V_s)` measured here on the true grid (no section is built). It is directed
+//!   at the soil-tool friction angle `delta` from the blade normal (Eq. 18) for either direction of
+//!   travel, acting at the cutting edge. The
 //!   payload's weight acts at its centroid through the gravity torques (Eq. A4), which replaces the
 //!   moment of Eq. 19. Moving down into the ground meets a bearing resistance, and a boulder is a stiff
 //!   obstacle the edge cannot cut.
 
 use planner::kinematics::TipForce;
 use planner::machine::GRAVITY_M_PER_S2;
+use planner::soil::{DigGeometry, SoilProperties, fee_force_n};
 use planner::terrain::{TerrainError, TerrainGrid};
 use rand::{RngExt, SeedableRng};
 
 use crate::scenario::{Boulder, Scenario, SoilSpec};
 
-/// Soil properties of one terrain cell (Psi of Eq. 17, radians).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SoilCell {
-    /// Bank density gamma (kg/m^3).
-    pub density_kg_per_m3: f64,
-    /// Cohesion c (Pa).
-    pub cohesion_pa: f64,
-    /// Soil-soil friction angle phi (rad).
-    pub phi_rad: f64,
-    /// Soil-tool friction angle delta (rad).
-    pub delta_rad: f64,
-    /// Failure-surface angle beta (rad).
-    pub beta_rad: f64,
-}
-
-impl From<&SoilSpec> for SoilCell {
-    fn from(s: &SoilSpec) -> Self {
-        Self {
-            density_kg_per_m3: s.density_kg_per_m3,
-            cohesion_pa: s.cohesion_pa,
-            phi_rad: s.friction_angle_deg.to_radians(),
-            delta_rad: s.tool_friction_angle_deg.to_radians(),
-            beta_rad: s.failure_angle_deg.to_radians(),
-        }
+/// Soil properties `Psi` of a scenario soil (degrees in the file, radians here).
+fn soil_properties(s: &SoilSpec) -> SoilProperties {
+    SoilProperties {
+        density_kg_per_m3: s.density_kg_per_m3,
+        failure_angle_rad: s.failure_angle_deg.to_radians(),
+        friction_angle_rad: s.friction_angle_deg.to_radians(),
+        tool_friction_angle_rad: s.tool_friction_angle_deg.to_radians(),
+        cohesion_pa: s.cohesion_pa,
     }
 }
 
@@ -85,7 +73,8 @@ pub struct BucketContent {
 pub struct World {
     /// True terrain heights.
     pub terrain: TerrainGrid,
-    soil: Vec<SoilCell>,
+    /// Soil properties per cell (row-major, as the terrain grid).
+    soil: Vec<SoilProperties>,
     /// Hard inclusions.
     pub boulders: Vec<Boulder>,
     /// Angle of repose of spilled material (rad).
@@ -112,7 +101,7 @@ impl World {
                 0.0
             }
         })?;
-        let default = SoilCell::from(&s.soil);
+        let default = soil_properties(&s.soil);
         let mut soil = vec![default; nx * ny];
         for j in 0..ny {
             for i in 0..nx {
@@ -120,7 +109,7 @@ impl World {
                 for r in &s.soil_regions {
                     if (r.x_min_m..=r.x_max_m).contains(&x) && (r.y_min_m..=r.y_max_m).contains(&y)
                     {
-                        soil[j * nx + i] = SoilCell::from(&r.soil);
+                        soil[j * nx + i] = soil_properties(&r.soil);
                     }
                 }
             }
@@ -149,16 +138,20 @@ impl World {
     }
 
     /// Soil at a world point (the default cell at the map edge), with the soil effects applied.
-    pub fn soil_at(&self, x_m: f64, y_m: f64, effects: &SoilEffects) -> SoilCell {
+    pub fn soil_at(&self, x_m: f64, y_m: f64, effects: &SoilEffects) -> SoilProperties {
         let nx = self.terrain.nx();
         let (i, j) = self.terrain.cell_index(x_m, y_m).unwrap_or((0, 0));
-        let mut c = self.soil.get(j * nx + i).copied().unwrap_or(SoilCell {
-            density_kg_per_m3: 1700.0,
-            cohesion_pa: 0.0,
-            phi_rad: 0.6,
-            delta_rad: 0.35,
-            beta_rad: 0.5,
-        });
+        let mut c = self
+            .soil
+            .get(j * nx + i)
+            .copied()
+            .unwrap_or(SoilProperties {
+                density_kg_per_m3: 1700.0,
+                cohesion_pa: 0.0,
+                friction_angle_rad: 0.6,
+                tool_friction_angle_rad: 0.35,
+                failure_angle_rad: 0.5,
+            });
         c.cohesion_pa = (c.cohesion_pa + effects.cohesion_pa).max(0.0);
         c.density_kg_per_m3 = (c.density_kg_per_m3 + effects.density_kg_per_m3).max(100.0);
         c
@@ -189,61 +182,55 @@ impl World {
         };
         let reach = (2.5 / res).ceil() as isize;
         let slope = self.repose_rad.tan();
-        let mut cells = Vec::new();
-        for dj in -reach..=reach {
-            for di in -reach..=reach {
-                let (i, j) = (ci as isize + di, cj as isize + dj);
-                if i < 0 || j < 0 {
-                    continue;
-                }
+        let (nx, ny) = (self.terrain.nx() as isize, self.terrain.ny() as isize);
+        // `(i, j, base)` per cell, `base = h + r tan(repose)`: the apex height at which the cone's flank
+        // reaches the cell. A cell rises to `max(h, apex - r tan(repose))`.
+        let mut cells = Vec::with_capacity(((2 * reach + 1) * (2 * reach + 1)) as usize);
+        for j in (cj as isize - reach).max(0)..=(cj as isize + reach).min(ny - 1) {
+            for i in (ci as isize - reach).max(0)..=(ci as isize + reach).min(nx - 1) {
                 let (i, j) = (i as usize, j as usize);
                 if let Some(h) = self.terrain.cell(i, j) {
                     let [cx, cy] = self.terrain.cell_center(i, j);
-                    cells.push((i, j, (cx - x_m).hypot(cy - y_m) * slope, h));
+                    let (dx, dy) = (cx - x_m, cy - y_m);
+                    cells.push((i, j, (dx * dx + dy * dy).sqrt() * slope + h));
                 }
             }
         }
         if cells.is_empty() {
             return 0.0;
         }
+        // The added volume `area * sum max(apex - base, 0)` is piecewise linear in the apex: walk the
+        // bases upwards until the cells below the apex hold the volume, then solve that linear piece.
         let area = res * res;
-        let added = |apex: f64| -> f64 {
-            cells
-                .iter()
-                .map(|&(_, _, drop, h)| (apex - drop - h).max(0.0))
-                .sum::<f64>()
-                * area
-        };
-        let mut lo = cells
-            .iter()
-            .map(|c| c.2 + c.3)
-            .fold(f64::INFINITY, f64::min);
-        let mut hi = lo + 1.0;
-        for _ in 0..60 {
-            if added(hi) >= volume_m3 {
+        let mut bases: Vec<f64> = cells.iter().map(|c| c.2).collect();
+        bases.sort_unstable_by(f64::total_cmp);
+        let target = volume_m3 / area;
+        let (mut sum, mut apex) = (0.0, f64::NAN);
+        for (k, &b) in bases.iter().enumerate() {
+            // With the k lowest cells filled, raising the apex to `b` holds `k b - sum`.
+            if k > 0 && k as f64 * b - sum >= target {
+                apex = (target + sum) / k as f64;
                 break;
             }
-            hi = lo + 2.0 * (hi - lo);
+            sum += b;
         }
-        for _ in 0..60 {
-            let mid = 0.5 * (lo + hi);
-            if added(mid) < volume_m3 {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
+        if !apex.is_finite() {
+            apex = (target + sum) / bases.len() as f64;
         }
-        // Scale the last bisection step away so the placed volume matches exactly.
-        let placed = added(hi);
+        // Scale away the rounding so the placed volume matches exactly.
+        let placed: f64 = cells.iter().map(|c| (apex - c.2).max(0.0)).sum::<f64>() * area;
         let scale = if placed > 0.0 {
             volume_m3 / placed
         } else {
             0.0
         };
         let mut total = 0.0;
-        for &(i, j, drop, h) in &cells {
-            let add = (hi - drop - h).max(0.0) * scale;
-            if add > 0.0 && self.terrain.set_cell(i, j, Some(h + add)).is_ok() {
+        for &(i, j, base) in &cells {
+            let add = (apex - base).max(0.0) * scale;
+            if add > 0.0
+                && let Some(h) = self.terrain.cell(i, j)
+                && self.terrain.set_cell(i, j, Some(h + add)).is_ok()
+            {
                 total += add * area;
             }
         }
@@ -354,12 +341,18 @@ impl SoilContact {
             let blade_from_travel = b[1].atan2(b[0] * travel_sign);
             let rho = (std::f64::consts::PI - blade_from_travel + alpha * travel_sign)
                 .clamp(0.1, std::f64::consts::PI - 0.1);
-            let f = fee_force(&soil, d, alpha, rho, input.width_m, self.content.volume_m3);
+            let gamma = DigGeometry {
+                depth_m: d,
+                slope_rad: alpha,
+                rake_rad: -rho, // the thesis's sign (planner::soil)
+                swept_volume_m3: self.content.volume_m3,
+            };
+            let f = failure_force_n(&soil, &gamma, input.width_m);
             let speed = v[0].hypot(v[1]);
             let mobilised = f * (speed / CREEP_SPEED_M_PER_S).tanh();
             // Eq. 18: the tool force on the soil is at delta from the blade normal; on the bucket it is
             // the opposite: against the normal, and up the blade by friction.
-            let (sd, cd) = soil.delta_rad.sin_cos();
+            let (sd, cd) = soil.tool_friction_angle_rad.sin_cos();
             force[0] += mobilised * (-cd * n[0] + sd * b[0]);
             force[1] += mobilised * (-cd * n[1] + sd * b[1]);
             // Bearing resistance when the edge is pushed down into the ground.
@@ -530,26 +523,26 @@ impl SoilContact {
     }
 }
 
-/// The magnitude of the modified FEE force on a bucket of width `w` (Eqs. 14-17).
-pub fn fee_force(soil: &SoilCell, d: f64, alpha: f64, rho: f64, w: f64, swept_m3: f64) -> f64 {
-    if d <= 0.0 {
+/// Margin (the sine of an angle, rad) from the wedge's failure limit within which no soil failure force
+/// is applied: Eq. 17's denominator `cos(rho + delta) + sin(rho + delta) cot(beta + phi)` equals
+/// `sin(beta + phi + rho + delta) / sin(beta + phi)` and vanishes as the rake plus the three friction and
+/// failure angles reach 180 degrees, where the FEE force grows without bound.
+const WEDGE_LIMIT_MARGIN: f64 = 1e-3;
+
+/// The FEE force magnitude on the bucket (Eqs. 14-17, [`planner::soil::fee_force_n`]), N. Zero out of
+/// the soil, for soil properties outside their physical range, and near or past the wedge's failure
+/// limit (see [`WEDGE_LIMIT_MARGIN`]): a wedge that cannot fail offers no failure force (the edge then
+/// meets only the bearing resistance), and the simulator must not see an unbounded force.
+fn failure_force_n(soil: &SoilProperties, gamma: &DigGeometry, width_m: f64) -> f64 {
+    if gamma.depth_m <= 0.0 {
         return 0.0;
     }
-    let (beta, phi, delta) = (soil.beta_rad, soil.phi_rad, soil.delta_rad);
-    let cot = |x: f64| x.cos() / x.sin();
-    let cbp = cot(beta + phi);
-    let denom = (rho + delta).cos() + (rho + delta).sin() * cbp;
-    if denom.abs() < 1e-3 {
+    let limit = soil.failure_angle_rad + soil.friction_angle_rad;
+    let rake = -gamma.rake_rad;
+    if (limit + rake + soil.tool_friction_angle_rad).sin() < WEDGE_LIMIT_MARGIN * limit.sin() {
         return 0.0;
     }
-    let gamma_g = soil.density_kg_per_m3 * GRAVITY_M_PER_S2;
-    // Eq. 17.
-    let n_w =
-        ((cot(beta) - alpha.tan()).max(0.0) * (alpha.cos() + alpha.sin() * cbp)) / (2.0 * denom);
-    let n_c = (1.0 + cot(beta) * cbp) / denom;
-    let n_q = (alpha.cos() + alpha.sin() * cbp) / denom;
-    let f = d * d * w * gamma_g * n_w + soil.cohesion_pa * w * d * n_c + swept_m3 * gamma_g * n_q;
-    f.max(0.0)
+    fee_force_n(soil, gamma, width_m).unwrap_or(0.0)
 }
 
 #[cfg(test)]
@@ -575,18 +568,47 @@ mod tests {
     }
 
     #[test]
-    fn fee_force_grows_with_depth_cohesion_and_swept_volume() {
-        let soil = SoilCell::from(&SoilSpec::default());
-        let f1 = fee_force(&soil, 0.2, 0.0, 1.2, 1.3, 0.0);
-        let f2 = fee_force(&soil, 0.4, 0.0, 1.2, 1.3, 0.0);
-        let f3 = fee_force(&soil, 0.4, 0.0, 1.2, 1.3, 0.5);
+    fn failure_force_is_the_planners_fee_and_grows_with_depth_cohesion_and_swept_volume() {
+        let soil = soil_properties(&SoilSpec::default());
+        let at = |d: f64, swept_m3: f64| DigGeometry {
+            depth_m: d,
+            slope_rad: 0.0,
+            rake_rad: -1.2,
+            swept_volume_m3: swept_m3,
+        };
+        let f1 = failure_force_n(&soil, &at(0.2, 0.0), 1.3);
+        let f2 = failure_force_n(&soil, &at(0.4, 0.0), 1.3);
+        let f3 = failure_force_n(&soil, &at(0.4, 0.5), 1.3);
         assert!(f1 > 0.0 && f2 > f1 && f3 > f2);
-        let hard = SoilCell {
+        assert_eq!(f3, fee_force_n(&soil, &at(0.4, 0.5), 1.3).unwrap());
+        let hard = SoilProperties {
             cohesion_pa: 50_000.0,
             ..soil
         };
-        assert!(fee_force(&hard, 0.4, 0.0, 1.2, 1.3, 0.0) > f2);
-        assert_eq!(fee_force(&soil, 0.0, 0.0, 1.2, 1.3, 0.0), 0.0);
+        assert!(failure_force_n(&hard, &at(0.4, 0.0), 1.3) > f2);
+        assert_eq!(failure_force_n(&soil, &at(0.0, 0.0), 1.3), 0.0);
+        // At and past the wedge's failure limit (rake + delta + beta + phi = 180 degrees): no force.
+        let limit = std::f64::consts::PI
+            - soil.failure_angle_rad
+            - soil.friction_angle_rad
+            - soil.tool_friction_angle_rad;
+        for rake in [limit - 1e-4, limit, limit + 0.3] {
+            let g = DigGeometry {
+                rake_rad: -rake,
+                ..at(0.4, 0.2)
+            };
+            assert_eq!(failure_force_n(&soil, &g, 1.3), 0.0, "rake {rake}");
+        }
+        assert!(
+            failure_force_n(
+                &soil,
+                &DigGeometry {
+                    rake_rad: -(limit - 0.05),
+                    ..at(0.4, 0.2)
+                },
+                1.3
+            ) > f3
+        );
     }
 
     /// Done-when: the mass removed from the terrain equals the mass in the bucket plus spill.
