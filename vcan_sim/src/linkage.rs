@@ -126,6 +126,12 @@ impl Linkage {
         let tau = self
             .kin
             .joint_torques_from_tip_force(&s.q, soil, payload_kg);
+        Self::cylinder_forces(s, &tau)
+    }
+
+    /// Cylinder forces for joint torques with the tabulated moment arms, `F = tau / r` (Eqs. A7, A19);
+    /// zero at a vanishing arm.
+    pub fn cylinder_forces(s: &LinkageState, tau: &Vector3<f64>) -> [f64; 3] {
         [0, 1, 2].map(|i| {
             let r = s.arms[i];
             if r.abs() < 1e-4 { 0.0 } else { tau[i] / r }

@@ -332,13 +332,7 @@ impl Plant {
         } else {
             let tau = -(self.linkage.kinematics().jacobian(&self.link.q).transpose()
                 * self.soil_force.to_vector());
-            [0, 1, 2].map(|i| {
-                if self.link.arms[i].abs() < 1e-4 {
-                    0.0
-                } else {
-                    tau[i] / self.link.arms[i]
-                }
-            })
+            Linkage::cylinder_forces(&self.link, &tau)
         };
         let masses = self.linkage.cylinder_masses(&self.link, payload);
         let tip = self.linkage.kinematics().forward(&self.link.q);

@@ -2,6 +2,7 @@
 //! that scans the terrain. Noise comes from a seeded RNG so a run is reproducible for a seed; the
 //! `pressure_sensor_offset` and `resolver_offset` hidden effects act here.
 
+use planner::kinematics::wrap_angle;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -42,9 +43,10 @@ impl Default for SensorSpec {
     }
 }
 
-/// True values the sensors look at.
+/// One value per measured quantity: what the sensors look at ([`SensedTruth`]) and what they read
+/// ([`SensorReadings`]), in the same units.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct SensedTruth {
+pub struct SensorValues {
     /// `[boom, stick, bucket, swing]` angles (rad).
     pub angles_rad: [f64; 4],
     /// Their rates (rad/s).
@@ -59,22 +61,12 @@ pub struct SensedTruth {
     pub odometry_m: [f64; 2],
 }
 
-/// One set of readings, as the gateway would put them on the bus.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct SensorReadings {
-    /// Resolver angles (rad).
-    pub angles_rad: [f64; 4],
-    /// Joint rates (rad/s).
-    pub rates_rad_per_s: [f64; 4],
-    /// Head pressures (Pa).
-    pub head_pa: [f64; 3],
-    /// Rod pressures (Pa).
-    pub rod_pa: [f64; 3],
-    /// Pump pressures (Pa).
-    pub pump_pa: [f64; 2],
-    /// Track odometry (m).
-    pub odometry_m: [f64; 2],
-}
+/// True values the sensors look at.
+pub type SensedTruth = SensorValues;
+
+/// One set of readings (noise, quantisation and sensor effects applied), as the gateway would put them
+/// on the bus.
+pub type SensorReadings = SensorValues;
 
 /// Sensor offsets (hidden effects).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -90,16 +82,24 @@ pub struct SensorEffects {
 pub struct Sensors {
     spec: SensorSpec,
     rng: ChaCha8Rng,
+    /// Noise distributions of angles, rates, pressures and ranges (`None` for zero noise).
+    angle_noise: Option<Normal<f64>>,
+    rate_noise: Option<Normal<f64>>,
+    pressure_noise: Option<Normal<f64>>,
+    range_noise: Option<Normal<f64>>,
 }
 
 fn quantise(v: f64, q: f64) -> f64 {
     if q > 0.0 { (v / q).round() * q } else { v }
 }
 
-fn wrap(a: f64) -> f64 {
-    let t = std::f64::consts::TAU;
-    let w = a.rem_euclid(t);
-    if w > std::f64::consts::PI { w - t } else { w }
+/// Zero-mean normal noise of standard deviation `std` (none when `std` is not positive and finite).
+fn normal(std: f64) -> Option<Normal<f64>> {
+    if std > 0.0 {
+        Normal::new(0.0, std).ok()
+    } else {
+        None
+    }
 }
 
 impl Sensors {
@@ -108,14 +108,15 @@ impl Sensors {
         Self {
             spec,
             rng: ChaCha8Rng::seed_from_u64(seed ^ 0x5E45_0125),
+            angle_noise: normal(spec.angle_noise_rad),
+            rate_noise: normal(spec.rate_noise_rad_per_s),
+            pressure_noise: normal(spec.pressure_noise_pa),
+            range_noise: normal(spec.range_noise_m),
         }
     }
 
-    fn noise(&mut self, std: f64) -> f64 {
-        match Normal::new(0.0, std) {
-            Ok(n) if std > 0.0 => n.sample(&mut self.rng),
-            _ => 0.0,
-        }
+    fn noise(rng: &mut ChaCha8Rng, distribution: Option<Normal<f64>>) -> f64 {
+        distribution.map_or(0.0, |n| n.sample(rng))
     }
 
     /// Reads every sensor once.
@@ -128,20 +129,22 @@ impl Sensors {
             } else {
                 0.0
             };
-            let a = truth.angles_rad[i] + offset + self.noise(s.angle_noise_rad);
-            r.angles_rad[i] = wrap(quantise(a, s.angle_quantum_rad));
-            r.rates_rad_per_s[i] = truth.rates_rad_per_s[i] + self.noise(s.rate_noise_rad_per_s);
+            let a = truth.angles_rad[i] + offset + Self::noise(&mut self.rng, self.angle_noise);
+            r.angles_rad[i] = wrap_angle(quantise(a, s.angle_quantum_rad));
+            r.rates_rad_per_s[i] =
+                truth.rates_rad_per_s[i] + Self::noise(&mut self.rng, self.rate_noise);
         }
-        let pressure = |p: f64, rng: &mut Self| {
-            (p + effects.pressure_offset_pa + rng.noise(s.pressure_noise_pa))
+        let pressure_noise = self.pressure_noise;
+        let mut pressure = |p: f64| {
+            (p + effects.pressure_offset_pa + Self::noise(&mut self.rng, pressure_noise))
                 .clamp(0.0, s.pressure_full_scale_pa)
         };
         for i in 0..3 {
-            r.head_pa[i] = pressure(truth.head_pa[i], self);
-            r.rod_pa[i] = pressure(truth.rod_pa[i], self);
+            r.head_pa[i] = pressure(truth.head_pa[i]);
+            r.rod_pa[i] = pressure(truth.rod_pa[i]);
         }
         for i in 0..2 {
-            r.pump_pa[i] = pressure(truth.pump_pa[i], self);
+            r.pump_pa[i] = pressure(truth.pump_pa[i]);
             r.odometry_m[i] = quantise(truth.odometry_m[i], s.odometry_quantum_m);
         }
         r
@@ -215,7 +218,7 @@ impl Sensors {
                     t += step;
                 }
                 if let Some(range) = hit {
-                    let noisy = (range + self.noise(self.spec.range_noise_m)).max(0.0);
+                    let noisy = (range + Self::noise(&mut self.rng, self.range_noise)).max(0.0);
                     points.push(at(noisy));
                 }
             }

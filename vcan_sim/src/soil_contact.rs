@@ -75,6 +75,11 @@ pub struct World {
     pub terrain: TerrainGrid,
     /// Soil properties per cell (row-major, as the terrain grid).
     soil: Vec<SoilProperties>,
+    /// The scenario's default soil (cells outside every soil region).
+    default_soil: SoilProperties,
+    /// Summed-area table of the cells whose density differs from the default, `(nx + 1) x (ny + 1)`:
+    /// a cut whose box holds none of them takes its mass from the removed volume in one product.
+    odd_density_sums: Vec<u32>,
     /// Hard inclusions.
     pub boulders: Vec<Boulder>,
     /// Angle of repose of spilled material (rad).
@@ -114,6 +119,17 @@ impl World {
                 }
             }
         }
+        let mut odd_density_sums = vec![0u32; (nx + 1) * (ny + 1)];
+        for j in 0..ny {
+            for i in 0..nx {
+                let odd =
+                    u32::from(soil[j * nx + i].density_kg_per_m3 != default.density_kg_per_m3);
+                odd_density_sums[(j + 1) * (nx + 1) + i + 1] = odd
+                    + odd_density_sums[j * (nx + 1) + i + 1]
+                    + odd_density_sums[(j + 1) * (nx + 1) + i]
+                    - odd_density_sums[j * (nx + 1) + i];
+            }
+        }
         let mut boulders = s.boulders.list.clone();
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(s.seed ^ 0xB0B0_1DE5);
         for _ in 0..s.boulders.random_count {
@@ -132,6 +148,8 @@ impl World {
         Ok(Self {
             terrain,
             soil,
+            default_soil: default,
+            odd_density_sums,
             boulders,
             repose_rad: s.spoil.repose_deg.to_radians(),
         })
@@ -155,6 +173,16 @@ impl World {
         c.cohesion_pa = (c.cohesion_pa + effects.cohesion_pa).max(0.0);
         c.density_kg_per_m3 = (c.density_kg_per_m3 + effects.density_kg_per_m3).max(100.0);
         c
+    }
+
+    /// Whether every cell in columns `i0..i1` and rows `j0..j1` has the default density.
+    fn default_density_in(&self, i0: usize, i1: usize, j0: usize, j1: usize) -> bool {
+        let w = self.terrain.nx() + 1;
+        let at = |i: usize, j: usize| self.odd_density_sums.get(j * w + i).copied();
+        match (at(i1, j1), at(i0, j1), at(i1, j0), at(i0, j0)) {
+            (Some(a), Some(b), Some(c), Some(d)) => a + d == b + c,
+            _ => false,
+        }
     }
 
     fn cell_density(&self, i: usize, j: usize, effects: &SoilEffects) -> f64 {
@@ -440,35 +468,48 @@ impl SoilContact {
         let i1 = (((x1 - ox) / res).ceil().max(0.0) as usize).min(t.nx());
         let j0 = (((y0 - oy) / res).floor().max(0.0) as usize).min(t.ny());
         let j1 = (((y1 - oy) / res).ceil().max(0.0) as usize).min(t.ny());
-        let mut before = Vec::with_capacity((i1 - i0) * (j1 - j0));
-        for j in j0..j1 {
-            for i in i0..i1 {
-                before.push(t.cell(i, j).unwrap_or(f64::NAN));
-            }
-        }
-        // Boulder cells are not cut: the edge rides over them (the contact force stops it).
-        if world
-            .terrain
-            .cut(from, to, input.azimuth_rad, input.width_m)
-            .is_err()
-        {
-            return;
-        }
         let area = res * res;
-        let (mut volume, mut mass) = (0.0, 0.0);
-        let mut k = 0;
-        for j in j0..j1 {
-            for i in i0..i1 {
-                let h0 = before[k];
-                k += 1;
-                let h1 = world.terrain.cell(i, j).unwrap_or(h0);
-                if h0.is_finite() && h1 < h0 {
-                    let dv = (h0 - h1) * area;
-                    volume += dv;
-                    mass += dv * world.cell_density(i, j, effects);
+        let (volume, mass) = if world.default_density_in(i0, i1, j0, j1) {
+            // One soil density under the whole edge path: the mass is the removed volume times it.
+            let Ok(volume) = world
+                .terrain
+                .cut(from, to, input.azimuth_rad, input.width_m)
+            else {
+                return;
+            };
+            let density = world.default_soil.density_kg_per_m3 + effects.density_kg_per_m3;
+            (volume, volume * density)
+        } else {
+            let mut before = Vec::with_capacity((i1 - i0) * (j1 - j0));
+            for j in j0..j1 {
+                for i in i0..i1 {
+                    before.push(t.cell(i, j).unwrap_or(f64::NAN));
                 }
             }
-        }
+            // Boulder cells are not cut: the edge rides over them (the contact force stops it).
+            if world
+                .terrain
+                .cut(from, to, input.azimuth_rad, input.width_m)
+                .is_err()
+            {
+                return;
+            }
+            let (mut volume, mut mass) = (0.0, 0.0);
+            let mut k = 0;
+            for j in j0..j1 {
+                for i in i0..i1 {
+                    let h0 = before[k];
+                    k += 1;
+                    let h1 = world.terrain.cell(i, j).unwrap_or(h0);
+                    if h0.is_finite() && h1 < h0 {
+                        let dv = (h0 - h1) * area;
+                        volume += dv;
+                        mass += dv * world.cell_density(i, j, effects);
+                    }
+                }
+            }
+            (volume, mass)
+        };
         self.ledger.removed_kg += mass;
         self.content.volume_m3 += volume;
         self.content.mass_kg += mass;
