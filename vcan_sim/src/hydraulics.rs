@@ -353,6 +353,10 @@ pub struct Hydraulics {
     /// Derived from `params` once (they never change after construction).
     orifice_constants: OrificeConstants,
     chambers: [Chambers; N_ACTUATORS],
+    /// Chamber `[head, rod]` and gallery pressures one step back: the solvers start from the linear
+    /// extrapolation of the last two steps, which saves Newton iterations while the machine moves.
+    previous_chamber_pa: [[f64; 2]; N_ACTUATORS],
+    previous_pump_pa: [f64; 2],
     /// Actuators: boom, stick, bucket, swing.
     pub actuators: [ActuatorState; N_ACTUATORS],
     /// Gallery (pump outlet) pressures (Pa).
@@ -546,6 +550,8 @@ impl Hydraulics {
             params,
             orifice_constants: OrificeConstants::of(&params.fluid),
             chambers: [0, 1, 2, 3].map(|i| Self::chambers_of(&params, i)),
+            previous_chamber_pa: [[tank; 2]; N_ACTUATORS],
+            previous_pump_pa: [tank; 2],
             actuators,
             pump_pa: [tank; 2],
             pump_flow_m3_per_s: [0.0; 2],
@@ -730,9 +736,11 @@ impl Hydraulics {
                 (value - qr, slope - dr)
             };
             let hi = pp.main_relief_pa + 20.0 * pp.relief_override_pa;
-            new_pump[pump] = solve_decreasing(balance, self.pump_pa[pump], tank, hi);
+            let guess = 2.0 * self.pump_pa[pump] - self.previous_pump_pa[pump];
+            new_pump[pump] = solve_decreasing(balance, guess, tank, hi);
             pump_flow[pump] = pp.flow(new_pump[pump], effects.pump_saturation);
         }
+        self.previous_pump_pa = self.pump_pa;
         self.pump_pa = new_pump;
         self.pump_flow_m3_per_s = pump_flow;
 
@@ -801,19 +809,23 @@ impl Hydraulics {
             let head_out = spool < 0.0;
             let v = state.velocity;
             // Eq. 2 in backward Euler: P' = P + dt beta / V (Q_in(P') - dV/dt).
-            let solve_chamber = |p_old: f64, volume: f64, dvdt: f64, supplied, drained, other| {
-                let c = p.fluid.bulk_modulus_pa * dt_s / volume.max(1e-6);
-                let residual = |pn: f64| {
-                    let (q, d) = chamber_inflow(pn, supplied, drained, other);
-                    (p_old + c * (q - dvdt) - pn, c * d - 1.0)
+            let previous = self.previous_chamber_pa[i];
+            let solve_chamber =
+                |p_old: f64, p_before: f64, volume: f64, dvdt: f64, supplied, drained, other| {
+                    let c = p.fluid.bulk_modulus_pa * dt_s / volume.max(1e-6);
+                    let residual = |pn: f64| {
+                        let (q, d) = chamber_inflow(pn, supplied, drained, other);
+                        (p_old + c * (q - dvdt) - pn, c * d - 1.0)
+                    };
+                    let guess = 2.0 * p_old - p_before;
+                    let pn = solve_decreasing(residual, guess, 0.0, relief_pa + 50.0e6);
+                    // Stiffness of the chamber seen by the piston: dP'/d(dV/dt) = -c / (1 - c dQ/dP).
+                    let (_, d) = chamber_inflow(pn, supplied, drained, other);
+                    (pn, c / (1.0 - c * d).max(1.0))
                 };
-                let pn = solve_decreasing(residual, p_old, 0.0, relief_pa + 50.0e6);
-                // Stiffness of the chamber seen by the piston: dP'/d(dV/dt) = -c / (1 - c dQ/dP).
-                let (_, d) = chamber_inflow(pn, supplied, drained, other);
-                (pn, c / (1.0 - c * d).max(1.0))
-            };
             let (head0, head_gain) = solve_chamber(
                 state.head_pa,
+                previous[0],
                 ch.head_volume(state.position),
                 ch.area_head * v,
                 head_in,
@@ -822,6 +834,7 @@ impl Hydraulics {
             );
             let (rod0, rod_gain) = solve_chamber(
                 state.rod_pa,
+                previous[1],
                 ch.rod_volume(state.position),
                 -ch.area_rod * v,
                 head_out,
@@ -872,6 +885,7 @@ impl Hydraulics {
             }
             let head = (head0 - head_gain * ch.area_head * (v_new - v)).max(0.0);
             let rod = (rod0 + rod_gain * ch.area_rod * (v_new - v)).max(0.0);
+            self.previous_chamber_pa[i] = [state.head_pa, state.rod_pa];
             self.actuators[i] = ActuatorState {
                 position: x_new,
                 velocity: v_new,

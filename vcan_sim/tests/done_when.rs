@@ -163,9 +163,10 @@ fn soil_removed_from_the_terrain_equals_bucket_plus_spill() {
         let boom = (3.0 * (1.7 - tip_z)).clamp(-1.0, 1.0);
         plant.step([boom, 0.7, 0.2, 0.0, 0.0, 0.0]);
     }
-    // The dig itself is chaotic (contact forces switch with the direction of travel), so the test checks
-    // that the bucket filled at the end of the drag, not how much of it the capture keeps.
-    let dug = plant.contact.content.mass_kg;
+    // The dig itself is chaotic (contact forces switch with the direction of travel and with contact;
+    // a one-ulp change elsewhere changes it macroscopically), so the test checks that the edge cut soil,
+    // not how much of it the bucket keeps through the drag and the capture.
+    let dug = plant.mass_ledger().removed_kg;
     assert!(dug > 100.0, "the bucket dug: {:?}", plant.mass_ledger());
     run(&mut plant, [0.8, 0.0, 1.0, 0.0, 0.0, 0.0], 2.5);
     let ledger = plant.mass_ledger();
@@ -179,8 +180,9 @@ fn soil_removed_from_the_terrain_equals_bucket_plus_spill() {
     // Dump: open the bucket in the air.
     run(&mut plant, [0.0, -0.5, -1.0, 0.0, 0.0, 0.0], 4.0);
     assert!(
-        plant.contact.content.mass_kg < dug,
-        "the dump emptied the bucket"
+        plant.contact.content.mass_kg < 1.0,
+        "the dump emptied the bucket: {:?}",
+        plant.contact.content
     );
     let ledger = plant.mass_ledger();
     let payload = plant.contact.content.mass_kg;
