@@ -813,14 +813,17 @@ impl Hydraulics {
             let solve_chamber =
                 |p_old: f64, p_before: f64, volume: f64, dvdt: f64, supplied, drained, other| {
                     let c = p.fluid.bulk_modulus_pa * dt_s / volume.max(1e-6);
+                    // The inflow slope at the last pressure the solver evaluated: within its 10 Pa tolerance
+                    // of the root, so it stands in for the slope at the root without another evaluation.
+                    let mut d = 0.0;
                     let residual = |pn: f64| {
-                        let (q, d) = chamber_inflow(pn, supplied, drained, other);
-                        (p_old + c * (q - dvdt) - pn, c * d - 1.0)
+                        let (q, dq) = chamber_inflow(pn, supplied, drained, other);
+                        d = dq;
+                        (p_old + c * (q - dvdt) - pn, c * dq - 1.0)
                     };
                     let guess = 2.0 * p_old - p_before;
                     let pn = solve_decreasing(residual, guess, 0.0, relief_pa + 50.0e6);
                     // Stiffness of the chamber seen by the piston: dP'/d(dV/dt) = -c / (1 - c dQ/dP).
-                    let (_, d) = chamber_inflow(pn, supplied, drained, other);
                     (pn, c / (1.0 - c * d).max(1.0))
                 };
             let (head0, head_gain) = solve_chamber(
