@@ -4,9 +4,11 @@
 // Test helpers panic on setup failure by design (clippy only exempts `#[test]` bodies).
 #![allow(clippy::unwrap_used)]
 
-use firmware_bridge::messages::{
-    AuxValveCommand, ControllerHeartbeat, GatewayMode, Message, RequestedMode, Valve,
-};
+mod common;
+
+use common::{heartbeat, valve_command};
+
+use firmware_bridge::messages::{GatewayMode, Message, Valve};
 use firmware_bridge::transport::{InProcessBus, VirtualClock};
 use planner::terrain::TerrainGrid;
 use vcan_sim::SimConfig;
@@ -92,21 +94,6 @@ fn cylinder_against_rigid_obstacle_stalls_at_relief_pressure() {
     assert!((s.pump_pa[1] - relief).abs() <= RELIEF_TOLERANCE * relief);
 }
 
-fn heartbeat(alive: u8) -> firmware_bridge::CanFrame {
-    ControllerHeartbeat {
-        mode: RequestedMode::ArmValve,
-        alive_counter: alive % 16,
-    }
-    .to_frame()
-    .unwrap()
-}
-
-fn boom_command(u: f64) -> firmware_bridge::CanFrame {
-    Message::AuxValveCommand(AuxValveCommand::from_fraction(Valve::Boom, u).unwrap())
-        .encode()
-        .unwrap()
-}
-
 #[test]
 fn missing_heartbeat_neutralises_the_valves_within_100_ms_of_simulated_time() {
     let clock = VirtualClock::new();
@@ -116,7 +103,7 @@ fn missing_heartbeat_neutralises_the_valves_within_100_ms_of_simulated_time() {
     let mut alive = 0u8;
     for _ in 0..100 {
         controller.send(heartbeat(alive)).unwrap();
-        controller.send(boom_command(0.5)).unwrap();
+        controller.send(valve_command(Valve::Boom, 0.5)).unwrap();
         alive = alive.wrapping_add(1);
         machine.advance(0.01);
     }
@@ -125,7 +112,7 @@ fn missing_heartbeat_neutralises_the_valves_within_100_ms_of_simulated_time() {
     let last_heartbeat_s = machine.time_s() - 0.01;
     let mut neutral_at = None;
     for _ in 0..300 {
-        controller.send(boom_command(0.5)).unwrap();
+        controller.send(valve_command(Valve::Boom, 0.5)).unwrap();
         machine.advance(0.001);
         // The commands returned were computed by the gateway at the start of the step.
         if neutral_at.is_none() && machine.node().valve_commands() == [0.0; 6] {

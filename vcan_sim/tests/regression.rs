@@ -20,9 +20,11 @@
 // Test helpers panic on setup failure by design (clippy only exempts `#[test]` bodies).
 #![allow(clippy::unwrap_used)]
 
-use firmware_bridge::messages::{
-    AuxValveCommand, ControllerHeartbeat, Message, RequestedMode, Valve,
-};
+mod common;
+
+use common::{heartbeat, valve_command};
+
+use firmware_bridge::messages::{Message, Valve};
 use firmware_bridge::transport::{InProcessBus, VirtualClock};
 use planner::terrain::TerrainGrid;
 use vcan_sim::SimConfig;
@@ -258,21 +260,6 @@ fn prescribed_edge_path_gives_the_recorded_forces_and_ledger() {
     );
 }
 
-fn heartbeat(alive: u8) -> firmware_bridge::CanFrame {
-    ControllerHeartbeat {
-        mode: RequestedMode::ArmValve,
-        alive_counter: alive % 16,
-    }
-    .to_frame()
-    .unwrap()
-}
-
-fn command(valve: Valve, u: f64) -> firmware_bridge::CanFrame {
-    Message::AuxValveCommand(AuxValveCommand::from_fraction(valve, u).unwrap())
-        .encode()
-        .unwrap()
-}
-
 /// The embedded machine (gateway, plant, sensor frames) under a scripted controller: it sends as many
 /// frames as before, with the same decoded angles and pressures (sums over the run, within a few
 /// quanta of the signal encoding).
@@ -286,8 +273,8 @@ fn scripted_embedded_run_sends_the_recorded_frames() {
     for k in 0..300u32 {
         controller.send(heartbeat(k as u8)).unwrap();
         let u = if k < 150 { 0.6 } else { -0.4 };
-        controller.send(command(Valve::Boom, u)).unwrap();
-        controller.send(command(Valve::Stick, -u)).unwrap();
+        controller.send(valve_command(Valve::Boom, u)).unwrap();
+        controller.send(valve_command(Valve::Stick, -u)).unwrap();
         machine.advance(0.01);
         while let Some(f) = controller.try_recv() {
             count += 1;
