@@ -12,6 +12,7 @@
 //! - [`node`]: [`ControllerNode`], the synchronous, clock-agnostic control step combining the three:
 //!   frames in, frames out, no I/O.
 //! - [`run`]: the real-time loop over SocketCAN (tokio drives a 10 ms interval around the node).
+//! - [`scan_client`]: the range-scan client of the real-time loop (JSON lines over TCP).
 //! - [`cli`]: the command line of `excavator-ctl`.
 //!
 //! # Data flow (one 10 ms step)
@@ -29,6 +30,7 @@ pub mod estimate;
 pub mod node;
 pub mod run;
 pub mod safety;
+pub mod scan_client;
 pub mod trace_tool;
 
 pub use cycle::{Action, CycleConfig, DigStats, WorkCycle};

@@ -9,6 +9,17 @@
 //! - receiving: frames are queued for the next tick; error frames (`transport::Error::Fault`) go to
 //!   [`ControllerNode::on_bus_fault`] at once.
 //!
+//! - with `--scan-addr`, the results of the range-scan task ([`crate::scan_client`]): after a tick in
+//!   which the work cycle asked for a scan ([`ControllerNode::take_scan_request`]) the loop asks the
+//!   task, which never blocks the loop; a terrain map goes to [`ControllerNode::provide_terrain`], a
+//!   failure is logged with its reason and Autodig digs on its plain angle rules.
+//!
+//! A [`LoopMonitor`] checks the loop rate once per second (steps, the longest gap between ticks) and the
+//! receive load. Under a receive overload (more than [`OVERLOAD_FRAMES_PER_S`] frames/s, or frames
+//! dropped from the inbox) it logs a verdict, `loop rate kept` or `safe state`, so an overload never
+//! passes silently; when the loop rate is lost during an overload it stops motion itself
+//! ([`BusFault::Overflow`], fault code 9 in `ControllerStatus`).
+//!
 //! Whatever ends the loop (the signal, the end of the plan, an I/O error), the last frames sent are
 //! [`ControllerNode::shutdown`]'s: neutral commands for all six valves and a `Disarm` heartbeat. The
 //! caller closes the trace recorder afterwards so the buffered tail reaches the file.
@@ -19,18 +30,30 @@ use std::time::Duration;
 
 use anyhow::Context as _;
 use firmware_bridge::trace::Recorder;
-use firmware_bridge::transport::{self, Bus, SocketCanBus, TimestampedFrame};
+use firmware_bridge::transport::{self, Bus, BusFault, SocketCanBus, TimestampedFrame};
 use planner::autodig::AutodigMaps;
 use planner::machine::MachineConfig;
 use tokio::time::MissedTickBehavior;
 
+use crate::cycle::Phase;
 use crate::node::{ControllerConfig, ControllerNode};
+use crate::scan_client::{ScanClient, ScanClientConfig, ScanService};
 
 /// The control period (100 Hz).
 pub const CONTROL_PERIOD: Duration = Duration::from_millis(10);
 /// Frames queued between two ticks before further ones are dropped (a full 10 ms of the bus at
 /// 500 kbit/s is under 40 frames).
 pub const MAX_INBOX: usize = 1024;
+/// The loop monitor's window, s.
+pub const MONITOR_WINDOW_S: f64 = 1.0;
+/// Received frames per second above which the bus counts as overloaded: over three times the full
+/// schedule of docs/protocol.md (1160 frames/s).
+pub const OVERLOAD_FRAMES_PER_S: f64 = 4000.0;
+/// The loop rate counts as kept while a window has at least this fraction of its steps ...
+pub const MIN_STEP_FRACTION: f64 = 0.8;
+/// ... and no gap between two ticks longer than this, s (the gateway's watchdog is 0.1 s; scheduling
+/// jitter in a TCG VM reaches 0.03 s).
+pub const MAX_TICK_GAP_S: f64 = 0.08;
 
 /// Options of `excavator-ctl run`.
 #[derive(Debug, Clone, Default)]
@@ -75,6 +98,115 @@ pub struct LoopStats {
     pub dropped: u64,
     /// Ticks that ran late (more than one period after the previous one).
     pub late_ticks: u64,
+    /// Longest gap between two ticks, microseconds.
+    pub max_tick_gap_us: u64,
+    /// Monitor windows with a receive overload in which the loop kept its rate.
+    pub overload_rate_kept: u64,
+    /// Monitor windows with a receive overload that ended in (or found) a safe state.
+    pub overload_safe_state: u64,
+    /// Range scans turned into terrain maps.
+    pub scans_ok: u64,
+    /// Range scans that failed (the dig then used the plain angle rules).
+    pub scans_failed: u64,
+}
+
+/// One [`MONITOR_WINDOW_S`] window of the loop monitor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoadReport {
+    /// Length of the window, s.
+    pub window_s: f64,
+    /// Control steps per second.
+    pub steps_per_s: f64,
+    /// Longest gap between two ticks, s.
+    pub max_gap_s: f64,
+    /// Received frames per second.
+    pub frames_per_s: f64,
+    /// Frames dropped because the inbox was full.
+    pub dropped: u64,
+}
+
+impl LoadReport {
+    /// More than [`OVERLOAD_FRAMES_PER_S`] received, or frames dropped.
+    pub fn overloaded(&self) -> bool {
+        self.frames_per_s > OVERLOAD_FRAMES_PER_S || self.dropped > 0
+    }
+
+    /// At least [`MIN_STEP_FRACTION`] of the steps, and no gap over [`MAX_TICK_GAP_S`].
+    pub fn rate_kept(&self, period: Duration) -> bool {
+        let expected = 1.0 / period.as_secs_f64();
+        self.steps_per_s >= MIN_STEP_FRACTION * expected && self.max_gap_s <= MAX_TICK_GAP_S
+    }
+}
+
+/// Counts steps, tick gaps, received and dropped frames per window (pure; the loop feeds it with the
+/// bus clock).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoopMonitor {
+    start_s: Option<f64>,
+    last_tick_s: Option<f64>,
+    steps: u64,
+    received: u64,
+    dropped: u64,
+    max_gap_s: f64,
+}
+
+impl Default for LoopMonitor {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl LoopMonitor {
+    /// A monitor whose first window starts at the first tick.
+    pub fn new() -> Self {
+        Self {
+            start_s: None,
+            last_tick_s: None,
+            steps: 0,
+            received: 0,
+            dropped: 0,
+            max_gap_s: 0.0,
+        }
+    }
+
+    /// A frame was received.
+    pub fn on_received(&mut self) {
+        self.received += 1;
+    }
+
+    /// A frame was dropped (inbox full).
+    pub fn on_dropped(&mut self) {
+        self.dropped += 1;
+    }
+
+    /// A tick at `now_s`; returns the report of the window it closes, if any.
+    pub fn on_tick(&mut self, now_s: f64) -> Option<LoadReport> {
+        if let Some(last) = self.last_tick_s {
+            self.max_gap_s = self.max_gap_s.max(now_s - last);
+        }
+        self.last_tick_s = Some(now_s);
+        self.steps += 1;
+        let start = *self.start_s.get_or_insert(now_s);
+        let window_s = now_s - start;
+        if window_s < MONITOR_WINDOW_S {
+            return None;
+        }
+        // The closing tick belongs to the next window too (as its first).
+        let report = LoadReport {
+            window_s,
+            steps_per_s: (self.steps - 1) as f64 / window_s,
+            max_gap_s: self.max_gap_s,
+            frames_per_s: self.received as f64 / window_s,
+            dropped: self.dropped,
+        };
+        *self = Self {
+            start_s: Some(now_s),
+            last_tick_s: Some(now_s),
+            steps: 1,
+            ..Self::new()
+        };
+        Some(report)
+    }
 }
 
 /// Builds the node from the options' files.
@@ -109,13 +241,11 @@ pub fn build_node(opts: &RunOptions) -> anyhow::Result<ControllerNode> {
     if let Some(n) = opts.digs {
         config.cycle.max_digs = Some(n);
     }
-    if opts.scan_addr.is_some() {
-        // docs/scan-protocol.md has not landed; dig on the plain angle rules until it does.
-        tracing::warn!(
-            "--scan-addr: the scan protocol is not implemented yet; digging without scans"
-        );
+    // Without a scan service nobody would answer the cycle's requests: dig on the plain angle rules
+    // at once instead of waiting `scan_timeout_s` before every dig.
+    if opts.scan_addr.is_none() {
+        config.cycle.scan = false;
     }
-    config.cycle.scan = false;
     ControllerNode::new(&machine, maps, config).context("controller configuration")
 }
 
@@ -145,8 +275,20 @@ async fn send_all<B: Bus>(
     Ok(())
 }
 
+/// The scan client for `node`'s cycle: `addr`, the cycle's grid, and the cycle's `scan_timeout_s`
+/// (a later answer would no longer be used).
+pub fn scan_client_config(node: &ControllerNode, addr: &str) -> ScanClientConfig {
+    let cycle = node.cycle().config();
+    ScanClientConfig {
+        addr: addr.to_owned(),
+        timeout: Duration::from_secs_f64(cycle.scan_timeout_s.clamp(0.01, 3600.0)),
+        request: vcan_sim::sensors::ScanRequest::default(),
+        grid: cycle.scan_grid,
+    }
+}
+
 /// Runs `node` on `bus` until `shutdown` resolves, the plan finishes or an I/O error occurs; then sends
-/// the shutdown frames (neutral valves, disarm).
+/// the shutdown frames (neutral valves, disarm). Without a scan service; see [`run_loop_with_scans`].
 ///
 /// # Errors
 /// A receive or send error of the bus (after the shutdown frames were attempted).
@@ -156,7 +298,103 @@ pub async fn run_loop<B: Bus>(
     period: Duration,
     shutdown: impl Future<Output = ()>,
 ) -> anyhow::Result<(StopReason, LoopStats)> {
+    run_loop_with_scans(bus, node, period, shutdown, None).await
+}
+
+/// Logs the monitor's verdict on an overloaded window and stops motion when the loop rate is lost.
+fn judge_load(
+    report: &LoadReport,
+    period: Duration,
+    node: &mut ControllerNode,
+    now_s: f64,
+    stats: &mut LoopStats,
+) {
+    let rate_kept = report.rate_kept(period);
+    if !report.overloaded() {
+        if !rate_kept {
+            tracing::warn!(
+                steps_per_s = report.steps_per_s,
+                max_gap_ms = report.max_gap_s * 1e3,
+                "control loop late (no bus overload)"
+            );
+        }
+        return;
+    }
+    if !rate_kept && node.safety().motion().is_some() {
+        node.on_bus_fault(now_s, BusFault::Overflow);
+    }
+    let motion = match (node.safety().motion(), node.fault()) {
+        (Some(mode), _) => format!("moving ({mode:?} mode)"),
+        (None, Some(fault)) => format!("stopped: {fault}"),
+        (None, None) => "stopped (not armed)".to_owned(),
+    };
+    if rate_kept {
+        stats.overload_rate_kept += 1;
+        tracing::warn!(
+            verdict = "loop rate kept",
+            frames_per_s = report.frames_per_s.round(),
+            dropped = report.dropped,
+            steps_per_s = report.steps_per_s,
+            max_gap_ms = report.max_gap_s * 1e3,
+            %motion,
+            "bus overload"
+        );
+    } else {
+        stats.overload_safe_state += 1;
+        tracing::warn!(
+            verdict = "safe state",
+            frames_per_s = report.frames_per_s.round(),
+            dropped = report.dropped,
+            steps_per_s = report.steps_per_s,
+            max_gap_ms = report.max_gap_s * 1e3,
+            %motion,
+            "bus overload: loop rate lost, valves neutral"
+        );
+    }
+}
+
+/// Hands a scan result to the node, or logs why there is none (Autodig then uses its plain angle
+/// rules).
+fn on_scan_result(
+    node: &mut ControllerNode,
+    result: Result<planner::terrain::TerrainGrid, crate::scan_client::ScanError>,
+    stats: &mut LoopStats,
+) {
+    match result {
+        Ok(terrain) if node.status().phase == Phase::Scan => {
+            stats.scans_ok += 1;
+            tracing::info!("range scan: terrain map handed to the work cycle");
+            node.provide_terrain(terrain);
+        }
+        Ok(_) => {
+            stats.scans_failed += 1;
+            tracing::warn!(
+                "range scan arrived after the work cycle stopped waiting; discarded (plain angle rules)"
+            );
+        }
+        Err(e) => {
+            stats.scans_failed += 1;
+            tracing::warn!(
+                reason = %e,
+                "range scan failed: Autodig digs on its plain angle rules"
+            );
+        }
+    }
+}
+
+/// [`run_loop`] with an optional range-scan service answering the work cycle's scan requests.
+///
+/// # Errors
+/// A receive or send error of the bus (after the shutdown frames were attempted).
+pub async fn run_loop_with_scans<B: Bus>(
+    bus: &B,
+    node: &mut ControllerNode,
+    period: Duration,
+    shutdown: impl Future<Output = ()>,
+    mut scans: Option<&mut ScanService>,
+) -> anyhow::Result<(StopReason, LoopStats)> {
     let mut stats = LoopStats::default();
+    let mut monitor = LoopMonitor::new();
     let mut interval = tokio::time::interval(period);
     interval.set_missed_tick_behavior(MissedTickBehavior::Skip);
     let mut inbox: Vec<TimestampedFrame> = Vec::with_capacity(MAX_INBOX);
@@ -168,16 +406,37 @@ pub async fn run_loop<B: Bus>(
             biased;
             () = &mut shutdown => break Ok(StopReason::Signal),
             tick = interval.tick() => {
-                if last_tick.is_some_and(|t| tick.duration_since(t) > period + period / 2) {
-                    stats.late_ticks += 1;
+                if let Some(t) = last_tick {
+                    let gap = tick.duration_since(t);
+                    if gap > period + period / 2 {
+                        stats.late_ticks += 1;
+                    }
+                    stats.max_tick_gap_us =
+                        stats.max_tick_gap_us.max(u64::try_from(gap.as_micros()).unwrap_or(u64::MAX));
                 }
                 last_tick = Some(tick);
                 let now = now_s(bus);
+                if let Some(report) = monitor.on_tick(now) {
+                    judge_load(&report, period, node, now, &mut stats);
+                }
                 let out = node.step(now, &inbox);
                 inbox.clear();
                 stats.steps += 1;
                 if let Err(e) = send_all(bus, node, &out, &mut stats).await {
                     break Err(e);
+                }
+                if node.take_scan_request() {
+                    match scans.as_deref_mut() {
+                        Some(service) => {
+                            if !service.request() {
+                                tracing::debug!("a range scan is already in flight");
+                            }
+                        }
+                        None => tracing::warn!(
+                            "the work cycle asked for a range scan but no scan service is configured \
+                             (--scan-addr): plain angle rules"
+                        ),
+                    }
                 }
                 if now - last_report_s >= 1.0 {
                     last_report_s = now;
@@ -198,11 +457,13 @@ pub async fn run_loop<B: Bus>(
             received = bus.recv() => match received {
                 Ok(tf) => {
                     stats.received += 1;
+                    monitor.on_received();
                     tracing::trace!(frame = ?tf.frame, "received");
                     if inbox.len() < MAX_INBOX {
                         inbox.push(tf);
                     } else {
                         stats.dropped += 1;
+                        monitor.on_dropped();
                     }
                 }
                 Err(transport::Error::Fault(fault)) => node.on_bus_fault(now_s(bus), fault),
@@ -210,6 +471,7 @@ pub async fn run_loop<B: Bus>(
                     break Err(anyhow::Error::new(e).context(format!("receiving on {}", bus.interface())));
                 }
             },
+            result = next_scan(&mut scans) => on_scan_result(node, result, &mut stats),
         }
     };
     let out = node.shutdown(now_s(bus));
@@ -220,6 +482,16 @@ pub async fn run_loop<B: Bus>(
     }
     stats.sent += out.len() as u64;
     result.map(|r| (r, stats))
+}
+
+/// The next scan result, or never without a service.
+async fn next_scan(
+    scans: &mut Option<&mut ScanService>,
+) -> Result<planner::terrain::TerrainGrid, crate::scan_client::ScanError> {
+    match scans {
+        Some(service) => service.next_result().await,
+        None => std::future::pending().await,
+    }
 }
 
 /// Ctrl-C or SIGTERM (systemd's stop signal).
@@ -266,9 +538,21 @@ pub async fn run(opts: RunOptions) -> anyhow::Result<()> {
     tracing::info!(
         iface = %opts.iface,
         listen_only = node.safety().config().listen_only,
+        scan_addr = opts.scan_addr.as_deref().unwrap_or("none"),
         "excavator-ctl running; Ctrl-C stops (valves neutral, disarm)"
     );
-    let result = run_loop(&bus, &mut node, CONTROL_PERIOD, shutdown_signal()).await;
+    let mut scans = opts
+        .scan_addr
+        .as_deref()
+        .map(|addr| ScanService::spawn(ScanClient::new(scan_client_config(&node, addr))));
+    let result = run_loop_with_scans(
+        &bus,
+        &mut node,
+        CONTROL_PERIOD,
+        shutdown_signal(),
+        scans.as_mut(),
+    )
+    .await;
     if let Some(r) = recorder {
         let closed = r.close().context("closing the trace");
         if let Ok(stats) = &closed {
@@ -290,4 +574,57 @@ pub async fn run(opts: RunOptions) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn window(steps_per_s: f64, max_gap_s: f64, frames_per_s: f64, dropped: u64) -> LoadReport {
+        LoadReport {
+            window_s: 1.0,
+            steps_per_s,
+            max_gap_s,
+            frames_per_s,
+            dropped,
+        }
+    }
+
+    #[test]
+    fn monitor_reports_steps_gaps_and_load_per_window() {
+        let mut m = LoopMonitor::new();
+        let mut reports = Vec::new();
+        let mut t = 0.0;
+        for k in 0..250 {
+            // One 60 ms stall in the first window.
+            t += if k == 50 { 0.06 } else { 0.01 };
+            for _ in 0..12 {
+                m.on_received();
+            }
+            if let Some(r) = m.on_tick(t) {
+                reports.push(r);
+            }
+        }
+        assert_eq!(reports.len(), 2, "{reports:?}");
+        let first = reports[0];
+        assert!((first.max_gap_s - 0.06).abs() < 1e-9, "{first:?}");
+        assert!(
+            first.steps_per_s > 90.0 && first.steps_per_s <= 100.0,
+            "{first:?}"
+        );
+        assert!(first.frames_per_s > 1000.0 && first.frames_per_s < 1300.0);
+        assert!(!first.overloaded());
+        assert!(first.rate_kept(CONTROL_PERIOD));
+        assert!((reports[1].max_gap_s - 0.01).abs() < 1e-9);
+    }
+
+    #[test]
+    fn overload_and_rate_verdicts() {
+        assert!(window(100.0, 0.012, 50_000.0, 0).overloaded());
+        assert!(window(100.0, 0.012, 1200.0, 3).overloaded());
+        assert!(!window(100.0, 0.012, 1200.0, 0).overloaded());
+        assert!(window(99.0, 0.03, 0.0, 0).rate_kept(CONTROL_PERIOD));
+        assert!(!window(60.0, 0.03, 0.0, 0).rate_kept(CONTROL_PERIOD));
+        assert!(!window(99.0, 0.09, 0.0, 0).rate_kept(CONTROL_PERIOD));
+    }
 }

@@ -1,0 +1,378 @@
+//! The range-scan client of the real-time loop (docs/scan-protocol.md): JSON lines over TCP.
+//!
+//! The work cycle asks for a scan before each dig ([`crate::ControllerNode::take_scan_request`]); the
+//! run loop hands the request to [`ScanService`], a tokio task that owns the connection, so the
+//! control loop never waits on the network. The task
+//!
+//! 1. connects (or reuses the connection; a failed exchange drops it and the next request reconnects),
+//! 2. writes one [`ScanRequest`] as a JSON line and reads one reply line,
+//! 3. parses the [`Scan`] (or the server's `{"error": ...}`) and bins its points into a
+//!    [`TerrainGrid`] with the cycle's [`ScanGrid`] (`TerrainGrid::from_scan`) on tokio's blocking
+//!    pool, because a default scan is about 10,000 points,
+//!
+//! all within one timeout, and sends back the terrain or a [`ScanError`] naming the reason. The loop
+//! then calls [`crate::ControllerNode::provide_terrain`], or logs the reason and lets Autodig fall
+//! back to its plain angle rules (the cycle's own `scan_timeout_s` also covers a reply that never
+//! comes).
+
+use std::time::Duration;
+
+use planner::terrain::TerrainGrid;
+use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
+use tokio::net::TcpStream;
+use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
+use tokio::sync::mpsc;
+use vcan_sim::sensors::{Scan, ScanRequest};
+
+use crate::cycle::ScanGrid;
+
+/// Longest reply line accepted (a 2000 x 2000 scan would be far larger; the default is about 0.5 MB).
+pub const MAX_REPLY_BYTES: usize = 64 * 1024 * 1024;
+
+/// Why a scan did not produce a terrain map.
+#[derive(Debug, thiserror::Error)]
+pub enum ScanError {
+    /// The TCP connection could not be opened.
+    #[error("cannot connect to the scan service at {addr}: {source}")]
+    Connect {
+        /// The address.
+        addr: String,
+        /// The socket error.
+        source: std::io::Error,
+    },
+    /// Reading or writing failed.
+    #[error("scan connection to {addr}: {source}")]
+    Io {
+        /// The address.
+        addr: String,
+        /// The socket error.
+        source: std::io::Error,
+    },
+    /// The service closed the connection before replying.
+    #[error("the scan service at {addr} closed the connection")]
+    Closed {
+        /// The address.
+        addr: String,
+    },
+    /// No reply within the timeout.
+    #[error("no scan from {addr} within {timeout_s} s")]
+    Timeout {
+        /// The address.
+        addr: String,
+        /// The timeout, s.
+        timeout_s: f64,
+    },
+    /// The reply line is longer than [`MAX_REPLY_BYTES`].
+    #[error("scan reply longer than {MAX_REPLY_BYTES} bytes")]
+    TooLong,
+    /// The service answered with an error object.
+    #[error("the scan service refused the request: {0}")]
+    Refused(String),
+    /// The reply is not a scan.
+    #[error("malformed scan reply: {0}")]
+    Malformed(String),
+    /// The points do not make a terrain map (none in the grid, gaps too large).
+    #[error("terrain from the scan: {0}")]
+    Terrain(String),
+    /// The scan task is gone.
+    #[error("the scan task stopped")]
+    TaskGone,
+}
+
+/// Where and how to scan.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScanClientConfig {
+    /// `HOST:PORT` of the scan service.
+    pub addr: String,
+    /// Connect, request, reply and terrain building must finish within this.
+    pub timeout: Duration,
+    /// The request sent (default: the protocol's default scan).
+    pub request: ScanRequest,
+    /// The grid the points are binned into.
+    pub grid: ScanGrid,
+}
+
+/// A JSON-lines connection to the scan service; reconnects after any failure.
+#[derive(Debug)]
+pub struct ScanClient {
+    config: ScanClientConfig,
+    conn: Option<(BufReader<OwnedReadHalf>, OwnedWriteHalf)>,
+    line: String,
+}
+
+impl ScanClient {
+    /// A client for `config` (connects on the first request).
+    pub fn new(config: ScanClientConfig) -> Self {
+        Self {
+            config,
+            conn: None,
+            line: String::new(),
+        }
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &ScanClientConfig {
+        &self.config
+    }
+
+    /// One scan turned into a terrain map, within the configured timeout.
+    ///
+    /// # Errors
+    /// [`ScanError`] naming what failed; the connection is dropped and reopened next time.
+    pub async fn terrain(&mut self) -> Result<TerrainGrid, ScanError> {
+        let timeout = self.config.timeout;
+        let result = match tokio::time::timeout(timeout, self.exchange()).await {
+            Ok(r) => r,
+            Err(_) => Err(ScanError::Timeout {
+                addr: self.config.addr.clone(),
+                timeout_s: timeout.as_secs_f64(),
+            }),
+        };
+        let result = match result {
+            Ok(line) => {
+                let grid = self.config.grid;
+                // Parsing and binning ~10,000 points takes milliseconds: keep it off the runtime's
+                // thread, which also drives the control loop.
+                let task = tokio::task::spawn_blocking(move || terrain_from_reply(&line, &grid));
+                // The timeout covers the whole exchange; what is left of it bounds the binning.
+                match tokio::time::timeout(timeout, task).await {
+                    Ok(Ok(r)) => r,
+                    Ok(Err(e)) => Err(ScanError::Terrain(format!("terrain task failed: {e}"))),
+                    Err(_) => Err(ScanError::Timeout {
+                        addr: self.config.addr.clone(),
+                        timeout_s: timeout.as_secs_f64(),
+                    }),
+                }
+            }
+            Err(e) => Err(e),
+        };
+        if result.is_err() {
+            // A late reply to this request must not be taken as the answer to the next one.
+            self.conn = None;
+        }
+        result
+    }
+
+    /// Sends the request and returns the reply line.
+    async fn exchange(&mut self) -> Result<String, ScanError> {
+        let addr = self.config.addr.clone();
+        let io = |source| ScanError::Io {
+            addr: addr.clone(),
+            source,
+        };
+        if self.conn.is_none() {
+            let stream = TcpStream::connect(&addr)
+                .await
+                .map_err(|source| ScanError::Connect {
+                    addr: addr.clone(),
+                    source,
+                })?;
+            // Small request lines: do not let Nagle hold them back.
+            let _ = stream.set_nodelay(true);
+            let (read, write) = stream.into_split();
+            self.conn = Some((BufReader::new(read), write));
+        }
+        let Some((read, write)) = self.conn.as_mut() else {
+            return Err(ScanError::Closed { addr });
+        };
+        let mut request = serde_json::to_string(&self.config.request)
+            .map_err(|e| ScanError::Malformed(format!("encoding the request: {e}")))?;
+        request.push('\n');
+        write.write_all(request.as_bytes()).await.map_err(io)?;
+        write.flush().await.map_err(io)?;
+        self.line.clear();
+        let n = read.read_line(&mut self.line).await.map_err(io)?;
+        if n == 0 {
+            return Err(ScanError::Closed { addr });
+        }
+        if self.line.len() > MAX_REPLY_BYTES {
+            return Err(ScanError::TooLong);
+        }
+        Ok(std::mem::take(&mut self.line))
+    }
+}
+
+/// Parses one reply line (a [`Scan`] or `{"error": ...}`) and bins the points into `grid`.
+///
+/// # Errors
+/// [`ScanError::Refused`], [`ScanError::Malformed`] or [`ScanError::Terrain`].
+pub fn terrain_from_reply(line: &str, grid: &ScanGrid) -> Result<TerrainGrid, ScanError> {
+    let value: serde_json::Value =
+        serde_json::from_str(line.trim_end()).map_err(|e| ScanError::Malformed(e.to_string()))?;
+    if let Some(error) = value.get("error") {
+        let text = error
+            .as_str()
+            .map_or_else(|| error.to_string(), str::to_owned);
+        return Err(ScanError::Refused(text));
+    }
+    let scan: Scan =
+        serde_json::from_value(value).map_err(|e| ScanError::Malformed(e.to_string()))?;
+    grid.terrain(&scan.points)
+        .map_err(|e| ScanError::Terrain(e.to_string()))
+}
+
+/// The scan task seen from the control loop: requests go in without waiting, results come back on a
+/// channel the loop `select!`s on.
+#[derive(Debug)]
+pub struct ScanService {
+    requests: mpsc::Sender<()>,
+    results: mpsc::Receiver<Result<TerrainGrid, ScanError>>,
+    addr: String,
+}
+
+impl ScanService {
+    /// Spawns the task owning `client` on the current tokio runtime.
+    pub fn spawn(mut client: ScanClient) -> Self {
+        let addr = client.config().addr.clone();
+        let (requests, mut pending) = mpsc::channel::<()>(1);
+        let (done, results) = mpsc::channel(1);
+        tokio::spawn(async move {
+            while pending.recv().await.is_some() {
+                let result = client.terrain().await;
+                if done.send(result).await.is_err() {
+                    break;
+                }
+            }
+        });
+        Self {
+            requests,
+            results,
+            addr,
+        }
+    }
+
+    /// The service address.
+    pub fn addr(&self) -> &str {
+        &self.addr
+    }
+
+    /// Asks for a scan. Returns false when one is still in flight (the request is then answered by
+    /// that one) or the task is gone.
+    pub fn request(&self) -> bool {
+        self.requests.try_send(()).is_ok()
+    }
+
+    /// The next result (cancel-safe: use it in `select!`).
+    pub async fn next_result(&mut self) -> Result<TerrainGrid, ScanError> {
+        self.results
+            .recv()
+            .await
+            .unwrap_or(Err(ScanError::TaskGone))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+    use tokio::net::TcpListener;
+
+    /// A flat patch of ground 6-8 m out, well inside the default grid.
+    fn flat_scan_json() -> String {
+        let mut points = Vec::new();
+        for i in 0..20 {
+            for j in 0..10 {
+                points.push([6.0 + 0.1 * f64::from(i), -0.5 + 0.1 * f64::from(j), 1.5]);
+            }
+        }
+        serde_json::json!({
+            "time_s": 1.0,
+            "sensor": {"x_m": 0.8, "y_m": 0.0, "z_m": 3.0, "heading_rad": 0.0},
+            "points": points,
+        })
+        .to_string()
+    }
+
+    fn config(addr: String, timeout_ms: u64) -> ScanClientConfig {
+        ScanClientConfig {
+            addr,
+            timeout: Duration::from_millis(timeout_ms),
+            request: ScanRequest::default(),
+            grid: ScanGrid::default(),
+        }
+    }
+
+    /// Serves `replies` in order on one connection per accept; `None` = read the request, never reply.
+    async fn server(replies: Vec<Option<String>>) -> String {
+        let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let addr = listener.local_addr().unwrap().to_string();
+        tokio::spawn(async move {
+            let mut replies = replies.into_iter();
+            while let Ok((stream, _)) = listener.accept().await {
+                let (read, mut write) = stream.into_split();
+                let mut lines = BufReader::new(read).lines();
+                while let Ok(Some(line)) = lines.next_line().await {
+                    serde_json::from_str::<ScanRequest>(&line).unwrap();
+                    match replies.next() {
+                        Some(Some(reply)) => {
+                            write.write_all(reply.as_bytes()).await.unwrap();
+                            write.write_all(b"\n").await.unwrap();
+                        }
+                        Some(None) => break,
+                        None => return,
+                    }
+                }
+            }
+        });
+        addr
+    }
+
+    #[tokio::test]
+    async fn a_scan_becomes_a_terrain_map_and_the_connection_is_reused() {
+        let addr = server(vec![Some(flat_scan_json()), Some(flat_scan_json())]).await;
+        let mut client = ScanClient::new(config(addr, 5000));
+        for _ in 0..2 {
+            let grid = client.terrain().await.unwrap();
+            let z = grid.height_at(6.95, 0.05).unwrap();
+            assert!((z - 1.5).abs() < 1e-9, "{z}");
+        }
+    }
+
+    #[tokio::test]
+    async fn failures_name_their_reason() {
+        // Nothing listens on a port we just closed.
+        let closed = {
+            let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+            l.local_addr().unwrap().to_string()
+        };
+        let e = ScanClient::new(config(closed, 2000))
+            .terrain()
+            .await
+            .unwrap_err();
+        assert!(matches!(e, ScanError::Connect { .. }), "{e}");
+
+        let addr = server(vec![
+            Some(r#"{"error": "bad request: nope"}"#.to_owned()),
+            Some("not json".to_owned()),
+            Some(r#"{"time_s": 1, "sensor": {"x_m": 0, "y_m": 0, "z_m": 3, "heading_rad": 0}, "points": []}"#.to_owned()),
+            None,
+        ])
+        .await;
+        let mut client = ScanClient::new(config(addr, 300));
+        let e = client.terrain().await.unwrap_err();
+        assert!(
+            matches!(e, ScanError::Refused(ref m) if m.contains("nope")),
+            "{e}"
+        );
+        let e = client.terrain().await.unwrap_err();
+        assert!(matches!(e, ScanError::Malformed(_)), "{e}");
+        let e = client.terrain().await.unwrap_err();
+        assert!(matches!(e, ScanError::Terrain(_)), "{e}");
+        // The server reads the request and never answers.
+        let e = client.terrain().await.unwrap_err();
+        assert!(
+            matches!(e, ScanError::Timeout { .. } | ScanError::Closed { .. }),
+            "{e}"
+        );
+    }
+
+    #[tokio::test]
+    async fn the_service_answers_without_blocking_the_caller() {
+        let addr = server(vec![Some(flat_scan_json())]).await;
+        let mut service = ScanService::spawn(ScanClient::new(config(addr, 5000)));
+        assert!(service.request());
+        let grid = service.next_result().await.unwrap();
+        assert!(grid.height_at(7.0, 0.0).is_ok());
+    }
+}
