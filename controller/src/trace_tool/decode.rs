@@ -183,7 +183,7 @@ impl Decoder {
         out.push_str(") ");
         out.push_str(&rec.interface);
         out.push(' ');
-        format_frame(frame, out);
+        push_frame(frame, out);
         match rec.direction {
             Some(Direction::Receive) => out.push_str(" R"),
             Some(Direction::Transmit) => out.push_str(" T"),
@@ -221,7 +221,8 @@ impl Decoder {
                 first = false;
                 out.push_str(sig.name);
                 out.push_str(": ");
-                format_value(sig, signals::decode_signal(sig, data), out);
+                let table = signals::value_table(msg_index, sig_index);
+                format_value_with(sig, table, signals::decode_signal(sig, data), out);
             }
             out.push(')');
         }
@@ -232,12 +233,54 @@ impl Decoder {
     }
 }
 
+/// Appends the candump frame field; data frames without `write!` per byte (the decode hot path).
+fn push_frame(frame: &CanFrame, out: &mut String) {
+    const HEX: &[u8; 16] = b"0123456789ABCDEF";
+    let (FrameKind::Data, id) = (frame.kind(), frame.id()) else {
+        format_frame(frame, out);
+        return;
+    };
+    let (raw, digits) = match id {
+        CanId::Standard(id) => (u32::from(id), 3),
+        CanId::Extended(id) => (id, 8),
+    };
+    for i in (0..digits).rev() {
+        out.push(char::from(HEX[((raw >> (4 * i)) & 0xF) as usize]));
+    }
+    out.push('#');
+    for b in frame.data() {
+        out.push(char::from(HEX[usize::from(b >> 4)]));
+        out.push(char::from(HEX[usize::from(b & 0xF)]));
+    }
+}
+
 /// Appends a signal value with its unit or enum name.
 pub fn format_value(sig: &dbc::SignalDesc, value: SignalValue, out: &mut String) {
+    let name = |raw: i64| signals::value_name(sig.name, raw);
+    format_value_inner(sig, &name, value, out);
+}
+
+/// As [`format_value`] with the signal's value table already looked up.
+fn format_value_with(
+    sig: &dbc::SignalDesc,
+    table: Option<&[(i64, &'static str)]>,
+    value: SignalValue,
+    out: &mut String,
+) {
+    let name = |raw: i64| table.and_then(|t| t.iter().find(|(v, _)| *v == raw).map(|(_, n)| *n));
+    format_value_inner(sig, &name, value, out);
+}
+
+fn format_value_inner(
+    sig: &dbc::SignalDesc,
+    name_of: &dyn Fn(i64) -> Option<&'static str>,
+    value: SignalValue,
+    out: &mut String,
+) {
     match value {
         SignalValue::Value(v) => {
             let raw = ((v - sig.offset) / sig.factor).round() as i64;
-            if let Some(name) = signals::value_name(sig.name, raw) {
+            if let Some(name) = name_of(raw) {
                 out.push_str(name);
             } else {
                 let _ = write!(out, "{v}");
@@ -395,6 +438,24 @@ mod tests {
             "(1700000000.123456) vcan0 0CFE3027#7DFF31204EFFFFFF T :: AuxValveCommand_Boom(\
              PortFlowCommand: 50 %, ValveState: Extend, FailSafeMode: Block, PortFlowCommandFine: 50 %)"
         );
+    }
+
+    #[test]
+    fn frames_print_as_candump_does() {
+        for text in [
+            "(1.000000) can0 123#0102",
+            "(1.000000) can0 7FF#",
+            "(1.000000) can0 0CFE3027#7DFF31204EFFFFFF",
+            "(1.000000) can0 123#R5",
+            "(1.000000) can0 20000040#0000000000000000",
+        ] {
+            let rec = parse_line(text).unwrap();
+            let mut fast = String::new();
+            push_frame(&rec.frame, &mut fast);
+            let mut reference = String::new();
+            format_frame(&rec.frame, &mut reference);
+            assert_eq!(fast, reference);
+        }
     }
 
     #[test]

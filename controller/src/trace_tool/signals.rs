@@ -86,6 +86,32 @@ pub fn value_name(signal: &str, raw: i64) -> Option<&'static str> {
         .and_then(|t| t.iter().find(|(v, _)| *v == raw).map(|(_, n)| *n))
 }
 
+/// The DBC value table of signal `sig_index` of message `msg_index`, if it has one (looked up by
+/// signal name, see the module docs). Precomputed per signal, so the decode hot path does not hash.
+pub fn value_table(
+    msg_index: MessageIndex,
+    sig_index: usize,
+) -> Option<&'static [(i64, &'static str)]> {
+    static PER_SIGNAL: OnceLock<Vec<Vec<Option<&'static [(i64, &'static str)]>>>> = OnceLock::new();
+    PER_SIGNAL
+        .get_or_init(|| {
+            let tables = value_tables();
+            dbc::MESSAGES
+                .iter()
+                .map(|m| {
+                    m.signals
+                        .iter()
+                        .map(|s| tables.get(s.name).map(Vec::as_slice))
+                        .collect()
+                })
+                .collect()
+        })
+        .get(msg_index)?
+        .get(sig_index)
+        .copied()
+        .flatten()
+}
+
 type ValueTables = HashMap<&'static str, Vec<(i64, &'static str)>>;
 
 fn value_tables() -> &'static ValueTables {
@@ -259,6 +285,11 @@ mod tests {
         assert_eq!(value_name("Activity", 9), Some("Faulted"));
         assert_eq!(value_name("RequestedMode", 3), Some("EStop"));
         assert_eq!(value_name("BoomAngle", 0), None);
+        // The stick command has no VAL_ line of its own; the boom's table applies by name.
+        let (stick, _) = message_of_id(0x0CFE_3127).unwrap();
+        let table = value_table(stick, 1).unwrap();
+        assert!(table.contains(&(2, "Retract")));
+        assert!(value_table(stick, 0).is_none());
     }
 
     #[test]

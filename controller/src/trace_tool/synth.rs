@@ -63,6 +63,8 @@ impl Default for SynthConfig {
 #[derive(Debug, Clone, Copy)]
 struct Sample {
     q: [f64; 3],
+    /// False where the inverse kinematics failed and the previous angles were kept.
+    reached: bool,
     swing_rad: f64,
     stage: AutodigStageCode,
     activity: Activity,
@@ -95,12 +97,14 @@ fn cycle_pose(t: f64) -> (AutodigStageCode, Activity, [f64; 3], f64) {
             a[2] + (b[2] - a[2]) * s,
         ]
     }
+    // Bucket angles are `bucket_abs` (pin -> tip to the horizontal): curling lowers it, so the
+    // captured bucket points back toward the machine (about -pi).
     const START: [f64; 3] = [7.2, 1.2, -1.4];
     const TOUCH: [f64; 3] = [7.2, -0.2, -1.4];
-    const PENETRATED: [f64; 3] = [7.0, -0.7, -1.1];
-    const DRAGGED: [f64; 3] = [4.8, -0.6, -0.4];
-    const CAPTURED: [f64; 3] = [5.2, 1.0, 0.6];
-    const CARRY: [f64; 3] = [5.8, 2.5, 0.6];
+    const PENETRATED: [f64; 3] = [7.0, -0.7, -1.6];
+    const DRAGGED: [f64; 3] = [5.0, -0.6, -2.3];
+    const CAPTURED: [f64; 3] = [5.4, 1.0, -3.0];
+    const CARRY: [f64; 3] = [5.8, 2.5, -3.0];
     const DUMPED: [f64; 3] = [6.2, 2.5, -1.2];
     use Activity as A;
     use AutodigStageCode as S;
@@ -138,6 +142,7 @@ fn cycle_table() -> Vec<Sample> {
         .map(|i| {
             let t = i as f64 * PERIOD_S;
             let (stage, activity, pose, swing_rad) = cycle_pose(t);
+            let mut reached = false;
             if let Some(kin) = &kin {
                 let target = BucketPose {
                     x_m: pose[0],
@@ -146,10 +151,12 @@ fn cycle_table() -> Vec<Sample> {
                 };
                 if let Ok(sol) = kin.inverse(&target) {
                     q = [sol.boom_rad, sol.stick_rad, sol.bucket_rad];
+                    reached = true;
                 }
             }
             Sample {
                 q,
+                reached,
                 swing_rad,
                 stage,
                 activity,
@@ -200,6 +207,7 @@ impl SyntheticTrace {
             .copied()
             .unwrap_or(Sample {
                 q: [0.0; 3],
+                reached: false,
                 swing_rad: 0.0,
                 stage: AutodigStageCode::None,
                 activity: Activity::Idle,
@@ -402,6 +410,8 @@ mod tests {
     #[test]
     fn the_dig_reaches_its_poses() {
         let table = cycle_table();
+        let reached = table.iter().filter(|s| s.reached).count();
+        assert_eq!(reached, table.len(), "poses out of reach");
         let kin = Kinematics::new(&MachineConfig::default_machine().unwrap()).unwrap();
         // The deepest point of the cycle is below the ground the tracks stand on.
         let min_z = table
