@@ -1,0 +1,182 @@
+//! The terrain map the dig planner keeps current from successive range scans (thesis 5.3: "The Dig
+//! planner receives the range data from the Sensor Interface, and packages it into the terrain map").
+//!
+//! Each scan's points are binned into the map's cells (mean height per cell). A cell hit by the new scan
+//! takes the new height: the terrain changes as it is dug, so the latest observation wins over older
+//! ones. A cell the scan did not hit keeps its old height (occluded or out of view this time). A cell
+//! never observed before takes the occlusion-gap interpolation of
+//! [`crate::terrain::TerrainGrid::from_scan`] when the scan bounds it on both sides.
+
+use super::{PlanError, Result};
+use crate::terrain::{TerrainError, TerrainGrid};
+
+/// A terrain map updated scan by scan.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TerrainMapper {
+    grid: TerrainGrid,
+    max_gap_cells: usize,
+    scans: u64,
+}
+
+/// What one scan changed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct MapUpdate {
+    /// Cells hit by the scan's points.
+    pub observed_cells: usize,
+    /// Cells newly known from the gap interpolation.
+    pub interpolated_cells: usize,
+    /// Points outside the map or not finite (ignored).
+    pub ignored_points: usize,
+}
+
+impl TerrainMapper {
+    /// An empty map (every cell unknown) of `nx x ny` cells of `resolution_m` with its lower-left
+    /// corner at the origin; gaps up to `max_gap_cells` between observed cells are interpolated for
+    /// cells never observed.
+    ///
+    /// # Errors
+    /// [`PlanError::Terrain`] for a bad grid.
+    pub fn new(
+        origin_x_m: f64,
+        origin_y_m: f64,
+        resolution_m: f64,
+        nx: usize,
+        ny: usize,
+        max_gap_cells: usize,
+    ) -> Result<Self> {
+        Ok(Self {
+            grid: TerrainGrid::new_unknown(origin_x_m, origin_y_m, resolution_m, nx, ny)?,
+            max_gap_cells,
+            scans: 0,
+        })
+    }
+
+    /// A mapper starting from an existing map (e.g. a survey before the first scan).
+    #[must_use]
+    pub fn from_grid(grid: TerrainGrid, max_gap_cells: usize) -> Self {
+        Self {
+            grid,
+            max_gap_cells,
+            scans: 0,
+        }
+    }
+
+    /// The current map.
+    #[must_use]
+    pub fn grid(&self) -> &TerrainGrid {
+        &self.grid
+    }
+
+    /// Scans fused so far.
+    #[must_use]
+    pub fn scans(&self) -> u64 {
+        self.scans
+    }
+
+    /// Fuses one scan (world-frame points `[x, y, z]`).
+    ///
+    /// # Errors
+    /// [`PlanError::Terrain`] with [`TerrainError::NoPoints`] if no finite point falls in the map (the
+    /// map is unchanged).
+    pub fn integrate(&mut self, points: &[[f64; 3]]) -> Result<MapUpdate> {
+        let (nx, ny) = (self.grid.nx(), self.grid.ny());
+        let mut sum = vec![0.0; nx * ny];
+        let mut count = vec![0u32; nx * ny];
+        let mut update = MapUpdate::default();
+        for p in points {
+            let cell = if p.iter().all(|v| v.is_finite()) {
+                self.grid.cell_index(p[0], p[1])
+            } else {
+                None
+            };
+            match cell {
+                Some((i, j)) => {
+                    sum[j * nx + i] += p[2];
+                    count[j * nx + i] += 1;
+                }
+                None => update.ignored_points += 1,
+            }
+        }
+        if count.iter().all(|&c| c == 0) {
+            return Err(PlanError::Terrain(TerrainError::NoPoints));
+        }
+        // Occlusion fills for cells never observed: only when the scan bounds the gap.
+        let [ox, oy] = self.grid.origin();
+        let interpolated = TerrainGrid::from_scan(
+            points,
+            ox,
+            oy,
+            self.grid.resolution_m(),
+            nx,
+            ny,
+            self.max_gap_cells,
+        )
+        .ok();
+        for j in 0..ny {
+            for i in 0..nx {
+                let k = j * nx + i;
+                if count[k] > 0 {
+                    self.grid
+                        .set_cell(i, j, Some(sum[k] / f64::from(count[k])))?;
+                    update.observed_cells += 1;
+                } else if self.grid.cell(i, j).is_none()
+                    && let Some(h) = interpolated.as_ref().and_then(|g| g.cell(i, j))
+                {
+                    self.grid.set_cell(i, j, Some(h))?;
+                    update.interpolated_cells += 1;
+                }
+            }
+        }
+        self.scans += 1;
+        Ok(update)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Points every 0.1 m (one per cell centre) over `[x0, x1] x [-0.95, 0.95]` at height `z`.
+    fn scan(x0: f64, x1: f64, z: f64) -> Vec<[f64; 3]> {
+        let nx = ((x1 - x0) / 0.1).round() as i32 + 1;
+        (0..nx)
+            .flat_map(|i| {
+                (0..20).map(move |j| [x0 + f64::from(i) * 0.1, -0.95 + f64::from(j) * 0.1, z])
+            })
+            .collect()
+    }
+
+    #[test]
+    fn new_points_replace_old_cells_and_unobserved_cells_stay() {
+        let mut m = TerrainMapper::new(0.0, -1.0, 0.1, 40, 20, 3).expect("mapper");
+        let u = m.integrate(&scan(0.05, 3.95, 2.0)).expect("first");
+        assert_eq!(u.observed_cells, 40 * 20);
+        // The second scan sees only the near half, dug down to 1 m.
+        m.integrate(&scan(0.05, 1.95, 1.0)).expect("second");
+        assert_eq!(m.scans(), 2);
+        assert!((m.grid().height_at(1.0, 0.0).expect("near") - 1.0).abs() < 1e-12);
+        assert!((m.grid().height_at(3.0, 0.0).expect("far") - 2.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn gaps_are_filled_only_where_never_observed_and_bad_points_ignored() {
+        let mut m = TerrainMapper::new(0.0, -1.0, 0.1, 40, 20, 5).expect("mapper");
+        // Points on both sides of a 3-cell gap (x in [1.5, 1.8)): interpolated.
+        let mut pts = scan(0.05, 1.45, 1.0);
+        pts.extend(scan(1.85, 3.95, 2.0));
+        pts.push([f64::NAN, 0.0, 0.0]);
+        pts.push([100.0, 0.0, 0.0]);
+        let u = m.integrate(&pts).expect("scan");
+        assert_eq!(u.ignored_points, 2);
+        assert!(u.interpolated_cells > 0);
+        let mid = m.grid().height_at(1.65, 0.0).expect("filled");
+        assert!(mid > 1.0 && mid < 2.0, "{mid}");
+        // A later scan with a gap there keeps the old (filled) heights rather than re-interpolating.
+        m.integrate(&scan(0.05, 0.95, 0.5)).expect("partial");
+        assert!((m.grid().height_at(1.65, 0.0).expect("kept") - mid).abs() < 1e-12);
+        // No usable point: an error, the map unchanged.
+        let before = m.grid().clone();
+        assert!(m.integrate(&[[f64::NAN; 3]]).is_err());
+        assert_eq!(m.grid(), &before);
+    }
+}

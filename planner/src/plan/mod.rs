@@ -1,0 +1,514 @@
+//! Dig planning (thesis chapter 5): where to dig, when to clean the floor, how far to track back, and
+//! the soil hardness index Autodig should use.
+//!
+//! # Layout (data flows top to bottom)
+//!
+//! - [`mapper`]: [`TerrainMapper`] keeps the terrain grid current from successive range scans (5.3).
+//! - [`coarse`]: the coarse dig location planner (5.1.1.1, Fig. 44): the workspace between the machine
+//!   and the nearer of the bench edge and the kinematic reach, within +-30 degrees of the tracks, cut into
+//!   regions one bucket wide, ordered away from the spoil side, with a region pointer.
+//! - [`refined`]: the refined planner (5.1.1.2, Figs. 45-48): candidate starts `(d, alpha)` over one
+//!   region, kinematic and floor constraints, the dig model ([`crate::dig_model`]) and the dig quality of
+//!   Fig. 46.
+//! - [`cleanup_track`]: the cleanup and tracking planners (5.1.2, Figs. 49-51).
+//! - [`action`]: the action selection of Fig. 42.
+//! - [`hardness`]: the soil hardness index from the average soil force (5.2, Eq. 25, Fig. 53), and the
+//!   simulation that fits its regression.
+//!
+//! [`Planner`] runs one planning cycle (coarse + refined + cleanup + tracking + selection) on a terrain
+//! map and a machine pose; [`PlannerState`] carries what persists between cycles (the region pointer and
+//! the per-swing-angle cleanup counters). Everything here is pure computation: no I/O, no clock,
+//! deterministic for its inputs, typed errors and never a panic.
+//!
+//! Frames: the terrain map is in the world frame; plans are in the machine's base frame (docs/
+//! ARCHITECTURE.md): swing angles counter-clockwise from the tracks' forward direction (positive = left),
+//! radii from the swing axis, heights above the ground the tracks stand on. The desired floor elevation
+//! is a base-frame height (0 when the floor is the ground the machine stands on).
+
+pub mod action;
+pub mod cleanup_track;
+pub mod coarse;
+pub mod hardness;
+pub mod mapper;
+pub mod refined;
+
+pub use action::{ActionChoice, select_action};
+pub use cleanup_track::{
+    CleanupCandidate, CleanupConfig, CleanupStatus, CleanupTrackPlan, MaterialBoundary,
+    TrackingConfig, TrackingLimit, reach_track_distance_m, view_track_distance_m,
+};
+pub use coarse::{CoarseConfig, CoarsePlan, DigRegion, SpoilSide};
+pub use hardness::{HardnessRegression, average_soil_force_n};
+pub use mapper::TerrainMapper;
+pub use refined::{
+    Candidate, CandidateStatus, DigChoice, DigQuality, QualityConfig, RefinedConfig, RefinedPlan,
+};
+
+use crate::dig_model::{ActuatorDynamics, DigModel, DigModelError};
+use crate::estimate::EstimateError;
+use crate::kinematics::{Kinematics, KinematicsError, MachinePose};
+use crate::machine::MachineConfig;
+use crate::terrain::{TerrainError, TerrainGrid};
+use serde::{Deserialize, Serialize};
+
+/// The shipped planner settings (`config/planner.toml`).
+pub const DEFAULT_PLANNER_TOML: &str = include_str!("../../../config/planner.toml");
+
+/// Planner errors.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PlanError {
+    /// A configuration value is invalid.
+    #[error("planner config {field}: {reason}")]
+    Config {
+        /// The field.
+        field: &'static str,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A NaN or infinite input.
+    #[error("non-finite input: {what}")]
+    NonFinite {
+        /// Which input.
+        what: &'static str,
+    },
+    /// An input out of its range.
+    #[error("invalid input: {what}")]
+    InvalidInput {
+        /// Which input and why.
+        what: &'static str,
+    },
+    /// The terrain map.
+    #[error("terrain: {0}")]
+    Terrain(#[from] TerrainError),
+    /// The dig model (other than the per-candidate rejections, which are candidate statuses).
+    #[error("dig model: {0}")]
+    DigModel(#[from] DigModelError),
+    /// Kinematics.
+    #[error("kinematics: {0}")]
+    Kinematics(#[from] KinematicsError),
+    /// Soil property estimation.
+    #[error("soil estimation: {0}")]
+    Estimate(#[from] EstimateError),
+    /// The machine cannot reach any point of the workspace.
+    #[error("no reachable workspace: {what}")]
+    NoWorkspace {
+        /// Why.
+        what: &'static str,
+    },
+}
+
+/// Result alias for this module.
+pub type Result<T> = std::result::Result<T, PlanError>;
+
+/// Fig. 42's thresholds.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ActionConfig {
+    /// Dig when the best dig's quality exceeds this. Default 3.0 (of at most 6 with the default
+    /// weights: a dig needs about a full bucket to pass).
+    pub min_quality: f64,
+    /// Track back when the allowed distance exceeds this, m. Default 0.5.
+    pub min_track_distance_m: f64,
+    /// Try further regions in order when the pointer's region has no dig above `min_quality`
+    /// (the thesis refines one region per cycle; this keeps a poor region from stopping the dig).
+    /// Default true.
+    pub search_all_regions: bool,
+}
+
+impl Default for ActionConfig {
+    fn default() -> Self {
+        Self {
+            min_quality: 3.0,
+            min_track_distance_m: 0.5,
+            search_all_regions: true,
+        }
+    }
+}
+
+/// All planner settings (`config/planner.toml`; angles in degrees there).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PlannerConfig {
+    /// Desired floor elevation in the base frame, m (0: the ground the tracks stand on).
+    pub floor_z_m: f64,
+    /// Coarse planner (5.1.1.1).
+    pub coarse: CoarseConfig,
+    /// Refined planner (5.1.1.2).
+    pub refined: RefinedConfig,
+    /// Dig quality (Fig. 46).
+    pub quality: QualityConfig,
+    /// Cleanup planner (5.1.2).
+    pub cleanup: CleanupConfig,
+    /// Tracking planner (5.1.2, Fig. 51).
+    pub tracking: TrackingConfig,
+    /// Action selection (Fig. 42).
+    pub action: ActionConfig,
+}
+
+impl PlannerConfig {
+    /// Parses and validates `config/planner.toml`.
+    ///
+    /// # Errors
+    /// [`PlanError::Config`] naming the problem.
+    pub fn from_toml_str(text: &str) -> Result<Self> {
+        let cfg: Self = toml::from_str(text).map_err(|e| PlanError::Config {
+            field: "planner.toml",
+            reason: e.to_string(),
+        })?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// The shipped settings ([`DEFAULT_PLANNER_TOML`]).
+    ///
+    /// # Errors
+    /// As [`Self::from_toml_str`] (the shipped file is tested).
+    pub fn nominal() -> Result<Self> {
+        Self::from_toml_str(DEFAULT_PLANNER_TOML)
+    }
+
+    /// Checks every section.
+    ///
+    /// # Errors
+    /// [`PlanError::Config`] naming the field.
+    pub fn validate(&self) -> Result<()> {
+        finite("floor_z_m", self.floor_z_m)?;
+        self.coarse.validate()?;
+        self.refined.validate()?;
+        self.quality.validate()?;
+        self.cleanup.validate()?;
+        self.tracking.validate()?;
+        finite("action.min_quality", self.action.min_quality)?;
+        non_negative(
+            "action.min_track_distance_m",
+            self.action.min_track_distance_m,
+        )
+    }
+}
+
+pub(crate) fn finite(field: &'static str, v: f64) -> Result<()> {
+    if v.is_finite() {
+        Ok(())
+    } else {
+        Err(PlanError::Config {
+            field,
+            reason: format!("{v}: must be finite"),
+        })
+    }
+}
+
+pub(crate) fn positive(field: &'static str, v: f64) -> Result<()> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(PlanError::Config {
+            field,
+            reason: format!("{v}: must be finite and > 0"),
+        })
+    }
+}
+
+pub(crate) fn non_negative(field: &'static str, v: f64) -> Result<()> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(())
+    } else {
+        Err(PlanError::Config {
+            field,
+            reason: format!("{v}: must be finite and >= 0"),
+        })
+    }
+}
+
+/// What persists between planning cycles.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct PlannerState {
+    /// Index (in dig order) of the region the coarse planner offers next (5.1.1.1: the regions are dug
+    /// in order so the bench erodes evenly).
+    pub region_pointer: usize,
+    /// Cleanups executed per swing-angle bin since the last track back (5.1.2: "not cleanable" after
+    /// repeated tries), keyed by the bin index of [`CleanupConfig::swing_step_rad`].
+    pub cleanup_tries: std::collections::BTreeMap<i32, u32>,
+}
+
+impl PlannerState {
+    /// Records that a cleanup ran at `swing_rad` (call when the controller executed a planned cleanup).
+    pub fn record_cleanup(&mut self, swing_rad: f64, cfg: &CleanupConfig) {
+        if let Some(bin) = cfg.bin(swing_rad) {
+            *self.cleanup_tries.entry(bin).or_insert(0) += 1;
+        }
+    }
+
+    /// Records a track back: the swing angles of the material changed, so the counters restart.
+    pub fn record_track_back(&mut self) {
+        self.cleanup_tries.clear();
+    }
+
+    /// Records that the dig in region `index` (dig order) was executed: the pointer moves past it.
+    pub fn record_dig(&mut self, region_index: usize, region_count: usize) {
+        if region_count > 0 {
+            self.region_pointer = (region_index + 1) % region_count;
+        }
+    }
+}
+
+/// The result of one planning cycle (Fig. 54's "dig plan": an optimal dig location and its quality,
+/// a cleanup plan and a tracking distance), and the action Fig. 42 selects.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    /// The coarse plan (regions in dig order).
+    pub coarse: CoarsePlan,
+    /// The refined plans evaluated this cycle, in the order tried (the first is the pointer's region).
+    pub refined: Vec<RefinedPlan>,
+    /// The best dig found (the one of the first refined plan whose quality passes, else the best seen).
+    pub best_dig: Option<DigChoice>,
+    /// Cleanup candidates per swing angle, the chosen cleanup and the tracking distance.
+    pub cleanup_track: CleanupTrackPlan,
+    /// Fig. 42's choice.
+    pub action: ActionChoice,
+}
+
+/// The dig planner (Fig. 43 and 5.1.2): coarse + refined dig location, cleanup and tracking plans.
+#[derive(Debug, Clone)]
+pub struct Planner<A: ActuatorDynamics = crate::actuator::ActuatorModel> {
+    config: PlannerConfig,
+    model: DigModel<A>,
+    kin: Kinematics,
+    bucket_width_m: f64,
+    capacity_m3: f64,
+    sensor_height_m: f64,
+    sensor_radial_m: f64,
+}
+
+impl<A: ActuatorDynamics> Planner<A> {
+    /// A planner for `machine` using `model` to evaluate candidate digs. The quality's `V_max` is the
+    /// machine's bucket capacity (Fig. 46) unless the config sets it.
+    ///
+    /// # Errors
+    /// [`PlanError::Config`] for invalid settings, [`PlanError::Kinematics`] for an inconsistent
+    /// machine.
+    pub fn new(machine: &MachineConfig, model: DigModel<A>, config: PlannerConfig) -> Result<Self> {
+        config.validate()?;
+        let kin = Kinematics::new(machine)?;
+        positive("machine.bucket.width_m", machine.bucket.width_m)?;
+        positive("machine.bucket.capacity_m3", machine.bucket.capacity_m3)?;
+        Ok(Self {
+            config,
+            model,
+            kin,
+            bucket_width_m: machine.bucket.width_m,
+            capacity_m3: machine.bucket.capacity_m3,
+            sensor_height_m: machine.sensor.height_m,
+            sensor_radial_m: machine.sensor.radial_offset_m,
+        })
+    }
+
+    /// The settings.
+    #[must_use]
+    pub fn config(&self) -> &PlannerConfig {
+        &self.config
+    }
+
+    /// The dig model (e.g. to replace its soil with estimated properties or set the hardness index).
+    pub fn model_mut(&mut self) -> &mut DigModel<A> {
+        &mut self.model
+    }
+
+    /// The dig model.
+    #[must_use]
+    pub fn model(&self) -> &DigModel<A> {
+        &self.model
+    }
+
+    /// The machine's kinematics.
+    #[must_use]
+    pub fn kinematics(&self) -> &Kinematics {
+        &self.kin
+    }
+
+    /// Bucket capacity, m^3 (`V_max` of Fig. 46 by default).
+    #[must_use]
+    pub fn capacity_m3(&self) -> f64 {
+        self.capacity_m3
+    }
+
+    /// The coarse plan for the machine at `pose` (5.1.1.1).
+    ///
+    /// # Errors
+    /// As [`coarse::plan_regions`].
+    pub fn coarse(&self, grid: &TerrainGrid, pose: &MachinePose) -> Result<CoarsePlan> {
+        coarse::plan_regions(
+            grid,
+            pose,
+            &self.kin,
+            self.bucket_width_m,
+            self.config.floor_z_m,
+            &self.config.coarse,
+            &self.config.refined,
+        )
+    }
+
+    /// The refined plan over one region (5.1.1.2).
+    ///
+    /// # Errors
+    /// As [`refined::refine`].
+    pub fn refine(
+        &self,
+        grid: &TerrainGrid,
+        pose: &MachinePose,
+        region: &DigRegion,
+    ) -> Result<RefinedPlan> {
+        refined::refine(
+            &self.model,
+            grid,
+            pose,
+            region,
+            self.config.floor_z_m,
+            &self.config.refined,
+            &self.quality(),
+        )
+    }
+
+    /// The quality settings with `V_max` defaulted to the bucket capacity.
+    #[must_use]
+    pub fn quality(&self) -> QualityConfig {
+        let mut q = self.config.quality;
+        if q.v_max_m3 <= 0.0 {
+            q.v_max_m3 = self.capacity_m3;
+        }
+        q
+    }
+
+    /// The cleanup and tracking plans (5.1.2).
+    ///
+    /// # Errors
+    /// As [`cleanup_track::plan_cleanup_and_tracking`].
+    pub fn cleanup_and_tracking(
+        &self,
+        grid: &TerrainGrid,
+        pose: &MachinePose,
+        state: &PlannerState,
+    ) -> Result<CleanupTrackPlan> {
+        cleanup_track::plan_cleanup_and_tracking(
+            grid,
+            pose,
+            &self.kin,
+            cleanup_track::Geometry {
+                floor_z_m: self.config.floor_z_m,
+                bucket_width_m: self.bucket_width_m,
+                sensor_height_m: self.sensor_height_m,
+                sensor_radial_m: self.sensor_radial_m,
+                angular_extent_rad: self.config.coarse.angular_extent_rad,
+            },
+            &self.config.cleanup,
+            &self.config.tracking,
+            state,
+        )
+    }
+
+    /// One full planning cycle: the coarse plan, the refined plan of the pointer's region (and, with
+    /// `search_all_regions`, of the following regions until one passes the minimum quality), the
+    /// cleanup and tracking plans, and Fig. 42's action. `state` is not changed: call
+    /// [`PlannerState::record_dig`], [`PlannerState::record_cleanup`] or
+    /// [`PlannerState::record_track_back`] when the action was executed.
+    ///
+    /// # Errors
+    /// [`PlanError`] for non-finite input or an unusable terrain map; candidates the dig model cannot
+    /// evaluate are candidate statuses, not errors.
+    pub fn plan(
+        &self,
+        grid: &TerrainGrid,
+        pose: &MachinePose,
+        state: &PlannerState,
+    ) -> Result<Plan> {
+        let coarse = self.coarse(grid, pose)?;
+        let n = coarse.regions.len();
+        let mut refined = Vec::new();
+        let mut best: Option<DigChoice> = None;
+        let min_q = self.config.action.min_quality;
+        let tries = if self.config.action.search_all_regions {
+            n
+        } else {
+            n.min(1)
+        };
+        for k in 0..tries {
+            let idx = (state.region_pointer % n.max(1) + k) % n.max(1);
+            let Some(region) = coarse.regions.get(idx) else {
+                break;
+            };
+            if !region.has_material {
+                continue;
+            }
+            let r = self.refine(grid, pose, region)?;
+            if let Some(b) = &r.best
+                && best
+                    .as_ref()
+                    .is_none_or(|x| b.quality.quality > x.quality.quality)
+            {
+                best = Some(b.clone());
+            }
+            let passed = r.best.as_ref().is_some_and(|b| b.quality.quality > min_q);
+            refined.push(r);
+            if passed {
+                break;
+            }
+        }
+        let cleanup_track = self.cleanup_and_tracking(grid, pose, state)?;
+        let action = select_action(
+            best.as_ref(),
+            &cleanup_track,
+            min_q,
+            self.config.action.min_track_distance_m,
+        );
+        Ok(Plan {
+            coarse,
+            refined,
+            best_dig: best,
+            cleanup_track,
+            action,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shipped_config_parses_and_bad_values_are_rejected() {
+        let cfg = PlannerConfig::nominal().expect("shipped planner.toml");
+        assert!((cfg.coarse.angular_extent_rad.to_degrees() - 30.0).abs() < 1e-9);
+        assert!((cfg.refined.d_step_m - 0.2).abs() < 1e-12);
+        assert!((cfg.refined.alpha_step_rad.to_degrees() - 5.0).abs() < 1e-9);
+        assert!((cfg.tracking.repose_rad.to_degrees() - 45.0).abs() < 1e-9);
+        assert_eq!(
+            (
+                cfg.quality.w_volume,
+                cfg.quality.w_time,
+                cfg.quality.w_energy
+            ),
+            (3.0, 2.0, 1.0)
+        );
+        assert!(PlannerConfig::from_toml_str("floor_z_m = nan").is_err());
+        assert!(PlannerConfig::from_toml_str("[refined]\nd_step_m = 0.0").is_err());
+        assert!(PlannerConfig::from_toml_str("bogus = 1").is_err());
+        assert!(PlannerConfig::from_toml_str("").is_ok());
+    }
+
+    #[test]
+    fn state_pointer_and_counters() {
+        let cfg = CleanupConfig::default();
+        let mut s = PlannerState::default();
+        s.record_dig(2, 3);
+        assert_eq!(s.region_pointer, 0);
+        s.record_dig(0, 3);
+        assert_eq!(s.region_pointer, 1);
+        s.record_dig(5, 0);
+        assert_eq!(s.region_pointer, 1);
+        s.record_cleanup(0.1, &cfg);
+        s.record_cleanup(0.1, &cfg);
+        s.record_cleanup(f64::NAN, &cfg);
+        assert_eq!(s.cleanup_tries.values().sum::<u32>(), 2);
+        s.record_track_back();
+        assert!(s.cleanup_tries.is_empty());
+    }
+}
