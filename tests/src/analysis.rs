@@ -1,0 +1,426 @@
+//! What a recorded session shows. The same functions read a `candump -L` log of a vcan run and the
+//! recording of an in-process run, so both kinds of test check the same things.
+
+use std::path::Path;
+
+use firmware_bridge::messages::{
+    Activity, ControllerHeartbeat, ControllerStatus, GatewayStatus, JointAngles, Message,
+};
+use firmware_bridge::{CONTROLLER_ADDRESS, CanFrame, GATEWAY_ADDRESS};
+use serde::Deserialize;
+
+/// One recorded frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rec {
+    /// Time, s (wall clock for candump, simulation time in-process).
+    pub t_s: f64,
+    /// The frame.
+    pub frame: CanFrame,
+}
+
+/// Reads a `candump -L` log. Lines that do not parse are counted, not fatal (a killed candump may
+/// leave half a line).
+///
+/// # Panics
+/// When the file cannot be read.
+pub fn read_candump(path: &Path) -> (Vec<Rec>, usize) {
+    let text = std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
+    let mut recs = Vec::new();
+    let mut bad = 0;
+    for line in text.lines() {
+        match firmware_bridge::trace::parse_line(line) {
+            Ok(r) => recs.push(Rec {
+                t_s: r.timestamp_ns as f64 * 1e-9,
+                frame: r.frame,
+            }),
+            Err(_) => bad += 1,
+        }
+    }
+    (recs, bad)
+}
+
+/// Decoded messages from source address `sa`, with their times.
+pub fn messages_from(recs: &[Rec], sa: u8) -> impl Iterator<Item = (f64, Message)> + '_ {
+    recs.iter()
+        .filter_map(move |r| match Message::decode(&r.frame) {
+            Ok(d) if d.id.source_address() == sa => Some((r.t_s, d.message)),
+            _ => None,
+        })
+}
+
+/// The controller's `ControllerStatus` frames.
+pub fn controller_statuses(recs: &[Rec]) -> Vec<(f64, ControllerStatus)> {
+    messages_from(recs, CONTROLLER_ADDRESS)
+        .filter_map(|(t, m)| match m {
+            Message::ControllerStatus(s) => Some((t, s)),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The controller's heartbeats.
+pub fn heartbeats(recs: &[Rec]) -> Vec<(f64, ControllerHeartbeat)> {
+    messages_from(recs, CONTROLLER_ADDRESS)
+        .filter_map(|(t, m)| match m {
+            Message::ControllerHeartbeat(h) => Some((t, h)),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The gateway's `GatewayStatus` frames.
+pub fn gateway_statuses(recs: &[Rec]) -> Vec<(f64, GatewayStatus)> {
+    messages_from(recs, GATEWAY_ADDRESS)
+        .filter_map(|(t, m)| match m {
+            Message::GatewayStatus(s) => Some((t, s)),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The gateway's `JointAngles` as `[boom, stick, bucket, swing]`.
+pub fn joint_angles(recs: &[Rec]) -> Vec<(f64, [f64; 4])> {
+    messages_from(recs, GATEWAY_ADDRESS)
+        .filter_map(|(t, m)| match m {
+            Message::JointAngles(JointAngles {
+                boom_rad,
+                stick_rad,
+                bucket_rad,
+                swing_rad,
+            }) => Some((t, [boom_rad, stick_rad, bucket_rad, swing_rad])),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The activity sequence with consecutive repeats collapsed.
+pub fn activity_sequence(statuses: &[(f64, ControllerStatus)]) -> Vec<Activity> {
+    let mut seq: Vec<Activity> = Vec::new();
+    for (_, s) in statuses {
+        if seq.last() != Some(&s.activity) {
+            seq.push(s.activity);
+        }
+    }
+    seq
+}
+
+/// Complete work cycles found in an activity sequence.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Cycles {
+    /// Dig, swing to dump, dump, return (swing to the next dig, or home).
+    pub digs: usize,
+    /// Cleanup (with its Autodig hand-over), swing to dump, dump, return.
+    pub cleanups: usize,
+    /// Of these, cycles whose return was the final `Return` home.
+    pub returns_home: usize,
+}
+
+/// Counts complete cycles: `Dig | Cleanup [-> Dig]`, then `SwingToDump`, `Dump`, then `SwingToDig` or
+/// `Return`. Idle (weighing, between actions), Scan and Faulted (a pause that re-arms and resumes) do
+/// not break a cycle; tracking does.
+pub fn count_cycles(sequence: &[Activity]) -> Cycles {
+    #[derive(Clone, Copy, PartialEq)]
+    enum Step {
+        None,
+        Working(bool),
+        Swung(bool),
+        Dumped(bool),
+    }
+    let mut cycles = Cycles::default();
+    let mut step = Step::None;
+    for a in sequence {
+        step = match (*a, step) {
+            (Activity::Idle | Activity::Scan | Activity::Faulted, s) => s,
+            (Activity::Dig, Step::Working(true)) => Step::Working(true),
+            (Activity::Dig, _) => Step::Working(false),
+            (Activity::Cleanup, _) => Step::Working(true),
+            (Activity::SwingToDump, Step::Working(c) | Step::Swung(c)) => Step::Swung(c),
+            (Activity::Dump, Step::Swung(c) | Step::Dumped(c)) => Step::Dumped(c),
+            (Activity::SwingToDig | Activity::Return, Step::Dumped(cleanup)) => {
+                if cleanup {
+                    cycles.cleanups += 1;
+                } else {
+                    cycles.digs += 1;
+                }
+                if *a == Activity::Return {
+                    cycles.returns_home += 1;
+                }
+                Step::None
+            }
+            _ => Step::None,
+        };
+    }
+    cycles
+}
+
+/// One line of `excavator-sim --state-log` (the fields these tests use).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+pub struct StateSample {
+    /// Simulation time, s.
+    pub time_s: f64,
+    /// `[boom, stick, bucket, swing]`, rad.
+    pub angles_rad: [f64; 4],
+    /// Their rates, rad/s.
+    pub rates_rad_per_s: [f64; 4],
+}
+
+/// Reads a state log; a truncated last line (the simulator was stopped) is ignored.
+///
+/// # Panics
+/// When the file cannot be read or a line other than the last does not parse.
+pub fn read_state_log(path: &Path) -> Vec<StateSample> {
+    let text = std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
+    let lines: Vec<&str> = text.lines().collect();
+    let mut out = Vec::with_capacity(lines.len());
+    for (i, line) in lines.iter().enumerate() {
+        match serde_json::from_str::<StateSample>(line) {
+            Ok(s) => out.push(s),
+            Err(e) if i + 1 == lines.len() => eprintln!("state log: last line ignored: {e}"),
+            Err(e) => panic!("{}:{}: {e}", path.display(), i + 1),
+        }
+    }
+    out
+}
+
+/// Resolution of the angles on the wire and in the resolver, rad: half the 14-bit resolver step
+/// (2 pi / 16384) plus half the JointAngles LSB (1e-4 rad).
+pub const ANGLE_RESOLUTION_RAD: f64 = std::f64::consts::PI / 16384.0 + 0.5e-4;
+/// Resolver noise allowance, rad: five standard deviations of the simulator's 2e-4 rad.
+pub const ANGLE_NOISE_RAD: f64 = 5.0 * 2e-4;
+
+/// How decoded angles compare with the simulator's truth.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AngleComparison {
+    /// Decoded samples compared.
+    pub compared: usize,
+    /// Samples left out because they were sent in a catch-up burst (the simulator stepped several
+    /// periods at once after a late wake-up, so their timestamps are not their simulation times).
+    pub burst: usize,
+    /// Samples outside the tolerance.
+    pub outside: Vec<(f64, [f64; 4], [f64; 4], [f64; 4])>,
+    /// `wall - simulation` time offset per segment, s.
+    pub offsets_s: Vec<f64>,
+    /// Largest error per joint among the compared samples, rad.
+    pub max_error_rad: [f64; 4],
+    /// Largest error among samples taken while the joint moved slower than 0.01 rad/s, rad (where the
+    /// alignment does not matter: resolution and noise only).
+    pub max_error_still_rad: f64,
+}
+
+fn interpolate(truth: &[StateSample], t: f64) -> Option<([f64; 4], [f64; 4])> {
+    let i = truth.partition_point(|s| s.time_s < t);
+    if i == 0 || i >= truth.len() {
+        return None;
+    }
+    let (a, b) = (&truth[i - 1], &truth[i]);
+    let dt = b.time_s - a.time_s;
+    if !(dt > 0.0) || dt > 0.5 {
+        return None;
+    }
+    let w = (t - a.time_s) / dt;
+    let q = std::array::from_fn(|j| a.angles_rad[j] + w * (b.angles_rad[j] - a.angles_rad[j]));
+    let r = std::array::from_fn(|j| a.rates_rad_per_s[j].abs().max(b.rates_rad_per_s[j].abs()));
+    Some((q, r))
+}
+
+/// Mean absolute error (all joints) of `samples` against the truth at `t - offset`.
+fn alignment_cost(samples: &[(f64, [f64; 4])], truth: &[StateSample], offset: f64) -> f64 {
+    let mut sum = 0.0;
+    let mut n = 0usize;
+    for (t, q) in samples {
+        if let Some((truth_q, _)) = interpolate(truth, t - offset) {
+            sum += (0..4).map(|j| (q[j] - truth_q[j]).abs()).sum::<f64>();
+            n += 1;
+        }
+    }
+    if n * 2 < samples.len() || n == 0 {
+        f64::INFINITY
+    } else {
+        sum / n as f64
+    }
+}
+
+/// The offset in `[center - half, center + half]` (grid `step`) that aligns `samples` best.
+fn best_offset(
+    samples: &[(f64, [f64; 4])],
+    truth: &[StateSample],
+    center: f64,
+    half: f64,
+    step: f64,
+) -> f64 {
+    let n = (2.0 * half / step).round() as i64;
+    let mut best = (f64::INFINITY, center);
+    for k in 0..=n {
+        let o = center - half + k as f64 * step;
+        let c = alignment_cost(samples, truth, o);
+        if c < best.0 {
+            best = (c, o);
+        }
+    }
+    best.1
+}
+
+/// Compares decoded `JointAngles` (`decoded`, wall or bus time) with the simulator's state log
+/// (`truth`, simulation time). The time offset between the two clocks is estimated per `segment_s`
+/// segment (it drifts when the simulator falls behind wall time), then every sample must lie within
+/// [`ANGLE_RESOLUTION_RAD`] + [`ANGLE_NOISE_RAD`] + (the joint's rate) x `align_s` of the truth.
+/// `initial_offset_s` is a first guess of `decoded time - simulation time` (e.g. the simulator's
+/// start time), searched within +/- 2 s.
+pub fn compare_angles(
+    decoded: &[(f64, [f64; 4])],
+    truth: &[StateSample],
+    initial_offset_s: f64,
+    segment_s: f64,
+    align_s: f64,
+) -> AngleComparison {
+    let mut result = AngleComparison {
+        compared: 0,
+        burst: 0,
+        outside: Vec::new(),
+        offsets_s: Vec::new(),
+        max_error_rad: [0.0; 4],
+        max_error_still_rad: 0.0,
+    };
+    if decoded.is_empty() || truth.is_empty() {
+        return result;
+    }
+    // Frames closer than 3 ms to a neighbour were sent in a catch-up burst.
+    let burst: Vec<bool> = (0..decoded.len())
+        .map(|i| {
+            let prev = i.checked_sub(1).map(|p| decoded[i].0 - decoded[p].0);
+            let next = decoded.get(i + 1).map(|n| n.0 - decoded[i].0);
+            prev.is_some_and(|d| d < 0.003) || next.is_some_and(|d| d < 0.003)
+        })
+        .collect();
+    // A coarse global search on a subsample, then per segment around it.
+    let stride = (decoded.len() / 400).max(1);
+    let sub: Vec<_> = decoded.iter().copied().step_by(stride).collect();
+    let coarse = best_offset(&sub, truth, initial_offset_s, 2.0, 0.005);
+    let global = best_offset(&sub, truth, coarse, 0.01, 0.0005);
+    let t0 = decoded[0].0;
+    let mut start = 0;
+    while start < decoded.len() {
+        let end = decoded[start..]
+            .iter()
+            .position(|(t, _)| *t >= t0 + segment_s * (result.offsets_s.len() + 1) as f64)
+            .map_or(decoded.len(), |p| start + p);
+        let seg: Vec<_> = (start..end)
+            .filter(|&i| !burst[i])
+            .map(|i| decoded[i])
+            .collect();
+        let offset = if seg.len() >= 20 {
+            let o = best_offset(&seg, truth, global, 0.3, 0.002);
+            best_offset(&seg, truth, o, 0.002, 0.0002)
+        } else {
+            global
+        };
+        result.offsets_s.push(offset);
+        for i in start..end {
+            if burst[i] {
+                result.burst += 1;
+                continue;
+            }
+            let (t, q) = decoded[i];
+            let Some((truth_q, rate)) = interpolate(truth, t - offset) else {
+                continue;
+            };
+            result.compared += 1;
+            let err: [f64; 4] = std::array::from_fn(|j| (q[j] - truth_q[j]).abs());
+            let tol: [f64; 4] =
+                std::array::from_fn(|j| ANGLE_RESOLUTION_RAD + ANGLE_NOISE_RAD + rate[j] * align_s);
+            for j in 0..4 {
+                result.max_error_rad[j] = result.max_error_rad[j].max(err[j]);
+                if rate[j] < 0.01 {
+                    result.max_error_still_rad = result.max_error_still_rad.max(err[j]);
+                }
+            }
+            if (0..4).any(|j| err[j] > tol[j]) {
+                result.outside.push((t, q, truth_q, err));
+            }
+        }
+        start = end;
+    }
+    result
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cycles_are_counted_through_pauses_and_the_cleanup_hand_over() {
+        use Activity::*;
+        let seq = [
+            Idle,
+            Scan,
+            SwingToDig,
+            Dig,
+            Idle,
+            SwingToDump,
+            Dump,
+            Idle,
+            Scan,
+            SwingToDig,
+            Dig,
+            Faulted,
+            Dig,
+            SwingToDump,
+            Dump,
+            Scan,
+            SwingToDig,
+            Cleanup,
+            Dig,
+            SwingToDump,
+            Dump,
+            Return,
+            Idle,
+        ];
+        assert_eq!(
+            count_cycles(&seq),
+            Cycles {
+                digs: 2,
+                cleanups: 1,
+                returns_home: 1
+            }
+        );
+        // A dig abandoned before its dump is no cycle.
+        assert_eq!(count_cycles(&[Dig, SwingToDump, Return]).digs, 0);
+    }
+
+    #[test]
+    fn angle_comparison_finds_the_clock_offset() {
+        let truth: Vec<StateSample> = (0..2000)
+            .map(|k| {
+                let t = k as f64 * 0.01;
+                StateSample {
+                    time_s: t,
+                    angles_rad: [0.5 * (t * 0.5).sin(), -1.0, -0.5, 0.1 * t],
+                    rates_rad_per_s: [0.25 * (t * 0.5).cos(), 0.0, 0.0, 0.1],
+                }
+            })
+            .collect();
+        let offset = 1_700_000_000.25;
+        let decoded: Vec<(f64, [f64; 4])> = truth
+            .iter()
+            .skip(1)
+            .map(|s| (s.time_s + offset + 0.003, s.angles_rad))
+            .collect();
+        let c = compare_angles(&decoded, &truth, 1_700_000_000.0, 5.0, 0.02);
+        assert!(
+            c.outside.is_empty(),
+            "{:?}",
+            &c.outside[..c.outside.len().min(3)]
+        );
+        assert!(c.compared > 1900);
+        for o in &c.offsets_s {
+            assert!((o - offset - 0.003).abs() < 0.002, "{o}");
+        }
+        // A wrong angle is found.
+        let mut bad = decoded.clone();
+        bad[500].1[1] += 0.01;
+        let c = compare_angles(&bad, &truth, 1_700_000_000.0, 5.0, 0.02);
+        assert_eq!(c.outside.len(), 1);
+    }
+}
