@@ -27,6 +27,13 @@ pub enum Command {
         #[command(subcommand)]
         cmd: crate::trace_tool::TraceCommand,
     },
+    /// The planner's dig model: train the actuator networks, generate simulator data, compare with
+    /// the simulator, thesis Table 2 (docs/models.md).
+    Model {
+        /// The model command.
+        #[command(subcommand)]
+        cmd: crate::model_cmd::ModelCommand,
+    },
 }
 
 /// Arguments of `excavator-ctl run`.

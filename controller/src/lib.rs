@@ -27,6 +27,7 @@
 pub mod cli;
 pub mod cycle;
 pub mod estimate;
+pub mod model_cmd;
 pub mod node;
 pub mod run;
 pub mod safety;

@@ -1,0 +1,1286 @@
+//! `excavator-ctl model`: the planner's dig model (thesis ch. 4) against the simulator.
+//!
+//! - `generate-data`: digs in the simulator (`vcan_sim::plant::Plant` in-process, virtual time) with
+//!   Autodig closing the loop on the sensor readings, from varied starts (bench geometry, cohesion,
+//!   start distance and bucket angle, hardness index), each written as a `candump -L` trace with the
+//!   frames the gateway and the controller exchange (sensors, valve commands, heartbeat and
+//!   `ControllerStatus`), so `model train` reads the same thing as a trace recorded by `run` or `demo`.
+//! - `train`: actuator training digs from traces (Eq. A20 forces, moment-arm velocities), the recurrent
+//!   networks of `planner::actuator` with a held-out split, and the error per cylinder.
+//! - `compare`: the simulator and the dig model from the same starts over the same sections (thesis
+//!   Figs. 34-41): trajectory, time, energy and swept volume errors, and an SVG of the trajectories.
+//! - `table2`: thesis Table 2 with the dig model (force factor 1, 2, 3).
+//!
+//! The simulation harness ([`DigSetup`], [`run_sim_dig`], [`compare_dig`]) is public so the
+//! integration tests and the discrepancy workflow can reuse it.
+
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Write as _};
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use clap::{Args, Subcommand};
+use firmware_bridge::messages::{
+    Activity, AutodigStageCode, AuxValveCommand, AuxValveMeasured, ControllerHeartbeat,
+    ControllerStatus, Cylinder, JointAngles as JointAnglesMsg, JointRates, Message, PumpPressures,
+    RequestedMode, Valve, ValveState,
+};
+use firmware_bridge::trace::{Direction, ReadMode, TraceReader, TraceWriter};
+use planner::actuator::{ActuatorDig, ActuatorModel, ActuatorSample, TrainConfig};
+use planner::autodig::{Autodig, AutodigInputs, AutodigMaps, EndReason, Stage};
+use planner::dig_model::{DigModel, DigModelConfig, DigPrediction, DigSite, DigStart};
+use planner::kinematics::{BucketPose, Joint, JointAngles, Kinematics};
+use planner::terrain::{SectionProfile, SweptVolume};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use vcan_sim::SimConfig;
+use vcan_sim::soil_contact::World;
+
+/// Control period, s.
+const PERIOD_S: f64 = 0.01;
+/// Physics steps per control period.
+const PHYSICS_PER_PERIOD: usize = 10;
+/// Neutral time recorded before and after each dig, s.
+const IDLE_S: f64 = 0.3;
+/// A simulated dig that has not ended by then is stopped, s.
+const SIM_MAX_DIG_S: f64 = 20.0;
+/// Section along the digging plane: start, end and step, m.
+const SECTION_R: (f64, f64, f64) = (0.5, 12.0, 0.05);
+/// Cylinder speeds above this are sensor glitches (pump flow over the smallest area is far lower), m/s.
+const MAX_CYLINDER_SPEED_M_PER_S: f64 = 1.5;
+/// The thesis's Table 2: force factor, time (s), volume (m^3), energy (kJ).
+pub const THESIS_TABLE2: [(f64, f64, f64, f64); 3] = [
+    (1.0, 5.5, 2.2, 113.0),
+    (2.0, 8.1, 2.5, 234.0),
+    (3.0, 7.8, 2.1, 253.0),
+];
+
+/// `excavator-ctl model ...`
+#[derive(Debug, Subcommand)]
+pub enum ModelCommand {
+    /// Train the actuator networks (thesis 4.2) from candump traces.
+    Train(TrainArgs),
+    /// Run Autodig digs in the simulator from varied starts and write their traces.
+    GenerateData(GenerateArgs),
+    /// Compare the dig model with the simulator from the same starts (thesis Figs. 34-41).
+    Compare(CompareArgs),
+    /// Thesis Table 2 with the dig model: force factor 1, 2, 3.
+    Table2(Table2Args),
+}
+
+/// Arguments of `model train`.
+#[derive(Debug, Args)]
+pub struct TrainArgs {
+    /// candump -L traces (from `model generate-data`, `run --trace` or a real machine).
+    #[arg(long, required = true, num_args = 1..)]
+    pub trace: Vec<PathBuf>,
+    /// Where to write the model (`actuator.json`).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Seed of the split and the initial weights.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Hidden units per network (thesis: five).
+    #[arg(long, default_value_t = 5)]
+    pub hidden: usize,
+    /// Command delay in 10 ms steps (default: the machine file's transport delay).
+    #[arg(long)]
+    pub delay: Option<usize>,
+    /// Free-running (BPTT) epochs.
+    #[arg(long, default_value_t = 400)]
+    pub epochs: usize,
+    /// Machine file (default: the built-in config/machine.toml).
+    #[arg(long, value_name = "FILE")]
+    pub machine: Option<PathBuf>,
+}
+
+/// Arguments of `model generate-data`.
+#[derive(Debug, Args)]
+pub struct GenerateArgs {
+    /// Output folder (one `dig_NNN.log` per dig and `setups.json`).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Number of digs.
+    #[arg(long, default_value_t = 60)]
+    pub digs: usize,
+    /// Seed of the starts, terrain and sensor noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Print every dig's statistics.
+    #[arg(long)]
+    pub verbose: bool,
+}
+
+/// Arguments of `model compare`.
+#[derive(Debug, Args)]
+pub struct CompareArgs {
+    /// Number of digs.
+    #[arg(long, default_value_t = 8)]
+    pub digs: usize,
+    /// Seed of the starts (different from the training data's by default).
+    #[arg(long, default_value_t = 1001)]
+    pub seed: u64,
+    /// Actuator model (default: the shipped config/nominal_actuator.json).
+    #[arg(long, value_name = "FILE")]
+    pub model: Option<PathBuf>,
+    /// Output folder for `compare.svg` and `compare.json`.
+    #[arg(long, default_value = "model-compare")]
+    pub out: PathBuf,
+}
+
+/// Arguments of `model table2`.
+#[derive(Debug, Args)]
+pub struct Table2Args {
+    /// Actuator model (default: the shipped config/nominal_actuator.json).
+    #[arg(long, value_name = "FILE")]
+    pub model: Option<PathBuf>,
+    /// Start distance of the tip from the swing axis, m.
+    #[arg(long, default_value_t = 6.5)]
+    pub start_r: f64,
+    /// Start bucket angle to the horizontal, degrees.
+    #[arg(long, default_value_t = -85.0)]
+    pub start_bucket_deg: f64,
+}
+
+/// Runs a `model` subcommand.
+///
+/// # Errors
+/// Any failure, with its cause chain.
+pub fn run(cmd: ModelCommand) -> anyhow::Result<()> {
+    match cmd {
+        ModelCommand::Train(a) => train(&a),
+        ModelCommand::GenerateData(a) => generate(&a),
+        ModelCommand::Compare(a) => compare(&a),
+        ModelCommand::Table2(a) => table2(&a),
+    }
+}
+
+// ---------------------------------------------------------------------------------------------------
+// Simulation harness
+// ---------------------------------------------------------------------------------------------------
+
+/// A small deterministic generator (SplitMix64) for the dig setups.
+#[derive(Debug, Clone)]
+struct SplitMix(u64);
+
+impl SplitMix {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
+    }
+}
+
+/// One simulated dig: the bench, the soil and the start (Autodig starts in Pre-Dig there).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DigSetup {
+    /// Dig number.
+    pub index: usize,
+    /// Simulator seed (sensor noise).
+    pub seed: u64,
+    /// Toe of the bench face, m from the machine.
+    pub face_x_m: f64,
+    /// Face angle, degrees.
+    pub face_slope_deg: f64,
+    /// Bench height, m.
+    pub bench_height_m: f64,
+    /// Soil cohesion, Pa.
+    pub cohesion_pa: f64,
+    /// Autodig hardness index.
+    pub hardness_index: f64,
+    /// Depth of the tip below the surface at the start (as after Boom-Down), m.
+    pub start_depth_m: f64,
+    /// Start joint angles, rad.
+    pub start: JointAngles,
+}
+
+/// The simulator configuration of a setup (default machine and bench, changed as the setup says).
+///
+/// # Errors
+/// Loading the built-in files.
+pub fn sim_config(setup: &DigSetup) -> anyhow::Result<SimConfig> {
+    let mut cfg = SimConfig::load::<&str>(None, None, Some(setup.seed), &[])?;
+    let s = &mut cfg.scenario;
+    s.bench.face_x_m = setup.face_x_m;
+    s.bench.face_slope_deg = setup.face_slope_deg;
+    s.bench.height_m = setup.bench_height_m;
+    s.soil.cohesion_pa = setup.cohesion_pa;
+    s.start.boom_deg = setup.start.boom_rad.to_degrees();
+    s.start.stick_deg = setup.start.stick_rad.to_degrees();
+    s.start.bucket_deg = setup.start.bucket_rad.to_degrees();
+    s.start.swing_deg = 0.0;
+    Ok(cfg)
+}
+
+fn section_of(world: &World, cfg: &SimConfig) -> anyhow::Result<SectionProfile> {
+    let pose = planner::kinematics::MachinePose {
+        x_m: cfg.scenario.start.x_m,
+        y_m: cfg.scenario.start.y_m,
+        heading_rad: cfg.scenario.start.heading_deg.to_radians(),
+    };
+    Ok(world
+        .terrain
+        .section(&pose, 0.0, SECTION_R.0, SECTION_R.1, SECTION_R.2)?)
+}
+
+/// `n` setups drawn from `seed`. With `vary` the bench, cohesion and hardness index vary too
+/// (training data); without, the default bench and soil and hardness 3 (comparison with the
+/// nominal model), varying only the start.
+///
+/// # Errors
+/// Loading the built-in files, or no reachable start found.
+pub fn random_setups(n: usize, seed: u64, vary: bool) -> anyhow::Result<Vec<DigSetup>> {
+    let base = SimConfig::load::<&str>(None, None, Some(seed), &[])?;
+    let kin = Kinematics::new(&base.machine)?;
+    let mut rng = SplitMix(seed ^ 0x5EED_D16);
+    let mut out = Vec::with_capacity(n);
+    for index in 0..n {
+        let mut found = None;
+        for _ in 0..200 {
+            let mut setup = DigSetup {
+                index,
+                seed: seed.wrapping_mul(1000).wrapping_add(index as u64),
+                face_x_m: base.scenario.bench.face_x_m,
+                face_slope_deg: base.scenario.bench.face_slope_deg,
+                bench_height_m: base.scenario.bench.height_m,
+                cohesion_pa: base.scenario.soil.cohesion_pa,
+                hardness_index: 3.0,
+                start_depth_m: rng.uniform(0.1, 0.3),
+                start: JointAngles::default(),
+            };
+            if vary {
+                setup.face_x_m = rng.uniform(2.5, 4.0);
+                setup.face_slope_deg = rng.uniform(30.0, 60.0);
+                setup.bench_height_m = rng.uniform(1.2, 2.5);
+                setup.cohesion_pa = rng.uniform(3e3, 16e3);
+                setup.hardness_index = rng.uniform(1.0, 5.0);
+            }
+            let r = rng.uniform(setup.face_x_m + 0.8, 8.6);
+            let bucket_abs = rng.uniform(-115.0_f64, -95.0).to_radians();
+            let mut cfg = sim_config(&setup)?;
+            cfg.scenario.start.boom_deg = 40.0;
+            let world = World::from_scenario(&cfg.scenario)?;
+            let profile = section_of(&world, &cfg)?;
+            let z = profile.height_at(r)? - setup.start_depth_m;
+            let Ok(q) = kin.inverse(&BucketPose {
+                x_m: r,
+                z_m: z,
+                bucket_abs_rad: bucket_abs,
+            }) else {
+                continue;
+            };
+            // The stick out (thesis Table 1: -87 to -50 deg): Dig brings it in to beta.
+            if q.stick_abs_rad().to_degrees() > -25.0 || q.stick_abs_rad().to_degrees() < -70.0 {
+                continue;
+            }
+            setup.start = q;
+            // The plant must start where the model does (strokes, wrapping).
+            // and hold still there through the idle time before the dig.
+            let mut plant = sim_config(&setup)?.build()?;
+            for _ in 0..(IDLE_S / PERIOD_S).round() as usize * PHYSICS_PER_PERIOD {
+                plant.step([0.0; 6]);
+            }
+            let tip = kin.forward(&plant.joint_angles());
+            if (tip.x_m - r).hypot(tip.z_m - z) > 0.03 {
+                continue;
+            }
+            found = Some(setup);
+            break;
+        }
+        match found {
+            Some(s) => out.push(s),
+            None => bail!("no reachable start found for dig {index}"),
+        }
+    }
+    Ok(out)
+}
+
+/// One 10 ms sample of a simulated dig (from the sensor readings, as the controller sees them).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SimSample {
+    /// Time since the start of Autodig, s.
+    pub time_s: f64,
+    /// Tip `x` from the sensed angles, m.
+    pub tip_x_m: f64,
+    /// Tip `z`, m.
+    pub tip_z_m: f64,
+    /// Bucket angle to the horizontal, rad.
+    pub bucket_abs_rad: f64,
+    /// Autodig command.
+    pub command: [f64; 3],
+}
+
+/// A simulated dig and its statistics (measured like the controller's `DigStats`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimDig {
+    /// The setup.
+    pub setup: DigSetup,
+    /// The pre-dig section along the digging plane (true terrain).
+    pub profile: SectionProfile,
+    /// Samples from the start of Autodig.
+    pub samples: Vec<SimSample>,
+    /// Dig time, s.
+    pub time_s: f64,
+    /// `sum |F dL|` from the measured pressures (Eq. A20) and sensed angles, J.
+    pub energy_j: f64,
+    /// Swept volume over the pre-dig section along the sensed tip path, m^3.
+    pub swept_volume_m3: f64,
+    /// Bank volume in the bucket at the end (the simulator's ledger), m^3.
+    pub bucket_volume_m3: f64,
+    /// Autodig's end reason (`None`: stopped at the time limit).
+    pub end: Option<EndReason>,
+}
+
+fn stage_code(stage: Stage) -> AutodigStageCode {
+    match stage {
+        Stage::BoomDown => AutodigStageCode::BoomDown,
+        Stage::PreDig => AutodigStageCode::PreDig,
+        Stage::Dig => AutodigStageCode::Dig,
+        Stage::Capture => AutodigStageCode::Capture,
+        Stage::Done => AutodigStageCode::Done,
+    }
+}
+
+struct Recorder<'a> {
+    writer: Option<&'a mut TraceWriter<BufWriter<File>>>,
+}
+
+impl Recorder<'_> {
+    fn emit(&mut self, t_s: f64, msg: Message, dir: Direction) -> anyhow::Result<()> {
+        if let Some(w) = self.writer.as_deref_mut() {
+            let frame = msg.encode()?;
+            w.write((t_s * 1e9).round() as u64, &frame, dir)?;
+        }
+        Ok(())
+    }
+}
+
+/// Runs one dig in the simulator: neutral for 0.3 s, Autodig from Pre-Dig on the sensor readings
+/// (with the perception enhancements over the true pre-dig section), neutral for 0.3 s; records the
+/// frames into `trace` if given.
+///
+/// # Errors
+/// Building the plant, Autodig errors, encoding or writing frames.
+pub fn run_sim_dig(
+    setup: &DigSetup,
+    trace: Option<&mut TraceWriter<BufWriter<File>>>,
+) -> anyhow::Result<SimDig> {
+    let cfg = sim_config(setup)?;
+    let mut plant = cfg.build()?;
+    let kin = Kinematics::new(&cfg.machine)?;
+    let profile = section_of(&plant.world, &cfg)?;
+    let mut swept = SweptVolume::new(profile.clone(), cfg.machine.bucket.width_m)?;
+    let mut ad_cfg = DigModelConfig::nominal()?.autodig;
+    ad_cfg.relief_pressure_pa = [cfg.machine.hydraulics.relief_pressure_pa; 3];
+    ad_cfg.perception.bucket_capacity_m3 = cfg.machine.bucket.capacity_m3;
+    ad_cfg.hardness_index = setup.hardness_index;
+    let mut autodig = Autodig::starting_in(ad_cfg, AutodigMaps::builtin()?, Stage::PreDig)?;
+    let cyl = &cfg.machine.cylinders;
+    let areas = [&cyl.boom, &cyl.stick, &cyl.bucket].map(|c| (c.head_area_m2(), c.rod_area_m2()));
+    let strokes = Joint::ALL.map(|j| kin.stroke(j));
+    let rated = plant.hydraulics.params().pumps[0].max_flow_m3_per_s;
+    let dig_index = u16::try_from(setup.index % 60_000).unwrap_or(0);
+
+    let mut rec = Recorder { writer: trace };
+    let idle_steps = (IDLE_S / PERIOD_S).round() as usize;
+    let max_dig_steps = (SIM_MAX_DIG_S / PERIOD_S).round() as usize;
+    let mut samples = Vec::with_capacity(max_dig_steps);
+    let mut energy_j = 0.0;
+    let mut last_len: Option<[f64; 3]> = None;
+    let mut dig_start_s = None;
+    let mut dig_time_s = 0.0;
+    let mut end = None;
+    let mut post = 0usize;
+    let mut command = [0.0; 3];
+    let mut stage = Stage::PreDig;
+    let mut alive = 0u8;
+    for step in 0usize.. {
+        let t = plant.time_s();
+        let r = plant.read_sensors();
+        // The gateway's frames (vcan_sim::node's layout).
+        let angle = |a: f64| a.clamp(-std::f64::consts::PI + 1e-4, std::f64::consts::PI - 1e-4);
+        let rate = |w: f64| w.clamp(-31.9, 31.9);
+        let pressure = |p: f64| p.clamp(0.0, 100e6);
+        rec.emit(
+            t,
+            Message::JointAngles(JointAnglesMsg {
+                boom_rad: angle(r.angles_rad[0]),
+                stick_rad: angle(r.angles_rad[1]),
+                bucket_rad: angle(r.angles_rad[2]),
+                swing_rad: angle(r.angles_rad[3]),
+            }),
+            Direction::Receive,
+        )?;
+        rec.emit(
+            t,
+            Message::JointRates(JointRates {
+                boom_rad_per_s: rate(r.rates_rad_per_s[0]),
+                stick_rad_per_s: rate(r.rates_rad_per_s[1]),
+                bucket_rad_per_s: rate(r.rates_rad_per_s[2]),
+                swing_rad_per_s: rate(r.rates_rad_per_s[3]),
+            }),
+            Direction::Receive,
+        )?;
+        for (i, cylinder) in Cylinder::ALL.iter().enumerate() {
+            let a = plant.hydraulics.actuators[i];
+            let (state, area) = if command[i] > 0.0 {
+                (ValveState::Extend, areas[i].0)
+            } else if command[i] < 0.0 {
+                (ValveState::Retract, areas[i].1)
+            } else {
+                (ValveState::Block, 0.0)
+            };
+            rec.emit(
+                t,
+                Message::AuxValveMeasured(AuxValveMeasured {
+                    cylinder: *cylinder,
+                    flow_percent: (a.velocity.abs() * area / rated * 100.0).clamp(0.0, 160.0),
+                    state,
+                    head_pressure_pa: pressure(r.head_pa[i]),
+                    rod_pressure_pa: pressure(r.rod_pa[i]),
+                }),
+                Direction::Receive,
+            )?;
+        }
+        rec.emit(
+            t,
+            Message::PumpPressures(PumpPressures {
+                pump1_pa: pressure(r.pump_pa[0]),
+                pump2_pa: pressure(r.pump_pa[1]),
+            }),
+            Direction::Receive,
+        )?;
+
+        // The controller's step.
+        let q = JointAngles {
+            boom_rad: r.angles_rad[0],
+            stick_rad: r.angles_rad[1],
+            bucket_rad: r.angles_rad[2],
+        };
+        let mut activity = Activity::Idle;
+        match (dig_start_s, end.is_some() || post > 0) {
+            (None, _) if step < idle_steps => command = [0.0; 3],
+            (_, false) => {
+                let t0 = *dig_start_s.get_or_insert(t);
+                activity = Activity::Dig;
+                let tip = kin.forward(&q);
+                let swept_m3 = swept.update(tip.x_m, tip.z_m).ok();
+                let depth_m = swept.depth_m(tip.x_m, tip.z_m).ok();
+                let mut len = [0.0; 3];
+                let mut ext = [0.0; 3];
+                let mut force = [0.0; 3];
+                for (j, joint) in Joint::ALL.iter().enumerate() {
+                    len[j] = kin.cylinder_length(*joint, q.to_vector()[j])?;
+                    ext[j] =
+                        ((len[j] - strokes[j].0) / (strokes[j].1 - strokes[j].0)).clamp(0.0, 1.0);
+                    force[j] = r.head_pa[j] * areas[j].0 - r.rod_pa[j] * areas[j].1; // Eq. A20
+                }
+                if let Some(prev) = last_len {
+                    energy_j += (0..3)
+                        .map(|j| (force[j] * (len[j] - prev[j])).abs())
+                        .sum::<f64>();
+                }
+                last_len = Some(len);
+                let inputs = AutodigInputs {
+                    joint_rad: [q.boom_rad, q.stick_rad, q.bucket_rad],
+                    head_pressure_pa: r.head_pa,
+                    rod_pressure_pa: r.rod_pa,
+                    extension_fraction: ext,
+                    swept_volume_m3: swept_m3,
+                    bucket_depth_m: depth_m,
+                };
+                let out = autodig.step(&inputs, t - t0)?;
+                stage = out.stage;
+                command = out.command;
+                samples.push(SimSample {
+                    time_s: t - t0,
+                    tip_x_m: tip.x_m,
+                    tip_z_m: tip.z_m,
+                    bucket_abs_rad: tip.bucket_abs_rad,
+                    command,
+                });
+                if out.stage == Stage::Done || samples.len() > max_dig_steps {
+                    end = out.end_reason;
+                    dig_time_s = t - t0;
+                    post = 1;
+                    command = [0.0; 3];
+                }
+            }
+            (_, true) => {
+                command = [0.0; 3];
+                post += 1;
+            }
+        }
+        for (i, valve) in Valve::ALL.iter().enumerate() {
+            let u = if i < 3 { command[i] } else { 0.0 };
+            rec.emit(
+                t,
+                Message::AuxValveCommand(AuxValveCommand::from_fraction(*valve, u)?),
+                Direction::Transmit,
+            )?;
+        }
+        rec.emit(
+            t,
+            Message::ControllerHeartbeat(ControllerHeartbeat {
+                mode: RequestedMode::ArmValve,
+                alive_counter: alive,
+            }),
+            Direction::Transmit,
+        )?;
+        if step % 5 == 0 {
+            rec.emit(
+                t,
+                Message::ControllerStatus(ControllerStatus {
+                    activity,
+                    stage: if activity == Activity::Dig {
+                        stage_code(stage)
+                    } else {
+                        AutodigStageCode::None
+                    },
+                    dig_index,
+                    hardness_index: setup.hardness_index.clamp(0.0, 12.5),
+                    swept_volume_m3: swept.volume_m3().clamp(0.0, 6.4),
+                    fault_reason: 0,
+                    alive_counter: alive,
+                }),
+                Direction::Transmit,
+            )?;
+        }
+        alive = (alive + 1) % 16;
+        if post > idle_steps {
+            break;
+        }
+        for _ in 0..PHYSICS_PER_PERIOD {
+            plant.step([command[0], command[1], command[2], 0.0, 0.0, 0.0]);
+        }
+    }
+    Ok(SimDig {
+        setup: setup.clone(),
+        profile,
+        samples,
+        time_s: dig_time_s,
+        energy_j,
+        swept_volume_m3: swept.volume_m3(),
+        bucket_volume_m3: plant.contact.content.volume_m3,
+        end,
+    })
+}
+
+/// Model-versus-simulator figures of one dig (thesis Figs. 34, 40, 41).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DigComparison {
+    /// Dig number.
+    pub index: usize,
+    /// RMS distance between the predicted and measured tip paths (symmetric nearest-point), m.
+    pub trajectory_rms_m: f64,
+    /// Measured and predicted dig time, s.
+    pub time_s: [f64; 2],
+    /// Measured and predicted energy, kJ.
+    pub energy_kj: [f64; 2],
+    /// Measured and predicted swept volume, m^3.
+    pub volume_m3: [f64; 2],
+    /// Relative errors (model - measured) / measured, %: time, energy, volume.
+    pub error_percent: [f64; 3],
+    /// Measured and predicted end reasons.
+    pub end: [String; 2],
+}
+
+/// Distance from `p` to the polyline `line`, m.
+fn distance_to_polyline(p: [f64; 2], line: &[[f64; 2]]) -> f64 {
+    if line.len() == 1 {
+        return (p[0] - line[0][0]).hypot(p[1] - line[0][1]);
+    }
+    line.windows(2)
+        .map(|w| {
+            let (a, b) = (w[0], w[1]);
+            let d = [b[0] - a[0], b[1] - a[1]];
+            let len2 = d[0] * d[0] + d[1] * d[1];
+            let t = if len2 > 0.0 {
+                (((p[0] - a[0]) * d[0] + (p[1] - a[1]) * d[1]) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            (p[0] - a[0] - t * d[0]).hypot(p[1] - a[1] - t * d[1])
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Symmetric RMS distance between two paths, m (each point of one to the other polyline).
+#[must_use]
+pub fn path_rms_m(a: &[[f64; 2]], b: &[[f64; 2]]) -> f64 {
+    if a.is_empty() || b.is_empty() {
+        return f64::INFINITY;
+    }
+    let sq = |from: &[[f64; 2]], to: &[[f64; 2]]| {
+        from.iter()
+            .map(|p| distance_to_polyline(*p, to).powi(2))
+            .sum::<f64>()
+            / from.len() as f64
+    };
+    (0.5 * (sq(a, b) + sq(b, a))).sqrt()
+}
+
+fn percent(model: f64, measured: f64) -> f64 {
+    if measured.abs() > 1e-12 {
+        100.0 * (model - measured) / measured
+    } else {
+        0.0
+    }
+}
+
+/// Runs the dig model from the setup's start over the simulator's pre-dig section and compares.
+///
+/// # Errors
+/// The dig model's errors.
+pub fn compare_dig(
+    model: &DigModel,
+    sim: &SimDig,
+) -> anyhow::Result<(DigComparison, DigPrediction)> {
+    let mut model = model.clone();
+    model.set_hardness_index(sim.setup.hardness_index)?;
+    let site = DigSite::new(sim.profile.clone(), 0.0)?;
+    let pred = model
+        .predict(&DigStart::Joints(sim.setup.start), &site)
+        .with_context(|| format!("dig model, dig {}", sim.setup.index))?;
+    let measured: Vec<[f64; 2]> = sim.samples.iter().map(|s| [s.tip_x_m, s.tip_z_m]).collect();
+    let predicted: Vec<[f64; 2]> = pred
+        .samples
+        .iter()
+        .map(|s| [s.tip_x_m, s.tip_z_m])
+        .collect();
+    let s = &pred.summary;
+    let cmp = DigComparison {
+        index: sim.setup.index,
+        trajectory_rms_m: path_rms_m(&measured, &predicted),
+        time_s: [sim.time_s, s.time_s],
+        energy_kj: [sim.energy_j * 1e-3, s.energy_kj()],
+        volume_m3: [sim.swept_volume_m3, s.swept_volume_m3],
+        error_percent: [
+            percent(s.time_s, sim.time_s),
+            percent(s.energy_j, sim.energy_j),
+            percent(s.swept_volume_m3, sim.swept_volume_m3),
+        ],
+        end: [
+            sim.end
+                .map_or_else(|| "time limit".to_owned(), |e| format!("{e:?}")),
+            format!("{:?}", s.end),
+        ],
+    };
+    Ok((cmp, pred))
+}
+
+/// Mean of the absolute relative errors `[time, energy, volume]`, % and the mean trajectory RMS, m.
+#[must_use]
+pub fn mean_errors(c: &[DigComparison]) -> ([f64; 3], f64) {
+    let n = c.len().max(1) as f64;
+    let mut e = [0.0; 3];
+    for d in c {
+        for (k, v) in d.error_percent.iter().enumerate() {
+            e[k] += v.abs() / n;
+        }
+    }
+    (e, c.iter().map(|d| d.trajectory_rms_m).sum::<f64>() / n)
+}
+
+// ---------------------------------------------------------------------------------------------------
+// generate-data
+// ---------------------------------------------------------------------------------------------------
+
+fn generate(a: &GenerateArgs) -> anyhow::Result<()> {
+    if a.digs == 0 {
+        bail!("--digs must be at least 1");
+    }
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let setups = random_setups(a.digs, a.seed, true)?;
+    let bar = indicatif::ProgressBar::new(setups.len() as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} digs {elapsed} {msg}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let results: Vec<anyhow::Result<SimDig>> = setups
+        .par_iter()
+        .map(|s| {
+            let path = a.out.join(format!("dig_{:03}.log", s.index));
+            let file =
+                File::create(&path).with_context(|| format!("creating {}", path.display()))?;
+            let mut w = TraceWriter::new(BufWriter::new(file), "vcan0", true);
+            let dig = run_sim_dig(s, Some(&mut w))?;
+            w.flush()?;
+            bar.inc(1);
+            Ok(dig)
+        })
+        .collect();
+    bar.finish_and_clear();
+    let mut volume = 0.0;
+    let mut time = 0.0;
+    for r in &results {
+        let d = r.as_ref().map_err(|e| anyhow::anyhow!("{e:#}"))?;
+        volume += d.swept_volume_m3;
+        time += d.time_s;
+        if a.verbose {
+            let first = d
+                .samples
+                .first()
+                .map_or([0.0; 2], |s| [s.tip_x_m, s.tip_z_m]);
+            let min_z = d
+                .samples
+                .iter()
+                .map(|s| s.tip_z_m)
+                .fold(f64::INFINITY, f64::min);
+            println!(
+                "  dig {:>3}: start r {:.2} z {:.2}, lowest z {:.2}, {:.2} s, swept {:.2} m^3, bucket {:.2} m^3, {:.0} kJ, end {:?}",
+                d.setup.index,
+                first[0],
+                first[1],
+                min_z,
+                d.time_s,
+                d.swept_volume_m3,
+                d.bucket_volume_m3,
+                d.energy_j * 1e-3,
+                d.end
+            );
+        }
+    }
+    std::fs::write(
+        a.out.join("setups.json"),
+        serde_json::to_string_pretty(&setups)?,
+    )?;
+    let n = setups.len() as f64;
+    println!(
+        "wrote {} dig traces to {} (mean dig {:.2} s, swept {:.2} m^3)",
+        setups.len(),
+        a.out.display(),
+        time / n,
+        volume / n
+    );
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------------------------
+// train
+// ---------------------------------------------------------------------------------------------------
+
+#[derive(Debug, Clone, Copy)]
+struct Tagged {
+    sample: ActuatorSample,
+    /// `Some(dig index)` when a ControllerStatus said Dig or Cleanup.
+    dig: Option<u16>,
+}
+
+/// Reads the training digs of one trace: samples at every `JointAngles` frame with the latest
+/// commands, pressures (-> Eq. A20 forces) and rates (-> cylinder velocities through the moment arms),
+/// segmented by `ControllerStatus` (activity Dig or Cleanup, per dig index) or, in traces without it,
+/// by command activity (runs of non-neutral commands, split by 1 s of neutral).
+///
+/// # Errors
+/// Opening or reading the file.
+pub fn read_training_digs(
+    path: &Path,
+    kin: &Kinematics,
+    areas: [(f64, f64); 3],
+) -> anyhow::Result<Vec<ActuatorDig>> {
+    let file = File::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let reader = TraceReader::new(BufReader::new(file), ReadMode::Skip);
+    let mut command = [0.0; 3];
+    let mut head = [0.0; 3];
+    let mut rod = [0.0; 3];
+    let mut rates: Option<[f64; 3]> = None;
+    let mut pending: Option<(f64, JointAngles)> = None;
+    let mut status: Option<(Activity, u16)> = None;
+    let mut seen_status = false;
+    let mut tagged: Vec<Tagged> = Vec::new();
+    let mut flush = |pending: &mut Option<(f64, JointAngles)>,
+                     rates: &Option<[f64; 3]>,
+                     command: &[f64; 3],
+                     head: &[f64; 3],
+                     rod: &[f64; 3],
+                     status: &Option<(Activity, u16)>| {
+        if let (Some((t, q)), Some(w)) = (pending.take(), rates)
+            && let Ok(arms) = kin.moment_arms(&q)
+        {
+            let sample = ActuatorSample {
+                time_s: t,
+                command: *command,
+                force_n: [0, 1, 2].map(|j| head[j] * areas[j].0 - rod[j] * areas[j].1), // Eq. A20
+                velocity_m_per_s: [0, 1, 2].map(|j| arms[j] * w[j]),
+            };
+            let dig = match status {
+                Some((Activity::Dig | Activity::Cleanup, i)) => Some(*i),
+                _ => None,
+            };
+            if sample
+                .force_n
+                .iter()
+                .chain(&sample.velocity_m_per_s)
+                .all(|v| v.is_finite())
+            {
+                tagged.push(Tagged { sample, dig });
+            }
+        }
+    };
+    for record in reader {
+        let record = record.with_context(|| format!("reading {}", path.display()))?;
+        let Ok(decoded) = Message::decode(&record.frame) else {
+            continue;
+        };
+        let t = record.timestamp_ns as f64 * 1e-9;
+        match decoded.message {
+            Message::JointAngles(a) => {
+                flush(&mut pending, &rates, &command, &head, &rod, &status);
+                pending = Some((
+                    t,
+                    JointAngles {
+                        boom_rad: a.boom_rad,
+                        stick_rad: a.stick_rad,
+                        bucket_rad: a.bucket_rad,
+                    },
+                ));
+            }
+            Message::JointRates(r) => {
+                rates = Some([r.boom_rad_per_s, r.stick_rad_per_s, r.bucket_rad_per_s]);
+            }
+            Message::AuxValveMeasured(m) => {
+                let i = usize::from(m.cylinder.number());
+                head[i] = m.head_pressure_pa;
+                rod[i] = m.rod_pressure_pa;
+            }
+            Message::AuxValveCommand(c) => {
+                let i = usize::from(c.valve.number());
+                if i < 3 {
+                    command[i] = c.to_fraction();
+                }
+            }
+            Message::ControllerStatus(s) => {
+                seen_status = true;
+                status = Some((s.activity, s.dig_index));
+            }
+            _ => {}
+        }
+    }
+    flush(&mut pending, &rates, &command, &head, &rod, &status);
+    let mut digs = Vec::new();
+    let mut current: Vec<ActuatorSample> = Vec::new();
+    let mut current_key: Option<u16> = None;
+    let mut neutral_since: Option<f64> = None;
+    let finish = |current: &mut Vec<ActuatorSample>, digs: &mut Vec<ActuatorDig>| {
+        if current.len() >= 50 {
+            digs.push(ActuatorDig {
+                samples: std::mem::take(current),
+            });
+        } else {
+            current.clear();
+        }
+    };
+    for s in &tagged {
+        let key = if seen_status {
+            s.dig
+        } else {
+            // Command activity: a dig runs while some command is non-neutral, until 1 s of neutral.
+            let active = s.sample.command.iter().any(|u| u.abs() > 1e-3);
+            if active {
+                neutral_since = None;
+                Some(0)
+            } else {
+                let since = *neutral_since.get_or_insert(s.sample.time_s);
+                (s.sample.time_s - since < 1.0 && !current.is_empty()).then_some(0)
+            }
+        };
+        if key != current_key {
+            finish(&mut current, &mut digs);
+            current_key = key;
+        }
+        if key.is_some() {
+            current.push(s.sample);
+        }
+    }
+    finish(&mut current, &mut digs);
+    Ok(digs)
+}
+
+fn train(a: &TrainArgs) -> anyhow::Result<()> {
+    let machine = match &a.machine {
+        Some(p) => planner::machine::MachineConfig::from_toml_file(p)?,
+        None => planner::machine::MachineConfig::default_machine()?,
+    };
+    let kin = Kinematics::new(&machine)?;
+    let c = &machine.cylinders;
+    let areas = [&c.boom, &c.stick, &c.bucket].map(|c| (c.head_area_m2(), c.rod_area_m2()));
+    let mut digs = Vec::new();
+    let mut implausible = 0usize;
+    for path in &a.trace {
+        for mut dig in read_training_digs(path, &kin, areas)? {
+            // A cylinder faster than the pumps can drive it is a glitch, not hydraulics: keep the
+            // dig up to it.
+            if let Some(k) = dig.samples.iter().position(|s| {
+                s.velocity_m_per_s
+                    .iter()
+                    .any(|v| v.abs() > MAX_CYLINDER_SPEED_M_PER_S)
+            }) {
+                implausible += 1;
+                dig.samples.truncate(k);
+            }
+            if dig.samples.len() >= 50 {
+                digs.push(dig);
+            }
+        }
+    }
+    if implausible > 0 {
+        println!(
+            "cut {implausible} dig(s) short at a cylinder speed above {MAX_CYLINDER_SPEED_M_PER_S} m/s"
+        );
+    }
+    if digs.len() < 3 {
+        bail!(
+            "found {} digs in the traces; training needs at least 3",
+            digs.len()
+        );
+    }
+    let config = TrainConfig {
+        seed: a.seed,
+        hidden_units: a.hidden,
+        delay_steps: a.delay.unwrap_or_else(|| {
+            (machine.hydraulics.transport_delay_s / 0.01)
+                .round()
+                .max(0.0) as usize
+        }),
+        free_run_epochs: a.epochs,
+        ..TrainConfig::default()
+    };
+    let samples: usize = digs.iter().map(|d| d.samples.len()).sum();
+    println!(
+        "training on {} digs ({} samples) from {} trace(s): {} hidden units, delay {} steps, seed {}",
+        digs.len(),
+        samples,
+        a.trace.len(),
+        config.hidden_units,
+        config.delay_steps,
+        config.seed
+    );
+    let bar = indicatif::ProgressBar::new(1);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} epochs {elapsed} {msg}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let started = std::time::Instant::now();
+    let (model, report) = planner::actuator::train(&digs, &config, |p| {
+        bar.set_length(p.total as u64);
+        bar.set_position(p.done as u64);
+        bar.set_message(format!(
+            "{} {:?} loss {:.2e} val {:.2e}",
+            p.joint, p.phase, p.train_loss, p.validation_loss
+        ));
+    })?;
+    bar.finish_and_clear();
+    std::fs::write(&a.out, model.to_json()?)
+        .with_context(|| format!("writing {}", a.out.display()))?;
+    println!(
+        "trained in {:.1} s; {} train, {} validation, {} test digs; wrote {}",
+        started.elapsed().as_secs_f64(),
+        report.train_digs.len(),
+        report.validation_digs.len(),
+        report.test_digs.len(),
+        a.out.display()
+    );
+    println!("held-out test digs, free-running (thesis Figs. 19-21: 5-8 %; target < 5 %):");
+    println!("  cylinder  MAE [m/s]  peak [m/s]  MAE % of peak");
+    for e in &report.test.cylinders {
+        println!(
+            "  {:<8}  {:>9.4}  {:>10.3}  {:>8.2} %{}",
+            e.joint.to_string(),
+            e.mae_m_per_s,
+            e.peak_m_per_s,
+            e.mae_percent_of_peak,
+            if e.mae_percent_of_peak < 5.0 {
+                ""
+            } else {
+                "  (above 5 %)"
+            }
+        );
+    }
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------------------------
+// compare
+// ---------------------------------------------------------------------------------------------------
+
+fn load_model(path: Option<&Path>) -> anyhow::Result<DigModel> {
+    let nominal = DigModel::nominal()?;
+    match path {
+        None => Ok(nominal),
+        Some(p) => {
+            let text =
+                std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+            let actuator =
+                ActuatorModel::from_json(&text).with_context(|| format!("{}", p.display()))?;
+            Ok(nominal.with_actuator(actuator)?)
+        }
+    }
+}
+
+fn compare(a: &CompareArgs) -> anyhow::Result<()> {
+    if a.digs == 0 {
+        bail!("--digs must be at least 1");
+    }
+    let model = load_model(a.model.as_deref())?;
+    let setups = random_setups(a.digs, a.seed, false)?;
+    let bar = indicatif::ProgressBar::new(setups.len() as u64);
+    let runs: Vec<anyhow::Result<(SimDig, DigComparison, DigPrediction)>> = setups
+        .par_iter()
+        .map(|s| {
+            let sim = run_sim_dig(s, None)?;
+            let (cmp, pred) = compare_dig(&model, &sim)?;
+            bar.inc(1);
+            Ok((sim, cmp, pred))
+        })
+        .collect();
+    bar.finish_and_clear();
+    let mut rows = Vec::new();
+    for r in runs {
+        rows.push(r.map_err(|e| anyhow::anyhow!("{e:#}"))?);
+    }
+    println!(
+        "dig model vs simulator, {} digs (thesis Fig. 41: within 12-15 %; target 15 %)",
+        rows.len()
+    );
+    println!(
+        "  dig  traj RMS [m]  time sim/model [s]  energy sim/model [kJ]  volume sim/model [m^3]  err time/energy/volume [%]  end sim / model"
+    );
+    for (_, c, _) in &rows {
+        println!(
+            "  {:>3}  {:>12.3}  {:>7.2} / {:>6.2}  {:>9.1} / {:>8.1}  {:>9.2} / {:>9.2}  {:>+7.1} / {:>+7.1} / {:>+7.1}  {} / {}",
+            c.index,
+            c.trajectory_rms_m,
+            c.time_s[0],
+            c.time_s[1],
+            c.energy_kj[0],
+            c.energy_kj[1],
+            c.volume_m3[0],
+            c.volume_m3[1],
+            c.error_percent[0],
+            c.error_percent[1],
+            c.error_percent[2],
+            c.end[0],
+            c.end[1]
+        );
+    }
+    let cmps: Vec<DigComparison> = rows.iter().map(|(_, c, _)| c.clone()).collect();
+    let (mean, rms) = mean_errors(&cmps);
+    println!(
+        "  mean |error|: trajectory {:.3} m, time {:.1} %, energy {:.1} %, volume {:.1} %{}",
+        rms,
+        mean[0],
+        mean[1],
+        mean[2],
+        if mean.iter().all(|e| *e <= 15.0) {
+            " (within 15 %)"
+        } else {
+            " (above 15 % somewhere)"
+        }
+    );
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    std::fs::write(
+        a.out.join("compare.json"),
+        serde_json::to_string_pretty(&cmps)?,
+    )?;
+    let svg = a.out.join("compare.svg");
+    plot_compare(&svg, &rows)?;
+    println!("wrote {} and compare.json", svg.display());
+    Ok(())
+}
+
+fn plot_compare(
+    path: &Path,
+    rows: &[(SimDig, DigComparison, DigPrediction)],
+) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+    let err = |e: &dyn std::fmt::Display| anyhow::anyhow!("drawing {}: {e}", path.display());
+    let cols = rows.len().clamp(1, 4);
+    let nrows = rows.len().div_ceil(cols).max(1);
+    let root = SVGBackend::new(path, (360 * cols as u32, 300 * nrows as u32)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| err(&e))?;
+    let areas = root.split_evenly((nrows, cols));
+    for ((sim, cmp, pred), area) in rows.iter().zip(areas.iter()) {
+        let xs = sim
+            .samples
+            .iter()
+            .map(|s| s.tip_x_m)
+            .chain(pred.samples.iter().map(|s| s.tip_x_m));
+        let (mut x0, mut x1) = (f64::INFINITY, f64::NEG_INFINITY);
+        for x in xs {
+            x0 = x0.min(x);
+            x1 = x1.max(x);
+        }
+        let (x0, x1) = (x0 - 1.0, x1 + 1.0);
+        let zs = sim
+            .samples
+            .iter()
+            .map(|s| s.tip_z_m)
+            .chain(pred.samples.iter().map(|s| s.tip_z_m));
+        let (mut z0, mut z1) = (f64::INFINITY, f64::NEG_INFINITY);
+        for z in zs {
+            z0 = z0.min(z);
+            z1 = z1.max(z);
+        }
+        let (z0, z1) = (z0.min(0.0) - 0.3, z1 + 0.3);
+        let mut chart = ChartBuilder::on(area)
+            .caption(
+                format!("dig {}: RMS {:.2} m", cmp.index, cmp.trajectory_rms_m),
+                ("sans-serif", 14),
+            )
+            .margin(6)
+            .x_label_area_size(26)
+            .y_label_area_size(36)
+            .build_cartesian_2d(x0..x1, z0..z1)
+            .map_err(|e| err(&e))?;
+        chart
+            .configure_mesh()
+            .x_desc("r [m]")
+            .y_desc("z [m]")
+            .draw()
+            .map_err(|e| err(&e))?;
+        let n = ((x1 - x0) / 0.05).ceil() as usize;
+        let terrain: Vec<(f64, f64)> = (0..=n)
+            .filter_map(|k| {
+                let r = x0 + k as f64 * 0.05;
+                sim.profile.height_at(r).ok().map(|h| (r, h))
+            })
+            .collect();
+        chart
+            .draw_series(LineSeries::new(terrain, BLACK.mix(0.5).stroke_width(1)))
+            .map_err(|e| err(&e))?
+            .label("terrain before")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], BLACK.mix(0.5)));
+        chart
+            .draw_series(LineSeries::new(
+                sim.samples.iter().map(|s| (s.tip_x_m, s.tip_z_m)),
+                BLUE.stroke_width(2),
+            ))
+            .map_err(|e| err(&e))?
+            .label("simulator")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], BLUE));
+        chart
+            .draw_series(LineSeries::new(
+                pred.samples.iter().map(|s| (s.tip_x_m, s.tip_z_m)),
+                RED.stroke_width(2),
+            ))
+            .map_err(|e| err(&e))?
+            .label("dig model")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], RED));
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerRight)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 10))
+            .draw()
+            .map_err(|e| err(&e))?;
+    }
+    root.present().map_err(|e| err(&e))?;
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------------------------
+// table2
+// ---------------------------------------------------------------------------------------------------
+
+/// One row of Table 2 as the dig model predicts it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Table2Row {
+    /// Force factor.
+    pub force_factor: f64,
+    /// Dig time, s.
+    pub time_s: f64,
+    /// Swept volume, m^3.
+    pub volume_m3: f64,
+    /// Energy, kJ.
+    pub energy_kj: f64,
+}
+
+/// The default bench's site (config/bench.toml) as the machine at its start pose sees it.
+///
+/// # Errors
+/// Loading the built-in files.
+pub fn default_site() -> anyhow::Result<DigSite> {
+    let cfg = SimConfig::load::<&str>(None, None, None, &[])?;
+    let world = World::from_scenario(&cfg.scenario)?;
+    Ok(DigSite::new(
+        section_of(&world, &cfg)?,
+        cfg.scenario.bench.floor_elevation_m,
+    )?)
+}
+
+/// Table 2 with `model` from the tip at `start_r` on the default bench.
+///
+/// # Errors
+/// The dig model's errors.
+pub fn table2_rows(
+    model: &DigModel,
+    start_r: f64,
+    start_bucket_deg: f64,
+) -> anyhow::Result<Vec<Table2Row>> {
+    let site = default_site()?;
+    let start = DigStart::Pose(BucketPose {
+        x_m: start_r,
+        z_m: site.profile().height_at(start_r)? - 0.02,
+        bucket_abs_rad: start_bucket_deg.to_radians(),
+    });
+    let mut rows = Vec::new();
+    for factor in [1.0, 2.0, 3.0] {
+        let mut m = model.clone();
+        m.set_force_factor(factor)?;
+        let s = m.evaluate(&start, &site)?;
+        rows.push(Table2Row {
+            force_factor: factor,
+            time_s: s.time_s,
+            volume_m3: s.swept_volume_m3,
+            energy_kj: s.energy_kj(),
+        });
+    }
+    Ok(rows)
+}
+
+fn table2(a: &Table2Args) -> anyhow::Result<()> {
+    let model = load_model(a.model.as_deref())?;
+    let rows = table2_rows(&model, a.start_r, a.start_bucket_deg)?;
+    println!(
+        "Table 2 with the dig model (tip at r = {:.2} m on the default bench, bucket {:.0} deg)",
+        a.start_r, a.start_bucket_deg
+    );
+    println!(
+        "  force factor  time [s]  volume [m^3]  energy [kJ]   | thesis: time  volume  energy"
+    );
+    for (r, t) in rows.iter().zip(THESIS_TABLE2) {
+        println!(
+            "  {:>12.1}  {:>8.2}  {:>12.2}  {:>11.1}   |        {:>5.1}  {:>6.1}  {:>6.0}",
+            r.force_factor, r.time_s, r.volume_m3, r.energy_kj, t.1, t.2, t.3
+        );
+    }
+    let check = |name: &str, ok: bool| {
+        println!(
+            "  {name}: {}",
+            if ok {
+                "as in the thesis"
+            } else {
+                "differs from the thesis"
+            }
+        )
+    };
+    check("time rises 1 -> 2", rows[1].time_s > rows[0].time_s);
+    check("time falls 2 -> 3", rows[2].time_s < rows[1].time_s);
+    check("volume rises 1 -> 2", rows[1].volume_m3 > rows[0].volume_m3);
+    check("volume falls 2 -> 3", rows[2].volume_m3 < rows[1].volume_m3);
+    check(
+        "energy rises throughout",
+        rows[1].energy_kj > rows[0].energy_kj && rows[2].energy_kj > rows[1].energy_kj,
+    );
+    let mut out = std::io::stdout().lock();
+    out.flush()?;
+    Ok(())
+}
