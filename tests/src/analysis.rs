@@ -345,8 +345,46 @@ pub fn compare_angles(
     result
 }
 
+/// Joint angles from the text output of `excavator-ctl trace decode` or `cantools decode
+/// --single-line` (both print `(time) iface ID#DATA :: JointAngles(BoomAngle: 0.5244 rad, ...)`).
+/// Lines of other messages are skipped; a JointAngles line that does not parse is an error.
+///
+/// # Errors
+/// The offending line.
+pub fn decoded_joint_angles(text: &str) -> Result<Vec<(f64, [f64; 4])>, String> {
+    const NAMES: [&str; 4] = ["BoomAngle", "StickAngle", "BucketAngle", "SwingAngle"];
+    let mut out = Vec::new();
+    for line in text.lines() {
+        let Some((head, body)) = line.split_once(":: JointAngles(") else {
+            continue;
+        };
+        let bad = || format!("cannot parse {line:?}");
+        let t: f64 = head
+            .trim_start()
+            .strip_prefix('(')
+            .and_then(|r| r.split_once(')'))
+            .and_then(|(t, _)| t.parse().ok())
+            .ok_or_else(bad)?;
+        let mut q = [f64::NAN; 4];
+        for field in body.trim_end().trim_end_matches(')').split(", ") {
+            let (name, value) = field.split_once(": ").ok_or_else(bad)?;
+            let value: f64 = value.trim_end_matches(" rad").parse().map_err(|_| bad())?;
+            if let Some(j) = NAMES.iter().position(|n| *n == name) {
+                q[j] = value;
+            }
+        }
+        if q.iter().any(|v| v.is_nan()) {
+            return Err(bad());
+        }
+        out.push((t, q));
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
+    #![allow(clippy::unwrap_used)]
+
     use super::*;
 
     #[test]
@@ -387,6 +425,17 @@ mod tests {
         );
         // A dig abandoned before its dump is no cycle.
         assert_eq!(count_cycles(&[Dig, SwingToDump, Return]).digs, 0);
+    }
+
+    #[test]
+    fn decoder_output_lines_parse() {
+        let text = "(1700000000.123456) vcan0 0CFF5080#7C14C8FB7EB2B57A :: JointAngles(BoomAngle: \
+                    0.5244 rad, StickAngle: -0.108 rad, BucketAngle: -1.9842000000000002 rad, \
+                    SwingAngle: 3.1413 rad)\n(1700000000.2) vcan0 0CFF5480#00 :: GatewayStatus(Mode: 0)";
+        let q = decoded_joint_angles(text).unwrap();
+        assert_eq!(q.len(), 1);
+        assert!((q[0].0 - 1_700_000_000.123456).abs() < 1e-6);
+        assert_eq!(q[0].1, [0.5244, -0.108, -1.9842000000000002, 3.1413]);
     }
 
     #[test]

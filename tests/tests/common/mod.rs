@@ -1,0 +1,228 @@
+//! A vcan session for the end-to-end tests: `candump -L` recording the bus, `excavator-sim` with its
+//! state log and scan socket, `excavator-ctl run` with the HIL plan, each a separate process on the
+//! real SocketCAN interface. Everything is killed when the session drops (also on a failed assertion);
+//! the logs stay in the artefact directory and their tails are printed on failure.
+
+#![allow(dead_code, clippy::unwrap_used)]
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use firmware_bridge::messages::{ControllerStatus, Message};
+use firmware_bridge::{CONTROLLER_ADDRESS, CanFrame as BridgeFrame, CanId};
+use hil_tests::env;
+use hil_tests::process::Proc;
+use socketcan::{CanFrame, CanSocket, EmbeddedFrame, ExtendedId, Id, Socket, StandardId};
+
+/// Generous waits: the VM runs under TCG on a shared machine.
+pub const START_TIMEOUT: Duration = Duration::from_secs(60);
+
+/// The processes of one session.
+pub struct Session {
+    /// Artefact directory.
+    pub dir: PathBuf,
+    /// The interface.
+    pub iface: String,
+    /// `candump -L` of the whole session.
+    pub candump: Proc,
+    /// The simulator.
+    pub sim: Proc,
+    /// The controller (taken when it is killed).
+    pub ctl: Option<Proc>,
+    /// Where candump writes.
+    pub candump_log: PathBuf,
+    /// The simulator's state log.
+    pub state_log: PathBuf,
+    /// The controller's own trace.
+    pub ctl_trace: PathBuf,
+    /// Wall-clock time the simulator was started (UNIX s), a first guess of the clock offset.
+    pub sim_started_unix_s: f64,
+    /// Raw socket of the test.
+    pub socket: CanSocket,
+}
+
+fn unix_now_s() -> f64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64())
+}
+
+/// A free loopback TCP port.
+fn free_port() -> u16 {
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    l.local_addr().unwrap().port()
+}
+
+/// Opens a raw CAN socket with a short read timeout.
+pub fn open_socket(iface: &str) -> CanSocket {
+    let socket = CanSocket::open(iface)
+        .unwrap_or_else(|e| panic!("cannot open a SocketCAN socket on {iface}: {e}"));
+    socket.set_read_timeout(Duration::from_millis(100)).unwrap();
+    socket
+}
+
+/// A frame of the project's type as a socketcan frame.
+pub fn to_socketcan(frame: &BridgeFrame) -> CanFrame {
+    let id: Id = match frame.id() {
+        CanId::Extended(raw) => Id::Extended(ExtendedId::new(raw).unwrap()),
+        CanId::Standard(raw) => Id::Standard(StandardId::new(raw).unwrap()),
+    };
+    CanFrame::new(id, frame.data()).unwrap()
+}
+
+/// A socketcan data frame as the project's type (None for other kinds).
+pub fn from_socketcan(frame: &CanFrame) -> Option<BridgeFrame> {
+    if !matches!(frame, CanFrame::Data(_)) {
+        return None;
+    }
+    let id = match frame.id() {
+        Id::Extended(id) => CanId::Extended(id.as_raw()),
+        Id::Standard(id) => CanId::Standard(id.as_raw()),
+    };
+    BridgeFrame::new_data(id, frame.data()).ok()
+}
+
+impl Session {
+    /// Starts candump, the simulator and the controller (with `ctl_args` added to `run`).
+    pub fn start(test: &str, ctl_args: &[&str]) -> Self {
+        let iface = env::vcan_iface();
+        let sim_bin = env::binary("excavator-sim");
+        let ctl_bin = env::binary("excavator-ctl");
+        let candump_bin = env::tool("candump", "can-utils");
+        let dir = env::artifacts(test);
+        let socket = open_socket(&iface);
+
+        // candump first, synchronised with a marker frame so nothing of the session is missed.
+        let candump_log = dir.join("candump.log");
+        let mut candump = Proc::spawn("candump", &candump_bin, &["-L", &iface], &candump_log);
+        let marker = CanFrame::new(StandardId::new(0x7FF).unwrap(), &[0xC0, 0xDE]).unwrap();
+        let deadline = Instant::now() + START_TIMEOUT;
+        loop {
+            socket.write_frame(&marker).unwrap();
+            std::thread::sleep(Duration::from_millis(100));
+            if candump.log().contains("7FF#C0DE") {
+                break;
+            }
+            candump.assert_running();
+            assert!(
+                Instant::now() < deadline,
+                "candump -L {iface} recorded nothing"
+            );
+        }
+
+        let state_log = dir.join("state.jsonl");
+        let scan_addr = format!("127.0.0.1:{}", free_port());
+        let sim_started_unix_s = unix_now_s();
+        let mut sim = Proc::spawn(
+            "excavator-sim",
+            &sim_bin,
+            &[
+                "--iface",
+                &iface,
+                "--seed",
+                "1",
+                "--state-log",
+                state_log.to_str().unwrap(),
+                "--scan-socket",
+                &scan_addr,
+            ],
+            &dir.join("sim.log"),
+        );
+        assert!(
+            sim.wait_for_log("scan socket listening", START_TIMEOUT),
+            "excavator-sim did not start: {}",
+            sim.log_tail(30)
+        );
+
+        let plan = hil_tests::plan::write_plan(&dir);
+        let ctl_trace = dir.join("ctl-trace.log");
+        let mut args: Vec<&str> = vec![
+            "run",
+            "--iface",
+            &iface,
+            "--config",
+            plan.to_str().unwrap(),
+            "--trace",
+            ctl_trace.to_str().unwrap(),
+            "--scan-addr",
+            &scan_addr,
+        ];
+        args.extend_from_slice(ctl_args);
+        let ctl = Proc::spawn("excavator-ctl", &ctl_bin, &args, &dir.join("ctl.log"));
+        let mut s = Self {
+            dir,
+            iface,
+            candump,
+            sim,
+            ctl: Some(ctl),
+            candump_log,
+            state_log,
+            ctl_trace,
+            sim_started_unix_s,
+            socket,
+        };
+        s.sim.assert_running();
+        s
+    }
+
+    /// The controller.
+    pub fn ctl(&mut self) -> &mut Proc {
+        self.ctl.as_mut().expect("the controller was killed")
+    }
+
+    /// Reads the bus until a `ControllerStatus` satisfies `pred`; returns it and its arrival time.
+    pub fn wait_status(
+        &mut self,
+        timeout: Duration,
+        mut pred: impl FnMut(&ControllerStatus) -> bool,
+    ) -> Option<ControllerStatus> {
+        let deadline = Instant::now() + timeout;
+        while Instant::now() < deadline {
+            let Ok(frame) = self.socket.read_frame() else {
+                continue;
+            };
+            let Some(frame) = from_socketcan(&frame) else {
+                continue;
+            };
+            if let Ok(d) = Message::decode(&frame)
+                && d.id.source_address() == CONTROLLER_ADDRESS
+                && let Message::ControllerStatus(s) = d.message
+                && pred(&s)
+            {
+                return Some(s);
+            }
+        }
+        None
+    }
+
+    /// Stops the controller with SIGTERM (neutral, disarm) and waits for it.
+    pub fn stop_controller(&mut self) -> Option<std::process::ExitStatus> {
+        let ctl = self.ctl.as_mut()?;
+        ctl.signal("TERM");
+        ctl.wait_timeout(Duration::from_secs(30))
+    }
+
+    /// Stops the simulator with SIGINT (it flushes the state log) and candump (SIGINT), and waits.
+    pub fn stop_sim_and_candump(&mut self) {
+        self.sim.signal("INT");
+        assert!(
+            self.sim.wait_timeout(Duration::from_secs(30)).is_some(),
+            "excavator-sim did not stop on SIGINT"
+        );
+        // Let candump write the last frames before it goes.
+        std::thread::sleep(Duration::from_millis(300));
+        self.candump.signal("INT");
+        let _ = self.candump.wait_timeout(Duration::from_secs(10));
+    }
+
+    /// The logs' tails, for failure messages.
+    pub fn logs(&self) -> String {
+        let ctl = self.ctl.as_ref().map_or(String::new(), |c| c.log_tail(25));
+        format!(
+            "--- excavator-ctl log (tail) ---\n{ctl}\n--- excavator-sim log (tail) ---\n{}\n\
+             (artefacts in {})",
+            self.sim.log_tail(15),
+            self.dir.display()
+        )
+    }
+}
