@@ -494,6 +494,109 @@ mod tests {
         assert!(PlannerConfig::from_toml_str("").is_ok());
     }
 
+    /// The default bench seen from the machine at the origin (config/bench.toml): 2 m high, toe at
+    /// 3 m, 45 degree face, 10 m wide.
+    fn bench() -> TerrainGrid {
+        TerrainGrid::from_fn(-8.0, -10.0, 0.1, 240, 200, |x, y| {
+            if y.abs() > 5.0 || x > 13.0 {
+                0.0
+            } else {
+                (x - 3.0).clamp(0.0, 2.0)
+            }
+        })
+        .expect("grid")
+    }
+
+    /// A coarser grid than Fig. 45's so the debug-build test stays fast.
+    fn test_planner(floor_z_m: f64) -> Planner {
+        let machine = MachineConfig::default_machine().expect("machine");
+        let mut cfg = PlannerConfig::nominal().expect("config");
+        cfg.floor_z_m = floor_z_m;
+        cfg.refined.d_step_m = 0.6;
+        cfg.refined.alpha_step_rad = 10f64.to_radians();
+        Planner::new(&machine, DigModel::nominal().expect("model"), cfg).expect("planner")
+    }
+
+    #[test]
+    fn refined_planner_rejects_unreachable_and_floor_penetrating_and_picks_the_best() {
+        // The floor 1.5 m up the 2 m bench: deep digs and starts low on the face go below it.
+        let planner = test_planner(1.5);
+        let grid = bench();
+        let pose = MachinePose::default();
+        let coarse = planner.coarse(&grid, &pose).expect("coarse");
+        // A region running past the reach, so some candidates are unreachable.
+        let region = DigRegion {
+            far_r_m: 11.0,
+            ..coarse.regions[coarse.regions.len() / 2]
+        };
+        let r = planner.refine(&grid, &pose, &region).expect("refined");
+        assert_eq!(
+            r.candidates.len(),
+            r.d_values_m.len() * r.alpha_values_rad.len()
+        );
+        let kin = planner.kinematics();
+        let unreachable = r.count(CandidateStatus::Unreachable);
+        let penetrating = r.count(CandidateStatus::PenetratesFloor);
+        let valid = r.count(CandidateStatus::Valid);
+        assert!(
+            unreachable > 0 && penetrating > 0 && valid > 0,
+            "{unreachable} {penetrating} {valid}"
+        );
+        for c in &r.candidates {
+            match c.status {
+                CandidateStatus::Unreachable => {
+                    assert!(c.summary.is_none() && kin.inverse(&c.pose).is_err());
+                }
+                CandidateStatus::PenetratesFloor => {
+                    let s = c.summary.expect("evaluated");
+                    assert!(s.floor_penetration && c.quality.is_none());
+                }
+                CandidateStatus::Valid => {
+                    assert!(!c.summary.expect("evaluated").floor_penetration);
+                    assert!(c.quality.is_some());
+                }
+                CandidateStatus::ModelFailed => {}
+            }
+        }
+        let best = r.best.as_ref().expect("a valid dig");
+        let max = r
+            .candidates
+            .iter()
+            .filter_map(|c| c.quality.map(|q| q.quality))
+            .fold(0.0, f64::max);
+        assert!((best.quality.quality - max).abs() < 1e-12 && max > 0.0);
+        assert!(!best.summary.floor_penetration);
+        // The chosen start is executable: its joints put the tip at the pose.
+        let tip = kin.forward(&best.joints);
+        assert!((tip.x_m - best.pose.x_m).abs() < 1e-6 && (tip.z_m - best.pose.z_m).abs() < 1e-6);
+        // Deterministic.
+        assert_eq!(planner.refine(&grid, &pose, &region).expect("again"), r);
+    }
+
+    #[test]
+    fn a_full_cycle_on_the_bench_digs_and_on_bare_floor_does_not() {
+        let planner = test_planner(0.0);
+        let pose = MachinePose::default();
+        let plan = planner
+            .plan(&bench(), &pose, &PlannerState::default())
+            .expect("plan");
+        assert!(
+            matches!(plan.action, ActionChoice::Dig(_)),
+            "{:?}",
+            plan.action.kind()
+        );
+        // The bench runs past the reach: no backing away from it.
+        assert_eq!(plan.cleanup_track.tracking_distance_m, 0.0);
+        let flat = TerrainGrid::new_flat(-8.0, -10.0, 0.1, 240, 200, 0.0).expect("flat");
+        let plan = planner
+            .plan(&flat, &pose, &PlannerState::default())
+            .expect("plan");
+        assert!(plan.refined.is_empty() && plan.best_dig.is_none());
+        // Nothing to dig or clean: Fig. 42 tracks back (the bench lies behind the view).
+        assert!(!plan.cleanup_track.material_found);
+        assert!(matches!(plan.action, ActionChoice::TrackBack { .. }));
+    }
+
     #[test]
     fn state_pointer_and_counters() {
         let cfg = CleanupConfig::default();
