@@ -1,5 +1,7 @@
 //! `excavator-ctl trace ...` end to end: the binary on synthetic traces of the full schedule.
 
+#![allow(clippy::unwrap_used)] // helpers outside #[test] functions fail loudly on purpose
+
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};

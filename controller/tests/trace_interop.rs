@@ -3,6 +3,8 @@
 //! 9-digit timestamps decode, and every signal value agrees with `cantools decode` on the same file and
 //! DBC. A missing tool skips its test (printing why) unless `EXCAVATOR_REQUIRE_TOOLS=1`.
 
+#![allow(clippy::unwrap_used)] // helpers outside #[test] functions fail loudly on purpose
+
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};

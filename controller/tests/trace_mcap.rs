@@ -2,6 +2,8 @@
 //! reader from PyPI when it is installed), one channel per message, JSON messages matching their JSON
 //! schemas.
 
+#![allow(clippy::unwrap_used)] // helpers outside #[test] functions fail loudly on purpose
+
 use std::collections::HashMap;
 use std::io::BufReader;
 use std::path::Path;

@@ -1,6 +1,8 @@
 //! `trace replay` timing without a CAN bus: the replay loop drives a recording [`Bus`] under tokio's
 //! paused clock, so the send times are exact and the test takes no wall time.
 
+#![allow(clippy::unwrap_used)] // helpers outside #[test] functions fail loudly on purpose
+
 use std::sync::Mutex;
 
 use controller::trace_tool::replay::{self, ReplayClock};

@@ -3,6 +3,8 @@
 //! `candump -l` logs decode with `trace decode`. Needs vcan: run through `scripts/vcan-vm run` (see
 //! docs/hil.md), which sets `EXCAVATOR_VCAN_IFACE`.
 
+#![allow(clippy::unwrap_used)] // helpers outside #[test] functions fail loudly on purpose
+
 use std::io::BufRead as _;
 use std::path::Path;
 use std::process::{Command, Stdio};

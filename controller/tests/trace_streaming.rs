@@ -3,6 +3,8 @@
 //! `Read` adapter (never held in memory), and the peak RSS (`VmHWM`) is compared before and after.
 //! One test in its own executable, so no other test allocates meanwhile.
 
+#![allow(clippy::unwrap_used)] // helpers outside #[test] functions fail loudly on purpose
+
 use std::io::{self, Read};
 
 use controller::trace_tool::convert::{self, Rows};

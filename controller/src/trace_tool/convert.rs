@@ -423,7 +423,7 @@ pub fn to_mcap<R: BufRead, W: Write + Seek>(
         };
         let sa = (rec.frame.id().raw() & 0xFF) as u8;
         let key = (msg_index, sa);
-        if !channels.contains_key(&key) {
+        if let std::collections::hash_map::Entry::Vacant(slot) = channels.entry(key) {
             let schema = match schemas.get(&msg_index) {
                 Some(s) => *s,
                 None => {
@@ -448,7 +448,7 @@ pub fn to_mcap<R: BufRead, W: Write + Seek>(
             let ch = writer
                 .add_channel(schema, &topic, "json", &meta)
                 .with_context(|| format!("adding {topic}"))?;
-            channels.insert(key, (ch, 0));
+            slot.insert((ch, 0));
         }
         if let Some((ch, seq)) = channels.get_mut(&key) {
             message_json(desc, &rec.frame, &mut payload);

@@ -163,7 +163,7 @@ pub fn for_each_record<R: BufRead>(
 ) -> anyhow::Result<ReadSummary> {
     let mut records = Records::new(input);
     let mut summary = ReadSummary::default();
-    while let Some(item) = records.next() {
+    for item in records.by_ref() {
         match item {
             Ok(rec) => {
                 summary.records += 1;

@@ -153,7 +153,7 @@ pub fn format_timestamp(timestamp_ns: u64, out: &mut String) {
     let secs = timestamp_ns / 1_000_000_000;
     let frac = timestamp_ns % 1_000_000_000;
     // Writing to a String cannot fail.
-    if frac % 1000 == 0 {
+    if frac.is_multiple_of(1000) {
         let _ = write!(out, "{secs}.{:06}", frac / 1000);
     } else {
         let _ = write!(out, "{secs}.{frac:09}");

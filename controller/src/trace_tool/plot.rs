@@ -94,7 +94,7 @@ impl Series {
         if !(x.is_finite() && y.is_finite()) {
             return;
         }
-        let keep = self.seen % self.stride == 0;
+        let keep = self.seen.is_multiple_of(self.stride);
         self.seen += 1;
         if !keep {
             return;

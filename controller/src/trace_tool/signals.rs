@@ -3,7 +3,7 @@
 //!
 //! [`firmware_bridge::Message::decode`] is the receiver's view: it rejects a whole frame for one bad
 //! signal and reports some values in derived form (the valve command's flow is the fine value). A
-//! debugging tool must show what is on the wire, so [`decode_signals`] decodes each signal of the
+//! debugging tool must show what is on the wire, so [`decode_signal`] decodes each signal of the
 //! descriptor on its own (as `cantools decode` does) and keeps "not available", "error indicator" and
 //! out-of-range raw values visible per signal; the tools add the verdict of `Message::decode` next to
 //! it.
@@ -92,7 +92,8 @@ pub fn value_table(
     msg_index: MessageIndex,
     sig_index: usize,
 ) -> Option<&'static [(i64, &'static str)]> {
-    static PER_SIGNAL: OnceLock<Vec<Vec<Option<&'static [(i64, &'static str)]>>>> = OnceLock::new();
+    type Table = Option<&'static [(i64, &'static str)]>;
+    static PER_SIGNAL: OnceLock<Vec<Vec<Table>>> = OnceLock::new();
     PER_SIGNAL
         .get_or_init(|| {
             let tables = value_tables();
@@ -319,11 +320,11 @@ mod tests {
 
     #[test]
     fn special_values_stay_visible() {
-        // Boom angle not available (0x7FFF), stick error indicator (0x7FFE), bucket 0.5236 rad.
-        let data = [0xFF, 0x7F, 0xFE, 0x7F, 0x74, 0x14, 0x00, 0x00];
+        // Boom angle not available (0x7FFF), stick error indicator (0x7FFE), bucket 0.512 rad.
+        let data = [0xFF, 0x7F, 0xFE, 0x7F, 0x00, 0x14, 0x00, 0x00];
         let sigs = dbc::joint_angles::SIGNALS;
         assert_eq!(decode_signal(&sigs[0], &data), SignalValue::NotAvailable);
         assert_eq!(decode_signal(&sigs[1], &data), SignalValue::ErrorIndicator);
-        assert_eq!(decode_signal(&sigs[2], &data), SignalValue::Value(0.5236));
+        assert_eq!(decode_signal(&sigs[2], &data), SignalValue::Value(0.512));
     }
 }

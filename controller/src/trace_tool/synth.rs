@@ -43,7 +43,7 @@ pub struct SynthConfig {
     pub interface: String,
     /// Seed of the timing jitter.
     pub seed: u64,
-    /// Largest timing jitter added to each frame, ns (below [`FRAME_SPACING_NS`] keeps the order).
+    /// Largest timing jitter added to each frame, ns (below the 300 us frame spacing keeps the order).
     pub jitter_ns: u64,
 }
 
@@ -63,7 +63,9 @@ impl Default for SynthConfig {
 #[derive(Debug, Clone, Copy)]
 struct Sample {
     q: [f64; 3],
-    /// False where the inverse kinematics failed and the previous angles were kept.
+    /// False where the inverse kinematics failed and the previous angles were kept (checked by the
+    /// tests: every pose of the cycle is reachable).
+    #[cfg_attr(not(test), allow(dead_code))]
     reached: bool,
     swing_rad: f64,
     stage: AutodigStageCode,
@@ -108,7 +110,9 @@ fn cycle_pose(t: f64) -> (AutodigStageCode, Activity, [f64; 3], f64) {
     const DUMPED: [f64; 3] = [6.2, 2.5, -1.2];
     use Activity as A;
     use AutodigStageCode as S;
-    let phases: [(f64, S, A, [f64; 3], [f64; 3], f64, f64); 8] = [
+    // (duration s, stage, activity, tip from, tip to, swing from, swing to)
+    type Phase = (f64, S, A, [f64; 3], [f64; 3], f64, f64);
+    let phases: [Phase; 8] = [
         (1.5, S::BoomDown, A::Dig, START, TOUCH, 0.0, 0.0),
         (1.5, S::PreDig, A::Dig, TOUCH, PENETRATED, 0.0, 0.0),
         (3.5, S::Dig, A::Dig, PENETRATED, DRAGGED, 0.0, 0.0),
@@ -232,7 +236,7 @@ impl SyntheticTrace {
             AutodigStageCode::PreDig | AutodigStageCode::Dig | AutodigStageCode::Capture
         );
         let load_pa = if digging { 18e6 } else { 4e6 };
-        let every = |n: u64| step % n == 0;
+        let every = |n: u64| step.is_multiple_of(n);
         let mut out = Vec::with_capacity(17);
         for (valve, cmd) in [Valve::Boom, Valve::Stick, Valve::Bucket, Valve::Swing]
             .into_iter()
