@@ -583,6 +583,8 @@ pub struct WorkCycle {
     stats: Vec<DigStats>,
     track_target_m: f64,
     last_now_s: f64,
+    /// Hook for an external action source (`crate::planned`): hold in Idle when the actions run out.
+    external_plan: bool,
 }
 
 impl WorkCycle {
@@ -634,7 +636,47 @@ impl WorkCycle {
             stats: Vec::new(),
             track_target_m: 0.0,
             last_now_s: 0.0,
+            external_plan: false,
         })
+    }
+
+    /// Hook for an external action source (the dig planner, `crate::planned`): with `on`, the cycle
+    /// holds neutral in Idle when its actions run out (instead of returning home) until
+    /// [`Self::push_action`] adds one.
+    pub fn set_external_plan(&mut self, on: bool) {
+        self.external_plan = on;
+    }
+
+    /// True when the cycle waits for the next action from an external source.
+    pub fn needs_action(&self) -> bool {
+        self.external_plan
+            && self.started
+            && self.phase == Phase::Idle
+            && self.action_index >= self.config.actions.len()
+            && !self.finished_digs()
+    }
+
+    /// Appends an action to the plan (its start pose resolved now).
+    ///
+    /// # Errors
+    /// [`ControllerError::Kinematics`] for an unreachable start, [`ControllerError::Config`] for a
+    /// non-positive track distance.
+    pub fn push_action(&mut self, action: Action, kin: &Kinematics) -> Result<(), ControllerError> {
+        let start = match &action {
+            Action::Dig { start, .. } | Action::Cleanup { start, .. } => start.resolve(kin)?,
+            Action::TrackBack { distance_m } => {
+                if !(distance_m.is_finite() && *distance_m > 0.0) {
+                    return Err(ControllerError::Config {
+                        field: "actions.track_back.distance_m",
+                        reason: "must be finite and > 0".to_owned(),
+                    });
+                }
+                JointAngles::default()
+            }
+        };
+        self.config.actions.push(action);
+        self.starts.push(start);
+        Ok(())
     }
 
     /// Starts (or resumes) the plan at the next step.
@@ -836,6 +878,9 @@ impl WorkCycle {
 
     fn begin_action(&mut self, now_s: f64, est: &Estimator) {
         if self.action_index >= self.config.actions.len() {
+            if self.external_plan && !self.finished_digs() {
+                return; // hold in Idle until push_action
+            }
             if self.config.repeat && !self.config.actions.is_empty() && !self.finished_digs() {
                 self.action_index = 0;
             } else {

@@ -11,6 +11,8 @@
 //!   cleanup, weigh, swing to the spoil pile, dump, return; tracking backwards; per-dig statistics.
 //! - [`node`]: [`ControllerNode`], the synchronous, clock-agnostic control step combining the three:
 //!   frames in, frames out, no I/O.
+//! - [`planned`]: the dig planner as the work cycle's action source (thesis 5.3, Fig. 42), and the
+//!   predefined excavation sequence of 6.2.
 //! - [`run`]: the real-time loop over SocketCAN (tokio drives a 10 ms interval around the node).
 //! - [`scan_client`]: the range-scan client of the real-time loop (JSON lines over TCP).
 //! - [`cli`]: the command line of `excavator-ctl`.
@@ -29,6 +31,7 @@ pub mod cycle;
 pub mod estimate;
 pub mod model_cmd;
 pub mod node;
+pub mod planned;
 pub mod run;
 pub mod safety;
 pub mod scan_client;

@@ -303,6 +303,19 @@ impl ControllerNode {
         &self.cycle
     }
 
+    /// Hook for an external action source (`crate::planned`): see [`WorkCycle::set_external_plan`].
+    pub fn set_external_plan(&mut self, on: bool) {
+        self.cycle.set_external_plan(on);
+    }
+
+    /// Appends an action to the work cycle's plan (see [`WorkCycle::push_action`]).
+    ///
+    /// # Errors
+    /// As [`WorkCycle::push_action`].
+    pub fn push_action(&mut self, action: Action) -> Result<(), crate::ControllerError> {
+        self.cycle.push_action(action, self.est.kinematics())
+    }
+
     /// The active fault (motion stopped), if any.
     pub fn fault(&self) -> Option<Fault> {
         self.safety.active_fault()

@@ -1,0 +1,546 @@
+//! The planner-driven action source of the work cycle (thesis 5.3 and 6.2): between digs the session
+//! takes the latest terrain map, runs the dig planner ([`planner::plan::Planner`]: coarse and refined
+//! dig location, cleanup and tracking plans), picks the action by Fig. 42 and hands the
+//! [`crate::WorkCycle`] the next [`Action`]; or it replays the predefined excavation sequence of 6.2.
+//!
+//! ```text
+//! scan points --observe_scan--> TerrainMapper (5.3) --+
+//! machine pose (odometry) ----------------------------+--> next_action: Planner::plan -> Fig. 42
+//!                                                            -> Action::{Dig, Cleanup, TrackBack}
+//! ControllerNode::cycle().needs_action() --drive--> ControllerNode::push_action
+//! ```
+//!
+//! Usage with a [`ControllerNode`] (the in-process demo): call
+//! [`ControllerNode::set_external_plan`]`(true)` once (with an empty action list and `repeat = false`),
+//! feed every range scan to [`PlannedSession::observe_scan`], and after each node step call
+//! [`PlannedSession::drive`], which plans and pushes an action whenever the cycle waits for one and
+//! reports when the session is over (the bench is done from here, or nothing is left to do).
+//!
+//! **Predefined sequence** (6.2, for comparison): one set of implement joint angles for all digs (the
+//! median of the planner's choices: [`median_joints`]), the swing stepped across the regions from the
+//! spoil side; after one dig in every region a cleanup in every region started at the far reach
+//! (without perception there is no distance to the material); then a fixed 1.3 m track back; repeat.
+
+use planner::cleanup::CleanupPlan;
+use planner::dig_model::{ActuatorDynamics, DigModel};
+use planner::kinematics::{JointAngles, MachinePose};
+use planner::machine::MachineConfig;
+use planner::plan::mapper::MapUpdate;
+use planner::plan::{
+    ActionChoice, HardnessRegression, Plan, PlanError, Planner, PlannerConfig, PlannerState,
+    TerrainMapper,
+};
+use planner::soil::EmpiricalSoilModel;
+use serde::{Deserialize, Serialize};
+
+use crate::cycle::{Action, StartPose};
+use crate::node::ControllerNode;
+
+/// The predefined sequence's track-back distance (6.2: "a typical distance selected by the
+/// perception based dig planner (1.3 meters)").
+pub const PREDEFINED_BACKUP_M: f64 = 1.3;
+
+/// Session errors.
+#[derive(Debug, thiserror::Error)]
+pub enum SessionError {
+    /// The planner.
+    #[error("planner: {0}")]
+    Plan(#[from] PlanError),
+    /// The controller rejected an action.
+    #[error("controller: {0}")]
+    Controller(#[from] crate::ControllerError),
+    /// A bad predefined sequence.
+    #[error("predefined sequence: {0}")]
+    Predefined(&'static str),
+}
+
+/// Result alias of this module.
+pub type Result<T> = std::result::Result<T, SessionError>;
+
+/// Which action source drives the cycle (`demo --strategy planned|predefined`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Strategy {
+    /// The perception-based dig planner (5.1).
+    Planned,
+    /// The predefined excavation sequence (6.2).
+    Predefined,
+}
+
+/// The predefined excavation sequence of 6.2.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PredefinedSequence {
+    /// Implement joint angles of every dig start (the median of the planner's).
+    pub start: JointAngles,
+    /// Swing angles of the regions, in dig order (from the spoil side).
+    pub swings_rad: Vec<f64>,
+    /// Cleanup start radius: the far reach at floor level, m.
+    pub cleanup_start_m: f64,
+    /// Cleanup end radius, m.
+    pub cleanup_min_m: f64,
+    /// Cleanup start pose height over the floor and bucket angle.
+    pub cleanup_start_z_m: f64,
+    /// Cleanup start bucket angle to the horizontal, rad.
+    pub cleanup_bucket_abs_rad: f64,
+    /// Track-back distance, m (1.3 in the thesis).
+    pub backup_m: f64,
+}
+
+impl PredefinedSequence {
+    /// The sequence for a planner's geometry: regions of its coarse plan on `grid` at `pose`, cleanup
+    /// from the floor-level reach, 1.3 m backups, and the given start joints.
+    ///
+    /// # Errors
+    /// [`SessionError::Plan`] from the coarse or cleanup planner.
+    pub fn from_planner<A: ActuatorDynamics>(
+        planner: &Planner<A>,
+        grid: &planner::terrain::TerrainGrid,
+        pose: &MachinePose,
+        start: JointAngles,
+    ) -> Result<Self> {
+        let coarse = planner.coarse(grid, pose)?;
+        let ct = planner.cleanup_and_tracking(grid, pose, &PlannerState::default())?;
+        let c = planner.config().cleanup;
+        Ok(Self {
+            start,
+            swings_rad: coarse.regions.iter().map(|r| r.swing_rad).collect(),
+            cleanup_start_m: ct.reach_m,
+            cleanup_min_m: c.min_radius_m,
+            cleanup_start_z_m: planner.config().floor_z_m + c.start_height_m,
+            cleanup_bucket_abs_rad: c.bucket_abs_rad,
+            backup_m: PREDEFINED_BACKUP_M,
+        })
+    }
+
+    /// The `k`-th action of the repeating sequence: one dig per region, one cleanup per region, one
+    /// backup.
+    #[must_use]
+    pub fn action(&self, k: usize) -> Option<Action> {
+        let n = self.swings_rad.len();
+        if n == 0 {
+            return None;
+        }
+        let period = 2 * n + 1;
+        let i = k % period;
+        Some(if i < n {
+            Action::Dig {
+                swing_rad: self.swings_rad[i],
+                start: StartPose::Joints {
+                    boom_rad: self.start.boom_rad,
+                    stick_rad: self.start.stick_rad,
+                    bucket_rad: self.start.bucket_rad,
+                },
+            }
+        } else if i < 2 * n {
+            Action::Cleanup {
+                swing_rad: self.swings_rad[i - n],
+                start: StartPose::Tip {
+                    x_m: self.cleanup_start_m,
+                    z_m: self.cleanup_start_z_m,
+                    bucket_abs_rad: self.cleanup_bucket_abs_rad,
+                },
+                plan: CleanupPlan {
+                    start_radius_m: self.cleanup_start_m,
+                    min_radius_m: self.cleanup_min_m,
+                },
+            }
+        } else {
+            Action::TrackBack {
+                distance_m: self.backup_m,
+            }
+        })
+    }
+}
+
+/// The median of each joint angle over the planner's chosen starts (6.2's "virtual expert").
+#[must_use]
+pub fn median_joints(starts: &[JointAngles]) -> Option<JointAngles> {
+    if starts.is_empty() {
+        return None;
+    }
+    let median = |f: fn(&JointAngles) -> f64| {
+        let mut v: Vec<f64> = starts.iter().map(f).filter(|x| x.is_finite()).collect();
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied()
+    };
+    Some(JointAngles {
+        boom_rad: median(|q| q.boom_rad)?,
+        stick_rad: median(|q| q.stick_rad)?,
+        bucket_rad: median(|q| q.bucket_rad)?,
+    })
+}
+
+/// One action the session handed to the cycle, with the plan behind it (for plots and statistics).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SessionStep {
+    /// The action pushed to the work cycle.
+    pub action: Action,
+    /// The planning cycle that chose it (planned strategy only).
+    pub plan: Option<Plan>,
+    /// The machine pose it was planned at.
+    pub pose: MachinePose,
+}
+
+/// The action source of an autonomous session.
+#[derive(Debug)]
+pub struct PlannedSession {
+    planner: Planner,
+    state: PlannerState,
+    mapper: TerrainMapper,
+    strategy: Strategy,
+    predefined: Option<PredefinedSequence>,
+    predefined_index: usize,
+    regression: HardnessRegression,
+    hardness_index: Option<f64>,
+    dig_starts: Vec<JointAngles>,
+    steps: Vec<SessionStep>,
+    finished: bool,
+}
+
+impl PlannedSession {
+    /// A session with the planner on `machine` (nominal dig model, `config`), an empty terrain map of
+    /// the given grid, and the shipped hardness regression.
+    ///
+    /// # Errors
+    /// [`SessionError::Plan`] for an invalid config, grid or dig model.
+    pub fn new(
+        machine: &MachineConfig,
+        config: PlannerConfig,
+        mapper: TerrainMapper,
+        strategy: Strategy,
+    ) -> Result<Self> {
+        let model = DigModel::nominal().map_err(PlanError::from)?;
+        Self::with_model(machine, model, config, mapper, strategy)
+    }
+
+    /// As [`Self::new`] with a given dig model.
+    ///
+    /// # Errors
+    /// As [`Self::new`].
+    pub fn with_model(
+        machine: &MachineConfig,
+        model: DigModel,
+        config: PlannerConfig,
+        mapper: TerrainMapper,
+        strategy: Strategy,
+    ) -> Result<Self> {
+        Ok(Self {
+            planner: Planner::new(machine, model, config)?,
+            state: PlannerState::default(),
+            mapper,
+            strategy,
+            predefined: None,
+            predefined_index: 0,
+            regression: HardnessRegression::nominal()?,
+            hardness_index: None,
+            dig_starts: Vec::new(),
+            steps: Vec::new(),
+            finished: false,
+        })
+    }
+
+    /// Uses the predefined sequence (6.2) instead of the planner.
+    pub fn set_predefined(&mut self, sequence: PredefinedSequence) {
+        self.predefined = Some(sequence);
+        self.predefined_index = 0;
+        self.strategy = Strategy::Predefined;
+    }
+
+    /// The strategy.
+    #[must_use]
+    pub fn strategy(&self) -> Strategy {
+        self.strategy
+    }
+
+    /// The planner.
+    #[must_use]
+    pub fn planner(&self) -> &Planner {
+        &self.planner
+    }
+
+    /// What persists between planning cycles.
+    #[must_use]
+    pub fn state(&self) -> &PlannerState {
+        &self.state
+    }
+
+    /// The terrain map.
+    #[must_use]
+    pub fn terrain(&self) -> &planner::terrain::TerrainGrid {
+        self.mapper.grid()
+    }
+
+    /// The actions handed out so far, with their plans.
+    #[must_use]
+    pub fn steps(&self) -> &[SessionStep] {
+        &self.steps
+    }
+
+    /// The joint angles of the planner's dig starts so far (their median seeds the predefined
+    /// sequence: [`median_joints`]).
+    #[must_use]
+    pub fn dig_starts(&self) -> &[JointAngles] {
+        &self.dig_starts
+    }
+
+    /// Whether the session has nothing left to do.
+    #[must_use]
+    pub fn finished(&self) -> bool {
+        self.finished
+    }
+
+    /// The soil hardness index from the latest soil estimate (5.2), if one was given.
+    #[must_use]
+    pub fn hardness_index(&self) -> Option<f64> {
+        self.hardness_index
+    }
+
+    /// Fuses a range scan (world-frame points) into the terrain map (5.3).
+    ///
+    /// # Errors
+    /// [`SessionError::Plan`] when no point falls in the map.
+    pub fn observe_scan(&mut self, points: &[[f64; 3]]) -> Result<MapUpdate> {
+        Ok(self.mapper.integrate(points)?)
+    }
+
+    /// Takes estimated empirical soil properties (Eqs. 21-23): the dig model predicts with them and
+    /// the hardness index follows the regression of 5.2 (Eq. 25). Returns the index, which the caller
+    /// gives Autodig.
+    ///
+    /// # Errors
+    /// [`SessionError::Plan`] for non-finite coefficients.
+    pub fn set_soil_estimate(&mut self, soil: EmpiricalSoilModel) -> Result<f64> {
+        let index = self.regression.index_for_model(&soil)?;
+        let model = self.planner.model_mut();
+        model
+            .set_soil(planner::dig_model::SoilModel::Empirical(soil))
+            .map_err(PlanError::from)?;
+        model.set_hardness_index(index).map_err(PlanError::from)?;
+        self.hardness_index = Some(index);
+        Ok(index)
+    }
+
+    /// Plans the next action for the machine at `pose` (world frame) on the current terrain map.
+    /// `None` when the session is over: no dig, backup or cleanup is possible from here (planned), or
+    /// the predefined sequence is missing.
+    ///
+    /// # Errors
+    /// [`SessionError::Plan`] when the map is unusable.
+    pub fn next_action(&mut self, pose: &MachinePose) -> Result<Option<Action>> {
+        if self.finished {
+            return Ok(None);
+        }
+        let (action, plan) = match self.strategy {
+            Strategy::Predefined => {
+                let Some(seq) = &self.predefined else {
+                    self.finished = true;
+                    return Ok(None);
+                };
+                let a = seq.action(self.predefined_index);
+                self.predefined_index += 1;
+                (a, None)
+            }
+            Strategy::Planned => {
+                let plan = self.planner.plan(self.mapper.grid(), pose, &self.state)?;
+                let regions = plan.coarse.regions.len();
+                let action = match &plan.action {
+                    ActionChoice::Dig(d) => {
+                        self.state.record_dig(d.region_index, regions);
+                        self.dig_starts.push(d.joints);
+                        Some(Action::Dig {
+                            swing_rad: d.swing_rad,
+                            start: StartPose::Joints {
+                                boom_rad: d.joints.boom_rad,
+                                stick_rad: d.joints.stick_rad,
+                                bucket_rad: d.joints.bucket_rad,
+                            },
+                        })
+                    }
+                    ActionChoice::TrackBack { distance_m } => {
+                        self.state.record_track_back();
+                        Some(Action::TrackBack {
+                            distance_m: *distance_m,
+                        })
+                    }
+                    ActionChoice::Cleanup(c) => match c.plan {
+                        Some(p) => {
+                            self.state
+                                .record_cleanup(c.swing_rad, &self.planner.config().cleanup);
+                            Some(Action::Cleanup {
+                                swing_rad: c.swing_rad,
+                                start: StartPose::Tip {
+                                    x_m: c.start.x_m,
+                                    z_m: c.start.z_m,
+                                    bucket_abs_rad: c.start.bucket_abs_rad,
+                                },
+                                plan: p,
+                            })
+                        }
+                        None => None,
+                    },
+                    ActionChoice::Nothing => None,
+                };
+                (action, Some(plan))
+            }
+        };
+        match action {
+            Some(a) => {
+                self.steps.push(SessionStep {
+                    action: a,
+                    plan,
+                    pose: *pose,
+                });
+                Ok(Some(a))
+            }
+            None => {
+                self.finished = true;
+                Ok(None)
+            }
+        }
+    }
+
+    /// Between node steps: when the work cycle waits for an action, plans one at the node's
+    /// dead-reckoned pose and pushes it. Returns `false` once the session is over (the caller then
+    /// stops the node, which returns home).
+    ///
+    /// # Errors
+    /// [`SessionError`] from the planner or when the cycle rejects the action.
+    pub fn drive(&mut self, node: &mut ControllerNode) -> Result<bool> {
+        if !node.cycle().needs_action() {
+            return Ok(!self.finished);
+        }
+        let pose = node.estimator().state().pose;
+        match self.next_action(&pose)? {
+            Some(a) => {
+                node.push_action(a)?;
+                Ok(true)
+            }
+            None => Ok(false),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use planner::terrain::TerrainGrid;
+
+    fn bench_points() -> Vec<[f64; 3]> {
+        let mut pts = Vec::new();
+        for i in 0..240 {
+            for j in 0..200 {
+                let (x, y) = (
+                    -8.0 + 0.05 + 0.1 * f64::from(i),
+                    -10.0 + 0.05 + 0.1 * f64::from(j),
+                );
+                let z = if y.abs() > 5.0 || x > 13.0 {
+                    0.0
+                } else {
+                    (x - 3.0).clamp(0.0, 2.0)
+                };
+                pts.push([x, y, z]);
+            }
+        }
+        pts
+    }
+
+    fn session(strategy: Strategy) -> PlannedSession {
+        let machine = MachineConfig::default_machine().expect("machine");
+        let mut cfg = PlannerConfig::nominal().expect("config");
+        // Coarser than Fig. 45 so the debug-build test stays fast.
+        cfg.refined.d_step_m = 0.6;
+        cfg.refined.alpha_step_rad = 10f64.to_radians();
+        let mapper = TerrainMapper::new(-8.0, -10.0, 0.1, 240, 200, 5).expect("mapper");
+        PlannedSession::new(&machine, cfg, mapper, strategy).expect("session")
+    }
+
+    #[test]
+    fn planned_session_digs_the_bench_and_records_the_region() {
+        let mut s = session(Strategy::Planned);
+        s.observe_scan(&bench_points()).expect("scan");
+        let pose = MachinePose::default();
+        let a = s.next_action(&pose).expect("plan").expect("an action");
+        assert!(matches!(a, Action::Dig { .. }), "{a:?}");
+        assert_eq!(s.steps().len(), 1);
+        assert!(s.steps()[0].plan.is_some());
+        assert_eq!(s.dig_starts().len(), 1);
+        // The pointer moved past the dug region.
+        let Some(ActionChoice::Dig(d)) = s.steps()[0].plan.as_ref().map(|p| p.action.clone())
+        else {
+            panic!("dig plan expected");
+        };
+        let n = s.steps()[0]
+            .plan
+            .as_ref()
+            .map_or(0, |p| p.coarse.regions.len());
+        assert_eq!(s.state().region_pointer, (d.region_index + 1) % n);
+    }
+
+    #[test]
+    fn predefined_sequence_steps_regions_then_cleans_then_backs_up() {
+        let s = session(Strategy::Predefined);
+        let grid = TerrainGrid::new_flat(-8.0, -10.0, 0.1, 240, 200, 0.0).expect("grid");
+        let start = median_joints(&[
+            JointAngles {
+                boom_rad: 0.1,
+                stick_rad: -1.2,
+                bucket_rad: -0.5,
+            },
+            JointAngles {
+                boom_rad: 0.3,
+                stick_rad: -1.0,
+                bucket_rad: -0.7,
+            },
+            JointAngles {
+                boom_rad: 0.2,
+                stick_rad: -1.4,
+                bucket_rad: -0.6,
+            },
+        ])
+        .expect("median");
+        assert_eq!(
+            start,
+            JointAngles {
+                boom_rad: 0.2,
+                stick_rad: -1.2,
+                bucket_rad: -0.6
+            }
+        );
+        let seq =
+            PredefinedSequence::from_planner(s.planner(), &grid, &MachinePose::default(), start)
+                .expect("sequence");
+        let n = seq.swings_rad.len();
+        assert!(n >= 5);
+        for k in 0..n {
+            assert!(
+                matches!(seq.action(k), Some(Action::Dig { swing_rad, .. }) if swing_rad == seq.swings_rad[k])
+            );
+            let Some(Action::Cleanup { plan, .. }) = seq.action(n + k) else {
+                panic!("cleanup expected");
+            };
+            assert!((plan.start_radius_m - seq.cleanup_start_m).abs() < 1e-12);
+        }
+        assert_eq!(
+            seq.action(2 * n),
+            Some(Action::TrackBack { distance_m: 1.3 })
+        );
+        assert_eq!(seq.action(2 * n + 1), seq.action(0));
+        let mut s = s;
+        s.set_predefined(seq);
+        let a = s.next_action(&MachinePose::default()).expect("next");
+        assert!(matches!(a, Some(Action::Dig { .. })));
+        assert!(median_joints(&[]).is_none());
+    }
+
+    #[test]
+    fn nothing_to_do_ends_the_session() {
+        let mut s = session(Strategy::Planned);
+        // Bare floor everywhere in view, machine boxed in: the planner can only track back; a
+        // planned session on an unknown map fails with a typed error, not a panic.
+        let pose = MachinePose::default();
+        assert!(s.next_action(&pose).is_err() || s.finished() || !s.steps().is_empty());
+        let mut p = session(Strategy::Predefined);
+        assert_eq!(p.next_action(&pose).expect("no sequence"), None);
+        assert!(p.finished());
+    }
+}
