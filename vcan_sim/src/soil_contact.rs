@@ -306,6 +306,11 @@ pub struct SoilContact {
 
 /// Velocity scale (m/s) over which soil resistance builds up from rest (creep regularisation).
 const CREEP_SPEED_M_PER_S: f64 = 0.01;
+/// Thickness of the cutting edge (with its teeth) that bears on the soil when it is pushed in tip
+/// first, m.
+const EDGE_THICKNESS_M: f64 = 0.05;
+/// Length of the bucket's back (bottom plate) that bears on the soil when it is pushed in, m.
+const BACK_BEARING_LENGTH_M: f64 = 0.25;
 /// Boulder contact stiffness (N/m) and damping (N s/m).
 const BOULDER_STIFFNESS: f64 = 2.0e7;
 const BOULDER_DAMPING: f64 = 2.0e5;
@@ -383,14 +388,35 @@ impl SoilContact {
             let (sd, cd) = soil.tool_friction_angle_rad.sin_cos();
             force[0] += mobilised * (-cd * n[0] + sd * b[0]);
             force[1] += mobilised * (-cd * n[1] + sd * b[1]);
-            // Bearing resistance when the edge is pushed down into the ground.
-            if v[1] < 0.0 {
-                let bearing = (soil.cohesion_pa * 40.0
-                    + soil.density_kg_per_m3 * GRAVITY_M_PER_S2 * d.max(0.0) * 30.0
-                    + 2.0e4)
+            // Bearing resistance (bearing pressure c N_c + gamma g d N_q + q0): the cutting edge pushed in
+            // tip first (its speed along the bucket line, pin -> tip) bears on its face, bucket width x
+            // EDGE_THICKNESS_M, directed back up the blade; the bucket's back (bottom plate) pushed into
+            // the soil (speed against the opening) bears over width x BACK_BEARING_LENGTH_M, directed
+            // toward the opening. Motion into the opening meets the FEE wedge above. (A plate area for
+            // any downward motion stopped a sharp edge at the surface with ~1e5 N.)
+            let pressure = soil.cohesion_pa * 40.0
+                + soil.density_kg_per_m3 * GRAVITY_M_PER_S2 * d.max(0.0) * 30.0
+                + 2.0e4;
+            let v_tip_first = -(v[0] * b[0] + v[1] * b[1]);
+            if v_tip_first > 0.0 {
+                let edge = pressure
                     * input.width_m
-                    * 0.25;
-                force[1] += bearing * (-v[1] / CREEP_SPEED_M_PER_S).tanh();
+                    * EDGE_THICKNESS_M
+                    * (v_tip_first / CREEP_SPEED_M_PER_S).tanh();
+                force[0] += edge * b[0];
+                force[1] += edge * b[1];
+            }
+            // The opening faces bucket_abs - 90 degrees (as in `spill`).
+            let (sa, ca) = input.bucket_abs_rad.sin_cos();
+            let opening = [sa, -ca];
+            let v_back_first = -(v[0] * opening[0] + v[1] * opening[1]);
+            if v_back_first > 0.0 {
+                let back = pressure
+                    * input.width_m
+                    * BACK_BEARING_LENGTH_M
+                    * (v_back_first / CREEP_SPEED_M_PER_S).tanh();
+                force[0] += back * opening[0];
+                force[1] += back * opening[1];
             }
         }
         let boulder = self.boulder_force(world, input);
@@ -564,26 +590,34 @@ impl SoilContact {
     }
 }
 
-/// Margin (the sine of an angle, rad) from the wedge's failure limit within which no soil failure force
-/// is applied: Eq. 17's denominator `cos(rho + delta) + sin(rho + delta) cot(beta + phi)` equals
-/// `sin(beta + phi + rho + delta) / sin(beta + phi)` and vanishes as the rake plus the three friction and
-/// failure angles reach 180 degrees, where the FEE force grows without bound.
-const WEDGE_LIMIT_MARGIN: f64 = 1e-3;
+/// Closest approach of the rake to the wedge's failure limit, rad. Eq. 17's denominator
+/// `cos(rho + delta) + sin(rho + delta) cot(beta + phi)` equals `sin(beta + phi + rho + delta) /
+/// sin(beta + phi)` and vanishes as the rake plus the three friction and failure angles reach 180
+/// degrees, where the FEE force grows without bound (a blade flipping its direction of travel inside a
+/// full bucket gave 12 MN, two orders of magnitude above the thesis's ~1e5 N digging forces). A blade at
+/// or past that rake still bulldozes the soil ahead of it, so the force is evaluated at the rake this
+/// far from the limit: it saturates (at about four times the force at a typical 45 degree rake) instead
+/// of diverging or vanishing.
+const RAKE_LIMIT_MARGIN_RAD: f64 = 0.17;
 
 /// The FEE force magnitude on the bucket (Eqs. 14-17, [`planner::soil::fee_force_n`]), N. Zero out of
-/// the soil, for soil properties outside their physical range, and near or past the wedge's failure
-/// limit (see [`WEDGE_LIMIT_MARGIN`]): a wedge that cannot fail offers no failure force (the edge then
-/// meets only the bearing resistance), and the simulator must not see an unbounded force.
+/// the soil and for soil properties outside their physical range; near or past the wedge's failure
+/// limit the rake is held [`RAKE_LIMIT_MARGIN_RAD`] from it, so the simulator never sees an unbounded
+/// force.
 fn failure_force_n(soil: &SoilProperties, gamma: &DigGeometry, width_m: f64) -> f64 {
     if gamma.depth_m <= 0.0 {
         return 0.0;
     }
-    let limit = soil.failure_angle_rad + soil.friction_angle_rad;
-    let rake = -gamma.rake_rad;
-    if (limit + rake + soil.tool_friction_angle_rad).sin() < WEDGE_LIMIT_MARGIN * limit.sin() {
-        return 0.0;
-    }
-    fee_force_n(soil, gamma, width_m).unwrap_or(0.0)
+    let limit = std::f64::consts::PI
+        - soil.failure_angle_rad
+        - soil.friction_angle_rad
+        - soil.tool_friction_angle_rad;
+    let rake = (-gamma.rake_rad).min(limit - RAKE_LIMIT_MARGIN_RAD);
+    let gamma = DigGeometry {
+        rake_rad: -rake,
+        ..*gamma
+    };
+    fee_force_n(soil, &gamma, width_m).unwrap_or(0.0)
 }
 
 #[cfg(test)]
@@ -628,28 +662,27 @@ mod tests {
         };
         assert!(failure_force_n(&hard, &at(0.4, 0.0), 1.3) > f2);
         assert_eq!(failure_force_n(&soil, &at(0.0, 0.0), 1.3), 0.0);
-        // At and past the wedge's failure limit (rake + delta + beta + phi = 180 degrees): no force.
+        // Near, at and past the wedge's failure limit (rake + delta + beta + phi = 180 degrees) the
+        // force saturates at its value RAKE_LIMIT_MARGIN_RAD from the limit: bounded, not zero.
         let limit = std::f64::consts::PI
             - soil.failure_angle_rad
             - soil.friction_angle_rad
             - soil.tool_friction_angle_rad;
-        for rake in [limit - 1e-4, limit, limit + 0.3] {
+        let at_rake = |rake: f64| {
             let g = DigGeometry {
                 rake_rad: -rake,
                 ..at(0.4, 0.2)
             };
-            assert_eq!(failure_force_n(&soil, &g, 1.3), 0.0, "rake {rake}");
-        }
+            failure_force_n(&soil, &g, 1.3)
+        };
+        let saturated = at_rake(limit - RAKE_LIMIT_MARGIN_RAD);
         assert!(
-            failure_force_n(
-                &soil,
-                &DigGeometry {
-                    rake_rad: -(limit - 0.05),
-                    ..at(0.4, 0.2)
-                },
-                1.3
-            ) > f3
+            saturated > f3 && saturated < 10.0 * f3,
+            "{saturated} vs {f3}"
         );
+        for rake in [limit - 1e-4, limit, limit + 0.3, 3.0] {
+            assert_eq!(at_rake(rake), saturated, "rake {rake}");
+        }
     }
 
     /// Done-when: the mass removed from the terrain equals the mass in the bucket plus spill.
@@ -700,6 +733,30 @@ mod tests {
         });
         let f = contact.step(&mut w, &input_at(8.25, 1.5), 1e-3, &effects);
         assert!(f.fx_n > 5.0e5, "{f:?}");
+    }
+
+    /// Regression: a bearing force of ~1.1e5 N (a 0.25 m plate under any downward motion) stopped a
+    /// sharp edge 1 cm into the bench top, so Autodig could not penetrate. Pushed in tip first the edge
+    /// meets only its edge bearing and the shallow FEE wedge; the bucket's back pushed in bears over
+    /// the plate.
+    #[test]
+    fn edge_pushed_in_tip_first_penetrates_but_the_back_bears() {
+        let effects = SoilEffects::default();
+        let pushed_down = |bucket_abs: f64| {
+            let mut w = world();
+            let mut contact = SoilContact::default();
+            let mut i = input_at(8.0, 1.95);
+            i.bucket_abs_rad = bucket_abs;
+            i.pin_base = [8.0 - 1.5 * bucket_abs.cos(), 1.95 - 1.5 * bucket_abs.sin()];
+            i.tip_velocity_base = [0.0, -0.2];
+            contact.step(&mut w, &i, 1e-3, &effects);
+            let f = contact.step(&mut w, &i, 1e-3, &effects);
+            f.fx_n.hypot(f.fz_n)
+        };
+        let tip_first = pushed_down(-std::f64::consts::FRAC_PI_2);
+        assert!(tip_first > 0.0 && tip_first < 3.0e4, "{tip_first} N");
+        let back_first = pushed_down(-std::f64::consts::PI);
+        assert!(back_first > 1.0e5, "{back_first} N");
     }
 
     #[test]
