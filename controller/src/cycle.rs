@@ -318,12 +318,13 @@ impl Default for CycleConfig {
     fn default() -> Self {
         let dig = |swing_deg: f64| Action::Dig {
             swing_rad: swing_deg.to_radians(),
-            // The default bench's start: tip 7 m out, 0.8 m above the bench top, bucket at -90
-            // degrees; Boom-Down lowers it onto the bench.
+            // The default bench's start: tip 7.5 m out (stick at about -45 degrees absolute), 0.4 m
+            // above the bench top, bucket opened to -55 degrees so Pre-Dig's curl bites the edge in;
+            // Boom-Down lowers it onto the bench.
             start: StartPose::Tip {
-                x_m: 7.0,
-                z_m: 2.8,
-                bucket_abs_rad: (-90.0_f64).to_radians(),
+                x_m: 7.5,
+                z_m: 2.4,
+                bucket_abs_rad: (-55.0_f64).to_radians(),
             },
         };
         Self {

@@ -609,7 +609,7 @@ impl ControllerNode {
         if tick.send_neutral {
             self.push_neutral();
         }
-        if tick.heartbeat.is_some() && track_slot {
+        if track_slot && self.safety.state() != SafetyState::ListenOnly {
             let status = self.status_message();
             self.push_message(Message::ControllerStatus(status));
         }

@@ -224,6 +224,11 @@ pub struct SafetyConfig {
     pub max_auto_rearms: u32,
     /// Armed time without a fault that resets the re-arm count, s. Default 10.
     pub rearm_reset_s: f64,
+    /// Heartbeat period, s. Default 0.05 (20 Hz, the docs/protocol.md budget; the gateway's watchdog
+    /// is 100 ms). A change of the requested mode (arm, disarm on a fault, e-stop) and every heartbeat
+    /// after a shutdown are sent at once, whatever the period; values of 0.1 s or more are treated as
+    /// 0.05 s so the watchdog cannot starve.
+    pub heartbeat_period_s: f64,
 }
 
 impl Default for SafetyConfig {
@@ -239,6 +244,7 @@ impl Default for SafetyConfig {
             auto_rearm: true,
             max_auto_rearms: 5,
             rearm_reset_s: 10.0,
+            heartbeat_period_s: 0.05,
         }
     }
 }
@@ -307,6 +313,8 @@ pub struct Safety {
     healthy: Result<(), Fault>,
     gateway_mode: Option<GatewayMode>,
     now_s: f64,
+    /// Time and mode of the last heartbeat sent.
+    last_heartbeat: Option<(f64, RequestedMode)>,
 }
 
 impl Safety {
@@ -336,6 +344,7 @@ impl Safety {
             }),
             gateway_mode: None,
             now_s: f64::NEG_INFINITY,
+            last_heartbeat: None,
         }
     }
 
@@ -567,8 +576,37 @@ impl Safety {
     }
 
     /// One control period at `now_s`: `want` is the mode the work cycle needs (`None`: stay disarmed).
-    /// Advances the arming handshake and the fault recovery and says what to send.
+    /// Advances the arming handshake and the fault recovery and says what to send. The heartbeat goes
+    /// out every [`SafetyConfig::heartbeat_period_s`], and at once when the requested mode changes.
     pub fn tick(&mut self, now_s: f64, want: Option<ArmMode>) -> SafetyTick {
+        let mut tick = self.tick_every_period(now_s, want);
+        if let Some(hb) = tick.heartbeat {
+            let period =
+                if self.config.heartbeat_period_s > 0.0 && self.config.heartbeat_period_s < 0.1 {
+                    self.config.heartbeat_period_s
+                } else {
+                    0.05
+                };
+            let due = match self.last_heartbeat {
+                None => true,
+                Some((t, mode)) => {
+                    mode != hb.mode
+                        || self.state == SafetyState::Shutdown
+                        || !(now_s - t < period - 1e-6)
+                }
+            };
+            if due {
+                self.last_heartbeat = Some((now_s, hb.mode));
+            } else {
+                // Not sent: the gateway expects the alive counter to advance by one per heartbeat.
+                self.alive_counter = (self.alive_counter + 15) % 16;
+                tick.heartbeat = None;
+            }
+        }
+        tick
+    }
+
+    fn tick_every_period(&mut self, now_s: f64, want: Option<ArmMode>) -> SafetyTick {
         if now_s.is_finite() {
             self.now_s = now_s;
         }
@@ -846,23 +884,42 @@ mod tests {
     }
 
     #[test]
-    fn heartbeat_counter_advances_by_one_every_period() {
+    fn heartbeat_goes_out_at_20_hz_and_its_counter_advances_by_one_per_heartbeat() {
         let mut rig = Rig::new(SafetyConfig::default());
         let mut prev = None;
+        let mut sent = Vec::new();
         let mut t = 0.0;
-        for _ in 0..40 {
-            let hb = rig
-                .period(t, Some(ArmMode::Valve), false)
-                .heartbeat
-                .unwrap();
-            if let Some(p) = prev {
-                assert_eq!(hb.alive_counter, (p + 1) % 16);
-            } else {
-                assert_eq!(hb.alive_counter, 0);
+        for k in 0..100 {
+            if let Some(hb) = rig.period(t, Some(ArmMode::Valve), false).heartbeat {
+                if let Some(p) = prev {
+                    assert_eq!(hb.alive_counter, (p + 1) % 16);
+                } else {
+                    assert_eq!(hb.alive_counter, 0);
+                }
+                prev = Some(hb.alive_counter);
+                sent.push(k);
             }
-            prev = Some(hb.alive_counter);
             t += PERIOD_S;
         }
+        // Every 5th period (20 Hz) apart from the mode changes (disarm -> arm), sent at once; never a
+        // gap near the gateway's 100 ms watchdog.
+        assert!((19..=23).contains(&sent.len()), "{sent:?}");
+        assert!(sent.windows(2).all(|w| w[1] - w[0] <= 5), "{sent:?}");
+    }
+
+    #[test]
+    fn a_fault_sends_the_disarm_heartbeat_in_the_same_period() {
+        let (mut rig, t) = Rig::armed(SafetyConfig::default());
+        let mut now = t;
+        for _ in 0..20 {
+            let tick = rig.period(now, Some(ArmMode::Valve), true);
+            if tick.motion.is_none() {
+                assert_eq!(tick.heartbeat.map(|h| h.mode), Some(RequestedMode::Disarm));
+                return;
+            }
+            now += PERIOD_S;
+        }
+        panic!("no stop");
     }
 
     #[test]
@@ -940,7 +997,11 @@ mod tests {
 
     #[test]
     fn estop_latches_until_reset() {
-        let (mut rig, t) = Rig::armed(SafetyConfig::default());
+        // A heartbeat every period, so the last period's shows the request.
+        let (mut rig, t) = Rig::armed(SafetyConfig {
+            heartbeat_period_s: PERIOD_S,
+            ..SafetyConfig::default()
+        });
         rig.safety.request_estop(t);
         let (tick, t2) = rig.run(t, 100, Some(ArmMode::Valve));
         assert_eq!(tick.heartbeat.unwrap().mode, RequestedMode::EStop);

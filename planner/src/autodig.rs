@@ -658,7 +658,8 @@ pub struct AutodigConfig {
     /// Default -100 deg.
     #[serde(rename = "beta_deg", with = "serde_deg")]
     pub beta_rad: f64,
-    /// Pre-Dig ends when the bucket has curled to `bucket_abs <= rho1`. Default -120 deg.
+    /// Pre-Dig ends when the bucket has curled to `bucket_abs <= rho1`. Default -80 deg: from an opened
+    /// bucket (about -50 deg) the curl bites the edge in, and the stick does the rest in Dig.
     #[serde(rename = "rho1_deg", with = "serde_deg")]
     pub rho1_rad: f64,
     /// Dig ends when `bucket_abs <= rho2`. Default -180 deg.
@@ -689,7 +690,7 @@ impl Default for AutodigConfig {
     fn default() -> Self {
         Self {
             beta_rad: (-100.0_f64).to_radians(),
-            rho1_rad: (-120.0_f64).to_radians(),
+            rho1_rad: (-80.0_f64).to_radians(),
             rho2_rad: (-180.0_f64).to_radians(),
             rho3_rad: (-210.0_f64).to_radians(),
             gamma_rad: 25.0_f64.to_radians(),
@@ -1245,8 +1246,8 @@ mod tests {
     /// Boom pressures with the bucket resting on the ground.
     const CONTACT_HEAD_PA: f64 = 3.0e6;
     const CONTACT_ROD_PA: f64 = 6.0e6;
-    /// Start pose: boom 0 deg, stick -70 deg (absolute -70), bucket -20 deg (absolute -90).
-    const START_JOINTS_DEG: [f64; 3] = [0.0, -70.0, -20.0];
+    /// Start pose: boom 0 deg, stick -70 deg (absolute -70), bucket 20 deg (absolute -50, opened).
+    const START_JOINTS_DEG: [f64; 3] = [0.0, -70.0, 20.0];
 
     fn maps() -> AutodigMaps {
         AutodigMaps::builtin().expect("shipped maps are valid")
@@ -1318,9 +1319,9 @@ mod tests {
         let (out, t1) = run(&mut ad, &on_ground(), t1 + DT_S, 0.3);
         note(out.stage, &mut seen);
         t = t1;
-        // Pre-Dig: bucket curls from -90 to rho1 (-120).
+        // Pre-Dig: bucket curls from -50 to rho1 (-80).
         let mut i = on_ground();
-        for bucket_rel in (20..=55).map(|d| -f64::from(d)) {
+        for bucket_rel in (-20..=15).map(|d| -f64::from(d)) {
             i.joint_rad = joints([0.0, -70.0, bucket_rel]);
             t += DT_S;
             let out = ad.step(&i, t).expect("valid");
@@ -1415,7 +1416,7 @@ mod tests {
         let mut ad = in_stage(Stage::PreDig, AutodigConfig::default());
         let mut i = free_lowering();
         assert_eq!(ad.step(&i, 0.0).expect("valid").stage, Stage::PreDig);
-        i.joint_rad = joints([0.0, -70.0, -51.0]); // bucket_abs -121 < rho1 -120
+        i.joint_rad = joints([0.0, -70.0, -11.0]); // bucket_abs -81 < rho1 -80
         let out = ad.step(&i, 0.01).expect("valid");
         assert_eq!(out.stage, Stage::Dig);
         assert_eq!(
@@ -1634,8 +1635,8 @@ mod tests {
     #[test]
     fn maps_errors_name_curve_and_point() {
         let bad = BUILTIN_MAPS_TOML.replace(
-            "[[0, 0], [60, 0], [85, 100], [100, 100]]",
-            "[[0, 0], [60, 0], [50, 100]]",
+            "predig_boom = [[0, -30], [55, -30], [75, 0], [94, 100], [100, 100]]",
+            "predig_boom = [[0, -30], [55, -30], [50, 0]]",
         );
         match AutodigMaps::from_toml_str(&bad) {
             Err(MapsError::NotIncreasing { curve, point, .. }) => {
