@@ -189,14 +189,16 @@ pub fn read_state_log(path: &Path) -> Vec<StateSample> {
 pub const ANGLE_RESOLUTION_RAD: f64 = std::f64::consts::PI / 16384.0 + 0.5e-4;
 /// Resolver noise allowance, rad: five standard deviations of the simulator's 2e-4 rad.
 pub const ANGLE_NOISE_RAD: f64 = 5.0 * 2e-4;
+/// Step of the search within the alignment window, s.
+const ALIGN_STEP_S: f64 = 0.001;
 
 /// How decoded angles compare with the simulator's truth.
 #[derive(Debug, Clone, PartialEq)]
 pub struct AngleComparison {
     /// Decoded samples compared.
     pub compared: usize,
-    /// Samples left out because they were sent in a catch-up burst (the simulator stepped several
-    /// periods at once after a late wake-up, so their timestamps are not their simulation times).
+    /// Samples sent in a catch-up burst (the simulator stepped several periods at once after a late
+    /// wake-up, so their timestamps are not their simulation times; the alignment window covers them).
     pub burst: usize,
     /// Samples outside the tolerance.
     pub outside: Vec<(f64, [f64; 4], [f64; 4], [f64; 4])>,
@@ -207,22 +209,26 @@ pub struct AngleComparison {
     /// Largest error among samples taken while the joint moved slower than 0.01 rad/s, rad (where the
     /// alignment does not matter: resolution and noise only).
     pub max_error_still_rad: f64,
+    /// 99th percentile of the per-sample largest joint error, rad.
+    pub p99_error_rad: f64,
 }
 
-fn interpolate(truth: &[StateSample], t: f64) -> Option<([f64; 4], [f64; 4])> {
+fn interpolate(truth: &[StateSample], t: f64) -> Option<([f64; 4], [f64; 4], f64)> {
     let i = truth.partition_point(|s| s.time_s < t);
     if i == 0 || i >= truth.len() {
         return None;
     }
     let (a, b) = (&truth[i - 1], &truth[i]);
     let dt = b.time_s - a.time_s;
-    if !(dt > 0.0) || dt > 0.5 {
+    if !(dt > 0.0) || dt > 2.5 {
         return None;
     }
     let w = (t - a.time_s) / dt;
     let q = std::array::from_fn(|j| a.angles_rad[j] + w * (b.angles_rad[j] - a.angles_rad[j]));
+    // The state log is written once per loop wake-up, so two lines may be several periods apart: the
+    // interpolation itself is uncertain by up to the rate times half the gap.
     let r = std::array::from_fn(|j| a.rates_rad_per_s[j].abs().max(b.rates_rad_per_s[j].abs()));
-    Some((q, r))
+    Some((q, r, 0.5 * dt))
 }
 
 /// Mean absolute error (all joints) of `samples` against the truth at `t - offset`.
@@ -230,7 +236,7 @@ fn alignment_cost(samples: &[(f64, [f64; 4])], truth: &[StateSample], offset: f6
     let mut sum = 0.0;
     let mut n = 0usize;
     for (t, q) in samples {
-        if let Some((truth_q, _)) = interpolate(truth, t - offset) {
+        if let Some((truth_q, _, _)) = interpolate(truth, t - offset) {
             sum += (0..4).map(|j| (q[j] - truth_q[j]).abs()).sum::<f64>();
             n += 1;
         }
@@ -264,8 +270,10 @@ fn best_offset(
 
 /// Compares decoded `JointAngles` (`decoded`, wall or bus time) with the simulator's state log
 /// (`truth`, simulation time). The time offset between the two clocks is estimated per `segment_s`
-/// segment (it drifts when the simulator falls behind wall time), then every sample must lie within
-/// [`ANGLE_RESOLUTION_RAD`] + [`ANGLE_NOISE_RAD`] + (the joint's rate) x `align_s` of the truth.
+/// segment (it drifts when the simulator falls behind wall time), then every sample must match the
+/// truth at some time within +/- `align_s` of its aligned time (the timestamp alignment tolerance)
+/// to [`ANGLE_RESOLUTION_RAD`] + [`ANGLE_NOISE_RAD`] (+ the rate times half the gap between the two
+/// state-log lines interpolated, which are one loop wake-up apart).
 /// `initial_offset_s` is a first guess of `decoded time - simulation time` (e.g. the simulator's
 /// start time), searched within +/- 2 s.
 pub fn compare_angles(
@@ -282,7 +290,9 @@ pub fn compare_angles(
         offsets_s: Vec::new(),
         max_error_rad: [0.0; 4],
         max_error_still_rad: 0.0,
+        p99_error_rad: 0.0,
     };
+    let mut errors: Vec<f64> = Vec::with_capacity(decoded.len());
     if decoded.is_empty() || truth.is_empty() {
         return result;
     }
@@ -294,53 +304,94 @@ pub fn compare_angles(
             prev.is_some_and(|d| d < 0.003) || next.is_some_and(|d| d < 0.003)
         })
         .collect();
-    // A coarse global search on a subsample, then per segment around it.
-    let stride = (decoded.len() / 400).max(1);
-    let sub: Vec<_> = decoded.iter().copied().step_by(stride).collect();
-    let coarse = best_offset(&sub, truth, initial_offset_s, 2.0, 0.005);
-    let global = best_offset(&sub, truth, coarse, 0.01, 0.0005);
+    // Per segment: a wide coarse search on a subsample around the previous segment's offset (the
+    // simulator only falls behind wall time, by up to seconds after long stalls), then a fine one.
     let t0 = decoded[0].0;
+    let mut previous = initial_offset_s;
+    let mut segments: Vec<(usize, usize, f64, bool)> = Vec::new();
     let mut start = 0;
     while start < decoded.len() {
         let end = decoded[start..]
             .iter()
-            .position(|(t, _)| *t >= t0 + segment_s * (result.offsets_s.len() + 1) as f64)
+            .position(|(t, _)| *t >= t0 + segment_s * (segments.len() + 1) as f64)
             .map_or(decoded.len(), |p| start + p);
         let seg: Vec<_> = (start..end)
             .filter(|&i| !burst[i])
             .map(|i| decoded[i])
             .collect();
-        let offset = if seg.len() >= 20 {
-            let o = best_offset(&seg, truth, global, 0.3, 0.002);
-            best_offset(&seg, truth, o, 0.002, 0.0002)
+        let (offset, flat) = if seg.len() >= 20 {
+            let stride = (seg.len() / 100).max(1);
+            let sub: Vec<_> = seg.iter().copied().step_by(stride).collect();
+            let o = best_offset(&sub, truth, previous + 4.0, 5.0, 0.01);
+            let o = best_offset(&seg, truth, o, 0.02, 0.001);
+            let o = best_offset(&seg, truth, o, 0.001, 0.0001);
+            // At rest every offset fits equally well.
+            let flat =
+                alignment_cost(&seg, truth, previous) - alignment_cost(&seg, truth, o) < 1e-4;
+            (if flat { previous } else { o }, flat)
         } else {
-            global
+            (previous, true)
         };
+        previous = offset;
+        segments.push((start, end, offset, flat));
+        start = end;
+    }
+    // A segment at rest that ends where motion starts takes the next moving segment's offset.
+    for k in (0..segments.len().saturating_sub(1)).rev() {
+        if segments[k].3 && !segments[k + 1].3 {
+            segments[k].2 = segments[k + 1].2;
+            segments[k].3 = false;
+        }
+    }
+    for (start, end, offset, _) in segments {
         result.offsets_s.push(offset);
         for i in start..end {
             if burst[i] {
                 result.burst += 1;
-                continue;
             }
             let (t, q) = decoded[i];
-            let Some((truth_q, rate)) = interpolate(truth, t - offset) else {
+            // The best match within the alignment window: the frame's sample time on the simulator's
+            // clock is only known to within `align_s` (scheduling delays between sampling and the
+            // kernel's timestamp).
+            let mut best: Option<([f64; 4], [f64; 4], [f64; 4], f64)> = None;
+            let n = (align_s / ALIGN_STEP_S).round() as i64;
+            for k in -n..=n {
+                let Some((truth_q, rate, half_gap)) =
+                    interpolate(truth, t - offset + k as f64 * ALIGN_STEP_S)
+                else {
+                    continue;
+                };
+                let err: [f64; 4] = std::array::from_fn(|j| (q[j] - truth_q[j]).abs());
+                let excess = (0..4)
+                    .map(|j| err[j] - rate[j] * half_gap)
+                    .fold(f64::NEG_INFINITY, f64::max);
+                if best.is_none_or(|b| excess < b.3) {
+                    let tol = std::array::from_fn(|j| {
+                        ANGLE_RESOLUTION_RAD + ANGLE_NOISE_RAD + rate[j] * half_gap
+                    });
+                    best = Some((truth_q, err, tol, excess));
+                }
+            }
+            let Some((truth_q, err, tol, _)) = best else {
                 continue;
             };
             result.compared += 1;
-            let err: [f64; 4] = std::array::from_fn(|j| (q[j] - truth_q[j]).abs());
-            let tol: [f64; 4] =
-                std::array::from_fn(|j| ANGLE_RESOLUTION_RAD + ANGLE_NOISE_RAD + rate[j] * align_s);
+            let rate_at = interpolate(truth, t - offset).map_or([0.0; 4], |r| r.1);
             for j in 0..4 {
                 result.max_error_rad[j] = result.max_error_rad[j].max(err[j]);
-                if rate[j] < 0.01 {
+                if rate_at[j] < 0.01 {
                     result.max_error_still_rad = result.max_error_still_rad.max(err[j]);
                 }
             }
+            errors.push(err.iter().copied().fold(0.0, f64::max));
             if (0..4).any(|j| err[j] > tol[j]) {
                 result.outside.push((t, q, truth_q, err));
             }
         }
-        start = end;
+    }
+    errors.sort_by(f64::total_cmp);
+    if let Some(e) = errors.get(errors.len() * 99 / 100) {
+        result.p99_error_rad = *e;
     }
     result
 }
@@ -472,4 +523,16 @@ mod tests {
         let c = compare_angles(&bad, &truth, 1_700_000_000.0, 5.0, 0.02);
         assert_eq!(c.outside.len(), 1);
     }
+}
+
+/// Puts decoded `JointAngles` on the simulator's clock by their sequence: the simulator samples the
+/// resolvers every 10 ms of simulation time and sends one frame per sample, so the k-th frame is
+/// sample k whatever the wall-clock delays were. [`compare_angles`] then only has to find the
+/// constant offset per segment (a frame lost by candump shifts the rest by one period).
+pub fn on_simulation_clock(decoded: &[(f64, [f64; 4])]) -> Vec<(f64, [f64; 4])> {
+    decoded
+        .iter()
+        .enumerate()
+        .map(|(k, (_, q))| (0.01 * k as f64, *q))
+        .collect()
 }
