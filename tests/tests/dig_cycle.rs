@@ -20,8 +20,9 @@ use hil_tests::analysis::{
 use hil_tests::env;
 use hil_tests::plan::{PLAN_CLEANUPS, PLAN_DIGS};
 
-/// The whole plan takes about 125 s of machine time; the VM may be slower than real time.
-const PLAN_TIMEOUT: Duration = Duration::from_secs(420);
+/// The whole plan takes about 115 s of machine time; in the TCG VM on a loaded machine the simulator
+/// falls behind wall time and gateway watchdog trips pause the work (measured: over 420 s at load 8-9).
+const PLAN_TIMEOUT: Duration = Duration::from_secs(900);
 /// Timestamp alignment tolerance, s: candump stamps a frame when the kernel delivers it, the simulator
 /// sends a period's frames after stepping it; in the VM its loop woke up to 350 ms late (measured at
 /// load 8-9 on the shared 2-core machine).
