@@ -126,6 +126,9 @@ pub struct CompareArgs {
     /// Output folder for `compare.svg` and `compare.json`.
     #[arg(long, default_value = "model-compare")]
     pub out: PathBuf,
+    /// Print both trajectories every 0.2 s.
+    #[arg(long)]
+    pub verbose: bool,
 }
 
 /// Arguments of `model table2`.
@@ -135,11 +138,14 @@ pub struct Table2Args {
     #[arg(long, value_name = "FILE")]
     pub model: Option<PathBuf>,
     /// Start distance of the tip from the swing axis, m.
-    #[arg(long, default_value_t = 6.5)]
+    #[arg(long, default_value_t = 7.8)]
     pub start_r: f64,
     /// Start bucket angle to the horizontal, degrees.
-    #[arg(long, default_value_t = -85.0)]
+    #[arg(long, default_value_t = -55.0)]
     pub start_bucket_deg: f64,
+    /// Start depth of the tip below the surface, m.
+    #[arg(long, default_value_t = 0.02)]
+    pub start_depth: f64,
 }
 
 /// Runs a `model` subcommand.
@@ -194,7 +200,7 @@ pub struct DigSetup {
     pub cohesion_pa: f64,
     /// Autodig hardness index.
     pub hardness_index: f64,
-    /// Depth of the tip below the surface at the start (as after Boom-Down), m.
+    /// Depth of the tip below the surface at the start, m.
     pub start_depth_m: f64,
     /// Start joint angles, rad.
     pub start: JointAngles,
@@ -251,7 +257,7 @@ pub fn random_setups(n: usize, seed: u64, vary: bool) -> anyhow::Result<Vec<DigS
                 bench_height_m: base.scenario.bench.height_m,
                 cohesion_pa: base.scenario.soil.cohesion_pa,
                 hardness_index: 3.0,
-                start_depth_m: rng.uniform(0.1, 0.3),
+                start_depth_m: rng.uniform(0.0, 0.05),
                 start: JointAngles::default(),
             };
             if vary {
@@ -262,7 +268,7 @@ pub fn random_setups(n: usize, seed: u64, vary: bool) -> anyhow::Result<Vec<DigS
                 setup.hardness_index = rng.uniform(1.0, 5.0);
             }
             let r = rng.uniform(setup.face_x_m + 0.8, 8.6);
-            let bucket_abs = rng.uniform(-115.0_f64, -95.0).to_radians();
+            let bucket_abs = rng.uniform(-65.0_f64, -45.0).to_radians();
             let mut cfg = sim_config(&setup)?;
             cfg.scenario.start.boom_deg = 40.0;
             let world = World::from_scenario(&cfg.scenario)?;
@@ -280,16 +286,6 @@ pub fn random_setups(n: usize, seed: u64, vary: bool) -> anyhow::Result<Vec<DigS
                 continue;
             }
             setup.start = q;
-            // The plant must start where the model does (strokes, wrapping).
-            // and hold still there through the idle time before the dig.
-            let mut plant = sim_config(&setup)?.build()?;
-            for _ in 0..(IDLE_S / PERIOD_S).round() as usize * PHYSICS_PER_PERIOD {
-                plant.step([0.0; 6]);
-            }
-            let tip = kin.forward(&plant.joint_angles());
-            if (tip.x_m - r).hypot(tip.z_m - z) > 0.03 {
-                continue;
-            }
             found = Some(setup);
             break;
         }
@@ -314,6 +310,10 @@ pub struct SimSample {
     pub bucket_abs_rad: f64,
     /// Autodig command.
     pub command: [f64; 3],
+    /// Cylinder forces from the measured pressures (Eq. A20), N.
+    pub force_n: [f64; 3],
+    /// Head pressures, Pa.
+    pub head_pa: [f64; 3],
 }
 
 /// A simulated dig and its statistics (measured like the controller's `DigStats`).
@@ -335,6 +335,8 @@ pub struct SimDig {
     pub bucket_volume_m3: f64,
     /// Autodig's end reason (`None`: stopped at the time limit).
     pub end: Option<EndReason>,
+    /// True joint angles when Autodig started (the machine may settle during the idle time before).
+    pub start_joints: JointAngles,
 }
 
 fn stage_code(stage: Stage) -> AutodigStageCode {
@@ -400,6 +402,7 @@ pub fn run_sim_dig(
     let mut command = [0.0; 3];
     let mut stage = Stage::PreDig;
     let mut alive = 0u8;
+    let mut start_joints = setup.start;
     for step in 0usize.. {
         let t = plant.time_s();
         let r = plant.read_sensors();
@@ -467,6 +470,9 @@ pub fn run_sim_dig(
         match (dig_start_s, end.is_some() || post > 0) {
             (None, _) if step < idle_steps => command = [0.0; 3],
             (_, false) => {
+                if dig_start_s.is_none() {
+                    start_joints = plant.joint_angles();
+                }
                 let t0 = *dig_start_s.get_or_insert(t);
                 activity = Activity::Dig;
                 let tip = kin.forward(&q);
@@ -504,6 +510,8 @@ pub fn run_sim_dig(
                     tip_z_m: tip.z_m,
                     bucket_abs_rad: tip.bucket_abs_rad,
                     command,
+                    force_n: force,
+                    head_pa: r.head_pa,
                 });
                 if out.stage == Stage::Done || samples.len() > max_dig_steps {
                     end = out.end_reason;
@@ -569,6 +577,7 @@ pub fn run_sim_dig(
         swept_volume_m3: swept.volume_m3(),
         bucket_volume_m3: plant.contact.content.volume_m3,
         end,
+        start_joints,
     })
 }
 
@@ -634,7 +643,8 @@ fn percent(model: f64, measured: f64) -> f64 {
     }
 }
 
-/// Runs the dig model from the setup's start over the simulator's pre-dig section and compares.
+/// Runs the dig model from the simulator's start (joint angles when Autodig began) over its pre-dig
+/// section and compares.
 ///
 /// # Errors
 /// The dig model's errors.
@@ -646,7 +656,7 @@ pub fn compare_dig(
     model.set_hardness_index(sim.setup.hardness_index)?;
     let site = DigSite::new(sim.profile.clone(), 0.0)?;
     let pred = model
-        .predict(&DigStart::Joints(sim.setup.start), &site)
+        .predict(&DigStart::Joints(sim.start_joints), &site)
         .with_context(|| format!("dig model, dig {}", sim.setup.index))?;
     let measured: Vec<[f64; 2]> = sim.samples.iter().map(|s| [s.tip_x_m, s.tip_z_m]).collect();
     let predicted: Vec<[f64; 2]> = pred
@@ -1070,6 +1080,43 @@ fn compare(a: &CompareArgs) -> anyhow::Result<()> {
             c.end[1]
         );
     }
+    if a.verbose {
+        for (sim, c, pred) in &rows {
+            println!(
+                "  dig {}: t, sim (x z bucket_abs cmd), model (stage x z bucket_abs cmd head MPa)",
+                c.index
+            );
+            for k in (0..sim.samples.len().max(pred.samples.len())).step_by(20) {
+                let fmt_sim = sim.samples.get(k).map_or(String::new(), |s| {
+                    format!(
+                        "{:5.2} {:5.2} {:6.0} {:+.2?} {:.1?} {:.0?}",
+                        s.tip_x_m,
+                        s.tip_z_m,
+                        s.bucket_abs_rad.to_degrees(),
+                        s.command,
+                        s.head_pa.map(|p| p * 1e-6),
+                        s.force_n.map(|f| f * 1e-3)
+                    )
+                });
+                let fmt_model = pred.samples.get(k).map_or(String::new(), |s| {
+                    format!(
+                        "{:?} {:5.2} {:5.2} {:6.0} {:+.2?} {:.1?} {:.0?}",
+                        s.stage,
+                        s.tip_x_m,
+                        s.tip_z_m,
+                        s.bucket_abs_rad.to_degrees(),
+                        s.command,
+                        s.head_pa.map(|p| p * 1e-6),
+                        s.force_n.map(|f| f * 1e-3)
+                    )
+                });
+                println!(
+                    "    {:5.2}  {fmt_sim:<44}  {fmt_model}",
+                    k as f64 * PERIOD_S
+                );
+            }
+        }
+    }
     let cmps: Vec<DigComparison> = rows.iter().map(|(_, c, _)| c.clone()).collect();
     let (mean, rms) = mean_errors(&cmps);
     println!(
@@ -1223,12 +1270,13 @@ pub fn default_site() -> anyhow::Result<DigSite> {
 pub fn table2_rows(
     model: &DigModel,
     start_r: f64,
+    start_depth_m: f64,
     start_bucket_deg: f64,
 ) -> anyhow::Result<Vec<Table2Row>> {
     let site = default_site()?;
     let start = DigStart::Pose(BucketPose {
         x_m: start_r,
-        z_m: site.profile().height_at(start_r)? - 0.02,
+        z_m: site.profile().height_at(start_r)? - start_depth_m,
         bucket_abs_rad: start_bucket_deg.to_radians(),
     });
     let mut rows = Vec::new();
@@ -1248,10 +1296,10 @@ pub fn table2_rows(
 
 fn table2(a: &Table2Args) -> anyhow::Result<()> {
     let model = load_model(a.model.as_deref())?;
-    let rows = table2_rows(&model, a.start_r, a.start_bucket_deg)?;
+    let rows = table2_rows(&model, a.start_r, a.start_depth, a.start_bucket_deg)?;
     println!(
-        "Table 2 with the dig model (tip at r = {:.2} m on the default bench, bucket {:.0} deg)",
-        a.start_r, a.start_bucket_deg
+        "Table 2 with the dig model (tip {:.2} m deep at r = {:.2} m on the default bench, bucket {:.0} deg)",
+        a.start_depth, a.start_r, a.start_bucket_deg
     );
     println!(
         "  force factor  time [s]  volume [m^3]  energy [kJ]   | thesis: time  volume  energy"

@@ -1035,8 +1035,9 @@ mod tests {
         (r - 3.0).clamp(0.0, 2.0)
     }
 
-    const START_R_M: f64 = 6.5;
-    const START_BUCKET_DEG: f64 = -85.0;
+    const START_R_M: f64 = 7.8;
+    const START_BUCKET_DEG: f64 = -55.0;
+    const START_DEPTH_M: f64 = 0.02;
 
     fn site() -> DigSite {
         let p = SectionProfile::from_fn(0.5, 12.0, 0.05, bench_height).expect("profile");
@@ -1046,7 +1047,7 @@ mod tests {
     fn start() -> DigStart {
         DigStart::Pose(BucketPose {
             x_m: START_R_M,
-            z_m: bench_height(START_R_M) - 0.02,
+            z_m: bench_height(START_R_M) - START_DEPTH_M,
             bucket_abs_rad: START_BUCKET_DEG.to_radians(),
         })
     }
@@ -1097,7 +1098,7 @@ mod tests {
                 let r = 5.8 + 0.3 * f64::from(i);
                 DigStart::Pose(BucketPose {
                     x_m: r,
-                    z_m: bench_height(r) - 0.02,
+                    z_m: bench_height(r) - START_DEPTH_M,
                     bucket_abs_rad: START_BUCKET_DEG.to_radians(),
                 })
             })
