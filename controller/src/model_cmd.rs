@@ -244,7 +244,7 @@ fn section_of(world: &World, cfg: &SimConfig) -> anyhow::Result<SectionProfile> 
 pub fn random_setups(n: usize, seed: u64, vary: bool) -> anyhow::Result<Vec<DigSetup>> {
     let base = SimConfig::load::<&str>(None, None, Some(seed), &[])?;
     let kin = Kinematics::new(&base.machine)?;
-    let mut rng = SplitMix(seed ^ 0x5EED_D16);
+    let mut rng = SplitMix(seed ^ 0x05EE_DD16);
     let mut out = Vec::with_capacity(n);
     for index in 0..n {
         let mut found = None;
