@@ -21,6 +21,9 @@ pub enum Command {
     /// Run on a CAN interface in real time (SocketCAN): arm, dig, dump; Ctrl-C leaves the valves
     /// neutral and the gateway disarmed.
     Run(RunArgs),
+    /// The embedded default: the simulator in-process in virtual time and a full autonomous session;
+    /// writes the trace, scans, summary and plots into --out (docs/demo-output.md).
+    Demo(crate::demo::DemoArgs),
     /// candump trace tools: decode, stats, plot, convert (csv, mcap), replay, diff (docs/trace-tools.md).
     Trace {
         /// The trace tool.

@@ -584,6 +584,8 @@ pub struct WorkCycle {
     stats: Vec<DigStats>,
     track_target_m: f64,
     last_now_s: f64,
+    /// MoveToDig: the tip has been lifted to the start height once (lift-first is not re-entered).
+    lifted: bool,
     /// Hook for an external action source (`crate::planned`): hold in Idle when the actions run out.
     external_plan: bool,
 }
@@ -637,6 +639,7 @@ impl WorkCycle {
             stats: Vec::new(),
             track_target_m: 0.0,
             last_now_s: 0.0,
+            lifted: false,
             external_plan: false,
         })
     }
@@ -803,6 +806,7 @@ impl WorkCycle {
         self.phase = phase;
         self.phase_since_s = now_s;
         self.settle_since_s = None;
+        self.lifted = false;
     }
 
     fn hold(&self) -> CycleOutput {
@@ -968,7 +972,13 @@ impl WorkCycle {
         // Lift first: while the tip is well below the start pose only the boom moves (up), so the
         // bucket is not dragged through the ground; the swing waits until the boom is up too.
         let target_z = est.kinematics().forward(&target).z_m;
-        let low = s.tip.z_m < target_z - 0.2;
+        // Latched: once lifted, the boom's P-controller alone settles it. Re-entering the full lift
+        // whenever a gravity-assisted lowering overshot made a limit cycle (boom +-4 degrees) that
+        // timed out the move.
+        let low = !self.lifted && s.tip.z_m < target_z - 0.2;
+        if !low {
+            self.lifted = true;
+        }
         if low {
             implement = [self.config.joint.max_command, 0.0, 0.0];
         }

@@ -28,10 +28,12 @@
 
 pub mod cli;
 pub mod cycle;
+pub mod demo;
 pub mod estimate;
 pub mod model_cmd;
 pub mod node;
 pub mod planned;
+pub mod plots;
 pub mod run;
 pub mod safety;
 pub mod scan_client;

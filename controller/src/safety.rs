@@ -592,7 +592,8 @@ impl Safety {
                 Some((t, mode)) => {
                     mode != hb.mode
                         || self.state == SafetyState::Shutdown
-                        || !(now_s - t < period - 1e-6)
+                        // Also when the clock is not finite: send rather than starve the watchdog.
+                        || (now_s - t).partial_cmp(&(period - 1e-6)) != Some(std::cmp::Ordering::Less)
                 }
             };
             if due {

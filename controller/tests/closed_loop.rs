@@ -341,6 +341,21 @@ fn log_one_dig() {
             },
         }];
     }
+    if let Ok(sw) = std::env::var("DIG_SWING") {
+        let sw: f64 = sw.parse().unwrap();
+        if let Some(Action::Dig { swing_rad, .. }) = c.cycle.actions.first_mut() {
+            *swing_rad = sw.to_radians();
+        }
+    }
+    if let Ok(sw) = std::env::var("DIG_SECOND") {
+        let sw: f64 = sw.parse().unwrap();
+        let mut second = c.cycle.actions[0];
+        if let Action::Dig { swing_rad, .. } = &mut second {
+            *swing_rad = sw.to_radians();
+        }
+        c.cycle.actions.push(second);
+        c.cycle.max_digs = Some(2);
+    }
     if std::env::var("DIG_Q").is_ok() {
         // boom, stick, bucket (deg) directly.
         let q: Vec<f64> = std::env::var("DIG_Q")
@@ -379,9 +394,18 @@ fn log_one_dig() {
     l.node = controller::node::ControllerNode::new(&l.sim.machine, maps, c).unwrap();
     let mut next = 0.0;
     l.run_until(60.0, |l| {
-        let in_dig = matches!(l.phase(), Phase::Autodig | Phase::Weigh);
+        let in_dig = matches!(l.phase(), Phase::Autodig | Phase::Weigh)
+            || std::env::var("DIG_ALL").is_ok();
         if in_dig && !quiet && l.time_s() >= next {
             next = l.time_s() + env("DIG_DT", 0.1);
+            if std::env::var("DIG_ALL").is_ok() {
+                eprintln!(
+                    "phase {:?} swing {:.1} deg target action {:?}",
+                    l.phase(),
+                    l.node.state().swing_rad.to_degrees(),
+                    l.node.action().map(|a| a.kind())
+                );
+            }
             let s = l.node.state();
             let t = l.machine.plant().true_state();
             let q = s.joints;
@@ -420,6 +444,9 @@ fn log_one_dig() {
                 l.node.estimator().payload_estimate_kg().unwrap_or(f64::NAN),
                 l.node.cycle().swept_volume_m3(),
             );
+        }
+        if std::env::var("DIG_SECOND").is_ok() {
+            return l.node.statistics().len() >= 2 || l.node.finished();
         }
         l.phase() == Phase::SwingToDump
     });
