@@ -24,6 +24,8 @@ pub enum Command {
     /// The embedded default: the simulator in-process in virtual time and a full autonomous session;
     /// writes the trace, scans, summary and plots into --out (docs/demo-output.md).
     Demo(crate::demo::DemoArgs),
+    /// The thesis's Autodig results in closed loop against the simulator: table1, table2, fig52.
+    Experiment(crate::experiment::ExperimentArgs),
     /// candump trace tools: decode, stats, plot, convert (csv, mcap), replay, diff (docs/trace-tools.md).
     Trace {
         /// The trace tool.

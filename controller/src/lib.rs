@@ -30,6 +30,7 @@ pub mod cli;
 pub mod cycle;
 pub mod demo;
 pub mod estimate;
+pub mod experiment;
 pub mod model_cmd;
 pub mod node;
 pub mod planned;

@@ -25,6 +25,7 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Run(args) => runtime.block_on(controller::run::run(args.into())),
         Command::Demo(args) => runtime.block_on(controller::demo::run(args)),
+        Command::Experiment(args) => controller::experiment::run(&args),
         Command::Trace { cmd } => runtime.block_on(controller::trace_tool::run(cmd)),
         Command::Model { cmd } => controller::model_cmd::run(cmd),
     };

@@ -1,0 +1,32 @@
+//! The thesis reproductions (`excavator-ctl experiment`) in a reduced run: the trends that hold today.
+//! Those that do not (Table 1's -87/-70 degree starts time out in the move to the dig; Table 2's time
+//! and swept volume; Fig. 52's hard soil) are listed in the README section and not asserted.
+
+#![allow(clippy::unwrap_used)]
+
+use controller::experiment::{ExperimentArgs, Which, report, table2};
+
+#[test]
+fn energy_rises_from_the_nominal_soil_force() {
+    let rows = table2(1).unwrap();
+    assert_eq!(rows.len(), 3);
+    assert!(rows.iter().all(|(_, m)| m.completed == 1), "{rows:?}");
+    assert!(rows[0].1.payload_kg > 0.8 * 2550.0, "{rows:?}");
+    assert!(rows[1].1.energy_kj > rows[0].1.energy_kj, "{rows:?}");
+    // x3 against x2 is within the seed-to-seed spread (about 1 %); against x1 it rises.
+    assert!(rows[2].1.energy_kj > rows[0].1.energy_kj, "{rows:?}");
+}
+
+#[test]
+fn fig52_report_prints_the_thesis_comparison() {
+    let text = report(&ExperimentArgs {
+        which: Which::Fig52,
+        runs: 1,
+    })
+    .unwrap();
+    assert!(
+        text.contains("| soft | 1 |") && text.contains("| hard | 5 |"),
+        "{text}"
+    );
+    assert!(text.contains("Thesis"), "{text}");
+}
