@@ -52,9 +52,20 @@ fn demo_writes_all_outputs_with_the_documented_fields_for_two_digs() {
         assert!(d["energy_kj"].as_f64().unwrap() > 0.0);
     }
     // The first dig fills the bucket from the default start (> 80 % of 2550 kg).
-    assert!(digs[0]["true_payload_kg"].as_f64().unwrap() > 0.8 * 2550.0, "{}", digs[0]);
+    assert!(
+        digs[0]["true_payload_kg"].as_f64().unwrap() > 0.8 * 2550.0,
+        "{}",
+        digs[0]
+    );
     assert!(digs[0]["swept_volume_m3"].as_f64().unwrap() > 0.0);
-    for k in ["digs", "weight_n", "mean_time_s", "energy_kj", "sim_time_s", "trace_frames"] {
+    for k in [
+        "digs",
+        "weight_n",
+        "mean_time_s",
+        "energy_kj",
+        "sim_time_s",
+        "trace_frames",
+    ] {
         assert!(json["totals"].get(k).is_some(), "totals field {k}");
     }
     assert_eq!(json["totals"]["trace_dropped"].as_u64(), Some(0));
@@ -68,7 +79,10 @@ fn demo_writes_all_outputs_with_the_documented_fields_for_two_digs() {
     assert!(trace.ends_with('\n'));
     let first = trace.lines().find(|l| l.starts_with('(')).unwrap();
     assert!(first.contains(" vcan0 "), "{first}");
-    assert!(trace.contains("#27") || trace.contains("27#"), "controller frames");
+    assert!(
+        trace.contains("#27") || trace.contains("27#"),
+        "controller frames"
+    );
     assert!(trace.lines().count() as u64 >= json["totals"]["trace_frames"].as_u64().unwrap());
 }
 

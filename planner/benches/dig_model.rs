@@ -67,7 +67,10 @@ fn main() {
     let t0 = Instant::now();
     let parallel = model.evaluate_many(&starts, &site);
     let t_parallel = t0.elapsed().as_secs_f64();
-    assert_eq!(serial, parallel, "parallel evaluation must match the serial one");
+    assert_eq!(
+        serial, parallel,
+        "parallel evaluation must match the serial one"
+    );
     let ok = parallel.iter().filter(|r| r.is_ok()).count();
     println!(
         "{} candidates ({} evaluated without error): serial {:.1} ms, rayon on {} threads {:.1} ms, speed-up {:.2}x",
