@@ -192,6 +192,14 @@ pub const ANGLE_NOISE_RAD: f64 = 5.0 * 2e-4;
 /// Step of the search within the alignment window, s.
 const ALIGN_STEP_S: f64 = 0.001;
 
+/// One sample outside the tolerance: time (s), decoded angles, true angles and allowed error (rad),
+/// joints `[boom, stick, bucket, swing]`.
+pub type AngleOutlier = (f64, [f64; 4], [f64; 4], [f64; 4]);
+
+/// A candidate alignment of one decoded sample: true angles, error, tolerance (rad) and the excess of
+/// the error over the tolerance.
+type AlignedMatch = ([f64; 4], [f64; 4], [f64; 4], f64);
+
 /// How decoded angles compare with the simulator's truth.
 #[derive(Debug, Clone, PartialEq)]
 pub struct AngleComparison {
@@ -201,7 +209,7 @@ pub struct AngleComparison {
     /// wake-up, so their timestamps are not their simulation times; the alignment window covers them).
     pub burst: usize,
     /// Samples outside the tolerance.
-    pub outside: Vec<(f64, [f64; 4], [f64; 4], [f64; 4])>,
+    pub outside: Vec<AngleOutlier>,
     /// `wall - simulation` time offset per segment, s.
     pub offsets_s: Vec<f64>,
     /// Largest error per joint among the compared samples, rad.
@@ -220,7 +228,7 @@ fn interpolate(truth: &[StateSample], t: f64) -> Option<([f64; 4], [f64; 4], f64
     }
     let (a, b) = (&truth[i - 1], &truth[i]);
     let dt = b.time_s - a.time_s;
-    if !(dt > 0.0) || dt > 2.5 {
+    if dt.is_nan() || dt <= 0.0 || dt > 2.5 {
         return None;
     }
     let w = (t - a.time_s) / dt;
@@ -353,7 +361,7 @@ pub fn compare_angles(
             // The best match within the alignment window: the frame's sample time on the simulator's
             // clock is only known to within `align_s` (scheduling delays between sampling and the
             // kernel's timestamp).
-            let mut best: Option<([f64; 4], [f64; 4], [f64; 4], f64)> = None;
+            let mut best: Option<AlignedMatch> = None;
             let n = (align_s / ALIGN_STEP_S).round() as i64;
             for k in -n..=n {
                 let Some((truth_q, rate, half_gap)) =
@@ -430,6 +438,18 @@ pub fn decoded_joint_angles(text: &str) -> Result<Vec<(f64, [f64; 4])>, String> 
         out.push((t, q));
     }
     Ok(out)
+}
+
+/// Puts decoded `JointAngles` on the simulator's clock by their sequence: the simulator samples the
+/// resolvers every 10 ms of simulation time and sends one frame per sample, so the k-th frame is
+/// sample k whatever the wall-clock delays were. [`compare_angles`] then only has to find the
+/// constant offset per segment (a frame lost by candump shifts the rest by one period).
+pub fn on_simulation_clock(decoded: &[(f64, [f64; 4])]) -> Vec<(f64, [f64; 4])> {
+    decoded
+        .iter()
+        .enumerate()
+        .map(|(k, (_, q))| (0.01 * k as f64, *q))
+        .collect()
 }
 
 #[cfg(test)]
@@ -523,16 +543,4 @@ mod tests {
         let c = compare_angles(&bad, &truth, 1_700_000_000.0, 5.0, 0.02);
         assert_eq!(c.outside.len(), 1);
     }
-}
-
-/// Puts decoded `JointAngles` on the simulator's clock by their sequence: the simulator samples the
-/// resolvers every 10 ms of simulation time and sends one frame per sample, so the k-th frame is
-/// sample k whatever the wall-clock delays were. [`compare_angles`] then only has to find the
-/// constant offset per segment (a frame lost by candump shifts the rest by one period).
-pub fn on_simulation_clock(decoded: &[(f64, [f64; 4])]) -> Vec<(f64, [f64; 4])> {
-    decoded
-        .iter()
-        .enumerate()
-        .map(|(k, (_, q))| (0.01 * k as f64, *q))
-        .collect()
 }
