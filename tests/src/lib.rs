@@ -2,7 +2,7 @@
 //!
 //! # Layout
 //!
-//! - [`env`]: the vcan interface, the built binaries, can-utils: found or a loud failure naming the fix.
+//! - [`env`](mod@env): the vcan interface, the built binaries, can-utils: found or a loud failure naming the fix.
 //! - [`process`]: child processes that die with the test, signals, logs.
 //! - [`plan`]: the HIL work-cycle plan (three digs and a cleanup) as a controller config file.
 //! - [`analysis`]: what a recorded session shows, computed the same way for a `candump -L` log and an
