@@ -72,7 +72,12 @@ fn sim_and_controller_complete_three_dig_cycles_and_a_cleanup() {
         s.logs()
     );
     assert_eq!(cycles.returns_home, 1, "{seq:?}");
-    assert_eq!(seq.last(), Some(&Activity::Idle), "ends idle: {seq:?}");
+    // The session ends with the return home; the Idle status after it is sent at 20 Hz and may be
+    // cut off by the controller's exit before candump sees it.
+    assert!(
+        matches!(seq.last(), Some(Activity::Idle | Activity::Return)),
+        "ends with the return home: {seq:?}"
+    );
     // The controller's own summary agrees: the plan finished with four actions recorded, and each dig
     // asked the simulator's scan socket for a terrain map.
     let summary = ctl_log
