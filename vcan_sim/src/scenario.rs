@@ -114,6 +114,11 @@ pub struct BenchSpec {
     pub face_slope_deg: f64,
     /// Elevation of the floor to dig down to (m, world z).
     pub floor_elevation_m: f64,
+    /// A cut instead of a block: the machine stands on the ground plane, which is the bench top, and
+    /// the bench region is excavated `height_m` below it, its face descending from the crest at
+    /// `face_x_m` (the thesis's extended-operation setting, ch. 6: the dig face recedes toward the
+    /// machine, which tracks back). Default false.
+    pub cut: bool,
 }
 
 impl Default for BenchSpec {
@@ -126,6 +131,7 @@ impl Default for BenchSpec {
             center_y_m: 0.0,
             face_slope_deg: 45.0,
             floor_elevation_m: 0.0,
+            cut: false,
         }
     }
 }

@@ -86,6 +86,7 @@ pub struct World {
     pub repose_rad: f64,
 }
 
+pub static DEPOSITS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 impl World {
     /// Builds the terrain, soil map and boulders of a scenario.
     ///
@@ -101,7 +102,8 @@ impl World {
             let inside_y = (y - b.center_y_m).abs() <= 0.5 * b.width_m;
             let inside_x = x >= b.face_x_m && x <= b.face_x_m + b.length_m;
             if inside_y && inside_x {
-                ((x - b.face_x_m) * slope).min(b.height_m)
+                let rise = ((x - b.face_x_m) * slope).min(b.height_m);
+                if b.cut { -rise } else { rise }
             } else {
                 0.0
             }
@@ -134,10 +136,19 @@ impl World {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(s.seed ^ 0xB0B0_1DE5);
         for _ in 0..s.boulders.random_count {
             let radius = rng.random_range(s.boulders.min_radius_m..=s.boulders.max_radius_m);
-            let x = b.face_x_m + rng.random_range(0.0..=b.length_m.max(1e-3));
+            let along = rng.random_range(0.0..=b.length_m.max(1e-3));
             let y = b.center_y_m + rng.random_range(-0.5..=0.5) * b.width_m;
-            let top = ((x - b.face_x_m) * slope).min(b.height_m);
-            let z = rng.random_range(0.0..=top.max(1e-3));
+            let (x, z) = if b.cut {
+                // In the material behind the crest, above the cut's floor.
+                (
+                    b.face_x_m - along,
+                    -rng.random_range(0.0..=b.height_m.max(1e-3)),
+                )
+            } else {
+                let x = b.face_x_m + along;
+                let top = ((x - b.face_x_m) * slope).min(b.height_m);
+                (x, rng.random_range(0.0..=top.max(1e-3)))
+            };
             boulders.push(Boulder {
                 x_m: x,
                 y_m: y,
@@ -201,6 +212,7 @@ impl World {
     /// Deposits `volume_m3` as a cone at the angle of repose centred on `(x, y)`, within 2.5 m.
     /// Returns the volume actually placed (0 when the point is off the map).
     pub fn deposit_local(&mut self, x_m: f64, y_m: f64, volume_m3: f64) -> f64 {
+        DEPOSITS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         if !(volume_m3 > 0.0 && x_m.is_finite() && y_m.is_finite()) {
             return 0.0;
         }
