@@ -86,7 +86,6 @@ pub struct World {
     pub repose_rad: f64,
 }
 
-pub static DEPOSITS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 impl World {
     /// Builds the terrain, soil map and boulders of a scenario.
     ///
@@ -212,7 +211,6 @@ impl World {
     /// Deposits `volume_m3` as a cone at the angle of repose centred on `(x, y)`, within 2.5 m.
     /// Returns the volume actually placed (0 when the point is off the map).
     pub fn deposit_local(&mut self, x_m: f64, y_m: f64, volume_m3: f64) -> f64 {
-        DEPOSITS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         if !(volume_m3 > 0.0 && x_m.is_finite() && y_m.is_finite()) {
             return 0.0;
         }
