@@ -651,6 +651,14 @@ impl WorkCycle {
         self.external_plan = on;
     }
 
+    /// Hook for the online soil hardness index (thesis 5.2, `crate::planned`): the index Autodig uses
+    /// from the next dig on. Non-finite values are ignored.
+    pub fn set_hardness_index(&mut self, index: f64) {
+        if index.is_finite() {
+            self.autodig_config.hardness_index = index;
+        }
+    }
+
     /// True when the cycle waits for the next action from an external source.
     pub fn needs_action(&self) -> bool {
         self.external_plan

@@ -308,6 +308,11 @@ impl ControllerNode {
         self.cycle.set_external_plan(on);
     }
 
+    /// Sets Autodig's soil hardness index for the next digs (see [`WorkCycle::set_hardness_index`]).
+    pub fn set_hardness_index(&mut self, index: f64) {
+        self.cycle.set_hardness_index(index);
+    }
+
     /// Appends an action to the work cycle's plan (see [`WorkCycle::push_action`]).
     ///
     /// # Errors
