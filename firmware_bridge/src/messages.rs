@@ -13,6 +13,39 @@ use crate::id::J1939Id;
 
 pub use crate::dbc::{DecodeError, EncodeError};
 
+/// Defines a `Copy` enum whose variants are the values of one DBC enumeration signal, with a
+/// `from_raw` that maps a raw signal value to its variant.
+///
+/// The first variant listed is the one for raw 0 and for any value outside the listed ones: every
+/// caller has already checked the raw value against the signal's DBC range, so the fallback is only
+/// reached for values the DBC allows but leaves unnamed.
+macro_rules! signal_enum {
+    (
+        $(#[$meta:meta])*
+        pub enum $name:ident {
+            $(#[$first_meta:meta])*
+            $first:ident = $first_value:literal,
+            $( $(#[$variant_meta:meta])* $variant:ident = $value:literal, )*
+        }
+    ) => {
+        $(#[$meta])*
+        pub enum $name {
+            $(#[$first_meta])*
+            $first = $first_value,
+            $( $(#[$variant_meta])* $variant = $value, )*
+        }
+
+        impl $name {
+            fn from_raw(raw: i64) -> Self {
+                match raw {
+                    $( $value => Self::$variant, )*
+                    _ => Self::$first,
+                }
+            }
+        }
+    };
+}
+
 /// The six valve sections, in the valve-number order of the ISO 11783-7 PGNs (PGN 65072 + number).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Valve {
@@ -81,85 +114,59 @@ impl Cylinder {
     }
 }
 
-/// ISO 11783-7 valve state.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum ValveState {
-    /// Block (neutral): both work ports closed.
-    Block = 0,
-    /// Flow to the extend port (cylinder extends).
-    Extend = 1,
-    /// Flow to the retract port (cylinder retracts).
-    Retract = 2,
-    /// Float: both work ports to tank.
-    Float = 3,
-}
-
-impl ValveState {
-    fn from_raw(raw: i64) -> Self {
-        match raw {
-            1 => Self::Extend,
-            2 => Self::Retract,
-            3 => Self::Float,
-            // The DBC range [0|3] has been checked before this is called.
-            _ => Self::Block,
-        }
+signal_enum! {
+    /// ISO 11783-7 valve state.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+    pub enum ValveState {
+        /// Block (neutral): both work ports closed.
+        Block = 0,
+        /// Flow to the extend port (cylinder extends).
+        Extend = 1,
+        /// Flow to the retract port (cylinder retracts).
+        Retract = 2,
+        /// Float: both work ports to tank.
+        Float = 3,
     }
 }
 
-/// ISO 11783-7 fail-safe mode: what the valve does when commands stop arriving.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum FailSafeMode {
-    /// Go to block (neutral). The project always uses this.
-    Block = 0,
-    /// Go to float.
-    Float = 1,
-}
-
-/// Gateway operating mode.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum GatewayMode {
-    /// Valves held neutral; commands ignored.
-    Disarmed = 0,
-    /// Valve commands from the controller are applied.
-    ArmedValve = 1,
-    /// The gateway's closed-loop position control follows [`PositionSetpoint`].
-    ArmedPosition = 2,
-    /// A fault latched; valves neutral until the controller disarms.
-    Faulted = 3,
-}
-
-impl GatewayMode {
-    fn from_raw(raw: i64) -> Self {
-        match raw {
-            1 => Self::ArmedValve,
-            2 => Self::ArmedPosition,
-            3 => Self::Faulted,
-            _ => Self::Disarmed,
-        }
+signal_enum! {
+    /// ISO 11783-7 fail-safe mode: what the valve does when commands stop arriving.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+    pub enum FailSafeMode {
+        /// Go to block (neutral). The project always uses this.
+        Block = 0,
+        /// Go to float.
+        Float = 1,
     }
 }
 
-/// The mode the controller asks the gateway for.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum RequestedMode {
-    /// Go to disarmed (valves neutral).
-    Disarm = 0,
-    /// Arm and apply valve commands.
-    ArmValve = 1,
-    /// Arm and follow position setpoints.
-    ArmPosition = 2,
-    /// Emergency stop: neutral valves and latch a fault.
-    EStop = 3,
+signal_enum! {
+    /// Gateway operating mode.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+    pub enum GatewayMode {
+        /// Valves held neutral; commands ignored.
+        Disarmed = 0,
+        /// Valve commands from the controller are applied.
+        ArmedValve = 1,
+        /// The gateway's closed-loop position control follows [`PositionSetpoint`].
+        ArmedPosition = 2,
+        /// A fault latched; valves neutral until the controller disarms.
+        Faulted = 3,
+    }
 }
 
-impl RequestedMode {
-    fn from_raw(raw: i64) -> Self {
-        match raw {
-            1 => Self::ArmValve,
-            2 => Self::ArmPosition,
-            3 => Self::EStop,
-            _ => Self::Disarm,
-        }
+signal_enum! {
+    /// The mode the controller asks the gateway for.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+    pub enum RequestedMode {
+        /// Go to disarmed (valves neutral).
+        Disarm = 0,
+        /// Arm and apply valve commands.
+        ArmValve = 1,
+        /// Arm and follow position setpoints.
+        ArmPosition = 2,
+        /// Emergency stop: neutral valves and latch a fault.
+        EStop = 3,
     }
 }
 
@@ -445,77 +452,51 @@ pub fn heartbeat_checksum(data: &[u8]) -> u8 {
     crc8_sae_j1850(pgn_bytes.into_iter().chain(body))
 }
 
-/// What the controller is doing (the `Activity` signal of [`ControllerStatus`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
-pub enum Activity {
-    /// Not moving the machine.
-    #[default]
-    Idle = 0,
-    /// Taking a range scan.
-    Scan = 1,
-    /// Swinging to the dig location.
-    SwingToDig = 2,
-    /// Autodig.
-    Dig = 3,
-    /// Floor cleanup (waypoint following, then Autodig from Pre-Dig).
-    Cleanup = 4,
-    /// Swinging to the spoil pile or truck.
-    SwingToDump = 5,
-    /// Dumping.
-    Dump = 6,
-    /// Returning from the dump.
-    Return = 7,
-    /// Tracking (driving) the machine.
-    Track = 8,
-    /// Halted by a fault; valves neutral.
-    Faulted = 9,
-}
-
-impl Activity {
-    fn from_raw(raw: i64) -> Self {
-        match raw {
-            1 => Self::Scan,
-            2 => Self::SwingToDig,
-            3 => Self::Dig,
-            4 => Self::Cleanup,
-            5 => Self::SwingToDump,
-            6 => Self::Dump,
-            7 => Self::Return,
-            8 => Self::Track,
-            9 => Self::Faulted,
-            _ => Self::Idle,
-        }
+signal_enum! {
+    /// What the controller is doing (the `Activity` signal of [`ControllerStatus`]).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+    pub enum Activity {
+        /// Not moving the machine.
+        #[default]
+        Idle = 0,
+        /// Taking a range scan.
+        Scan = 1,
+        /// Swinging to the dig location.
+        SwingToDig = 2,
+        /// Autodig.
+        Dig = 3,
+        /// Floor cleanup (waypoint following, then Autodig from Pre-Dig).
+        Cleanup = 4,
+        /// Swinging to the spoil pile or truck.
+        SwingToDump = 5,
+        /// Dumping.
+        Dump = 6,
+        /// Returning from the dump.
+        Return = 7,
+        /// Tracking (driving) the machine.
+        Track = 8,
+        /// Halted by a fault; valves neutral.
+        Faulted = 9,
     }
 }
 
-/// Autodig stage as sent on the bus (the `AutodigStage` signal of [`ControllerStatus`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
-pub enum AutodigStageCode {
-    /// Autodig not running.
-    #[default]
-    None = 0,
-    /// Lowering the boom to the ground.
-    BoomDown = 1,
-    /// Pre-Dig: curling the bucket into the material.
-    PreDig = 2,
-    /// Dig: stick in, boom and bucket regulating load.
-    Dig = 3,
-    /// Capture: boom and bucket up.
-    Capture = 4,
-    /// Finished.
-    Done = 5,
-}
-
-impl AutodigStageCode {
-    fn from_raw(raw: i64) -> Self {
-        match raw {
-            1 => Self::BoomDown,
-            2 => Self::PreDig,
-            3 => Self::Dig,
-            4 => Self::Capture,
-            5 => Self::Done,
-            _ => Self::None,
-        }
+signal_enum! {
+    /// Autodig stage as sent on the bus (the `AutodigStage` signal of [`ControllerStatus`]).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+    pub enum AutodigStageCode {
+        /// Autodig not running.
+        #[default]
+        None = 0,
+        /// Lowering the boom to the ground.
+        BoomDown = 1,
+        /// Pre-Dig: curling the bucket into the material.
+        PreDig = 2,
+        /// Dig: stick in, boom and bucket regulating load.
+        Dig = 3,
+        /// Capture: boom and bucket up.
+        Capture = 4,
+        /// Finished.
+        Done = 5,
     }
 }
 
@@ -807,11 +788,7 @@ impl Message {
                 valve,
                 flow_percent,
                 state: ValveState::from_raw(raw(&cmd::VALVE_STATE, d)?),
-                fail_safe: if raw(&cmd::FAIL_SAFE_MODE, d)? == 1 {
-                    FailSafeMode::Float
-                } else {
-                    FailSafeMode::Block
-                },
+                fail_safe: FailSafeMode::from_raw(raw(&cmd::FAIL_SAFE_MODE, d)?),
             }));
         }
         if let Some(n) = AUX_VALVE_MEASURED.iter().position(|m| m.pgn == desc.pgn) {
