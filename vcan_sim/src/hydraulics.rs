@@ -503,6 +503,8 @@ fn relief_flow(p: f64, crack: f64, override_pa: f64, rated_flow: f64) -> f64 {
 /// that bisection shrinks; `f` returns the value and its derivative.
 fn solve_decreasing(mut f: impl FnMut(f64) -> (f64, f64), guess: f64, lo: f64, hi: f64) -> f64 {
     let (mut lo, mut hi) = (lo, hi);
+    // Whether the residual has been evaluated at each end of the bracket.
+    let (mut lo_seen, mut hi_seen) = (false, false);
     let mut p = guess.clamp(lo, hi);
     for _ in 0..40 {
         let (value, slope) = f(p);
@@ -510,22 +512,31 @@ fn solve_decreasing(mut f: impl FnMut(f64) -> (f64, f64), guess: f64, lo: f64, h
             return p;
         }
         if value > 0.0 {
-            lo = p;
+            (lo, lo_seen) = (p, true);
         } else {
-            hi = p;
+            (hi, hi_seen) = (p, true);
         }
         let newton = if slope < 0.0 {
             p - value / slope
         } else {
             f64::NAN
         };
-        let next = if newton.is_finite() && newton > lo && newton < hi {
+        // Converged when the Newton step is below 10 Pa (far below the 5 kPa sensor resolution).
+        // At a root found to rounding the step may end a hair outside the bracket: clamp it.
+        if (newton - p).abs() < 10.0 {
+            return newton.clamp(lo, hi);
+        }
+        let next = if newton > lo && newton < hi {
             newton
+        } else if newton <= lo && !lo_seen {
+            // The root may lie at the lower bound (a chamber emptied to zero): look there first.
+            lo
+        } else if newton >= hi && !hi_seen {
+            hi
         } else {
             0.5 * (lo + hi)
         };
-        // 10 Pa is far below sensor resolution (5 kPa on the bus).
-        if (next - p).abs() < 10.0 || hi - lo < 10.0 {
+        if hi - lo < 10.0 {
             return next;
         }
         p = next;
@@ -1059,6 +1070,50 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// Regression: a Newton step that landed on the root left a residual at rounding level (not
+    /// below 1e-12), the next Newton step then fell on the bracket's edge and the solver bisected the
+    /// whole 87 MPa bracket down to 10 Pa (~25 evaluations, and an answer anywhere within 10 Pa).
+    #[test]
+    fn root_found_to_rounding_ends_the_solve_without_bisecting() {
+        // A chamber-like residual: linear plus a square-root orifice term, root near 2.7e5 Pa.
+        let residual = |p: f64| {
+            let q = 5.4e-6 * (2.0e7 - p).sqrt();
+            (
+                2.7e5 + 5.0e8 * (q - 2.4e-2) - p,
+                -5.0e8 * 5.4e-6 / (2.0 * (2.0e7 - p).sqrt()) - 1.0,
+            )
+        };
+        let mut evaluations = 0;
+        let root = solve_decreasing(
+            |p| {
+                evaluations += 1;
+                residual(p)
+            },
+            2.6e5,
+            0.0,
+            8.7e7,
+        );
+        assert!(evaluations <= 4, "{evaluations} evaluations");
+        assert!(
+            residual(root).0.abs() < 1e-3,
+            "residual {}",
+            residual(root).0
+        );
+        // A root below the lower bound (a chamber drained below zero) is clamped to it at once.
+        let mut evaluations = 0;
+        let clamped = solve_decreasing(
+            |p| {
+                evaluations += 1;
+                (-2.2e5 - 1.3 * p, -1.3)
+            },
+            5.0e3,
+            0.0,
+            8.7e7,
+        );
+        assert_eq!(clamped, 0.0);
+        assert!(evaluations <= 2, "{evaluations} evaluations");
     }
 
     #[test]

@@ -4,7 +4,7 @@
 //! excavator-sim --iface vcan0 [--machine FILE] [--bench FILE] [--seed N] [--effect NAME=VALUE]...
 //!               [--state-log FILE] [--scan-socket ADDR]
 //! excavator-sim --list-effects [--json]
-//! excavator-sim bench [--seconds S]
+//! excavator-sim bench [--seconds S] [--case TEXT] [--repeat N]
 //! ```
 
 use std::path::PathBuf;
@@ -65,57 +65,121 @@ enum Command {
         /// Run only the cases whose name contains this text (e.g. `idle`, `digging`, `node`).
         #[arg(long)]
         case: Option<String>,
+        /// Runs per case (the figures are printed as a range).
+        #[arg(long, default_value_t = 1)]
+        repeat: u32,
     },
 }
 
-fn bench(config: &SimConfig, seconds: f64, case: Option<&str>) -> Result<()> {
+/// CPU time this thread has run (ns), from `/proc/thread-self/schedstat` (Linux); `None` elsewhere.
+/// Unlike wall time it does not grow while other processes hold the core, so on the shared build
+/// machine it measures what the simulator costs on one core.
+fn thread_cpu_ns() -> Option<u64> {
+    // A yield makes the kernel account the running slice before we read it.
+    std::thread::yield_now();
+    let text = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
+    text.split_whitespace().next()?.parse().ok()
+}
+
+/// The 1, 5 and 15 minute load averages, as `/proc/loadavg` prints them.
+fn load_average() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+        .unwrap_or_else(|| "unknown".into())
+}
+
+/// Wall and CPU time of one run of `steps` physics steps.
+struct Timing {
+    wall_s: f64,
+    cpu_s: Option<f64>,
+}
+
+fn timed(mut run: impl FnMut()) -> Timing {
+    let cpu0 = thread_cpu_ns();
+    let start = Instant::now();
+    run();
+    let wall_s = start.elapsed().as_secs_f64();
+    let cpu_s = cpu0
+        .zip(thread_cpu_ns())
+        .map(|(a, b)| b.saturating_sub(a) as f64 * 1e-9);
+    Timing { wall_s, cpu_s }
+}
+
+fn bench(config: &SimConfig, seconds: f64, case: Option<&str>, repeat: u32) -> Result<()> {
     let selected = |name: &str| case.is_none_or(|c| name.contains(c));
-    let steps = (seconds / PHYSICS_DT_S).round() as u64;
-    let scenarios: [(&str, [f64; 6]); 3] = [
-        ("idle (valves neutral)", [0.0; 6]),
-        ("all joints moving", [0.6, -0.5, 0.7, 0.3, 0.0, 0.0]),
+    let steps = (seconds / PHYSICS_DT_S).round().max(1.0) as u64;
+    let scenarios: [(&str, Option<[f64; 6]>); 4] = [
+        ("idle (valves neutral)", Some([0.0; 6])),
+        ("all joints moving", Some([0.6, -0.5, 0.7, 0.3, 0.0, 0.0])),
         (
             "digging (stick in, bucket curl)",
-            [-0.3, 1.0, 0.4, 0.0, 0.0, 0.0],
+            Some([-0.3, 1.0, 0.4, 0.0, 0.0, 0.0]),
         ),
+        // The node adds the gateway (disarmed: valves neutral) and the CAN frame encoding.
+        ("node (gateway + plant + frames)", None),
     ];
-    println!("excavator-sim bench: {seconds} simulated s per case, 1 kHz physics, one core");
+    println!(
+        "excavator-sim bench: {seconds} simulated s per case, 1 kHz physics, one core, {repeat} run(s) \
+         each; load average {} ({} CPUs)",
+        load_average(),
+        std::thread::available_parallelism().map_or(0, usize::from)
+    );
+    println!(
+        "  {:<34} {:>14} {:>14} {:>14}",
+        "case", "x real (wall)", "x real (CPU)", "ns/step (CPU)"
+    );
     for (name, commands) in scenarios {
         if !selected(name) {
             continue;
         }
-        let mut plant = config.build()?;
-        let start = Instant::now();
-        for k in 0..steps {
-            // Reverse every 4 s so the joints stay inside their strokes.
-            let sign = if (k / 4000) % 2 == 0 { 1.0 } else { -1.0 };
-            plant.step(commands.map(|u| u * sign));
+        let mut runs = Vec::new();
+        for _ in 0..repeat.max(1) {
+            let timing = match commands {
+                Some(commands) => {
+                    let mut plant = config.build()?;
+                    timed(|| {
+                        for k in 0..steps {
+                            // Reverse every 4 s so the joints stay inside their strokes.
+                            let sign = if (k / 4000) % 2 == 0 { 1.0 } else { -1.0 };
+                            plant.step(commands.map(|u| u * sign));
+                        }
+                    })
+                }
+                None => {
+                    let mut node = MachineNode::new(config.build()?);
+                    let mut out = Vec::new();
+                    timed(|| {
+                        for _ in 0..steps {
+                            out.clear();
+                            node.step(&mut out);
+                        }
+                    })
+                }
+            };
+            runs.push(timing);
         }
-        let wall = start.elapsed().as_secs_f64();
-        println!(
-            "  {name:<34} {:>8.0} x real time ({:.3} s wall, {:.2} us per step)",
-            seconds / wall,
-            wall,
-            wall / steps as f64 * 1e6
-        );
+        let range = |values: Vec<f64>, digits: usize| {
+            let lo = values.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            if values.len() > 1 {
+                format!("{lo:.digits$}-{hi:.digits$}")
+            } else {
+                format!("{lo:.digits$}")
+            }
+        };
+        let wall = range(runs.iter().map(|t| seconds / t.wall_s).collect(), 0);
+        let cpu: Option<Vec<f64>> = runs.iter().map(|t| t.cpu_s).collect();
+        let (cpu_ratio, cpu_ns) = match cpu {
+            Some(cpu) => (
+                range(cpu.iter().map(|c| seconds / c).collect(), 0),
+                range(cpu.iter().map(|c| c / steps as f64 * 1e9).collect(), 0),
+            ),
+            None => ("n/a".into(), "n/a".into()),
+        };
+        println!("  {name:<34} {wall:>14} {cpu_ratio:>14} {cpu_ns:>14}");
     }
-    // The node adds the gateway and the CAN frame encoding.
-    if !selected("node") {
-        return Ok(());
-    }
-    let mut node = MachineNode::new(config.build()?);
-    let mut out = Vec::new();
-    let start = Instant::now();
-    for _ in 0..steps {
-        out.clear();
-        node.step(&mut out);
-    }
-    let wall = start.elapsed().as_secs_f64();
-    println!(
-        "  {:<34} {:>8.0} x real time",
-        "node (gateway + plant + frames)",
-        seconds / wall
-    );
+    println!("  load average after: {}", load_average());
     Ok(())
 }
 
@@ -143,8 +207,13 @@ fn real_main() -> Result<()> {
         &cli.effects,
     )
     .context("loading the simulation")?;
-    if let Some(Command::Bench { seconds, case }) = cli.command {
-        return bench(&config, seconds, case.as_deref());
+    if let Some(Command::Bench {
+        seconds,
+        case,
+        repeat,
+    }) = cli.command
+    {
+        return bench(&config, seconds, case.as_deref(), repeat);
     }
     let Some(iface) = cli.iface else {
         bail!("--iface is required (or use --list-effects, or the `bench` subcommand)");

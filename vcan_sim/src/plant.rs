@@ -458,8 +458,12 @@ impl Plant {
         let v = 0.5 * (self.track_speed[0] + self.track_speed[1]);
         let omega = (self.track_speed[1] - self.track_speed[0]) / self.cfg.tracks.gauge_m.max(0.1);
         self.pose.heading_rad += omega * dt;
-        self.pose.x_m += v * self.pose.heading_rad.cos() * dt;
-        self.pose.y_m += v * self.pose.heading_rad.sin() * dt;
+        // Standing still (the common case) the position cannot change: skip the trigonometry.
+        if v != 0.0 {
+            let (sin, cos) = self.pose.heading_rad.sin_cos();
+            self.pose.x_m += v * cos * dt;
+            self.pose.y_m += v * sin * dt;
+        }
         self.time_s += dt;
     }
 

@@ -215,46 +215,44 @@ impl World {
             return 0.0;
         }
         let res = self.terrain.resolution_m();
-        let Some((ci, cj)) = self.terrain.cell_index(x_m, y_m) else {
+        if self.terrain.cell_index(x_m, y_m).is_none() {
             return 0.0;
-        };
-        let reach = (2.5 / res).ceil() as isize;
-        let slope = self.repose_rad.tan();
-        let (nx, ny) = (self.terrain.nx() as isize, self.terrain.ny() as isize);
-        // `(i, j, base)` per cell, `base = h + r tan(repose)`: the apex height at which the cone's flank
-        // reaches the cell. A cell rises to `max(h, apex - r tan(repose))`.
-        let mut cells = Vec::with_capacity(((2 * reach + 1) * (2 * reach + 1)) as usize);
-        for j in (cj as isize - reach).max(0)..=(cj as isize + reach).min(ny - 1) {
-            for i in (ci as isize - reach).max(0)..=(ci as isize + reach).min(nx - 1) {
-                let (i, j) = (i as usize, j as usize);
-                if let Some(h) = self.terrain.cell(i, j) {
-                    let [cx, cy] = self.terrain.cell_center(i, j);
-                    let (dx, dy) = (cx - x_m, cy - y_m);
-                    cells.push((i, j, (dx * dx + dy * dy).sqrt() * slope + h));
-                }
-            }
         }
+        let slope = self.repose_rad.tan();
+        let area = res * res;
+        let target = volume_m3 / area;
+        // A cell at height `h` and distance `r` from the centre has the base `h + r tan(repose)`: the
+        // apex height at which the cone's flank reaches it. A cell rises to `max(h, apex - r tan)`.
+        // 1. An upper bound of the apex: the cone filled into the cells near the centre only (fewer
+        //    cells hold less, so their apex is higher), with a margin far above rounding. On flat
+        //    ground that window is 1.5 times the cone's radius.
+        let cone_radius_m = (3.0 * volume_m3 / (std::f64::consts::PI * slope.max(1e-3))).cbrt();
+        let near = ((1.5 * cone_radius_m / res).ceil() + 1.0).min(DEPOSIT_REACH_M / res);
+        let mut bases = Vec::new();
+        self.deposit_window([x_m, y_m], near, |_, _, h, d2| {
+            bases.push(d2.sqrt() * slope + h);
+        });
+        let upper = if bases.is_empty() {
+            f64::INFINITY
+        } else {
+            cone_apex(&mut bases, target) + 1.0e-6
+        };
+        // 2. Only cells whose base is below that bound can receive material: the others are skipped
+        //    without a square root. The apex of the kept cells is the apex of the whole window (the
+        //    same lowest bases in the same order), and the skipped ones would add exactly zero.
+        let mut cells = Vec::with_capacity(bases.len());
+        self.deposit_window([x_m, y_m], DEPOSIT_REACH_M / res, |i, j, h, d2| {
+            let rise = upper - h;
+            if rise > 0.0 && d2 * slope * slope < rise * rise {
+                cells.push((i, j, d2.sqrt() * slope + h));
+            }
+        });
         if cells.is_empty() {
             return 0.0;
         }
-        // The added volume `area * sum max(apex - base, 0)` is piecewise linear in the apex: walk the
-        // bases upwards until the cells below the apex hold the volume, then solve that linear piece.
-        let area = res * res;
-        let mut bases: Vec<f64> = cells.iter().map(|c| c.2).collect();
-        bases.sort_unstable_by(f64::total_cmp);
-        let target = volume_m3 / area;
-        let (mut sum, mut apex) = (0.0, f64::NAN);
-        for (k, &b) in bases.iter().enumerate() {
-            // With the k lowest cells filled, raising the apex to `b` holds `k b - sum`.
-            if k > 0 && k as f64 * b - sum >= target {
-                apex = (target + sum) / k as f64;
-                break;
-            }
-            sum += b;
-        }
-        if !apex.is_finite() {
-            apex = (target + sum) / bases.len() as f64;
-        }
+        bases.clear();
+        bases.extend(cells.iter().map(|c| c.2));
+        let apex = cone_apex(&mut bases, target);
         // Scale away the rounding so the placed volume matches exactly.
         let placed: f64 = cells.iter().map(|c| (apex - c.2).max(0.0)).sum::<f64>() * area;
         let scale = if placed > 0.0 {
@@ -274,6 +272,52 @@ impl World {
         }
         total
     }
+
+    /// Calls `f(i, j, height, squared distance from the point)` for the known cells within `reach`
+    /// cells of the cell holding `point` (which is on the map), row by row.
+    fn deposit_window(
+        &self,
+        point: [f64; 2],
+        reach: f64,
+        mut f: impl FnMut(usize, usize, f64, f64),
+    ) {
+        let t = &self.terrain;
+        let [x_m, y_m] = point;
+        let Some((ci, cj)) = t.cell_index(x_m, y_m) else {
+            return;
+        };
+        let reach = reach.ceil() as isize;
+        let (nx, ny) = (t.nx() as isize, t.ny() as isize);
+        for j in (cj as isize - reach).max(0)..=(cj as isize + reach).min(ny - 1) {
+            for i in (ci as isize - reach).max(0)..=(ci as isize + reach).min(nx - 1) {
+                let (i, j) = (i as usize, j as usize);
+                if let Some(h) = t.cell(i, j) {
+                    let [cx, cy] = t.cell_center(i, j);
+                    let (dx, dy) = (cx - x_m, cy - y_m);
+                    f(i, j, h, dx * dx + dy * dy);
+                }
+            }
+        }
+    }
+}
+
+/// How far from its centre a spill or dump cone may reach (m).
+const DEPOSIT_REACH_M: f64 = 2.5;
+
+/// The apex height of a cone of `target` (volume / cell area) over cells with the given bases: the
+/// added volume `sum max(apex - base, 0)` is piecewise linear in the apex, so walk the bases upwards
+/// until the cells below the apex hold the volume, then solve that linear piece. Sorts `bases`.
+fn cone_apex(bases: &mut [f64], target: f64) -> f64 {
+    bases.sort_unstable_by(f64::total_cmp);
+    let mut sum = 0.0;
+    for (k, &b) in bases.iter().enumerate() {
+        // With the k lowest cells filled, raising the apex to `b` holds `k b - sum`.
+        if k > 0 && k as f64 * b - sum >= target {
+            return (target + sum) / k as f64;
+        }
+        sum += b;
+    }
+    (target + sum) / bases.len() as f64
 }
 
 /// Geometry of the bucket for one contact step.
@@ -722,6 +766,80 @@ mod tests {
         assert_eq!(contact.content.mass_kg, 0.0);
         let l = contact.ledger;
         assert!((l.removed_kg - l.spilled_kg).abs() < 1e-6 * l.removed_kg);
+    }
+
+    /// The cone deposit as it was before the apex bound: every cell of the 2.5 m window sorted.
+    fn deposit_by_full_sort(world: &mut World, x_m: f64, y_m: f64, volume_m3: f64) -> f64 {
+        let t = &world.terrain;
+        let res = t.resolution_m();
+        let (ci, cj) = t.cell_index(x_m, y_m).unwrap();
+        let reach = (DEPOSIT_REACH_M / res).ceil() as isize;
+        let slope = world.repose_rad.tan();
+        let mut cells = Vec::new();
+        for j in (cj as isize - reach).max(0)..=(cj as isize + reach).min(t.ny() as isize - 1) {
+            for i in (ci as isize - reach).max(0)..=(ci as isize + reach).min(t.nx() as isize - 1) {
+                let (i, j) = (i as usize, j as usize);
+                if let Some(h) = t.cell(i, j) {
+                    let [cx, cy] = t.cell_center(i, j);
+                    let (dx, dy) = (cx - x_m, cy - y_m);
+                    cells.push((i, j, (dx * dx + dy * dy).sqrt() * slope + h));
+                }
+            }
+        }
+        let area = res * res;
+        let mut bases: Vec<f64> = cells.iter().map(|c| c.2).collect();
+        let apex = cone_apex(&mut bases, volume_m3 / area);
+        let placed: f64 = cells.iter().map(|c| (apex - c.2).max(0.0)).sum::<f64>() * area;
+        let mut total = 0.0;
+        for &(i, j, base) in &cells {
+            let add = (apex - base).max(0.0) * (volume_m3 / placed);
+            if add > 0.0 {
+                let h = world.terrain.cell(i, j).unwrap();
+                world.terrain.set_cell(i, j, Some(h + add)).unwrap();
+                total += add * area;
+            }
+        }
+        total
+    }
+
+    /// The apex bound only skips cells that receive nothing: the terrain after a series of spills and
+    /// dumps on rough ground (bench face, edges of the map, earlier cones) is bit for bit the same as
+    /// with the whole window sorted.
+    #[test]
+    fn cone_deposit_with_the_apex_bound_equals_the_full_window() {
+        let mut fast = world();
+        // Rough ground: a pit and a ridge near the bench face.
+        for j in 90..110 {
+            for i in 120..140 {
+                let h = fast.terrain.cell(i, j).unwrap();
+                let bump = 0.3 * ((i * 7 + j * 13) % 11) as f64 / 11.0 - 0.4;
+                fast.terrain.set_cell(i, j, Some(h + bump)).unwrap();
+            }
+        }
+        let mut full = fast.clone();
+        let deposits = [
+            (5.2, 0.1, 0.05),
+            (5.2, 0.1, 0.05),
+            (4.0, -0.3, 1.5),
+            (13.0, 0.0, 0.3),
+            (-7.95, -9.95, 0.8),
+            (5.3, 0.2, 0.02),
+            (2.0, 1.0, 2.5),
+        ];
+        for (x, y, v) in deposits {
+            let a = fast.deposit_local(x, y, v);
+            let b = deposit_by_full_sort(&mut full, x, y, v);
+            assert_eq!(a.to_bits(), b.to_bits(), "placed at ({x}, {y})");
+        }
+        for j in 0..fast.terrain.ny() {
+            for i in 0..fast.terrain.nx() {
+                assert_eq!(
+                    fast.terrain.cell(i, j).map(f64::to_bits),
+                    full.terrain.cell(i, j).map(f64::to_bits),
+                    "cell ({i}, {j})"
+                );
+            }
+        }
     }
 
     #[test]

@@ -40,6 +40,11 @@ use vcan_sim::soil_contact::{ContactInput, SoilContact, SoilEffects, World};
 const REL_TOLERANCE: f64 = 1e-6;
 /// Absolute floor for quantities near zero (m, rad, Pa, kg, N: far below anything physical).
 const ABS_FLOOR: f64 = 1e-6;
+/// Absolute tolerance on pressures (Pa, names ending in `_pa`): the hydraulic solvers' convergence
+/// tolerance, 10 Pa. Their exit test was changed after the recording (a root found to rounding no
+/// longer falls back to bisecting the whole bracket, which stopped anywhere within 10 Pa of the root),
+/// so a pressure may differ from the recorded one by up to that tolerance; the motion does not.
+const PRESSURE_TOLERANCE_PA: f64 = 10.0;
 
 /// The command script in the air: `(seconds, [boom, stick, bucket, swing, left track, right track])`.
 const SCRIPT: [(f64, [f64; 6]); 8] = [
@@ -150,7 +155,12 @@ fn check(name: &str, got: &[(&'static str, f64)], expected: &[(&str, f64)]) {
     let mut failures = Vec::new();
     for ((k, v), (ek, ev)) in got.iter().zip(expected) {
         assert_eq!(k, ek, "{name}: quantity order");
-        let tol = REL_TOLERANCE * ev.abs() + ABS_FLOOR;
+        let floor = if k.ends_with("_pa") {
+            PRESSURE_TOLERANCE_PA
+        } else {
+            ABS_FLOOR
+        };
+        let tol = REL_TOLERANCE * ev.abs() + floor;
         if (v - ev).abs() > tol || !v.is_finite() {
             failures.push(format!("{k}: {v:?} vs recorded {ev:?} (tolerance {tol:e})"));
         }
