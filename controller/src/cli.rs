@@ -39,6 +39,10 @@ pub enum Command {
         #[command(subcommand)]
         cmd: crate::model_cmd::ModelCommand,
     },
+    /// Model-discrepancy workflow: where the model and measured sessions disagree, the missing effect
+    /// named and added (`--measured DIR... --out DIR`), `eval` (hidden-effect confusion table), `bench`
+    /// (docs/discrepancy.md).
+    Discrepancy(crate::discrepancy::DiscrepancyArgs),
 }
 
 /// Arguments of `excavator-ctl run`.

@@ -29,6 +29,7 @@
 pub mod cli;
 pub mod cycle;
 pub mod demo;
+pub mod discrepancy;
 pub mod estimate;
 pub mod experiment;
 pub mod model_cmd;

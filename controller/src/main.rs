@@ -28,6 +28,7 @@ fn main() -> std::process::ExitCode {
         Command::Experiment(args) => controller::experiment::run(&args),
         Command::Trace { cmd } => runtime.block_on(controller::trace_tool::run(cmd)),
         Command::Model { cmd } => controller::model_cmd::run(cmd),
+        Command::Discrepancy(args) => controller::discrepancy::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -1,0 +1,295 @@
+//! Reading a measured session (the folder `excavator-ctl demo` writes, or the same files from a real
+//! machine): `trace.log` (candump) and `scans/scan_NNNN.json` (docs/scan-protocol.md), into the
+//! discrepancy workflow's 100 Hz records. Only the bus traffic and the scans are read; nothing else
+//! in the folder (in particular not `summary.json`, whose `effects` field would reveal the answer).
+
+use std::fs::File;
+use std::io::BufReader;
+use std::path::{Path, PathBuf};
+
+use anyhow::Context as _;
+use firmware_bridge::messages::{Activity, AutodigStageCode, Message};
+use firmware_bridge::trace::{ReadMode, TraceReader};
+use planner::discrepancy::{DigRecord, LoadTag, Sample, StageTag};
+use planner::machine::MachineConfig;
+use planner::terrain::SectionProfile;
+use serde::Deserialize;
+
+/// A scan in the reply format of docs/scan-protocol.md.
+#[derive(Debug, Clone, Deserialize)]
+pub struct ScanFile {
+    /// Time of the scan, s.
+    pub time_s: f64,
+    /// Sensor pose: position (world) and the heading of the digging plane.
+    pub sensor: ScanSensor,
+    /// Hits, world frame `[x, y, z]`.
+    pub points: Vec<[f64; 3]>,
+}
+
+/// The sensor pose of a scan.
+#[derive(Debug, Clone, Copy, Deserialize)]
+pub struct ScanSensor {
+    /// World x, m.
+    pub x_m: f64,
+    /// World y, m.
+    pub y_m: f64,
+    /// Height, m.
+    pub z_m: f64,
+    /// Azimuth of the digging plane the scan was turned to, rad.
+    pub heading_rad: f64,
+}
+
+/// Status of the controller at a sample.
+#[derive(Debug, Clone, Copy, Default)]
+struct Status {
+    activity: Activity,
+    stage: AutodigStageCode,
+    dig_index: u16,
+    swept_volume_m3: f64,
+}
+
+fn stage_tag(code: AutodigStageCode) -> StageTag {
+    match code {
+        AutodigStageCode::BoomDown => StageTag::BoomDown,
+        AutodigStageCode::PreDig => StageTag::PreDig,
+        AutodigStageCode::Dig => StageTag::Dig,
+        AutodigStageCode::Capture => StageTag::Capture,
+        _ => StageTag::Outside,
+    }
+}
+
+fn load_tag(status: &Status) -> LoadTag {
+    let stage = stage_tag(status.stage);
+    if stage.in_soil() || status.activity == Activity::Cleanup {
+        return LoadTag::InSoil;
+    }
+    match status.activity {
+        Activity::Idle
+        | Activity::Scan
+        | Activity::SwingToDig
+        | Activity::Return
+        | Activity::Track => LoadTag::EmptyFreeAir,
+        Activity::Dig if stage == StageTag::BoomDown => LoadTag::EmptyFreeAir,
+        _ => LoadTag::Loaded,
+    }
+}
+
+/// Reads `trace.log` into samples tagged with the dig index, one per `JointAngles` frame, with the
+/// latest readings and the commands the controller sent in answer to them (in force until the next
+/// sample).
+///
+/// # Errors
+/// Opening or reading the file; a trace without controller status frames.
+pub fn read_trace(path: &Path) -> anyhow::Result<Vec<(u16, Sample)>> {
+    let file = File::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let reader = TraceReader::new(BufReader::new(file), ReadMode::Skip);
+    let mut out: Vec<(u16, Sample)> = Vec::new();
+    let mut pending: Option<Sample> = None;
+    let mut current = Sample::default();
+    let mut status: Option<Status> = None;
+    let push =
+        |pending: &mut Option<Sample>, out: &mut Vec<(u16, Sample)>, cmd: &Sample, st: &Status| {
+            if let Some(mut s) = pending.take() {
+                s.command = cmd.command;
+                s.swing_command = cmd.swing_command;
+                s.stage = stage_tag(st.stage);
+                s.load = load_tag(st);
+                s.swept_volume_m3 = if s.stage == StageTag::Outside {
+                    0.0
+                } else {
+                    st.swept_volume_m3
+                };
+                out.push((st.dig_index, s));
+            }
+        };
+    for record in reader {
+        let record = record.with_context(|| format!("reading {}", path.display()))?;
+        let Ok(decoded) = Message::decode(&record.frame) else {
+            continue;
+        };
+        let t = record.timestamp_ns as f64 * 1e-9;
+        match decoded.message {
+            Message::JointAngles(a) => {
+                if let Some(st) = status {
+                    push(&mut pending, &mut out, &current, &st);
+                }
+                current.time_s = t;
+                current.angles_rad = [a.boom_rad, a.stick_rad, a.bucket_rad];
+                pending = Some(current);
+            }
+            Message::JointRates(r) => {
+                let rates = [r.boom_rad_per_s, r.stick_rad_per_s, r.bucket_rad_per_s];
+                current.rates_rad_per_s = rates;
+                current.swing_rate_rad_per_s = r.swing_rad_per_s;
+                if let Some(p) = pending.as_mut() {
+                    p.rates_rad_per_s = rates;
+                    p.swing_rate_rad_per_s = r.swing_rad_per_s;
+                }
+            }
+            Message::AuxValveMeasured(m) => {
+                let i = usize::from(m.cylinder.number());
+                if i < 3 {
+                    current.head_pa[i] = m.head_pressure_pa;
+                    current.rod_pa[i] = m.rod_pressure_pa;
+                    if let Some(p) = pending.as_mut() {
+                        p.head_pa[i] = m.head_pressure_pa;
+                        p.rod_pa[i] = m.rod_pressure_pa;
+                    }
+                }
+            }
+            Message::PumpPressures(p) => {
+                current.pump_pa = [p.pump1_pa, p.pump2_pa];
+                if let Some(s) = pending.as_mut() {
+                    s.pump_pa = current.pump_pa;
+                }
+            }
+            Message::AuxValveCommand(c) => {
+                let i = usize::from(c.valve.number());
+                match i {
+                    0..=2 => current.command[i] = c.to_fraction(),
+                    3 => current.swing_command = c.to_fraction(),
+                    _ => {}
+                }
+            }
+            Message::ControllerStatus(s) => {
+                status = Some(Status {
+                    activity: s.activity,
+                    stage: s.stage,
+                    dig_index: s.dig_index,
+                    swept_volume_m3: s.swept_volume_m3,
+                });
+            }
+            _ => {}
+        }
+    }
+    if let Some(st) = status {
+        push(&mut pending, &mut out, &current, &st);
+    } else {
+        anyhow::bail!(
+            "{}: no ControllerStatus frames: the workflow segments digs by the controller's status",
+            path.display()
+        );
+    }
+    Ok(out)
+}
+
+/// Reads every `scans/scan_*.json` of a session folder, in name order.
+///
+/// # Errors
+/// Reading or parsing a scan file.
+pub fn read_scans(dir: &Path) -> anyhow::Result<Vec<ScanFile>> {
+    let scans_dir = dir.join("scans");
+    if !scans_dir.is_dir() {
+        return Ok(Vec::new());
+    }
+    let mut names: Vec<PathBuf> = std::fs::read_dir(&scans_dir)
+        .with_context(|| format!("listing {}", scans_dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "json"))
+        .collect();
+    names.sort();
+    names
+        .iter()
+        .map(|p| {
+            let text =
+                std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+            serde_json::from_str(&text).with_context(|| format!("parsing {}", p.display()))
+        })
+        .collect()
+}
+
+/// The terrain section of a scan along its digging plane, in the base frame (x from the swing axis,
+/// z up): points within 0.5 m of the plane, median height per 0.1 m bin, gaps interpolated. The
+/// machine position follows from the sensor pose and the machine file's `[sensor]` mount.
+pub fn scan_section(scan: &ScanFile, machine: &MachineConfig) -> Option<SectionProfile> {
+    let h = scan.sensor.heading_rad;
+    let mount = h + machine.sensor.bearing_rad;
+    let origin = [
+        scan.sensor.x_m - machine.sensor.radial_offset_m * mount.cos(),
+        scan.sensor.y_m - machine.sensor.radial_offset_m * mount.sin(),
+    ];
+    const STEP_M: f64 = 0.1;
+    const R0_M: f64 = 1.0;
+    const BINS: usize = 130;
+    let mut bins: Vec<Vec<f64>> = vec![Vec::new(); BINS];
+    for p in &scan.points {
+        let (dx, dy) = (p[0] - origin[0], p[1] - origin[1]);
+        let along = dx * h.cos() + dy * h.sin();
+        let lateral = -dx * h.sin() + dy * h.cos();
+        if lateral.abs() > 0.5 || !p[2].is_finite() {
+            continue;
+        }
+        let b = ((along - R0_M) / STEP_M).round();
+        if b >= 0.0 && (b as usize) < BINS {
+            bins[b as usize].push(p[2]);
+        }
+    }
+    let mut heights: Vec<Option<f64>> = bins
+        .iter_mut()
+        .map(|v| {
+            if v.is_empty() {
+                None
+            } else {
+                v.sort_by(f64::total_cmp);
+                Some(v[v.len() / 2])
+            }
+        })
+        .collect();
+    let first = heights.iter().position(Option::is_some)?;
+    let last = heights.iter().rposition(Option::is_some)?;
+    if last <= first {
+        return None;
+    }
+    let mut k = first;
+    while k < last {
+        let next = (k + 1..=last).find(|j| heights[*j].is_some())?;
+        let (a, b) = (heights[k]?, heights[next]?);
+        for j in k + 1..next {
+            let t = (j - k) as f64 / (next - k) as f64;
+            heights[j] = Some(a + t * (b - a));
+        }
+        k = next;
+    }
+    let values: Vec<f64> = heights[first..=last]
+        .iter()
+        .map(|h| h.unwrap_or(0.0))
+        .collect();
+    SectionProfile::new(R0_M + first as f64 * STEP_M, STEP_M, values).ok()
+}
+
+/// Reads a session folder into one record per dig index (every sample of that work cycle), each with
+/// the section of the last scan before its Autodig started.
+///
+/// # Errors
+/// Reading the trace or the scans.
+pub fn read_session(dir: &Path, machine: &MachineConfig) -> anyhow::Result<Vec<DigRecord>> {
+    let samples = read_trace(&dir.join("trace.log"))?;
+    let scans = read_scans(dir)?;
+    let mut records: Vec<DigRecord> = Vec::new();
+    for (index, s) in samples {
+        match records.last_mut() {
+            Some(r) if r.index == u32::from(index) => r.samples.push(s),
+            _ => records.push(DigRecord {
+                index: u32::from(index),
+                samples: vec![s],
+                section: None,
+            }),
+        }
+    }
+    for r in &mut records {
+        let dig_start = r
+            .samples
+            .iter()
+            .find(|s| s.stage != StageTag::Outside || s.load == LoadTag::InSoil)
+            .map(|s| s.time_s);
+        if let Some(t0) = dig_start {
+            r.section = scans
+                .iter()
+                .rev()
+                .find(|s| s.time_s <= t0 + 1e-9)
+                .and_then(|s| scan_section(s, machine));
+        }
+    }
+    records.retain(|r| r.samples.len() >= 200 && r.validate().is_ok());
+    Ok(records)
+}

@@ -1,0 +1,215 @@
+//! The library of candidate effects: each a named physical augmentation of the grey-box model with one
+//! parameter, its unit and bounds (the simulator's names, units and ranges, so a fitted magnitude
+//! compares with a hidden one directly) and the signals it acts on.
+
+use serde::Serialize;
+
+use super::greybox::SignalGroups;
+
+/// Number of candidate effects.
+pub const N_CANDIDATES: usize = 12;
+
+/// One candidate effect.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Candidate {
+    /// Valve dead band: `|u|` below the magnitude gives no spool motion.
+    ValveDeadband,
+    /// Extra fixed command-to-spool delay.
+    TransportDelay,
+    /// Extra first-order lag in series with the spool response.
+    HydraulicLag,
+    /// Boom meter-in area scaled by `1 - m |bucket spool|` (shared pump 1).
+    FlowSharing,
+    /// Pumps saturating at `(1 - m)` of their nominal maximum flow.
+    PumpSaturation,
+    /// Dry friction with stiction in every cylinder.
+    CoulombFriction,
+    /// Extra viscous friction in every cylinder.
+    ViscousFriction,
+    /// Cross-piston leakage `m (p_h - p_r)` in every cylinder.
+    InternalLeakage,
+    /// Offset on every pressure reading.
+    PressureSensorOffset,
+    /// Offset on the boom, stick and bucket resolver readings.
+    ResolverOffset,
+    /// Higher soil cohesion (FEE `c`, Eq. 17).
+    SoilCohesion,
+    /// Higher soil density (FEE `gamma`, Eq. 17, and the payload).
+    SoilDensity,
+}
+
+impl Candidate {
+    /// Every candidate, in the simulator's registry order.
+    pub const ALL: [Candidate; N_CANDIDATES] = [
+        Candidate::ValveDeadband,
+        Candidate::TransportDelay,
+        Candidate::HydraulicLag,
+        Candidate::FlowSharing,
+        Candidate::PumpSaturation,
+        Candidate::CoulombFriction,
+        Candidate::ViscousFriction,
+        Candidate::InternalLeakage,
+        Candidate::PressureSensorOffset,
+        Candidate::ResolverOffset,
+        Candidate::SoilCohesion,
+        Candidate::SoilDensity,
+    ];
+
+    /// Index in [`Candidate::ALL`] and in [`super::Augmentation::values`].
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    /// The simulator's effect name (`excavator-sim --list-effects`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Candidate::ValveDeadband => "valve_deadband",
+            Candidate::TransportDelay => "transport_delay",
+            Candidate::HydraulicLag => "hydraulic_lag",
+            Candidate::FlowSharing => "flow_sharing",
+            Candidate::PumpSaturation => "pump_saturation",
+            Candidate::CoulombFriction => "coulomb_friction",
+            Candidate::ViscousFriction => "viscous_friction",
+            Candidate::InternalLeakage => "internal_leakage",
+            Candidate::PressureSensorOffset => "pressure_sensor_offset",
+            Candidate::ResolverOffset => "resolver_offset",
+            Candidate::SoilCohesion => "soil_cohesion",
+            Candidate::SoilDensity => "soil_density",
+        }
+    }
+
+    /// Looks a candidate up by its name.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.iter().copied().find(|c| c.name() == name.trim())
+    }
+
+    /// Unit of the magnitude (the simulator's).
+    pub fn unit(self) -> &'static str {
+        match self {
+            Candidate::ValveDeadband => "fraction of full command",
+            Candidate::TransportDelay | Candidate::HydraulicLag => "s",
+            Candidate::FlowSharing => "fraction",
+            Candidate::PumpSaturation => "fraction of nominal maximum pump flow",
+            Candidate::CoulombFriction => "N",
+            Candidate::ViscousFriction => "N s/m",
+            Candidate::InternalLeakage => "m^3/(s Pa)",
+            Candidate::PressureSensorOffset | Candidate::SoilCohesion => "Pa",
+            Candidate::ResolverOffset => "rad",
+            Candidate::SoilDensity => "kg/m^3",
+        }
+    }
+
+    /// Search bounds of the magnitude (the simulator's ranges).
+    pub fn bounds(self) -> (f64, f64) {
+        match self {
+            Candidate::ValveDeadband => (0.0, 0.3),
+            Candidate::TransportDelay => (0.0, 0.3),
+            Candidate::HydraulicLag => (0.0, 0.5),
+            Candidate::FlowSharing => (0.0, 1.0),
+            Candidate::PumpSaturation => (0.0, 0.6),
+            Candidate::CoulombFriction => (0.0, 50_000.0),
+            Candidate::ViscousFriction => (0.0, 2.0e6),
+            Candidate::InternalLeakage => (0.0, 2.0e-11),
+            Candidate::PressureSensorOffset => (-2.0e6, 2.0e6),
+            Candidate::ResolverOffset => (-0.1, 0.1),
+            Candidate::SoilCohesion => (0.0, 100_000.0),
+            Candidate::SoilDensity => (0.0, 1000.0),
+        }
+    }
+
+    /// Plain-language description of the physical augmentation.
+    pub fn description(self) -> &'static str {
+        match self {
+            Candidate::ValveDeadband => {
+                "valve dead band: commands below the magnitude do not move the spool, above it the \
+                 spool sees sign(u) (|u| - magnitude)"
+            }
+            Candidate::TransportDelay => {
+                "extra fixed delay between a valve command and the spool (onset of motion shifted)"
+            }
+            Candidate::HydraulicLag => {
+                "extra first-order lag in series with the spool response (smoothed response)"
+            }
+            Candidate::FlowSharing => {
+                "boom-bucket flow sharing on pump 1: the boom meter-in area shrinks by \
+                 magnitude x |bucket spool| (boom slows while the bucket moves)"
+            }
+            Candidate::PumpSaturation => {
+                "the pumps deliver only (1 - magnitude) of their nominal maximum flow (velocity cap \
+                 and lower stand-by pressure)"
+            }
+            Candidate::CoulombFriction => {
+                "dry friction of the magnitude opposing the motion of each cylinder, with stiction \
+                 at rest"
+            }
+            Candidate::ViscousFriction => {
+                "extra viscous friction force, magnitude x rod velocity, in each cylinder"
+            }
+            Candidate::InternalLeakage => {
+                "cross-piston leakage magnitude x (head - rod pressure) in each cylinder (velocity \
+                 deficit growing with the load pressure)"
+            }
+            Candidate::PressureSensorOffset => {
+                "constant offset on every head, rod and pump pressure reading, also at rest"
+            }
+            Candidate::ResolverOffset => {
+                "constant offset on the boom, stick and bucket angle readings (gravity torques do \
+                 not match the measured pose)"
+            }
+            Candidate::SoilCohesion => {
+                "the soil is more cohesive than the nominal model's: FEE cohesion c higher by the \
+                 magnitude (Eq. 17)"
+            }
+            Candidate::SoilDensity => {
+                "the soil is denser than the nominal model's: FEE density gamma and the payload \
+                 higher by the magnitude (Eq. 17)"
+            }
+        }
+    }
+
+    /// The signal groups the candidate changes (the others need no recomputation when fitting it).
+    pub fn groups(self) -> SignalGroups {
+        let (hydraulic, force, soil) = match self {
+            Candidate::ValveDeadband
+            | Candidate::TransportDelay
+            | Candidate::HydraulicLag
+            | Candidate::FlowSharing
+            | Candidate::PumpSaturation
+            | Candidate::InternalLeakage => (true, false, false),
+            Candidate::CoulombFriction | Candidate::ViscousFriction | Candidate::ResolverOffset => {
+                (false, true, false)
+            }
+            Candidate::PressureSensorOffset => (true, true, false),
+            Candidate::SoilCohesion | Candidate::SoilDensity => (false, false, true),
+        };
+        SignalGroups {
+            hydraulic,
+            force,
+            soil,
+        }
+    }
+
+    /// A typical magnitude, the scale of the golden-section tolerance and of the uncertainty step.
+    pub fn scale(self) -> f64 {
+        let (lo, hi) = self.bounds();
+        hi.max(-lo)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_round_trip_and_bounds_contain_zero() {
+        for (i, c) in Candidate::ALL.iter().enumerate() {
+            assert_eq!(c.index(), i);
+            assert_eq!(Candidate::from_name(c.name()), Some(*c));
+            let (lo, hi) = c.bounds();
+            assert!(lo <= 0.0 && 0.0 < hi, "{}", c.name());
+            assert!(!c.description().is_empty() && !c.unit().is_empty());
+        }
+        assert_eq!(Candidate::from_name("bogus"), None);
+    }
+}

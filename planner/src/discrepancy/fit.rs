@@ -1,0 +1,550 @@
+//! Naming the missing effect: each candidate's magnitude is fitted on the training digs (a coarse grid,
+//! then golden-section search inside the bounds), scored on the held-out digs with a BIC penalty, and
+//! the best significant one is added; repeated (greedy forward selection, as in sparse term selection)
+//! until no candidate is significant.
+//!
+//! Cost: the chi-square of the residuals, each signal weighted by its nominal residual variance on the
+//! training digs and by its decorrelation factor `kappa` (the integrated autocorrelation time of the
+//! nominal residuals, in samples), so that `chi2 = sum_s SSE_s / (sigma_s^2 kappa_s)` behaves like
+//! `-2 ln L` of independent samples and `n_eff = sum_s n_s / kappa_s`. Held-out score of a candidate:
+//! `dBIC = chi2_test(0) - chi2_test(m) - ln(n_eff_test)` (one parameter). It is significant when
+//! `dBIC` exceeds [`AnalysisConfig::min_delta_bic`] and it explains at least
+//! [`AnalysisConfig::min_explained`] of the held-out chi-square; both thresholds were calibrated on
+//! effect-free traces (docs/discrepancy.md). Uncertainty: `sqrt(2 / chi2'')` from the curvature of
+//! the training cost at the optimum (Fisher information), the `kappa` weighting making it honest for
+//! correlated samples.
+
+use serde::Serialize;
+
+use super::effects::Candidate;
+use super::greybox::{
+    Augmentation, GreyBoxParams, N_SIGNALS, PreparedRecord, Signal, SignalGroups, replay,
+};
+use super::stats::{self, ResidualSummary};
+use super::{DiscrepancyError, Result};
+
+/// Settings of the analysis.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct AnalysisConfig {
+    /// The candidates to try.
+    pub candidates: Vec<Candidate>,
+    /// Minimum held-out BIC improvement for a candidate to be significant.
+    pub min_delta_bic: f64,
+    /// Minimum fraction of the held-out chi-square a candidate must explain.
+    pub min_explained: f64,
+    /// At most this many effects are named.
+    pub max_effects: usize,
+    /// Coarse grid points before the golden-section search.
+    pub grid_points: usize,
+    /// Golden-section iterations.
+    pub golden_iterations: usize,
+    /// The model's effects before the analysis (from `--model`); their candidates are not refitted.
+    pub base: Augmentation,
+}
+
+impl Default for AnalysisConfig {
+    fn default() -> Self {
+        Self {
+            candidates: Candidate::ALL.to_vec(),
+            min_delta_bic: 30.0,
+            min_explained: 0.03,
+            max_effects: 3,
+            grid_points: 9,
+            golden_iterations: 18,
+            base: Augmentation::nominal(),
+        }
+    }
+}
+
+/// A candidate's fit and score in one round of the forward selection.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CandidateScore {
+    /// Effect name (the simulator's).
+    pub name: &'static str,
+    /// Fitted magnitude, in the simulator's unit.
+    pub magnitude: f64,
+    /// Standard uncertainty of the magnitude.
+    pub uncertainty: f64,
+    /// Training chi-square drop.
+    pub train_chi2_drop: f64,
+    /// Held-out BIC improvement (positive = better than without it).
+    pub heldout_delta_bic: f64,
+    /// Fraction of the held-out chi-square it explains.
+    pub heldout_explained: f64,
+    /// Whether it passed both thresholds.
+    pub significant: bool,
+}
+
+/// An effect the analysis named.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct NamedEffect {
+    /// Effect name (the simulator's, `excavator-sim --list-effects`).
+    pub name: &'static str,
+    /// Fitted magnitude.
+    pub magnitude: f64,
+    /// Standard uncertainty.
+    pub uncertainty: f64,
+    /// Unit of the magnitude.
+    pub unit: &'static str,
+    /// What the effect is.
+    pub description: &'static str,
+    /// Held-out BIC improvement when it was added.
+    pub heldout_delta_bic: f64,
+}
+
+/// Held-out residual RMS of one signal before and after the augmentation.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SignalRms {
+    /// Signal name.
+    pub signal: &'static str,
+    /// Unit.
+    pub unit: &'static str,
+    /// Samples.
+    pub samples: usize,
+    /// RMS with the nominal model.
+    pub before: f64,
+    /// RMS with the augmented model.
+    pub after: f64,
+    /// Per Autodig stage: `(stage, samples, before, after)`.
+    pub per_stage: Vec<(&'static str, usize, f64, f64)>,
+}
+
+/// Everything the analysis found.
+#[derive(Debug, Clone, Serialize)]
+pub struct AnalysisResult {
+    /// Named effects, in the order they were added (empty: "no missing effect found").
+    pub named_effects: Vec<NamedEffect>,
+    /// The final augmentation (magnitudes per candidate).
+    pub augmentation: Augmentation,
+    /// Every round's candidate scores.
+    pub rounds: Vec<Vec<CandidateScore>>,
+    /// Held-out residual RMS per signal, before and after.
+    pub rms: Vec<SignalRms>,
+    /// Localisation of the nominal residuals on all digs (per signal, stage and regime; whiteness,
+    /// cross-correlation with the inputs).
+    pub localisation: Vec<ResidualSummary>,
+    /// Dig indices used for training.
+    pub train_digs: Vec<u32>,
+    /// Dig indices held out.
+    pub test_digs: Vec<u32>,
+    /// Nominal residual standard deviation per signal on the training digs.
+    pub sigma: Vec<f64>,
+    /// Decorrelation factor per signal (samples per independent sample).
+    pub kappa: Vec<f64>,
+}
+
+/// Per-signal weights of the chi-square.
+#[derive(Debug, Clone, Copy)]
+struct Weights {
+    inv_var: [f64; N_SIGNALS],
+}
+
+/// Sum of squares and counts per signal over records.
+fn sse(
+    records: &[&PreparedRecord],
+    preds: &[Vec<[f64; N_SIGNALS]>],
+) -> ([f64; N_SIGNALS], [usize; N_SIGNALS]) {
+    let mut s = [0.0; N_SIGNALS];
+    let mut n = [0usize; N_SIGNALS];
+    for (rec, pred) in records.iter().zip(preds) {
+        for (m, p) in rec.measured.iter().zip(pred) {
+            for j in 0..N_SIGNALS {
+                let r = m[j] - p[j];
+                if r.is_finite() {
+                    s[j] += r * r;
+                    n[j] += 1;
+                }
+            }
+        }
+    }
+    (s, n)
+}
+
+fn chi2(w: &Weights, s: &[f64; N_SIGNALS]) -> f64 {
+    (0..N_SIGNALS).map(|j| s[j] * w.inv_var[j]).sum()
+}
+
+/// Replays records with an augmentation, recomputing only `groups` over the cached nominal replay.
+struct Evaluator<'a> {
+    records: Vec<&'a PreparedRecord>,
+    params: &'a GreyBoxParams,
+    base: Vec<Vec<[f64; N_SIGNALS]>>,
+    scratch: Vec<Vec<[f64; N_SIGNALS]>>,
+}
+
+impl<'a> Evaluator<'a> {
+    fn new(
+        records: Vec<&'a PreparedRecord>,
+        params: &'a GreyBoxParams,
+        aug: &Augmentation,
+    ) -> Self {
+        let base: Vec<_> = records
+            .iter()
+            .map(|r| {
+                let mut out = Vec::new();
+                replay(r, params, aug, SignalGroups::ALL, &mut out);
+                out
+            })
+            .collect();
+        Self {
+            scratch: base.clone(),
+            records,
+            params,
+            base,
+        }
+    }
+
+    fn sse_with(&mut self, aug: &Augmentation, groups: SignalGroups) -> [f64; N_SIGNALS] {
+        for ((rec, out), base) in self.records.iter().zip(&mut self.scratch).zip(&self.base) {
+            out.clone_from(base);
+            replay(rec, self.params, aug, groups, out);
+        }
+        sse(&self.records, &self.scratch).0
+    }
+
+    fn base_sse(&self) -> ([f64; N_SIGNALS], [usize; N_SIGNALS]) {
+        sse(&self.records, &self.base)
+    }
+}
+
+/// Golden-section minimisation of `f` on `[lo, hi]` after a coarse grid (the cost curves of the
+/// timing effects are not unimodal over the whole range).
+fn minimise(
+    mut f: impl FnMut(f64) -> f64,
+    lo: f64,
+    hi: f64,
+    grid: usize,
+    iterations: usize,
+) -> (f64, f64) {
+    let grid = grid.max(3);
+    let mut best = (0.0_f64.clamp(lo, hi), f(0.0_f64.clamp(lo, hi)));
+    let step = (hi - lo) / (grid - 1) as f64;
+    for g in 0..grid {
+        let x = lo + step * g as f64;
+        let v = f(x);
+        if v < best.1 {
+            best = (x, v);
+        }
+    }
+    let (mut a, mut b) = ((best.0 - step).max(lo), (best.0 + step).min(hi));
+    let phi = 0.5 * (5f64.sqrt() - 1.0);
+    let mut c = b - phi * (b - a);
+    let mut d = a + phi * (b - a);
+    let (mut fc, mut fd) = (f(c), f(d));
+    for _ in 0..iterations {
+        if fc < fd {
+            b = d;
+            d = c;
+            fd = fc;
+            c = b - phi * (b - a);
+            fc = f(c);
+        } else {
+            a = c;
+            c = d;
+            fc = fd;
+            d = a + phi * (b - a);
+            fd = f(d);
+        }
+    }
+    for (x, v) in [(c, fc), (d, fd)] {
+        if v < best.1 {
+            best = (x, v);
+        }
+    }
+    best
+}
+
+/// Integrated autocorrelation time of a residual series (in samples), summed until the
+/// autocorrelation falls below 0.05, capped at 100.
+fn integrated_time(series: &[f64]) -> f64 {
+    let n = series.len();
+    if n < 20 {
+        return 1.0;
+    }
+    let mean = series.iter().sum::<f64>() / n as f64;
+    let var = series.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n as f64;
+    if var <= 0.0 {
+        return 1.0;
+    }
+    let mut tau = 1.0;
+    for lag in 1..n.min(100) {
+        let c = (0..n - lag)
+            .map(|k| (series[k] - mean) * (series[k + lag] - mean))
+            .sum::<f64>()
+            / (n as f64 * var);
+        if c < 0.05 {
+            break;
+        }
+        tau += 2.0 * c;
+    }
+    tau.min(100.0)
+}
+
+/// Runs the workflow on prepared records: split, nominal residuals, localisation, forward selection,
+/// before/after RMS. `progress(done, total)` is called after every candidate fit.
+///
+/// # Errors
+/// [`DiscrepancyError::NotEnoughData`] for fewer than two records or no usable samples.
+pub fn analyse(
+    records: &[PreparedRecord],
+    params: &GreyBoxParams,
+    config: &AnalysisConfig,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<AnalysisResult> {
+    if records.len() < 2 {
+        return Err(DiscrepancyError::NotEnoughData(format!(
+            "{} dig(s): at least two are needed (training and held-out)",
+            records.len()
+        )));
+    }
+    let mut order: Vec<&PreparedRecord> = records.iter().collect();
+    order.sort_by_key(|r| r.index);
+    let train: Vec<&PreparedRecord> = order.iter().step_by(2).copied().collect();
+    let test: Vec<&PreparedRecord> = order.iter().skip(1).step_by(2).copied().collect();
+
+    let nominal = config.base;
+    let mut train_eval = Evaluator::new(train.clone(), params, &nominal);
+    let mut test_eval = Evaluator::new(test.clone(), params, &nominal);
+    let (s0, n0) = train_eval.base_sse();
+    if n0.iter().all(|n| *n == 0) {
+        return Err(DiscrepancyError::NotEnoughData(
+            "no usable samples in the training digs".into(),
+        ));
+    }
+    // Nominal residual spread and decorrelation per signal (training digs only).
+    let mut sigma = vec![0.0; N_SIGNALS];
+    let mut kappa = vec![1.0; N_SIGNALS];
+    let mut inv_var = [0.0; N_SIGNALS];
+    for j in 0..N_SIGNALS {
+        if n0[j] < 50 {
+            continue;
+        }
+        sigma[j] = (s0[j] / n0[j] as f64).sqrt();
+        let mut taus = Vec::new();
+        for (rec, pred) in train.iter().zip(&train_eval.base) {
+            let series: Vec<f64> = rec
+                .measured
+                .iter()
+                .zip(pred)
+                .map(|(m, p)| m[j] - p[j])
+                .filter(|r| r.is_finite())
+                .collect();
+            taus.push(integrated_time(&series));
+        }
+        kappa[j] = taus.iter().sum::<f64>() / taus.len().max(1) as f64;
+        if sigma[j] > 0.0 {
+            inv_var[j] = 1.0 / (sigma[j] * sigma[j] * kappa[j]);
+        }
+    }
+    let w = Weights { inv_var };
+    let (_, n_test) = test_eval.base_sse();
+    let n_eff_test: f64 = (0..N_SIGNALS)
+        .filter(|j| inv_var[*j] > 0.0)
+        .map(|j| n_test[j] as f64 / kappa[j])
+        .sum::<f64>()
+        .max(2.0);
+
+    let localisation = stats::localise(&order, params, &nominal);
+
+    let mut aug = config.base;
+    let mut named = Vec::new();
+    let mut rounds = Vec::new();
+    let mut remaining: Vec<Candidate> = config
+        .candidates
+        .iter()
+        .copied()
+        .filter(|c| config.base.get(*c) == 0.0)
+        .collect();
+    let total = config.candidates.len() * (config.max_effects + 1).min(config.candidates.len() + 1);
+    let mut done = 0;
+    while named.len() < config.max_effects && !remaining.is_empty() {
+        let train_chi0 = chi2(&w, &train_eval.base_sse().0);
+        let test_chi0 = chi2(&w, &test_eval.base_sse().0);
+        let mut scores: Vec<(Candidate, CandidateScore)> = Vec::new();
+        for c in &remaining {
+            let c = *c;
+            let groups = c.groups();
+            let (lo, hi) = c.bounds();
+            let mut cost = |x: f64| {
+                let mut a = aug;
+                a.set(c, x);
+                chi2(&w, &train_eval.sse_with(&a, groups))
+            };
+            let (x, fx) = minimise(
+                &mut cost,
+                lo,
+                hi,
+                config.grid_points,
+                config.golden_iterations,
+            );
+            // Curvature of the training chi-square at the optimum (Fisher information).
+            let h = (0.05 * x.abs()).max(0.005 * c.scale());
+            let (xm, xp) = ((x - h).max(lo), (x + h).min(hi));
+            let (fm, fp) = (cost(xm), cost(xp));
+            let curvature = if xp > x && x > xm {
+                2.0 * ((fp - fx) / (xp - x) - (fx - fm) / (x - xm)) / (xp - xm)
+            } else {
+                let (x1, f1, x2, f2) = if xp > x {
+                    (x, fx, xp, fp)
+                } else {
+                    (xm, fm, x, fx)
+                };
+                // One-sided at a bound: the slope over the step, as a lower bound of the curvature.
+                ((f2 - f1) / (x2 - x1)).abs() / h
+            };
+            let uncertainty = if curvature > 0.0 {
+                (2.0 / curvature).sqrt()
+            } else {
+                c.scale()
+            };
+            let mut a = aug;
+            a.set(c, x);
+            let test_chi = chi2(&w, &test_eval.sse_with(&a, groups));
+            let delta_bic = test_chi0 - test_chi - n_eff_test.ln();
+            let explained = if test_chi0 > 0.0 {
+                (test_chi0 - test_chi) / test_chi0
+            } else {
+                0.0
+            };
+            let significant = delta_bic > config.min_delta_bic && explained > config.min_explained;
+            scores.push((
+                c,
+                CandidateScore {
+                    name: c.name(),
+                    magnitude: x,
+                    uncertainty,
+                    train_chi2_drop: train_chi0 - fx,
+                    heldout_delta_bic: delta_bic,
+                    heldout_explained: explained,
+                    significant,
+                },
+            ));
+            done += 1;
+            progress(done, total);
+        }
+        scores.sort_by(|a, b| b.1.heldout_delta_bic.total_cmp(&a.1.heldout_delta_bic));
+        let best = scores.first().filter(|(_, s)| s.significant).cloned();
+        rounds.push(scores.into_iter().map(|(_, s)| s).collect());
+        let Some((c, s)) = best else {
+            break;
+        };
+        aug.set(c, s.magnitude);
+        named.push(NamedEffect {
+            name: c.name(),
+            magnitude: s.magnitude,
+            uncertainty: s.uncertainty,
+            unit: c.unit(),
+            description: c.description(),
+            heldout_delta_bic: s.heldout_delta_bic,
+        });
+        remaining.retain(|r| *r != c);
+        train_eval = Evaluator::new(train.clone(), params, &aug);
+        test_eval = Evaluator::new(test.clone(), params, &aug);
+    }
+    progress(total, total);
+
+    let rms = before_after(&test, params, &config.base, &aug);
+    Ok(AnalysisResult {
+        named_effects: named,
+        augmentation: aug,
+        rounds,
+        rms,
+        localisation,
+        train_digs: train.iter().map(|r| r.index).collect(),
+        test_digs: test.iter().map(|r| r.index).collect(),
+        sigma,
+        kappa,
+    })
+}
+
+/// Residual RMS per signal (and per stage) of records under the model `before` and the augmented one.
+pub fn before_after(
+    records: &[&PreparedRecord],
+    params: &GreyBoxParams,
+    before: &Augmentation,
+    aug: &Augmentation,
+) -> Vec<SignalRms> {
+    let nominal = *before;
+    let mut acc = vec![([0.0; 2], 0usize); N_SIGNALS];
+    let mut stage_acc = vec![vec![([0.0; 2], 0usize); super::StageTag::ALL.len()]; N_SIGNALS];
+    let (mut p0, mut p1) = (Vec::new(), Vec::new());
+    for rec in records {
+        replay(rec, params, &nominal, SignalGroups::ALL, &mut p0);
+        replay(rec, params, aug, SignalGroups::ALL, &mut p1);
+        for (k, m) in rec.measured.iter().enumerate() {
+            let st = super::StageTag::ALL
+                .iter()
+                .position(|s| *s == rec.samples[k].stage)
+                .unwrap_or(0);
+            for j in 0..N_SIGNALS {
+                let (r0, r1) = (m[j] - p0[k][j], m[j] - p1[k][j]);
+                if r0.is_finite() && r1.is_finite() {
+                    acc[j].0[0] += r0 * r0;
+                    acc[j].0[1] += r1 * r1;
+                    acc[j].1 += 1;
+                    stage_acc[j][st].0[0] += r0 * r0;
+                    stage_acc[j][st].0[1] += r1 * r1;
+                    stage_acc[j][st].1 += 1;
+                }
+            }
+        }
+    }
+    let rms = |s: f64, n: usize| if n > 0 { (s / n as f64).sqrt() } else { 0.0 };
+    Signal::ALL
+        .iter()
+        .map(|sig| {
+            let j = sig.index();
+            SignalRms {
+                signal: sig.name(),
+                unit: sig.unit(),
+                samples: acc[j].1,
+                before: rms(acc[j].0[0], acc[j].1),
+                after: rms(acc[j].0[1], acc[j].1),
+                per_stage: super::StageTag::ALL
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, _)| stage_acc[j][*i].1 > 0)
+                    .map(|(i, st)| {
+                        let (s, n) = stage_acc[j][i];
+                        (st.name(), n, rms(s[0], n), rms(s[1], n))
+                    })
+                    .collect(),
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn golden_section_finds_a_parabola_minimum_inside_bounds() {
+        let (x, v) = minimise(|x| (x - 0.37).powi(2) + 1.0, 0.0, 1.0, 9, 30);
+        assert!((x - 0.37).abs() < 1e-4, "{x}");
+        assert!((v - 1.0).abs() < 1e-8);
+        let (x, _) = minimise(|x| (x + 5.0).powi(2), -1.0, 1.0, 9, 30);
+        assert!((x + 1.0).abs() < 1e-9, "clamped at the bound: {x}");
+    }
+
+    #[test]
+    fn integrated_time_is_one_for_white_noise_and_larger_for_a_random_walk() {
+        let mut state = 12345u64;
+        let mut uniform = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 11) as f64 / (1u64 << 53) as f64) - 0.5
+        };
+        let white: Vec<f64> = (0..5000).map(|_| uniform()).collect();
+        assert!(integrated_time(&white) < 1.3);
+        let mut x = 0.0;
+        let smooth: Vec<f64> = (0..5000)
+            .map(|_| {
+                x = 0.95 * x + uniform();
+                x
+            })
+            .collect();
+        assert!(integrated_time(&smooth) > 10.0);
+    }
+}

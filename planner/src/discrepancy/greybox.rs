@@ -1,0 +1,1066 @@
+//! The grey-box replay model: a physical model of the valves, pumps, cylinders, links and soil with
+//! few parameters, driven by the measured inputs of a trace (valve commands, measured pressures and
+//! motion, the pre-dig terrain section) and predicting the measured signals sample by sample.
+//!
+//! The prediction is an equation-error (one-step) replay: every relation is evaluated at the measured
+//! state of its own sample, so model errors never accumulate along a dig (the limit of multiple
+//! shooting with one-sample windows). Only the spool state is integrated along the record, from the
+//! commands alone (it has no measured counterpart). Relations, per 10 ms sample:
+//!
+//! - spool: dead band, fixed transport delay, first-order lag (Eq. 2's compressibility and the pilot
+//!   stage folded into one time constant), integrated at 1 ms from the zero-order-held commands;
+//! - cylinder velocity (Eq. 1): meter-in `Q = k_in a(s) sqrt(p_pump - p_inlet)` and meter-out
+//!   `Q = k_out a(s) sqrt(p_outlet - p_tank)` orifices with the measured pressures, flow continuity
+//!   `Q = A v` (plus cross-piston leakage), the two estimates combined with weights inverse to their
+//!   sensitivity to pressure noise;
+//! - pump pressure: the open-centre flow balance `Q_pump(p) = Q_bypass(p) + sum Q_meter_in(p) +
+//!   Q_relief(p)` with `Q_pump = min(Q_max, W / p)` (thesis 4.2.1, Fig. 15), solved for the gallery
+//!   pressure with the measured chamber pressures;
+//! - cylinder force (Eq. 3 with Eq. A20): `p_h A_h - p_r A_r = F_gravity(q) + M(q) a + c v + friction`
+//!   with the Appendix gravity torques (Eq. A4) over the moment arms (Eqs. A7, A19), only where the
+//!   bucket is empty and out of the soil;
+//! - soil force on the bucket (Eqs. A20-A23 from the measured pressures) against the modified FEE
+//!   (Eqs. 14-18) on the pre-dig section, in the soil stages.
+
+// Per-cylinder and per-signal arrays run in parallel; indexing them by one counter is clearer here
+// than zipping four iterators.
+#![allow(clippy::needless_range_loop)]
+
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+use super::{DigRecord, DiscrepancyError, LoadTag, Result};
+use crate::kinematics::{Joint, JointAngles, Kinematics, TipForce};
+use crate::machine::MachineConfig;
+use crate::soil::{self, Contact, SoilProperties};
+
+/// Physics substep of the spool integration, s (the simulator's and the valve's 1 kHz).
+const SPOOL_DT_S: f64 = 0.001;
+/// Substeps per record sample.
+const SUBSTEPS: usize = 10;
+/// Samples at the start of a record whose spool state is still unknown (the commands before it are).
+pub const WARMUP_SAMPLES: usize = 50;
+/// Below this cylinder speed the actuator is at rest (stiction holds it), m/s.
+const REST_SPEED_M_PER_S: f64 = 2.0e-3;
+/// Margin from the stroke ends where the end stops may carry force, m.
+const STROKE_MARGIN_M: f64 = 0.01;
+
+/// The predicted signals.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Signal {
+    /// Boom cylinder velocity, m/s.
+    BoomVelocity,
+    /// Stick cylinder velocity, m/s.
+    StickVelocity,
+    /// Bucket cylinder velocity, m/s.
+    BucketVelocity,
+    /// Pump 1 (boom, bucket) pressure, Pa.
+    Pump1Pressure,
+    /// Pump 2 (stick, swing) pressure, Pa.
+    Pump2Pressure,
+    /// Boom cylinder force (Eq. A20), N.
+    BoomForce,
+    /// Stick cylinder force, N.
+    StickForce,
+    /// Bucket cylinder force, N.
+    BucketForce,
+    /// Soil force on the bucket, horizontal (base x), N.
+    SoilForceX,
+    /// Soil force on the bucket, vertical (base z), N.
+    SoilForceZ,
+}
+
+/// Number of signals.
+pub const N_SIGNALS: usize = 10;
+
+impl Signal {
+    /// Every signal in array order.
+    pub const ALL: [Signal; N_SIGNALS] = [
+        Signal::BoomVelocity,
+        Signal::StickVelocity,
+        Signal::BucketVelocity,
+        Signal::Pump1Pressure,
+        Signal::Pump2Pressure,
+        Signal::BoomForce,
+        Signal::StickForce,
+        Signal::BucketForce,
+        Signal::SoilForceX,
+        Signal::SoilForceZ,
+    ];
+
+    /// Index in signal arrays.
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    /// Name for reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Signal::BoomVelocity => "boom_velocity",
+            Signal::StickVelocity => "stick_velocity",
+            Signal::BucketVelocity => "bucket_velocity",
+            Signal::Pump1Pressure => "pump1_pressure",
+            Signal::Pump2Pressure => "pump2_pressure",
+            Signal::BoomForce => "boom_force",
+            Signal::StickForce => "stick_force",
+            Signal::BucketForce => "bucket_force",
+            Signal::SoilForceX => "soil_force_x",
+            Signal::SoilForceZ => "soil_force_z",
+        }
+    }
+
+    /// Unit of the signal.
+    pub fn unit(self) -> &'static str {
+        match self.index() {
+            0..=2 => "m/s",
+            3..=4 => "Pa",
+            _ => "N",
+        }
+    }
+
+    /// The cylinder (0 boom, 1 stick, 2 bucket) of a per-cylinder signal.
+    pub fn cylinder(self) -> Option<usize> {
+        match self.index() {
+            i @ 0..=2 => Some(i),
+            i @ 5..=7 => Some(i - 5),
+            _ => None,
+        }
+    }
+}
+
+/// The nominal grey-box parameters: "the nominal model the project ships" (`config/nominal_greybox.json`).
+/// Geometry and masses come from the machine file; these are the hydraulic and soil constants.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GreyBoxParams {
+    /// Head areas `[boom, stick, bucket]` (all cylinders of a joint together), m^2.
+    pub head_area_m2: [f64; 3],
+    /// Rod (annulus) areas, m^2.
+    pub rod_area_m2: [f64; 3],
+    /// Tank (return) pressure, Pa.
+    pub tank_pa: f64,
+    /// Meter-in orifice constant at full spool, `Cd A sqrt(2/rho)` (Eq. 1), m^3/(s sqrt(Pa)).
+    pub meter_in_k: [f64; 3],
+    /// Meter-out orifice constant at full spool, m^3/(s sqrt(Pa)).
+    pub meter_out_k: [f64; 3],
+    /// Open-centre bypass constant of one valve at neutral, m^3/(s sqrt(Pa)).
+    pub bypass_k: f64,
+    /// Below this pressure drop the orifices are laminar (linear), Pa.
+    pub laminar_dp_pa: f64,
+    /// Spool overlap: fraction of the stroke before the metering orifices open.
+    pub overlap: f64,
+    /// Spool fraction at which the bypass is closed.
+    pub bypass_close: f64,
+    /// Boom command where the crossover from pump 2 starts to open.
+    pub crossover_start: f64,
+    /// Boom command where it is fully open.
+    pub crossover_full: f64,
+    /// Crossover orifice constant, m^3/(s sqrt(Pa)).
+    pub crossover_k: f64,
+    /// Maximum flow of each pump, m^3/s.
+    pub pump_max_flow_m3_per_s: f64,
+    /// Power of each pump before it destrokes, W.
+    pub pump_power_w: f64,
+    /// Main relief pressure, Pa.
+    pub relief_pa: f64,
+    /// Pressure over the relief setting at which it passes the full pump flow, Pa.
+    pub relief_override_pa: f64,
+    /// Swing motor displacement per swing radian, m^3/rad.
+    pub swing_displacement_m3_per_rad: f64,
+    /// Fixed command-to-spool delay, s.
+    pub transport_delay_s: f64,
+    /// Spool first-order lag, s.
+    pub lag_time_constant_s: f64,
+    /// Viscous damping of the seals of each cylinder, N s/m.
+    pub damping_n_s_per_m: f64,
+    /// Inertia of cylinders, pins and oil reflected to each joint, kg m^2.
+    pub inertia_floor_kg_m2: [f64; 3],
+    /// Nominal soil (FEE `Psi`).
+    pub soil: SoilProperties,
+    /// Multiplies the FEE force (calibrated on nominal digs).
+    pub soil_force_factor: f64,
+}
+
+impl GreyBoxParams {
+    /// Physical first guesses from a machine file (Eq. 1 constants from its valve area and discharge
+    /// coefficient; the boom section passes two cylinders' flow, so 1.3 times the area; meter-out
+    /// areas 1.6 times the meter-in ones, a usual valve-catalogue ratio), the soil of
+    /// `config/dig_model.toml`. [`Self::nominal`] is these after calibration on nominal traces.
+    pub fn from_machine(cfg: &MachineConfig) -> Self {
+        let h = &cfg.hydraulics;
+        let cyl = [
+            &cfg.cylinders.boom,
+            &cfg.cylinders.stick,
+            &cfg.cylinders.bucket,
+        ];
+        let k = h.valve_discharge_coefficient * h.valve_max_area_m2;
+        let pumps = f64::from(h.pump_count.max(1));
+        Self {
+            head_area_m2: cyl.map(|c| c.head_area_m2()),
+            rod_area_m2: cyl.map(|c| c.rod_area_m2()),
+            tank_pa: h.tank_pressure_pa,
+            meter_in_k: [1.3 * k, k, k],
+            meter_out_k: [1.6 * 1.3 * k, 1.6 * k, 1.6 * k],
+            bypass_k: h.valve_discharge_coefficient * h.valve_bleed_area_m2 * 2f64.sqrt(),
+            laminar_dp_pa: 5.0e4,
+            overlap: 0.05,
+            bypass_close: 0.75,
+            crossover_start: h.crossover_command.clamp(0.05, 0.95),
+            crossover_full: (h.crossover_command + 0.2).min(1.0),
+            crossover_k: k,
+            pump_max_flow_m3_per_s: h.pump_max_flow_m3_per_s,
+            pump_power_w: h.max_engine_power_w / pumps,
+            relief_pa: h.relief_pressure_pa,
+            relief_override_pa: 1.0e6,
+            swing_displacement_m3_per_rad: 3.1e-3,
+            transport_delay_s: h.transport_delay_s,
+            lag_time_constant_s: h.lag_time_constant_s,
+            damping_n_s_per_m: 5.0e4,
+            inertia_floor_kg_m2: [2000.0, 500.0, 100.0],
+            soil: SoilProperties {
+                density_kg_per_m3: 1700.0,
+                failure_angle_rad: 30f64.to_radians(),
+                friction_angle_rad: 35f64.to_radians(),
+                tool_friction_angle_rad: 20f64.to_radians(),
+                cohesion_pa: 8000.0,
+            },
+            soil_force_factor: 1.0,
+        }
+    }
+
+    /// Checks that every parameter is finite and physically meaningful.
+    ///
+    /// # Errors
+    /// [`DiscrepancyError::Invalid`] naming the first bad parameter.
+    pub fn validate(&self) -> Result<()> {
+        let positive = [
+            ("head_area_m2", self.head_area_m2.iter().all(|v| *v > 0.0)),
+            ("rod_area_m2", self.rod_area_m2.iter().all(|v| *v > 0.0)),
+            ("meter_in_k", self.meter_in_k.iter().all(|v| *v > 0.0)),
+            ("meter_out_k", self.meter_out_k.iter().all(|v| *v > 0.0)),
+            ("bypass_k", self.bypass_k > 0.0),
+            ("laminar_dp_pa", self.laminar_dp_pa > 0.0),
+            ("pump_max_flow_m3_per_s", self.pump_max_flow_m3_per_s > 0.0),
+            ("pump_power_w", self.pump_power_w > 0.0),
+            ("relief_pa", self.relief_pa > self.tank_pa),
+            ("relief_override_pa", self.relief_override_pa > 0.0),
+            ("lag_time_constant_s", self.lag_time_constant_s > 0.0),
+            ("transport_delay_s", self.transport_delay_s >= 0.0),
+            ("overlap", (0.0..0.9).contains(&self.overlap)),
+            (
+                "bypass_close",
+                self.bypass_close > 0.0 && self.bypass_close <= 1.0,
+            ),
+            ("crossover", self.crossover_full > self.crossover_start),
+            ("soil_force_factor", self.soil_force_factor >= 0.0),
+            ("damping_n_s_per_m", self.damping_n_s_per_m >= 0.0),
+        ];
+        for (name, ok) in positive {
+            if !ok {
+                return Err(DiscrepancyError::Invalid(format!(
+                    "grey-box parameter {name}"
+                )));
+            }
+        }
+        let all = self
+            .head_area_m2
+            .iter()
+            .chain(&self.rod_area_m2)
+            .chain(&self.meter_in_k)
+            .chain(&self.meter_out_k)
+            .chain(&self.inertia_floor_kg_m2)
+            .chain(&[
+                self.tank_pa,
+                self.crossover_k,
+                self.swing_displacement_m3_per_rad,
+                self.soil.cohesion_pa,
+                self.soil.density_kg_per_m3,
+            ])
+            .all(|v| v.is_finite());
+        if !all {
+            return Err(DiscrepancyError::Invalid(
+                "grey-box parameters must be finite".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Magnitudes of the candidate effects added to the nominal model, indexed by
+/// [`super::Candidate::index`], in the simulator's units. All zero is the nominal model.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Augmentation {
+    /// Magnitude per candidate.
+    pub values: [f64; super::effects::N_CANDIDATES],
+}
+
+impl Augmentation {
+    /// The nominal model.
+    pub fn nominal() -> Self {
+        Self::default()
+    }
+
+    /// Magnitude of one candidate.
+    pub fn get(&self, c: super::Candidate) -> f64 {
+        self.values[c.index()]
+    }
+
+    /// Sets one candidate's magnitude.
+    pub fn set(&mut self, c: super::Candidate, value: f64) {
+        self.values[c.index()] = value;
+    }
+}
+
+/// Per-sample quantities of a record that do not depend on the candidate effects (kinematics, measured
+/// velocities and forces, FEE factors), computed once.
+#[derive(Debug, Clone)]
+pub struct PreparedRecord {
+    /// Dig index.
+    pub index: u32,
+    /// The samples of the record.
+    pub samples: Vec<super::Sample>,
+    /// Measured value of every signal (NaN where it is not defined).
+    pub measured: Vec<[f64; N_SIGNALS]>,
+    /// Measured cylinder velocities, m/s.
+    velocity: Vec<[f64; 3]>,
+    /// Measured cylinder accelerations (central differences), m/s^2.
+    accel: Vec<[f64; 3]>,
+    /// Cylinder forces holding the links against gravity at the measured angles, N.
+    gravity_force: Vec<[f64; 3]>,
+    /// Their derivative with respect to a common offset of the three resolvers, N/rad.
+    gravity_force_per_rad: Vec<[f64; 3]>,
+    /// Reflected cylinder masses, kg.
+    mass: Vec<[f64; 3]>,
+    /// Soil: measured tip force at zero payload `[fx, fz]` and its change per kg of payload, the
+    /// payload volume, the FEE force at nominal soil and its change per Pa of cohesion and per kg/m^3.
+    soil: Vec<Option<SoilTerms>>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct SoilTerms {
+    measured0: [f64; 2],
+    measured_per_kg: [f64; 2],
+    payload_volume_m3: f64,
+    fee0: [f64; 2],
+    fee_per_pa: [f64; 2],
+    fee_per_density: [f64; 2],
+}
+
+/// Reflected masses of the cylinders, kg (diagonal of the joint-space inertia over the squared moment
+/// arms; links as slender rods, Eq. A1).
+fn cylinder_masses(
+    kin: &Kinematics,
+    cfg: &MachineConfig,
+    floor: &[f64; 3],
+    q: &JointAngles,
+    arms: &Vector3<f64>,
+) -> [f64; 3] {
+    let p = kin.linkage_points(q);
+    let joints = [p.boom_foot, p.stick_pin, p.bucket_pin];
+    let abs = [q.boom_rad, q.stick_abs_rad(), q.bucket_abs_rad()];
+    let m = &cfg.masses;
+    let links = [
+        (&m.boom, cfg.links.boom_m),
+        (&m.stick, cfg.links.stick_m),
+        (&m.bucket, cfg.links.bucket_m),
+    ];
+    let mut bodies = [(0.0, [0.0, 0.0], 0.0); 3];
+    for (n, (link, length)) in links.iter().enumerate() {
+        let c = [
+            joints[n][0] + link.cog_distance_m * (abs[n] + link.cog_angle_rad).cos(),
+            joints[n][1] + link.cog_distance_m * (abs[n] + link.cog_angle_rad).sin(),
+        ];
+        bodies[n] = (link.mass_kg, c, link.mass_kg * length * length / 12.0);
+    }
+    let mut out = *floor;
+    for (i, joint) in joints.iter().enumerate() {
+        for (n, (mass, c, own)) in bodies.iter().enumerate() {
+            if n >= i {
+                out[i] += mass * ((c[0] - joint[0]).powi(2) + (c[1] - joint[1]).powi(2)) + own;
+            }
+        }
+    }
+    [0, 1, 2].map(|i| out[i] / arms[i].powi(2).max(1e-4))
+}
+
+fn gravity_forces(kin: &Kinematics, q: &JointAngles) -> Option<[f64; 3]> {
+    let f = kin
+        .cylinder_forces_from_tip_force(q, &TipForce::default(), 0.0)
+        .ok()?;
+    Some([f[0], f[1], f[2]])
+}
+
+impl PreparedRecord {
+    /// Precomputes the kinematic and soil terms of a record.
+    ///
+    /// # Errors
+    /// [`DiscrepancyError`] when the record is invalid or the machine geometry cannot be built.
+    pub fn new(record: &DigRecord, cfg: &MachineConfig, params: &GreyBoxParams) -> Result<Self> {
+        record.validate()?;
+        params.validate()?;
+        let kin = Kinematics::new(cfg)?;
+        let n = record.samples.len();
+        let strokes = Joint::ALL.map(|j| kin.stroke(j));
+        let mut velocity = vec![[0.0; 3]; n];
+        let mut gravity_force = vec![[f64::NAN; 3]; n];
+        let mut gravity_force_per_rad = vec![[0.0; 3]; n];
+        let mut mass = vec![[0.0; 3]; n];
+        let mut in_stroke = vec![[false; 3]; n];
+        const D_RAD: f64 = 1e-3;
+        for (k, s) in record.samples.iter().enumerate() {
+            let q = JointAngles {
+                boom_rad: s.angles_rad[0],
+                stick_rad: s.angles_rad[1],
+                bucket_rad: s.angles_rad[2],
+            };
+            let Ok(arms) = kin.moment_arms(&q) else {
+                continue;
+            };
+            velocity[k] = [0, 1, 2].map(|i| arms[i] * s.rates_rad_per_s[i]);
+            if let Ok(len) = kin.cylinder_lengths(&q) {
+                let len = len.to_vector();
+                in_stroke[k] = [0, 1, 2].map(|i| {
+                    len[i] > strokes[i].0 + STROKE_MARGIN_M
+                        && len[i] < strokes[i].1 - STROKE_MARGIN_M
+                });
+            }
+            if let Some(g) = gravity_forces(&kin, &q) {
+                gravity_force[k] = g;
+                // The true angles are the readings minus the offset: dF/d(offset) = -dF/dq.
+                let shifted = JointAngles {
+                    boom_rad: q.boom_rad - D_RAD,
+                    stick_rad: q.stick_rad - D_RAD,
+                    bucket_rad: q.bucket_rad - D_RAD,
+                };
+                if let Some(g2) = gravity_forces(&kin, &shifted) {
+                    gravity_force_per_rad[k] = [0, 1, 2].map(|i| (g2[i] - g[i]) / D_RAD);
+                }
+            }
+            mass[k] = cylinder_masses(&kin, cfg, &params.inertia_floor_kg_m2, &q, &arms);
+        }
+        let mut accel = vec![[0.0; 3]; n];
+        // Central differences over one sample each side: the oil-column oscillations of a stopping
+        // link are a few hertz, which wider stencils would attenuate.
+        for k in 1..n.saturating_sub(1) {
+            let dt = record.samples[k + 1].time_s - record.samples[k - 1].time_s;
+            if dt > 0.0 {
+                accel[k] = [0, 1, 2].map(|i| (velocity[k + 1][i] - velocity[k - 1][i]) / dt);
+            }
+        }
+        // Samples where a resolver rate disagrees with the angle's own derivative (a link held at an
+        // end stop or a bad sensor) are left out; so are the cylinder forces while some cylinder is
+        // stalled under a large command (the bucket pushing on the ground or an obstacle).
+        let mut consistent = vec![[true; 3]; n];
+        let mut stalled = vec![false; n];
+        for k in 2..n.saturating_sub(2) {
+            let dt = record.samples[k + 2].time_s - record.samples[k - 2].time_s;
+            for i in 0..3 {
+                let rate = record.samples[k].rates_rad_per_s[i];
+                let fd = (record.samples[k + 2].angles_rad[i]
+                    - record.samples[k - 2].angles_rad[i])
+                    / dt.max(1e-3);
+                consistent[k][i] = (rate - fd).abs() < 0.03 + 0.2 * rate.abs();
+                if record.samples[k].command[i].abs() > 0.15 && rate.abs() < 0.005 {
+                    stalled[k] = true;
+                }
+            }
+        }
+        let mut measured = vec![[f64::NAN; N_SIGNALS]; n];
+        let mut soil_terms = vec![None; n];
+        for (k, s) in record.samples.iter().enumerate() {
+            let m = &mut measured[k];
+            if k < WARMUP_SAMPLES {
+                continue;
+            }
+            let all_consistent = consistent[k].iter().all(|c| *c);
+            for i in 0..3 {
+                if in_stroke[k][i] && consistent[k][i] {
+                    m[i] = velocity[k][i];
+                }
+            }
+            m[3] = s.pump_pa[0];
+            m[4] = s.pump_pa[1];
+            if s.load == LoadTag::EmptyFreeAir && all_consistent && !stalled[k] {
+                for i in 0..3 {
+                    if in_stroke[k][i] && gravity_force[k][i].is_finite() {
+                        m[5 + i] = s.head_pa[i] * params.head_area_m2[i]
+                            - s.rod_pa[i] * params.rod_area_m2[i]; // Eq. A20
+                    }
+                }
+            }
+            if let (true, true, Some(section)) =
+                (s.stage.in_soil(), all_consistent, &record.section)
+            {
+                soil_terms[k] = soil_terms_of(
+                    &kin,
+                    cfg,
+                    params,
+                    s,
+                    section,
+                    velocity[k],
+                    accel[k],
+                    mass[k],
+                );
+                if let Some(t) = soil_terms[k] {
+                    let payload = t.payload_volume_m3 * params.soil.density_kg_per_m3;
+                    m[8] = t.measured0[0] + payload * t.measured_per_kg[0];
+                    m[9] = t.measured0[1] + payload * t.measured_per_kg[1];
+                }
+            }
+        }
+        Ok(Self {
+            index: record.index,
+            samples: record.samples.clone(),
+            measured,
+            velocity,
+            accel,
+            gravity_force,
+            gravity_force_per_rad,
+            mass,
+            soil: soil_terms,
+        })
+    }
+
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.samples.len()
+    }
+
+    /// True for a record without samples.
+    pub fn is_empty(&self) -> bool {
+        self.samples.is_empty()
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn soil_terms_of(
+    kin: &Kinematics,
+    cfg: &MachineConfig,
+    params: &GreyBoxParams,
+    s: &super::Sample,
+    section: &crate::terrain::SectionProfile,
+    velocity: [f64; 3],
+    accel: [f64; 3],
+    mass: [f64; 3],
+) -> Option<SoilTerms> {
+    let q = JointAngles {
+        boom_rad: s.angles_rad[0],
+        stick_rad: s.angles_rad[1],
+        bucket_rad: s.angles_rad[2],
+    };
+    let pose = kin.forward(&q);
+    let volume = s.swept_volume_m3.clamp(0.0, cfg.bucket.capacity_m3);
+    let Ok(Contact::InContact(gamma)) = soil::dig_geometry(&pose, section, volume) else {
+        return None;
+    };
+    // Measured soil force: Eq. A20 forces less inertia and seal damping, then Eq. A23.
+    let forces = Vector3::from_fn(|i, _| {
+        s.head_pa[i] * params.head_area_m2[i]
+            - s.rod_pa[i] * params.rod_area_m2[i]
+            - mass[i] * accel[i]
+            - params.damping_n_s_per_m * velocity[i]
+    });
+    let f0 = kin.tip_force_from_cylinder_forces(&q, &forces, 0.0).ok()?;
+    let f1 = kin
+        .tip_force_from_cylinder_forces(&q, &forces, 1000.0)
+        .ok()?;
+    let xc = kin.centroid_offset_x_m(&q);
+    let width = cfg.bucket.width_m;
+    let fee = |psi: &SoilProperties| soil::fee_tip_force(psi, &gamma, width, xc).ok();
+    let base = fee(&params.soil)?;
+    let mut more_c = params.soil;
+    more_c.cohesion_pa += 1000.0;
+    let mut more_gamma = params.soil;
+    more_gamma.density_kg_per_m3 += 100.0;
+    let fc = fee(&more_c)?;
+    let fg = fee(&more_gamma)?;
+    let k = params.soil_force_factor;
+    let out = SoilTerms {
+        measured0: [f0.fx_n, f0.fz_n],
+        measured_per_kg: [(f1.fx_n - f0.fx_n) / 1000.0, (f1.fz_n - f0.fz_n) / 1000.0],
+        payload_volume_m3: volume,
+        fee0: [k * base.fx_n, k * base.fz_n],
+        fee_per_pa: [
+            k * (fc.fx_n - base.fx_n) / 1000.0,
+            k * (fc.fz_n - base.fz_n) / 1000.0,
+        ],
+        fee_per_density: [
+            k * (fg.fx_n - base.fx_n) / 100.0,
+            k * (fg.fz_n - base.fz_n) / 100.0,
+        ],
+    };
+    let all = out
+        .measured0
+        .iter()
+        .chain(&out.measured_per_kg)
+        .chain(&out.fee0)
+        .chain(&out.fee_per_pa)
+        .chain(&out.fee_per_density)
+        .all(|v| v.is_finite());
+    all.then_some(out)
+}
+
+/// Spool positions `[boom, stick, bucket, swing]` at every sample of a record: dead band, delay and lag
+/// (nominal and augmented) integrated at 1 ms over the zero-order-held commands.
+pub fn spools(
+    samples: &[super::Sample],
+    params: &GreyBoxParams,
+    aug: &Augmentation,
+) -> Vec<[f64; 4]> {
+    use super::Candidate as C;
+    let n = samples.len();
+    let deadband = aug.get(C::ValveDeadband).max(0.0);
+    let band = |u: f64| {
+        let u = u.clamp(-1.0, 1.0);
+        u.signum() * (u.abs() - deadband).max(0.0)
+    };
+    let cmd: Vec<[f64; 4]> = samples
+        .iter()
+        .map(|s| {
+            [
+                band(s.command[0]),
+                band(s.command[1]),
+                band(s.command[2]),
+                band(s.swing_command),
+            ]
+        })
+        .collect();
+    let delay_ms =
+        ((params.transport_delay_s + aug.get(C::TransportDelay).max(0.0)) / SPOOL_DT_S).max(0.0);
+    let d0 = delay_ms.floor() as usize;
+    let frac = delay_ms - d0 as f64;
+    // Command in force during 1 ms step j (sample j / 10 holds it); before the record: the first one.
+    let at = |j: isize| -> [f64; 4] {
+        if j < 0 {
+            cmd[0]
+        } else {
+            cmd[((j as usize) / SUBSTEPS).min(n - 1)]
+        }
+    };
+    let tau = params.lag_time_constant_s.max(SPOOL_DT_S);
+    let extra = aug.get(C::HydraulicLag).max(0.0);
+    let a1 = (SPOOL_DT_S / tau).min(1.0);
+    let a2 = if extra > 0.0 {
+        (SPOOL_DT_S / extra).min(1.0)
+    } else {
+        1.0
+    };
+    let mut s1 = at(-(d0 as isize) - 1);
+    let mut s2 = s1;
+    let mut out = vec![[0.0; 4]; n];
+    if n == 0 {
+        return out;
+    }
+    out[0] = s2;
+    for (k, slot) in out.iter_mut().enumerate().skip(1) {
+        for sub in 0..SUBSTEPS {
+            let j = ((k - 1) * SUBSTEPS + sub) as isize;
+            let c0 = at(j - d0 as isize);
+            let c1 = at(j - d0 as isize - 1);
+            for a in 0..4 {
+                let target = c0[a] + frac * (c1[a] - c0[a]);
+                s1[a] += (target - s1[a]) * a1;
+                s2[a] += (s1[a] - s2[a]) * a2;
+            }
+        }
+        *slot = s2;
+    }
+    out
+}
+
+/// Laminar-regularised orifice flow (Eq. 1) for a constant `k = Cd A sqrt(2/rho)`, positive for `dp > 0`.
+#[inline]
+fn orifice(k: f64, dp: f64, laminar_dp_pa: f64) -> f64 {
+    if k <= 0.0 {
+        0.0
+    } else if dp.abs() < laminar_dp_pa {
+        k * dp / laminar_dp_pa.sqrt()
+    } else {
+        k * dp.abs().sqrt() * dp.signum()
+    }
+}
+
+fn metering(params: &GreyBoxParams, spool: f64) -> f64 {
+    ((spool.abs() - params.overlap) / (1.0 - params.overlap)).clamp(0.0, 1.0)
+}
+
+fn bypass_fraction(params: &GreyBoxParams, spool: f64) -> f64 {
+    (1.0 - spool.abs() / params.bypass_close).clamp(0.0, 1.0)
+}
+
+fn crossover_fraction(params: &GreyBoxParams, boom_spool: f64) -> f64 {
+    ((boom_spool.abs() - params.crossover_start) / (params.crossover_full - params.crossover_start))
+        .clamp(0.0, 1.0)
+}
+
+/// Series bypass constant of the valves `fractions` (1/k^2 = sum 1/k_i^2), zero if one is closed.
+fn series_bypass(k: f64, fractions: &[f64]) -> f64 {
+    let mut inv = 0.0;
+    for f in fractions {
+        if *f <= 0.0 {
+            return 0.0;
+        }
+        inv += 1.0 / (k * f).powi(2);
+    }
+    if inv > 0.0 { inv.sqrt().recip() } else { 0.0 }
+}
+
+/// Cylinder velocity from the two metering orifices and the measured pressures (Eq. 1, continuity).
+#[allow(clippy::too_many_arguments)]
+fn cylinder_velocity(
+    params: &GreyBoxParams,
+    i: usize,
+    spool: f64,
+    meter_in_scale: f64,
+    head_pa: f64,
+    rod_pa: f64,
+    gallery_pa: f64,
+    crossover: Option<(f64, f64)>,
+    leak: f64,
+) -> f64 {
+    let (ah, ar) = (params.head_area_m2[i], params.rod_area_m2[i]);
+    let leak_flow = leak * (head_pa - rod_pa);
+    let a = metering(params, spool);
+    if a <= 0.0 {
+        // Closed spool: only the cross-piston leakage moves the piston.
+        return -leak_flow / ah;
+    }
+    let lam = params.laminar_dp_pa;
+    let k_in = params.meter_in_k[i] * a * meter_in_scale;
+    let k_out = params.meter_out_k[i] * a;
+    let tank = params.tank_pa;
+    let (p_in, p_out, a_in, a_out) = if spool > 0.0 {
+        (head_pa, rod_pa, ah, ar)
+    } else {
+        (rod_pa, head_pa, ar, ah)
+    };
+    let dp_in = gallery_pa - p_in;
+    let mut q_in = if dp_in > 0.0 {
+        orifice(k_in, dp_in, lam)
+    } else {
+        0.0
+    };
+    let mut w_in = if dp_in > 2.0e5 && k_in > 0.0 {
+        dp_in * a_in * a_in / (k_in * k_in)
+    } else {
+        0.0
+    };
+    if let Some((xk, cross_pa)) = crossover {
+        let dpx = cross_pa - p_in;
+        if dpx > 0.0 && xk > 0.0 {
+            q_in += orifice(xk, dpx, lam);
+            w_in = w_in.max(dpx * a_in * a_in / ((k_in + xk) * (k_in + xk)));
+        }
+    }
+    let dp_out = (p_out - tank).max(0.0);
+    let q_out = orifice(k_out, dp_out, lam);
+    let w_out = dp_out.max(1.0e4) * a_out * a_out / (k_out * k_out);
+    // Continuity with leakage L (p_h - p_r) from head to rod:
+    //   head: Q_head_in = A_h v + L dp,  rod: Q_rod_in = -A_r v - L dp.
+    let (v_in, v_out) = if spool > 0.0 {
+        ((q_in - leak_flow) / ah, (q_out - leak_flow) / ar)
+    } else {
+        (-(q_in + leak_flow) / ar, -(q_out + leak_flow) / ah)
+    };
+    (w_in * v_in + w_out * v_out) / (w_in + w_out)
+}
+
+/// Gallery pressure of one pump from its flow balance, solved by bisection (the balance falls
+/// monotonically with the pressure, so the root is unique).
+fn pump_pressure(
+    params: &GreyBoxParams,
+    max_flow: f64,
+    bypass_k: f64,
+    fixed_demand: f64,
+    meter_in: &[(f64, f64)],
+) -> f64 {
+    let lam = params.laminar_dp_pa;
+    let tank = params.tank_pa;
+    let relief_slope = params.pump_max_flow_m3_per_s / params.relief_override_pa;
+    let balance = |p: f64| {
+        let mut f = max_flow.min(params.pump_power_w / p.max(1.0)) - fixed_demand;
+        f -= orifice(bypass_k, p - tank, lam);
+        for (k, p_in) in meter_in {
+            if p > *p_in {
+                f -= orifice(*k, p - p_in, lam);
+            }
+        }
+        if p > params.relief_pa {
+            f -= relief_slope * (p - params.relief_pa);
+        }
+        f
+    };
+    let (mut lo, mut hi) = (tank, params.relief_pa + 20.0 * params.relief_override_pa);
+    if balance(lo) <= 0.0 {
+        return lo;
+    }
+    let (mut f_lo, mut f_hi) = (balance(lo), balance(hi));
+    // Regula falsi with the Illinois modification: a few evaluations to 1 kPa.
+    let mut side = 0;
+    for _ in 0..60 {
+        let p = if f_lo > f_hi {
+            (lo * (-f_hi) + hi * f_lo) / (f_lo - f_hi)
+        } else {
+            0.5 * (lo + hi)
+        };
+        let f = balance(p);
+        if f > 0.0 {
+            lo = p;
+            f_lo = f;
+            if side == 1 {
+                f_hi *= 0.5;
+            }
+            side = 1;
+        } else {
+            hi = p;
+            f_hi = f;
+            if side == -1 {
+                f_lo *= 0.5;
+            }
+            side = -1;
+        }
+        if hi - lo < 1.0e3 {
+            break;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+/// Which groups of signals a replay must recompute.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SignalGroups {
+    /// Velocities and pump pressures.
+    pub hydraulic: bool,
+    /// Cylinder forces.
+    pub force: bool,
+    /// Soil forces.
+    pub soil: bool,
+}
+
+impl SignalGroups {
+    /// Every group.
+    pub const ALL: SignalGroups = SignalGroups {
+        hydraulic: true,
+        force: true,
+        soil: true,
+    };
+
+    fn contains(&self, s: usize) -> bool {
+        match s {
+            0..=4 => self.hydraulic,
+            5..=7 => self.force,
+            _ => self.soil,
+        }
+    }
+}
+
+/// Replays a prepared record through the (augmented) grey-box model: the predicted value of every
+/// signal at every sample (NaN where the measured one is undefined). Only the `groups` are computed;
+/// the others are copied from `out` as it was (a cache of an earlier replay) or left NaN.
+pub fn replay(
+    rec: &PreparedRecord,
+    params: &GreyBoxParams,
+    aug: &Augmentation,
+    groups: SignalGroups,
+    out: &mut Vec<[f64; N_SIGNALS]>,
+) {
+    use super::Candidate as C;
+    let n = rec.len();
+    if out.len() != n {
+        out.clear();
+        out.resize(n, [f64::NAN; N_SIGNALS]);
+    }
+    let offset = aug.get(C::PressureSensorOffset);
+    let resolver = aug.get(C::ResolverOffset);
+    let leak = aug.get(C::InternalLeakage).max(0.0);
+    let sharing = aug.get(C::FlowSharing).clamp(0.0, 1.0);
+    let max_flow =
+        params.pump_max_flow_m3_per_s * (1.0 - aug.get(C::PumpSaturation)).clamp(0.0, 1.0);
+    let coulomb = aug.get(C::CoulombFriction).max(0.0);
+    let viscous = params.damping_n_s_per_m + aug.get(C::ViscousFriction).max(0.0);
+    let cohesion = aug.get(C::SoilCohesion);
+    let density = aug.get(C::SoilDensity);
+    let spool = if groups.hydraulic {
+        spools(&rec.samples, params, aug)
+    } else {
+        Vec::new()
+    };
+    for k in 0..n {
+        let m = &rec.measured[k];
+        let o = &mut out[k];
+        for s in 0..N_SIGNALS {
+            if groups.contains(s) {
+                o[s] = f64::NAN;
+            }
+        }
+        if k < WARMUP_SAMPLES {
+            continue;
+        }
+        let smp = &rec.samples[k];
+        // The model sees the true pressures: readings less the sensor offset.
+        let head = smp.head_pa.map(|p| p - offset);
+        let rod = smp.rod_pa.map(|p| p - offset);
+        let pump = smp.pump_pa.map(|p| p - offset);
+        if groups.hydraulic {
+            let sp = spool[k];
+            let share = (1.0 - sharing * sp[2].abs()).clamp(0.0, 1.0);
+            let xfrac = crossover_fraction(params, sp[0]);
+            for i in 0..3 {
+                if m[i].is_nan() {
+                    continue;
+                }
+                let gallery = pump[if i == 1 { 1 } else { 0 }];
+                let cross =
+                    (i == 0 && xfrac > 0.0).then_some((params.crossover_k * xfrac, pump[1]));
+                o[i] = cylinder_velocity(
+                    params,
+                    i,
+                    sp[i],
+                    if i == 0 { share } else { 1.0 },
+                    head[i],
+                    rod[i],
+                    gallery,
+                    cross,
+                    leak,
+                );
+            }
+            let inlet = |i: usize| if sp[i] >= 0.0 { head[i] } else { rod[i] };
+            // Pump 1: boom and bucket; its bypass runs through both sections.
+            let bypass1 = series_bypass(
+                params.bypass_k,
+                &[
+                    bypass_fraction(params, sp[0]),
+                    bypass_fraction(params, sp[2]),
+                ],
+            );
+            let meter1 = [
+                (
+                    params.meter_in_k[0] * metering(params, sp[0]) * share,
+                    inlet(0),
+                ),
+                (params.meter_in_k[2] * metering(params, sp[2]), inlet(2)),
+            ];
+            o[3] = pump_pressure(params, max_flow, bypass1, 0.0, &meter1) + offset;
+            // Pump 2: stick and swing, and the crossover to the boom (its spool closes the centre).
+            let mut fractions = vec![
+                bypass_fraction(params, sp[1]),
+                bypass_fraction(params, sp[3]),
+            ];
+            if xfrac > 0.0 {
+                fractions.push(1.0 - xfrac);
+            }
+            let bypass2 = series_bypass(params.bypass_k, &fractions);
+            let swing_flow = if metering(params, sp[3]) > 0.0 {
+                params.swing_displacement_m3_per_rad * smp.swing_rate_rad_per_s.abs()
+            } else {
+                0.0
+            };
+            let meter2 = [
+                (params.meter_in_k[1] * metering(params, sp[1]), inlet(1)),
+                (params.crossover_k * xfrac, inlet(0)),
+            ];
+            o[4] = pump_pressure(params, max_flow, bypass2, swing_flow, &meter2) + offset;
+        }
+        if groups.force {
+            for i in 0..3 {
+                if m[5 + i].is_nan() {
+                    continue;
+                }
+                let v = rec.velocity[k][i];
+                let sensor = offset * (params.head_area_m2[i] - params.rod_area_m2[i]);
+                // Eq. 3 at the measured motion; the true angles are the readings less the offset.
+                let mut f = rec.gravity_force[k][i]
+                    + resolver * rec.gravity_force_per_rad[k][i]
+                    + rec.mass[k][i] * rec.accel[k][i]
+                    + viscous * v;
+                if coulomb > 0.0 {
+                    if v.abs() > REST_SPEED_M_PER_S {
+                        f += coulomb * v.signum();
+                    } else {
+                        // Stiction: at rest the friction takes any value up to its limit.
+                        f += (m[5 + i] - sensor - f).clamp(-coulomb, coulomb);
+                    }
+                }
+                o[5 + i] = f + sensor;
+            }
+        }
+        if groups.soil
+            && let Some(t) = rec.soil[k]
+        {
+            let payload_shift = t.payload_volume_m3 * density;
+            for a in 0..2 {
+                // The measured force is computed with the nominal payload; a denser soil makes the
+                // payload heavier, which the model carries on the prediction side.
+                o[8 + a] = t.fee0[a] + cohesion * t.fee_per_pa[a] + density * t.fee_per_density[a]
+                    - payload_shift * t.measured_per_kg[a];
+            }
+        }
+    }
+}
+
+/// Cylinder velocity the grey-box model gives for a spool position and a cylinder force, used by
+/// [`super::GreyBoxActuator`]: the meter-in and meter-out orifices in series with the force balance
+/// `p_h A_h - p_r A_r = F` (Eqs. 1, 3 in steady state), fed by the pump flow `q_max` available to this
+/// cylinder, which splits between the cylinder and the open-centre bypass of constant `bypass_k`
+/// (Fig. 15). The speed is found by bisection: the flow left for the cylinder falls as the speed, and
+/// with it the pump pressure, rises.
+#[allow(clippy::too_many_arguments)]
+pub fn steady_velocity(
+    params: &GreyBoxParams,
+    i: usize,
+    spool: f64,
+    meter_in_scale: f64,
+    force_n: f64,
+    q_max: f64,
+    bypass_k: f64,
+    leak: f64,
+) -> f64 {
+    let a = metering(params, spool);
+    if a <= 0.0 || q_max <= 0.0 {
+        return 0.0;
+    }
+    let (ah, ar) = (params.head_area_m2[i], params.rod_area_m2[i]);
+    let (a_in, a_out, load) = if spool > 0.0 {
+        (ah, ar, force_n)
+    } else {
+        (ar, ah, -force_n)
+    };
+    let k_in = (params.meter_in_k[i] * a * meter_in_scale).max(1e-12);
+    let k_out = (params.meter_out_k[i] * a).max(1e-12);
+    let tank = params.tank_pa;
+    let lam = params.laminar_dp_pa;
+    // Surplus of pump flow over what the cylinder and the bypass take at speed u (>= 0): outlet
+    // pressure from the meter-out drop, inlet from the force balance, pump from the meter-in drop.
+    let surplus = |u: f64| {
+        let p_out = tank + (a_out * u / k_out).powi(2);
+        let p_in = ((load + a_out * p_out) / a_in).max(0.0);
+        let q = a_in * u + leak * (p_in - p_out).abs();
+        let p_pump = p_in + (q / k_in).powi(2);
+        if p_pump > params.relief_pa {
+            return -1.0;
+        }
+        q_max.min(params.pump_power_w / p_pump.max(1.0)) - q - orifice(bypass_k, p_pump - tank, lam)
+    };
+    let (mut lo, mut hi) = (0.0, q_max / a_in);
+    if surplus(lo) <= 0.0 {
+        return 0.0;
+    }
+    if surplus(hi) >= 0.0 {
+        return hi * spool.signum();
+    }
+    for _ in 0..40 {
+        let mid = 0.5 * (lo + hi);
+        if surplus(mid) > 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    lo * spool.signum()
+}
+
+/// Open-centre bypass constant of a pump whose sections have the given spool positions.
+pub fn bypass_constant(params: &GreyBoxParams, spools: [f64; 2]) -> f64 {
+    series_bypass(params.bypass_k, &spools.map(|s| bypass_fraction(params, s)))
+}
