@@ -42,13 +42,30 @@ pub const MAX_DELAY_STEPS: usize = 64;
 pub const MAX_DIG_STEPS: usize = 360_000;
 /// Largest number of hidden units per network.
 pub const MAX_HIDDEN: usize = 16;
-/// Inputs of the boom network (the stick and bucket networks use the first three).
-const MAX_INPUTS: usize = 4;
-/// Input slots: delayed own command, cylinder force, previous velocity, delayed bucket command (boom).
+/// Input slots of a network with the coupled inputs; Fig. 17's networks use a prefix (boom 4, others 3).
+const MAX_INPUTS: usize = 5;
+/// Input slots: delayed own command, cylinder force, previous velocity, the delayed command and the
+/// force of the cylinder sharing its flow (the partner: boom and bucket share a pump, the stick's pump
+/// feeds the boom through the crossover). Fig. 17 gives the boom the bucket command (slot 3) only.
 const IN_COMMAND: usize = 0;
 const IN_FORCE: usize = 1;
 const IN_VELOCITY: usize = 2;
-const IN_BUCKET_COMMAND: usize = 3;
+const IN_PARTNER_COMMAND: usize = 3;
+const IN_PARTNER_FORCE: usize = 4;
+
+/// The cylinder whose flow network `j` shares: boom <- bucket (shared pump), stick <- boom (crossover),
+/// bucket <- boom (shared pump).
+const fn partner(j: usize) -> usize {
+    match j {
+        0 => 2,
+        _ => 0,
+    }
+}
+
+/// Inputs of network `j` in Fig. 17's layout: the boom also sees the bucket command.
+const fn thesis_inputs(j: usize) -> usize {
+    if j == 0 { 4 } else { 3 }
+}
 /// Predicted velocities are clamped to this multiple of the largest training velocity, so a free-running
 /// rollout stays bounded whatever the inputs (cylinder speed is bounded by pump flow).
 const VELOCITY_LIMIT_FACTOR: f64 = 1.5;
@@ -234,6 +251,10 @@ pub struct TrainConfig {
     pub patience: usize,
     /// Largest gradient norm (normalised units); larger gradients are scaled down.
     pub gradient_clip: f64,
+    /// Every network also sees the delayed command and the force of the cylinder sharing its flow
+    /// (boom and bucket: the shared, power-limited pump; stick: the crossover to the boom); `false` is
+    /// Fig. 17's layout (only the boom sees the bucket command).
+    pub coupled_inputs: bool,
 }
 
 impl Default for TrainConfig {
@@ -252,6 +273,7 @@ impl Default for TrainConfig {
             free_run_learning_rate: 0.005,
             patience: 60,
             gradient_clip: 1.0,
+            coupled_inputs: false,
         }
     }
 }
@@ -366,6 +388,7 @@ pub struct TrainReport {
 /// One cylinder's network with its normalisation (private layout; see [`NetworkFile`] for the file).
 #[derive(Debug, Clone, PartialEq)]
 struct Network {
+    joint: Joint,
     inputs: usize,
     hidden: usize,
     activation: Activation,
@@ -498,16 +521,17 @@ struct NetworkFile {
     output_bias: f64,
 }
 
-fn input_names(inputs: usize) -> Vec<String> {
+fn input_names(j: usize, inputs: usize) -> Vec<String> {
+    let other = Joint::ALL[partner(j)];
     [
-        "delayed_command",
-        "force_n",
-        "previous_velocity_m_per_s",
-        "delayed_bucket_command",
+        "delayed_command".to_owned(),
+        "force_n".to_owned(),
+        "previous_velocity_m_per_s".to_owned(),
+        format!("delayed_{other}_command"),
+        format!("{other}_force_n"),
     ]
-    .iter()
+    .into_iter()
     .take(inputs)
-    .map(|s| (*s).to_owned())
     .collect()
 }
 
@@ -525,7 +549,7 @@ impl From<&Network> for NetworkFile {
                 .unwrap_or_default()
         };
         Self {
-            inputs: input_names(net.inputs),
+            inputs: input_names(net.joint.index(), net.inputs),
             activation: net.activation,
             input_offset: net.input_offset[..net.inputs].to_vec(),
             input_scale: net.input_scale[..net.inputs].to_vec(),
@@ -547,7 +571,14 @@ impl NetworkFile {
                 "{joint} network: {what}"
             )))
         };
-        let inputs = if joint == Joint::Boom { 4 } else { 3 };
+        let j = joint.index();
+        let inputs = self.input_offset.len();
+        if inputs != thesis_inputs(j) && inputs != MAX_INPUTS {
+            return bad("input count is neither Fig. 17's nor the coupled layout");
+        }
+        if self.inputs != input_names(j, inputs) {
+            return bad("input names do not match the layout");
+        }
         let hidden = self.hidden_weights.len();
         if hidden == 0 || hidden > MAX_HIDDEN {
             return bad("hidden unit count outside 1..=MAX_HIDDEN");
@@ -599,6 +630,7 @@ impl NetworkFile {
         input_offset[..inputs].copy_from_slice(&self.input_offset);
         input_scale[..inputs].copy_from_slice(&self.input_scale);
         Ok(Network {
+            joint,
             inputs,
             hidden,
             activation: self.activation,
@@ -773,7 +805,7 @@ impl ActuatorModel {
         let mut hidden = [0.0; MAX_HIDDEN];
         let mut velocity = [0.0; 3];
         for (j, net) in self.networks.iter().enumerate() {
-            let raw = raw_inputs(j, &delayed, force_n[j], state.velocity_m_per_s[j]);
+            let raw = raw_inputs(j, &delayed, &force_n, state.velocity_m_per_s[j]);
             let x = net.normalise(&raw);
             let y = net.forward(&net.params, &x, &mut hidden);
             // A non-finite y can only come from overflowing weights; hold the previous speed then.
@@ -939,17 +971,22 @@ fn clamp_command(command: [f64; 3]) -> [f64; 3] {
     command.map(|u| u.clamp(-1.0, 1.0))
 }
 
-/// Raw (physical) inputs of network `j`: delayed command, force, previous velocity, and for the boom the
-/// delayed bucket command (Fig. 17).
+/// Raw (physical) inputs of network `j`: delayed command, force, previous velocity, the partner's
+/// delayed command and force (a network with fewer inputs ignores the last slots; for the boom the
+/// partner is the bucket, Fig. 17).
 #[inline]
-fn raw_inputs(j: usize, delayed: &[f64; 3], force_n: f64, velocity: f64) -> [f64; MAX_INPUTS] {
+fn raw_inputs(
+    j: usize,
+    delayed: &[f64; 3],
+    force_n: &[f64; 3],
+    velocity: f64,
+) -> [f64; MAX_INPUTS] {
     let mut raw = [0.0; MAX_INPUTS];
     raw[IN_COMMAND] = delayed[j];
-    raw[IN_FORCE] = force_n;
+    raw[IN_FORCE] = force_n[j];
     raw[IN_VELOCITY] = velocity;
-    if j == Joint::Boom.index() {
-        raw[IN_BUCKET_COMMAND] = delayed[Joint::Bucket.index()];
-    }
+    raw[IN_PARTNER_COMMAND] = delayed[partner(j)];
+    raw[IN_PARTNER_FORCE] = force_n[partner(j)];
     raw
 }
 
@@ -1064,12 +1101,8 @@ fn net_sequences(net: &Network, j: usize, seqs: &[Sequence], delay: usize) -> Ve
             for k in 0..n {
                 // The delay line starts full of the first command, as `initial_state` fills it.
                 let delayed = seq.command[k.saturating_sub(delay)];
-                let mut x = net.normalise(&raw_inputs(
-                    j,
-                    &clamp_command(delayed),
-                    seq.force[k][j],
-                    0.0,
-                ));
+                let mut x =
+                    net.normalise(&raw_inputs(j, &clamp_command(delayed), &seq.force[k], 0.0));
                 x[IN_VELOCITY] = 0.0;
                 exo.push(x);
                 target.push(seq.velocity[k][j] / net.velocity_scale);
@@ -1095,7 +1128,11 @@ fn new_network(
     rng: &mut ChaCha8Rng,
 ) -> Result<Network, ActuatorError> {
     let joint = Joint::ALL[j];
-    let inputs = if j == Joint::Boom.index() { 4 } else { 3 };
+    let inputs = if config.coupled_inputs {
+        MAX_INPUTS
+    } else {
+        thesis_inputs(j)
+    };
     let velocities = seqs
         .iter()
         .flat_map(|s| s.velocity.iter().map(move |v| v[j]));
@@ -1109,6 +1146,10 @@ fn new_network(
     let mut input_scale = [1.0; MAX_INPUTS];
     input_offset[IN_FORCE] = f_mean;
     input_scale[IN_FORCE] = if f_std > 1e-9 { f_std } else { 1.0 };
+    let o = partner(j);
+    let (p_mean, p_std) = mean_std(seqs.iter().flat_map(|s| s.force.iter().map(move |f| f[o])));
+    input_offset[IN_PARTNER_FORCE] = p_mean;
+    input_scale[IN_PARTNER_FORCE] = if p_std > 1e-9 { p_std } else { 1.0 };
     input_scale[IN_VELOCITY] = v_std;
     let hidden = config.hidden_units;
     let count = Network::param_count(inputs, hidden);
@@ -1117,6 +1158,7 @@ fn new_network(
         .map(|_| rng.random_range(-bound..bound))
         .collect();
     let net = Network {
+        joint,
         inputs,
         hidden,
         activation: config.activation,
@@ -1568,6 +1610,31 @@ mod tests {
         ));
         let nan = text.replacen("\"output_bias\": ", "\"output_bias\": 1e999, \"x\": ", 1);
         assert!(ActuatorModel::from_json(&nan).is_err());
+        // The coupled layout (every network sees its partner's command and force) round-trips too,
+        // and its input names are checked.
+        let coupled = TrainConfig {
+            coupled_inputs: true,
+            ..config
+        };
+        let (model, _) = train(&digs, &coupled, |_| {}).unwrap();
+        let text = model.to_json().unwrap();
+        assert!(text.contains("\"boom_force_n\"") && text.contains("\"bucket_force_n\""));
+        let back = ActuatorModel::from_json(&text).unwrap();
+        let mut s1 = model.initial_state([0.0; 3], [0.0; 3]).unwrap();
+        let mut s2 = back.initial_state([0.0; 3], [0.0; 3]).unwrap();
+        for _ in 0..10 {
+            let a = model
+                .step(&mut s1, [0.5, -0.3, 0.8], [1e5, -2e4, 5e4])
+                .unwrap();
+            let b = back
+                .step(&mut s2, [0.5, -0.3, 0.8], [1e5, -2e4, 5e4])
+                .unwrap();
+            for (x, y) in a.iter().zip(&b) {
+                assert!((x - y).abs() < 1e-9);
+            }
+        }
+        let renamed = text.replacen("\"boom_force_n\"", "\"swing_force_n\"", 1);
+        assert!(ActuatorModel::from_json(&renamed).is_err());
     }
 
     #[test]

@@ -7,16 +7,24 @@
 //!    [`crate::actuator::ActuatorModel`], Eq. 4, Figs. 17-18): cylinder velocities from the commands and
 //!    cylinder forces, integrated to cylinder lengths (trapezoid), turned into joint angles through
 //!    tabulated stroke tables (Eq. A5, A8-A14) and the bucket pose by forward kinematics.
-//! 2. **Soil** ([`SoilModel`]): the bucket pose intersected with the pre-dig section gives
-//!    `Gamma = (d, alpha, rho, V_s)` ([`crate::soil::dig_geometry`], `V_s` from
-//!    [`crate::terrain::SweptVolume`]); the analytical model (modified FEE, Eqs. 14-18) or the empirical
-//!    one (Eq. 21) gives the soil force on the bucket, multiplied by the force factor of Table 2.
+//! 2. **Soil** ([`SoilModel`]): the bucket pose and its motion over the terrain section give
+//!    `Gamma = (d, alpha, rho, V_s)` (`V_s` from [`crate::terrain::SweptVolume`], at most the bucket
+//!    capacity). The analytical model ([`crate::soil::MovingBucketSoil`]) is the modified FEE (Eqs.
+//!    14-18) for the direction the tip actually travels, held short of the wedge's failure limit where
+//!    Eq. 17 has no solution (an open bucket pulled in: the soil then resists more, not less), plus the
+//!    bearing resistance of the edge and the bucket's back pushed into the soil
+//!    ([`crate::soil::BearingParams`]); depth and slope are measured on the section as the dig cuts it
+//!    (lowered to the tip's path, as the machine's terrain is). The empirical model (Eq. 21) uses the
+//!    pre-dig geometry ([`crate::soil::dig_geometry`]). The result is multiplied by the force factor of
+//!    Table 2.
 //! 3. **Autodig** ([`crate::autodig::Autodig`], the very same step the controller runs, with the
 //!    perception enhancements of 3.2: swept volume and bucket-above-terrain): commands from joint
 //!    angles, cylinder extensions and head pressures.
 //!
 //! The link between them is the static analysis of the Appendix: the soil force and gravity give the
 //! joint torques `tau = G - J^T f` (Eq. A2, A4) and the cylinder forces `F = tau / r` (Eqs. A7, A19).
+//! Forward kinematics, the Jacobian and `G` come from one pass over the joint angles (three `sin_cos`
+//! per step); the tip velocity for the soil model is `J q'` with `q' = v_cyl / r`.
 //!
 //! # Pressures from forces (the inverse of Eq. A20)
 //!
@@ -54,10 +62,10 @@ use crate::kinematics::MachinePose;
 use crate::kinematics::{BucketPose, Joint, JointAngles, Kinematics, KinematicsError, TipForce};
 use crate::machine::{ConfigError, MachineConfig};
 use crate::soil::{
-    Contact, EmpiricalSoilModel, SoilError, SoilProperties, dig_geometry, fee_tip_force,
+    BearingParams, BucketMotion, Contact, EmpiricalSoilModel, MovingBucketSoil, SoilError,
+    SoilProperties, dig_geometry, fee_tip_force,
 };
 use crate::terrain::{SectionProfile, SweptVolume, TerrainError, TerrainGrid};
-use nalgebra::Vector3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -216,6 +224,9 @@ pub struct DigModelConfig {
     pub floor_tolerance_m: f64,
     /// Autodig settings (relief pressures and bucket capacity are taken from the machine).
     pub autodig: AutodigConfig,
+    /// Bearing resistance of the edge and the bucket's back pushed into the soil (with the analytical
+    /// soil model; the empirical model's fit contains whatever the soil did).
+    pub bearing: BearingParams,
 }
 
 #[derive(Debug, Deserialize)]
@@ -237,6 +248,8 @@ struct ConfigFile {
     soil: SoilFile,
     #[serde(default)]
     autodig: AutodigConfig,
+    #[serde(default)]
+    bearing: BearingParams,
 }
 
 impl DigModelConfig {
@@ -262,6 +275,7 @@ impl DigModelConfig {
             max_time_s: f.max_time_s,
             floor_tolerance_m: f.floor_tolerance_m,
             autodig: f.autodig,
+            bearing: f.bearing,
         };
         cfg.validate()?;
         Ok(cfg)
@@ -298,6 +312,10 @@ impl DigModelConfig {
         if !(self.floor_tolerance_m.is_finite() && self.floor_tolerance_m >= 0.0) {
             return bad("floor_tolerance_m", "must be finite and >= 0");
         }
+        self.bearing.validate().map_err(|e| DigModelError::Config {
+            field: "bearing",
+            reason: e.to_string(),
+        })?;
         match &self.soil {
             SoilModel::Analytical(p) => p.validate().map_err(|e| DigModelError::Config {
                 field: "soil",
@@ -573,6 +591,180 @@ pub struct DigModel<A: ActuatorDynamics = ActuatorModel> {
     rod_area_m2: [f64; 3],
     tank_pa: f64,
     port_relief_pa: f64,
+    statics: Statics,
+    /// The analytical soil model with its constants precomputed (`None` with the empirical model).
+    moving_soil: Option<MovingBucketSoil>,
+}
+
+/// Forward kinematics, the Jacobian (Eq. A3) and the gravity torques (Eq. A4) in one pass: one
+/// `sin_cos` per joint instead of the three `linkage_points` evaluations of calling
+/// [`Kinematics::forward`], [`Kinematics::jacobian`] and [`Kinematics::gravity_torques`] in turn
+/// (tested equal to them).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Statics {
+    foot: [f64; 2],
+    /// Link lengths `l2, l3, l4` (boom, stick, bucket), m.
+    links: [f64; 3],
+    /// Per link: mass, kg; centre-of-gravity distance, m; `cos` and `sin` of its angle to the link line.
+    masses: [(f64, f64, f64, f64); 3],
+    /// Payload centroid: distance from the bucket pin, m; `cos` and `sin` of its angle to the bucket line.
+    payload: (f64, f64, f64),
+}
+
+/// What [`Statics::eval`] gives for one pose.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct PoseStatics {
+    tip: [f64; 2],
+    /// `sin`, `cos` of `bucket_abs`.
+    sin_bucket_abs: f64,
+    cos_bucket_abs: f64,
+    /// First two rows of the Jacobian (Eq. A3): `d x / d q_j`, `d z / d q_j` (third row is all ones).
+    jx: [f64; 3],
+    jz: [f64; 3],
+    /// Gravity torques `G` of the empty implement (Eq. A4), N m.
+    gravity_nm: [f64; 3],
+    /// Horizontal distance from each joint to the payload centroid, m: the payload adds
+    /// `g m_p payload_arm_m[i]` to `G_i`.
+    payload_arm_m: [f64; 3],
+}
+
+impl PoseStatics {
+    /// Gravity torques with `payload_kg` in the bucket (Eq. A4), N m.
+    #[inline]
+    fn gravity_with_payload(&self, payload_kg: f64) -> [f64; 3] {
+        let w = crate::machine::GRAVITY_M_PER_S2 * payload_kg.max(0.0);
+        [0, 1, 2].map(|i| self.gravity_nm[i] + w * self.payload_arm_m[i])
+    }
+}
+
+impl Statics {
+    fn new(machine: &MachineConfig) -> Self {
+        let m = &machine.masses;
+        let link = |l: &crate::machine::LinkMass| {
+            let (s, c) = l.cog_angle_rad.sin_cos();
+            (l.mass_kg, l.cog_distance_m, c, s)
+        };
+        let (ps, pc) = machine.bucket.payload_centroid_angle_rad.sin_cos();
+        Self {
+            foot: [machine.base.boom_foot_x_m, machine.base.boom_foot_z_m],
+            links: [
+                machine.links.boom_m,
+                machine.links.stick_m,
+                machine.links.bucket_m,
+            ],
+            masses: [link(&m.boom), link(&m.stick), link(&m.bucket)],
+            payload: (machine.bucket.payload_centroid_distance_m, pc, ps),
+        }
+    }
+
+    #[inline]
+    fn eval(&self, q: &[f64; 3]) -> PoseStatics {
+        let [l2, l3, l4] = self.links;
+        let (s2, c2) = q[0].sin_cos();
+        let (s23, c23) = (q[0] + q[1]).sin_cos();
+        let (s234, c234) = (q[0] + q[1] + q[2]).sin_cos();
+        let stick_pin = [self.foot[0] + l2 * c2, self.foot[1] + l2 * s2];
+        let bucket_pin = [stick_pin[0] + l3 * c23, stick_pin[1] + l3 * s23];
+        let tip = [bucket_pin[0] + l4 * c234, bucket_pin[1] + l4 * s234];
+        // Eq. A3 (z up)
+        let jx = [
+            -l2 * s2 - l3 * s23 - l4 * s234,
+            -l3 * s23 - l4 * s234,
+            -l4 * s234,
+        ];
+        let jz = [
+            l2 * c2 + l3 * c23 + l4 * c234,
+            l3 * c23 + l4 * c234,
+            l4 * c234,
+        ];
+        // Eq. A4: G_i = g sum_{n >= i} m_n (x_n - x_i), the payload riding on the bucket.
+        let joints_x = [self.foot[0], stick_pin[0], bucket_pin[0]];
+        let abs_cs = [(c2, s2), (c23, s23), (c234, s234)];
+        let mut body = [(0.0, 0.0); 3];
+        for n in 0..3 {
+            let (mass, d, ca, sa) = self.masses[n];
+            let (c, s) = abs_cs[n];
+            body[n] = (mass, joints_x[n] + d * (c * ca - s * sa));
+        }
+        let (pd, pca, psa) = self.payload;
+        let payload_x = bucket_pin[0] + pd * (c234 * pca - s234 * psa);
+        let mut gravity_nm = [0.0; 3];
+        for (i, g) in gravity_nm.iter_mut().enumerate() {
+            let xi = joints_x[i];
+            let sum: f64 = body[i..].iter().map(|(m, x)| m * (x - xi)).sum();
+            *g = crate::machine::GRAVITY_M_PER_S2 * sum;
+        }
+        PoseStatics {
+            tip,
+            sin_bucket_abs: s234,
+            cos_bucket_abs: c234,
+            jx,
+            jz,
+            gravity_nm,
+            payload_arm_m: joints_x.map(|x| payload_x - x),
+        }
+    }
+}
+
+/// The terrain along the digging plane as the dig cuts it: the pre-dig section lowered to the tip's
+/// path wherever the tip passed below it (the simulator cuts its grid the same way), so the soil
+/// geometry (depth, slope) is measured on the current surface as on a real machine.
+#[derive(Debug, Clone)]
+struct CutSurface {
+    r_start_m: f64,
+    step_m: f64,
+    heights: Vec<f64>,
+}
+
+impl CutSurface {
+    fn new(profile: &SectionProfile) -> Result<Self> {
+        let step = profile.step_m();
+        let n = ((profile.r_end_m() - profile.r_start_m()) / step).round() as usize + 1;
+        let mut heights = Vec::with_capacity(n);
+        for k in 0..n {
+            let r = (profile.r_start_m() + k as f64 * step).min(profile.r_end_m());
+            heights.push(profile.height_at(r)?);
+        }
+        Ok(Self {
+            r_start_m: profile.r_start_m(),
+            step_m: step,
+            heights,
+        })
+    }
+
+    /// Height at `r` (linear between samples, the end samples beyond the section), m.
+    #[inline]
+    fn height(&self, r_m: f64) -> f64 {
+        let last = self.heights.len() - 1;
+        let f = ((r_m - self.r_start_m) / self.step_m).clamp(0.0, last as f64);
+        let k = (f as usize).min(last - 1);
+        let t = f - k as f64;
+        self.heights[k] + t * (self.heights[k + 1] - self.heights[k])
+    }
+
+    /// Lowers the samples between two tip positions to the straight path between them.
+    #[inline]
+    fn cut(&mut self, from: [f64; 2], to: [f64; 2]) {
+        let (lo, hi) = if from[0] < to[0] {
+            (from[0], to[0])
+        } else {
+            (to[0], from[0])
+        };
+        let dx = to[0] - from[0];
+        if dx.abs() < 1e-12 {
+            return;
+        }
+        let last = self.heights.len() - 1;
+        let k0 = ((lo - self.r_start_m) / self.step_m).ceil().max(0.0) as usize;
+        let k1 = (((hi - self.r_start_m) / self.step_m).floor().max(-1.0) + 1.0) as usize;
+        for k in k0..k1.min(last + 1) {
+            let r = self.r_start_m + k as f64 * self.step_m;
+            let z = from[1] + (r - from[0]) / dx * (to[1] - from[1]);
+            if z < self.heights[k] {
+                self.heights[k] = z;
+            }
+        }
+    }
 }
 
 impl DigModel<ActuatorModel> {
@@ -624,10 +816,13 @@ impl<A: ActuatorDynamics> DigModel<A> {
         ];
         let c = &machine.cylinders;
         let cyl = [&c.boom, &c.stick, &c.bucket];
+        let moving_soil = Self::moving_soil_for(&config, machine.bucket.width_m)?;
         Ok(Self {
             kin,
             tables,
             actuator,
+            moving_soil,
+            statics: Statics::new(machine),
             config,
             maps,
             bucket_width_m: machine.bucket.width_m,
@@ -681,7 +876,23 @@ impl<A: ActuatorDynamics> DigModel<A> {
             rod_area_m2: self.rod_area_m2,
             tank_pa: self.tank_pa,
             port_relief_pa: self.port_relief_pa,
+            statics: self.statics,
+            moving_soil: self.moving_soil,
         })
+    }
+
+    fn moving_soil_for(config: &DigModelConfig, width_m: f64) -> Result<Option<MovingBucketSoil>> {
+        match &config.soil {
+            SoilModel::Analytical(psi) => Ok(Some(
+                MovingBucketSoil::new(psi, &config.bearing, width_m).map_err(|e| {
+                    DigModelError::Config {
+                        field: "soil",
+                        reason: e.to_string(),
+                    }
+                })?,
+            )),
+            SoilModel::Empirical(_) => Ok(None),
+        }
     }
 
     /// Replaces the soil model (e.g. with properties estimated online, [`crate::estimate`]).
@@ -692,6 +903,20 @@ impl<A: ActuatorDynamics> DigModel<A> {
         let mut cfg = self.config.clone();
         cfg.soil = soil;
         cfg.validate()?;
+        self.moving_soil = Self::moving_soil_for(&cfg, self.bucket_width_m)?;
+        self.config = cfg;
+        Ok(())
+    }
+
+    /// Sets the bearing resistance of the edge and the bucket's back (analytical soil model).
+    ///
+    /// # Errors
+    /// [`DigModelError::Config`] for invalid parameters (the model is unchanged).
+    pub fn set_bearing(&mut self, bearing: BearingParams) -> Result<()> {
+        let mut cfg = self.config.clone();
+        cfg.bearing = bearing;
+        cfg.validate()?;
+        self.moving_soil = Self::moving_soil_for(&cfg, self.bucket_width_m)?;
         self.config = cfg;
         Ok(())
     }
@@ -830,12 +1055,14 @@ impl<A: ActuatorDynamics> DigModel<A> {
         let mut autodig =
             Autodig::starting_in(self.config.autodig, self.maps.clone(), Stage::PreDig)?;
         let mut swept = SweptVolume::new(profile.clone(), self.bucket_width_m)?;
+        let mut surface = CutSurface::new(profile)?;
         let density = match &self.config.soil {
             SoilModel::Analytical(p) => p.density_kg_per_m3,
             SoilModel::Empirical(_) => 0.0,
         };
         let floor_limit = site.floor_z_m - self.config.floor_tolerance_m;
         let max_steps = (self.config.max_time_s / dt).ceil() as usize;
+        let factor = self.config.force_factor;
 
         let mut velocity = [0.0; 3];
         let mut energy_j = 0.0;
@@ -845,6 +1072,7 @@ impl<A: ActuatorDynamics> DigModel<A> {
         let mut end = DigEnd::TimeLimit;
         let mut steps = 0usize;
         let mut time_s = 0.0;
+        let mut last_tip = [tip0.x_m, tip0.z_m];
         for k in 0..=max_steps {
             time_s = k as f64 * dt;
             steps = k;
@@ -856,12 +1084,12 @@ impl<A: ActuatorDynamics> DigModel<A> {
                 q_arr[j] = a;
                 arms[j] = r;
             }
-            let q = JointAngles {
-                boom_rad: q_arr[0],
-                stick_rad: q_arr[1],
-                bucket_rad: q_arr[2],
+            let st0 = self.statics.eval(&q_arr);
+            let pose = BucketPose {
+                x_m: st0.tip[0],
+                z_m: st0.tip[1],
+                bucket_abs_rad: q_arr[0] + q_arr[1] + q_arr[2],
             };
-            let pose = self.kin.forward(&q);
             self.check_inside(profile, pose.x_m)?;
             min_z = min_z.min(pose.z_m);
             floor_penetration |= pose.z_m < floor_limit;
@@ -869,23 +1097,38 @@ impl<A: ActuatorDynamics> DigModel<A> {
             // Perception (3.2): swept volume and depth below the pre-dig surface.
             let swept_m3 = swept.update(pose.x_m, pose.z_m)?;
             let depth_m = swept.depth_m(pose.x_m, pose.z_m)?;
+            surface.cut(last_tip, st0.tip);
+            last_tip = st0.tip;
 
-            // Soil force (Eqs. 14-18 or 21) at Gamma, times the force factor (Table 2).
+            // Soil force (Eqs. 14-18 with bearing, or Eq. 21) times the force factor (Table 2).
             let v_s = swept_m3.min(self.capacity_m3);
-            let soil = self.soil_force(&pose, profile, v_s)?;
+            let mut tip_v = [0.0; 2];
+            for j in 0..3 {
+                let rate = velocity[j] / arms[j];
+                tip_v[0] += st0.jx[j] * rate;
+                tip_v[1] += st0.jz[j] * rate;
+            }
+            let f = match &self.moving_soil {
+                Some(soil) => soil.force(&Self::motion(&surface, &st0, tip_v, v_s))?,
+                None => self.soil_force(&pose, profile, v_s)?,
+            };
+            let soil = TipForce {
+                fx_n: factor * f.fx_n,
+                fz_n: factor * f.fz_n,
+                my_nm: factor * f.my_nm,
+            };
             peak_force = peak_force.max(soil.fx_n.hypot(soil.fz_n));
             let payload_kg = v_s * density;
 
             // Statics: tau = G - J^T f (Eq. A2, A4), F = tau / r (Eqs. A7, A19).
-            let tau = self.kin.gravity_torques(&q, payload_kg)
-                - self.kin.jacobian(&q).transpose()
-                    * Vector3::new(soil.fx_n, soil.fz_n, soil.my_nm);
+            let gravity = st0.gravity_with_payload(payload_kg);
             let mut force_n = [0.0; 3];
             let mut head_pa = [0.0; 3];
             let mut rod_pa = [0.0; 3];
             let mut extension = [0.0; 3];
             for j in 0..3 {
-                let f = tau[j] / arms[j];
+                let tau = gravity[j] - (st0.jx[j] * soil.fx_n + st0.jz[j] * soil.fz_n + soil.my_nm);
+                let f = tau / arms[j];
                 if !f.is_finite() {
                     return Err(DigModelError::NonFinite {
                         what: "cylinder force",
@@ -961,6 +1204,63 @@ impl<A: ActuatorDynamics> DigModel<A> {
         })
     }
 
+    /// The bucket's motion over the current (cut) surface, measured as the simulator's soil contact
+    /// does: depth below the higher of the surface at the tip and 0.15 m ahead in the direction of
+    /// travel, slope over +-0.25 m.
+    #[inline]
+    fn motion(surface: &CutSurface, st: &PoseStatics, tip_v: [f64; 2], v_s: f64) -> BucketMotion {
+        let [x, z] = st.tip;
+        let ahead = if tip_v[0] > 0.0 { 0.15 } else { -0.15 };
+        let top = surface.height(x).max(surface.height(x + ahead));
+        BucketMotion {
+            sin_bucket_abs: st.sin_bucket_abs,
+            cos_bucket_abs: st.cos_bucket_abs,
+            tip_velocity_m_per_s: tip_v,
+            vertical_depth_m: top - z,
+            slope_tan: (surface.height(x + 0.25) - surface.height(x - 0.25)) / 0.5,
+            swept_volume_m3: v_s,
+        }
+    }
+
+    /// The soil force the model applies (before the force factor) to a bucket at `q` moving with
+    /// cylinder velocities `velocity_m_per_s` over `surface_profile` (the current terrain along the
+    /// digging plane), with `swept_volume_m3` in the bucket (capped at the capacity). For diagnostics:
+    /// comparing the model's soil force with measured forces along a recorded dig.
+    ///
+    /// # Errors
+    /// [`DigModelError::Kinematics`] for a pose outside the strokes, [`DigModelError::Soil`],
+    /// [`DigModelError::Terrain`].
+    pub fn soil_force_at(
+        &self,
+        q: &JointAngles,
+        velocity_m_per_s: [f64; 3],
+        surface_profile: &SectionProfile,
+        swept_volume_m3: f64,
+    ) -> Result<TipForce> {
+        let arms = self.kin.moment_arms(q).map_err(DigModelError::Kinematics)?;
+        let q_arr = [q.boom_rad, q.stick_rad, q.bucket_rad];
+        let st = self.statics.eval(&q_arr);
+        let mut tip_v = [0.0; 2];
+        for j in 0..3 {
+            let rate = velocity_m_per_s[j] / arms[j];
+            tip_v[0] += st.jx[j] * rate;
+            tip_v[1] += st.jz[j] * rate;
+        }
+        let v_s = swept_volume_m3.min(self.capacity_m3);
+        match &self.moving_soil {
+            Some(soil) => Ok(soil.force(&Self::motion(
+                &CutSurface::new(surface_profile)?,
+                &st,
+                tip_v,
+                v_s,
+            ))?),
+            None => {
+                let pose = self.kin.forward(q);
+                self.soil_force(&pose, surface_profile, v_s)
+            }
+        }
+    }
+
     fn check_inside(&self, profile: &SectionProfile, r_m: f64) -> Result<()> {
         if !r_m.is_finite() {
             return Err(DigModelError::NonFinite {
@@ -977,9 +1277,9 @@ impl<A: ActuatorDynamics> DigModel<A> {
         Ok(())
     }
 
-    /// The soil force on the bucket with the force factor applied. Where the FEE wedge cannot fail
-    /// (Eq. 17's denominator <= 0, a bucket pushed in nearly edge-on) the wedge mechanism gives no
-    /// force, as in the simulator.
+    /// The soil force of the empirical model (Eq. 21) at the pre-dig geometry, before the force factor.
+    /// (The analytical model goes through [`MovingBucketSoil`], which also knows the direction of
+    /// travel, the wedge-limit saturation and the bearing resistance.)
     #[inline]
     fn soil_force(
         &self,
@@ -1001,12 +1301,7 @@ impl<A: ActuatorDynamics> DigModel<A> {
             }
             SoilModel::Empirical(m) => m.evaluate(&gamma)?, // Eq. 21
         };
-        let k = self.config.force_factor;
-        Ok(TipForce {
-            fx_n: k * f.fx_n,
-            fz_n: k * f.fz_n,
-            my_nm: k * f.my_nm,
-        })
+        Ok(f)
     }
 
     /// Head and rod pressure for a cylinder force (module docs: the static split, inverse of Eq. A20).
@@ -1058,6 +1353,45 @@ mod tests {
         assert_send_sync::<DigSite>();
         assert_send_sync::<DigPrediction>();
     };
+
+    #[test]
+    fn fused_statics_equal_the_kinematics_functions() {
+        let machine = MachineConfig::default_machine().expect("machine");
+        let kin = Kinematics::new(&machine).expect("kin");
+        let st = Statics::new(&machine);
+        for (k, payload) in [(0, 0.0), (1, 800.0), (2, 2500.0), (3, 100.0)] {
+            let q = JointAngles {
+                boom_rad: -0.4 + 0.3 * f64::from(k),
+                stick_rad: -1.9 + 0.25 * f64::from(k),
+                bucket_rad: -1.5 + 0.6 * f64::from(k),
+            };
+            let e = st.eval(&[q.boom_rad, q.stick_rad, q.bucket_rad]);
+            let gravity = e.gravity_with_payload(payload);
+            let pose = kin.forward(&q);
+            assert!((e.tip[0] - pose.x_m).abs() < 1e-12 && (e.tip[1] - pose.z_m).abs() < 1e-12);
+            assert!((e.sin_bucket_abs - pose.bucket_abs_rad.sin()).abs() < 1e-12);
+            let j = kin.jacobian(&q);
+            let g = kin.gravity_torques(&q, payload);
+            for c in 0..3 {
+                assert!((e.jx[c] - j[(0, c)]).abs() < 1e-12);
+                assert!((e.jz[c] - j[(1, c)]).abs() < 1e-12);
+                assert!((gravity[c] - g[c]).abs() < 1e-9 * g[c].abs().max(1.0));
+            }
+        }
+    }
+
+    #[test]
+    fn cut_surface_follows_the_tip_path_below_the_section() {
+        let p = SectionProfile::from_fn(0.0, 10.0, 0.05, |_| 1.0).expect("profile");
+        let mut c = CutSurface::new(&p).expect("surface");
+        c.cut([8.0, 0.5], [7.0, 0.7]);
+        assert!((c.height(7.5) - 0.6).abs() < 1e-9);
+        assert!((c.height(8.5) - 1.0).abs() < 1e-12 && (c.height(6.5) - 1.0).abs() < 1e-12);
+        // Above the surface nothing changes; beyond the section the end samples hold.
+        c.cut([5.0, 2.0], [4.0, 2.0]);
+        assert!((c.height(4.5) - 1.0).abs() < 1e-12);
+        assert!((c.height(-3.0) - 1.0).abs() < 1e-12 && (c.height(30.0) - 1.0).abs() < 1e-12);
+    }
 
     #[test]
     fn nominal_model_loads_from_the_shipped_files() {

@@ -385,6 +385,292 @@ pub fn dig_geometry(
     }))
 }
 
+/// Closest approach of the rake to the wedge's failure limit, rad. Eq. 17's denominator
+/// `cos(rho + delta) + sin(rho + delta) cot(beta + phi) = sin(beta + phi + rho + delta) / sin(beta + phi)`
+/// vanishes as the rake plus the three angles reach 180 degrees: there the wedge cannot fail and the
+/// FEE force grows without bound. A blade at or past that rake still bulldozes the soil ahead of it, so
+/// [`MovingBucketSoil`] evaluates the force at the rake this far from the limit (it saturates at about
+/// four times the force at a typical 45 degree rake) instead of diverging or, as a bare Eq. 17 would
+/// suggest, vanishing. The simulator's soil contact (`vcan_sim::soil_contact`) uses the same margin.
+pub const WEDGE_LIMIT_MARGIN_RAD: f64 = 0.17;
+
+/// Bearing resistance of a bucket pushed into the soil (not cut by it), the part of the soil force that
+/// the wedge analysis of Eqs. 14-17 leaves out: the cutting edge pushed in tip first bears on its face,
+/// the bucket's back (bottom plate) pushed into the soil bears over a strip of it. The bearing pressure
+/// has the form of Terzaghi's bearing capacity, `c N_c + gamma g d N_q + q0` (the same terms as Eq. 9),
+/// and both resistances build up from rest over `creep_speed_m_per_s` (`tanh(v / v_creep)`), as the FEE
+/// force does. The defaults are the simulator's soil contact (`vcan_sim::soil_contact`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BearingParams {
+    /// Thickness of the cutting edge (with its teeth) that bears when pushed in tip first, m.
+    pub edge_thickness_m: f64,
+    /// Length of the bucket's back (bottom plate) that bears when pushed in, m.
+    pub back_length_m: f64,
+    /// Cohesion bearing factor `N_c`.
+    pub cohesion_factor: f64,
+    /// Depth (overburden) bearing factor `N_q`.
+    pub depth_factor: f64,
+    /// Bearing pressure at the surface of a cohesionless soil `q0`, Pa.
+    pub surface_pressure_pa: f64,
+    /// Speed over which the soil resistance builds up from rest, m/s.
+    pub creep_speed_m_per_s: f64,
+}
+
+impl Default for BearingParams {
+    fn default() -> Self {
+        Self {
+            edge_thickness_m: 0.05,
+            back_length_m: 0.25,
+            cohesion_factor: 40.0,
+            depth_factor: 30.0,
+            surface_pressure_pa: 2.0e4,
+            creep_speed_m_per_s: 0.01,
+        }
+    }
+}
+
+impl BearingParams {
+    /// Checks that every value is finite and not negative, and the creep speed positive.
+    ///
+    /// # Errors
+    /// [`SoilError::NonFinite`] or [`SoilError::OutOfRange`].
+    pub fn validate(&self) -> Result<()> {
+        let v = [
+            self.edge_thickness_m,
+            self.back_length_m,
+            self.cohesion_factor,
+            self.depth_factor,
+            self.surface_pressure_pa,
+            self.creep_speed_m_per_s,
+        ];
+        if v.iter().any(|x| !x.is_finite()) {
+            return Err(SoilError::NonFinite {
+                what: "bearing parameters",
+            });
+        }
+        if v.iter().any(|x| *x < 0.0) || self.creep_speed_m_per_s <= 0.0 {
+            return Err(SoilError::OutOfRange {
+                what: "bearing parameters must not be negative, the creep speed positive",
+            });
+        }
+        Ok(())
+    }
+
+    /// Bearing pressure `c N_c + gamma g d N_q + q0` at a depth `d` (perpendicular), Pa.
+    #[must_use]
+    pub fn pressure_pa(&self, psi: &SoilProperties, depth_m: f64) -> f64 {
+        psi.cohesion_pa * self.cohesion_factor
+            + psi.density_kg_per_m3 * GRAVITY_M_PER_S2 * depth_m.max(0.0) * self.depth_factor
+            + self.surface_pressure_pa
+    }
+}
+
+/// `tanh` through one `exp` (libm's `tanh` is several times slower); exact to rounding, saturating
+/// without NaN.
+#[inline]
+fn fast_tanh(a: f64) -> f64 {
+    if a > 20.0 {
+        1.0
+    } else if a < -20.0 {
+        -1.0
+    } else {
+        1.0 - 2.0 / ((2.0 * a).exp() + 1.0)
+    }
+}
+
+/// The soil force on a moving bucket, with the soil constants of Eq. 17 precomputed for one `Psi` (the
+/// dig model evaluates it every 10 ms step): the modified FEE (Eqs. 14-17) for either direction of
+/// travel, directed by Eq. 18 (at `delta` from the blade normal, the blade along the bucket line), held
+/// [`WEDGE_LIMIT_MARGIN_RAD`] short of the wedge's failure limit, mobilised from rest over the creep
+/// speed, plus the bearing resistance of [`BearingParams`].
+///
+/// For a bucket pulled toward the machine below the limit the FEE part equals [`fee_tip_force`] (tested),
+/// which is Eq. 18 written with the signed rake; the vector form here also covers a bucket pushed away
+/// from the machine (the rake is then measured from the other side of the blade).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MovingBucketSoil {
+    psi: SoilProperties,
+    bearing: BearingParams,
+    width_m: f64,
+    cot_beta: f64,
+    cot_bp: f64,
+    n_c_numerator: f64,
+    weight_n_per_m3: f64,
+    sin_delta: f64,
+    cos_delta: f64,
+    /// Largest classical rake used for the FEE magnitude, rad.
+    max_rake_rad: f64,
+}
+
+/// Where the bucket is and how it moves, for [`MovingBucketSoil::force`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BucketMotion {
+    /// `sin(bucket_abs)` (bucket line pin -> tip to the horizontal).
+    pub sin_bucket_abs: f64,
+    /// `cos(bucket_abs)`.
+    pub cos_bucket_abs: f64,
+    /// Tip velocity in the base frame `[vx, vz]`, m/s.
+    pub tip_velocity_m_per_s: [f64; 2],
+    /// Depth of the tip below the current surface, measured vertically, m (> 0 in the soil).
+    pub vertical_depth_m: f64,
+    /// Terrain slope `alpha` at the tip, as `tan(alpha)` (rising away from the machine positive).
+    pub slope_tan: f64,
+    /// Soil in the bucket (swept volume, at most the capacity), m^3.
+    pub swept_volume_m3: f64,
+}
+
+impl MovingBucketSoil {
+    /// Precomputes the constants for soil `psi`, bearing parameters and a bucket `width_m`.
+    ///
+    /// # Errors
+    /// Validation errors of `psi` and `bearing`; [`SoilError::OutOfRange`] for a non-positive width;
+    /// [`SoilError::Singular`] for `sin(beta + phi) = 0`.
+    pub fn new(psi: &SoilProperties, bearing: &BearingParams, width_m: f64) -> Result<Self> {
+        psi.validate()?;
+        bearing.validate()?;
+        if !(width_m.is_finite() && width_m > 0.0) {
+            return Err(SoilError::OutOfRange {
+                what: "bucket width must be positive",
+            });
+        }
+        let beta = psi.failure_angle_rad;
+        let bp = beta + psi.friction_angle_rad;
+        if bp.sin().abs() < EPS {
+            return Err(SoilError::Singular {
+                what: "sin(beta + phi) = 0",
+            });
+        }
+        let cot_beta = beta.cos() / beta.sin();
+        let cot_bp = bp.cos() / bp.sin();
+        let (sin_delta, cos_delta) = psi.tool_friction_angle_rad.sin_cos();
+        Ok(Self {
+            psi: *psi,
+            bearing: *bearing,
+            width_m,
+            cot_beta,
+            cot_bp,
+            n_c_numerator: 1.0 + cot_beta * cot_bp,
+            weight_n_per_m3: psi.density_kg_per_m3 * GRAVITY_M_PER_S2,
+            sin_delta,
+            cos_delta,
+            max_rake_rad: PI - bp - psi.tool_friction_angle_rad - WEDGE_LIMIT_MARGIN_RAD,
+        })
+    }
+
+    /// The soil properties.
+    #[must_use]
+    pub fn properties(&self) -> &SoilProperties {
+        &self.psi
+    }
+
+    /// Eq. 17's magnitude at perpendicular depth `d`, slope `alpha` (given as `cos`, `sin`, `tan`) and
+    /// classical rake `rake_rad` (held short of the failure limit), N.
+    #[inline]
+    fn fee_magnitude_n(
+        &self,
+        d: f64,
+        cos_a: f64,
+        sin_a: f64,
+        tan_a: f64,
+        rake_rad: f64,
+        v_s: f64,
+    ) -> f64 {
+        let rake = rake_rad.min(self.max_rake_rad);
+        let (s, c) = (rake + self.psi.tool_friction_angle_rad).sin_cos();
+        let den = c + s * self.cot_bp; // Eq. 17
+        if den < EPS {
+            return 0.0;
+        }
+        let slope_term = cos_a + sin_a * self.cot_bp;
+        let wedge = (self.cot_beta - tan_a).max(0.0); // Eq. 15
+        let f = d * d * self.width_m * self.weight_n_per_m3 * wedge * slope_term / (2.0 * den)
+            + self.psi.cohesion_pa * self.width_m * d * self.n_c_numerator / den
+            + v_s * self.weight_n_per_m3 * slope_term / den; // Eq. 17
+        f.max(0.0)
+    }
+
+    /// Soil force on the bucket (base frame, at the tip; `M_y = 0`: the payload's weight acts through
+    /// the gravity torques). Zero out of the soil (`vertical_depth_m <= 0`).
+    ///
+    /// # Errors
+    /// [`SoilError::NonFinite`] for non-finite motion values, [`SoilError::OutOfRange`] for a negative
+    /// swept volume.
+    #[inline]
+    pub fn force(&self, m: &BucketMotion) -> Result<TipForce> {
+        let v = m.tip_velocity_m_per_s;
+        if !(m.sin_bucket_abs.is_finite()
+            && m.cos_bucket_abs.is_finite()
+            && v[0].is_finite()
+            && v[1].is_finite()
+            && m.vertical_depth_m.is_finite()
+            && m.slope_tan.is_finite()
+            && m.swept_volume_m3.is_finite())
+        {
+            return Err(SoilError::NonFinite {
+                what: "bucket motion",
+            });
+        }
+        if m.swept_volume_m3 < 0.0 {
+            return Err(SoilError::OutOfRange {
+                what: "swept volume must not be negative",
+            });
+        }
+        if m.vertical_depth_m <= 0.0 {
+            return Ok(TipForce::default());
+        }
+        let sec = (1.0 + m.slope_tan * m.slope_tan).sqrt();
+        let (cos_a, sin_a) = (1.0 / sec, m.slope_tan / sec);
+        let alpha = m.slope_tan.atan();
+        let d = m.vertical_depth_m * cos_a; // Eq. 17 measures d perpendicular to the terrain
+        // The blade: from the tip up the bucket line to the pin; its normal facing the travel.
+        let b = [-m.cos_bucket_abs, -m.sin_bucket_abs];
+        let travel = if v[0] > 0.0 { 1.0 } else { -1.0 };
+        let mut n = [b[1], -b[0]];
+        if n[0] * travel < 0.0 {
+            n = [-n[0], -n[1]];
+        }
+        // Classical rake (Fig. 25): between the blade and the terrain surface behind the edge.
+        let blade_from_travel = b[1].atan2(b[0] * travel);
+        let rake = (PI - blade_from_travel + alpha * travel).clamp(0.1, PI - 0.1);
+        let f = self.fee_magnitude_n(d, cos_a, sin_a, m.slope_tan, rake, m.swept_volume_m3);
+        let speed = v[0].hypot(v[1]);
+        let creep = self.bearing.creep_speed_m_per_s;
+        let mobilised = f * fast_tanh(speed / creep);
+        // Eq. 18: the bucket's force on the soil is at delta from the blade normal; on the bucket the
+        // opposite: against the normal and up the blade by friction.
+        let mut fx = mobilised * (-self.cos_delta * n[0] + self.sin_delta * b[0]);
+        let mut fz = mobilised * (-self.cos_delta * n[1] + self.sin_delta * b[1]);
+        // Bearing: the edge pushed in tip first, the back pushed against the soil.
+        let pressure = self.bearing.pressure_pa(&self.psi, d);
+        let v_tip_first = -(v[0] * b[0] + v[1] * b[1]);
+        if v_tip_first > 0.0 {
+            let edge = pressure
+                * self.width_m
+                * self.bearing.edge_thickness_m
+                * fast_tanh(v_tip_first / creep);
+            fx += edge * b[0];
+            fz += edge * b[1];
+        }
+        // The opening faces bucket_abs - 90 degrees.
+        let opening = [m.sin_bucket_abs, -m.cos_bucket_abs];
+        let v_back_first = -(v[0] * opening[0] + v[1] * opening[1]);
+        if v_back_first > 0.0 {
+            let back = pressure
+                * self.width_m
+                * self.bearing.back_length_m
+                * fast_tanh(v_back_first / creep);
+            fx += back * opening[0];
+            fz += back * opening[1];
+        }
+        Ok(TipForce {
+            fx_n: fx,
+            fz_n: fz,
+            my_nm: 0.0,
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -583,6 +869,118 @@ mod tests {
             dig_geometry(&outside, &profile, 0.0),
             Err(SoilError::Terrain(_))
         ));
+    }
+
+    fn motion_toward_machine(bucket_abs_rad: f64, depth_m: f64, slope_rad: f64) -> BucketMotion {
+        BucketMotion {
+            sin_bucket_abs: bucket_abs_rad.sin(),
+            cos_bucket_abs: bucket_abs_rad.cos(),
+            tip_velocity_m_per_s: [-0.4, 0.0],
+            vertical_depth_m: depth_m,
+            slope_tan: slope_rad.tan(),
+            swept_volume_m3: 0.5,
+        }
+    }
+
+    const NO_BEARING: BearingParams = BearingParams {
+        edge_thickness_m: 0.0,
+        back_length_m: 0.0,
+        cohesion_factor: 0.0,
+        depth_factor: 0.0,
+        surface_pressure_pa: 0.0,
+        creep_speed_m_per_s: 1e-6,
+    };
+
+    #[test]
+    fn moving_bucket_force_is_eq_17_18_when_pulled_in_below_the_wedge_limit() {
+        let psi = SoilProperties::typical();
+        let soil = MovingBucketSoil::new(&psi, &NO_BEARING, WIDTH_M).expect("soil");
+        let profile =
+            SectionProfile::from_fn(0.0, 15.0, 0.05, |x| 0.3 * (x - 4.0)).expect("profile");
+        for (bucket_abs_deg, slope_deg) in [(-130.0_f64, 0.0_f64), (-150.0, 10.0), (-110.0, -5.0)] {
+            let slope = slope_deg.to_radians();
+            let m = motion_toward_machine(bucket_abs_deg.to_radians(), 0.4, slope);
+            let f = soil.force(&m).expect("force");
+            let pose = BucketPose {
+                x_m: 8.0,
+                z_m: profile.height_at(8.0).expect("h") - 0.4,
+                bucket_abs_rad: bucket_abs_deg.to_radians(),
+            };
+            let Contact::InContact(g) = dig_geometry(&pose, &profile, 0.5).expect("gamma") else {
+                panic!("in contact");
+            };
+            let g = DigGeometry {
+                slope_rad: slope,
+                depth_m: 0.4 * slope.cos(),
+                rake_rad: -(wrap_angle(bucket_abs_deg.to_radians() + PI) - slope),
+                ..g
+            };
+            let e = fee_tip_force(&psi, &g, WIDTH_M, 0.0).expect("eq 17");
+            assert!(
+                (f.fx_n - e.fx_n).abs() < 1e-6 * e.fx_n.abs().max(1.0),
+                "{f:?} {e:?}"
+            );
+            assert!(
+                (f.fz_n - e.fz_n).abs() < 1e-6 * e.fz_n.abs().max(1.0),
+                "{f:?} {e:?}"
+            );
+        }
+    }
+
+    /// Regression: a bucket pulled in at an open attitude (rake past the wedge's failure limit) got no
+    /// soil force at all in the dig model (Eq. 17's singular denominator mapped to zero), so it dove
+    /// 1 m deeper than the simulated machine, whose soil saturates there.
+    #[test]
+    fn force_past_the_wedge_limit_saturates_instead_of_vanishing() {
+        let psi = SoilProperties::typical();
+        let soil = MovingBucketSoil::new(&psi, &NO_BEARING, WIDTH_M).expect("soil");
+        let limit =
+            PI - psi.failure_angle_rad - psi.friction_angle_rad - psi.tool_friction_angle_rad;
+        // Rake = blade_abs on flat ground, blade_abs = bucket_abs + 180 degrees.
+        let at_rake = |rake: f64| {
+            let f = soil
+                .force(&motion_toward_machine(rake - PI, 0.4, 0.0))
+                .expect("force");
+            f.fx_n.hypot(f.fz_n)
+        };
+        let saturated = at_rake(limit - WEDGE_LIMIT_MARGIN_RAD);
+        assert!(saturated > 2.0 * at_rake(45f64.to_radians()), "{saturated}");
+        for rake in [limit - 1e-3, limit + 0.2, 2.9] {
+            assert!(
+                (at_rake(rake) - saturated).abs() < 1e-6 * saturated,
+                "rake {rake}"
+            );
+        }
+    }
+
+    #[test]
+    fn bearing_resists_pushing_the_edge_in_and_nothing_acts_above_ground() {
+        let psi = SoilProperties::typical();
+        let bearing = BearingParams::default();
+        let soil = MovingBucketSoil::new(&psi, &bearing, WIDTH_M).expect("soil");
+        // Bucket line vertical (tip below the pin), pushed straight down: the edge bears, up the blade.
+        let down = BucketMotion {
+            tip_velocity_m_per_s: [0.0, -0.2],
+            ..motion_toward_machine(-0.5 * PI, 0.3, 0.0)
+        };
+        let f = soil.force(&down).expect("force");
+        let edge = bearing.pressure_pa(&psi, 0.3) * WIDTH_M * bearing.edge_thickness_m;
+        assert!(f.fz_n > 0.9 * edge, "{f:?} vs {edge}");
+        let above = BucketMotion {
+            vertical_depth_m: -0.1,
+            ..down
+        };
+        assert_eq!(soil.force(&above).expect("force"), TipForce::default());
+        let nan = BucketMotion {
+            slope_tan: f64::NAN,
+            ..down
+        };
+        assert!(matches!(soil.force(&nan), Err(SoilError::NonFinite { .. })));
+        let bad = BearingParams {
+            creep_speed_m_per_s: 0.0,
+            ..bearing
+        };
+        assert!(MovingBucketSoil::new(&psi, &bad, WIDTH_M).is_err());
     }
 
     proptest! {
