@@ -306,10 +306,17 @@ pub struct CycleConfig {
     pub section_step_m: f64,
     /// Wait this long after Capture before weighing, s. Default 0.8.
     pub weigh_settle_s: f64,
-    /// Average the payload estimate over this window, s. Default 0.3.
+    /// Average the payload estimate over this window, s. Default 1.0: the implement keeps oscillating
+    /// on its oil columns after the valves close (about 2 Hz on the default machine, the static
+    /// estimate swinging by +-35 %), and a 0.3 s window, part of one period, read up to 20 % off.
     pub weigh_window_s: f64,
     /// Detect the floor on the first cleanup and reuse it (Table 5), or every time.
     pub floor_policy: FloorPolicy,
+    /// A cleanup's probe contact above this elevation (base frame: the track ground is z = 0) is
+    /// material, not the floor, and is not kept for later cleanups: the machine stands on the floor
+    /// it levels, or above it in a cut. (The demo's first cleanup started over what the digs had left
+    /// of the bench and "detected" the floor 1.68 m up; every later cleanup reused it.) m. Default 0.3.
+    pub floor_max_z_m: f64,
     /// The grid scans are binned into.
     pub scan_grid: ScanGrid,
 }
@@ -367,8 +374,9 @@ impl Default for CycleConfig {
             section_r_max_m: 12.0,
             section_step_m: 0.05,
             weigh_settle_s: 0.8,
-            weigh_window_s: 0.3,
+            weigh_window_s: 1.0,
             floor_policy: FloorPolicy::DetectOnce,
+            floor_max_z_m: 0.3,
             scan_grid: ScanGrid::default(),
         }
     }
@@ -425,6 +433,7 @@ impl CycleConfig {
             ("home_swing_deg", self.home_swing_rad),
             ("carry_boom_deg", self.carry_boom_rad),
             ("carry_tip_z_m", self.carry_tip_z_m),
+            ("floor_max_z_m", self.floor_max_z_m),
             ("dump_bucket_deg", self.dump_bucket_rad),
         ] {
             if !a.is_finite() {
@@ -987,8 +996,26 @@ impl WorkCycle {
         if !low {
             self.lifted = true;
         }
-        if low {
+        // Boom up first, boom down last: bringing the stick in (or out) at a boom still below its
+        // target sweeps the bucket down through the bench (from the dump pose to a start close in, at
+        // a stick of -87 degrees, it came to rest on the face with the boom stalled 4 degrees short).
+        let boom_err = target.boom_rad - s.joints.boom_rad;
+        let boom_band = 3.0 * self.config.joint.tolerance;
+        if low || boom_err > boom_band {
+            // Full lift: at part command the open-centre bypass keeps the gallery below the boom's
+            // holding pressure and the loaded boom stalls (as in SwingToDump).
             implement = [self.config.joint.max_command, 0.0, 0.0];
+        } else if boom_err < -boom_band
+            && [
+                target.stick_rad - s.joints.stick_rad,
+                target.bucket_rad - s.joints.bucket_rad,
+            ]
+            .iter()
+            .any(|e| e.abs() > boom_band)
+        {
+            // Lowering waits only for the large stick and bucket moves: their last degrees at the
+            // P-controller's minimum command crawl, and the boom would wait seconds for them.
+            implement[0] = 0.0;
         }
         let boom_clear =
             !low && s.joints.boom_rad >= target.boom_rad - 3.0 * self.config.joint.tolerance;
@@ -1199,11 +1226,19 @@ impl WorkCycle {
                 ]))
             }
             CleanupOutput::HandOver(reason) => {
-                self.floor = cleanup.floor_estimate();
-                tracing::info!(?reason, floor_z_m = ?self.floor.z_m(), "cleanup hand-over to Autodig");
+                let used = cleanup.floor_estimate();
+                match used.z_m() {
+                    Some(z) if z > self.config.floor_max_z_m => tracing::warn!(
+                        floor_z_m = z,
+                        max_z_m = self.config.floor_max_z_m,
+                        "cleanup contact above the track ground is material, not the floor: not kept"
+                    ),
+                    _ => self.floor = used,
+                }
+                tracing::info!(?reason, floor_z_m = ?used.z_m(), "cleanup hand-over to Autodig");
                 if let Some(r) = &mut self.record {
                     r.stats.hand_over = Some(reason);
-                    r.stats.floor_z_m = self.floor.z_m();
+                    r.stats.floor_z_m = used.z_m();
                 }
                 self.cleanup = None;
                 // Hand over in Pre-Dig (3.3), with the perception enhancements if a section exists.

@@ -102,6 +102,10 @@ pub struct EstimatorConfig {
     pub rate_filter_time_constant_s: f64,
     /// The machine's world pose when the odometry first arrives (tracking dead-reckons from it).
     pub initial_pose: MachinePose,
+    /// The static weighing leaves out a joint whose cylinder is within this extension fraction of a
+    /// stroke end: the end stop then carries part of that joint's load (after Capture the bucket
+    /// cylinder is typically at its end stop with relief pressure trapped in the head). Default 0.01.
+    pub weigh_stroke_end_margin: f64,
 }
 
 impl Default for EstimatorConfig {
@@ -109,6 +113,7 @@ impl Default for EstimatorConfig {
         Self {
             rate_filter_time_constant_s: 0.03,
             initial_pose: MachinePose::default(),
+            weigh_stroke_end_margin: 0.01,
         }
     }
 }
@@ -388,8 +393,18 @@ impl Estimator {
 
     /// Static payload estimate, kg: with the bucket still and clear of the ground the tip force is zero,
     /// so the measured joint torques equal the gravity torques `G(q, m)` (Eqs. A2, A4), which are linear
-    /// in the payload mass `m`; least squares over the three joints. `None` if the derived state is
-    /// invalid or the payload has no lever arm.
+    /// in the payload mass `m`; least squares over the joints whose cylinder is off its end stops.
+    ///
+    /// A cylinder at a stroke end does not carry its joint's load alone (the end stop takes a share, and
+    /// a valve closed after the cylinder was driven into the stop traps up to relief pressure), so that
+    /// joint is left out. An end stop between two links is an internal force of the links beyond the
+    /// joints closer to the base, so their equations stay exact: after Capture (bucket curled into its
+    /// stop) the boom and stick torques alone weigh the payload. `None` if the derived state is invalid,
+    /// every joint is at an end stop, or the payload has no lever arm.
+    ///
+    /// Static means still: the hydraulic oil columns let the implement oscillate for seconds after the
+    /// valves close (at about 2 Hz on the default machine, boom pressure swinging by +-30 % of the
+    /// static value), so average this over whole oscillation periods (the work cycle's Weigh window).
     pub fn payload_estimate_kg(&self) -> Option<f64> {
         let s = &self.state;
         if !s.derived_valid {
@@ -397,12 +412,21 @@ impl Estimator {
         }
         let g0 = self.kin.gravity_torques(&s.joints, 0.0);
         let a = self.kin.gravity_torques(&s.joints, 1.0) - g0;
-        let denom = a.dot(&a);
+        let tau = Vector3::from(s.joint_torque_nm);
+        let margin = self.config.weigh_stroke_end_margin;
+        let (mut num, mut denom) = (0.0, 0.0);
+        for i in 0..3 {
+            let e = s.extension_fraction[i];
+            if e <= margin || e >= 1.0 - margin {
+                continue;
+            }
+            num += a[i] * (tau[i] - g0[i]);
+            denom += a[i] * a[i];
+        }
         if !(denom.is_finite() && denom > 1e-9) {
             return None;
         }
-        let tau = Vector3::from(s.joint_torque_nm);
-        let m = a.dot(&(tau - g0)) / denom;
+        let m = num / denom;
         m.is_finite().then_some(m)
     }
 
@@ -485,6 +509,65 @@ mod tests {
         let m = e.payload_estimate_kg().expect("payload");
         assert!((m - 2000.0).abs() < 0.5, "{m}");
         assert!((e.payload_weight_n().expect("w") - 2000.0 * GRAVITY_M_PER_S2).abs() < 5.0);
+    }
+
+    /// Regression: after Capture the bucket cylinder sits in its end stop with relief pressure trapped
+    /// in the head; weighing it with the bucket joint read the payload about 21 % high.
+    #[test]
+    fn weighing_leaves_out_a_cylinder_in_its_end_stop() {
+        let mut e = estimator();
+        let kin = e.kinematics().clone();
+        // The bucket angle at which its cylinder is fully extended (curled into the stop).
+        let (lo, hi) = kin.stroke_limited_range(Joint::Bucket);
+        let at_stop = [lo, hi]
+            .into_iter()
+            .find(|&b| {
+                let len = kin.cylinder_length(Joint::Bucket, b).expect("length");
+                let (r, x) = kin.stroke(Joint::Bucket);
+                (len - x).abs() < 1e-6 * (x - r)
+            })
+            .expect("an end of the stroke-limited range is full extension");
+        let q = JointAngles {
+            bucket_rad: at_stop,
+            ..Q
+        };
+        let payload_kg = 2500.0;
+        let tau = kin.gravity_torques(&q, payload_kg);
+        let mut force = kin
+            .cylinder_forces_from_joint_torques(&q, &tau)
+            .expect("forces");
+        // The end stop: the bucket cylinder pushes on far beyond what gravity needs.
+        force[2] += 5.0e5;
+        let m = MachineConfig::default_machine().expect("machine");
+        let cyl = [m.cylinders.boom, m.cylinders.stick, m.cylinders.bucket];
+        let feed = |e: &mut Estimator| {
+            e.on_message(&angles(q, 0.0), 0.0);
+            for (i, c) in Cylinder::ALL.into_iter().enumerate() {
+                let (head, rod) = if force[i] >= 0.0 {
+                    (force[i] / cyl[i].head_area_m2(), 0.0)
+                } else {
+                    (0.0, -force[i] / cyl[i].rod_area_m2())
+                };
+                e.on_message(&pressures(c, head, rod), 0.0);
+            }
+            e.update();
+        };
+        feed(&mut e);
+        assert!(e.state().extension_fraction[2] > 0.99);
+        let est = e.payload_estimate_kg().expect("payload");
+        assert!((est - payload_kg).abs() < 1.0, "{est} kg");
+        // Counting the bucket joint (a negative margin) takes the end-stop force for payload.
+        let mut counting_all = Estimator::new(
+            kin,
+            m.tracks.gauge_m,
+            EstimatorConfig {
+                weigh_stroke_end_margin: -1.0,
+                ..EstimatorConfig::default()
+            },
+        );
+        feed(&mut counting_all);
+        let biased = counting_all.payload_estimate_kg().expect("payload");
+        assert!((biased - payload_kg).abs() > 100.0, "{biased} kg");
     }
 
     #[test]

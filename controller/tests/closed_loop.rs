@@ -20,6 +20,10 @@ const FILL_FRACTION: f64 = 0.8;
 const FLOOR_TOLERANCE_M: f64 = 0.15;
 /// Cleanup: the detected floor elevation lies within this of the true floor, m.
 const FLOOR_DETECTION_TOLERANCE_M: f64 = 0.05;
+/// The static weighing after Capture lies within this fraction of the simulator's true payload
+/// (2 % on the default dig; it read 21 % high with the bucket cylinder in its end stop counted and a
+/// 0.3 s window over the implement's 2 Hz oscillation).
+const WEIGH_TOLERANCE: f64 = 0.10;
 
 fn one_dig() -> ControllerConfig {
     let mut c = ControllerConfig::default();
@@ -80,7 +84,7 @@ fn autodig_fills_the_bucket_from_a_reachable_start() {
     let w = d.weight_n.unwrap();
     let truth_n = t.payload_kg * 9.81;
     assert!(
-        (w - truth_n).abs() < 0.25 * truth_n,
+        (w - truth_n).abs() < WEIGH_TOLERANCE * truth_n,
         "weight {w} N vs {truth_n} N"
     );
     // After the plan the gateway is disarmed.
@@ -153,8 +157,10 @@ fn floor_extremes(l: &Loop) -> (f64, f64) {
 }
 
 #[test]
-#[ignore = "fails today: waypoint following hands over on high bucket pressure at the layer's 0.2 m \
-            face and the following Autodig leaves most of the layer; see the report"]
+#[ignore = "fails today (residual 0.20 m, the whole layer): following hands over on HighPressure(Bucket) \
+            at x = 6.2 m, 0.4 m before the layer, when the floor's reaction on the edge (dragged tip \
+            first at bucket_abs -150 deg) curls the bucket against the position loop; the Autodig from \
+            Pre-Dig there then lifts over the layer. See docs/controller.md"]
 fn cleanup_removes_the_residual_layer() {
     let (sim, config) = cleanup_setup();
     let mut l = Loop::new(sim, config);
@@ -320,7 +326,8 @@ fn explore_autodig_parameters() {
 }
 
 /// Stage-by-stage log of one dig: angles, pressures (MPa), commands, soil force and payload every
-/// 0.1 s of Autodig. `DIG_X`, `DIG_Z`, `DIG_BUCKET` override the start pose.
+/// 0.1 s of Autodig. `DIG_X`, `DIG_Z`, `DIG_BUCKET` override the start pose, `DIG_FACE_X` the bench
+/// face's toe.
 #[test]
 #[ignore = "diagnostic log"]
 fn log_one_dig() {
@@ -384,6 +391,7 @@ fn log_one_dig() {
         let effects: Vec<&str> = e.split(';').collect();
         sim = vcan_sim::SimConfig::load::<&str>(None, None, Some(1), &effects).unwrap();
     }
+    sim.scenario.bench.face_x_m = env("DIG_FACE_X", sim.scenario.bench.face_x_m);
     let maps = match std::env::var("DIG_MAPS") {
         Ok(p) => planner::autodig::AutodigMaps::from_toml_str(&std::fs::read_to_string(p).unwrap())
             .unwrap(),

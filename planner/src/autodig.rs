@@ -633,6 +633,14 @@ pub struct PerceptionConfig {
     /// The bucket counts as above the terrain when its depth below it is at most `-margin`, m.
     /// Default 0.0.
     pub above_terrain_margin_m: f64,
+    /// While the swept-volume end is active (enabled and the volume known), Pre-Dig and Dig end at
+    /// `stick_abs <= stick_limit` instead of at beta (or at beta if that is farther in). Thesis 3.2:
+    /// without the enhancements "the stick angle at which digging ends is fixed", so a dig started
+    /// close in ends with a small payload; with them the swept volume ends the dig and the payload
+    /// stays consistent across the starts (Table 1). The limit only keeps the bucket from coming
+    /// under the machine (as the cleanup's stick limit, 3.3). Default -120 deg.
+    #[serde(rename = "stick_limit_deg", with = "serde_deg")]
+    pub stick_limit_rad: f64,
 }
 
 impl Default for PerceptionConfig {
@@ -643,6 +651,7 @@ impl Default for PerceptionConfig {
             bucket_capacity_m3: 1.2,
             spill_allowance: 1.15,
             above_terrain_margin_m: 0.0,
+            stick_limit_rad: (-120.0_f64).to_radians(),
         }
     }
 }
@@ -781,6 +790,12 @@ impl AutodigConfig {
         }
         if !p.above_terrain_margin_m.is_finite() {
             return bad("perception.above_terrain_margin_m", "must be finite");
+        }
+        if !(p.stick_limit_rad.is_finite() && p.stick_limit_rad.abs() <= MAX_ANGLE_RAD) {
+            return bad(
+                "perception.stick_limit_deg",
+                "must be finite and within +-720 deg",
+            );
         }
         Ok(())
     }
@@ -1079,6 +1094,7 @@ impl Autodig {
         let cfg = &self.config;
         let stick_abs = inputs.stick_abs_rad();
         let bucket_abs = inputs.bucket_abs_rad();
+        let beta = self.stick_end_rad(inputs);
         match self.stage {
             Stage::BoomDown => self.check_contact(inputs, now_s),
             // Pre-Dig ends at rho1 (Fig. 9). The Fig. 9 caption also names beta for Pre-Dig; a stick
@@ -1086,7 +1102,7 @@ impl Autodig {
             Stage::PreDig => {
                 if bucket_abs <= cfg.rho1_rad {
                     Some(EndReason::BucketAngleRho1)
-                } else if stick_abs <= cfg.beta_rad {
+                } else if stick_abs <= beta {
                     Some(EndReason::StickAngleBeta)
                 } else if self.at_extend_limit(inputs, Joint::Bucket) {
                     Some(EndReason::CylinderLimit(Joint::Bucket))
@@ -1099,7 +1115,7 @@ impl Autodig {
                 let full = p.bucket_capacity_m3 * p.spill_allowance;
                 if p.end_dig_on_swept_volume && inputs.swept_volume_m3.is_some_and(|v| v >= full) {
                     Some(EndReason::SweptVolumeFull)
-                } else if stick_abs <= cfg.beta_rad {
+                } else if stick_abs <= beta {
                     Some(EndReason::StickAngleBeta)
                 } else if bucket_abs <= cfg.rho2_rad {
                     Some(EndReason::BucketAngleRho2)
@@ -1130,6 +1146,17 @@ impl Autodig {
                 }
             }
             Stage::Done => None,
+        }
+    }
+
+    /// The stick angle that ends Pre-Dig and Dig: beta, or with the swept-volume end active (3.2) the
+    /// perception stick limit if that is farther in.
+    fn stick_end_rad(&self, inputs: &AutodigInputs) -> f64 {
+        let p = &self.config.perception;
+        if p.end_dig_on_swept_volume && inputs.swept_volume_m3.is_some() {
+            p.stick_limit_rad.min(self.config.beta_rad)
+        } else {
+            self.config.beta_rad
         }
     }
 
@@ -1489,6 +1516,41 @@ mod tests {
         assert_eq!(
             out.stage_end.map(|e| e.reason),
             Some(EndReason::SweptVolumeFull)
+        );
+    }
+
+    /// Table 1 (3.2): a dig started close in reached beta after a few degrees of stick travel with a
+    /// small payload; with the swept-volume end active the stick goes on to the perception limit.
+    #[test]
+    fn swept_volume_end_replaces_beta_by_the_stick_limit() {
+        let mut i = free_lowering();
+        // stick_abs -105: past beta (-100), short of the perception limit (-120).
+        i.joint_rad = joints([0.0, -105.0, -20.0]);
+        i.swept_volume_m3 = Some(0.5);
+        let mut cfg = AutodigConfig::default();
+        let mut ad = in_stage(Stage::Dig, cfg);
+        let out = ad.step(&i, 0.0).expect("valid");
+        assert_eq!(
+            out.stage_end.map(|e| e.reason),
+            Some(EndReason::StickAngleBeta)
+        );
+        cfg.perception.end_dig_on_swept_volume = true;
+        let mut ad = in_stage(Stage::Dig, cfg);
+        assert_eq!(ad.step(&i, 0.0).expect("valid").stage, Stage::Dig);
+        // Without a volume (no terrain) the plain angle rules apply.
+        i.swept_volume_m3 = None;
+        let out = ad.step(&i, 0.01).expect("valid");
+        assert_eq!(
+            out.stage_end.map(|e| e.reason),
+            Some(EndReason::StickAngleBeta)
+        );
+        let mut ad = in_stage(Stage::Dig, cfg);
+        i.swept_volume_m3 = Some(0.5);
+        i.joint_rad = joints([0.0, -121.0, -20.0]);
+        let out = ad.step(&i, 0.0).expect("valid");
+        assert_eq!(
+            out.stage_end.map(|e| e.reason),
+            Some(EndReason::StickAngleBeta)
         );
     }
 

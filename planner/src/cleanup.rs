@@ -5,8 +5,10 @@
 //!
 //! 1. **Probe** (only when the floor elevation is not known yet, or with [`FloorPolicy::DetectEveryTime`]):
 //!    the tip is lowered slowly at the start radius until it stops following (the measured tip stays
-//!    above the commanded one by `probe_lag_m` for `probe_debounce_s`); the floor elevation is the mean
-//!    measured tip elevation over that held contact and is stored in the [`FloorEstimate`].
+//!    above the commanded one by `probe_lag_m` for `probe_debounce_s` and has stopped descending, after
+//!    it had first followed the setpoint down: a position loop's lag is not contact); the floor
+//!    elevation is the mean measured tip elevation over that held contact and is stored in the
+//!    [`FloorEstimate`].
 //!    **Descend** (floor known): the tip is lowered at the same speed to the known floor.
 //! 2. **Follow**: waypoints toward the machine along the floor. At a fixed rate the spacing sets the
 //!    speed, so the waypoints start close together and spread out, a velocity ramp up to a maximum speed
@@ -155,6 +157,16 @@ pub struct CleanupConfig {
     pub probe_lag_m: f64,
     /// Probe contact must hold this long, s. Default 0.2.
     pub probe_debounce_s: f64,
+    /// Probe contact also needs the tip to have stopped: over the debounce window the measured tip
+    /// descends by at most this fraction of the commanded descent. A position loop lags a lowering
+    /// setpoint by a constant distance while still moving at the commanded speed, so the lag alone
+    /// passed for contact (the demo's first cleanup "found" the floor 1.7 m up, in the air); a tip
+    /// resting on the ground stops while the setpoint goes on down. Contact also needs the tip to have
+    /// descended `probe_lag_m` from the probe's start first (the loop tracks; before it does, a tip
+    /// that has not started moving looks stalled), so start the probe at least that far above the
+    /// floor. In `[0, 1]`. Default 0.3.
+    #[serde(default = "default_probe_stall_fraction")]
+    pub probe_stall_fraction: f64,
     /// Probe gives up this far below the start, m. Default 1.5.
     pub probe_max_depth_m: f64,
     /// Absolute bucket angle held along the floor. Default -150 deg.
@@ -177,6 +189,10 @@ pub struct CleanupConfig {
     pub end_settle_s: f64,
 }
 
+fn default_probe_stall_fraction() -> f64 {
+    0.3
+}
+
 impl Default for CleanupConfig {
     fn default() -> Self {
         Self {
@@ -187,6 +203,7 @@ impl Default for CleanupConfig {
             descent_speed_m_per_s: 0.1,
             probe_lag_m: 0.05,
             probe_debounce_s: 0.2,
+            probe_stall_fraction: default_probe_stall_fraction(),
             probe_max_depth_m: 1.5,
             bucket_abs_rad: (-150.0_f64).to_radians(),
             stick_limit_rad: (-115.0_f64).to_radians(),
@@ -231,6 +248,9 @@ impl CleanupConfig {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(field, "must be finite and >= 0");
             }
+        }
+        if !(0.0..=1.0).contains(&self.probe_stall_fraction) {
+            return bad("probe_stall_fraction", "must be in [0, 1]");
         }
         if self.initial_speed_m_per_s > self.max_speed_m_per_s {
             return bad("initial_speed_m_per_s", "must not exceed max_speed_m_per_s");
@@ -400,6 +420,8 @@ pub struct Cleanup {
     last_now_s: Option<f64>,
     start_z_m: Option<f64>,
     probe_since_s: Option<f64>,
+    /// Measured tip elevation when the current probe contact window opened, m.
+    probe_window_z_m: f64,
     probe_z_sum_m: f64,
     probe_z_count: u32,
     high_since_s: Option<f64>,
@@ -446,6 +468,7 @@ impl Cleanup {
             last_now_s: None,
             start_z_m: None,
             probe_since_s: None,
+            probe_window_z_m: 0.0,
             probe_z_sum_m: 0.0,
             probe_z_count: 0,
             high_since_s: None,
@@ -520,13 +543,35 @@ impl Cleanup {
                 let depth = (cfg.descent_speed_m_per_s * t_k).min(cfg.probe_max_depth_m);
                 let z_cmd = start_z - depth;
                 if inputs.tip_z_m - z_cmd >= cfg.probe_lag_m {
-                    let since = *self.probe_since_s.get_or_insert(now_s);
+                    let since = match self.probe_since_s {
+                        Some(s) => s,
+                        None => {
+                            self.probe_window_z_m = inputs.tip_z_m;
+                            *self.probe_since_s.insert(now_s)
+                        }
+                    };
                     self.probe_z_sum_m += inputs.tip_z_m;
                     self.probe_z_count = self.probe_z_count.saturating_add(1);
                     if now_s - since >= cfg.probe_debounce_s {
-                        let floor_z = self.probe_z_sum_m / f64::from(self.probe_z_count.max(1));
-                        self.floor.z_m = Some(floor_z);
-                        return Ok(self.begin_follow(now_s));
+                        let window_s = now_s - since;
+                        let fallen_m = self.probe_window_z_m - inputs.tip_z_m;
+                        let stalled = fallen_m
+                            <= cfg.probe_stall_fraction * cfg.descent_speed_m_per_s * window_s;
+                        // The loop must have been tracking first: at the start of the descent a
+                        // position loop (valve deadband, open-centre bypass) lags while the tip has
+                        // not moved yet, which looks like a stall too.
+                        let tracked = start_z - self.probe_window_z_m >= cfg.probe_lag_m;
+                        if stalled && tracked {
+                            let floor_z = self.probe_z_sum_m / f64::from(self.probe_z_count.max(1));
+                            self.floor.z_m = Some(floor_z);
+                            return Ok(self.begin_follow(now_s));
+                        }
+                        // Still descending, or not yet moving: the position loop's lag, not contact.
+                        // Open a new window.
+                        self.probe_since_s = Some(now_s);
+                        self.probe_window_z_m = inputs.tip_z_m;
+                        self.probe_z_sum_m = inputs.tip_z_m;
+                        self.probe_z_count = 1;
                     }
                 } else {
                     self.probe_since_s = None;
@@ -723,6 +768,39 @@ mod tests {
             Cleanup::new(cfg, plan(), every).expect("valid").phase(),
             CleanupPhase::Probe
         );
+    }
+
+    /// Regression: a position loop that lags the lowering setpoint by more than `probe_lag_m` while
+    /// still descending at the commanded speed was taken for floor contact in the air.
+    #[test]
+    fn a_lagging_position_loop_is_not_floor_contact() {
+        let cfg = CleanupConfig::default();
+        // First-order position loop: steady lag = descent speed / gain = 0.2 m, four times probe_lag.
+        const LOOP_GAIN_PER_S: f64 = 0.5;
+        let mut c =
+            Cleanup::new(cfg, plan(), FloorEstimate::new(FloorPolicy::DetectOnce)).expect("valid");
+        let mut tip_z = START_Z_M;
+        let mut t = 0.0;
+        let mut max_lag = 0.0_f64;
+        while c.phase() == CleanupPhase::Probe && t < 60.0 {
+            match c
+                .step(&inputs_at(START_RADIUS_M, tip_z), t)
+                .expect("valid step")
+            {
+                CleanupOutput::Waypoint(w) => {
+                    if tip_z > TRUE_FLOOR_Z_M + 0.01 {
+                        max_lag = max_lag.max(tip_z - w.z_m);
+                    }
+                    tip_z += (w.z_m - tip_z) * LOOP_GAIN_PER_S * DT_S;
+                    tip_z = tip_z.max(TRUE_FLOOR_Z_M);
+                }
+                CleanupOutput::HandOver(r) => panic!("hand-over {r:?} while probing"),
+            }
+            t += DT_S;
+        }
+        assert!(max_lag > 3.0 * cfg.probe_lag_m, "lag {max_lag} m");
+        let z = c.floor_estimate().z_m().expect("detected");
+        assert!((z - TRUE_FLOOR_Z_M).abs() < 0.02, "floor {z} m");
     }
 
     #[test]
