@@ -46,8 +46,8 @@ impl Default for AnalysisConfig {
     fn default() -> Self {
         Self {
             candidates: Candidate::ALL.to_vec(),
-            min_delta_bic: 30.0,
-            min_explained: 0.03,
+            min_delta_bic: 150.0,
+            min_explained: 0.05,
             max_effects: 3,
             grid_points: 9,
             golden_iterations: 18,

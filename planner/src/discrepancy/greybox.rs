@@ -42,6 +42,10 @@ const SUBSTEPS: usize = 10;
 pub const WARMUP_SAMPLES: usize = 50;
 /// Below this cylinder speed the actuator is at rest (stiction holds it), m/s.
 const REST_SPEED_M_PER_S: f64 = 2.0e-3;
+/// Largest cylinder acceleration at which a sample enters the force signals, m/s^2.
+const QUASI_STATIC_ACCEL_M_PER_S2: f64 = 0.1;
+/// Pressure readings at or below this are taken as clamped at the sensor's zero, Pa.
+const CLAMPED_READING_PA: f64 = 1.0e3;
 /// Margin from the stroke ends where the end stops may carry force, m.
 const STROKE_MARGIN_M: f64 = 0.01;
 
@@ -481,7 +485,13 @@ impl PreparedRecord {
             }
             m[3] = s.pump_pa[0];
             m[4] = s.pump_pa[1];
-            if s.load == LoadTag::EmptyFreeAir && all_consistent && !stalled[k] {
+            // Eq. 3 is used quasi-statically: the oil-column oscillations of a stopping link are
+            // faster than 100 Hz sampling resolves, so samples with a large measured acceleration
+            // are left out of the force signals.
+            let steady = accel[k]
+                .iter()
+                .all(|a| a.abs() < QUASI_STATIC_ACCEL_M_PER_S2);
+            if s.load == LoadTag::EmptyFreeAir && all_consistent && !stalled[k] && steady {
                 for i in 0..3 {
                     if in_stroke[k][i] && gravity_force[k][i].is_finite() {
                         m[5 + i] = s.head_pa[i] * params.head_area_m2[i]
@@ -898,10 +908,19 @@ pub fn replay(
             continue;
         }
         let smp = &rec.samples[k];
-        // The model sees the true pressures: readings less the sensor offset.
-        let head = smp.head_pa.map(|p| p - offset);
-        let rod = smp.rod_pa.map(|p| p - offset);
-        let pump = smp.pump_pa.map(|p| p - offset);
+        // The model sees the true pressures: readings less the sensor offset. A reading clamped at
+        // the sensor's zero by a negative offset hides the true value; it is a chamber at tank.
+        let tank = params.tank_pa;
+        let true_pa = |p: f64| {
+            if offset < 0.0 && p <= CLAMPED_READING_PA {
+                tank
+            } else {
+                p - offset
+            }
+        };
+        let head = smp.head_pa.map(true_pa);
+        let rod = smp.rod_pa.map(true_pa);
+        let pump = smp.pump_pa.map(true_pa);
         if groups.hydraulic {
             let sp = spool[k];
             let share = (1.0 - sharing * sp[2].abs()).clamp(0.0, 1.0);
@@ -941,7 +960,7 @@ pub fn replay(
                 ),
                 (params.meter_in_k[2] * metering(params, sp[2]), inlet(2)),
             ];
-            o[3] = pump_pressure(params, max_flow, bypass1, 0.0, &meter1) + offset;
+            o[3] = (pump_pressure(params, max_flow, bypass1, 0.0, &meter1) + offset).max(0.0);
             // Pump 2: stick and swing, and the crossover to the boom (its spool closes the centre).
             let mut fractions = vec![
                 bypass_fraction(params, sp[1]),
@@ -960,7 +979,8 @@ pub fn replay(
                 (params.meter_in_k[1] * metering(params, sp[1]), inlet(1)),
                 (params.crossover_k * xfrac, inlet(0)),
             ];
-            o[4] = pump_pressure(params, max_flow, bypass2, swing_flow, &meter2) + offset;
+            o[4] =
+                (pump_pressure(params, max_flow, bypass2, swing_flow, &meter2) + offset).max(0.0);
         }
         if groups.force {
             for i in 0..3 {
@@ -968,7 +988,17 @@ pub fn replay(
                     continue;
                 }
                 let v = rec.velocity[k][i];
-                let sensor = offset * (params.head_area_m2[i] - params.rod_area_m2[i]);
+                // What the offset adds to the Eq. A20 force of the readings; a clamped chamber
+                // reads zero instead of tank.
+                let chamber = |reading: f64| {
+                    if offset < 0.0 && reading <= CLAMPED_READING_PA {
+                        -tank
+                    } else {
+                        offset
+                    }
+                };
+                let sensor = params.head_area_m2[i] * chamber(smp.head_pa[i])
+                    - params.rod_area_m2[i] * chamber(smp.rod_pa[i]);
                 // Eq. 3 at the measured motion; the true angles are the readings less the offset.
                 let mut f = rec.gravity_force[k][i]
                     + resolver * rec.gravity_force_per_rad[k][i]
