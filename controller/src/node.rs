@@ -150,10 +150,13 @@ impl Default for ControllerConfig {
             cycle: CycleConfig::default(),
             autodig: AutodigConfig::default(),
             // The gateway's position loop lags a lowering setpoint by several centimetres; a slower
-            // probe and a larger lag threshold keep that lag from passing for floor contact.
+            // probe and a larger lag threshold keep that lag from passing for floor contact. The
+            // planner starts a cleanup above what is left of the bench (up to about 2.5 m over the
+            // floor on the default bench), so the probe may need to go that far down.
             cleanup: CleanupConfig {
                 descent_speed_m_per_s: 0.05,
                 probe_lag_m: 0.15,
+                probe_max_depth_m: 3.0,
                 ..CleanupConfig::default()
             },
             track_every_steps: 5,
