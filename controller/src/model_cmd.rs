@@ -89,6 +89,11 @@ pub struct TrainArgs {
     /// Free-running (BPTT) epochs.
     #[arg(long, default_value_t = 400)]
     pub epochs: usize,
+    /// Fig. 17's inputs only (the boom also sees the bucket command); by default every network also
+    /// sees the command and force of the cylinder sharing its flow (the shared, power-limited pump and
+    /// the crossover), which the simulator traces show matters.
+    #[arg(long)]
+    pub thesis_inputs: bool,
     /// Machine file (default: the built-in config/machine.toml).
     #[arg(long, value_name = "FILE")]
     pub machine: Option<PathBuf>,
@@ -314,6 +319,25 @@ pub struct SimSample {
     pub force_n: [f64; 3],
     /// Head pressures, Pa.
     pub head_pa: [f64; 3],
+    /// Rod pressures, Pa.
+    pub rod_pa: [f64; 3],
+    /// Sensed joint angles `[boom, stick, bucket]`, rad.
+    pub joint_rad: [f64; 3],
+    /// Autodig's stage for this command.
+    pub stage: Stage,
+    /// True soil force on the bucket `[F_x, F_z]` (the simulator's contact model), N.
+    pub soil_force_n: [f64; 2],
+    /// True cylinder velocities, m/s.
+    pub velocity_m_per_s: [f64; 3],
+    /// Swept volume so far (perception), m^3.
+    pub swept_volume_m3: f64,
+    /// Model soil force `[F_x, F_z]` at this pose and motion over the simulator's current terrain
+    /// (open loop; only with `diagnose`), N.
+    pub model_soil_force_n: Option<[f64; 2]>,
+    /// Static cylinder forces at the true pose with the true soil force and bucket content
+    /// (`tau = G - J^T f`, `F = tau / r`, Eqs. A2, A4, A7, A19; only with `diagnose`), N: what the
+    /// model's statics make of the simulator's load, against the measured `force_n`.
+    pub static_force_n: Option<[f64; 3]>,
 }
 
 /// A simulated dig and its statistics (measured like the controller's `DigStats`).
@@ -372,6 +396,20 @@ impl Recorder<'_> {
 pub fn run_sim_dig(
     setup: &DigSetup,
     trace: Option<&mut TraceWriter<BufWriter<File>>>,
+) -> anyhow::Result<SimDig> {
+    run_sim_dig_diagnosed(setup, trace, None)
+}
+
+/// [`run_sim_dig`], and with `diagnose` the model's soil force at every sample's true pose and cylinder
+/// velocities over the simulator's current (cut) terrain and true bucket content (open loop: is the
+/// soil force in the model the simulator's?).
+///
+/// # Errors
+/// As [`run_sim_dig`].
+pub fn run_sim_dig_diagnosed(
+    setup: &DigSetup,
+    trace: Option<&mut TraceWriter<BufWriter<File>>>,
+    diagnose: Option<&DigModel>,
 ) -> anyhow::Result<SimDig> {
     let cfg = sim_config(setup)?;
     let mut plant = cfg.build()?;
@@ -504,6 +542,35 @@ pub fn run_sim_dig(
                 let out = autodig.step(&inputs, t - t0)?;
                 stage = out.stage;
                 command = out.command;
+                let truth = plant.true_state();
+                let velocity = [0, 1, 2].map(|i| plant.hydraulics.actuators[i].velocity);
+                let static_force_n = diagnose
+                    .map(|_| {
+                        kin.cylinder_forces_from_tip_force(
+                            &plant.joint_angles(),
+                            &planner::kinematics::TipForce {
+                                fx_n: truth.soil_force_n[0],
+                                fz_n: truth.soil_force_n[1],
+                                my_nm: 0.0,
+                            },
+                            plant.contact.content.mass_kg,
+                        )
+                    })
+                    .transpose()?
+                    .map(|f| [f[0], f[1], f[2]]);
+                let model_soil_force_n = match diagnose {
+                    Some(m) => {
+                        let now = section_of(&plant.world, &cfg)?;
+                        let f = m.soil_force_at(
+                            &plant.joint_angles(),
+                            velocity,
+                            &now,
+                            plant.contact.content.volume_m3,
+                        )?;
+                        Some([f.fx_n, f.fz_n])
+                    }
+                    None => None,
+                };
                 samples.push(SimSample {
                     time_s: t - t0,
                     tip_x_m: tip.x_m,
@@ -512,6 +579,14 @@ pub fn run_sim_dig(
                     command,
                     force_n: force,
                     head_pa: r.head_pa,
+                    rod_pa: r.rod_pa,
+                    joint_rad: [q.boom_rad, q.stick_rad, q.bucket_rad],
+                    stage: out.stage,
+                    soil_force_n: truth.soil_force_n,
+                    velocity_m_per_s: velocity,
+                    swept_volume_m3: swept.volume_m3(),
+                    model_soil_force_n,
+                    static_force_n,
                 });
                 if out.stage == Stage::Done || samples.len() > max_dig_steps {
                     end = out.end_reason;
@@ -598,6 +673,12 @@ pub struct DigComparison {
     pub error_percent: [f64; 3],
     /// Measured and predicted end reasons.
     pub end: [String; 2],
+    /// Open-loop soil force error: RMS of `|F_model - F_sim|` over the simulated dig's samples in
+    /// contact, with the model's soil force at the simulator's true pose, motion, terrain and bucket
+    /// content, as a % of the RMS simulated force (`None` without the diagnosis).
+    pub soil_force_error_percent: Option<f64>,
+    /// Measured and predicted lowest tip elevation, m.
+    pub min_tip_z_m: [f64; 2],
 }
 
 /// Distance from `p` to the polyline `line`, m.
@@ -681,8 +762,35 @@ pub fn compare_dig(
                 .map_or_else(|| "time limit".to_owned(), |e| format!("{e:?}")),
             format!("{:?}", s.end),
         ],
+        soil_force_error_percent: open_loop_soil_error_percent(&sim.samples),
+        min_tip_z_m: [
+            sim.samples
+                .iter()
+                .map(|s| s.tip_z_m)
+                .fold(f64::INFINITY, f64::min),
+            s.min_tip_z_m,
+        ],
     };
     Ok((cmp, pred))
+}
+
+/// RMS of the open-loop soil force error over the samples with a simulated soil force, as a % of the
+/// RMS simulated force (`None` without model forces or contact).
+fn open_loop_soil_error_percent(samples: &[SimSample]) -> Option<f64> {
+    let (mut err2, mut ref2, mut n) = (0.0, 0.0, 0usize);
+    for s in samples {
+        let Some(m) = s.model_soil_force_n else {
+            continue;
+        };
+        let f = s.soil_force_n;
+        if f[0].hypot(f[1]) < 1.0 && m[0].hypot(m[1]) < 1.0 {
+            continue;
+        }
+        err2 += (m[0] - f[0]).powi(2) + (m[1] - f[1]).powi(2);
+        ref2 += f[0] * f[0] + f[1] * f[1];
+        n += 1;
+    }
+    (n > 0 && ref2 > 0.0).then(|| 100.0 * (err2 / ref2).sqrt())
 }
 
 /// Mean of the absolute relative errors `[time, energy, volume]`, % and the mean trajectory RMS, m.
@@ -960,17 +1068,23 @@ fn train(a: &TrainArgs) -> anyhow::Result<()> {
                 .max(0.0) as usize
         }),
         free_run_epochs: a.epochs,
+        coupled_inputs: !a.thesis_inputs,
         ..TrainConfig::default()
     };
     let samples: usize = digs.iter().map(|d| d.samples.len()).sum();
     println!(
-        "training on {} digs ({} samples) from {} trace(s): {} hidden units, delay {} steps, seed {}",
+        "training on {} digs ({} samples) from {} trace(s): {} hidden units, delay {} steps, seed {}, {} inputs",
         digs.len(),
         samples,
         a.trace.len(),
         config.hidden_units,
         config.delay_steps,
-        config.seed
+        config.seed,
+        if config.coupled_inputs {
+            "coupled (partner command and force)"
+        } else {
+            "Fig. 17"
+        }
     );
     let bar = indicatif::ProgressBar::new(1);
     bar.set_style(
@@ -1044,7 +1158,7 @@ fn compare(a: &CompareArgs) -> anyhow::Result<()> {
     let runs: Vec<anyhow::Result<(SimDig, DigComparison, DigPrediction)>> = setups
         .par_iter()
         .map(|s| {
-            let sim = run_sim_dig(s, None)?;
+            let sim = run_sim_dig_diagnosed(s, None, Some(&model))?;
             let (cmp, pred) = compare_dig(&model, &sim)?;
             bar.inc(1);
             Ok((sim, cmp, pred))
@@ -1060,11 +1174,11 @@ fn compare(a: &CompareArgs) -> anyhow::Result<()> {
         rows.len()
     );
     println!(
-        "  dig  traj RMS [m]  time sim/model [s]  energy sim/model [kJ]  volume sim/model [m^3]  err time/energy/volume [%]  end sim / model"
+        "  dig  traj RMS [m]  time sim/model [s]  energy sim/model [kJ]  volume sim/model [m^3]  err time/energy/volume [%]  lowest z sim/model [m]  soil F open loop [%]  end sim / model"
     );
     for (_, c, _) in &rows {
         println!(
-            "  {:>3}  {:>12.3}  {:>7.2} / {:>6.2}  {:>9.1} / {:>8.1}  {:>9.2} / {:>9.2}  {:>+7.1} / {:>+7.1} / {:>+7.1}  {} / {}",
+            "  {:>3}  {:>12.3}  {:>7.2} / {:>6.2}  {:>9.1} / {:>8.1}  {:>9.2} / {:>9.2}  {:>+7.1} / {:>+7.1} / {:>+7.1}  {:>9.2} / {:>9.2}  {:>18}  {} / {}",
             c.index,
             c.trajectory_rms_m,
             c.time_s[0],
@@ -1076,6 +1190,10 @@ fn compare(a: &CompareArgs) -> anyhow::Result<()> {
             c.error_percent[0],
             c.error_percent[1],
             c.error_percent[2],
+            c.min_tip_z_m[0],
+            c.min_tip_z_m[1],
+            c.soil_force_error_percent
+                .map_or_else(|| "-".to_owned(), |e| format!("{e:.1}")),
             c.end[0],
             c.end[1]
         );
@@ -1089,25 +1207,29 @@ fn compare(a: &CompareArgs) -> anyhow::Result<()> {
             for k in (0..sim.samples.len().max(pred.samples.len())).step_by(20) {
                 let fmt_sim = sim.samples.get(k).map_or(String::new(), |s| {
                     format!(
-                        "{:5.2} {:5.2} {:6.0} {:+.2?} {:.1?} {:.0?}",
+                        "{:5.2} {:5.2} {:6.0} {:+.2?} {:.1?} {:.0?} soil {:.0?} model@sim {:.0?}",
                         s.tip_x_m,
                         s.tip_z_m,
                         s.bucket_abs_rad.to_degrees(),
                         s.command,
                         s.head_pa.map(|p| p * 1e-6),
-                        s.force_n.map(|f| f * 1e-3)
+                        s.force_n.map(|f| f * 1e-3),
+                        s.soil_force_n.map(|f| f * 1e-3),
+                        s.model_soil_force_n.map(|m| m.map(|f| f * 1e-3))
                     )
                 });
                 let fmt_model = pred.samples.get(k).map_or(String::new(), |s| {
                     format!(
-                        "{:?} {:5.2} {:5.2} {:6.0} {:+.2?} {:.1?} {:.0?}",
+                        "{:?} {:5.2} {:5.2} {:6.0} {:+.2?} {:.1?} {:.0?} soil [{:.0}, {:.0}]",
                         s.stage,
                         s.tip_x_m,
                         s.tip_z_m,
                         s.bucket_abs_rad.to_degrees(),
                         s.command,
                         s.head_pa.map(|p| p * 1e-6),
-                        s.force_n.map(|f| f * 1e-3)
+                        s.force_n.map(|f| f * 1e-3),
+                        s.soil_force.fx_n * 1e-3,
+                        s.soil_force.fz_n * 1e-3
                     )
                 });
                 println!(
@@ -1138,7 +1260,18 @@ fn compare(a: &CompareArgs) -> anyhow::Result<()> {
     )?;
     let svg = a.out.join("compare.svg");
     plot_compare(&svg, &rows)?;
-    println!("wrote {} and compare.json", svg.display());
+    for (sim, cmp, pred) in &rows {
+        plot_dig_series(
+            &a.out.join(format!("dig_{}.svg", cmp.index)),
+            sim,
+            cmp,
+            pred,
+        )?;
+    }
+    println!(
+        "wrote {}, dig_N.svg (commands, joint angles, head pressures, soil force, swept volume over time) and compare.json",
+        svg.display()
+    );
     Ok(())
 }
 
@@ -1223,6 +1356,219 @@ fn plot_compare(
         chart
             .configure_series_labels()
             .position(SeriesLabelPosition::LowerRight)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 10))
+            .draw()
+            .map_err(|e| err(&e))?;
+    }
+    root.present().map_err(|e| err(&e))?;
+    Ok(())
+}
+
+/// One dig over time, simulator (solid) against the model (dashed), like the thesis's Figs. 35-38:
+/// Autodig commands, joint angles, head pressures, soil force magnitude (with the model's force at the
+/// simulator's pose, open loop, dotted) and swept volume.
+fn plot_dig_series(
+    path: &Path,
+    sim: &SimDig,
+    cmp: &DigComparison,
+    pred: &DigPrediction,
+) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+    let err = |e: &dyn std::fmt::Display| anyhow::anyhow!("drawing {}: {e}", path.display());
+    type Series = (Vec<(f64, f64)>, RGBColor, bool, &'static str);
+    let colors = [RED, BLUE, RGBColor(0, 150, 0)];
+    let names = ["boom", "stick", "bucket"];
+    let t_end = sim
+        .samples
+        .last()
+        .map_or(0.0, |s| s.time_s)
+        .max(pred.samples.last().map_or(0.0, |s| s.time_s))
+        .max(0.1);
+    let mut panels: Vec<(&str, Vec<Series>)> = Vec::new();
+    let per_joint = |sim_of: &dyn Fn(&SimSample) -> [f64; 3],
+                     model_of: &dyn Fn(&planner::dig_model::DigSample) -> [f64; 3]|
+     -> Vec<Series> {
+        let mut v = Vec::new();
+        for j in 0..3 {
+            v.push((
+                sim.samples
+                    .iter()
+                    .map(|s| (s.time_s, sim_of(s)[j]))
+                    .collect(),
+                colors[j],
+                false,
+                names[j],
+            ));
+            v.push((
+                pred.samples
+                    .iter()
+                    .map(|s| (s.time_s, model_of(s)[j]))
+                    .collect(),
+                colors[j],
+                true,
+                names[j],
+            ));
+        }
+        v
+    };
+    panels.push((
+        "Autodig command (Fig. 35)",
+        per_joint(&|s| s.command, &|s| s.command),
+    ));
+    panels.push((
+        "joint angle [deg] (Fig. 37)",
+        per_joint(&|s| s.joint_rad.map(f64::to_degrees), &|s| {
+            s.joint_rad.map(f64::to_degrees)
+        }),
+    ));
+    panels.push((
+        "cylinder force [kN] (dotted: statics at the simulator's pose and soil force)",
+        {
+            let mut v = per_joint(&|s| s.force_n.map(|f| f * 1e-3), &|s| {
+                s.force_n.map(|f| f * 1e-3)
+            });
+            for j in 0..3 {
+                v.push((
+                    sim.samples
+                        .iter()
+                        .filter_map(|s| s.static_force_n.map(|f| (s.time_s, f[j] * 1e-3)))
+                        .collect(),
+                    RGBColor(
+                        colors[j].0 / 2 + 128,
+                        colors[j].1 / 2 + 128,
+                        colors[j].2 / 2 + 128,
+                    ),
+                    false,
+                    "",
+                ));
+            }
+            v
+        },
+    ));
+    panels.push((
+        "head pressure [MPa] (Fig. 38)",
+        per_joint(&|s| s.head_pa.map(|p| p * 1e-6), &|s| {
+            s.head_pa.map(|p| p * 1e-6)
+        }),
+    ));
+    panels.push((
+        "soil force [kN]",
+        vec![
+            (
+                sim.samples
+                    .iter()
+                    .map(|s| (s.time_s, s.soil_force_n[0].hypot(s.soil_force_n[1]) * 1e-3))
+                    .collect(),
+                BLACK,
+                false,
+                "simulator",
+            ),
+            (
+                pred.samples
+                    .iter()
+                    .map(|s| (s.time_s, s.soil_force.fx_n.hypot(s.soil_force.fz_n) * 1e-3))
+                    .collect(),
+                BLACK,
+                true,
+                "model",
+            ),
+            (
+                sim.samples
+                    .iter()
+                    .filter_map(|s| {
+                        s.model_soil_force_n
+                            .map(|m| (s.time_s, m[0].hypot(m[1]) * 1e-3))
+                    })
+                    .collect(),
+                RGBColor(200, 120, 0),
+                false,
+                "model at the simulator's pose",
+            ),
+        ],
+    ));
+    panels.push((
+        "swept volume [m^3]",
+        vec![
+            (
+                sim.samples
+                    .iter()
+                    .map(|s| (s.time_s, s.swept_volume_m3))
+                    .collect(),
+                BLACK,
+                false,
+                "simulator",
+            ),
+            (
+                pred.samples
+                    .iter()
+                    .map(|s| (s.time_s, s.swept_volume_m3))
+                    .collect(),
+                BLACK,
+                true,
+                "model",
+            ),
+        ],
+    ));
+    let root = SVGBackend::new(path, (900, 230 * panels.len() as u32 + 30)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| err(&e))?;
+    let root = root
+        .titled(
+            &format!(
+                "dig {}: simulator (solid) vs dig model (dashed); time {:+.0} %, energy {:+.0} %, volume {:+.0} %",
+                cmp.index, cmp.error_percent[0], cmp.error_percent[1], cmp.error_percent[2]
+            ),
+            ("sans-serif", 16),
+        )
+        .map_err(|e| err(&e))?;
+    let areas = root.split_evenly((panels.len(), 1));
+    for ((title, series), area) in panels.iter().zip(areas.iter()) {
+        let (mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY);
+        for (pts, ..) in series {
+            for (_, y) in pts {
+                if y.is_finite() {
+                    y0 = y0.min(*y);
+                    y1 = y1.max(*y);
+                }
+            }
+        }
+        if !(y0.is_finite() && y1.is_finite()) {
+            (y0, y1) = (0.0, 1.0);
+        }
+        let pad = 0.05 * (y1 - y0).max(1e-3);
+        let mut chart = ChartBuilder::on(area)
+            .caption(*title, ("sans-serif", 13))
+            .margin(5)
+            .x_label_area_size(22)
+            .y_label_area_size(45)
+            .build_cartesian_2d(0.0..t_end, (y0 - pad)..(y1 + pad))
+            .map_err(|e| err(&e))?;
+        chart
+            .configure_mesh()
+            .x_desc("t [s]")
+            .draw()
+            .map_err(|e| err(&e))?;
+        for (pts, color, dashed, name) in series {
+            let style = color.stroke_width(if *dashed { 1 } else { 2 });
+            if *dashed {
+                chart
+                    .draw_series(DashedLineSeries::new(pts.iter().copied(), 6, 4, style))
+                    .map_err(|e| err(&e))?;
+            } else {
+                let drawn = chart
+                    .draw_series(LineSeries::new(pts.iter().copied(), style))
+                    .map_err(|e| err(&e))?;
+                if !name.is_empty() {
+                    drawn
+                        .label(*name)
+                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], style));
+                }
+            }
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
             .background_style(WHITE.mix(0.8))
             .border_style(BLACK)
             .label_font(("sans-serif", 10))
