@@ -463,8 +463,12 @@ impl Orifice {
         if mag < self.laminar_dp_pa {
             (self.laminar_slope * dp, self.laminar_slope)
         } else {
+            // dQ/d(dp) = k / (2 sqrt(dp)) = Q / (2 dp): the division by dp runs alongside the square
+            // root instead of after it (the solves are bound by this chain's latency).
             let root = mag.sqrt();
-            (self.k * root * dp.signum(), self.k / (2.0 * root))
+            let half_inverse = 0.5 / mag;
+            let q = self.k * root;
+            (q * dp.signum(), q * half_inverse)
         }
     }
 }

@@ -12,7 +12,7 @@
 //! `M_i / r_i^2`. The Coriolis terms of Eq. A1 are neglected (slow motion, as in the thesis's A2).
 
 use nalgebra::Vector3;
-use planner::kinematics::{JointAngles, Kinematics, KinematicsError, TipForce};
+use planner::kinematics::{JointAngles, Kinematics, KinematicsError, LinkagePoints, TipForce};
 use planner::machine::MachineConfig;
 
 /// Stroke geometry and statics of the implement.
@@ -140,7 +140,16 @@ impl Linkage {
 
     /// Diagonal of the joint-space inertia `M(q)` (Eq. A1), kg m^2, with the payload at its centroid.
     pub fn joint_inertias(&self, s: &LinkageState, payload_kg: f64) -> [f64; 3] {
-        let p = self.kin.linkage_points(&s.q);
+        self.joint_inertias_at(s, &self.kin.linkage_points(&s.q), payload_kg)
+    }
+
+    /// [`Self::joint_inertias`] with the linkage points of `s.q` already computed.
+    pub fn joint_inertias_at(
+        &self,
+        s: &LinkageState,
+        p: &LinkagePoints,
+        payload_kg: f64,
+    ) -> [f64; 3] {
         let joints = [p.boom_foot, p.stick_pin, p.bucket_pin];
         let abs = [s.q.boom_rad, s.q.stick_abs_rad(), s.q.bucket_abs_rad()];
         let mut bodies = [(0.0, [0.0, 0.0], 0.0); 4];
@@ -172,7 +181,17 @@ impl Linkage {
 
     /// Effective masses each cylinder drives, `M_ii / r_i^2` (kg).
     pub fn cylinder_masses(&self, s: &LinkageState, payload_kg: f64) -> [f64; 3] {
-        let inertia = self.joint_inertias(s, payload_kg);
+        self.cylinder_masses_at(s, &self.kin.linkage_points(&s.q), payload_kg)
+    }
+
+    /// [`Self::cylinder_masses`] with the linkage points of `s.q` already computed.
+    pub fn cylinder_masses_at(
+        &self,
+        s: &LinkageState,
+        points: &LinkagePoints,
+        payload_kg: f64,
+    ) -> [f64; 3] {
+        let inertia = self.joint_inertias_at(s, points, payload_kg);
         [0, 1, 2].map(|i| inertia[i] / s.arms[i].powi(2).max(1e-4))
     }
 

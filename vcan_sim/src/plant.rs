@@ -7,7 +7,7 @@
 
 use std::collections::VecDeque;
 
-use planner::kinematics::{Joint, JointAngles, MachinePose, TipForce};
+use planner::kinematics::{Joint, JointAngles, LinkagePoints, MachinePose, TipForce};
 use planner::machine::MachineConfig;
 use serde::Serialize;
 
@@ -248,7 +248,7 @@ impl Plant {
 
     /// Pressurises the cylinders to hold the start pose, so the run starts at rest.
     fn settle(&mut self) {
-        let loads = self.loads();
+        let loads = self.loads(&self.linkage.kinematics().linkage_points(&self.link.q));
         let tank = self.hydraulics.params().fluid.tank_pressure_pa;
         for (i, load) in loads.iter().enumerate().take(3) {
             let (ah, ar) = (
@@ -324,7 +324,8 @@ impl Plant {
         };
     }
 
-    fn loads(&self) -> [ActuatorLoad; N_ACTUATORS] {
+    /// Loads on the actuators at the current pose, with its linkage points.
+    fn loads(&self, points: &LinkagePoints) -> [ActuatorLoad; N_ACTUATORS] {
         let payload = self.payload_kg();
         let forces = if self.gravity {
             self.linkage
@@ -334,9 +335,9 @@ impl Plant {
                 * self.soil_force.to_vector());
             Linkage::cylinder_forces(&self.link, &tau)
         };
-        let masses = self.linkage.cylinder_masses(&self.link, payload);
-        let tip = self.linkage.kinematics().forward(&self.link.q);
-        let swing_inertia = self.cfg.swing.inertia_kg_m2 + payload * tip.x_m * tip.x_m;
+        let masses = self.linkage.cylinder_masses_at(&self.link, points, payload);
+        let tip_x_m = points.tip[0];
+        let swing_inertia = self.cfg.swing.inertia_kg_m2 + payload * tip_x_m * tip_x_m;
         [
             ActuatorLoad {
                 force: forces[0],
@@ -361,10 +362,8 @@ impl Plant {
         ]
     }
 
-    fn soil_contact(&mut self, dt: f64) {
+    fn soil_contact(&mut self, dt: f64, points: &LinkagePoints) {
         let fx = self.effects;
-        let kin = self.linkage.kinematics();
-        let points = kin.linkage_points(&self.link.q);
         let rates = self.linkage.joint_rates(
             &self.link,
             [0, 1, 2].map(|i| self.hydraulics.actuators[i].velocity),
@@ -429,8 +428,9 @@ impl Plant {
         // Soil contact at the current pose and the loads of gravity, payload and soil on the
         // cylinders (Appendix), at 200 Hz: they depend on the pose, which moves little in 5 ms.
         if self.steps.is_multiple_of(SOIL_SUBSTEPS) {
-            self.soil_contact(dt * SOIL_SUBSTEPS as f64);
-            self.cached_loads = self.loads();
+            let points = self.linkage.kinematics().linkage_points(&self.link.q);
+            self.soil_contact(dt * SOIL_SUBSTEPS as f64, &points);
+            self.cached_loads = self.loads(&points);
         }
         self.steps += 1;
         let loads = self.cached_loads;

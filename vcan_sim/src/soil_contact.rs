@@ -223,24 +223,27 @@ impl World {
         let target = volume_m3 / area;
         // A cell at height `h` and distance `r` from the centre has the base `h + r tan(repose)`: the
         // apex height at which the cone's flank reaches it. A cell rises to `max(h, apex - r tan)`.
-        // 1. An upper bound of the apex: the cone filled into the cells near the centre only (fewer
-        //    cells hold less, so their apex is higher), with a margin far above rounding. On flat
-        //    ground that window is 1.5 times the cone's radius.
+        // 1. An upper bound of the apex. Over any set T of cells, the added volume
+        //    `sum_T max(a - base, 0) >= |T| a - sum_T base`, so it reaches the target by
+        //    `a = (target + sum_T base) / |T|`: the apex of T, and of the whole window (more cells hold
+        //    more), is at most that. A window 1.5 times the cone's radius on flat ground makes it
+        //    tight (its mean base is near the apex). A margin far above rounding is added.
         let cone_radius_m = (3.0 * volume_m3 / (std::f64::consts::PI * slope.max(1e-3))).cbrt();
         let near = ((1.5 * cone_radius_m / res).ceil() + 1.0).min(DEPOSIT_REACH_M / res);
-        let mut bases = Vec::new();
+        let (mut sum, mut count) = (0.0, 0.0);
         self.deposit_window([x_m, y_m], near, |_, _, h, d2| {
-            bases.push(d2.sqrt() * slope + h);
+            sum += d2.sqrt() * slope + h;
+            count += 1.0;
         });
-        let upper = if bases.is_empty() {
-            f64::INFINITY
+        let upper = if count > 0.0 {
+            (target + sum) / count + 1.0e-6 * (1.0 + sum.abs() / count)
         } else {
-            cone_apex(&mut bases, target) + 1.0e-6
+            f64::INFINITY
         };
         // 2. Only cells whose base is below that bound can receive material: the others are skipped
         //    without a square root. The apex of the kept cells is the apex of the whole window (the
         //    same lowest bases in the same order), and the skipped ones would add exactly zero.
-        let mut cells = Vec::with_capacity(bases.len());
+        let mut cells = Vec::new();
         self.deposit_window([x_m, y_m], DEPOSIT_REACH_M / res, |i, j, h, d2| {
             let rise = upper - h;
             if rise > 0.0 && d2 * slope * slope < rise * rise {
@@ -250,8 +253,7 @@ impl World {
         if cells.is_empty() {
             return 0.0;
         }
-        bases.clear();
-        bases.extend(cells.iter().map(|c| c.2));
+        let mut bases: Vec<f64> = cells.iter().map(|c| c.2).collect();
         let apex = cone_apex(&mut bases, target);
         // Scale away the rounding so the placed volume matches exactly.
         let placed: f64 = cells.iter().map(|c| (apex - c.2).max(0.0)).sum::<f64>() * area;
