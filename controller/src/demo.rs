@@ -1,13 +1,26 @@
 //! `excavator-ctl demo`: the embedded default. The simulator (`vcan_sim::embedded`) runs in-process on
 //! an in-process CAN bus in virtual time, the [`ControllerNode`] runs a full autonomous session against
-//! it (a fixed action plan until the dig planner lands: digs across swing angles, a cleanup, a track
-//! back, repeated until `--digs`), and the session is written to `--out DIR` (docs/demo-output.md):
+//! it, and the session is written to `--out DIR` (docs/demo-output.md). The action source is
+//! `--strategy`:
+//!
+//! - `planned` (default; thesis 5.1, ch. 6): a [`PlannedSession`] keeps the terrain map current from
+//!   the scans, plans (coarse + refined dig location, cleanup and tracking plans, Fig. 42) whenever
+//!   the work cycle waits, estimates the soil and sets Autodig's hardness index online (5.2), on the
+//!   extended-operation bench (`config/bench_extended.toml`: machine on the bench top, the face
+//!   receding toward it, tracking back);
+//! - `predefined` (6.2): fixed start joints (the median of the planner's), swing stepped across the
+//!   regions, cleanups from the far reach, 1.3 m backups; same bench;
+//! - `fixed`: the fixed demo plan (digs across swing angles, a cleanup, a track back, repeated) or the
+//!   `--config` file's plan, on `config/bench.toml` (the library default of [`DemoArgs::new`]).
+//!
+//! Outputs:
 //!
 //! - `trace.log`: `candump -L` of every frame on the bus (firmware_bridge's `Recorder`), flushed as the
 //!   session runs and closed at the end and on Ctrl-C;
 //! - `scans/scan_NNNN.json`: the range scans the controller used (docs/scan-protocol.md format);
 //! - `summary.json`, `summary.md`: per dig weight, time, energy, swept volume (thesis 6.1) and totals;
-//! - `trajectories.svg`, `terrain_before.svg`, `terrain_after.svg`, `dig_stats.svg` ([`crate::plots`]).
+//! - `trajectories.svg`, `terrain_before.svg`, `terrain_after.svg`, `dig_stats.svg` ([`crate::plots`]);
+//! - planned and predefined: `bench_after_NNN.svg` (Fig. 55), `dig_sequence.svg` (Fig. 56).
 //!
 //! One thread alternates the simulator (10 ms, ten 1 kHz physics steps) and the controller step, as in
 //! the closed-loop tests; the run is deterministic for a seed.
@@ -28,8 +41,60 @@ use vcan_sim::SimConfig;
 use vcan_sim::embedded::EmbeddedMachine;
 use vcan_sim::sensors::ScanRequest;
 
+use planner::kinematics::{JointAngles, MachinePose};
+use planner::plan::{ActionChoice, HardnessRegression, PlannerConfig, TerrainMapper};
+use planner::terrain::TerrainGrid;
+use vcan_sim::scenario::Scenario;
+
 use crate::cycle::{Action, ActionKind, Phase, StartPose};
 use crate::node::{ControllerConfig, ControllerNode};
+use crate::planned::{PlannedSession, PredefinedSequence, SoilMonitor, Strategy, median_joints};
+
+/// The extended-operation bench (thesis ch. 6), the default bench of the planned and predefined
+/// strategies.
+pub const EXTENDED_BENCH_TOML: &str = include_str!("../../config/bench_extended.toml");
+
+/// Carry and dump height of the bucket tip on the planned and predefined strategies, m.
+pub const EXTENDED_CARRY_TIP_Z_M: f64 = 4.0;
+/// Joint tolerance of the moves to the dig on the planned and predefined strategies, rad.
+pub const EXTENDED_JOINT_TOLERANCE_RAD: f64 = 0.06;
+/// ... or boom angle, degrees, whichever comes first.
+pub const EXTENDED_CARRY_BOOM_DEG: f64 = 55.0;
+
+/// Which action source drives the session (`--strategy`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum DemoStrategy {
+    /// The perception-based dig planner (5.1), default bench `config/bench_extended.toml`.
+    #[default]
+    Planned,
+    /// The predefined excavation sequence (6.2), default bench `config/bench_extended.toml`.
+    Predefined,
+    /// The fixed demo plan or the `--config` file's plan, default bench `config/bench.toml`.
+    Fixed,
+}
+
+impl DemoStrategy {
+    /// The planned session's strategy, `None` for the fixed plan.
+    #[must_use]
+    pub fn session(self) -> Option<Strategy> {
+        match self {
+            Self::Planned => Some(Strategy::Planned),
+            Self::Predefined => Some(Strategy::Predefined),
+            Self::Fixed => None,
+        }
+    }
+
+    /// The name in `summary.json`.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Planned => "planned",
+            Self::Predefined => "predefined",
+            Self::Fixed => "fixed",
+        }
+    }
+}
 
 /// The control period of the session, s.
 pub const PERIOD_S: f64 = 0.01;
@@ -51,7 +116,8 @@ pub struct DemoArgs {
     /// Machine file (default: the built-in config/machine.toml).
     #[arg(long, value_name = "FILE")]
     pub machine: Option<PathBuf>,
-    /// Bench scenario file (default: the built-in config/bench.toml).
+    /// Bench scenario file (default: the built-in config/bench_extended.toml for the planned and
+    /// predefined strategies, config/bench.toml for the fixed plan).
     #[arg(long, value_name = "FILE")]
     pub bench: Option<PathBuf>,
     /// A hidden effect of the simulator, NAME=VALUE (repeatable; `excavator-sim --list-effects`).
@@ -69,10 +135,32 @@ pub struct DemoArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// The action source: the dig planner, the predefined sequence of 6.2, or the fixed plan.
+    #[arg(long, value_enum, default_value_t = DemoStrategy::Planned)]
+    pub strategy: DemoStrategy,
+    /// Planner settings (default: the built-in config/planner.toml); the floor is the bench's.
+    #[arg(long, value_name = "FILE")]
+    pub planner: Option<PathBuf>,
+    /// Hardness regression (default: the built-in config/hardness_regression.toml).
+    #[arg(long, value_name = "FILE")]
+    pub hardness: Option<PathBuf>,
+    /// Predefined strategy: the `summary.json` of a planned run whose dig starts' median are the
+    /// fixed start joints (6.2's "virtual expert"); default: the median of the planner's best digs
+    /// over the regions of the first map.
+    #[arg(long, value_name = "FILE")]
+    pub predefined_from: Option<PathBuf>,
+    /// Plot the bench after this many digs (Fig. 55; repeatable; the end of the session always).
+    #[arg(long = "bench-after", value_name = "N", default_values_t = [12u32])]
+    pub bench_after: Vec<u32>,
+    /// Predefined strategy: the fixed start joints (library callers; overrides `predefined_from`).
+    #[arg(skip)]
+    pub predefined_joints: Option<JointAngles>,
 }
 
 impl DemoArgs {
-    /// The defaults of the command line with `out` as the output folder.
+    /// The defaults of the command line with `out` as the output folder, except the strategy: the
+    /// fixed plan on config/bench.toml (what this constructor gave before the planner was wired, for
+    /// library callers); see [`Self::planned`].
     pub fn new(out: PathBuf) -> Self {
         Self {
             digs: 10,
@@ -84,6 +172,20 @@ impl DemoArgs {
             config: None,
             maps: None,
             quiet: true,
+            strategy: DemoStrategy::Fixed,
+            planner: None,
+            hardness: None,
+            predefined_from: None,
+            bench_after: vec![12],
+            predefined_joints: None,
+        }
+    }
+
+    /// The command line's defaults: the planned strategy on the extended-operation bench.
+    pub fn planned(out: PathBuf) -> Self {
+        Self {
+            strategy: DemoStrategy::Planned,
+            ..Self::new(out)
         }
     }
 }
@@ -157,6 +259,26 @@ pub struct DigRecord {
     pub end_reason: Option<String>,
     /// Whether the perception enhancements were active.
     pub perception: bool,
+    /// The planner's predicted Fig. 46 quality of the chosen dig (planned digs only).
+    #[serde(default)]
+    pub quality: Option<f64>,
+    /// The planner's predicted swept volume of the chosen dig, m^3 (planned digs only).
+    #[serde(default)]
+    pub predicted_volume_m3: Option<f64>,
+    /// Autodig's soil hardness index for this dig.
+    #[serde(default)]
+    pub hardness_index: Option<f64>,
+    /// The machine's dead-reckoned world pose `[x, y, heading]` (m, m, rad) during the dig.
+    #[serde(default)]
+    pub pose: Option<[f64; 3]>,
+    /// The planner's start tip `[r, z, bucket_abs_deg]` in the base frame (planned digs; the
+    /// bucket is brought above it and Boom-Down lowers it there).
+    #[serde(default)]
+    pub planned_start: Option<[f64; 3]>,
+    /// RMS difference between the planner's terrain map and the true terrain along the digging plane
+    /// (r 3 to 10 m) at the start of the dig, m (planned and predefined strategies).
+    #[serde(default)]
+    pub map_error_m: Option<f64>,
     /// The tip trajectory during the dig, base frame.
     #[serde(skip)]
     pub trajectory: Vec<TipPoint>,
@@ -204,9 +326,149 @@ pub struct Totals {
     pub last_fault: Option<String>,
 }
 
+/// Thesis Tables 3-5 figures of a session (6.1, 6.2).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct SessionStats {
+    /// Mean weight of the dig actions (normal digs), N.
+    pub dig_mean_weight_n: f64,
+    /// Mean time of the dig actions, s.
+    pub dig_mean_time_s: f64,
+    /// Mean energy of the dig actions, kJ.
+    pub dig_mean_energy_kj: f64,
+    /// Mean weight of the cleanup actions, N (0 without cleanups).
+    pub cleanup_mean_weight_n: f64,
+    /// Mean time of the cleanup actions, s.
+    pub cleanup_mean_time_s: f64,
+    /// Mean energy of the cleanup actions, kJ.
+    pub cleanup_mean_energy_kj: f64,
+    /// A full bucket's weight: capacity x bank density x g, N (the thesis's 25 000 N).
+    pub full_bucket_n: f64,
+    /// Share of all buckets (digs and cleanups) over half full (thesis test 3: 0.94).
+    pub over_half_full: f64,
+    /// Share of all buckets over a third full (thesis test 3: 0.98).
+    pub over_third_full: f64,
+    /// Eq. 26: mean weight / (12 s + mean time), N/s.
+    pub productivity_n_per_s: f64,
+    /// Eq. 27: mean energy / mean weight, kJ/N.
+    pub energy_per_weight_kj_per_n: f64,
+    /// Least-squares slope of the dig actions' weight over the dig number, N per dig (Fig. 60:
+    /// the bucket fill must not decay).
+    pub dig_weight_slope_n_per_dig: f64,
+    /// Mean weight of the dig actions in the first half of the session, N.
+    pub dig_mean_weight_first_half_n: f64,
+    /// Mean weight of the dig actions in the second half, N.
+    pub dig_mean_weight_second_half_n: f64,
+}
+
+impl SessionStats {
+    /// The statistics of `digs`, with a full bucket of `full_bucket_n`.
+    #[must_use]
+    pub fn of(digs: &[DigRecord], full_bucket_n: f64) -> Self {
+        let mean = |v: &[f64]| {
+            if v.is_empty() {
+                0.0
+            } else {
+                v.iter().sum::<f64>() / v.len() as f64
+            }
+        };
+        let pick = |kind: ActionKind, f: fn(&DigRecord) -> f64| -> Vec<f64> {
+            digs.iter().filter(|d| d.action == kind).map(f).collect()
+        };
+        let weight = |d: &DigRecord| d.weight_n.unwrap_or(0.0);
+        let share = |k: f64| {
+            if digs.is_empty() {
+                0.0
+            } else {
+                digs.iter()
+                    .filter(|d| weight(d) > k * full_bucket_n)
+                    .count() as f64
+                    / digs.len() as f64
+            }
+        };
+        let w_all: Vec<f64> = digs.iter().map(weight).collect();
+        let t_all: Vec<f64> = digs.iter().map(|d| d.time_s).collect();
+        let e_all: Vec<f64> = digs.iter().map(|d| d.energy_kj).collect();
+        let dig_w: Vec<(f64, f64)> = digs
+            .iter()
+            .filter(|d| d.action == ActionKind::Dig)
+            .map(|d| (f64::from(d.index), weight(d)))
+            .collect();
+        let slope = {
+            let n = dig_w.len() as f64;
+            let (mx, my) = (
+                dig_w.iter().map(|p| p.0).sum::<f64>() / n.max(1.0),
+                dig_w.iter().map(|p| p.1).sum::<f64>() / n.max(1.0),
+            );
+            let sxx: f64 = dig_w.iter().map(|p| (p.0 - mx).powi(2)).sum();
+            let sxy: f64 = dig_w.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+            if sxx > 0.0 { sxy / sxx } else { 0.0 }
+        };
+        let half = digs.len() / 2;
+        let halves = |first: bool| -> Vec<f64> {
+            digs.iter()
+                .enumerate()
+                .filter(|(i, d)| d.action == ActionKind::Dig && ((*i < half) == first))
+                .map(|(_, d)| weight(d))
+                .collect()
+        };
+        let (mw, mt, me) = (mean(&w_all), mean(&t_all), mean(&e_all));
+        Self {
+            dig_mean_weight_n: mean(&pick(ActionKind::Dig, weight)),
+            dig_mean_time_s: mean(&pick(ActionKind::Dig, |d| d.time_s)),
+            dig_mean_energy_kj: mean(&pick(ActionKind::Dig, |d| d.energy_kj)),
+            cleanup_mean_weight_n: mean(&pick(ActionKind::Cleanup, weight)),
+            cleanup_mean_time_s: mean(&pick(ActionKind::Cleanup, |d| d.time_s)),
+            cleanup_mean_energy_kj: mean(&pick(ActionKind::Cleanup, |d| d.energy_kj)),
+            full_bucket_n,
+            over_half_full: share(0.5),
+            over_third_full: share(1.0 / 3.0),
+            productivity_n_per_s: mw / (12.0 + mt), // Eq. 26
+            energy_per_weight_kj_per_n: if mw > 0.0 { me / mw } else { 0.0 }, // Eq. 27
+            dig_weight_slope_n_per_dig: slope,
+            dig_mean_weight_first_half_n: mean(&halves(true)),
+            dig_mean_weight_second_half_n: mean(&halves(false)),
+        }
+    }
+}
+
+/// Planning-cycle timing of a session (wall clock, this process).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct PlanningStats {
+    /// Planning cycles run.
+    pub cycles: usize,
+    /// Mean wall time per cycle, ms.
+    pub mean_ms: f64,
+    /// Longest cycle, ms.
+    pub max_ms: f64,
+}
+
 /// What a session produced (`summary.json`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DemoSummary {
+    /// The action source: `planned`, `predefined` or `fixed`.
+    #[serde(default)]
+    pub strategy: String,
+    /// The bench scenario's name.
+    #[serde(default)]
+    pub bench: String,
+    /// Track-back actions completed.
+    #[serde(default)]
+    pub backups: usize,
+    /// Cleanup actions completed.
+    #[serde(default)]
+    pub cleanups: usize,
+    /// Why the session ended (`dig count reached`, `nothing left to do`, `stopped`, `time budget`).
+    #[serde(default)]
+    pub end: String,
+    /// Tables 3-5 figures.
+    #[serde(default)]
+    pub stats: SessionStats,
+    /// Planning-cycle timing (planned strategy).
+    #[serde(default)]
+    pub planning: PlanningStats,
+    /// The predefined sequence's start joints `[boom, stick, bucket]`, degrees (predefined strategy).
+    #[serde(default)]
+    pub predefined_start_deg: Option<[f64; 3]>,
     /// The simulator's seed.
     pub seed: u64,
     /// The hidden effects given on the command line.
@@ -239,19 +501,36 @@ pub async fn run(args: DemoArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Builds the simulator and the controller of a session.
+/// Builds the simulator and the controller of a session. For the planned and predefined strategies
+/// the plan starts empty (the session pushes the actions), the estimator starts at the scenario's
+/// machine pose and scans are binned on the scenario's grid.
 ///
 /// # Errors
 /// File, simulator and controller construction errors.
 pub fn setup(args: &DemoArgs) -> anyhow::Result<(SimConfig, ControllerConfig, AutodigMaps)> {
     let effects: Vec<&str> = args.effects.iter().map(String::as_str).collect();
-    let sim = SimConfig::load(
+    let mut sim = SimConfig::load(
         args.machine.as_deref(),
         args.bench.as_deref(),
         args.seed,
         &effects,
     )
     .context("simulator configuration")?;
+    if args.bench.is_none() && args.strategy != DemoStrategy::Fixed {
+        let scenario =
+            Scenario::from_toml_str_named(EXTENDED_BENCH_TOML, "config/bench_extended.toml")
+                .context("built-in extended bench")?;
+        sim.effects
+            .merge(&scenario.effect_set().context("extended bench [effects]")?);
+        // The command line's effects win over the bench file's.
+        for e in &effects {
+            sim.effects.apply_arg(e).context("--effect")?;
+        }
+        sim.scenario = scenario;
+        if let Some(seed) = args.seed {
+            sim.scenario.seed = seed;
+        }
+    }
     let mut config = match &args.config {
         Some(p) => {
             let text = std::fs::read_to_string(p)
@@ -265,8 +544,42 @@ pub fn setup(args: &DemoArgs) -> anyhow::Result<(SimConfig, ControllerConfig, Au
             c
         }
     };
-    config.cycle.repeat = true;
     config.cycle.max_digs = Some(args.digs);
+    if args.strategy == DemoStrategy::Fixed {
+        config.cycle.repeat = true;
+    } else {
+        config.cycle.actions.clear();
+        config.cycle.repeat = false;
+        // The spoil is cast beside the tract onto the bench top and piles up there over a long
+        // session: carry and dump well above it (the default 2.8 m tip height is 0.8 m over the
+        // default bench's top; the uncurling bucket's tip swings down about 1.5 m).
+        config.cycle.carry_tip_z_m = config.cycle.carry_tip_z_m.max(EXTENDED_CARRY_TIP_Z_M);
+        // The start is approached 0.4 m above the planned tip and Boom-Down lowers it onto the
+        // terrain, so a few degrees of implement error only change where Boom-Down starts; the
+        // P-controller's minimum command cannot lift a boom that overshot a 0.03 rad tolerance
+        // downward (the move timed out 2 degrees short).
+        config.cycle.joint.tolerance = config
+            .cycle
+            .joint
+            .tolerance
+            .max(EXTENDED_JOINT_TOLERANCE_RAD);
+        config.cycle.carry_boom_rad = config
+            .cycle
+            .carry_boom_rad
+            .max(EXTENDED_CARRY_BOOM_DEG.to_radians());
+        let st = &sim.scenario.start;
+        config.estimator.initial_pose = MachinePose {
+            x_m: st.x_m,
+            y_m: st.y_m,
+            heading_rad: st.heading_deg.to_radians(),
+        };
+        let g = &sim.scenario.grid;
+        config.cycle.scan_grid.x_min_m = g.x_min_m;
+        config.cycle.scan_grid.y_min_m = g.y_min_m;
+        config.cycle.scan_grid.cell_m = g.cell_m;
+        config.cycle.scan_grid.size_x_m = g.size_x_m;
+        config.cycle.scan_grid.size_y_m = g.size_y_m;
+    }
     let maps = match &args.maps {
         Some(p) => {
             let text = std::fs::read_to_string(p)
@@ -277,6 +590,93 @@ pub fn setup(args: &DemoArgs) -> anyhow::Result<(SimConfig, ControllerConfig, Au
         None => AutodigMaps::builtin().context("built-in Autodig maps")?,
     };
     Ok((sim, config, maps))
+}
+
+/// The planner settings of a session: `--planner` or the built-in file, with the desired floor at
+/// the bench's floor elevation (world z = base z: the machine stands on the ground plane).
+///
+/// # Errors
+/// Reading or parsing the file.
+pub fn planner_config(args: &DemoArgs, sim: &SimConfig) -> anyhow::Result<PlannerConfig> {
+    let mut cfg = match &args.planner {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("reading the planner config {}", p.display()))?;
+            PlannerConfig::from_toml_str(&text)
+                .with_context(|| format!("planner config {}", p.display()))?
+        }
+        None => PlannerConfig::nominal().context("built-in planner config")?,
+    };
+    cfg.floor_z_m = sim.scenario.bench.floor_elevation_m;
+    Ok(cfg)
+}
+
+/// The planned session of a run: the planner on the machine, a terrain map on the scenario's grid,
+/// the hardness regression (`--hardness` or the built-in one).
+///
+/// # Errors
+/// Files, planner construction.
+pub fn build_session(
+    args: &DemoArgs,
+    sim: &SimConfig,
+    strategy: Strategy,
+) -> anyhow::Result<PlannedSession> {
+    let cfg = planner_config(args, sim)?;
+    let g = &sim.scenario.grid;
+    let n = |size: f64| (size / g.cell_m).round().max(1.0) as usize;
+    let mapper = TerrainMapper::new(
+        g.x_min_m,
+        g.y_min_m,
+        g.cell_m,
+        n(g.size_x_m),
+        n(g.size_y_m),
+        crate::cycle::ScanGrid::default().max_gap_cells,
+    )
+    .context("terrain map")?;
+    let mut session =
+        PlannedSession::new(&sim.machine, cfg, mapper, strategy).context("planned session")?;
+    if let Some(p) = &args.hardness {
+        let text = std::fs::read_to_string(p)
+            .with_context(|| format!("reading the hardness regression {}", p.display()))?;
+        session.set_regression(
+            HardnessRegression::from_toml_str(&text)
+                .with_context(|| format!("hardness regression {}", p.display()))?,
+        );
+    }
+    Ok(session)
+}
+
+/// The median start joints of the dig actions of a planned run's `summary.json` (6.2).
+///
+/// # Errors
+/// Reading or parsing the file; no dig with joint angles in it.
+pub fn predefined_start_from_summary(path: &Path) -> anyhow::Result<JointAngles> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let summary: DemoSummary =
+        serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+    median_joints(&dig_starts(&summary.digs))
+        .with_context(|| format!("{}: no dig start with joint angles", path.display()))
+}
+
+/// The start joints of the dig actions of a session (planned digs start from joints).
+#[must_use]
+pub fn dig_starts(digs: &[DigRecord]) -> Vec<JointAngles> {
+    digs.iter()
+        .filter(|d| d.action == ActionKind::Dig)
+        .filter_map(|d| match d.start_pose {
+            Some(StartPose::Joints {
+                boom_rad,
+                stick_rad,
+                bucket_rad,
+            }) => Some(JointAngles {
+                boom_rad,
+                stick_rad,
+                bucket_rad,
+            }),
+            _ => None,
+        })
+        .collect()
 }
 
 /// The scan for the next dig: the default fan, turned toward the action's digging plane (the scan is
@@ -313,6 +713,43 @@ fn true_section(machine: &EmbeddedMachine, swing_rad: f64) -> Vec<TipPoint> {
         .collect()
 }
 
+/// What the planner said about an action it pushed (for the dig's record).
+#[derive(Debug, Clone, Copy, Default)]
+struct PlannedInfo {
+    quality: Option<f64>,
+    volume_m3: Option<f64>,
+    start: Option<[f64; 3]>,
+}
+
+/// The true terrain after some digs (Fig. 55), with the machine's pose then.
+#[derive(Debug, Clone)]
+pub struct BenchSnapshot {
+    /// Digs done.
+    pub digs: usize,
+    /// Track backs done.
+    pub backups: usize,
+    /// The simulator's terrain.
+    pub terrain: TerrainGrid,
+    /// The machine's true world pose `[x, y, heading]`.
+    pub pose: [f64; 3],
+}
+
+/// The sensor's world position of a scan.
+fn scan_origin(scan: &vcan_sim::sensors::Scan) -> [f64; 3] {
+    [scan.sensor.x_m, scan.sensor.y_m, scan.sensor.z_m]
+}
+
+/// A scan request turned from the current swing to the digging plane at `target_swing_rad`.
+fn scan_toward(node: &ControllerNode, target_swing_rad: f64) -> ScanRequest {
+    let mut request = ScanRequest::default();
+    let offset = planner::kinematics::wrap_angle(target_swing_rad - node.state().swing_rad);
+    if offset.is_finite() {
+        request.azimuth_min_rad += offset;
+        request.azimuth_max_rad += offset;
+    }
+    request
+}
+
 /// Runs one session and writes its outputs into `args.out`. Stops early when `stop` is set.
 ///
 /// # Errors
@@ -324,7 +761,20 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
     let scans_dir = out.join("scans");
     std::fs::create_dir_all(&scans_dir)
         .with_context(|| format!("creating {}", scans_dir.display()))?;
-    let plan = config.cycle.actions.clone();
+    let mut session = match args.strategy.session() {
+        Some(st) => Some(build_session(args, &sim, st)?),
+        None => None,
+    };
+    let mut predefined_joints = args.predefined_joints;
+    if predefined_joints.is_none()
+        && args.strategy == DemoStrategy::Predefined
+        && let Some(p) = &args.predefined_from
+    {
+        predefined_joints = Some(predefined_start_from_summary(p)?);
+    }
+    let full_bucket_n = sim.machine.bucket.capacity_m3
+        * sim.scenario.soil.density_kg_per_m3
+        * planner::machine::GRAVITY_M_PER_S2;
     let clock = VirtualClock::new();
     let bus = InProcessBus::with_virtual_clock("vcan0", clock.clone());
     let ctl = bus.attach();
@@ -334,6 +784,9 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
         Some(clock.clone()),
     );
     let mut node = ControllerNode::new(&sim.machine, maps, config).context("controller")?;
+    if session.is_some() {
+        node.set_external_plan(true);
+    }
     let trace_path = out.join("trace.log");
     let recorder = Recorder::create(&trace_path, "vcan0")
         .with_context(|| format!("creating {}", trace_path.display()))?;
@@ -344,11 +797,24 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
     let mut current: Option<DigRecord> = None;
     let mut scans = 0usize;
     let mut track_backs = 0usize;
+    let mut backups_done = 0usize;
     let mut last_phase = node.cycle().phase();
     let mut inbox = Vec::new();
     let mut steps: u64 = 0;
     let budget_s = SIM_BUDGET_PER_DIG_S * f64::from(args.digs.max(1));
     let mut result: anyhow::Result<()> = Ok(());
+    let mut soil = SoilMonitor::default();
+    let mut planned_info: Vec<PlannedInfo> = Vec::new();
+    let mut session_over: Option<String> = None;
+    let mut plan_ms: Vec<f64> = Vec::new();
+    let mut snapshots: Vec<BenchSnapshot> = Vec::new();
+    let write_scan = |scan: &vcan_sim::sensors::Scan, scans: &mut usize| -> anyhow::Result<()> {
+        let path = scans_dir.join(format!("scan_{:04}.json", *scans));
+        std::fs::write(&path, serde_json::to_vec(scan)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+        *scans += 1;
+        Ok(())
+    };
     while !node.finished() && clock.now_s() < budget_s && !stop.load(Ordering::Relaxed) {
         machine.advance(PERIOD_S);
         inbox.clear();
@@ -369,20 +835,132 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
         }
         if node.take_scan_request() {
             let scan = machine.scan(&scan_request(&node));
-            let path = scans_dir.join(format!("scan_{scans:04}.json"));
-            std::fs::write(&path, serde_json::to_vec(&scan)?)
-                .with_context(|| format!("writing {}", path.display()))?;
-            scans += 1;
-            match node.cycle().config().scan_grid.terrain(&scan.points) {
-                Ok(grid) => node.provide_terrain(grid),
-                Err(e) => tracing::warn!(error = %e, "scan not usable"),
+            write_scan(&scan, &mut scans)?;
+            match &mut session {
+                // The session's map fuses every scan; the cycle digs with it (3.2).
+                Some(s) => match s.observe_scan_from(scan_origin(&scan), &scan.points) {
+                    Ok(_) => node.provide_terrain(s.terrain().clone()),
+                    Err(e) => tracing::warn!(error = %e, "scan not usable"),
+                },
+                None => match node.cycle().config().scan_grid.terrain(&scan.points) {
+                    Ok(grid) => node.provide_terrain(grid),
+                    Err(e) => tracing::warn!(error = %e, "scan not usable"),
+                },
+            }
+        }
+        if let Some(s) = &mut session
+            && session_over.is_none()
+            && node.cycle().needs_action()
+        {
+            // The map must show the last dig: scan the workspace (swing 0 +- the fan) first.
+            let scan = machine.scan(&scan_toward(&node, 0.0));
+            write_scan(&scan, &mut scans)?;
+            if let Err(e) = s.observe_scan_from(scan_origin(&scan), &scan.points) {
+                tracing::warn!(error = %e, "workspace scan not usable");
+            }
+            let pose = node.estimator().state().pose;
+            if s.strategy() == Strategy::Predefined && s.predefined().is_none() {
+                let start = match predefined_joints {
+                    Some(q) => Some(q),
+                    None => s.virtual_expert_start(&pose)?,
+                };
+                let Some(start) = start else {
+                    anyhow::bail!("predefined sequence: no start joints (no valid dig on the map)");
+                };
+                predefined_joints = Some(start);
+                let seq = PredefinedSequence::from_planner(s.planner(), s.terrain(), &pose, start)?;
+                s.set_predefined(seq);
+            }
+            let t0 = std::time::Instant::now();
+            match s.next_action(&pose) {
+                Ok(Some(a)) => {
+                    plan_ms.push(t0.elapsed().as_secs_f64() * 1e3);
+                    let info = match s.steps().last().and_then(|st| st.plan.as_ref()) {
+                        Some(plan) => match &plan.action {
+                            ActionChoice::Dig(d) => PlannedInfo {
+                                quality: Some(d.quality.quality),
+                                volume_m3: Some(d.summary.swept_volume_m3),
+                                start: Some([
+                                    d.pose.x_m,
+                                    d.pose.z_m,
+                                    d.pose.bucket_abs_rad.to_degrees(),
+                                ]),
+                            },
+                            _ => PlannedInfo::default(),
+                        },
+                        None => PlannedInfo::default(),
+                    };
+                    // The cycle appends: the action's index is the current plan length.
+                    let index = node.cycle().config().actions.len();
+                    if planned_info.len() <= index {
+                        planned_info.resize(index + 1, PlannedInfo::default());
+                    }
+                    planned_info[index] = info;
+                    node.push_action(a)?;
+                }
+                Ok(None) => {
+                    session_over = Some("nothing left to do".to_owned());
+                    node.set_external_plan(false);
+                }
+                Err(e) => {
+                    tracing::warn!(error = %e, "planning failed: session ends");
+                    session_over = Some(format!("planning failed: {e}"));
+                    node.set_external_plan(false);
+                }
             }
         }
         let phase = node.cycle().phase();
         if phase != last_phase {
+            let st = node.state();
+            tracing::debug!(
+                time_s = clock.now_s(),
+                from = ?last_phase,
+                to = ?phase,
+                joints_deg = ?[
+                    st.joints.boom_rad.to_degrees(),
+                    st.joints.stick_rad.to_degrees(),
+                    st.joints.bucket_rad.to_degrees(),
+                ],
+                tip = ?(st.tip.x_m, st.tip.z_m),
+                action = ?node.action(),
+                "demo phase"
+            );
+        }
+        if phase != last_phase {
             if matches!(phase, Phase::Autodig | Phase::Cleanup) && current.is_none() {
                 let action = node.action().copied();
                 let swing_rad = node.state().swing_rad;
+                let info = planned_info
+                    .get(node.cycle().action_index())
+                    .copied()
+                    .unwrap_or_default();
+                let pose = node.estimator().state().pose;
+                let truth = true_section(&machine, swing_rad);
+                let map_error_m = session.as_ref().and_then(|s| {
+                    let errs: Vec<f64> = truth
+                        .iter()
+                        .filter(|p| (3.0..=10.0).contains(&p.x_m))
+                        .filter_map(|p| {
+                            let [x, y, _] = pose.world_from_base(swing_rad, p.x_m, 0.0);
+                            s.terrain()
+                                .height_at(x, y)
+                                .ok()
+                                .map(|h| (h - p.z_m).powi(2))
+                        })
+                        .collect();
+                    (!errs.is_empty())
+                        .then(|| (errs.iter().sum::<f64>() / errs.len() as f64).sqrt())
+                });
+                if let Some(s) = &session {
+                    soil.begin(crate::planned::plane_section(
+                        s.terrain(),
+                        &pose,
+                        swing_rad,
+                        1.0,
+                        12.0,
+                        0.05,
+                    ));
+                }
                 current = Some(DigRecord {
                     index: u32::try_from(records.len()).unwrap_or(u32::MAX),
                     action: action.map_or(ActionKind::Dig, |a| a.kind()),
@@ -401,8 +979,14 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
                     swept_volume_m3: 0.0,
                     end_reason: None,
                     perception: false,
+                    quality: info.quality,
+                    predicted_volume_m3: info.volume_m3,
+                    hardness_index: Some(node.cycle().hardness_index()),
+                    pose: Some([pose.x_m, pose.y_m, pose.heading_rad]),
+                    planned_start: info.start,
+                    map_error_m,
                     trajectory: Vec::new(),
-                    section: true_section(&machine, swing_rad),
+                    section: truth,
                 });
             }
             if phase == Phase::Weigh
@@ -413,16 +997,26 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
             if phase == Phase::TrackBack {
                 track_backs += 1;
             }
+            if last_phase == Phase::TrackBack {
+                backups_done += 1;
+            }
             last_phase = phase;
         }
         if matches!(phase, Phase::Autodig | Phase::Cleanup)
             && let Some(c) = &mut current
         {
-            let tip = node.state().tip;
+            let st = node.state();
             c.trajectory.push(TipPoint {
-                x_m: tip.x_m,
-                z_m: tip.z_m,
+                x_m: st.tip.x_m,
+                z_m: st.tip.z_m,
             });
+            if phase == Phase::Autodig && steps.is_multiple_of(2) {
+                soil.sample(
+                    &st.tip,
+                    st.tip_force,
+                    node.cycle().swept_volume_m3().unwrap_or(0.0),
+                );
+            }
         }
         let stats = node.statistics();
         if stats.len() > records.len()
@@ -440,8 +1034,27 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
             c.end_reason = d.end_reason.map(|r| format!("{r:?}"));
             c.perception = d.perception;
             records.push(c);
+            // 5.2 online: the soil estimate of the recent digs sets the next digs' index.
+            if let Some(s) = &mut session
+                && let Some(model) = soil.end()
+            {
+                match s.set_soil_estimate(model) {
+                    Ok(index) => node.set_hardness_index(index),
+                    Err(e) => tracing::warn!(error = %e, "soil estimate rejected"),
+                }
+            }
+            if session.is_some() && args.bench_after.contains(&(records.len() as u32)) {
+                let t = machine.plant().true_state();
+                snapshots.push(BenchSnapshot {
+                    digs: records.len(),
+                    backups: backups_done,
+                    terrain: machine.plant().world.terrain.clone(),
+                    pose: t.pose,
+                });
+            }
             if let Some(p) = &progress {
                 p.set_position(records.len() as u64);
+                p.set_message(format!("{backups_done} backups"));
             }
         }
         steps += 1;
@@ -452,6 +1065,17 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
             break;
         }
     }
+    let end = if stop.load(Ordering::Relaxed) {
+        "stopped".to_owned()
+    } else if let Some(why) = &session_over {
+        why.clone()
+    } else if node.finished() {
+        "dig count reached".to_owned()
+    } else if clock.now_s() >= budget_s {
+        "time budget".to_owned()
+    } else {
+        "error".to_owned()
+    };
     // Whatever stopped the loop: neutral valves and a Disarm heartbeat, then let the gateway act.
     let now = clock.now_s();
     for f in &node.shutdown(now) {
@@ -477,16 +1101,17 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
             records.iter().map(f).sum::<f64>() / n as f64
         }
     };
+    let cleanups = records
+        .iter()
+        .filter(|r| r.action == ActionKind::Cleanup)
+        .count();
     let totals = Totals {
         digs: n,
         dig_actions: records
             .iter()
             .filter(|r| r.action == ActionKind::Dig)
             .count(),
-        cleanup_actions: records
-            .iter()
-            .filter(|r| r.action == ActionKind::Cleanup)
-            .count(),
+        cleanup_actions: cleanups,
         track_backs,
         weight_n: records.iter().filter_map(|r| r.weight_n).sum(),
         mean_weight_n: mean(&|r| r.weight_n.unwrap_or(0.0)),
@@ -502,19 +1127,70 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
         finished: node.finished(),
         last_fault: node.last_fault().map(|f| f.to_string()),
     };
+    let planning = if plan_ms.is_empty() {
+        PlanningStats::default()
+    } else {
+        PlanningStats {
+            cycles: plan_ms.len(),
+            mean_ms: plan_ms.iter().sum::<f64>() / plan_ms.len() as f64,
+            max_ms: plan_ms.iter().copied().fold(0.0, f64::max),
+        }
+    };
     let summary = DemoSummary {
+        strategy: args.strategy.name().to_owned(),
+        bench: sim.scenario.name.clone(),
+        backups: backups_done,
+        cleanups,
+        end,
+        stats: SessionStats::of(&records, full_bucket_n),
+        planning,
+        predefined_start_deg: session.as_ref().and_then(|s| s.predefined()).map(|p| {
+            [
+                p.start.boom_rad.to_degrees(),
+                p.start.stick_rad.to_degrees(),
+                p.start.bucket_rad.to_degrees(),
+            ]
+        }),
         seed: sim.scenario.seed,
         effects: args.effects.clone(),
         digs: records,
         totals,
     };
-    write_outputs(
-        out,
-        &summary,
-        &terrain_before,
-        &machine.plant().world.terrain,
-        &plan,
-    )?;
+    let plan: Vec<Action> = node.cycle().config().actions.clone();
+    let after = machine.plant().world.terrain.clone();
+    if let Some(s) = &session {
+        // The planner's last cycle (cleanup candidates, tracking limits, regions) and its map.
+        if let Some(p) = s.steps().iter().rev().find_map(|st| st.plan.as_ref()) {
+            let last = serde_json::json!({
+                "coarse": p.coarse,
+                "best_dig": p.best_dig,
+                "cleanup_track": p.cleanup_track,
+                "action": p.action.kind().map(|k| format!("{k:?}")),
+            });
+            let path = out.join("last_plan.json");
+            std::fs::write(&path, serde_json::to_vec_pretty(&last)?)
+                .with_context(|| format!("writing {}", path.display()))?;
+        }
+        let path = out.join("map_after.svg");
+        std::fs::write(
+            &path,
+            crate::plots::bench_svg(
+                s.terrain(),
+                machine.plant().true_state().pose,
+                "the planner's terrain map at the end (elevation, m)",
+            )?,
+        )
+        .with_context(|| format!("writing {}", path.display()))?;
+    }
+    if session.is_some() {
+        snapshots.push(BenchSnapshot {
+            digs: summary.digs.len(),
+            backups: backups_done,
+            terrain: after.clone(),
+            pose: machine.plant().true_state().pose,
+        });
+    }
+    write_outputs(out, &summary, &terrain_before, &after, &plan, &snapshots)?;
     Ok(summary)
 }
 
@@ -538,6 +1214,7 @@ fn write_outputs(
     before: &planner::terrain::TerrainGrid,
     after: &planner::terrain::TerrainGrid,
     plan: &[Action],
+    snapshots: &[BenchSnapshot],
 ) -> anyhow::Result<()> {
     let write = |name: &str, bytes: &[u8]| -> anyhow::Result<()> {
         let p = out.join(name);
@@ -562,6 +1239,26 @@ fn write_outputs(
         "dig_stats.svg",
         crate::plots::dig_stats_svg(&summary.digs)?.as_bytes(),
     )?;
+    if !snapshots.is_empty() {
+        for snap in snapshots {
+            write(
+                &format!("bench_after_{:03}.svg", snap.digs),
+                crate::plots::bench_svg(
+                    &snap.terrain,
+                    snap.pose,
+                    &format!(
+                        "bench after {} digs, {} backups ({}; elevation, m)",
+                        snap.digs, snap.backups, summary.strategy
+                    ),
+                )?
+                .as_bytes(),
+            )?;
+        }
+        write(
+            "dig_sequence.svg",
+            crate::plots::dig_sequence_svg(&summary.digs, summary.stats.full_bucket_n)?.as_bytes(),
+        )?;
+    }
     Ok(())
 }
 
@@ -586,6 +1283,9 @@ pub fn summary_markdown(s: &DemoSummary) -> String {
         t.wall_time_s,
         if t.finished { "" } else { " (stopped early)" }
     );
+    if !s.strategy.is_empty() && s.strategy != "fixed" {
+        m.push_str(&tables_markdown(s));
+    }
     let _ = writeln!(
         m,
         "| # | action | swing (deg) | weight (N) | true payload (kg) | time (s) | energy (kJ) | swept (m^3) | end |"
@@ -615,5 +1315,71 @@ pub fn summary_markdown(s: &DemoSummary) -> String {
     if let Some(f) = &t.last_fault {
         let _ = writeln!(m, "\nLast safety event: {f}.");
     }
+    m
+}
+
+/// Tables 3-5 of the thesis for one session: the run (Table 3), dig against cleanup actions
+/// (Table 4), the per-cycle means with Eqs. 26-27 (Table 5), the share of buckets over half full
+/// (Fig. 56) and the fill trend (Fig. 60).
+pub fn tables_markdown(s: &DemoSummary) -> String {
+    use std::fmt::Write as _;
+    let mut m = String::new();
+    let t = &s.totals;
+    let st = &s.stats;
+    // Writing into a String cannot fail.
+    let _ = writeln!(
+        m,
+        "Strategy `{}` on \"{}\"; ended: {}.\n",
+        s.strategy, s.bench, s.end
+    );
+    let _ = writeln!(
+        m,
+        "Table 3 (run): | digs | backups | weight (N) | time (s) | energy (kJ) |\n|---|---|---|---|---|\n| {} | {} | {:.0} | {:.1} | {:.0} |\n\
+         | thesis test 3 | 109, 6 | 21300 | 7.6 | 252 |\n",
+        t.digs, s.backups, t.mean_weight_n, t.mean_time_s, t.mean_energy_kj
+    );
+    let _ = writeln!(
+        m,
+        "Table 4 (actions): | | count | weight (N) | time (s) | energy (kJ) |\n|---|---|---|---|---|\n\
+         | dig actions | {} | {:.0} | {:.1} | {:.0} |\n| cleanup actions | {} | {:.0} | {:.1} | {:.0} |\n\
+         | thesis digs / cleanups | | 21201 / 21590 | 5.8 / 12.8 | 212 / 366 |\n",
+        t.dig_actions,
+        st.dig_mean_weight_n,
+        st.dig_mean_time_s,
+        st.dig_mean_energy_kj,
+        s.cleanups,
+        st.cleanup_mean_weight_n,
+        st.cleanup_mean_time_s,
+        st.cleanup_mean_energy_kj
+    );
+    let _ = writeln!(
+        m,
+        "Buckets over half full: {:.0} % (over a third: {:.0} %; full bucket {:.0} N; thesis test 3: 94 %, 98 %). \
+         Productivity (Eq. 26) {:.0} N/s, energy per weight (Eq. 27) {:.2} J/N. Dig-action weight trend {:+.0} N per dig; \
+         first half {:.0} N, second half {:.0} N (Fig. 60).",
+        100.0 * st.over_half_full,
+        100.0 * st.over_third_full,
+        st.full_bucket_n,
+        st.productivity_n_per_s,
+        1e3 * st.energy_per_weight_kj_per_n,
+        st.dig_weight_slope_n_per_dig,
+        st.dig_mean_weight_first_half_n,
+        st.dig_mean_weight_second_half_n
+    );
+    if s.planning.cycles > 0 {
+        let _ = writeln!(
+            m,
+            "\nPlanning: {} cycles, mean {:.0} ms, longest {:.0} ms (wall clock, this process).",
+            s.planning.cycles, s.planning.mean_ms, s.planning.max_ms
+        );
+    }
+    if let Some(q) = s.predefined_start_deg {
+        let _ = writeln!(
+            m,
+            "\nPredefined start joints (boom, stick, bucket): {:.1}, {:.1}, {:.1} deg.",
+            q[0], q[1], q[2]
+        );
+    }
+    m.push('\n');
     m
 }

@@ -562,8 +562,7 @@ fn extended_report(args: &ExperimentArgs) -> anyhow::Result<String> {
     let runs = extended(args.digs, &out, args.planner.as_deref())?;
     let text = extended_markdown(&runs);
     let path = out.join("comparison.md");
-    std::fs::write(&path, &text)
-        .map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))?;
+    std::fs::write(&path, &text).map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))?;
     Ok(format!(
         "{text}\nOutputs: {} (planned/, predefined/, fig60.svg, comparison.md)\n",
         out.display()
@@ -576,9 +575,7 @@ fn extended_report(args: &ExperimentArgs) -> anyhow::Result<String> {
 ///
 /// # Errors
 /// Dig model, sweep or fit errors; I/O.
-pub fn hardness_fit(
-    out: &std::path::Path,
-) -> anyhow::Result<planner::plan::hardness::HardnessFit> {
+pub fn hardness_fit(out: &std::path::Path) -> anyhow::Result<planner::plan::hardness::HardnessFit> {
     use anyhow::Context as _;
     use planner::plan::hardness::{default_sweep, fit_hardness_regression};
     let model = planner::dig_model::DigModel::nominal().context("nominal dig model")?;
@@ -638,7 +635,11 @@ fn hardness_fit_report(args: &ExperimentArgs) -> anyhow::Result<String> {
             p.soil,
             p.terrain,
             p.average_force_n / 1e3,
-            if p.analytical_fallback { " (analytical)" } else { "" },
+            if p.analytical_fallback {
+                " (analytical)"
+            } else {
+                ""
+            },
             p.best_index,
             p.best_quality
         );

@@ -23,6 +23,8 @@
 
 use planner::cleanup::CleanupPlan;
 use planner::dig_model::{ActuatorDynamics, DigModel};
+use planner::estimate::{SoilSample, SoilWindow, fit_empirical};
+use planner::kinematics::{BucketPose, TipForce};
 use planner::kinematics::{JointAngles, MachinePose};
 use planner::machine::MachineConfig;
 use planner::plan::mapper::MapUpdate;
@@ -30,11 +32,34 @@ use planner::plan::{
     ActionChoice, HardnessRegression, Plan, PlanError, Planner, PlannerConfig, PlannerState,
     TerrainMapper,
 };
-use planner::soil::EmpiricalSoilModel;
+use planner::soil::{Contact, EmpiricalSoilModel, dig_geometry};
+use planner::terrain::{SectionProfile, TerrainGrid};
 use serde::{Deserialize, Serialize};
 
 use crate::cycle::{Action, StartPose};
 use crate::node::ControllerNode;
+
+/// How far above the planned start the bucket is brought before Autodig's Boom-Down lowers it onto
+/// the terrain, m. The planner's start (Fig. 45) has the tip on the surface, where the dig model
+/// starts Pre-Dig; the work cycle starts Autodig in Boom-Down, which lowers the boom alone until
+/// ground contact, so raising the boom alone by the matching angle lands the tip back on the planned
+/// point (a move straight onto the surface would press into the soil and never settle).
+pub const APPROACH_HEIGHT_M: f64 = 0.4;
+
+/// The planned start joints with the boom raised so the tip is `height_m` higher (rotation about the
+/// boom foot: `dz = (x_tip - x_foot) d_boom`).
+#[must_use]
+pub fn approach_joints(
+    kin: &planner::kinematics::Kinematics,
+    q: JointAngles,
+    height_m: f64,
+) -> JointAngles {
+    let lever = (kin.forward(&q).x_m - kin.boom_foot()[0]).max(1.0);
+    JointAngles {
+        boom_rad: q.boom_rad + height_m / lever,
+        ..q
+    }
+}
 
 /// The predefined sequence's track-back distance (6.2: "a typical distance selected by the
 /// perception based dig planner (1.3 meters)").
@@ -58,7 +83,7 @@ pub enum SessionError {
 pub type Result<T> = std::result::Result<T, SessionError>;
 
 /// Which action source drives the cycle (`demo --strategy planned|predefined`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum Strategy {
     /// The perception-based dig planner (5.1).
@@ -239,6 +264,17 @@ impl PlannedSession {
         })
     }
 
+    /// Replaces the hardness regression (5.2) the online index follows.
+    pub fn set_regression(&mut self, regression: HardnessRegression) {
+        self.regression = regression;
+    }
+
+    /// The predefined sequence in use, if any.
+    #[must_use]
+    pub fn predefined(&self) -> Option<&PredefinedSequence> {
+        self.predefined.as_ref()
+    }
+
     /// Uses the predefined sequence (6.2) instead of the planner.
     pub fn set_predefined(&mut self, sequence: PredefinedSequence) {
         self.predefined = Some(sequence);
@@ -276,8 +312,8 @@ impl PlannedSession {
         &self.steps
     }
 
-    /// The joint angles of the planner's dig starts so far (their median seeds the predefined
-    /// sequence: [`median_joints`]).
+    /// The joint angles of the dig starts pushed so far (the planner's start raised by
+    /// [`APPROACH_HEIGHT_M`]; their median seeds the predefined sequence: [`median_joints`]).
     #[must_use]
     pub fn dig_starts(&self) -> &[JointAngles] {
         &self.dig_starts
@@ -295,12 +331,47 @@ impl PlannedSession {
         self.hardness_index
     }
 
+    /// The "virtual expert" start of 6.2 when no planned run is at hand: the median of the joint
+    /// angles of the best dig the refined planner finds in every region with material on the current
+    /// map, from `pose`. `None` when no region has a valid dig.
+    ///
+    /// # Errors
+    /// [`SessionError::Plan`] when the map is unusable.
+    pub fn virtual_expert_start(&self, pose: &MachinePose) -> Result<Option<JointAngles>> {
+        let grid = self.mapper.grid();
+        let coarse = self.planner.coarse(grid, pose)?;
+        let mut starts = Vec::new();
+        for region in coarse.regions.iter().filter(|r| r.has_material) {
+            if let Some(best) = self.planner.refine(grid, pose, region)?.best {
+                starts.push(approach_joints(
+                    self.planner.kinematics(),
+                    best.joints,
+                    APPROACH_HEIGHT_M,
+                ));
+            }
+        }
+        Ok(median_joints(&starts))
+    }
+
     /// Fuses a range scan (world-frame points) into the terrain map (5.3).
     ///
     /// # Errors
     /// [`SessionError::Plan`] when no point falls in the map.
     pub fn observe_scan(&mut self, points: &[[f64; 3]]) -> Result<MapUpdate> {
         Ok(self.mapper.integrate(points)?)
+    }
+
+    /// Fuses a range scan taken from the sensor at `origin` (world frame), carving the free space its
+    /// rays crossed (material dug out of sight leaves the map; [`TerrainMapper::integrate_from`]).
+    ///
+    /// # Errors
+    /// [`SessionError::Plan`] when no point falls in the map or the origin is not finite.
+    pub fn observe_scan_from(
+        &mut self,
+        origin: [f64; 3],
+        points: &[[f64; 3]],
+    ) -> Result<MapUpdate> {
+        Ok(self.mapper.integrate_from(origin, points)?)
     }
 
     /// Takes estimated empirical soil properties (Eqs. 21-23): the dig model predicts with them and
@@ -346,13 +417,15 @@ impl PlannedSession {
                 let action = match &plan.action {
                     ActionChoice::Dig(d) => {
                         self.state.record_dig(d.region_index, regions);
-                        self.dig_starts.push(d.joints);
+                        let q =
+                            approach_joints(self.planner.kinematics(), d.joints, APPROACH_HEIGHT_M);
+                        self.dig_starts.push(q);
                         Some(Action::Dig {
                             swing_rad: d.swing_rad,
                             start: StartPose::Joints {
-                                boom_rad: d.joints.boom_rad,
-                                stick_rad: d.joints.stick_rad,
-                                bucket_rad: d.joints.bucket_rad,
+                                boom_rad: q.boom_rad,
+                                stick_rad: q.stick_rad,
+                                bucket_rad: q.bucket_rad,
                             },
                         })
                     }
@@ -417,6 +490,127 @@ impl PlannedSession {
             }
             None => Ok(false),
         }
+    }
+}
+
+/// The terrain section along the digging plane at `swing_rad` from `r0_m` to `r1_m` (every `step_m`),
+/// unknown samples filled from their known neighbours; `None` when nothing along it is known.
+#[must_use]
+pub fn plane_section(
+    grid: &TerrainGrid,
+    pose: &MachinePose,
+    swing_rad: f64,
+    r0_m: f64,
+    r1_m: f64,
+    step_m: f64,
+) -> Option<SectionProfile> {
+    if !(r0_m.is_finite() && r1_m > r0_m && step_m > 0.0) {
+        return None;
+    }
+    // Bounded: radii of metres, steps of centimetres.
+    let n = (((r1_m - r0_m) / step_m).floor() as usize + 1).min(10_000);
+    let raw: Vec<Option<f64>> = (0..n)
+        .map(|k| {
+            let [x, y, _] = pose.world_from_base(swing_rad, r0_m + k as f64 * step_m, 0.0);
+            grid.height_at(x, y).ok().filter(|h| h.is_finite())
+        })
+        .collect();
+    let first = raw.iter().position(Option::is_some)?;
+    let mut heights = Vec::with_capacity(n);
+    let mut last = raw[first].unwrap_or(0.0);
+    for h in &raw {
+        if let Some(v) = h {
+            last = *v;
+        }
+        heights.push(h.unwrap_or(last));
+    }
+    // Before the first known sample: its height.
+    for h in heights.iter_mut().take(first) {
+        *h = raw[first].unwrap_or(0.0);
+    }
+    SectionProfile::new(r0_m, step_m, heights).ok()
+}
+
+/// The soil estimator of the planned session (thesis 5.3's Soil Estimator, 4.3.4-4.3.5): during each
+/// dig it intersects the bucket with the pre-dig terrain section (`Gamma`, [`dig_geometry`]) and
+/// pairs it with the measured tip force; after the dig it fits the empirical model (Eqs. 21-23) on a
+/// sliding window of the recent samples, which the session turns into the hardness index (Eq. 25 and
+/// the regression of 5.2, [`PlannedSession::set_soil_estimate`]).
+#[derive(Debug, Clone)]
+pub struct SoilMonitor {
+    window: SoilWindow,
+    section: Option<SectionProfile>,
+    fresh: usize,
+    min_samples: usize,
+}
+
+impl Default for SoilMonitor {
+    fn default() -> Self {
+        Self::new(600, 40)
+    }
+}
+
+impl SoilMonitor {
+    /// A monitor keeping the last `window` samples, fitting once a dig added `min_samples` (4.3.5: a
+    /// window of about 300 samples).
+    #[must_use]
+    pub fn new(window: usize, min_samples: usize) -> Self {
+        Self {
+            window: SoilWindow::new(window),
+            section: None,
+            fresh: 0,
+            min_samples: min_samples.max(planner::estimate::EMPIRICAL_TERMS),
+        }
+    }
+
+    /// A dig starts over the terrain `section` of its plane (or `None`: no samples this dig).
+    pub fn begin(&mut self, section: Option<SectionProfile>) {
+        self.section = section;
+        self.fresh = 0;
+    }
+
+    /// One sample during the dig: the tip pose, the measured soil force on the tip and the swept
+    /// volume so far. Poses out of the ground, or without a force or section, are skipped.
+    pub fn sample(&mut self, tip: &BucketPose, force: Option<TipForce>, swept_volume_m3: f64) {
+        let (Some(section), Some(force)) = (&self.section, force) else {
+            return;
+        };
+        if !(force.fx_n.is_finite() && force.fz_n.is_finite() && force.my_nm.is_finite()) {
+            return;
+        }
+        if let Ok(Contact::InContact(geometry)) =
+            dig_geometry(tip, section, swept_volume_m3.max(0.0))
+            && geometry.depth_m > 0.05
+        {
+            self.window.push(SoilSample { geometry, force });
+            self.fresh += 1;
+        }
+    }
+
+    /// Samples held in the window.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.window.len()
+    }
+
+    /// Whether no sample is held.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.window.is_empty()
+    }
+
+    /// The dig ended: the empirical soil model fitted on the window, when this dig added enough
+    /// samples and the fit is well posed.
+    pub fn end(&mut self) -> Option<EmpiricalSoilModel> {
+        self.section = None;
+        if self.fresh < self.min_samples {
+            return None;
+        }
+        let fit = fit_empirical(self.window.samples()).ok()?;
+        planner::plan::average_soil_force_n(&fit.model)
+            .ok()
+            .filter(|f| f.is_finite())
+            .map(|_| fit.model)
     }
 }
 

@@ -31,6 +31,25 @@ fn color(i: usize) -> RGBColor {
 /// # Errors
 /// A plotting error (not expected for finite data).
 pub fn trajectories_svg(digs: &[DigRecord]) -> anyhow::Result<String> {
+    // The default bench's range, widened to the data (a cut bench lies below the ground plane).
+    let zs = digs
+        .iter()
+        .flat_map(|d| d.trajectory.iter().chain(&d.section))
+        .filter(|p| (1.0..=10.0).contains(&p.x_m) && p.z_m.is_finite())
+        .map(|p| p.z_m);
+    let (lo, hi) = zs.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), z| {
+        (a.min(z), b.max(z))
+    });
+    let z_lo = if lo.is_finite() {
+        (lo - 0.3).min(-0.5)
+    } else {
+        -0.5
+    };
+    let z_hi = if hi.is_finite() {
+        (hi + 0.5).max(4.5)
+    } else {
+        4.5
+    };
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (900, 560)).into_drawing_area();
@@ -43,7 +62,7 @@ pub fn trajectories_svg(digs: &[DigRecord]) -> anyhow::Result<String> {
             .margin(12)
             .x_label_area_size(35)
             .y_label_area_size(45)
-            .build_cartesian_2d(1.0..10.0, -0.5..4.5)
+            .build_cartesian_2d(1.0..10.0, z_lo..z_hi)
             .map_err(err)?;
         chart
             .configure_mesh()
@@ -243,6 +262,355 @@ pub fn dig_stats_svg(digs: &[DigRecord]) -> anyhow::Result<String> {
                 ))
                 .map_err(err)?;
         }
+        root.present().map_err(err)?;
+    }
+    Ok(svg)
+}
+
+/// The bench after some digs (thesis Fig. 55): true terrain elevation over the whole map (world frame,
+/// 0.3 m cells, colour from the lowest to the highest elevation), the machine's tracks and heading.
+///
+/// # Errors
+/// A plotting error.
+pub fn bench_svg(terrain: &TerrainGrid, pose: [f64; 3], title: &str) -> anyhow::Result<String> {
+    const CELL: f64 = 0.3;
+    let [ox, oy] = terrain.origin();
+    let res = terrain.resolution_m();
+    let (x1, y1) = (
+        ox + res * terrain.nx() as f64,
+        oy + res * terrain.ny() as f64,
+    );
+    let nx = ((x1 - ox) / CELL).floor().max(1.0) as usize;
+    let ny = ((y1 - oy) / CELL).floor().max(1.0) as usize;
+    let mut z_lo = f64::INFINITY;
+    let mut z_hi = f64::NEG_INFINITY;
+    let mut samples = Vec::with_capacity(nx * ny);
+    for j in 0..ny {
+        for i in 0..nx {
+            let x = ox + CELL * i as f64;
+            let y = oy + CELL * j as f64;
+            if let Ok(z) = terrain.height_at(x + 0.5 * CELL, y + 0.5 * CELL)
+                && z.is_finite()
+            {
+                z_lo = z_lo.min(z);
+                z_hi = z_hi.max(z);
+                samples.push((x, y, z));
+            }
+        }
+    }
+    if z_hi.is_nan() || z_lo.is_nan() || z_hi <= z_lo {
+        z_lo = 0.0;
+        z_hi = 1.0;
+    }
+    let width_px = 760u32;
+    let height_px =
+        (f64::from(width_px - 80) * (y1 - oy) / (x1 - ox)).clamp(200.0, 900.0) as u32 + 90;
+    let mut svg = String::new();
+    {
+        let root =
+            SVGBackend::with_string(&mut svg, (width_px + 80, height_px)).into_drawing_area();
+        root.fill(&WHITE).map_err(err)?;
+        let (map, legend) = root.split_horizontally(width_px);
+        let mut chart = ChartBuilder::on(&map)
+            .caption(title, ("sans-serif", 15))
+            .margin(12)
+            .x_label_area_size(35)
+            .y_label_area_size(45)
+            .build_cartesian_2d(ox..x1, oy..y1)
+            .map_err(err)?;
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .x_desc("x east [m]")
+            .y_desc("y north [m]")
+            .draw()
+            .map_err(err)?;
+        chart
+            .draw_series(samples.iter().map(|&(x, y, z)| {
+                Rectangle::new(
+                    [(x, y), (x + CELL, y + CELL)],
+                    heat((z - z_lo) / (z_hi - z_lo)).filled(),
+                )
+            }))
+            .map_err(err)?;
+        // The machine: its tracks (4.45 m x 3 m footprint) and the heading.
+        let [mx, my, h] = pose;
+        let (c, s) = (h.cos(), h.sin());
+        let corner = |a: f64, b: f64| (mx + a * c - b * s, my + a * s + b * c);
+        let outline = vec![
+            corner(-2.2, -1.5),
+            corner(2.2, -1.5),
+            corner(2.2, 1.5),
+            corner(-2.2, 1.5),
+            corner(-2.2, -1.5),
+        ];
+        chart
+            .draw_series(std::iter::once(PathElement::new(
+                outline,
+                BLACK.stroke_width(2),
+            )))
+            .map_err(err)?;
+        chart
+            .draw_series(std::iter::once(PathElement::new(
+                vec![(mx, my), corner(3.5, 0.0)],
+                BLACK.stroke_width(2),
+            )))
+            .map_err(err)?;
+        chart
+            .draw_series(std::iter::once(Circle::new((mx, my), 4, BLACK.filled())))
+            .map_err(err)?;
+        let steps = 20;
+        let bar_h = (height_px.saturating_sub(140) / 20).max(5) as i32;
+        for k in 0..steps {
+            let f = f64::from(k) / f64::from(steps);
+            let y0 = 60 + (steps - k) * bar_h;
+            legend
+                .draw(&Rectangle::new(
+                    [(15, y0 - bar_h), (38, y0)],
+                    heat(f).filled(),
+                ))
+                .map_err(err)?;
+        }
+        for k in 0..=4 {
+            let z = z_lo + (z_hi - z_lo) * f64::from(k) / 4.0;
+            let y = 60 + steps * bar_h - k * steps * bar_h / 4;
+            legend
+                .draw(&Text::new(
+                    format!("{z:.1} m"),
+                    (40, y - 6),
+                    ("sans-serif", 11),
+                ))
+                .map_err(err)?;
+        }
+        root.present().map_err(err)?;
+    }
+    Ok(svg)
+}
+
+/// The statistics of a session in dig order (thesis Fig. 56): weight (kN) with the half-full line,
+/// time (s) and energy (kJ); dig actions blue, cleanups orange; backups as grey vertical lines.
+///
+/// # Errors
+/// A plotting error.
+pub fn dig_sequence_svg(digs: &[DigRecord], full_bucket_n: f64) -> anyhow::Result<String> {
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (860, 760)).into_drawing_area();
+        root.fill(&WHITE).map_err(err)?;
+        let panels = root.split_evenly((3, 1));
+        let n = digs.len().max(1) as f64;
+        // A backup happened between two digs whose machine poses differ.
+        let backups: Vec<f64> = digs
+            .windows(2)
+            .filter_map(|w| match (w[0].pose, w[1].pose) {
+                (Some(a), Some(b)) if (a[0] - b[0]).hypot(a[1] - b[1]) > 0.2 => {
+                    Some(f64::from(w[1].index) - 0.5)
+                }
+                _ => None,
+            })
+            .collect();
+        type Get = fn(&DigRecord) -> f64;
+        let half = 0.5 * full_bucket_n * 1e-3;
+        let series: [(String, Get, Option<f64>); 3] = [
+            (
+                format!("weight [kN] (dashed: half full, {half:.1} kN)"),
+                |d| d.weight_n.unwrap_or(0.0) * 1e-3,
+                Some(half),
+            ),
+            ("time [s]".to_owned(), |d| d.time_s, None),
+            ("energy [kJ]".to_owned(), |d| d.energy_kj, None),
+        ];
+        for (area, (label, get, line)) in panels.iter().zip(series) {
+            let top = digs
+                .iter()
+                .map(get)
+                .fold(line.unwrap_or(0.0), f64::max)
+                .max(1e-3)
+                * 1.15;
+            let mut chart = ChartBuilder::on(area)
+                .caption(label, ("sans-serif", 14))
+                .margin(8)
+                .x_label_area_size(28)
+                .y_label_area_size(50)
+                .build_cartesian_2d(-0.5..(n - 0.5), 0.0..top)
+                .map_err(err)?;
+            chart
+                .configure_mesh()
+                .disable_x_mesh()
+                .x_desc("dig")
+                .draw()
+                .map_err(err)?;
+            for &b in &backups {
+                chart
+                    .draw_series(std::iter::once(PathElement::new(
+                        vec![(b, 0.0), (b, top)],
+                        BLACK.mix(0.3).stroke_width(1),
+                    )))
+                    .map_err(err)?;
+            }
+            chart
+                .draw_series(digs.iter().enumerate().map(|(i, d)| {
+                    let c = if d.action == crate::cycle::ActionKind::Cleanup {
+                        color(1)
+                    } else {
+                        color(0)
+                    };
+                    Circle::new((i as f64, get(d)), 3, c.filled())
+                }))
+                .map_err(err)?;
+            if let Some(v) = line {
+                chart
+                    .draw_series(DashedLineSeries::new(
+                        vec![(-0.5, v), (n - 0.5, v)],
+                        5,
+                        4,
+                        BLACK.mix(0.6).stroke_width(1),
+                    ))
+                    .map_err(err)?;
+            }
+        }
+        root.present().map_err(err)?;
+    }
+    Ok(svg)
+}
+
+/// The bucket weights of the dig actions in order for two strategies (thesis Fig. 60): the planner
+/// (x) and the predefined sequence (o), each with its least-squares trend line.
+///
+/// # Errors
+/// A plotting error.
+pub fn weight_sequence_svg(
+    planned: &[DigRecord],
+    predefined: &[DigRecord],
+) -> anyhow::Result<String> {
+    let pick = |digs: &[DigRecord]| -> Vec<(f64, f64)> {
+        digs.iter()
+            .filter(|d| d.action == crate::cycle::ActionKind::Dig)
+            .enumerate()
+            .map(|(i, d)| (i as f64, d.weight_n.unwrap_or(0.0) * 1e-3))
+            .collect()
+    };
+    let (a, b) = (pick(planned), pick(predefined));
+    let n = a.len().max(b.len()).max(2) as f64;
+    let top = a.iter().chain(&b).map(|p| p.1).fold(1.0, f64::max) * 1.15;
+    let trend = |pts: &[(f64, f64)]| -> Option<Vec<(f64, f64)>> {
+        let m = pts.len() as f64;
+        if m < 2.0 {
+            return None;
+        }
+        let (mx, my) = (
+            pts.iter().map(|p| p.0).sum::<f64>() / m,
+            pts.iter().map(|p| p.1).sum::<f64>() / m,
+        );
+        let sxx: f64 = pts.iter().map(|p| (p.0 - mx).powi(2)).sum();
+        let sxy: f64 = pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+        let k = if sxx > 0.0 { sxy / sxx } else { 0.0 };
+        let x1 = pts.last().map_or(0.0, |p| p.0);
+        Some(vec![(0.0, my - k * mx), (x1, my + k * (x1 - mx))])
+    };
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (860, 440)).into_drawing_area();
+        root.fill(&WHITE).map_err(err)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(
+                "bucket weight of the normal digs in order: x planner, o predefined sequence (Fig. 60)",
+                ("sans-serif", 15),
+            )
+            .margin(12)
+            .x_label_area_size(35)
+            .y_label_area_size(50)
+            .build_cartesian_2d(-0.5..(n - 0.5), 0.0..top)
+            .map_err(err)?;
+        chart
+            .configure_mesh()
+            .x_desc("dig action")
+            .y_desc("weight [kN]")
+            .draw()
+            .map_err(err)?;
+        let (ca, cb) = (color(0), color(3));
+        chart
+            .draw_series(
+                a.iter()
+                    .map(|&(x, y)| Cross::new((x, y), 4, ca.stroke_width(2))),
+            )
+            .map_err(err)?
+            .label("perception-based dig planner")
+            .legend(move |(x, y)| Cross::new((x + 8, y), 4, ca.stroke_width(2)));
+        chart
+            .draw_series(
+                b.iter()
+                    .map(|&(x, y)| Circle::new((x, y), 4, cb.stroke_width(2))),
+            )
+            .map_err(err)?
+            .label("predefined excavation sequence")
+            .legend(move |(x, y)| Circle::new((x + 8, y), 4, cb.stroke_width(2)));
+        for (pts, c) in [(&a, ca), (&b, cb)] {
+            if let Some(line) = trend(pts) {
+                chart
+                    .draw_series(DashedLineSeries::new(line, 6, 4, c.stroke_width(1)))
+                    .map_err(err)?;
+            }
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerLeft)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(err)?;
+        root.present().map_err(err)?;
+    }
+    Ok(svg)
+}
+
+/// The optimal Autodig index against the average soil force (thesis Fig. 53): one point per soil
+/// and terrain case, and the fitted regression line (dashed).
+///
+/// # Errors
+/// A plotting error.
+pub fn hardness_fit_svg(
+    points: &[(f64, f64)],
+    intercept: f64,
+    slope_per_kn: f64,
+) -> anyhow::Result<String> {
+    let x_hi = points.iter().map(|p| p.0).fold(1.0, f64::max) * 1.1;
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (760, 480)).into_drawing_area();
+        root.fill(&WHITE).map_err(err)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(
+                "optimal Autodig hardness index vs average soil force (Fig. 53)",
+                ("sans-serif", 15),
+            )
+            .margin(12)
+            .x_label_area_size(35)
+            .y_label_area_size(45)
+            .build_cartesian_2d(0.0..x_hi, 0.0..5.5)
+            .map_err(err)?;
+        chart
+            .configure_mesh()
+            .x_desc("average soil force |F(Gamma_typical)| [kN] (Eq. 25)")
+            .y_desc("optimal index")
+            .draw()
+            .map_err(err)?;
+        chart
+            .draw_series(
+                points
+                    .iter()
+                    .filter(|p| p.0.is_finite() && p.1.is_finite())
+                    .map(|&(x, y)| Circle::new((x, y), 3, color(0).filled())),
+            )
+            .map_err(err)?;
+        chart
+            .draw_series(DashedLineSeries::new(
+                vec![(0.0, intercept), (x_hi, intercept + slope_per_kn * x_hi)],
+                6,
+                4,
+                BLACK.stroke_width(2),
+            ))
+            .map_err(err)?;
         root.present().map_err(err)?;
     }
     Ok(svg)

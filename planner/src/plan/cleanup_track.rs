@@ -9,8 +9,10 @@
 //! machine to `min_radius_m`. They are eliminated when too short to be worth executing, when they were
 //! executed `max_tries` times at that swing angle and still limit the backward motion ("not
 //! cleanable"), and next to a fresh wall (a face steeper than `wall_slope`, which must settle to its
-//! angle of repose first). Where the material runs on past the reach there is no pile to clean (the
-//! bench itself). The cleanup planner picks the longest remaining plan.
+//! angle of repose first). Where the material runs on past the reach at every swing angle there is no
+//! pile to clean (a bench ahead). The cleanup planner picks the longest remaining plan; without one,
+//! material running past the reach at only some angles (a remnant at the workspace's edge) is cleaned
+//! from the reach, and after `max_tries` there it is "not cleanable" like any other plan.
 //!
 //! **Tracking distance** (Figs. 49-51): the smallest, over the remaining plans, of the machine-reach
 //! constraint (the plan's far end stays within reach) and the sensor-view constraint (the material,
@@ -385,6 +387,11 @@ pub fn plan_cleanup_and_tracking(
     let n_half = ((geo.angular_extent_rad / cfg.swing_step_rad + 1e-9).floor() as i64).min(1000);
     let wall_run = cfg.wall_height_m / cfg.wall_slope_rad.tan();
 
+    let tried_out = |swing: f64| {
+        cfg.bin(swing)
+            .and_then(|bin| state.cleanup_tries.get(&bin))
+            .is_some_and(|&t| t >= cfg.max_tries)
+    };
     let mut candidates = Vec::new();
     let mut walls = Vec::new();
     for k in -n_half..=n_half {
@@ -423,6 +430,7 @@ pub fn plan_cleanup_and_tracking(
         let length = start_r.map_or(0.0, |s| (s - cfg.min_radius_m).max(0.0));
         let status = match b.r_m {
             None => CleanupStatus::NoMaterial,
+            Some(_) if b.beyond_reach && tried_out(swing) => CleanupStatus::NotCleanable,
             Some(_) if b.beyond_reach => CleanupStatus::BeyondReach,
             Some(_) if length < cfg.min_length_m => CleanupStatus::TooShort,
             Some(_)
@@ -512,14 +520,28 @@ pub fn plan_cleanup_and_tracking(
         }
     }
     // The longest valid plan; ties keep the first (rightmost) for determinism.
-    let chosen = candidates
-        .iter()
-        .filter(|c| c.status == CleanupStatus::Valid && c.plan.is_some())
-        .fold(None::<&CleanupCandidate>, |best, c| match best {
-            Some(b) if b.length_m >= c.length_m => Some(b),
-            _ => Some(c),
-        })
-        .copied();
+    let longest = |status: CleanupStatus| {
+        candidates
+            .iter()
+            .filter(|c| c.status == status && c.plan.is_some())
+            .fold(None::<&CleanupCandidate>, |best, c| match best {
+                Some(b) if b.length_m >= c.length_m => Some(b),
+                _ => Some(c),
+            })
+            .copied()
+    };
+    // Without a valid plan, material running past the reach at some swing angles (a remnant at the
+    // workspace's edge after a backup, not a bench ahead at every angle) is cleaned from the reach:
+    // that removes the farthest material (5.1.2), and after `max_tries` the angle is "not cleanable"
+    // and stops limiting the tracking distance, as the thesis's repeated cleanups do.
+    let all_beyond = candidates.iter().all(|c| c.boundary.beyond_reach);
+    let chosen = longest(CleanupStatus::Valid).or_else(|| {
+        if all_beyond {
+            None
+        } else {
+            longest(CleanupStatus::BeyondReach)
+        }
+    });
     let material_found = candidates.iter().any(|c| c.boundary.r_m.is_some());
     Ok(CleanupTrackPlan {
         reach_m: reach,
@@ -778,5 +800,75 @@ mod tests {
         );
         assert!(p.chosen.is_none());
         assert_eq!(p.tracking_distance_m, 0.0);
+    }
+
+    #[test]
+    fn a_remnant_past_the_reach_at_the_edge_is_cleaned_then_given_up() {
+        // Material running past the reach only on the left edge of the workspace (y > 3 m), a small
+        // pile straight ahead: the valid pile is chosen first.
+        let grid = TerrainGrid::from_fn(-8.0, -10.0, 0.1, 240, 200, |x, y| {
+            if y > 3.0 && x > 3.0 {
+                2.0
+            } else if (4.0..4.6).contains(&x) && y.abs() < 1.0 {
+                1.0
+            } else {
+                0.0
+            }
+        })
+        .expect("grid");
+        let run = |state: &PlannerState| {
+            plan_cleanup_and_tracking(
+                &grid,
+                &MachinePose::default(),
+                &kin(),
+                geo(),
+                &CleanupConfig::default(),
+                &TrackingConfig::default(),
+                state,
+            )
+            .expect("plan")
+        };
+        let p = run(&PlannerState::default());
+        assert!(
+            p.candidates
+                .iter()
+                .any(|c| c.status == CleanupStatus::BeyondReach)
+        );
+        assert_eq!(p.chosen.map(|c| c.status), Some(CleanupStatus::Valid));
+        assert_eq!(p.tracking_distance_m, 0.0);
+        // With every valid angle tried out, the remnant is cleaned from the reach.
+        let cfg = CleanupConfig::default();
+        let mut state = PlannerState::default();
+        for c in p
+            .candidates
+            .iter()
+            .filter(|c| c.status == CleanupStatus::Valid)
+        {
+            for _ in 0..cfg.max_tries {
+                state.record_cleanup(c.swing_rad, &cfg);
+            }
+        }
+        let p = run(&state);
+        let chosen = p.chosen.expect("the remnant");
+        assert_eq!(chosen.status, CleanupStatus::BeyondReach);
+        assert!((chosen.plan.expect("plan").start_radius_m - p.reach_m).abs() < 1e-9);
+        // Tried out there too: not cleanable, it no longer holds the machine.
+        for c in p
+            .candidates
+            .iter()
+            .filter(|c| c.status == CleanupStatus::BeyondReach)
+        {
+            for _ in 0..cfg.max_tries {
+                state.record_cleanup(c.swing_rad, &cfg);
+            }
+        }
+        let p = run(&state);
+        assert!(
+            p.candidates
+                .iter()
+                .all(|c| c.status != CleanupStatus::BeyondReach)
+        );
+        assert!(p.chosen.is_none());
+        assert!(p.tracking_distance_m > 0.0, "{}", p.tracking_distance_m);
     }
 }

@@ -6,6 +6,12 @@
 //! ones. A cell the scan did not hit keeps its old height (occluded or out of view this time). A cell
 //! never observed before takes the occlusion-gap interpolation of
 //! [`crate::terrain::TerrainGrid::from_scan`] when the scan bounds it on both sides.
+//!
+//! With the sensor's position ([`TerrainMapper::integrate_from`]) the rays also carve free space: a
+//! ray that passed over a cell before its hit shows the terrain there is no higher than the ray, so a
+//! known cell higher than that is lowered to it. This is what keeps material that was dug out of
+//! sight (behind a fresh wall, Fig. 50's occlusion) from staying in the map: a cell not hit keeps its
+//! old height only as far as the rays passing over it allow.
 
 use super::{PlanError, Result};
 use crate::terrain::{TerrainError, TerrainGrid};
@@ -27,6 +33,9 @@ pub struct MapUpdate {
     pub interpolated_cells: usize,
     /// Points outside the map or not finite (ignored).
     pub ignored_points: usize,
+    /// Known cells lowered because a ray passed over them below their height
+    /// ([`TerrainMapper::integrate_from`]).
+    pub carved_cells: usize,
 }
 
 impl TerrainMapper {
@@ -79,6 +88,29 @@ impl TerrainMapper {
     /// [`PlanError::Terrain`] with [`TerrainError::NoPoints`] if no finite point falls in the map (the
     /// map is unchanged).
     pub fn integrate(&mut self, points: &[[f64; 3]]) -> Result<MapUpdate> {
+        self.integrate_impl(None, points)
+    }
+
+    /// Fuses one scan taken from the sensor at `origin` (world frame) and carves the free space the
+    /// rays crossed: a known cell the ray passed over below its stored height is lowered to the ray's
+    /// height there (the stored material cannot be there, or the ray would have hit it).
+    ///
+    /// # Errors
+    /// As [`Self::integrate`]; [`PlanError::NonFinite`] for a non-finite origin.
+    pub fn integrate_from(&mut self, origin: [f64; 3], points: &[[f64; 3]]) -> Result<MapUpdate> {
+        if !origin.iter().all(|v| v.is_finite()) {
+            return Err(PlanError::NonFinite {
+                what: "sensor origin",
+            });
+        }
+        self.integrate_impl(Some(origin), points)
+    }
+
+    fn integrate_impl(
+        &mut self,
+        origin: Option<[f64; 3]>,
+        points: &[[f64; 3]],
+    ) -> Result<MapUpdate> {
         let (nx, ny) = (self.grid.nx(), self.grid.ny());
         let mut sum = vec![0.0; nx * ny];
         let mut count = vec![0u32; nx * ny];
@@ -127,8 +159,50 @@ impl TerrainMapper {
                 }
             }
         }
+        if let Some(o) = origin {
+            update.carved_cells = self.carve(o, points, &count);
+        }
         self.scans += 1;
         Ok(update)
+    }
+
+    /// Lowers known cells the rays from `o` passed over below their height; cells hit by this scan
+    /// (`hit_count > 0`) keep their measured height. Returns the cells lowered.
+    fn carve(&mut self, o: [f64; 3], points: &[[f64; 3]], hit_count: &[u32]) -> usize {
+        let nx = self.grid.nx();
+        let res = self.grid.resolution_m();
+        let step = 0.5 * res;
+        let mut lowered = vec![false; hit_count.len()];
+        let mut count = 0;
+        for p in points.iter().filter(|p| p.iter().all(|v| v.is_finite())) {
+            let (dx, dy, dz) = (p[0] - o[0], p[1] - o[1], p[2] - o[2]);
+            let horizontal = dx.hypot(dy);
+            // Stop a cell short of the hit: the hit cell itself is measured.
+            let n = ((horizontal - res) / step).floor();
+            if n.is_nan() || n < 1.0 {
+                continue;
+            }
+            // Bounded: scan ranges are tens of metres, the step centimetres.
+            for k in 1..=(n as usize).min(100_000) {
+                let t = k as f64 * step / horizontal;
+                let (x, y, z) = (o[0] + t * dx, o[1] + t * dy, o[2] + t * dz);
+                let Some((i, j)) = self.grid.cell_index(x, y) else {
+                    continue;
+                };
+                let c = j * nx + i;
+                if hit_count.get(c).copied().unwrap_or(0) > 0 {
+                    continue;
+                }
+                if let Some(h) = self.grid.cell(i, j)
+                    && h > z
+                    && self.grid.set_cell(i, j, Some(z)).is_ok()
+                    && !std::mem::replace(&mut lowered[c], true)
+                {
+                    count += 1;
+                }
+            }
+        }
+        count
     }
 }
 
@@ -178,5 +252,24 @@ mod tests {
         let before = m.grid().clone();
         assert!(m.integrate(&[[f64::NAN; 3]]).is_err());
         assert_eq!(m.grid(), &before);
+    }
+
+    #[test]
+    fn rays_carve_material_dug_out_of_sight() {
+        let mut m = TerrainMapper::new(0.0, -1.0, 0.1, 40, 20, 3).expect("mapper");
+        m.integrate(&scan(0.05, 3.95, 2.0)).expect("first");
+        // Material at x in [2, 3) was dug to 0.5 m, out of sight; the sensor at (0, 0, 4) sees the
+        // ground at x = 3.5 (height 0.5) over it: the ray passes x = 2.5 at z = 4 - 3.5 * 2.5 / 3.5.
+        let origin = [0.0, 0.0, 4.0];
+        let hit = [[3.55, 0.05, 0.5]];
+        let u = m.integrate_from(origin, &hit).expect("second");
+        assert!(u.carved_cells > 0);
+        let h = m.grid().height_at(2.55, 0.05).expect("carved");
+        let ray = 4.0 - 3.5 * 2.55 / 3.55;
+        assert!((h - ray).abs() < 0.1 && h < 2.0, "{h} vs ray {ray}");
+        // Cells the ray did not cross keep their height; the hit cell takes the measurement.
+        assert!((m.grid().height_at(2.55, 0.85).expect("aside") - 2.0).abs() < 1e-12);
+        assert!((m.grid().height_at(3.55, 0.05).expect("hit") - 0.5).abs() < 1e-12);
+        assert!(m.integrate_from([f64::NAN, 0.0, 0.0], &hit).is_err());
     }
 }
