@@ -244,9 +244,9 @@ pub fn scan_section(scan: &ScanFile, machine: &MachineConfig) -> Option<SectionP
     while k < last {
         let next = (k + 1..=last).find(|j| heights[*j].is_some())?;
         let (a, b) = (heights[k]?, heights[next]?);
-        for j in k + 1..next {
+        for (j, h) in heights.iter_mut().enumerate().take(next).skip(k + 1) {
             let t = (j - k) as f64 / (next - k) as f64;
-            heights[j] = Some(a + t * (b - a));
+            *h = Some(a + t * (b - a));
         }
         k = next;
     }

@@ -8,8 +8,9 @@
 //! nominal residuals, in samples), so that `chi2 = sum_s SSE_s / (sigma_s^2 kappa_s)` behaves like
 //! `-2 ln L` of independent samples and `n_eff = sum_s n_s / kappa_s`. Held-out score of a candidate:
 //! `dBIC = chi2_test(0) - chi2_test(m) - ln(n_eff_test)` (one parameter). It is significant when
-//! `dBIC` exceeds [`AnalysisConfig::min_delta_bic`] and it explains at least
-//! [`AnalysisConfig::min_explained`] of the held-out chi-square; both thresholds were calibrated on
+//! `dBIC` exceeds [`AnalysisConfig::min_delta_bic`], it explains at least
+//! [`AnalysisConfig::min_explained`] of the held-out chi-square of the signals it acts on, and it
+//! raises no signal's held-out RMS by more than 10 %; the thresholds were calibrated on
 //! effect-free traces (docs/discrepancy.md). Uncertainty: `sqrt(2 / chi2'')` from the curvature of
 //! the training cost at the optimum (Fisher information), the `kappa` weighting making it honest for
 //! correlated samples.
@@ -71,7 +72,7 @@ pub struct CandidateScore {
     pub heldout_delta_bic: f64,
     /// Fraction of the held-out chi-square it explains.
     pub heldout_explained: f64,
-    /// Whether it passed both thresholds.
+    /// Whether it passed the thresholds and worsened no signal by more than 10 %.
     pub significant: bool,
 }
 
@@ -131,6 +132,17 @@ pub struct AnalysisResult {
     pub sigma: Vec<f64>,
     /// Decorrelation factor per signal (samples per independent sample).
     pub kappa: Vec<f64>,
+}
+
+/// A candidate may raise no signal's held-out RMS by more than this factor.
+const MAX_SIGNAL_WORSENING: f64 = 1.1;
+
+fn groups_contain(g: SignalGroups, j: usize) -> bool {
+    match j {
+        0..=4 => g.hydraulic,
+        5..=7 => g.force,
+        _ => g.soil,
+    }
 }
 
 /// Per-signal weights of the chi-square.
@@ -359,7 +371,8 @@ pub fn analyse(
     let mut done = 0;
     while named.len() < config.max_effects && !remaining.is_empty() {
         let train_chi0 = chi2(&w, &train_eval.base_sse().0);
-        let test_chi0 = chi2(&w, &test_eval.base_sse().0);
+        let test_base_sse = test_eval.base_sse().0;
+        let test_chi0 = chi2(&w, &test_base_sse);
         let mut scores: Vec<(Candidate, CandidateScore)> = Vec::new();
         for c in &remaining {
             let c = *c;
@@ -399,14 +412,26 @@ pub fn analyse(
             };
             let mut a = aug;
             a.set(c, x);
-            let test_chi = chi2(&w, &test_eval.sse_with(&a, groups));
+            let test_sse = test_eval.sse_with(&a, groups);
+            let test_chi = chi2(&w, &test_sse);
             let delta_bic = test_chi0 - test_chi - n_eff_test.ln();
-            let explained = if test_chi0 > 0.0 {
-                (test_chi0 - test_chi) / test_chi0
+            // Explained share of the chi-square of the signals the candidate acts on (a friction
+            // must explain the forces, not the whole record).
+            let own: f64 = (0..N_SIGNALS)
+                .filter(|j| groups_contain(groups, *j))
+                .map(|j| test_base_sse[j] * w.inv_var[j])
+                .sum();
+            let explained = if own > 0.0 {
+                (test_chi0 - test_chi) / own
             } else {
                 0.0
             };
-            let significant = delta_bic > config.min_delta_bic && explained > config.min_explained;
+            // A physical augmentation that is right does not make any signal clearly worse.
+            let consistent = (0..N_SIGNALS).all(|j| {
+                n_test[j] < 100 || test_sse[j] <= MAX_SIGNAL_WORSENING.powi(2) * test_base_sse[j]
+            });
+            let significant =
+                delta_bic > config.min_delta_bic && explained > config.min_explained && consistent;
             scores.push((
                 c,
                 CandidateScore {
