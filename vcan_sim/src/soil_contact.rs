@@ -235,7 +235,7 @@ impl World {
             sum += d2.sqrt() * slope + h;
             count += 1.0;
         });
-        let upper = if count > 0.0 {
+        let mut upper = if count > 0.0 {
             (target + sum) / count + 1.0e-6 * (1.0 + sum.abs() / count)
         } else {
             f64::INFINITY
@@ -250,6 +250,23 @@ impl World {
                 cells.push((i, j, d2.sqrt() * slope + h));
             }
         });
+        // 3. Tighten the bound: for the cells below it, `(target + sum of their bases) / their count`
+        //    is again an upper bound of the apex (step 1), and below the old one while cells drop out.
+        //    Where the ground falls away (the bench face) most cells of the window pass step 2, but
+        //    only the cone's footprint is left to sort after a few passes.
+        for _ in 0..8 {
+            let (mut sum, mut count) = (0.0, 0.0);
+            for c in cells.iter().filter(|c| c.2 < upper) {
+                sum += c.2;
+                count += 1.0;
+            }
+            let tighter = (target + sum) / count + 1.0e-6 * (1.0 + sum.abs() / count);
+            if !(count > 0.0 && tighter < upper) {
+                break;
+            }
+            upper = tighter;
+        }
+        cells.retain(|c| c.2 < upper);
         if cells.is_empty() {
             return 0.0;
         }
