@@ -810,7 +810,8 @@ mod tests {
             if y > 3.0 && x > 3.0 {
                 2.0
             } else if (4.0..4.6).contains(&x) && y.abs() < 1.0 {
-                1.0
+                // Lower than a fresh wall (0.5 m), higher than the threshold (0.2 m).
+                0.45
             } else {
                 0.0
             }
