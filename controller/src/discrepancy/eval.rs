@@ -352,11 +352,28 @@ pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
     let results: Vec<CaseResult> = list
         .par_iter()
         .map(|(hidden, seed)| {
-            let r = run_case(&args.out, *hidden, *seed, digs);
+            // A session that cannot be analysed (e.g. the hidden effect stopped the work cycle
+            // after one dig) counts as a miss, named `error`, and the evaluation goes on.
+            let r = run_case(&args.out, *hidden, *seed, digs).unwrap_or_else(|e| CaseResult {
+                case: format!(
+                    "{}_s{seed} ({e:#})",
+                    hidden.map_or("none", |(c, _)| c.name())
+                ),
+                hidden: hidden.map_or("none".into(), |(c, _)| c.name().to_string()),
+                hidden_magnitude: hidden.map_or(0.0, |(_, v)| v),
+                seed: *seed,
+                digs: 0,
+                named: "error".into(),
+                named_all: Vec::new(),
+                magnitude_error_percent: None,
+                best_rms_change_percent: None,
+                best_signal: None,
+                analysis_s: 0.0,
+            });
             bar.inc(1);
             r
         })
-        .collect::<anyhow::Result<_>>()?;
+        .collect();
     bar.finish_and_clear();
     let text = confusion_text(&results);
     print!("{text}");
