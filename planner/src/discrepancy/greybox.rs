@@ -190,7 +190,8 @@ impl GreyBoxParams {
     /// Physical first guesses from a machine file (Eq. 1 constants from its valve area and discharge
     /// coefficient; the boom section passes two cylinders' flow, so 1.3 times the area; meter-out
     /// areas 1.6 times the meter-in ones, a usual valve-catalogue ratio), the soil of
-    /// `config/dig_model.toml`. [`Self::nominal`] is these after calibration on nominal traces.
+    /// `config/dig_model.toml`. [`super::AugmentedModel::nominal`] holds these after calibration on
+    /// nominal traces.
     pub fn from_machine(cfg: &MachineConfig) -> Self {
         let h = &cfg.hydraulics;
         let cyl = [
