@@ -305,13 +305,16 @@ pub fn write_outputs(
     Ok(())
 }
 
-/// One dig as CSV: inputs, then every signal measured, nominal and augmented (empty where undefined).
-fn replay_csv(
+/// One dig's replayed signals, a row per sample.
+type Replayed = Vec<[f64; N_SIGNALS]>;
+
+/// Every signal of one dig replayed by the nominal (`old`) and the augmented (`new`) model.
+fn replay_old_new(
     rec: &PreparedRecord,
     old: &AugmentedModel,
     new: &AugmentedModel,
     r: &AnalysisResult,
-) -> anyhow::Result<String> {
+) -> anyhow::Result<(Replayed, Replayed)> {
     let (mut p_old, mut p_new) = (Vec::new(), Vec::new());
     replay(
         rec,
@@ -327,6 +330,17 @@ fn replay_csv(
         SignalGroups::ALL,
         &mut p_new,
     );
+    Ok((p_old, p_new))
+}
+
+/// One dig as CSV: inputs, then every signal measured, nominal and augmented (empty where undefined).
+fn replay_csv(
+    rec: &PreparedRecord,
+    old: &AugmentedModel,
+    new: &AugmentedModel,
+    r: &AnalysisResult,
+) -> anyhow::Result<String> {
+    let (p_old, p_new) = replay_old_new(rec, old, new, r)?;
     let mut s = String::from(
         "time_s,stage,load,u_boom,u_stick,u_bucket,u_swing,head_boom,rod_boom,head_stick,rod_stick,head_bucket,rod_bucket,pump1,pump2",
     );
@@ -378,21 +392,7 @@ fn dig_svg(
     new: &AugmentedModel,
     r: &AnalysisResult,
 ) -> anyhow::Result<String> {
-    let (mut p_old, mut p_new) = (Vec::new(), Vec::new());
-    replay(
-        rec,
-        &old.params,
-        &old.augmentation()?,
-        SignalGroups::ALL,
-        &mut p_old,
-    );
-    replay(
-        rec,
-        &new.params,
-        &r.augmentation,
-        SignalGroups::ALL,
-        &mut p_new,
-    );
+    let (p_old, p_new) = replay_old_new(rec, old, new, r)?;
     let t0 = rec.samples.first().map_or(0.0, |s| s.time_s);
     let mut svg = String::new();
     {
