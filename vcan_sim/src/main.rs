@@ -247,6 +247,9 @@ fn real_main() -> Result<()> {
     tracing::info!(
         simulated_s = summary.simulated_s,
         frames_sent = summary.frames_sent,
+        overruns = summary.overruns,
+        slipped_s = summary.slipped_s,
+        max_lag_s = summary.max_lag_s,
         frames_received = summary.frames_received,
         "stopped"
     );
