@@ -317,6 +317,11 @@ pub struct CycleConfig {
     /// it levels, or above it in a cut. (The demo's first cleanup started over what the digs had left
     /// of the bench and "detected" the floor 1.68 m up; every later cleanup reused it.) m. Default 0.3.
     pub floor_max_z_m: f64,
+    /// An action of the plan abandoned on a control fault (a move timing out, the floor not found,
+    /// Autodig rejecting its inputs) is tried again this many times before the plan goes on with the
+    /// next one. Plans pushed by the planner (`crate::planned`) are not retried: it plans again from the
+    /// new terrain. Default 1.
+    pub retries: u32,
     /// The grid scans are binned into.
     pub scan_grid: ScanGrid,
 }
@@ -377,6 +382,7 @@ impl Default for CycleConfig {
             weigh_window_s: 1.0,
             floor_policy: FloorPolicy::DetectOnce,
             floor_max_z_m: 0.3,
+            retries: 1,
             scan_grid: ScanGrid::default(),
         }
     }
@@ -597,6 +603,10 @@ pub struct WorkCycle {
     lifted: bool,
     /// Hook for an external action source (`crate::planned`): hold in Idle when the actions run out.
     external_plan: bool,
+    /// Control faults of the current action so far.
+    failed_attempts: u32,
+    /// The current action was abandoned and is tried again when the bucket has been emptied.
+    retry_pending: bool,
 }
 
 impl WorkCycle {
@@ -650,6 +660,8 @@ impl WorkCycle {
             last_now_s: 0.0,
             lifted: false,
             external_plan: false,
+            failed_attempts: 0,
+            retry_pending: false,
         })
     }
 
@@ -791,8 +803,9 @@ impl WorkCycle {
     }
 
     /// Called by the node when a fault stopped motion: a failed action is abandoned (its partial
-    /// statistics are dropped) and the plan goes on with the next one after the re-arm; any other fault
-    /// pauses the current phase, which resumes after the re-arm.
+    /// statistics are dropped), the bucket emptied, and the action tried again up to
+    /// [`CycleConfig::retries`] times before the plan goes on with the next one; any other fault pauses
+    /// the current phase, which resumes after the re-arm.
     pub fn on_fault(&mut self, control: bool) {
         if let Some(r) = &mut self.record {
             // The motion stopped: do not integrate across the gap.
@@ -801,6 +814,18 @@ impl WorkCycle {
         }
         self.settle_since_s = None;
         if control {
+            let retry = !self.external_plan && self.failed_attempts < self.config.retries;
+            if retry {
+                self.failed_attempts += 1;
+                tracing::warn!(
+                    action = self.action_index,
+                    attempt = self.failed_attempts + 1,
+                    "action abandoned: it is tried again"
+                );
+            } else {
+                tracing::warn!(action = self.action_index, "action abandoned: going on");
+            }
+            self.retry_pending = retry;
             self.autodig = None;
             self.cleanup = None;
             self.swept = None;
@@ -812,7 +837,10 @@ impl WorkCycle {
                 // Raise and empty whatever is in the bucket before going on.
                 self.phase = Phase::SwingToDump;
             } else {
-                self.action_index += 1;
+                if !std::mem::take(&mut self.retry_pending) {
+                    self.action_index += 1;
+                    self.failed_attempts = 0;
+                }
                 self.phase = Phase::Idle;
             }
         }
@@ -935,7 +963,10 @@ impl WorkCycle {
     }
 
     fn next_action(&mut self, now_s: f64) {
-        self.action_index += 1;
+        if !std::mem::take(&mut self.retry_pending) {
+            self.action_index += 1;
+            self.failed_attempts = 0;
+        }
         self.phase = Phase::Idle;
         self.phase_since_s = now_s;
     }
@@ -1652,6 +1683,40 @@ mod tests {
         c.on_fault(true);
         assert_eq!(c.phase(), Phase::SwingToDump);
         assert!(c.stats().is_empty());
+    }
+
+    #[test]
+    fn an_abandoned_action_is_tried_again_then_skipped() {
+        let mut c = cycle(CycleConfig {
+            actions: vec![
+                Action::TrackBack { distance_m: 1.0 },
+                Action::TrackBack { distance_m: 2.0 },
+            ],
+            repeat: false,
+            ..CycleConfig::default()
+        });
+        c.start();
+        let e = est_at([0.3, -1.6, -0.9, 0.0], 5.0, 0.0);
+        c.step(0.0, &e, Some(ArmMode::Valve)).unwrap();
+        assert_eq!((c.phase(), c.action_index()), (Phase::TrackBack, 0));
+        c.on_fault(true);
+        c.step(0.1, &e, Some(ArmMode::Valve)).unwrap();
+        assert_eq!(
+            (c.phase(), c.action_index()),
+            (Phase::TrackBack, 0),
+            "retried once"
+        );
+        c.on_fault(true);
+        c.step(0.2, &e, Some(ArmMode::Valve)).unwrap();
+        assert_eq!(
+            (c.phase(), c.action_index()),
+            (Phase::TrackBack, 1),
+            "then skipped"
+        );
+        // The next action has its own retry.
+        c.on_fault(true);
+        c.step(0.3, &e, Some(ArmMode::Valve)).unwrap();
+        assert_eq!((c.phase(), c.action_index()), (Phase::TrackBack, 1));
     }
 
     #[test]
