@@ -26,7 +26,7 @@ use firmware_bridge::messages::{
     RequestedMode, Valve, ValveState,
 };
 use firmware_bridge::trace::{Direction, ReadMode, TraceReader, TraceWriter};
-use planner::actuator::{ActuatorDig, ActuatorModel, ActuatorSample, TrainConfig};
+use planner::actuator::{ActuatorDig, ActuatorModel, ActuatorSample, FreeRunLoss, TrainConfig};
 use planner::autodig::{Autodig, AutodigInputs, AutodigMaps, EndReason, Stage};
 use planner::dig_model::{DigModel, DigModelConfig, DigPrediction, DigSite, DigStart};
 use planner::kinematics::{BucketPose, Joint, JointAngles, Kinematics};
@@ -60,6 +60,8 @@ pub const THESIS_TABLE2: [(f64, f64, f64, f64); 3] = [
 pub enum ModelCommand {
     /// Train the actuator networks (thesis 4.2) from candump traces.
     Train(TrainArgs),
+    /// Free-running error of an actuator model on the held-out test digs of `train`'s split.
+    Evaluate(EvaluateArgs),
     /// Run Autodig digs in the simulator from varied starts and write their traces.
     GenerateData(GenerateArgs),
     /// Compare the dig model with the simulator from the same starts (thesis Figs. 34-41).
@@ -94,6 +96,37 @@ pub struct TrainArgs {
     /// the crossover), which the simulator traces show matters.
     #[arg(long)]
     pub thesis_inputs: bool,
+    /// Also feed every network the orifice-law drive (Eq. 1) of its own and its partner's cylinder:
+    /// the command times the square root of the pressure drop left at the valve for the load.
+    #[arg(long, conflicts_with = "thesis_inputs")]
+    pub orifice_inputs: bool,
+    /// Train the free run and stop early on the mean absolute error (the reported measure) instead of
+    /// the mean squared error.
+    #[arg(long)]
+    pub abs_loss: bool,
+    /// Teacher-forcing epochs before the free-running phase.
+    #[arg(long, default_value_t = 300)]
+    pub teacher_epochs: usize,
+    /// Machine file (default: the built-in config/machine.toml).
+    #[arg(long, value_name = "FILE")]
+    pub machine: Option<PathBuf>,
+}
+
+/// Arguments of `model evaluate`.
+#[derive(Debug, Args)]
+pub struct EvaluateArgs {
+    /// candump -L traces, in the order given to `model train`.
+    #[arg(long, required = true, num_args = 1..)]
+    pub trace: Vec<PathBuf>,
+    /// Actuator model (default: the shipped config/nominal_actuator.json).
+    #[arg(long, value_name = "FILE")]
+    pub model: Option<PathBuf>,
+    /// Seed of `train`'s split (the test digs are the ones `train --seed` held out).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Evaluate on every dig instead of the held-out test digs.
+    #[arg(long)]
+    pub all: bool,
     /// Machine file (default: the built-in config/machine.toml).
     #[arg(long, value_name = "FILE")]
     pub machine: Option<PathBuf>,
@@ -160,6 +193,7 @@ pub struct Table2Args {
 pub fn run(cmd: ModelCommand) -> anyhow::Result<()> {
     match cmd {
         ModelCommand::Train(a) => train(&a),
+        ModelCommand::Evaluate(a) => evaluate(&a),
         ModelCommand::GenerateData(a) => generate(&a),
         ModelCommand::Compare(a) => compare(&a),
         ModelCommand::Table2(a) => table2(&a),
@@ -1021,17 +1055,17 @@ pub fn read_training_digs(
     Ok(digs)
 }
 
-fn train(a: &TrainArgs) -> anyhow::Result<()> {
-    let machine = match &a.machine {
-        Some(p) => planner::machine::MachineConfig::from_toml_file(p)?,
-        None => planner::machine::MachineConfig::default_machine()?,
-    };
-    let kin = Kinematics::new(&machine)?;
+/// Reads the digs of `traces` for training or evaluation (cut short at implausible speeds).
+fn load_digs(
+    traces: &[PathBuf],
+    machine: &planner::machine::MachineConfig,
+) -> anyhow::Result<Vec<ActuatorDig>> {
+    let kin = Kinematics::new(machine)?;
     let c = &machine.cylinders;
     let areas = [&c.boom, &c.stick, &c.bucket].map(|c| (c.head_area_m2(), c.rod_area_m2()));
     let mut digs = Vec::new();
     let mut implausible = 0usize;
-    for path in &a.trace {
+    for path in traces {
         for mut dig in read_training_digs(path, &kin, areas)? {
             // A cylinder faster than the pumps can drive it is a glitch, not hydraulics: keep the
             // dig up to it.
@@ -1059,6 +1093,66 @@ fn train(a: &TrainArgs) -> anyhow::Result<()> {
             digs.len()
         );
     }
+    Ok(digs)
+}
+
+fn load_machine(path: Option<&Path>) -> anyhow::Result<planner::machine::MachineConfig> {
+    Ok(match path {
+        Some(p) => planner::machine::MachineConfig::from_toml_file(p)?,
+        None => planner::machine::MachineConfig::default_machine()?,
+    })
+}
+
+fn print_errors(report: &planner::actuator::EvaluationReport) {
+    println!("  cylinder  MAE [m/s]  peak [m/s]  MAE % of peak");
+    for e in &report.cylinders {
+        println!(
+            "  {:<8}  {:>9.4}  {:>10.3}  {:>8.2} %{}",
+            e.joint.to_string(),
+            e.mae_m_per_s,
+            e.peak_m_per_s,
+            e.mae_percent_of_peak,
+            if e.mae_percent_of_peak < 5.0 {
+                ""
+            } else {
+                "  (above 5 %)"
+            }
+        );
+    }
+}
+
+fn evaluate(a: &EvaluateArgs) -> anyhow::Result<()> {
+    let machine = load_machine(a.machine.as_deref())?;
+    let digs = load_digs(&a.trace, &machine)?;
+    let text = match &a.model {
+        Some(p) => {
+            std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?
+        }
+        None => planner::dig_model::NOMINAL_ACTUATOR_JSON.to_owned(),
+    };
+    let model = ActuatorModel::from_json(&text)?;
+    let chosen: Vec<ActuatorDig> = if a.all {
+        digs
+    } else {
+        let config = TrainConfig {
+            seed: a.seed,
+            ..TrainConfig::default()
+        };
+        let split = planner::actuator::split_digs(digs.len(), &config)?;
+        split.test.iter().map(|&i| digs[i].clone()).collect()
+    };
+    let report = model.evaluate(&chosen)?;
+    println!(
+        "{} digs ({} steps), free-running (thesis Figs. 19-21: 5-8 %; target < 5 %):",
+        report.digs, report.steps
+    );
+    print_errors(&report);
+    Ok(())
+}
+
+fn train(a: &TrainArgs) -> anyhow::Result<()> {
+    let machine = load_machine(a.machine.as_deref())?;
+    let digs = load_digs(&a.trace, &machine)?;
     let config = TrainConfig {
         seed: a.seed,
         hidden_units: a.hidden,
@@ -1069,6 +1163,13 @@ fn train(a: &TrainArgs) -> anyhow::Result<()> {
         }),
         free_run_epochs: a.epochs,
         coupled_inputs: !a.thesis_inputs,
+        orifice_inputs: a.orifice_inputs,
+        teacher_forcing_epochs: a.teacher_epochs,
+        free_run_loss: if a.abs_loss {
+            FreeRunLoss::Absolute
+        } else {
+            FreeRunLoss::Squared
+        },
         ..TrainConfig::default()
     };
     let samples: usize = digs.iter().map(|d| d.samples.len()).sum();
@@ -1080,7 +1181,9 @@ fn train(a: &TrainArgs) -> anyhow::Result<()> {
         config.hidden_units,
         config.delay_steps,
         config.seed,
-        if config.coupled_inputs {
+        if config.orifice_inputs {
+            "coupled + orifice drives"
+        } else if config.coupled_inputs {
             "coupled (partner command and force)"
         } else {
             "Fig. 17"
@@ -1112,21 +1215,7 @@ fn train(a: &TrainArgs) -> anyhow::Result<()> {
         a.out.display()
     );
     println!("held-out test digs, free-running (thesis Figs. 19-21: 5-8 %; target < 5 %):");
-    println!("  cylinder  MAE [m/s]  peak [m/s]  MAE % of peak");
-    for e in &report.test.cylinders {
-        println!(
-            "  {:<8}  {:>9.4}  {:>10.3}  {:>8.2} %{}",
-            e.joint.to_string(),
-            e.mae_m_per_s,
-            e.peak_m_per_s,
-            e.mae_percent_of_peak,
-            if e.mae_percent_of_peak < 5.0 {
-                ""
-            } else {
-                "  (above 5 %)"
-            }
-        );
-    }
+    print_errors(&report.test);
     Ok(())
 }
 

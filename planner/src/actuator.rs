@@ -8,6 +8,11 @@
 //! - its own previous velocity (the recurrence that carries the large transient lags, Fig. 18, Eq. 4),
 //! - for the boom only, the delayed bucket command (boom and bucket share a pump, 4.2.2).
 //!
+//! Two wider layouts are options of [`TrainConfig`]: `coupled_inputs` gives every network the delayed
+//! command and the force of the cylinder sharing its flow, and `orifice_inputs` adds the orifice-law drive
+//! of both cylinders, `u sqrt(1 - F / F_ref)` (Eq. 1: flow through the valve grows with the square root of
+//! the pressure drop the load leaves), a product the tanh units cannot form from `u` and `F` alone.
+//!
 //! The network is `y = w2 . act(W1 x + b1) + s . x + b2` on normalised inputs `x` and normalised output
 //! `y = v / v_scale`. The linear shortcut `s . x` is Eq. 4's `v(t+1) = w_v v(t) + u(t)`: the previous
 //! velocity enters linearly (`s_v = w_v`) and the hidden layer supplies the non-linear drive `u(t)`.
@@ -42,8 +47,11 @@ pub const MAX_DELAY_STEPS: usize = 64;
 pub const MAX_DIG_STEPS: usize = 360_000;
 /// Largest number of hidden units per network.
 pub const MAX_HIDDEN: usize = 16;
-/// Input slots of a network with the coupled inputs; Fig. 17's networks use a prefix (boom 4, others 3).
-const MAX_INPUTS: usize = 5;
+/// Input slots of a network with the orifice-law inputs; the coupled layout uses a prefix of five,
+/// Fig. 17's networks a prefix of four (boom) or three (stick, bucket).
+const MAX_INPUTS: usize = 7;
+/// Inputs of the coupled layout (own and partner command and force, previous velocity).
+const COUPLED_INPUTS: usize = 5;
 /// Input slots: delayed own command, cylinder force, previous velocity, the delayed command and the
 /// force of the cylinder sharing its flow (the partner: boom and bucket share a pump, the stick's pump
 /// feeds the boom through the crossover). Fig. 17 gives the boom the bucket command (slot 3) only.
@@ -52,6 +60,11 @@ const IN_FORCE: usize = 1;
 const IN_VELOCITY: usize = 2;
 const IN_PARTNER_COMMAND: usize = 3;
 const IN_PARTNER_FORCE: usize = 4;
+/// Orifice-law drive of the own and the partner cylinder (Eq. 1): the delayed command times
+/// `sqrt(1 - F / F_ref)`, the valve's pressure drop falling as the load on the inlet side approaches the
+/// largest the cylinder held in the training data ([`orifice_drive`]).
+const IN_ORIFICE: usize = 5;
+const IN_PARTNER_ORIFICE: usize = 6;
 
 /// The cylinder whose flow network `j` shares: boom <- bucket (shared pump), stick <- boom (crossover),
 /// bucket <- boom (shared pump).
@@ -255,6 +268,40 @@ pub struct TrainConfig {
     /// (boom and bucket: the shared, power-limited pump; stick: the crossover to the boom); `false` is
     /// Fig. 17's layout (only the boom sees the bucket command).
     pub coupled_inputs: bool,
+    /// With the coupled inputs, every network also gets the orifice-law drive (Eq. 1) of its own and its
+    /// partner's cylinder ([`orifice_drive`]): the command times the square root of the pressure drop
+    /// left for the valve, which the tanh units cannot form from command and force alone.
+    pub orifice_inputs: bool,
+    /// Loss of the free-running phase and of early stopping.
+    pub free_run_loss: FreeRunLoss,
+}
+
+/// Loss of the free-running (BPTT) phase and of early stopping on the validation digs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FreeRunLoss {
+    /// Mean squared error.
+    #[default]
+    Squared,
+    /// Mean absolute error (smoothed within 1 % of the velocity scale): the reported measure.
+    Absolute,
+}
+
+/// Smoothing width of [`FreeRunLoss::Absolute`], normalised velocity units.
+const ABS_LOSS_SMOOTHING: f64 = 0.01;
+
+impl FreeRunLoss {
+    /// Loss of one error `e` and its derivative.
+    #[inline]
+    fn of(self, e: f64) -> (f64, f64) {
+        match self {
+            FreeRunLoss::Squared => (e * e, 2.0 * e),
+            FreeRunLoss::Absolute => {
+                let r = (e * e + ABS_LOSS_SMOOTHING * ABS_LOSS_SMOOTHING).sqrt();
+                (r - ABS_LOSS_SMOOTHING, e / r)
+            }
+        }
+    }
 }
 
 impl Default for TrainConfig {
@@ -274,6 +321,8 @@ impl Default for TrainConfig {
             patience: 60,
             gradient_clip: 1.0,
             coupled_inputs: false,
+            orifice_inputs: false,
+            free_run_loss: FreeRunLoss::Squared,
         }
     }
 }
@@ -289,6 +338,9 @@ impl TrainConfig {
         }
         if self.hidden_units == 0 || self.hidden_units > MAX_HIDDEN {
             return bad("hidden_units", "must be 1..=MAX_HIDDEN");
+        }
+        if self.orifice_inputs && !self.coupled_inputs {
+            return bad("orifice_inputs", "needs coupled_inputs");
         }
         for (field, value) in [
             ("validation_fraction", self.validation_fraction),
@@ -398,6 +450,9 @@ struct Network {
     velocity_scale: f64,
     /// Clamp on the normalised output.
     output_limit: f64,
+    /// Reference forces of the orifice drive, N, `[own, partner]`, each `[extending, retracting]`
+    /// (positive magnitudes).
+    orifice_ref_n: [[f64; 2]; 2],
     /// `W1` (hidden x inputs, row-major), `b1` (hidden), `w2` (hidden), `s` (inputs), `b2`.
     params: Vec<f64>,
 }
@@ -488,6 +543,32 @@ impl Network {
         carry
     }
 
+    /// Raw (physical) inputs of this network (cylinder `j`): delayed command, force, previous velocity,
+    /// the partner's delayed command and force, the own and the partner's orifice drive (a network with
+    /// fewer inputs ignores the last slots; for the boom the partner is the bucket, Fig. 17).
+    #[inline]
+    fn raw_inputs(
+        &self,
+        j: usize,
+        delayed: &[f64; 3],
+        force_n: &[f64; 3],
+        velocity: f64,
+    ) -> [f64; MAX_INPUTS] {
+        let o = partner(j);
+        let mut raw = [0.0; MAX_INPUTS];
+        raw[IN_COMMAND] = delayed[j];
+        raw[IN_FORCE] = force_n[j];
+        raw[IN_VELOCITY] = velocity;
+        raw[IN_PARTNER_COMMAND] = delayed[o];
+        raw[IN_PARTNER_FORCE] = force_n[o];
+        if self.inputs == MAX_INPUTS {
+            let [own, other] = &self.orifice_ref_n;
+            raw[IN_ORIFICE] = orifice_drive(delayed[j], force_n[j], own);
+            raw[IN_PARTNER_ORIFICE] = orifice_drive(delayed[o], force_n[o], other);
+        }
+        raw
+    }
+
     /// Normalised inputs from physical ones (slot [`IN_VELOCITY`] is the previous velocity in m/s).
     #[inline]
     fn normalise(&self, raw: &[f64; MAX_INPUTS]) -> [f64; MAX_INPUTS] {
@@ -519,6 +600,10 @@ struct NetworkFile {
     /// Linear shortcut from the inputs to the output (Eq. 4's `w_v v(t)` among them).
     shortcut_weights: Vec<f64>,
     output_bias: f64,
+    /// Reference forces of the orifice drives, N, `[own, partner]` x `[extending, retracting]`; only in
+    /// networks with the orifice inputs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    orifice_reference_force_n: Option<[[f64; 2]; 2]>,
 }
 
 fn input_names(j: usize, inputs: usize) -> Vec<String> {
@@ -529,6 +614,8 @@ fn input_names(j: usize, inputs: usize) -> Vec<String> {
         "previous_velocity_m_per_s".to_owned(),
         format!("delayed_{other}_command"),
         format!("{other}_force_n"),
+        "orifice_drive".to_owned(),
+        format!("{other}_orifice_drive"),
     ]
     .into_iter()
     .take(inputs)
@@ -560,6 +647,7 @@ impl From<&Network> for NetworkFile {
             output_weights: slice(net.w2_at(), net.hidden),
             shortcut_weights: slice(net.skip_at(), net.inputs),
             output_bias: p.get(net.b2_at()).copied().unwrap_or(0.0),
+            orifice_reference_force_n: (net.inputs == MAX_INPUTS).then_some(net.orifice_ref_n),
         }
     }
 }
@@ -573,9 +661,15 @@ impl NetworkFile {
         };
         let j = joint.index();
         let inputs = self.input_offset.len();
-        if inputs != thesis_inputs(j) && inputs != MAX_INPUTS {
-            return bad("input count is neither Fig. 17's nor the coupled layout");
+        if inputs != thesis_inputs(j) && inputs != COUPLED_INPUTS && inputs != MAX_INPUTS {
+            return bad("input count is neither Fig. 17's, the coupled nor the orifice layout");
         }
+        let orifice_ref_n = match (inputs == MAX_INPUTS, self.orifice_reference_force_n) {
+            (false, None) => [[1.0; 2]; 2],
+            (true, Some(r)) if r.iter().flatten().all(|f| f.is_finite() && *f > 0.0) => r,
+            (true, _) => return bad("orifice reference forces missing or not positive"),
+            (false, Some(_)) => return bad("orifice reference forces without orifice inputs"),
+        };
         if self.inputs != input_names(j, inputs) {
             return bad("input names do not match the layout");
         }
@@ -638,6 +732,7 @@ impl NetworkFile {
             input_scale,
             velocity_scale: vs,
             output_limit: limit / vs,
+            orifice_ref_n,
             params,
         })
     }
@@ -805,7 +900,7 @@ impl ActuatorModel {
         let mut hidden = [0.0; MAX_HIDDEN];
         let mut velocity = [0.0; 3];
         for (j, net) in self.networks.iter().enumerate() {
-            let raw = raw_inputs(j, &delayed, &force_n, state.velocity_m_per_s[j]);
+            let raw = net.raw_inputs(j, &delayed, &force_n, state.velocity_m_per_s[j]);
             let x = net.normalise(&raw);
             let y = net.forward(&net.params, &x, &mut hidden);
             // A non-finite y can only come from overflowing weights; hold the previous speed then.
@@ -971,23 +1066,19 @@ fn clamp_command(command: [f64; 3]) -> [f64; 3] {
     command.map(|u| u.clamp(-1.0, 1.0))
 }
 
-/// Raw (physical) inputs of network `j`: delayed command, force, previous velocity, the partner's
-/// delayed command and force (a network with fewer inputs ignores the last slots; for the boom the
-/// partner is the bucket, Fig. 17).
+/// Orifice-law drive (Eq. 1, `Q = k A sqrt(dP)`): the command `u` times the square root of the
+/// pressure drop left across the meter-in orifice, `sqrt(1 - F / F_ext)` when extending (the head side
+/// carries the load `F`) and `sqrt(1 + F / F_ret)` when retracting, with the reference forces
+/// `[F_ext, F_ret]` the largest loads the cylinder held in the training data (the supply pressure is
+/// bounded by the relief). The root's argument is kept in `[0, 2]`; zero at a neutral command.
 #[inline]
-fn raw_inputs(
-    j: usize,
-    delayed: &[f64; 3],
-    force_n: &[f64; 3],
-    velocity: f64,
-) -> [f64; MAX_INPUTS] {
-    let mut raw = [0.0; MAX_INPUTS];
-    raw[IN_COMMAND] = delayed[j];
-    raw[IN_FORCE] = force_n[j];
-    raw[IN_VELOCITY] = velocity;
-    raw[IN_PARTNER_COMMAND] = delayed[partner(j)];
-    raw[IN_PARTNER_FORCE] = force_n[partner(j)];
-    raw
+fn orifice_drive(u: f64, force_n: f64, reference_n: &[f64; 2]) -> f64 {
+    let drop = if u > 0.0 {
+        1.0 - force_n / reference_n[0]
+    } else {
+        1.0 + force_n / reference_n[1]
+    };
+    u * drop.clamp(0.0, 2.0).sqrt()
 }
 
 /// A dig resampled to the model period.
@@ -1102,7 +1193,7 @@ fn net_sequences(net: &Network, j: usize, seqs: &[Sequence], delay: usize) -> Ve
                 // The delay line starts full of the first command, as `initial_state` fills it.
                 let delayed = seq.command[k.saturating_sub(delay)];
                 let mut x =
-                    net.normalise(&raw_inputs(j, &clamp_command(delayed), &seq.force[k], 0.0));
+                    net.normalise(&net.raw_inputs(j, &clamp_command(delayed), &seq.force[k], 0.0));
                 x[IN_VELOCITY] = 0.0;
                 exo.push(x);
                 target.push(seq.velocity[k][j] / net.velocity_scale);
@@ -1128,10 +1219,10 @@ fn new_network(
     rng: &mut ChaCha8Rng,
 ) -> Result<Network, ActuatorError> {
     let joint = Joint::ALL[j];
-    let inputs = if config.coupled_inputs {
-        MAX_INPUTS
-    } else {
-        thesis_inputs(j)
+    let inputs = match (config.coupled_inputs, config.orifice_inputs) {
+        (true, true) => MAX_INPUTS,
+        (true, false) => COUPLED_INPUTS,
+        (false, _) => thesis_inputs(j),
     };
     let velocities = seqs
         .iter()
@@ -1151,6 +1242,30 @@ fn new_network(
     input_offset[IN_PARTNER_FORCE] = p_mean;
     input_scale[IN_PARTNER_FORCE] = if p_std > 1e-9 { p_std } else { 1.0 };
     input_scale[IN_VELOCITY] = v_std;
+    // Orifice drives: reference forces are the largest loads held each way (5 % margin).
+    let reference = |c: usize| {
+        let (mut ext, mut ret) = (0.0_f64, 0.0_f64);
+        for f in seqs.iter().flat_map(|s| s.force.iter().map(move |f| f[c])) {
+            ext = ext.max(f);
+            ret = ret.max(-f);
+        }
+        [ext, ret].map(|r| if r > 1.0 { 1.05 * r } else { 1.0 })
+    };
+    let orifice_ref_n = [reference(j), reference(o)];
+    for (slot, c, refs) in [
+        (IN_ORIFICE, j, &orifice_ref_n[0]),
+        (IN_PARTNER_ORIFICE, o, &orifice_ref_n[1]),
+    ] {
+        let drives = seqs.iter().flat_map(|s| {
+            s.command
+                .iter()
+                .zip(&s.force)
+                .map(move |(u, f)| orifice_drive(u[c].clamp(-1.0, 1.0), f[c], refs))
+        });
+        let (mean, std) = mean_std(drives);
+        input_offset[slot] = mean;
+        input_scale[slot] = if std > 1e-9 { std } else { 1.0 };
+    }
     let hidden = config.hidden_units;
     let count = Network::param_count(inputs, hidden);
     let bound = 1.0 / (inputs as f64).sqrt();
@@ -1166,6 +1281,7 @@ fn new_network(
         input_scale,
         velocity_scale: v_std,
         output_limit: VELOCITY_LIMIT_FACTOR * v_peak / v_std,
+        orifice_ref_n,
         params: Vec::new(),
     };
     // Start the shortcut near Eq. 4's slow first-order response: v(t+1) = 0.9 v(t) + ...
@@ -1248,6 +1364,7 @@ fn free_run(
     net: &Network,
     params: &[f64],
     data: &[NetSequence],
+    loss_kind: FreeRunLoss,
     mut grad: Option<&mut [f64]>,
 ) -> f64 {
     if let Some(g) = grad.as_deref_mut() {
@@ -1279,17 +1396,17 @@ fn free_run(
             } else {
                 0.0
             };
-            let e = y - seq.target[k + 1];
-            loss += e * e;
+            let (l, dl) = loss_kind.of(y - seq.target[k + 1]);
+            loss += l;
             xs.push(x);
             hs.push(hidden);
-            errs.push((e, clamped));
+            errs.push((dl, clamped));
         }
         if let Some(g) = grad.as_deref_mut() {
             let mut carry = 0.0;
             for k in (0..steps).rev() {
-                let (e, clamped) = errs[k];
-                let dy = 2.0 * e / count + carry;
+                let (dl, clamped) = errs[k];
+                let dy = dl / count + carry;
                 carry = if clamped {
                     0.0
                 } else {
@@ -1299,6 +1416,52 @@ fn free_run(
         }
     }
     loss / count
+}
+
+/// The split of digs (by index) into training, validation and test sets.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DigSplit {
+    /// Training digs.
+    pub train: Vec<usize>,
+    /// Validation digs (early stopping).
+    pub validation: Vec<usize>,
+    /// Held-out test digs (the reported error).
+    pub test: Vec<usize>,
+}
+
+/// The split [`train`] uses for `count` digs and `config`'s seed and fractions, so a model can be
+/// evaluated later on the same held-out test digs.
+///
+/// # Errors
+/// [`ActuatorError::InvalidConfig`], [`ActuatorError::NotEnoughDigs`] (fewer than three).
+pub fn split_digs(count: usize, config: &TrainConfig) -> Result<DigSplit, ActuatorError> {
+    config.validate()?;
+    if count < 3 {
+        return Err(ActuatorError::NotEnoughDigs { count, needed: 3 });
+    }
+    Ok(split_with(
+        count,
+        config,
+        &mut ChaCha8Rng::seed_from_u64(config.seed),
+    ))
+}
+
+/// Shuffles `0..count` with `rng` and splits it; `count >= 3`.
+fn split_with(count: usize, config: &TrainConfig, rng: &mut ChaCha8Rng) -> DigSplit {
+    let mut order: Vec<usize> = (0..count).collect();
+    for i in (1..order.len()).rev() {
+        order.swap(i, rng.random_range(0..=i));
+    }
+    let n = count as f64;
+    let n_test = ((config.test_fraction * n).round() as usize).max(1);
+    let n_val = ((config.validation_fraction * n).round() as usize).max(1);
+    let (test, rest) = order.split_at(n_test.min(order.len() - 2));
+    let (validation, train) = rest.split_at(n_val.min(rest.len() - 1));
+    DigSplit {
+        train: train.to_vec(),
+        validation: validation.to_vec(),
+        test: test.to_vec(),
+    }
 }
 
 /// Trains the three networks on `digs` (thesis 4.2.3): splits the digs (deterministically for the
@@ -1328,15 +1491,12 @@ pub fn train(
         .map(|(i, d)| resample(d, i, config.dt_s))
         .collect::<Result<Vec<_>, _>>()?;
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
-    let mut order: Vec<usize> = (0..digs.len()).collect();
-    for i in (1..order.len()).rev() {
-        order.swap(i, rng.random_range(0..=i));
-    }
-    let n = digs.len() as f64;
-    let n_test = ((config.test_fraction * n).round() as usize).max(1);
-    let n_val = ((config.validation_fraction * n).round() as usize).max(1);
-    let (test_digs, rest) = order.split_at(n_test.min(order.len() - 2));
-    let (validation_digs, train_digs) = rest.split_at(n_val.min(rest.len() - 1));
+    let DigSplit {
+        train: train_digs,
+        validation: validation_digs,
+        test: test_digs,
+    } = split_with(digs.len(), config, &mut rng);
+    let (train_digs, validation_digs, test_digs) = (&train_digs, &validation_digs, &test_digs);
     let pick = |idx: &[usize]| idx.iter().map(|&i| seqs[i].clone()).collect::<Vec<_>>();
     let (train_seqs, val_seqs) = (pick(train_digs), pick(validation_digs));
 
@@ -1353,14 +1513,17 @@ pub fn train(
         let val_data = net_sequences(&net, j, &val_seqs, config.delay_steps);
         let mut params = std::mem::take(&mut net.params);
         let mut grad = vec![0.0; params.len()];
-        let mut best = (free_run(&net, &params, &val_data, None), params.clone());
+        let mut best = (
+            free_run(&net, &params, &val_data, config.free_run_loss, None),
+            params.clone(),
+        );
 
         let mut adam = Adam::new(params.len(), config.learning_rate);
         for epoch in 1..=config.teacher_forcing_epochs {
             let train_loss = teacher_forced(&net, &params, &train_data, &mut grad);
             clip(&mut grad, config.gradient_clip);
             adam.update(&mut params, &grad);
-            let val = free_run(&net, &params, &val_data, None);
+            let val = free_run(&net, &params, &val_data, config.free_run_loss, None);
             if val < best.0 {
                 best = (val, params.clone());
             }
@@ -1385,14 +1548,20 @@ pub fn train(
         let mut adam = Adam::new(params.len(), config.free_run_learning_rate);
         let mut since_best = 0;
         for epoch in 1..=config.free_run_epochs {
-            let train_loss = free_run(&net, &params, &train_data, Some(&mut grad));
+            let train_loss = free_run(
+                &net,
+                &params,
+                &train_data,
+                config.free_run_loss,
+                Some(&mut grad),
+            );
             if !train_loss.is_finite() || grad.iter().any(|g| !g.is_finite()) {
                 params.clone_from(&best.1);
                 break;
             }
             clip(&mut grad, config.gradient_clip);
             adam.update(&mut params, &grad);
-            let val = free_run(&net, &params, &val_data, None);
+            let val = free_run(&net, &params, &val_data, config.free_run_loss, None);
             free_run_epochs[j] = epoch;
             done += 1;
             let phase = TrainPhase::FreeRun;
@@ -1635,6 +1804,100 @@ mod tests {
         }
         let renamed = text.replacen("\"boom_force_n\"", "\"swing_force_n\"", 1);
         assert!(ActuatorModel::from_json(&renamed).is_err());
+        // The orifice layout stores its reference forces; without them the file is rejected.
+        let orifice = TrainConfig {
+            orifice_inputs: true,
+            free_run_loss: FreeRunLoss::Absolute,
+            ..coupled
+        };
+        let (model, _) = train(&digs, &orifice, |_| {}).unwrap();
+        let text = model.to_json().unwrap();
+        assert!(text.contains("\"bucket_orifice_drive\"") && text.contains("orifice_reference"));
+        let back = ActuatorModel::from_json(&text).unwrap();
+        let mut s1 = model.initial_state([0.0; 3], [0.0; 3]).unwrap();
+        let mut s2 = back.initial_state([0.0; 3], [0.0; 3]).unwrap();
+        for _ in 0..10 {
+            let a = model
+                .step(&mut s1, [0.5, -0.3, 0.8], [1e5, -2e4, 5e4])
+                .unwrap();
+            let b = back
+                .step(&mut s2, [0.5, -0.3, 0.8], [1e5, -2e4, 5e4])
+                .unwrap();
+            for (x, y) in a.iter().zip(&b) {
+                assert!((x - y).abs() < 1e-9);
+            }
+        }
+        let value: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let mut stripped = value.clone();
+        stripped["stick"]
+            .as_object_mut()
+            .unwrap()
+            .remove("orifice_reference_force_n");
+        assert!(ActuatorModel::from_json(&stripped.to_string()).is_err());
+        let mut negative = value;
+        negative["boom"]["orifice_reference_force_n"][0][1] = serde_json::json!(-1.0);
+        assert!(ActuatorModel::from_json(&negative.to_string()).is_err());
+        // Orifice inputs need the coupled layout.
+        let bad = TrainConfig {
+            coupled_inputs: false,
+            ..orifice
+        };
+        assert!(matches!(
+            train(&digs, &bad, |_| {}),
+            Err(ActuatorError::InvalidConfig {
+                field: "orifice_inputs",
+                ..
+            })
+        ));
+    }
+
+    #[test]
+    fn orifice_drive_follows_the_square_root_of_the_pressure_drop() {
+        let refs = [2.0e5, 1.0e5];
+        // No load: the drive is the command.
+        assert!((orifice_drive(0.5, 0.0, &refs) - 0.5).abs() < 1e-12);
+        assert!((orifice_drive(-0.5, 0.0, &refs) + 0.5).abs() < 1e-12);
+        // Extending against 3/4 of the reference: sqrt(1/4) of the command.
+        assert!((orifice_drive(0.8, 1.5e5, &refs) - 0.4).abs() < 1e-12);
+        // Retracting against a pulling load (negative force) uses the retracting reference.
+        assert!((orifice_drive(-0.8, -0.75e5, &refs) + 0.4).abs() < 1e-12);
+        // Stalled beyond the reference: zero, never NaN; an assisting load is capped at sqrt(2).
+        assert_eq!(orifice_drive(1.0, 5.0e5, &refs), 0.0);
+        assert!((orifice_drive(1.0, -1.0e7, &refs) - 2.0_f64.sqrt()).abs() < 1e-12);
+        assert_eq!(orifice_drive(0.0, 1.0e5, &refs), 0.0);
+    }
+
+    #[test]
+    fn absolute_loss_is_smoothed_abs_with_its_derivative() {
+        let (l, d) = FreeRunLoss::Absolute.of(0.5);
+        assert!((l - (0.25_f64 + 1e-4).sqrt() + 0.01).abs() < 1e-12);
+        assert!(d > 0.99 && d < 1.0);
+        assert_eq!(FreeRunLoss::Absolute.of(0.0), (0.0, 0.0));
+        let h = 1e-7;
+        let (lp, _) = FreeRunLoss::Absolute.of(0.003 + h);
+        let (lm, _) = FreeRunLoss::Absolute.of(0.003 - h);
+        let (_, d) = FreeRunLoss::Absolute.of(0.003);
+        assert!(((lp - lm) / (2.0 * h) - d).abs() < 1e-6);
+        assert_eq!(FreeRunLoss::Squared.of(-0.5), (0.25, -1.0));
+    }
+
+    #[test]
+    fn split_digs_matches_training() {
+        let digs = synthetic_digs(10, 60, 4);
+        let config = TrainConfig {
+            teacher_forcing_epochs: 2,
+            free_run_epochs: 1,
+            ..test_config()
+        };
+        let (_, report) = train(&digs, &config, |_| {}).unwrap();
+        let split = split_digs(digs.len(), &config).unwrap();
+        assert_eq!(split.test, report.test_digs);
+        assert_eq!(split.validation, report.validation_digs);
+        assert_eq!(split.train, report.train_digs);
+        assert!(matches!(
+            split_digs(2, &config),
+            Err(ActuatorError::NotEnoughDigs { .. })
+        ));
     }
 
     #[test]
