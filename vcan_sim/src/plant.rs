@@ -101,7 +101,8 @@ impl StrokeTable {
     fn lookup(&self, x: f64) -> (f64, f64) {
         let n = self.angle.len() - 1;
         let f = (x / self.stroke_m).clamp(0.0, 1.0) * n as f64;
-        let i = (f.floor() as usize).min(n - 1);
+        // `f >= 0`: truncation is its floor (without the libm call of `floor`).
+        let i = (f as usize).min(n - 1);
         let t = f - i as f64;
         (
             self.angle[i] + t * (self.angle[i + 1] - self.angle[i]),
