@@ -352,6 +352,11 @@ pub struct Hydraulics {
     params: HydraulicParams,
     /// Derived from `params` once (they never change after construction).
     orifice_constants: OrificeConstants,
+    /// The valves that do not change with the spools, built once: each gallery's main relief, each
+    /// actuator's port relief and the anti-cavitation make-up orifice.
+    main_reliefs: [Relief; 2],
+    port_reliefs: [Relief; N_ACTUATORS],
+    makeup_orifice: Orifice,
     chambers: [Chambers; N_ACTUATORS],
     /// Chamber `[head, rod]` and gallery pressures one step back: the solvers start from the linear
     /// extrapolation of the last two steps, which saves Newton iterations while the machine moves.
@@ -625,6 +630,26 @@ impl Hydraulics {
         Self {
             params,
             orifice_constants: OrificeConstants::of(&params.fluid),
+            main_reliefs: params.pumps.map(|pp| {
+                Relief::new(
+                    pp.main_relief_pa,
+                    pp.relief_override_pa,
+                    pp.max_flow_m3_per_s,
+                )
+            }),
+            port_reliefs: [0, 1, 2, 3].map(|i| {
+                let relief_pa = if i == SWING {
+                    params.swing.relief_pa
+                } else {
+                    params.port_relief_pa
+                };
+                Relief::new(
+                    relief_pa,
+                    1.0e6,
+                    params.pumps[VALVE_PUMP[i]].max_flow_m3_per_s,
+                )
+            }),
+            makeup_orifice: Orifice::new(&OrificeConstants::of(&params.fluid), 1.0e-4),
             chambers: [0, 1, 2, 3].map(|i| Self::chambers_of(&params, i)),
             previous_chamber_pa: [[tank; 2]; N_ACTUATORS],
             previous_pump_pa: [tank; 2],
@@ -766,7 +791,7 @@ impl Hydraulics {
         let meter_out_orifice = meter_out.map(|a| Orifice::new(&oc, a));
         let bypass_orifice = bypass.map(|a| Orifice::new(&oc, a));
         let crossover_orifice = Orifice::new(&oc, crossover_area);
-        let makeup_orifice = Orifice::new(&oc, 1.0e-4);
+        let makeup_orifice = self.makeup_orifice;
 
         // 1. Gallery pressures from the flow balance (monotone decreasing in p).
         let mut new_pump = self.pump_pa;
@@ -774,11 +799,7 @@ impl Hydraulics {
         for pump in 0..2 {
             let pp = p.pumps[pump];
             let acts = &self.actuators;
-            let main_relief = Relief::new(
-                pp.main_relief_pa,
-                pp.relief_override_pa,
-                pp.max_flow_m3_per_s,
-            );
+            let main_relief = self.main_reliefs[pump];
             let balance = |pg: f64| {
                 let mut value = pp.flow(pg, effects.pump_saturation);
                 let mut slope = if pp.power_w / pg.max(1.0)
@@ -837,8 +858,7 @@ impl Hydraulics {
             } else {
                 p.port_relief_pa
             };
-            let port_relief =
-                Relief::new(relief_pa, 1.0e6, p.pumps[VALVE_PUMP[i]].max_flow_m3_per_s);
+            let port_relief = self.port_reliefs[i];
             let (meter_in_i, meter_out_i) = (meter_in_orifice[i], meter_out_orifice[i]);
             let leak = if i == SWING {
                 0.0
