@@ -346,31 +346,24 @@ fn judge_load(
         (None, Some(fault)) => format!("stopped: {fault}"),
         (None, None) => "stopped (not armed)".to_owned(),
     };
-    if rate_kept {
+    let verdict = if rate_kept {
         stats.overload_rate_kept += 1;
-        tracing::warn!(
-            verdict = "loop rate kept",
-            frames_per_s = report.frames_per_s.round(),
-            foreign_per_s = report.foreign_per_s.round(),
-            dropped = report.dropped,
-            steps_per_s = report.steps_per_s,
-            max_gap_ms = report.max_gap_s * 1e3,
-            %motion,
-            "bus overload"
-        );
+        "loop rate kept"
     } else {
         stats.overload_safe_state += 1;
-        tracing::warn!(
-            verdict = "safe state",
-            frames_per_s = report.frames_per_s.round(),
-            foreign_per_s = report.foreign_per_s.round(),
-            dropped = report.dropped,
-            steps_per_s = report.steps_per_s,
-            max_gap_ms = report.max_gap_s * 1e3,
-            %motion,
-            "bus overload: loop rate lost, valves neutral"
-        );
-    }
+        "safe state"
+    };
+    tracing::warn!(
+        verdict,
+        frames_per_s = report.frames_per_s.round(),
+        foreign_per_s = report.foreign_per_s.round(),
+        dropped = report.dropped,
+        steps_per_s = report.steps_per_s,
+        max_gap_ms = report.max_gap_s * 1e3,
+        %motion,
+        "bus overload{}",
+        if rate_kept { "" } else { ": loop rate lost, valves neutral" }
+    );
 }
 
 /// Hands a scan result to the node, or logs why there is none (Autodig then uses its plain angle

@@ -13,7 +13,7 @@ pub const PLAN_CLEANUPS: usize = 1;
 /// The digs start from the default bench's start pose (tip 7.5 m out, 0.4 m above the bench top,
 /// bucket opened to -55 degrees) at swing 0, -7 and 0 degrees. Four actions are asked for, repeating
 /// the list: a dig or cleanup abandoned on a control fault (a move timing out, the floor not found)
-/// does not count, so the plan goes on until four have completed. The cleanup runs at swing 65 degrees, where the whole path (radius 6.3 m down to 3.2 m)
+/// does not count and is tried again (up to twice), so the plan goes on until four have completed. The cleanup runs at swing 65 degrees, where the whole path (radius 6.3 m down to 3.2 m)
 /// lies on the bare floor in front of the bench's flank (x < 3 m or |y| > 5 m), so it probes the floor
 /// and hands over to Autodig without fighting the bench. Holds and settle times are shortened to keep
 /// the real-time run short; the fill is not what these tests check.
@@ -21,6 +21,7 @@ pub const PLAN_TOML: &str = r#"
 [cycle]
 repeat = true
 max_digs = 4
+retries = 2
 move_timeout_s = 25.0
 dump_swing_deg = -90.0
 dump_hold_s = 0.5

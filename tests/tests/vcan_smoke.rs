@@ -6,7 +6,6 @@
 //! kernel has vcan, otherwise inside a throwaway qemu VM). A missing interface is a failure, never a pass.
 
 use std::io::{BufRead, BufReader};
-use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::thread;
@@ -16,33 +15,6 @@ use socketcan::{CanFrame, CanSocket, EmbeddedFrame, ExtendedId, Frame, Id, Socke
 
 /// How long to wait for a frame or for candump's output; generous because the VM runs under TCG.
 const WAIT: Duration = Duration::from_secs(20);
-
-/// The interface under test, checked to exist, to be a CAN interface and to be up.
-fn vcan_iface() -> String {
-    let iface = std::env::var("EXCAVATOR_VCAN_IFACE").unwrap_or_else(|_| "vcan0".to_owned());
-    let sys = Path::new("/sys/class/net").join(&iface);
-    assert!(
-        sys.exists(),
-        "CAN interface {iface} does not exist (EXCAVATOR_VCAN_IFACE={iface}): these tests need a vcan \
-         interface. Run them through `scripts/vcan-vm run -- <test binary> --ignored` (scripts/test-all \
-         does), or create one: sudo modprobe vcan; sudo ip link add dev {iface} type vcan; \
-         sudo ip link set up {iface}"
-    );
-    let kind = std::fs::read_to_string(sys.join("type")).unwrap_or_default();
-    assert_eq!(
-        kind.trim(),
-        "280",
-        "{iface} is not a CAN interface (ARPHRD type {})",
-        kind.trim()
-    );
-    let flags = std::fs::read_to_string(sys.join("flags")).unwrap_or_default();
-    let flags = u32::from_str_radix(flags.trim().trim_start_matches("0x"), 16).unwrap_or(0);
-    assert!(
-        flags & 1 == 1,
-        "{iface} is down: sudo ip link set up {iface}"
-    );
-    iface
-}
 
 fn open(iface: &str) -> CanSocket {
     let socket = CanSocket::open(iface)
@@ -98,7 +70,7 @@ fn require_tool(name: &str) -> String {
 #[test]
 #[ignore = "needs a vcan interface: run through scripts/test-all"]
 fn extended_frame_travels_between_two_sockets() {
-    let iface = vcan_iface();
+    let iface = hil_tests::env::vcan_iface();
     let rx = open(&iface);
     let tx = open(&iface);
     let sent = extended(
@@ -120,7 +92,7 @@ fn extended_frame_travels_between_two_sockets() {
 #[test]
 #[ignore = "needs a vcan interface: run through scripts/test-all"]
 fn cansend_frame_reaches_a_socket() {
-    let iface = vcan_iface();
+    let iface = hil_tests::env::vcan_iface();
     let cansend = require_tool("cansend");
     let rx = open(&iface);
     let status = Command::new(&cansend)
@@ -178,7 +150,7 @@ fn parse_candump_line<'a>(line: &'a str, iface: &str) -> &'a str {
 #[test]
 #[ignore = "needs a vcan interface: run through scripts/test-all"]
 fn candump_log_format_shows_sent_frames() {
-    let iface = vcan_iface();
+    let iface = hil_tests::env::vcan_iface();
     let candump = require_tool("candump");
     let mut child = Command::new(&candump)
         .args(["-L", iface.as_str()])
