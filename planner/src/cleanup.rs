@@ -169,7 +169,10 @@ pub struct CleanupConfig {
     pub probe_stall_fraction: f64,
     /// Probe gives up this far below the start, m. Default 1.5.
     pub probe_max_depth_m: f64,
-    /// Absolute bucket angle held along the floor. Default -150 deg.
+    /// Absolute bucket angle held along the floor. Default -130 deg: at -150 (edge 30 deg below the
+    /// horizontal) the soil's reaction on a 0.2 m layer is mostly upward, it curls the bucket against
+    /// the position loop (rod port at relief) and the edge rides over the layer; at -130 the edge cuts
+    /// it (closed loop: residual 0.10 m at -130 and -125, 0.13-0.20 m at -135 to -150).
     #[serde(rename = "bucket_abs_deg", with = "serde_deg")]
     pub bucket_abs_rad: f64,
     /// Hand over when `stick_abs <= stick_limit` (stick in, bucket near the tracks). Default -115 deg.
@@ -178,10 +181,27 @@ pub struct CleanupConfig {
     /// Relief pressures `[boom, stick, bucket]`, Pa. Default 34.3e6 each.
     pub relief_pressure_pa: [f64; 3],
     /// Pressure threshold in percent of relief: hand over when any port (head or rod) of any cylinder
-    /// stays at or above it for `pressure_hold_s`. Default 85.
+    /// stays at or above it for `pressure_hold_s`. Default 90.
     pub pressure_threshold_pct: f64,
-    /// How long the pressure must stay above the threshold without a break, s. Default 0.2.
+    /// How long the pressure must stay above the threshold without a break, s. Default 1.0: the
+    /// bucket cylinder holding its angle against the cut reaches relief in bursts; with 0.2 s cleanup
+    /// handed over in the middle of the layer and Autodig from Pre-Dig there dug 0.25 m below the
+    /// floor (0.5 s: 0.08 m, 1.0 s: 0.04 m below, in closed loop).
     pub pressure_hold_s: f64,
+    /// After a probe, the pressure hand-over is not checked for this long once following starts, s.
+    /// A probe ends only after the setpoint has gone `probe_lag_m` and more below a tip resting on the
+    /// floor, so the position loop is pressing the edge into the floor at that moment (in closed loop:
+    /// the bucket rod port at 36 MPa, above the threshold, and cleanup handed over 0.2 s into
+    /// following, before the layer); the first waypoints at the floor elevation release it (in closed
+    /// loop within about 0.5 s). Default 1.0.
+    #[serde(default = "default_follow_settle_s")]
+    pub follow_settle_s: f64,
+    /// Follow waypoints run this far above the floor elevation, m: the tip skims the floor instead of
+    /// being pressed into it. With the tip on a rigid floor any joint error of the position loop is
+    /// taken up by the floor's reaction on the edge, which (tip trailing the pivot at -150 deg) curls
+    /// the bucket against its loop until the rod port reaches relief. Default 0.05.
+    #[serde(default = "default_follow_clearance_m")]
+    pub follow_clearance_m: f64,
     /// At the path end, hand over once the tip is within this of the end point, m. Default 0.05.
     pub arrive_tolerance_m: f64,
     /// At the path end, hand over at the latest this long after commanding the end point, s.
@@ -191,6 +211,14 @@ pub struct CleanupConfig {
 
 fn default_probe_stall_fraction() -> f64 {
     0.3
+}
+
+fn default_follow_settle_s() -> f64 {
+    1.0
+}
+
+fn default_follow_clearance_m() -> f64 {
+    0.05
 }
 
 impl Default for CleanupConfig {
@@ -205,11 +233,13 @@ impl Default for CleanupConfig {
             probe_debounce_s: 0.2,
             probe_stall_fraction: default_probe_stall_fraction(),
             probe_max_depth_m: 1.5,
-            bucket_abs_rad: (-150.0_f64).to_radians(),
+            bucket_abs_rad: (-130.0_f64).to_radians(),
             stick_limit_rad: (-115.0_f64).to_radians(),
             relief_pressure_pa: [34.3e6; 3],
-            pressure_threshold_pct: 85.0,
-            pressure_hold_s: 0.2,
+            pressure_threshold_pct: 90.0,
+            pressure_hold_s: 1.0,
+            follow_settle_s: default_follow_settle_s(),
+            follow_clearance_m: default_follow_clearance_m(),
             arrive_tolerance_m: 0.05,
             end_settle_s: 0.5,
         }
@@ -243,6 +273,8 @@ impl CleanupConfig {
             ("probe_debounce_s", self.probe_debounce_s),
             ("pressure_hold_s", self.pressure_hold_s),
             ("end_settle_s", self.end_settle_s),
+            ("follow_settle_s", self.follow_settle_s),
+            ("follow_clearance_m", self.follow_clearance_m),
         ];
         for (field, v) in non_negative {
             if !(v.is_finite() && v >= 0.0) {
@@ -425,6 +457,8 @@ pub struct Cleanup {
     probe_z_sum_m: f64,
     probe_z_count: u32,
     high_since_s: Option<f64>,
+    /// Following started from a probe contact (the edge is pressed into the floor).
+    probed: bool,
     end_commanded_s: Option<f64>,
     hand_over: Option<HandOverReason>,
     failed_depth_m: f64,
@@ -472,6 +506,7 @@ impl Cleanup {
             probe_z_sum_m: 0.0,
             probe_z_count: 0,
             high_since_s: None,
+            probed: false,
             end_commanded_s: None,
             hand_over: None,
             failed_depth_m: 0.0,
@@ -530,7 +565,12 @@ impl Cleanup {
         if inputs.stick_abs_rad <= self.config.stick_limit_rad {
             return Ok(self.finish(HandOverReason::StickAngleLimit));
         }
-        if self.phase != CleanupPhase::Probe
+        let settling = self.phase == CleanupPhase::Follow
+            && self.probed
+            && now_s - phase_start < self.config.follow_settle_s;
+        if settling {
+            self.high_since_s = None;
+        } else if self.phase != CleanupPhase::Probe
             && let Some(joint) = self.high_pressure(inputs, now_s)
         {
             return Ok(self.finish(HandOverReason::HighPressure(joint)));
@@ -564,6 +604,7 @@ impl Cleanup {
                         if stalled && tracked {
                             let floor_z = self.probe_z_sum_m / f64::from(self.probe_z_count.max(1));
                             self.floor.z_m = Some(floor_z);
+                            self.probed = true;
                             return Ok(self.begin_follow(now_s));
                         }
                         // Still descending, or not yet moving: the position loop's lag, not contact.
@@ -586,27 +627,27 @@ impl Cleanup {
                 Ok(self.waypoint(self.plan.start_radius_m, z_cmd))
             }
             CleanupPhase::Descend => {
-                let floor_z = self.floor.z_m.unwrap_or(start_z);
+                let follow_z = self.floor.z_m.unwrap_or(start_z) + cfg.follow_clearance_m;
                 let z_cmd = start_z - cfg.descent_speed_m_per_s * t_k;
-                if z_cmd <= floor_z {
+                if z_cmd <= follow_z {
                     return Ok(self.begin_follow(now_s));
                 }
                 Ok(self.waypoint(self.plan.start_radius_m, z_cmd))
             }
             CleanupPhase::Follow => {
-                let floor_z = self.floor.z_m.unwrap_or(start_z);
+                let follow_z = self.floor.z_m.unwrap_or(start_z) + cfg.follow_clearance_m;
                 let x_cmd = self.plan.start_radius_m - cfg.ramp_distance_m(t_k);
                 if x_cmd > self.plan.min_radius_m {
-                    return Ok(self.waypoint(x_cmd, floor_z));
+                    return Ok(self.waypoint(x_cmd, follow_z));
                 }
                 let end_s = *self.end_commanded_s.get_or_insert(now_s);
                 let arrived = (inputs.tip_x_m - self.plan.min_radius_m).abs()
                     <= cfg.arrive_tolerance_m
-                    && (inputs.tip_z_m - floor_z).abs() <= cfg.arrive_tolerance_m;
+                    && (inputs.tip_z_m - follow_z).abs() <= cfg.arrive_tolerance_m;
                 if arrived || now_s - end_s >= cfg.end_settle_s {
                     return Ok(self.finish(HandOverReason::MinRadius));
                 }
-                Ok(self.waypoint(self.plan.min_radius_m, floor_z))
+                Ok(self.waypoint(self.plan.min_radius_m, follow_z))
             }
             CleanupPhase::HandedOver | CleanupPhase::Failed => {
                 // Handled above; kept total so a future phase cannot fall through to a panic.
@@ -626,7 +667,7 @@ impl Cleanup {
     fn begin_follow(&mut self, now_s: f64) -> CleanupOutput {
         self.phase = CleanupPhase::Follow;
         self.phase_start_s = Some(now_s);
-        let z = self.floor.z_m.unwrap_or_default();
+        let z = self.floor.z_m.unwrap_or_default() + self.config.follow_clearance_m;
         self.waypoint(self.plan.start_radius_m, z)
     }
 
@@ -727,7 +768,7 @@ mod tests {
         assert_eq!(reason, Some(HandOverReason::MinRadius));
         let floor_pts: Vec<f64> = points
             .iter()
-            .filter(|w| w.z_m == TRUE_FLOOR_Z_M && w.x_m > MIN_RADIUS_M)
+            .filter(|w| w.z_m == TRUE_FLOOR_Z_M + cfg.follow_clearance_m && w.x_m > MIN_RADIUS_M)
             .map(|w| w.x_m)
             .collect();
         let spacing: Vec<f64> = floor_pts.windows(2).map(|w| w[0] - w[1]).collect();
@@ -767,6 +808,57 @@ mod tests {
         assert_eq!(
             Cleanup::new(cfg, plan(), every).expect("valid").phase(),
             CleanupPhase::Probe
+        );
+    }
+
+    /// Regression: the probe leaves the edge pressed into the floor with the bucket rod port at relief;
+    /// following handed over on that pressure 0.2 s after it began. Now the pressure is ignored for
+    /// `follow_settle_s`, the waypoints run `follow_clearance_m` above the floor, and a pressure that
+    /// stays high after that still hands over.
+    #[test]
+    fn probe_pressure_is_not_a_hand_over_while_following_settles() {
+        let cfg = CleanupConfig::default();
+        let mut c =
+            Cleanup::new(cfg, plan(), FloorEstimate::new(FloorPolicy::DetectOnce)).expect("valid");
+        let mut tip = (START_RADIUS_M, START_Z_M);
+        let mut t = 0.0;
+        let mut pressed = inputs_at(tip.0, tip.1);
+        while c.phase() == CleanupPhase::Probe && t < 60.0 {
+            pressed = inputs_at(tip.0, tip.1);
+            if tip.1 <= TRUE_FLOOR_Z_M {
+                pressed.rod_pressure_pa[Joint::Bucket.index()] = HIGH_PRESSURE_PA;
+            }
+            if let CleanupOutput::Waypoint(w) = c.step(&pressed, t).expect("valid step") {
+                tip = (w.x_m, w.z_m.max(TRUE_FLOOR_Z_M));
+            }
+            t += DT_S;
+        }
+        assert_eq!(c.phase(), CleanupPhase::Follow);
+        let follow_start = t - DT_S;
+        // Pressure still high: no hand-over during the settle time, one after settle + hold.
+        let mut handed_over_at = None;
+        while t < follow_start + cfg.follow_settle_s + cfg.pressure_hold_s + 0.1 {
+            pressed.tip_z_m = TRUE_FLOOR_Z_M;
+            match c.step(&pressed, t).expect("valid step") {
+                CleanupOutput::Waypoint(w) => {
+                    assert!(
+                        (w.z_m - (TRUE_FLOOR_Z_M + cfg.follow_clearance_m)).abs() < 1e-9,
+                        "{w:?}"
+                    );
+                }
+                CleanupOutput::HandOver(r) => {
+                    assert_eq!(r, HandOverReason::HighPressure(Joint::Bucket));
+                    handed_over_at = Some(t);
+                    break;
+                }
+            }
+            t += DT_S;
+        }
+        let at = handed_over_at.expect("a lasting pressure still hands over");
+        assert!(
+            at - follow_start >= cfg.follow_settle_s + cfg.pressure_hold_s - 2.0 * DT_S,
+            "handed over {} s into following",
+            at - follow_start
         );
     }
 
