@@ -185,6 +185,9 @@ impl Candidate {
         };
         SignalGroups {
             hydraulic,
+            // Cross-piston leakage changes no pump's flow balance (the meter-in flows depend on
+            // the pressures alone).
+            pumps: hydraulic && self != Candidate::InternalLeakage,
             force,
             soil,
         }

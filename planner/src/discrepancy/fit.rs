@@ -8,10 +8,14 @@
 //! nominal residuals, in samples), so that `chi2 = sum_s SSE_s / (sigma_s^2 kappa_s)` behaves like
 //! `-2 ln L` of independent samples and `n_eff = sum_s n_s / kappa_s`. Held-out score of a candidate:
 //! `dBIC = chi2_test(0) - chi2_test(m) - ln(n_eff_test)` (one parameter). It is significant when
-//! `dBIC` exceeds [`AnalysisConfig::min_delta_bic`], it explains at least
-//! [`AnalysisConfig::min_explained`] of the held-out chi-square of the signals it acts on, and it
+//! `dBIC` exceeds [`AnalysisConfig::min_delta_bic`] and it explains at least
+//! [`AnalysisConfig::min_explained`] of the held-out chi-square of the signals it acts on (or
+//! `dBIC` exceeds [`AnalysisConfig::strong_delta_bic`] and it explains at least
+//! [`AnalysisConfig::strong_explained`]: signals with few independent samples, the forces), and it
 //! raises no signal's held-out RMS by more than 10 %; the thresholds were calibrated on
-//! effect-free traces (docs/discrepancy.md). Uncertainty: `sqrt(2 / chi2'')` from the curvature of
+//! effect-free traces (docs/discrepancy.md). The candidate added is the significant one with the
+//! largest `dBIC` among those explaining at least `strong_explained`, else among all significant
+//! ones; after each addition the residual spread and decorrelation are re-estimated. Uncertainty: `sqrt(2 / chi2'')` from the curvature of
 //! the training cost at the optimum (Fisher information), the `kappa` weighting making it honest for
 //! correlated samples.
 
@@ -33,6 +37,13 @@ pub struct AnalysisConfig {
     pub min_delta_bic: f64,
     /// Minimum fraction of the held-out chi-square a candidate must explain.
     pub min_explained: f64,
+    /// A candidate is also significant with a smaller held-out BIC improvement, at least this one,
+    /// if it explains at least [`AnalysisConfig::strong_explained`] of the held-out chi-square of
+    /// its signals (signals with few independent samples, such as the cylinder forces, cannot reach
+    /// [`AnalysisConfig::min_delta_bic`] however well an effect explains them).
+    pub strong_delta_bic: f64,
+    /// The explained fraction that goes with [`AnalysisConfig::strong_delta_bic`].
+    pub strong_explained: f64,
     /// At most this many effects are named.
     pub max_effects: usize,
     /// Coarse grid points before the golden-section search.
@@ -49,9 +60,11 @@ impl Default for AnalysisConfig {
             candidates: Candidate::ALL.to_vec(),
             min_delta_bic: 150.0,
             min_explained: 0.05,
+            strong_delta_bic: 25.0,
+            strong_explained: 0.2,
             max_effects: 3,
             grid_points: 9,
-            golden_iterations: 18,
+            golden_iterations: 12,
             base: Augmentation::nominal(),
         }
     }
@@ -138,11 +151,7 @@ pub struct AnalysisResult {
 const MAX_SIGNAL_WORSENING: f64 = 1.1;
 
 fn groups_contain(g: SignalGroups, j: usize) -> bool {
-    match j {
-        0..=4 => g.hydraulic,
-        5..=7 => g.force,
-        _ => g.soil,
-    }
+    g.contains(j)
 }
 
 /// Per-signal weights of the chi-square.
@@ -292,6 +301,53 @@ fn integrated_time(series: &[f64]) -> f64 {
     tau.min(100.0)
 }
 
+/// Residual standard deviation and decorrelation factor (integrated autocorrelation time, averaged
+/// over the records) per signal of `preds` against the records' measurements; signals with fewer than
+/// 50 samples get zero spread.
+fn noise_model(
+    records: &[&PreparedRecord],
+    preds: &[Vec<[f64; N_SIGNALS]>],
+) -> (Vec<f64>, Vec<f64>) {
+    let (s, n) = sse(records, preds);
+    let mut sigma = vec![0.0; N_SIGNALS];
+    let mut kappa = vec![1.0; N_SIGNALS];
+    for j in 0..N_SIGNALS {
+        if n[j] < 50 {
+            continue;
+        }
+        sigma[j] = (s[j] / n[j] as f64).sqrt();
+        kappa[j] = decorrelation(records, preds, j);
+    }
+    (sigma, kappa)
+}
+
+/// Mean integrated autocorrelation time of signal `j`'s residuals over the records.
+fn decorrelation(records: &[&PreparedRecord], preds: &[Vec<[f64; N_SIGNALS]>], j: usize) -> f64 {
+    let mut taus = Vec::new();
+    for (rec, pred) in records.iter().zip(preds) {
+        let series: Vec<f64> = rec
+            .measured
+            .iter()
+            .zip(pred)
+            .map(|(m, p)| m[j] - p[j])
+            .filter(|r| r.is_finite())
+            .collect();
+        taus.push(integrated_time(&series));
+    }
+    taus.iter().sum::<f64>() / taus.len().max(1) as f64
+}
+
+/// Chi-square weights `1 / (sigma^2 kappa)` (zero for signals with too few samples or no spread).
+fn weights_of(sigma: &[f64], kappa: &[f64], n: &[usize; N_SIGNALS]) -> [f64; N_SIGNALS] {
+    let mut inv_var = [0.0; N_SIGNALS];
+    for j in 0..N_SIGNALS {
+        if n[j] >= 50 && sigma[j] > 0.0 {
+            inv_var[j] = 1.0 / (sigma[j] * sigma[j] * kappa[j]);
+        }
+    }
+    inv_var
+}
+
 /// Runs the workflow on prepared records: split, nominal residuals, localisation, forward selection,
 /// before/after RMS. `progress(done, total)` is called after every candidate fit.
 ///
@@ -317,44 +373,22 @@ pub fn analyse(
     let nominal = config.base;
     let mut train_eval = Evaluator::new(train.clone(), params, &nominal);
     let mut test_eval = Evaluator::new(test.clone(), params, &nominal);
-    let (s0, n0) = train_eval.base_sse();
+    let (_, n0) = train_eval.base_sse();
     if n0.iter().all(|n| *n == 0) {
         return Err(DiscrepancyError::NotEnoughData(
             "no usable samples in the training digs".into(),
         ));
     }
     // Nominal residual spread and decorrelation per signal (training digs only).
-    let mut sigma = vec![0.0; N_SIGNALS];
-    let mut kappa = vec![1.0; N_SIGNALS];
-    let mut inv_var = [0.0; N_SIGNALS];
-    for j in 0..N_SIGNALS {
-        if n0[j] < 50 {
-            continue;
-        }
-        sigma[j] = (s0[j] / n0[j] as f64).sqrt();
-        let mut taus = Vec::new();
-        for (rec, pred) in train.iter().zip(&train_eval.base) {
-            let series: Vec<f64> = rec
-                .measured
-                .iter()
-                .zip(pred)
-                .map(|(m, p)| m[j] - p[j])
-                .filter(|r| r.is_finite())
-                .collect();
-            taus.push(integrated_time(&series));
-        }
-        kappa[j] = taus.iter().sum::<f64>() / taus.len().max(1) as f64;
-        if sigma[j] > 0.0 {
-            inv_var[j] = 1.0 / (sigma[j] * sigma[j] * kappa[j]);
-        }
-    }
-    let w = Weights { inv_var };
+    let (sigma, kappa) = noise_model(&train, &train_eval.base);
     let (_, n_test) = test_eval.base_sse();
-    let n_eff_test: f64 = (0..N_SIGNALS)
-        .filter(|j| inv_var[*j] > 0.0)
-        .map(|j| n_test[j] as f64 / kappa[j])
-        .sum::<f64>()
-        .max(2.0);
+    let n_eff = |inv_var: &[f64; N_SIGNALS], kappa: &[f64]| {
+        (0..N_SIGNALS)
+            .filter(|j| inv_var[*j] > 0.0)
+            .map(|j| n_test[j] as f64 / kappa[j])
+            .sum::<f64>()
+            .max(2.0)
+    };
 
     let localisation = stats::localise(&order, params, &nominal);
 
@@ -370,6 +404,16 @@ pub fn analyse(
     let total = config.candidates.len() * (config.max_effects + 1).min(config.candidates.len() + 1);
     let mut done = 0;
     while named.len() < config.max_effects && !remaining.is_empty() {
+        // The residual spread and decorrelation of the model as it stands this round (after an
+        // effect is added, the noise is re-estimated, as in forward selection).
+        let (sigma_r, kappa_r) = if named.is_empty() {
+            (sigma.clone(), kappa.clone())
+        } else {
+            noise_model(&train, &train_eval.base)
+        };
+        let w = Weights {
+            inv_var: weights_of(&sigma_r, &kappa_r, &n0),
+        };
         let train_chi0 = chi2(&w, &train_eval.base_sse().0);
         let test_base_sse = test_eval.base_sse().0;
         let test_chi0 = chi2(&w, &test_base_sse);
@@ -414,7 +458,7 @@ pub fn analyse(
             a.set(c, x);
             let test_sse = test_eval.sse_with(&a, groups);
             let test_chi = chi2(&w, &test_sse);
-            let delta_bic = test_chi0 - test_chi - n_eff_test.ln();
+            let delta_bic = test_chi0 - test_chi - n_eff(&w.inv_var, &kappa_r).ln();
             // Explained share of the chi-square of the signals the candidate acts on (a friction
             // must explain the forces, not the whole record).
             let own: f64 = (0..N_SIGNALS)
@@ -430,8 +474,10 @@ pub fn analyse(
             let consistent = (0..N_SIGNALS).all(|j| {
                 n_test[j] < 100 || test_sse[j] <= MAX_SIGNAL_WORSENING.powi(2) * test_base_sse[j]
             });
-            let significant =
-                delta_bic > config.min_delta_bic && explained > config.min_explained && consistent;
+            let significant = consistent
+                && ((delta_bic > config.min_delta_bic && explained > config.min_explained)
+                    || (delta_bic > config.strong_delta_bic
+                        && explained > config.strong_explained));
             scores.push((
                 c,
                 CandidateScore {
@@ -448,7 +494,17 @@ pub fn analyse(
             progress(done, total);
         }
         scores.sort_by(|a, b| b.1.heldout_delta_bic.total_cmp(&a.1.heldout_delta_bic));
-        let best = scores.first().filter(|(_, s)| s.significant).cloned();
+        // The best significant candidate: among those that explain a large share of their own
+        // signals (`strong_explained`) the one with the largest held-out BIC gain, else the one with
+        // the largest gain. A candidate acting on many signals (a pressure offset touches every
+        // pressure) collects a large BIC gain from small improvements of large-sample signals,
+        // while an effect on the few force samples explains nearly all of them with a smaller gain.
+        let strong = |s: &CandidateScore| s.heldout_explained > config.strong_explained;
+        let best = scores
+            .iter()
+            .find(|(_, s)| s.significant && strong(s))
+            .or_else(|| scores.iter().find(|(_, s)| s.significant))
+            .cloned();
         rounds.push(scores.into_iter().map(|(_, s)| s).collect());
         let Some((c, s)) = best else {
             break;

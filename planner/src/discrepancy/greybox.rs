@@ -42,8 +42,11 @@ const SUBSTEPS: usize = 10;
 pub const WARMUP_SAMPLES: usize = 50;
 /// Below this cylinder speed the actuator is at rest (stiction holds it), m/s.
 const REST_SPEED_M_PER_S: f64 = 2.0e-3;
+/// Smallest cylinder speed at which a sample enters that cylinder's force signal, m/s (well above
+/// the resolver-rate noise of a resting link, a few mm/s).
+const MOVING_SPEED_M_PER_S: f64 = 0.02;
 /// Largest cylinder acceleration at which a sample enters the force signals, m/s^2.
-const QUASI_STATIC_ACCEL_M_PER_S2: f64 = 0.1;
+const QUASI_STATIC_ACCEL_M_PER_S2: f64 = 0.5;
 /// Pressure readings at or below this are taken as clamped at the sensor's zero, Pa.
 const CLAMPED_READING_PA: f64 = 1.0e3;
 /// Margin from the stroke ends where the end stops may carry force, m.
@@ -492,9 +495,15 @@ impl PreparedRecord {
             let steady = accel[k]
                 .iter()
                 .all(|a| a.abs() < QUASI_STATIC_ACCEL_M_PER_S2);
+            // Only moving cylinders: at rest, dry friction (stiction) holds any force up to its
+            // limit and oil trapped behind closed spools keeps whatever pressure it had, so a
+            // resting cylinder's force says nothing definite about the model.
             if s.load == LoadTag::EmptyFreeAir && all_consistent && !stalled[k] && steady {
                 for i in 0..3 {
-                    if in_stroke[k][i] && gravity_force[k][i].is_finite() {
+                    if in_stroke[k][i]
+                        && gravity_force[k][i].is_finite()
+                        && velocity[k][i].abs() > MOVING_SPEED_M_PER_S
+                    {
                         m[5 + i] = s.head_pa[i] * params.head_area_m2[i]
                             - s.rod_pa[i] * params.rod_area_m2[i]; // Eq. A20
                     }
@@ -777,21 +786,62 @@ fn cylinder_velocity(
     (w_in * v_in + w_out * v_out) / (w_in + w_out)
 }
 
-/// Gallery pressure of one pump from its flow balance, solved by bisection (the balance falls
-/// monotonically with the pressure, so the root is unique).
+/// The pump-side terms of one pump's flow balance.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct PumpBalance {
+    /// Maximum pump flow, m^3/s.
+    max_flow: f64,
+    /// Open-centre bypass constant, m^3/(s sqrt(Pa)).
+    bypass_k: f64,
+    /// Flow taken regardless of the pressure (the swing motor), m^3/s.
+    fixed_demand: f64,
+}
+
+/// The last gallery pressure solved with every metering orifice of a pump closed: then the balance
+/// depends on the pump terms alone, the same at every sample of a record where the pump only
+/// bypasses (idle, scans, swinging with the arm at rest), so one solve serves them all.
+#[derive(Debug, Clone, Copy, Default)]
+struct NeutralCache {
+    last: Option<(PumpBalance, f64)>,
+}
+
+impl NeutralCache {
+    fn solve(
+        &mut self,
+        params: &GreyBoxParams,
+        b: PumpBalance,
+        meter_in: &[(f64, f64)],
+        guess_pa: f64,
+    ) -> f64 {
+        if meter_in.iter().any(|(k, _)| *k > 0.0) {
+            return pump_pressure(params, b, meter_in, guess_pa);
+        }
+        if let Some((key, p)) = self.last
+            && key == b
+        {
+            return p;
+        }
+        let p = pump_pressure(params, b, &[], guess_pa);
+        self.last = Some((b, p));
+        p
+    }
+}
+
+/// Gallery pressure of one pump from its flow balance, solved by regula falsi (the balance falls
+/// monotonically with the pressure, so the root is unique), starting from a bracket around
+/// `guess_pa` (the measured pump pressure: a few evaluations instead of a dozen).
 fn pump_pressure(
     params: &GreyBoxParams,
-    max_flow: f64,
-    bypass_k: f64,
-    fixed_demand: f64,
+    b: PumpBalance,
     meter_in: &[(f64, f64)],
+    guess_pa: f64,
 ) -> f64 {
     let lam = params.laminar_dp_pa;
     let tank = params.tank_pa;
     let relief_slope = params.pump_max_flow_m3_per_s / params.relief_override_pa;
     let balance = |p: f64| {
-        let mut f = max_flow.min(params.pump_power_w / p.max(1.0)) - fixed_demand;
-        f -= orifice(bypass_k, p - tank, lam);
+        let mut f = b.max_flow.min(params.pump_power_w / p.max(1.0)) - b.fixed_demand;
+        f -= orifice(b.bypass_k, p - tank, lam);
         for (k, p_in) in meter_in {
             if p > *p_in {
                 f -= orifice(*k, p - p_in, lam);
@@ -802,20 +852,48 @@ fn pump_pressure(
         }
         f
     };
-    let (mut lo, mut hi) = (tank, params.relief_pa + 20.0 * params.relief_override_pa);
-    if balance(lo) <= 0.0 {
-        return lo;
+    let top = params.relief_pa + 20.0 * params.relief_override_pa;
+    let f_tank = balance(tank);
+    if f_tank <= 0.0 {
+        return tank;
     }
-    let (mut f_lo, mut f_hi) = (balance(lo), balance(hi));
+    // Bracket: grow a window around the guess until the balance changes sign in it.
+    let guess = if guess_pa.is_finite() {
+        guess_pa.clamp(tank, top)
+    } else {
+        0.5 * (tank + top)
+    };
+    let mut step = 2.5e5;
+    let (mut lo, mut hi) = ((guess - step).max(tank), (guess + step).min(top));
+    let (mut f_lo, mut f_hi) = (if lo <= tank { f_tank } else { balance(lo) }, balance(hi));
+    while f_lo <= 0.0 || f_hi > 0.0 {
+        step *= 4.0;
+        if f_lo <= 0.0 {
+            hi = lo;
+            f_hi = f_lo;
+            lo = (lo - step).max(tank);
+            f_lo = if lo <= tank { f_tank } else { balance(lo) };
+        } else {
+            if hi >= top {
+                return top;
+            }
+            lo = hi;
+            f_lo = f_hi;
+            hi = (hi + step).min(top);
+            f_hi = balance(hi);
+        }
+    }
     // Regula falsi with the Illinois modification: a few evaluations to 1 kPa.
     let mut side = 0;
     for _ in 0..60 {
-        let p = if f_lo > f_hi {
-            (lo * (-f_hi) + hi * f_lo) / (f_lo - f_hi)
-        } else {
-            0.5 * (lo + hi)
-        };
+        if hi - lo < 1.0e3 {
+            break;
+        }
+        let p = (lo * (-f_hi) + hi * f_lo) / (f_lo - f_hi);
         let f = balance(p);
+        if f == 0.0 {
+            return p;
+        }
         if f > 0.0 {
             lo = p;
             f_lo = f;
@@ -831,9 +909,6 @@ fn pump_pressure(
             }
             side = -1;
         }
-        if hi - lo < 1.0e3 {
-            break;
-        }
     }
     0.5 * (lo + hi)
 }
@@ -841,8 +916,10 @@ fn pump_pressure(
 /// Which groups of signals a replay must recompute.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SignalGroups {
-    /// Velocities and pump pressures.
+    /// Cylinder velocities.
     pub hydraulic: bool,
+    /// Pump pressures.
+    pub pumps: bool,
     /// Cylinder forces.
     pub force: bool,
     /// Soil forces.
@@ -853,13 +930,16 @@ impl SignalGroups {
     /// Every group.
     pub const ALL: SignalGroups = SignalGroups {
         hydraulic: true,
+        pumps: true,
         force: true,
         soil: true,
     };
 
-    fn contains(&self, s: usize) -> bool {
+    /// Whether the group of signal index `s` is among these.
+    pub fn contains(&self, s: usize) -> bool {
         match s {
-            0..=4 => self.hydraulic,
+            0..=2 => self.hydraulic,
+            3..=4 => self.pumps,
             5..=7 => self.force,
             _ => self.soil,
         }
@@ -892,11 +972,12 @@ pub fn replay(
     let viscous = params.damping_n_s_per_m + aug.get(C::ViscousFriction).max(0.0);
     let cohesion = aug.get(C::SoilCohesion);
     let density = aug.get(C::SoilDensity);
-    let spool = if groups.hydraulic {
+    let spool = if groups.hydraulic || groups.pumps {
         spools(&rec.samples, params, aug)
     } else {
         Vec::new()
     };
+    let mut neutral = [NeutralCache::default(); 2];
     for k in 0..n {
         let m = &rec.measured[k];
         let o = &mut out[k];
@@ -922,10 +1003,14 @@ pub fn replay(
         let head = smp.head_pa.map(true_pa);
         let rod = smp.rod_pa.map(true_pa);
         let pump = smp.pump_pa.map(true_pa);
+        let sp = if groups.hydraulic || groups.pumps {
+            spool[k]
+        } else {
+            [0.0; 4]
+        };
+        let share = (1.0 - sharing * sp[2].abs()).clamp(0.0, 1.0);
+        let xfrac = crossover_fraction(params, sp[0]);
         if groups.hydraulic {
-            let sp = spool[k];
-            let share = (1.0 - sharing * sp[2].abs()).clamp(0.0, 1.0);
-            let xfrac = crossover_fraction(params, sp[0]);
             for i in 0..3 {
                 if m[i].is_nan() {
                     continue;
@@ -945,6 +1030,8 @@ pub fn replay(
                     leak,
                 );
             }
+        }
+        if groups.pumps {
             let inlet = |i: usize| if sp[i] >= 0.0 { head[i] } else { rod[i] };
             // Pump 1: boom and bucket; its bypass runs through both sections.
             let bypass1 = series_bypass(
@@ -961,16 +1048,22 @@ pub fn replay(
                 ),
                 (params.meter_in_k[2] * metering(params, sp[2]), inlet(2)),
             ];
-            o[3] = (pump_pressure(params, max_flow, bypass1, 0.0, &meter1) + offset).max(0.0);
+            let balance1 = PumpBalance {
+                max_flow,
+                bypass_k: bypass1,
+                fixed_demand: 0.0,
+            };
+            o[3] = (neutral[0].solve(params, balance1, &meter1, pump[0]) + offset).max(0.0);
             // Pump 2: stick and swing, and the crossover to the boom (its spool closes the centre).
-            let mut fractions = vec![
+            let fractions = [
                 bypass_fraction(params, sp[1]),
                 bypass_fraction(params, sp[3]),
+                1.0 - xfrac,
             ];
-            if xfrac > 0.0 {
-                fractions.push(1.0 - xfrac);
-            }
-            let bypass2 = series_bypass(params.bypass_k, &fractions);
+            let bypass2 = series_bypass(
+                params.bypass_k,
+                &fractions[..if xfrac > 0.0 { 3 } else { 2 }],
+            );
             let swing_flow = if metering(params, sp[3]) > 0.0 {
                 params.swing_displacement_m3_per_rad * smp.swing_rate_rad_per_s.abs()
             } else {
@@ -980,8 +1073,12 @@ pub fn replay(
                 (params.meter_in_k[1] * metering(params, sp[1]), inlet(1)),
                 (params.crossover_k * xfrac, inlet(0)),
             ];
-            o[4] =
-                (pump_pressure(params, max_flow, bypass2, swing_flow, &meter2) + offset).max(0.0);
+            let balance2 = PumpBalance {
+                max_flow,
+                bypass_k: bypass2,
+                fixed_demand: swing_flow,
+            };
+            o[4] = (neutral[1].solve(params, balance2, &meter2, pump[1]) + offset).max(0.0);
         }
         if groups.force {
             for i in 0..3 {
@@ -1005,13 +1102,11 @@ pub fn replay(
                     + resolver * rec.gravity_force_per_rad[k][i]
                     + rec.mass[k][i] * rec.accel[k][i]
                     + viscous * v;
-                if coulomb > 0.0 {
-                    if v.abs() > REST_SPEED_M_PER_S {
-                        f += coulomb * v.signum();
-                    } else {
-                        // Stiction: at rest the friction takes any value up to its limit.
-                        f += (m[5 + i] - sensor - f).clamp(-coulomb, coulomb);
-                    }
+                // Dry friction opposes the motion. At rest (stiction) it takes an unknown value
+                // within its limit; the prediction keeps none there rather than the one that fits
+                // the measurement, which would reward any larger magnitude on the rest samples.
+                if coulomb > 0.0 && v.abs() > REST_SPEED_M_PER_S {
+                    f += coulomb * v.signum();
                 }
                 o[5 + i] = f + sensor;
             }
