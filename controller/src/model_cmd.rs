@@ -104,6 +104,10 @@ pub struct TrainArgs {
     /// the mean squared error.
     #[arg(long)]
     pub abs_loss: bool,
+    /// Standard deviation of a per-dig force offset added in the free-running phase, in units of each
+    /// force input's standard deviation (robustness to the dig model's static forces); 0: none.
+    #[arg(long, default_value_t = 0.0)]
+    pub force_noise: f64,
     /// Teacher-forcing epochs before the free-running phase.
     #[arg(long, default_value_t = 300)]
     pub teacher_epochs: usize,
@@ -1165,6 +1169,7 @@ fn train(a: &TrainArgs) -> anyhow::Result<()> {
         coupled_inputs: !a.thesis_inputs,
         orifice_inputs: a.orifice_inputs,
         teacher_forcing_epochs: a.teacher_epochs,
+        force_noise: a.force_noise,
         free_run_loss: if a.abs_loss {
             FreeRunLoss::Absolute
         } else {

@@ -274,6 +274,11 @@ pub struct TrainConfig {
     pub orifice_inputs: bool,
     /// Loss of the free-running phase and of early stopping.
     pub free_run_loss: FreeRunLoss,
+    /// Standard deviation (in units of each force input's standard deviation) of a constant offset
+    /// added to the force inputs of every training dig, drawn anew each free-running epoch: trains the
+    /// networks to tolerate a force that is off by a load-dependent bias, as the dig model's statics
+    /// are against the measured pressures. Zero: no augmentation.
+    pub force_noise: f64,
 }
 
 /// Loss of the free-running (BPTT) phase and of early stopping on the validation digs.
@@ -323,6 +328,7 @@ impl Default for TrainConfig {
             coupled_inputs: false,
             orifice_inputs: false,
             free_run_loss: FreeRunLoss::Squared,
+            force_noise: 0.0,
         }
     }
 }
@@ -349,6 +355,9 @@ impl TrainConfig {
             if !(value.is_finite() && (0.0..0.5).contains(&value)) {
                 return bad(field, "must be in [0, 0.5)");
             }
+        }
+        if !(self.force_noise.is_finite() && self.force_noise >= 0.0) {
+            return bad("force_noise", "must be finite and not negative");
         }
         for (field, value) in [
             ("learning_rate", self.learning_rate),
@@ -1365,6 +1374,7 @@ fn free_run(
     params: &[f64],
     data: &[NetSequence],
     loss_kind: FreeRunLoss,
+    force_offsets: &[[f64; 2]],
     mut grad: Option<&mut [f64]>,
 ) -> f64 {
     if let Some(g) = grad.as_deref_mut() {
@@ -1379,7 +1389,8 @@ fn free_run(
     let mut xs: Vec<[f64; MAX_INPUTS]> = Vec::new();
     let mut hs: Vec<[f64; MAX_HIDDEN]> = Vec::new();
     let mut errs: Vec<(f64, bool)> = Vec::new();
-    for seq in data {
+    for (i, seq) in data.iter().enumerate() {
+        let offset = force_offsets.get(i).copied().unwrap_or([0.0; 2]);
         let steps = seq.target.len().saturating_sub(1);
         xs.clear();
         hs.clear();
@@ -1388,6 +1399,10 @@ fn free_run(
         for k in 0..steps {
             let mut x = seq.exo[k];
             x[IN_VELOCITY] = y;
+            x[IN_FORCE] += offset[0];
+            if net.inputs > IN_PARTNER_FORCE {
+                x[IN_PARTNER_FORCE] += offset[1];
+            }
             let mut hidden = [0.0; MAX_HIDDEN];
             let raw = net.forward(params, &x, &mut hidden);
             let clamped = raw.is_nan() || raw.abs() > net.output_limit;
@@ -1514,7 +1529,7 @@ pub fn train(
         let mut params = std::mem::take(&mut net.params);
         let mut grad = vec![0.0; params.len()];
         let mut best = (
-            free_run(&net, &params, &val_data, config.free_run_loss, None),
+            free_run(&net, &params, &val_data, config.free_run_loss, &[], None),
             params.clone(),
         );
 
@@ -1523,7 +1538,7 @@ pub fn train(
             let train_loss = teacher_forced(&net, &params, &train_data, &mut grad);
             clip(&mut grad, config.gradient_clip);
             adam.update(&mut params, &grad);
-            let val = free_run(&net, &params, &val_data, config.free_run_loss, None);
+            let val = free_run(&net, &params, &val_data, config.free_run_loss, &[], None);
             if val < best.0 {
                 best = (val, params.clone());
             }
@@ -1547,12 +1562,27 @@ pub fn train(
         params.clone_from(&best.1);
         let mut adam = Adam::new(params.len(), config.free_run_learning_rate);
         let mut since_best = 0;
+        let mut offsets = vec![[0.0; 2]; train_data.len()];
         for epoch in 1..=config.free_run_epochs {
+            if config.force_noise > 0.0 {
+                let normal = |rng: &mut ChaCha8Rng| {
+                    // Box-Muller.
+                    let (u1, u2): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random());
+                    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+                };
+                for o in &mut offsets {
+                    *o = [
+                        config.force_noise * normal(&mut rng),
+                        config.force_noise * normal(&mut rng),
+                    ];
+                }
+            }
             let train_loss = free_run(
                 &net,
                 &params,
                 &train_data,
                 config.free_run_loss,
+                &offsets,
                 Some(&mut grad),
             );
             if !train_loss.is_finite() || grad.iter().any(|g| !g.is_finite()) {
@@ -1561,7 +1591,7 @@ pub fn train(
             }
             clip(&mut grad, config.gradient_clip);
             adam.update(&mut params, &grad);
-            let val = free_run(&net, &params, &val_data, config.free_run_loss, None);
+            let val = free_run(&net, &params, &val_data, config.free_run_loss, &[], None);
             free_run_epochs[j] = epoch;
             done += 1;
             let phase = TrainPhase::FreeRun;
@@ -1879,6 +1909,41 @@ mod tests {
         let (_, d) = FreeRunLoss::Absolute.of(0.003);
         assert!(((lp - lm) / (2.0 * h) - d).abs() < 1e-6);
         assert_eq!(FreeRunLoss::Squared.of(-0.5), (0.25, -1.0));
+    }
+
+    #[test]
+    fn force_noise_training_is_deterministic_and_validated() {
+        let digs = synthetic_digs(6, 80, 12);
+        let config = TrainConfig {
+            teacher_forcing_epochs: 20,
+            free_run_epochs: 10,
+            force_noise: 0.5,
+            ..test_config()
+        };
+        let (a, _) = train(&digs, &config, |_| {}).unwrap();
+        let (b, _) = train(&digs, &config, |_| {}).unwrap();
+        assert_eq!(a, b);
+        let (c, _) = train(
+            &digs,
+            &TrainConfig {
+                force_noise: 0.0,
+                ..config.clone()
+            },
+            |_| {},
+        )
+        .unwrap();
+        assert_ne!(a, c, "the offsets change the trained weights");
+        let bad = TrainConfig {
+            force_noise: -1.0,
+            ..config
+        };
+        assert!(matches!(
+            train(&digs, &bad, |_| {}),
+            Err(ActuatorError::InvalidConfig {
+                field: "force_noise",
+                ..
+            })
+        ));
     }
 
     #[test]
