@@ -279,6 +279,11 @@ pub struct DigRecord {
     /// (r 3 to 10 m) at the start of the dig, m (planned and predefined strategies).
     #[serde(default)]
     pub map_error_m: Option<f64>,
+    /// Mean of (planner's map - true terrain) along the digging plane over the stretch the bucket
+    /// sweeps, from 1.5 m inside the planned start to 0.2 m beyond it, m (planned digs; positive:
+    /// the map shows material that is not there).
+    #[serde(default)]
+    pub map_bias_at_start_m: Option<f64>,
     /// The tip trajectory during the dig, base frame.
     #[serde(skip)]
     pub trajectory: Vec<TipPoint>,
@@ -959,6 +964,20 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
                     (!errs.is_empty())
                         .then(|| (errs.iter().sum::<f64>() / errs.len() as f64).sqrt())
                 });
+                let map_bias_at_start_m = match (&session, info.start) {
+                    (Some(s), Some([r_start, ..])) => {
+                        let errs: Vec<f64> = truth
+                            .iter()
+                            .filter(|p| (r_start - 1.5..=r_start + 0.2).contains(&p.x_m))
+                            .filter_map(|p| {
+                                let [x, y, _] = pose.world_from_base(swing_rad, p.x_m, 0.0);
+                                s.terrain().height_at(x, y).ok().map(|h| h - p.z_m)
+                            })
+                            .collect();
+                        (!errs.is_empty()).then(|| errs.iter().sum::<f64>() / errs.len() as f64)
+                    }
+                    _ => None,
+                };
                 if let Some(s) = &session {
                     soil.begin(crate::planned::plane_section(
                         s.terrain(),
@@ -993,6 +1012,7 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
                     pose: Some([pose.x_m, pose.y_m, pose.heading_rad]),
                     planned_start: info.start,
                     map_error_m,
+                    map_bias_at_start_m,
                     trajectory: Vec::new(),
                     section: truth,
                 });
@@ -1041,6 +1061,19 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
             c.swept_volume_m3 = d.swept_volume_m3;
             c.end_reason = d.end_reason.map(|r| format!("{r:?}"));
             c.perception = d.perception;
+            // The map's dead reckoning of the pass: no material above the tip's path (the toe of
+            // the face is out of the sensor's sight behind the crest).
+            if let (Some(s), Some([x_m, y_m, heading_rad])) = (&mut session, c.pose) {
+                let path: Vec<(f64, f64)> = c.trajectory.iter().map(|p| (p.x_m, p.z_m)).collect();
+                let pose = planner::kinematics::MachinePose {
+                    x_m,
+                    y_m,
+                    heading_rad,
+                };
+                let carved = s.observe_bucket_pass(&pose, d.swing_rad, &path);
+                tracing::debug!(carved, "bucket pass carved into the map");
+                node.provide_terrain(s.terrain().clone());
+            }
             records.push(c);
             // 5.2 online: the soil estimate of the recent digs sets the next digs' index.
             if let Some(s) = &mut session
@@ -1178,6 +1211,35 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
             let path = out.join("last_plan.json");
             std::fs::write(&path, serde_json::to_vec_pretty(&last)?)
                 .with_context(|| format!("writing {}", path.display()))?;
+        }
+        // Figs. 47/48: the refined planner's evaluated grid of the region of the first planned dig.
+        if let Some((plan, dig)) = s.steps().iter().find_map(|st| match &st.plan {
+            Some(p) => match &p.action {
+                planner::plan::ActionChoice::Dig(d) => Some((p, d)),
+                _ => None,
+            },
+            None => None,
+        }) && let Some(refined) = plan
+            .refined
+            .iter()
+            .find(|r| r.region.index == dig.region_index)
+        {
+            let q = s.planner().quality();
+            let max_q = q.w_volume * q.xi_max + q.w_time * q.psi_max + q.w_energy * q.zeta_max;
+            let path = out.join("refined_grid.svg");
+            std::fs::write(
+                &path,
+                crate::plots::refined_grid_svg(
+                    refined,
+                    s.planner().config().floor_z_m,
+                    max_q,
+                    &format!(
+                        "refined plan of the first planned dig (region {}, thesis Figs. 47/48)",
+                        dig.region_index
+                    ),
+                )?,
+            )
+            .with_context(|| format!("writing {}", path.display()))?;
         }
         let path = out.join("map_after.svg");
         std::fs::write(

@@ -374,6 +374,29 @@ impl PlannedSession {
         Ok(self.mapper.integrate_from(origin, points)?)
     }
 
+    /// Carves the swath of an executed dig or cleanup into the terrain map: the tip moved along
+    /// `tip_path` (`(r, z)` in the base frame, m) in the digging plane at `swing_rad` with the machine
+    /// at `pose`, and no material is left above it over the bucket width
+    /// ([`TerrainMapper::carve_swath`]). The toe of the receding face is hidden behind its crest
+    /// from the sensor, so the scans alone left the material dug there in the map. Returns the cells
+    /// lowered.
+    pub fn observe_bucket_pass(
+        &mut self,
+        pose: &MachinePose,
+        swing_rad: f64,
+        tip_path: &[(f64, f64)],
+    ) -> usize {
+        let path: Vec<[f64; 3]> = tip_path
+            .iter()
+            .map(|&(r, z)| pose.world_from_base(swing_rad, r, z))
+            .collect();
+        let [x0, y0, _] = pose.world_from_base(swing_rad, 0.0, 0.0);
+        let [x1, y1, _] = pose.world_from_base(swing_rad, 1.0, 0.0);
+        let lateral = [-(y1 - y0), x1 - x0];
+        self.mapper
+            .carve_swath(&path, lateral, self.planner.bucket_width_m())
+    }
+
     /// Takes estimated empirical soil properties (Eqs. 21-23): the dig model predicts with them and
     /// the hardness index follows the regression of 5.2 (Eq. 25). Returns the index, which the caller
     /// gives Autodig.

@@ -615,3 +615,201 @@ pub fn hardness_fit_svg(
     }
     Ok(svg)
 }
+
+/// The refined planner's evaluated candidate grid of one region (thesis Figs. 47/48). Left: the
+/// terrain section along the region's centre line (base frame), the floor, and the start tip of every
+/// evaluated candidate coloured by its quality, the chosen start circled. Right: the grid of candidates
+/// `(d, alpha)` (Fig. 45), each cell coloured by its Fig. 46 quality (green low, red high, out of
+/// `max_quality`), vetoed ones (a zero factor) light grey, floor-penetrating ones dark blue (as in the
+/// thesis), unreachable ones white, ones curled past the start limit lilac, ones the dig model could
+/// not predict black; the chosen dig outlined.
+///
+/// # Errors
+/// A plotting error; an empty grid.
+pub fn refined_grid_svg(
+    plan: &planner::plan::refined::RefinedPlan,
+    floor_z_m: f64,
+    max_quality: f64,
+    title: &str,
+) -> anyhow::Result<String> {
+    use planner::plan::refined::CandidateStatus;
+    let (Some(&d_last), Some(&a0), Some(&a1)) = (
+        plan.d_values_m.last(),
+        plan.alpha_values_rad.first(),
+        plan.alpha_values_rad.last(),
+    ) else {
+        anyhow::bail!("refined plan without candidates");
+    };
+    let d_step = plan
+        .d_values_m
+        .get(1)
+        .map_or(0.2, |d1| d1 - plan.d_values_m[0]);
+    let a_step = plan
+        .alpha_values_rad
+        .get(1)
+        .map_or(5f64.to_radians(), |x| x - a0)
+        .to_degrees();
+    let (a0, a1) = (a0.to_degrees(), a1.to_degrees());
+    let max_q = if max_quality > 0.0 { max_quality } else { 6.0 };
+    // Quality -> green (0) .. red (max): the upper two thirds of the heat scale, so no blue.
+    let q_color = |q: f64| heat(0.33 + 0.67 * (q / max_q).clamp(0.0, 1.0));
+    let floor_blue = RGBColor(30, 40, 150);
+    let vetoed = RGBColor(205, 205, 205);
+    let curled = RGBColor(200, 170, 230);
+    let best = plan
+        .best
+        .as_ref()
+        .map(|b| (b.d_m, b.alpha_rad.to_degrees()));
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (1100, 520)).into_drawing_area();
+        root.fill(&WHITE).map_err(err)?;
+        let root = root.titled(title, ("sans-serif", 16)).map_err(err)?;
+        let (left, right) = root.split_horizontally(520);
+
+        // Left: section and start tips.
+        let r0 = plan.section.first().map_or(0.0, |p| p[0]);
+        let r1 = plan.section.last().map_or(1.0, |p| p[0]).max(r0 + 1.0);
+        let zs = plan.section.iter().map(|p| p[1]).chain([floor_z_m]);
+        let zmin = zs.clone().fold(f64::INFINITY, f64::min) - 0.3;
+        let zmax = zs.fold(f64::NEG_INFINITY, f64::max) + 0.3;
+        let mut chart = ChartBuilder::on(&left)
+            .caption(
+                format!(
+                    "section at swing {:.1} deg, starts (d from {:.1} m)",
+                    plan.region.swing_rad.to_degrees(),
+                    plan.region.near_r_m
+                ),
+                ("sans-serif", 13),
+            )
+            .margin(8)
+            .x_label_area_size(32)
+            .y_label_area_size(44)
+            .build_cartesian_2d(r0..r1, zmin..zmax)
+            .map_err(err)?;
+        chart
+            .configure_mesh()
+            .x_desc("r [m] from the swing axis")
+            .y_desc("z [m]")
+            .draw()
+            .map_err(err)?;
+        chart
+            .draw_series(LineSeries::new(
+                plan.section.iter().map(|p| (p[0], p[1])),
+                BLACK.stroke_width(2),
+            ))
+            .map_err(err)?
+            .label("terrain (planner's map)")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLACK.stroke_width(2)));
+        chart
+            .draw_series(DashedLineSeries::new(
+                vec![(r0, floor_z_m), (r1, floor_z_m)],
+                5,
+                4,
+                floor_blue.stroke_width(1),
+            ))
+            .map_err(err)?
+            .label("floor")
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], floor_blue));
+        chart
+            .draw_series(plan.candidates.iter().filter_map(|c| {
+                let q = c.quality?.quality;
+                (q > 0.0).then(|| Circle::new((c.pose.x_m, c.pose.z_m), 3, q_color(q).filled()))
+            }))
+            .map_err(err)?;
+        if let Some(b) = &plan.best {
+            chart
+                .draw_series(std::iter::once(Circle::new(
+                    (b.pose.x_m, b.pose.z_m),
+                    8,
+                    BLACK.stroke_width(2),
+                )))
+                .map_err(err)?
+                .label(format!(
+                    "chosen: d {:.1} m, alpha {:.0} deg, V {:.2} m^3, Q {:.2}",
+                    b.d_m,
+                    b.alpha_rad.to_degrees(),
+                    b.summary.swept_volume_m3,
+                    b.quality.quality
+                ))
+                .legend(|(x, y)| Circle::new((x + 8, y), 5, BLACK.stroke_width(2)));
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK.mix(0.4))
+            .position(SeriesLabelPosition::LowerRight)
+            .label_font(("sans-serif", 11))
+            .draw()
+            .map_err(err)?;
+
+        // Right: the (d, alpha) grid.
+        let mut chart = ChartBuilder::on(&right)
+            .caption(
+                format!(
+                    "candidates: quality 0..{max_q:.0} green..red; grey vetoed, blue floor, white unreachable, lilac curled, black model failed"
+                ),
+                ("sans-serif", 12),
+            )
+            .margin(8)
+            .x_label_area_size(32)
+            .y_label_area_size(44)
+            .build_cartesian_2d(
+                -0.5 * d_step..d_last + 0.5 * d_step,
+                (a0 - 0.5 * a_step)..(a1 + 0.5 * a_step),
+            )
+            .map_err(err)?;
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .x_desc("d [m] from the region's near boundary")
+            .y_desc("alpha [deg] from the surface normal")
+            .draw()
+            .map_err(err)?;
+        chart
+            .draw_series(plan.candidates.iter().map(|c| {
+                let fill = match (c.status, c.quality) {
+                    (CandidateStatus::Valid, Some(q)) if q.quality > 0.0 => q_color(q.quality),
+                    (CandidateStatus::Valid, _) => vetoed,
+                    (CandidateStatus::PenetratesFloor, _) => floor_blue,
+                    (CandidateStatus::Unreachable, _) => WHITE,
+                    (CandidateStatus::ModelFailed, _) => BLACK,
+                    (CandidateStatus::CurledStart, _) => curled,
+                };
+                let a = c.alpha_rad.to_degrees();
+                Rectangle::new(
+                    [
+                        (c.d_m - 0.45 * d_step, a - 0.45 * a_step),
+                        (c.d_m + 0.45 * d_step, a + 0.45 * a_step),
+                    ],
+                    fill.filled(),
+                )
+            }))
+            .map_err(err)?;
+        chart
+            .draw_series(plan.candidates.iter().map(|c| {
+                let a = c.alpha_rad.to_degrees();
+                Rectangle::new(
+                    [
+                        (c.d_m - 0.45 * d_step, a - 0.45 * a_step),
+                        (c.d_m + 0.45 * d_step, a + 0.45 * a_step),
+                    ],
+                    BLACK.mix(0.15).stroke_width(1),
+                )
+            }))
+            .map_err(err)?;
+        if let Some((d, a)) = best {
+            chart
+                .draw_series(std::iter::once(Rectangle::new(
+                    [
+                        (d - 0.5 * d_step, a - 0.5 * a_step),
+                        (d + 0.5 * d_step, a + 0.5 * a_step),
+                    ],
+                    BLACK.stroke_width(3),
+                )))
+                .map_err(err)?;
+        }
+        root.present().map_err(err)?;
+    }
+    Ok(svg)
+}

@@ -54,6 +54,7 @@ fn planned_session_digs_cleans_up_and_backs_up() {
         "dig_sequence.svg",
         "map_after.svg",
         "last_plan.json",
+        "refined_grid.svg",
     ] {
         assert!(out.join(f).exists(), "{f}");
     }

@@ -166,6 +166,64 @@ impl TerrainMapper {
         Ok(update)
     }
 
+    /// Carves the swath of a bucket pass: the bucket tip moved along `path` (world frame, one digging
+    /// plane) and the bucket is `width_m` wide across `lateral` (the horizontal unit vector across the
+    /// plane), so no material stays above the tip there; known cells within half the width of the path
+    /// higher than the tip are lowered to it. This is the map's dead reckoning of a dig: the toe of a
+    /// receding face lies behind its crest from the sensor (Fig. 50's occlusion), so without it the
+    /// material dug there stayed in the map until a ray passed low enough, and the planner kept choosing
+    /// digs in material already removed. Returns the cells lowered; unknown cells stay unknown (the
+    /// next scan sees them).
+    pub fn carve_swath(&mut self, path: &[[f64; 3]], lateral: [f64; 2], width_m: f64) -> usize {
+        let norm = lateral[0].hypot(lateral[1]);
+        if !(norm > 0.0 && norm.is_finite() && width_m.is_finite() && width_m > 0.0) {
+            return 0;
+        }
+        let (lx, ly) = (lateral[0] / norm, lateral[1] / norm);
+        let res = self.grid.resolution_m();
+        let step = 0.5 * res;
+        let half = 0.5 * width_m;
+        // Bounded: bucket widths of metres, steps of centimetres.
+        let n_across = ((2.0 * half / step).ceil() as usize).min(10_000);
+        let mut lowered = std::collections::BTreeSet::new();
+        let finite: Vec<&[f64; 3]> = path
+            .iter()
+            .filter(|p| p.iter().all(|v| v.is_finite()))
+            .collect();
+        let mut lower = |grid: &mut TerrainGrid, x: f64, y: f64, z: f64| {
+            for k in 0..=n_across {
+                let o = -half + k as f64 * (2.0 * half / n_across.max(1) as f64);
+                let Some((i, j)) = grid.cell_index(x + o * lx, y + o * ly) else {
+                    continue;
+                };
+                if let Some(h) = grid.cell(i, j)
+                    && h > z
+                    && grid.set_cell(i, j, Some(z)).is_ok()
+                {
+                    lowered.insert((i, j));
+                }
+            }
+        };
+        for w in finite.windows(2) {
+            let (a, b) = (w[0], w[1]);
+            let len = (b[0] - a[0]).hypot(b[1] - a[1]);
+            let n = ((len / step).ceil() as usize).clamp(1, 100_000);
+            for k in 0..=n {
+                let t = k as f64 / n as f64;
+                lower(
+                    &mut self.grid,
+                    a[0] + t * (b[0] - a[0]),
+                    a[1] + t * (b[1] - a[1]),
+                    a[2] + t * (b[2] - a[2]),
+                );
+            }
+        }
+        if let [p] = finite.as_slice() {
+            lower(&mut self.grid, p[0], p[1], p[2]);
+        }
+        lowered.len()
+    }
+
     /// Lowers known cells the rays from `o` passed over below their height; cells hit by this scan
     /// (`hit_count > 0`) keep their measured height. Returns the cells lowered.
     fn carve(&mut self, o: [f64; 3], points: &[[f64; 3]], hit_count: &[u32]) -> usize {
@@ -271,5 +329,30 @@ mod tests {
         assert!((m.grid().height_at(2.55, 0.85).expect("aside") - 2.0).abs() < 1e-12);
         assert!((m.grid().height_at(3.55, 0.05).expect("hit") - 0.5).abs() < 1e-12);
         assert!(m.integrate_from([f64::NAN, 0.0, 0.0], &hit).is_err());
+    }
+
+    #[test]
+    fn a_bucket_pass_carves_its_swath_only() {
+        let mut m = TerrainMapper::new(0.0, -1.0, 0.1, 40, 20, 3).expect("mapper");
+        m.integrate(&scan(0.05, 3.95, 2.0)).expect("first");
+        // The tip dragged from x = 3 down to 1 m and in to x = 1 along y = 0, a 1 m wide bucket.
+        let path = [
+            [3.0, 0.0, 2.5],
+            [3.0, 0.0, 1.0],
+            [1.0, 0.0, 1.0],
+            [0.8, 0.0, 2.5],
+        ];
+        let n = m.carve_swath(&path, [0.0, 1.0], 1.0);
+        assert!(n > 0);
+        assert!((m.grid().height_at(2.05, 0.05).expect("in") - 1.0).abs() < 1e-9);
+        assert!((m.grid().height_at(2.05, 0.45).expect("edge") - 1.0).abs() < 1e-9);
+        // Beside the swath and beyond its ends: unchanged; above the terrain the pass changes nothing.
+        assert!((m.grid().height_at(2.05, 0.75).expect("aside") - 2.0).abs() < 1e-12);
+        assert!((m.grid().height_at(3.55, 0.05).expect("beyond") - 2.0).abs() < 1e-12);
+        assert_eq!(
+            m.carve_swath(&[[2.0, 0.0, 3.0], [1.0, 0.0, 3.0]], [0.0, 1.0], 1.0),
+            0
+        );
+        assert_eq!(m.carve_swath(&path, [0.0, 0.0], 1.0), 0);
     }
 }

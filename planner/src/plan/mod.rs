@@ -325,6 +325,12 @@ impl<A: ActuatorDynamics> Planner<A> {
         &self.kin
     }
 
+    /// Bucket width, m (the width of the coarse regions and of a bucket pass).
+    #[must_use]
+    pub fn bucket_width_m(&self) -> f64 {
+        self.bucket_width_m
+    }
+
     /// Bucket capacity, m^3 (`V_max` of Fig. 46 by default).
     #[must_use]
     pub fn capacity_m3(&self) -> f64 {
@@ -557,6 +563,10 @@ mod tests {
                     assert!(c.quality.is_some());
                 }
                 CandidateStatus::ModelFailed => {}
+                CandidateStatus::CurledStart => {
+                    assert!(c.summary.is_none());
+                    assert!(c.pose.bucket_abs_rad < planner.config().refined.bucket_abs_min_rad);
+                }
             }
         }
         let best = r.best.as_ref().expect("a valid dig");
@@ -572,6 +582,25 @@ mod tests {
         assert!((tip.x_m - best.pose.x_m).abs() < 1e-6 && (tip.z_m - best.pose.z_m).abs() < 1e-6);
         // Deterministic.
         assert_eq!(planner.refine(&grid, &pose, &region).expect("again"), r);
+        // Starts curled past the limit are kept out of the dig model (on the 45 deg face a start
+        // at alpha has bucket_abs = alpha - 45 deg; on the floor alpha - 90 deg).
+        let cfg = RefinedConfig {
+            bucket_abs_min_rad: (-25f64).to_radians(),
+            ..planner.config().refined
+        };
+        let q = planner.quality();
+        let c =
+            refined::refine(planner.model(), &grid, &pose, &region, 1.0, &cfg, &q).expect("curled");
+        assert!(c.count(CandidateStatus::CurledStart) > 0);
+        for k in c
+            .candidates
+            .iter()
+            .filter(|k| k.status == CandidateStatus::CurledStart)
+        {
+            assert!(k.summary.is_none() && k.pose.bucket_abs_rad < cfg.bucket_abs_min_rad);
+            assert!(kin.inverse(&k.pose).is_ok());
+        }
+        assert!(c.count(CandidateStatus::Valid) < valid);
     }
 
     #[test]

@@ -54,6 +54,11 @@ pub struct RefinedConfig {
     pub section_margin_m: f64,
     /// Section sample spacing, m. Default 0.05.
     pub section_step_m: f64,
+    /// Starts with the bucket curled past this absolute angle (to the horizontal) are not evaluated
+    /// ([`CandidateStatus::CurledStart`]): Autodig's Dig stage ends at `rho2` (-180 deg) and a start
+    /// curled close to it ends after a short drag. Default -180 deg (no limit).
+    #[serde(rename = "bucket_abs_min_deg", with = "crate::machine::degrees")]
+    pub bucket_abs_min_rad: f64,
 }
 
 impl Default for RefinedConfig {
@@ -67,6 +72,7 @@ impl Default for RefinedConfig {
             section_start_m: 1.0,
             section_margin_m: 1.0,
             section_step_m: 0.05,
+            bucket_abs_min_rad: (-180f64).to_radians(),
         }
     }
 }
@@ -102,6 +108,7 @@ impl RefinedConfig {
                 reason: "too fine for the alpha range".to_owned(),
             });
         }
+        super::finite("refined.bucket_abs_min_deg", self.bucket_abs_min_rad)?;
         non_negative("refined.tip_depth_m", self.tip_depth_m)?;
         positive("refined.section_start_m", self.section_start_m)?;
         non_negative("refined.section_margin_m", self.section_margin_m)?;
@@ -293,6 +300,8 @@ pub enum CandidateStatus {
     Valid,
     /// The dig model could not predict it (e.g. the tip left the mapped section).
     ModelFailed,
+    /// Reachable, but the bucket is curled past `refined.bucket_abs_min_deg` (not evaluated).
+    CurledStart,
 }
 
 /// One candidate start `(d, alpha)` (Fig. 45) and its evaluation.
@@ -481,7 +490,8 @@ pub fn refine<A: ActuatorDynamics>(
         for &alpha in &alphas {
             let p = start_pose(r, z, slope, alpha, cfg.tip_depth_m);
             let reachable = z.is_finite() && kin.inverse(&p).is_ok();
-            if reachable {
+            let curled = p.bucket_abs_rad < cfg.bucket_abs_min_rad;
+            if reachable && !curled {
                 start_of.push(candidates.len());
                 starts.push(DigStart::Pose(p));
             }
@@ -489,7 +499,11 @@ pub fn refine<A: ActuatorDynamics>(
                 d_m: d,
                 alpha_rad: alpha,
                 pose: p,
-                status: CandidateStatus::Unreachable,
+                status: if reachable && curled {
+                    CandidateStatus::CurledStart
+                } else {
+                    CandidateStatus::Unreachable
+                },
                 summary: None,
                 quality: None,
             });
