@@ -1190,3 +1190,45 @@ pub fn steady_velocity(
 pub fn bypass_constant(params: &GreyBoxParams, spools: [f64; 2]) -> f64 {
     series_bypass(params.bypass_k, &spools.map(|s| bypass_fraction(params, s)))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The warm-started solve finds the flow balance's unique root from any starting guess, and the
+    /// neutral-valve cache returns what a fresh solve gives.
+    #[test]
+    fn pump_pressure_does_not_depend_on_the_guess_and_the_neutral_cache_is_exact() {
+        let params = super::super::AugmentedModel::nominal().unwrap().params;
+        let b = PumpBalance {
+            max_flow: params.pump_max_flow_m3_per_s,
+            bypass_k: 0.3 * params.bypass_k,
+            fixed_demand: 0.0,
+        };
+        let meter = [(0.5 * params.meter_in_k[0], 8.0e6), (0.0, 0.0)];
+        let reference = pump_pressure(&params, b, &meter, f64::NAN);
+        assert!(
+            reference > params.tank_pa && reference < params.relief_pa + 2.0e6,
+            "{reference}"
+        );
+        for guess in [0.0, 1.0e5, 5.0e6, 9.0e6, 2.0e7, 4.0e7, 1.0e9] {
+            let p = pump_pressure(&params, b, &meter, guess);
+            assert!(
+                (p - reference).abs() < 2.0e3,
+                "guess {guess}: {p} vs {reference}"
+            );
+        }
+        let neutral = PumpBalance {
+            bypass_k: params.bypass_k,
+            ..b
+        };
+        let fresh = pump_pressure(&params, neutral, &[], 1.0e6);
+        let mut cache = NeutralCache::default();
+        let closed = [(0.0, 5.0e6)];
+        assert_eq!(cache.solve(&params, neutral, &closed, 1.0e6), fresh);
+        assert_eq!(cache.solve(&params, neutral, &closed, 3.0e6), fresh);
+        // An open orifice is never served from the cache.
+        let open = cache.solve(&params, neutral, &meter, 1.0e6);
+        assert!((open - pump_pressure(&params, neutral, &meter, 1.0e6)).abs() < 1e-9);
+    }
+}
