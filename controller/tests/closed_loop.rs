@@ -104,7 +104,7 @@ fn cleanup_setup() -> (vcan_sim::SimConfig, ControllerConfig) {
         start: StartPose::Tip {
             x_m: 6.3,
             z_m: 0.8,
-            bucket_abs_rad: planner::cleanup::CleanupConfig::default().bucket_abs_rad,
+            bucket_abs_rad: planner::cleanup::CleanupConfig::levelling().bucket_abs_rad,
         },
         plan: CleanupPlan {
             start_radius_m: 6.3,
@@ -113,6 +113,13 @@ fn cleanup_setup() -> (vcan_sim::SimConfig, ControllerConfig) {
     }];
     config.cycle.repeat = false;
     config.cycle.max_digs = Some(1);
+    // The floor-levelling settings (docs/autodig.md, Floor cleanup) over the controller's probe settings.
+    let levelling = planner::cleanup::CleanupConfig::levelling();
+    config.cleanup.bucket_abs_rad = levelling.bucket_abs_rad;
+    config.cleanup.pressure_threshold_pct = levelling.pressure_threshold_pct;
+    config.cleanup.pressure_hold_s = levelling.pressure_hold_s;
+    config.cleanup.follow_settle_s = levelling.follow_settle_s;
+    config.cleanup.follow_clearance_m = levelling.follow_clearance_m;
     (sim, config)
 }
 
@@ -391,6 +398,7 @@ fn log_one_dig() {
         let (s, cc) = cleanup_setup();
         sim = s;
         c.cycle = cc.cycle;
+        c.cleanup = cc.cleanup;
         c.cleanup.follow_clearance_m = env("DIG_CL_CLEAR", c.cleanup.follow_clearance_m);
         c.cleanup.follow_settle_s = env("DIG_CL_SETTLE", c.cleanup.follow_settle_s);
         c.cleanup.bucket_abs_rad =
