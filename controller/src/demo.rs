@@ -872,14 +872,9 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
                 let Some(start) = start else {
                     anyhow::bail!("predefined sequence: no start joints (no valid dig on the map)");
                 };
-                // The median start is a planned tip 0.4 m up at one swing, on or just above the
-                // face at another: raised once more, Boom-Down starts above the face everywhere
-                // (the move to a start on the face pressed the bucket into it and timed out).
-                let start = crate::planned::approach_joints(
-                    s.planner().kinematics(),
-                    start,
-                    crate::planned::APPROACH_HEIGHT_M,
-                );
+                // The median start is a planned tip APPROACH_HEIGHT_M (0.8 m) up: Boom-Down starts
+                // above the face everywhere (with 0.4 m, and no second raise, the move to a start on
+                // the face pressed the bucket into it and timed out).
                 predefined_joints = Some(start);
                 let seq = PredefinedSequence::from_planner(s.planner(), s.terrain(), &pose, start)?;
                 s.set_predefined(seq);

@@ -44,7 +44,9 @@ use crate::node::ControllerNode;
 /// starts Pre-Dig; the work cycle starts Autodig in Boom-Down, which lowers the boom alone until
 /// ground contact, so raising the boom alone by the matching angle lands the tip back on the planned
 /// point (a move straight onto the surface would press into the soil and never settle).
-pub const APPROACH_HEIGHT_M: f64 = 0.4;
+/// 0.8 m: from 0.4 m, a start on the bench top near the crest after a backup (r 6-8 m) dragged the
+/// bucket through the bench on the way there and the move timed out (26 timeouts in a 30-dig run).
+pub const APPROACH_HEIGHT_M: f64 = 0.8;
 
 /// The planned start joints with the boom raised so the tip is `height_m` higher (rotation about the
 /// boom foot: `dz = (x_tip - x_foot) d_boom`).

@@ -8,10 +8,15 @@ use std::sync::atomic::AtomicBool;
 use controller::cycle::ActionKind;
 use controller::demo::{DemoArgs, DemoStrategy, run_session};
 
-/// A short planned session: the planner digs, and once the face within reach is used up it cleans
-/// up and backs up (Fig. 42), all from the scans, in one process.
+/// A short planned session: the planner digs, and once the face within reach is used up it backs up
+/// (Fig. 42), all from the scans, in one process. (It cleans up when no dig reaches the quality
+/// minimum and tracking is blocked by material near the tracks; since each bucket pass is carved
+/// into the map and starts are approached 0.8 m up, the digs leave none: 0 cleanups in 25 digs here
+/// and in 100 on the 2 m bench. The choice is tested in `planner::plan::{action, cleanup_track}`,
+/// the cleanup itself in `closed_loop.rs`; the predefined sequence cleans up 47 times in the ignored
+/// 100-dig comparison below.)
 #[test]
-fn planned_session_digs_cleans_up_and_backs_up() {
+fn planned_session_digs_and_backs_up() {
     let dir = tempfile::tempdir().unwrap();
     // The extended bench with a 1 m cut (floor 1 m below the tracks): half the material per metre
     // of face, so the first backup comes within a short session.
@@ -31,7 +36,6 @@ fn planned_session_digs_cleans_up_and_backs_up() {
         .filter(|d| d.action == ActionKind::Dig)
         .count();
     assert!(digs >= 8, "{digs} digs: {}", s.end);
-    assert!(s.cleanups >= 1, "no cleanup: {}", s.end);
     assert!(s.backups >= 1, "no backup: {}", s.end);
     // Planned digs carry the planner's predicted quality and start, and the machine moved back.
     let first = s.digs.iter().find(|d| d.action == ActionKind::Dig).unwrap();
