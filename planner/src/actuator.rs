@@ -269,8 +269,8 @@ pub struct TrainConfig {
     /// Fig. 17's layout (only the boom sees the bucket command).
     pub coupled_inputs: bool,
     /// With the coupled inputs, every network also gets the orifice-law drive (Eq. 1) of its own and its
-    /// partner's cylinder ([`orifice_drive`]): the command times the square root of the pressure drop
-    /// left for the valve, which the tanh units cannot form from command and force alone.
+    /// partner's cylinder: the command times the square root of the pressure drop left for the valve,
+    /// `u sqrt(1 - F / F_ref)`, which the tanh units cannot form from command and force alone.
     pub orifice_inputs: bool,
     /// Loss of the free-running phase and of early stopping.
     pub free_run_loss: FreeRunLoss,
