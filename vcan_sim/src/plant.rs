@@ -19,7 +19,7 @@ use crate::hydraulics::{
 use crate::linkage::{Linkage, LinkageState};
 use crate::scenario::Scenario;
 use crate::sensors::{
-    Scan, ScanRequest, SensedTruth, SensorEffects, SensorReadings, SensorSpec, Sensors,
+    Scan, ScanJob, ScanRequest, SensedTruth, SensorEffects, SensorReadings, SensorSpec, Sensors,
 };
 use crate::soil_contact::{ContactInput, MassLedger, SoilContact, SoilEffects, World};
 
@@ -502,6 +502,21 @@ impl Plant {
     /// Scans the terrain from the range sensor on the cab (machine file `[sensor]`), pointing along
     /// the digging plane.
     pub fn scan(&mut self, request: &ScanRequest) -> Scan {
+        let (origin, az) = self.scan_origin();
+        self.sensors
+            .scan(&self.world.terrain, origin, az, request, self.time_s)
+    }
+
+    /// The same scan, to run away from the physics loop ([`ScanJob::run`]): the terrain and the sensor
+    /// pose are taken now.
+    pub fn scan_job(&mut self, request: &ScanRequest) -> ScanJob {
+        let (origin, az) = self.scan_origin();
+        self.sensors
+            .scan_job(&self.world.terrain, origin, az, request, self.time_s)
+    }
+
+    /// The range sensor's position (world) and heading (the digging plane's azimuth).
+    fn scan_origin(&self) -> ([f64; 3], f64) {
         let s = &self.cfg.sensor;
         let swing = self.hydraulics.actuators[SWING].position;
         let az = self.pose.dig_plane_azimuth_rad(swing);
@@ -511,8 +526,7 @@ impl Plant {
             self.pose.y_m + s.radial_offset_m * mount_az.sin(),
             s.height_m,
         ];
-        self.sensors
-            .scan(&self.world, origin, az, request, self.time_s)
+        (origin, az)
     }
 
     /// The true state (for state logs and tests).
