@@ -95,12 +95,6 @@ impl MachineNode {
         self.plant.scan(request)
     }
 
-    /// The same scan as a job to run on another thread ([`crate::sensors::ScanJob::run`]), so the
-    /// real-time loop keeps sending the machine's frames while it is ray-cast.
-    pub fn scan_job(&mut self, request: &ScanRequest) -> crate::sensors::ScanJob {
-        self.plant.scan_job(request)
-    }
-
     /// One physics step: gateway tick, plant step, and the frames due now (appended to `out`).
     pub fn step(&mut self, out: &mut Vec<CanFrame>) {
         if self.steps.is_multiple_of(SENSOR_PERIOD_STEPS) {

@@ -19,7 +19,7 @@ use crate::hydraulics::{
 use crate::linkage::{Linkage, LinkageState};
 use crate::scenario::Scenario;
 use crate::sensors::{
-    Scan, ScanJob, ScanRequest, SensedTruth, SensorEffects, SensorReadings, SensorSpec, Sensors,
+    Scan, ScanRequest, SensedTruth, SensorEffects, SensorReadings, SensorSpec, Sensors,
 };
 use crate::soil_contact::{ContactInput, MassLedger, SoilContact, SoilEffects, World};
 
@@ -502,21 +502,6 @@ impl Plant {
     /// Scans the terrain from the range sensor on the cab (machine file `[sensor]`), pointing along
     /// the digging plane.
     pub fn scan(&mut self, request: &ScanRequest) -> Scan {
-        let (origin, az) = self.scan_origin();
-        self.sensors
-            .scan(&self.world.terrain, origin, az, request, self.time_s)
-    }
-
-    /// The same scan, to run away from the physics loop ([`ScanJob::run`]): the terrain and the sensor
-    /// pose are taken now.
-    pub fn scan_job(&mut self, request: &ScanRequest) -> ScanJob {
-        let (origin, az) = self.scan_origin();
-        self.sensors
-            .scan_job(&self.world.terrain, origin, az, request, self.time_s)
-    }
-
-    /// The range sensor's position (world) and heading (the digging plane's azimuth).
-    fn scan_origin(&self) -> ([f64; 3], f64) {
         let s = &self.cfg.sensor;
         let swing = self.hydraulics.actuators[SWING].position;
         let az = self.pose.dig_plane_azimuth_rad(swing);
@@ -526,7 +511,8 @@ impl Plant {
             self.pose.y_m + s.radial_offset_m * mount_az.sin(),
             s.height_m,
         ];
-        (origin, az)
+        self.sensors
+            .scan(&self.world, origin, az, request, self.time_s)
     }
 
     /// The true state (for state logs and tests).

@@ -155,12 +155,7 @@ pub async fn run(
                 Err(e) => tracing::warn!("CAN receive: {e}"),
             },
             Some((request, reply)) = scan_rx.recv() => {
-                // Ray-cast on a blocking thread: under a slow host a scan took seconds, and the
-                // loop stopped sending the sensor frames meanwhile.
-                let job = node.scan_job(&request);
-                tokio::task::spawn_blocking(move || {
-                    let _ = reply.send(job.run());
-                });
+                let _ = reply.send(node.scan(&request));
             }
             _ = interval.tick() => {
                 // Wall-clock physics steps due, minus the time slipped so far.

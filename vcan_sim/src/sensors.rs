@@ -8,7 +8,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
-use planner::terrain::TerrainGrid;
+use crate::soil_contact::World;
 
 /// Sensor noise and resolution.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -155,14 +155,14 @@ impl Sensors {
     /// occludes what lies behind it. Range noise is added along the ray.
     pub fn scan(
         &mut self,
-        terrain: &TerrainGrid,
+        world: &World,
         origin: [f64; 3],
         heading_rad: f64,
         request: &ScanRequest,
         time_s: f64,
     ) -> Scan {
         let req = request.sanitised();
-        let step = 0.5 * terrain.resolution_m();
+        let step = 0.5 * world.terrain.resolution_m();
         let mut points = Vec::with_capacity(req.azimuth_count * req.elevation_count);
         for ia in 0..req.azimuth_count {
             let fa = if req.azimuth_count > 1 {
@@ -191,7 +191,7 @@ impl Sensors {
                 };
                 let above = |t: f64| {
                     let p = at(t);
-                    terrain.height_at(p[0], p[1]).map(|h| p[2] - h)
+                    world.terrain.height_at(p[0], p[1]).map(|h| p[2] - h)
                 };
                 let mut t_prev = 0.0;
                 let mut t = step;
@@ -232,57 +232,6 @@ impl Sensors {
                 heading_rad,
             },
             points,
-        }
-    }
-}
-
-/// A range scan taken at one instant, to be ray-cast away from the physics loop
-/// ([`crate::plant::Plant::scan_job`]): a scan under a slow host takes long enough (up to 2.8 s
-/// measured in the TCG VM) that running it inside the real-time loop stopped the machine's sensor
-/// frames and the controller faulted on stale data.
-#[derive(Debug, Clone)]
-pub struct ScanJob {
-    sensors: Sensors,
-    terrain: TerrainGrid,
-    origin: [f64; 3],
-    heading_rad: f64,
-    request: ScanRequest,
-    time_s: f64,
-}
-
-impl ScanJob {
-    /// Ray-casts the scan ([`Sensors::scan`]) over the terrain as it was when the job was made.
-    pub fn run(mut self) -> Scan {
-        self.sensors.scan(
-            &self.terrain,
-            self.origin,
-            self.heading_rad,
-            &self.request,
-            self.time_s,
-        )
-    }
-}
-
-impl Sensors {
-    /// A job for [`ScanJob::run`]: the terrain copied now, the range noise from a generator seeded
-    /// from this one (so the job does not replay the noise the sensors draw next).
-    pub fn scan_job(
-        &mut self,
-        terrain: &TerrainGrid,
-        origin: [f64; 3],
-        heading_rad: f64,
-        request: &ScanRequest,
-        time_s: f64,
-    ) -> ScanJob {
-        let mut sensors = self.clone();
-        sensors.rng = ChaCha8Rng::seed_from_u64(rand::RngExt::random::<u64>(&mut self.rng));
-        ScanJob {
-            sensors,
-            terrain: terrain.clone(),
-            origin,
-            heading_rad,
-            request: *request,
-            time_s,
         }
     }
 }
@@ -368,7 +317,6 @@ pub struct Scan {
 mod tests {
     use super::*;
     use crate::scenario::Scenario;
-    use crate::soil_contact::World;
 
     #[test]
     fn readings_are_quantised_noisy_offset_and_reproducible() {
@@ -393,45 +341,11 @@ mod tests {
     }
 
     #[test]
-    fn a_scan_job_sees_the_terrain_of_its_instant_and_draws_its_own_noise() {
-        let s = Scenario::default_bench().unwrap();
-        let mut world = World::from_scenario(&s).unwrap();
-        let exact = SensorSpec {
-            range_noise_m: 0.0,
-            ..SensorSpec::default()
-        };
-        let req = ScanRequest::default();
-        let direct = Sensors::new(exact, 1).scan(&world.terrain, [0.0, 0.0, 3.1], 0.0, &req, 2.0);
-        let job = Sensors::new(exact, 1).scan_job(&world.terrain, [0.0, 0.0, 3.1], 0.0, &req, 2.0);
-        // The terrain changes after the job was made (a dig): the job scans the copy.
-        let t = &world.terrain;
-        let [x0, y0] = t.origin();
-        world.terrain =
-            TerrainGrid::new_flat(x0, y0, t.resolution_m(), t.nx(), t.ny(), 0.0).unwrap();
-        let later = job.run();
-        assert_eq!(later.points, direct.points);
-        assert_eq!(later.time_s, 2.0);
-        // With noise, the job's draws are not the ones the sensors make next.
-        let mut noisy = Sensors::new(SensorSpec::default(), 1);
-        let job = noisy.scan_job(&world.terrain, [0.0, 0.0, 3.1], 0.0, &req, 0.0);
-        let a = job.run();
-        let b = noisy.scan(&world.terrain, [0.0, 0.0, 3.1], 0.0, &req, 0.0);
-        assert_eq!(a.points.len(), b.points.len());
-        assert_ne!(a.points, b.points);
-    }
-
-    #[test]
     fn scan_hits_the_terrain_and_the_face_occludes_the_bench_top_behind() {
         let s = Scenario::default_bench().unwrap();
         let world = World::from_scenario(&s).unwrap();
         let mut sensors = Sensors::new(SensorSpec::default(), 1);
-        let scan = sensors.scan(
-            &world.terrain,
-            [0.0, 0.0, 3.1],
-            0.0,
-            &ScanRequest::default(),
-            0.0,
-        );
+        let scan = sensors.scan(&world, [0.0, 0.0, 3.1], 0.0, &ScanRequest::default(), 0.0);
         assert!(scan.points.len() > 1000);
         for p in &scan.points {
             let h = world.height(p[0], p[1]);
@@ -447,7 +361,7 @@ mod tests {
             elevation_max_rad: -0.12,
             ..ScanRequest::default()
         };
-        let hit = sensors.scan(&world.terrain, [0.0, 0.0, 3.1], 0.0, &low, 0.0);
+        let hit = sensors.scan(&world, [0.0, 0.0, 3.1], 0.0, &low, 0.0);
         assert_eq!(hit.points.len(), 1);
         assert!(
             hit.points[0][2] > 1.5,
