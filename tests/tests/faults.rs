@@ -99,11 +99,22 @@ fn killed_controller_gateway_neutralises_valves_within_100_ms() {
         .position(|(_, st)| st.mode == GatewayMode::Faulted)
         .unwrap_or_else(|| panic!("the gateway never reported the watchdog\n{}", s.logs()));
     let (t_fault, st) = after[k];
+    // The controller goes silent: its heartbeat (watchdog) and its valve command (stale command) stop
+    // together, both with a 100 ms limit. Which one the gateway latches first depends on where in its
+    // 10 ms period the kill landed (heartbeat sent, command not yet: the command is a period older);
+    // measured in the VM: the watchdog bit in most runs, the stale-command bit alone in one.
     assert!(
-        st.faults.contains(GatewayFaults::WATCHDOG_TIMEOUT),
+        st.faults.contains(GatewayFaults::WATCHDOG_TIMEOUT)
+            || st.faults.contains(GatewayFaults::STALE_COMMAND),
         "{st:?}"
     );
-    let watchdog_statuses = ((WATCHDOG_S + STATUS_PERIOD_S) / STATUS_PERIOD_S).round() as usize;
+    // Plus one status in a VM: when the host held the simulator off as the heartbeat arrived, it
+    // sends the status due before it reads the queued heartbeat (measured: statuses at +283, +387,
+    // +429 ms wall after the heartbeat, Faulted in the fourth). The exact 100 ms bound is checked in
+    // virtual time by `inprocess_scenarios`.
+    let stall_allowance = usize::from(env::in_vm());
+    let watchdog_statuses =
+        ((WATCHDOG_S + STATUS_PERIOD_S) / STATUS_PERIOD_S).round() as usize + stall_allowance;
     assert!(
         k < watchdog_statuses,
         "faulted only in status {} after the heartbeat",
