@@ -209,46 +209,9 @@ impl World {
     }
 
     /// [`TerrainGrid::height_at`] (bilinear between cell centres), `None` where it is an error (off
-    /// the map, unknown cells, not finite): the same arithmetic in the same order, so the same bits,
-    /// without building error values and with truncation for the floor of non-negative numbers
-    /// (`floor` is a library call on the baseline x86-64 target). Test
-    /// `height_known_is_the_grids_bilinear_height_bit_for_bit`.
+    /// the map, unknown cells, not finite).
     pub fn height_known(&self, x_m: f64, y_m: f64) -> Option<f64> {
-        let t = &self.terrain;
-        if !(x_m.is_finite() && y_m.is_finite()) {
-            return None;
-        }
-        let [ox, oy] = t.origin();
-        let res = t.resolution_m();
-        let (nx, ny) = (t.nx(), t.ny());
-        let (fx, fy) = ((x_m - ox) / res, (y_m - oy) / res);
-        // `TerrainGrid::cell_index`: the point must lie on the grid.
-        if !(fx.is_finite() && fy.is_finite())
-            || fx < 0.0
-            || fy < 0.0
-            || fx as usize >= nx
-            || fy as usize >= ny
-            || nx < 2
-            || ny < 2
-        {
-            return None;
-        }
-        let fx = (fx - 0.5).clamp(0.0, (nx - 1) as f64);
-        let fy = (fy - 0.5).clamp(0.0, (ny - 1) as f64);
-        let i0 = (fx as usize).min(nx - 2);
-        let j0 = (fy as usize).min(ny - 2);
-        let (tx, ty) = (fx - i0 as f64, fy - j0 as f64);
-        let mut sum = 0.0;
-        for (di, wx) in [(0, 1.0 - tx), (1, tx)] {
-            for (dj, wy) in [(0, 1.0 - ty), (1, ty)] {
-                let w = wx * wy;
-                if w <= 0.0 {
-                    continue;
-                }
-                sum += w * t.cell(i0 + di, j0 + dj)?;
-            }
-        }
-        Some(sum)
+        self.terrain.height_at(x_m, y_m).ok()
     }
 
     /// Deposits `volume_m3` as a cone at the angle of repose centred on `(x, y)`, within 2.5 m.
@@ -269,19 +232,21 @@ impl World {
         // 1. An upper bound of the apex. Over any set T of cells, the added volume
         //    `sum_T max(a - base, 0) >= |T| a - sum_T base`, so it reaches the target by
         //    `a = (target + sum_T base) / |T|`: the apex of T, and of the whole window (more cells hold
-        //    more), is at most that. A window 1.5 times the cone's radius on flat ground makes it
-        //    tight (its mean base is near the apex). A margin far above rounding is added.
+        //    more), is at most that. The apex of the cells within 1.5 times the cone's radius (on
+        //    flat ground) is such a bound, and a tight one where the cone fits in them: Newton's
+        //    method of step 3 over those cells alone (each iterate is the bound of the cells below
+        //    it, so it stays an upper bound after any number of passes). Where the ground falls away
+        //    (a bench face) their mean base alone left most of the 2.5 m window below the bound. A
+        //    margin far above rounding is added.
         let cone_radius_m = (3.0 * volume_m3 / (std::f64::consts::PI * slope.max(1e-3))).cbrt();
         let near = ((1.5 * cone_radius_m / res).ceil() + 1.0).min(DEPOSIT_REACH_M / res);
-        let (mut sum, mut count) = (0.0, 0.0);
+        let mut near_bases = Vec::new();
         self.deposit_window([x_m, y_m], near, |_, _, h, d2| {
-            sum += d2.sqrt() * slope + h;
-            count += 1.0;
+            near_bases.push(d2.sqrt() * slope + h);
         });
-        let upper = if count > 0.0 {
-            (target + sum) / count + 1.0e-6 * (1.0 + sum.abs() / count)
-        } else {
-            f64::INFINITY
+        let upper = match apex_from_above(&mut near_bases, target, f64::INFINITY) {
+            Some((apex, _)) => apex + 1.0e-6 * (1.0 + apex.abs()),
+            None => f64::INFINITY,
         };
         // 2. Only cells whose base is below that bound can receive material: the others are skipped
         //    without a square root. The apex of the kept cells is the apex of the whole window (the
@@ -299,20 +264,10 @@ impl World {
         //    `a`), descends monotonically onto the root and stops on the exact linear piece once the
         //    set of cells below `a` no longer changes (usually within a few passes), without sorting.
         //    Only the order of the summation differs from sorting the bases (rounding level).
-        let mut apex = upper;
-        let mut converged = false;
-        for _ in 0..APEX_NEWTON_PASSES {
-            cells.retain(|c| c.2 < apex);
-            let (sum, count) = cells
-                .iter()
-                .fold((0.0, 0.0), |(sum, count), c| (sum + c.2, count + 1.0));
-            let next = (target + sum) / count;
-            if !(count > 0.0 && next < apex) {
-                converged = count > 0.0;
-                break;
-            }
-            apex = next;
-        }
+        let mut bases: Vec<f64> = cells.iter().map(|c| c.2).collect();
+        let (mut apex, converged) =
+            apex_from_above(&mut bases, target, upper).unwrap_or((upper, false));
+        cells.retain(|c| c.2 < apex);
         if cells.is_empty() {
             return 0.0;
         }
@@ -389,6 +344,33 @@ impl World {
 const DEPOSIT_REACH_M: f64 = 2.5;
 /// Newton passes of the cone apex before falling back to sorting the bases.
 const APEX_NEWTON_PASSES: usize = 24;
+
+/// Newton's method for the apex `a` of a cone of `target` (volume / cell area) over cells with the
+/// given bases, from `start` (at or above the apex, or infinite): `a' = (target + sum of the bases
+/// below a) / their count` (see `World::deposit_local`, step 3). Drops from `bases` the cells at or
+/// above the last iterate. Returns the last iterate (an upper bound of the apex, whether converged or
+/// not) and whether it converged within [`APEX_NEWTON_PASSES`]; `None` when no base is below
+/// `start`.
+fn apex_from_above(bases: &mut Vec<f64>, target: f64, start: f64) -> Option<(f64, bool)> {
+    let mut apex = start;
+    let mut last = None;
+    for _ in 0..APEX_NEWTON_PASSES {
+        bases.retain(|&b| b < apex);
+        let (sum, count) = bases
+            .iter()
+            .fold((0.0, 0.0), |(sum, count), &b| (sum + b, count + 1.0));
+        if count == 0.0 {
+            return last.map(|a| (a, false));
+        }
+        let next = (target + sum) / count;
+        if next >= apex {
+            return Some((apex, true));
+        }
+        apex = next;
+        last = Some(apex);
+    }
+    last.map(|a| (a, false))
+}
 
 /// The apex height of a cone of `target` (volume / cell area) over cells with the given bases: the
 /// added volume `sum max(apex - base, 0)` is piecewise linear in the apex, so walk the bases upwards
