@@ -7,7 +7,7 @@
 
 use std::collections::VecDeque;
 
-use planner::kinematics::{Joint, JointAngles, LinkagePoints, MachinePose, TipForce};
+use planner::kinematics::{Joint, JointAngles, MachinePose, TipForce};
 use planner::machine::MachineConfig;
 use serde::Serialize;
 
@@ -16,7 +16,7 @@ use crate::hydraulics::{
     ActuatorLoad, BOOM, BUCKET, HydraulicEffects, HydraulicParams, Hydraulics, N_ACTUATORS, STICK,
     SWING,
 };
-use crate::linkage::{Linkage, LinkageState};
+use crate::linkage::{Linkage, LinkageState, PoseFrame};
 use crate::scenario::Scenario;
 use crate::sensors::{
     Scan, ScanRequest, SensedTruth, SensorEffects, SensorReadings, SensorSpec, Sensors,
@@ -249,7 +249,7 @@ impl Plant {
 
     /// Pressurises the cylinders to hold the start pose, so the run starts at rest.
     fn settle(&mut self) {
-        let loads = self.loads(&self.linkage.kinematics().linkage_points(&self.link.q));
+        let loads = self.loads(&self.linkage.frame(&self.link.q));
         let tank = self.hydraulics.params().fluid.tank_pressure_pa;
         for (i, load) in loads.iter().enumerate().take(3) {
             let (ah, ar) = (
@@ -325,19 +325,18 @@ impl Plant {
         };
     }
 
-    /// Loads on the actuators at the current pose, with its linkage points.
-    fn loads(&self, points: &LinkagePoints) -> [ActuatorLoad; N_ACTUATORS] {
+    /// Loads on the actuators at the current pose, with its geometry.
+    fn loads(&self, frame: &PoseFrame) -> [ActuatorLoad; N_ACTUATORS] {
         let payload = self.payload_kg();
-        let forces = if self.gravity {
-            self.linkage
-                .cylinder_loads(&self.link, &self.soil_force, payload)
-        } else {
-            let tau = -(self.linkage.kinematics().jacobian(&self.link.q).transpose()
-                * self.soil_force.to_vector());
-            Linkage::cylinder_forces(&self.link, &tau)
-        };
-        let masses = self.linkage.cylinder_masses_at(&self.link, points, payload);
-        let tip_x_m = points.tip[0];
+        let forces = self.linkage.cylinder_loads_at(
+            &self.link,
+            frame,
+            &self.soil_force,
+            payload,
+            self.gravity,
+        );
+        let masses = self.linkage.cylinder_masses_at(&self.link, frame, payload);
+        let tip_x_m = frame.points.tip[0];
         let swing_inertia = self.cfg.swing.inertia_kg_m2 + payload * tip_x_m * tip_x_m;
         [
             ActuatorLoad {
@@ -363,13 +362,14 @@ impl Plant {
         ]
     }
 
-    fn soil_contact(&mut self, dt: f64, points: &LinkagePoints) {
+    fn soil_contact(&mut self, dt: f64, frame: &PoseFrame) {
+        let points = &frame.points;
         let fx = self.effects;
         let rates = self.linkage.joint_rates(
             &self.link,
             [0, 1, 2].map(|i| self.hydraulics.actuators[i].velocity),
         );
-        let tip_v = self.linkage.tip_velocity(&self.link, rates);
+        let tip_v = self.linkage.tip_velocity_at(frame, rates);
         let swing = self.hydraulics.actuators[SWING].position;
         let input = ContactInput {
             tip_world: self
@@ -429,9 +429,9 @@ impl Plant {
         // Soil contact at the current pose and the loads of gravity, payload and soil on the
         // cylinders (Appendix), at 200 Hz: they depend on the pose, which moves little in 5 ms.
         if self.steps.is_multiple_of(SOIL_SUBSTEPS) {
-            let points = self.linkage.kinematics().linkage_points(&self.link.q);
-            self.soil_contact(dt * SOIL_SUBSTEPS as f64, &points);
-            self.cached_loads = self.loads(&points);
+            let frame = self.linkage.frame(&self.link.q);
+            self.soil_contact(dt * SOIL_SUBSTEPS as f64, &frame);
+            self.cached_loads = self.loads(&frame);
         }
         self.steps += 1;
         let loads = self.cached_loads;
