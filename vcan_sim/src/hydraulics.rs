@@ -352,6 +352,10 @@ pub struct Hydraulics {
     params: HydraulicParams,
     /// Derived from `params` once (they never change after construction).
     orifice_constants: OrificeConstants,
+    /// Per valve, the reciprocals of the spans in its area laws (the same for every step).
+    valve_spans: [ValveSpans; N_ACTUATORS],
+    /// `1 / (crossover_full - crossover_start)`.
+    inverse_crossover_span: f64,
     /// The valves that do not change with the spools, built once: each gallery's main relief, each
     /// actuator's port relief and the anti-cavitation make-up orifice.
     main_reliefs: [Relief; 2],
@@ -371,6 +375,14 @@ pub struct Hydraulics {
     /// Whether the chamber solves may end on a Newton step they have not evaluated (within
     /// [`ACCEPT_UNEVALUATED_PA`] of the root); off only in the test that compares both.
     accept_unevaluated: bool,
+}
+
+/// The divisions of [`ValveParams`]'s area laws as products: `metering_fraction` divides by
+/// `1 - overlap`, `bypass_area` by `bypass_close`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct ValveSpans {
+    inverse_metering: f64,
+    inverse_bypass_close: f64,
 }
 
 /// Geometry of one actuator in the chamber model.
@@ -418,8 +430,8 @@ struct OrificeConstants {
     /// `sqrt(2 / rho)`.
     root_two_over_rho: f64,
     laminar_dp_pa: f64,
-    /// `sqrt(laminar_dp_pa)`.
-    root_laminar_dp: f64,
+    /// `1 / sqrt(laminar_dp_pa)`.
+    inverse_root_laminar_dp: f64,
 }
 
 impl OrificeConstants {
@@ -428,7 +440,7 @@ impl OrificeConstants {
             discharge_coefficient: fluid.discharge_coefficient,
             root_two_over_rho: (2.0 / fluid.density_kg_per_m3).sqrt(),
             laminar_dp_pa: fluid.laminar_dp_pa,
-            root_laminar_dp: fluid.laminar_dp_pa.sqrt(),
+            inverse_root_laminar_dp: fluid.laminar_dp_pa.sqrt().recip(),
         }
     }
 }
@@ -456,7 +468,7 @@ impl Orifice {
         let k = c.discharge_coefficient * area * c.root_two_over_rho;
         Self {
             k,
-            laminar_slope: k / c.root_laminar_dp,
+            laminar_slope: k * c.inverse_root_laminar_dp,
             laminar_dp_pa: c.laminar_dp_pa,
         }
     }
@@ -630,6 +642,13 @@ impl Hydraulics {
         Self {
             params,
             orifice_constants: OrificeConstants::of(&params.fluid),
+            valve_spans: params.valves.map(|v| ValveSpans {
+                inverse_metering: (1.0 - v.overlap).max(1e-6).recip(),
+                inverse_bypass_close: v.bypass_close.max(1e-6).recip(),
+            }),
+            inverse_crossover_span: (params.crossover_full - params.crossover_start)
+                .max(1e-6)
+                .recip(),
             main_reliefs: params.pumps.map(|pp| {
                 Relief::new(
                     pp.main_relief_pa,
@@ -736,19 +755,25 @@ impl Hydraulics {
             }
         });
 
-        // Valve areas.
+        // Valve areas ([`ValveParams::meter_in_area`], `meter_out_area`, `bypass_area`, with the
+        // divisions by constant spans done once in `Hydraulics::new`).
         let mut meter_in = [0.0; N_ACTUATORS];
         let mut meter_out = [0.0; N_ACTUATORS];
+        let mut valve_bypass = [0.0; N_ACTUATORS];
         for i in 0..N_ACTUATORS {
-            meter_in[i] = p.valves[i].meter_in_area(spools[i]);
-            meter_out[i] = p.valves[i].meter_out_area(spools[i]);
+            let (valve, spans, spool) = (&p.valves[i], &self.valve_spans[i], spools[i].abs());
+            let fraction = ((spool - valve.overlap) * spans.inverse_metering).clamp(0.0, 1.0);
+            meter_in[i] = valve.meter_in_area_m2 * fraction;
+            meter_out[i] = valve.meter_out_area_m2 * fraction;
+            valve_bypass[i] =
+                valve.bypass_area_m2 * (1.0 - spool * spans.inverse_bypass_close).clamp(0.0, 1.0);
         }
         // Hidden effect: the bucket spool steals boom meter-in flow on the shared pump.
         meter_in[BOOM] *= (1.0 - effects.flow_sharing * spools[BUCKET].abs()).clamp(0.0, 1.0);
         let boom_cmd = spools[BOOM].abs();
-        let crossover_area = p.crossover_area_m2
-            * ((boom_cmd - p.crossover_start) / (p.crossover_full - p.crossover_start).max(1e-6))
-                .clamp(0.0, 1.0);
+        let crossover_fraction =
+            ((boom_cmd - p.crossover_start) * self.inverse_crossover_span).clamp(0.0, 1.0);
+        let crossover_area = p.crossover_area_m2 * crossover_fraction;
         // Series bypass of the valves on each pump: 1/A^2 = sum 1/A_i^2.
         let mut bypass = [0.0; 2];
         for (pump, bypass_area) in bypass.iter_mut().enumerate() {
@@ -756,7 +781,7 @@ impl Hydraulics {
             let mut closed = false;
             for i in 0..N_ACTUATORS {
                 if VALVE_PUMP[i] == pump {
-                    let a = p.valves[i].bypass_area(spools[i]);
+                    let a = valve_bypass[i];
                     if a <= 0.0 {
                         closed = true;
                     } else {
@@ -766,8 +791,7 @@ impl Hydraulics {
             }
             // The crossover spool sits in pump 2's centre passage and closes it as it opens.
             if pump == 1 && crossover_area > 0.0 {
-                let frac = 1.0 - crossover_area / p.crossover_area_m2.max(1e-12);
-                let a = p.valves[BOOM].bypass_area_m2 * frac;
+                let a = p.valves[BOOM].bypass_area_m2 * (1.0 - crossover_fraction);
                 if a <= 0.0 {
                     closed = true;
                 } else {
@@ -800,14 +824,15 @@ impl Hydraulics {
             let pp = p.pumps[pump];
             let acts = &self.actuators;
             let main_relief = self.main_reliefs[pump];
+            // `PumpParams::flow` and its slope with one division: `min(Q_max, W / p)`.
+            let q_max = pp.max_flow_m3_per_s * (1.0 - effects.pump_saturation).clamp(0.0, 1.0);
             let balance = |pg: f64| {
-                let mut value = pp.flow(pg, effects.pump_saturation);
-                let mut slope = if pp.power_w / pg.max(1.0)
-                    < pp.max_flow_m3_per_s * (1.0 - effects.pump_saturation)
-                {
-                    -pp.power_w / (pg.max(1.0) * pg.max(1.0))
+                let inverse_p = pg.max(1.0).recip();
+                let destroked = pp.power_w * inverse_p;
+                let (mut value, mut slope) = if destroked < q_max {
+                    (destroked, -destroked * inverse_p)
                 } else {
-                    0.0
+                    (q_max, 0.0)
                 };
                 let (qb, db) = bypass_orifice[pump].flow(pg - tank);
                 value -= qb;

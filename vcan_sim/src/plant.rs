@@ -157,7 +157,11 @@ pub struct Plant {
     delay: VecDeque<[f64; 6]>,
     spool: [f64; 6],
     spool2: [f64; 6],
+    /// The linkage state of the extensions at the last 200 Hz load update (or start); `link_stale`
+    /// when the hydraulics have moved since. The loads need it at 200 Hz only, so it is refreshed
+    /// there (and computed on demand by the accessors), not every step.
     link: LinkageState,
+    link_stale: bool,
     soil_force: TipForce,
     sensors: Sensors,
     time_s: f64,
@@ -236,6 +240,7 @@ impl Plant {
             spool: [0.0; 6],
             spool2: [0.0; 6],
             link,
+            link_stale: false,
             soil_force: TipForce::default(),
             sensors: Sensors::new(SensorSpec::default(), scenario.seed),
             time_s: 0.0,
@@ -295,7 +300,7 @@ impl Plant {
 
     /// Current joint angles of the implement.
     pub fn joint_angles(&self) -> JointAngles {
-        self.link.q
+        self.link().q
     }
 
     /// Mass bookkeeping of the soil the bucket moved.
@@ -307,7 +312,16 @@ impl Plant {
         self.contact.content.mass_kg
     }
 
-    fn update_link(&mut self) {
+    /// The linkage state of the current cylinder extensions (stroke tables).
+    fn link(&self) -> LinkageState {
+        if self.link_stale {
+            self.link_from_tables()
+        } else {
+            self.link
+        }
+    }
+
+    fn link_from_tables(&self) -> LinkageState {
         let mut arms = [0.0; 3];
         let mut angles = [0.0; 3];
         for i in 0..3 {
@@ -315,14 +329,14 @@ impl Plant {
             angles[i] = a;
             arms[i] = r;
         }
-        self.link = LinkageState {
+        LinkageState {
             q: JointAngles {
                 boom_rad: angles[0],
                 stick_rad: angles[1],
                 bucket_rad: angles[2],
             },
             arms,
-        };
+        }
     }
 
     /// Loads on the actuators at the current pose, with its geometry.
@@ -429,6 +443,10 @@ impl Plant {
         // Soil contact at the current pose and the loads of gravity, payload and soil on the
         // cylinders (Appendix), at 200 Hz: they depend on the pose, which moves little in 5 ms.
         if self.steps.is_multiple_of(SOIL_SUBSTEPS) {
+            if self.link_stale {
+                self.link = self.link_from_tables();
+                self.link_stale = false;
+            }
             let frame = self.linkage.frame(&self.link.q);
             self.soil_contact(dt * SOIL_SUBSTEPS as f64, &frame);
             self.cached_loads = self.loads(&frame);
@@ -448,7 +466,7 @@ impl Plant {
             &loads,
             &hfx,
         );
-        self.update_link();
+        self.link_stale = true;
 
         // Tracks: speed follows the command with a lag; odometry and pose by differential drive.
         let vmax = self.cfg.tracks.max_speed_m_per_s;
@@ -471,14 +489,15 @@ impl Plant {
     /// The true values the sensors see.
     pub fn sensed_truth(&self) -> SensedTruth {
         let a = &self.hydraulics.actuators;
+        let link = self.link();
         let rates = self
             .linkage
-            .joint_rates(&self.link, [a[0].velocity, a[1].velocity, a[2].velocity]);
+            .joint_rates(&link, [a[0].velocity, a[1].velocity, a[2].velocity]);
         SensedTruth {
             angles_rad: [
-                self.link.q.boom_rad,
-                self.link.q.stick_rad,
-                self.link.q.bucket_rad,
+                link.q.boom_rad,
+                link.q.stick_rad,
+                link.q.bucket_rad,
                 a[SWING].position,
             ],
             rates_rad_per_s: [rates[0], rates[1], rates[2], a[SWING].velocity],
@@ -520,7 +539,7 @@ impl Plant {
         let t = self.sensed_truth();
         let a = &self.hydraulics.actuators;
         let swing = a[SWING].position;
-        let tip = self.linkage.kinematics().forward(&self.link.q);
+        let tip = self.linkage.kinematics().forward(&self.link().q);
         TrueState {
             time_s: self.time_s,
             angles_rad: t.angles_rad,
