@@ -111,6 +111,11 @@ pub struct TrainArgs {
     /// Teacher-forcing epochs before the free-running phase.
     #[arg(long, default_value_t = 300)]
     pub teacher_epochs: usize,
+    /// Feed the networks the delayed commands through a first-order lag with the machine file's spool
+    /// time constant (`lag_time_constant_s`): an estimate of the spool positions the valves meter with,
+    /// instead of the delayed commands themselves.
+    #[arg(long)]
+    pub spool_lag: bool,
     /// Machine file (default: the built-in config/machine.toml).
     #[arg(long, value_name = "FILE")]
     pub machine: Option<PathBuf>,
@@ -1170,6 +1175,11 @@ fn train(a: &TrainArgs) -> anyhow::Result<()> {
         orifice_inputs: a.orifice_inputs,
         teacher_forcing_epochs: a.teacher_epochs,
         force_noise: a.force_noise,
+        command_lag_s: if a.spool_lag {
+            machine.hydraulics.lag_time_constant_s
+        } else {
+            0.0
+        },
         free_run_loss: if a.abs_loss {
             FreeRunLoss::Absolute
         } else {
@@ -1179,12 +1189,13 @@ fn train(a: &TrainArgs) -> anyhow::Result<()> {
     };
     let samples: usize = digs.iter().map(|d| d.samples.len()).sum();
     println!(
-        "training on {} digs ({} samples) from {} trace(s): {} hidden units, delay {} steps, seed {}, {} inputs",
+        "training on {} digs ({} samples) from {} trace(s): {} hidden units, delay {} steps, spool lag {} s, seed {}, {} inputs",
         digs.len(),
         samples,
         a.trace.len(),
         config.hidden_units,
         config.delay_steps,
+        config.command_lag_s,
         config.seed,
         if config.orifice_inputs {
             "coupled + orifice drives"
