@@ -195,14 +195,6 @@ impl World {
         }
     }
 
-    fn cell_density(&self, i: usize, j: usize, effects: &SoilEffects) -> f64 {
-        let nx = self.terrain.nx();
-        self.soil
-            .get(j * nx + i)
-            .map_or(1700.0, |c| c.density_kg_per_m3)
-            + effects.density_kg_per_m3
-    }
-
     /// Terrain height at a world point; 0 (the ground plane) outside the map or where unknown.
     pub fn height(&self, x_m: f64, y_m: f64) -> f64 {
         self.height_known(x_m, y_m).unwrap_or(0.0)
@@ -632,32 +624,36 @@ impl SoilContact {
             let density = world.default_soil.density_kg_per_m3 + effects.density_kg_per_m3;
             (volume, volume * density)
         } else {
-            let mut before = Vec::with_capacity((i1 - i0) * (j1 - j0));
+            // The cells whose density differs from the default, with their heights before the cut
+            // (rows without any skipped by the summed-area table): the mass is the removed volume
+            // times the default density plus, for each of them, its removed volume times the
+            // difference (the same mass as summing every cell with its own density, to rounding,
+            // without copying the whole box).
+            let nx = t.nx();
+            let default_density = world.default_soil.density_kg_per_m3;
+            let mut odd = Vec::new();
             for j in j0..j1 {
+                if world.default_density_in(i0, i1, j, j + 1) {
+                    continue;
+                }
                 for i in i0..i1 {
-                    before.push(t.cell(i, j).unwrap_or(f64::NAN));
+                    let excess = world.soil[j * nx + i].density_kg_per_m3 - default_density;
+                    if excess != 0.0 {
+                        odd.push((i, j, excess, t.cell(i, j).unwrap_or(f64::NAN)));
+                    }
                 }
             }
-            // Boulder cells are not cut: the edge rides over them (the contact force stops it).
-            if world
+            let Ok(volume) = world
                 .terrain
                 .cut(from, to, input.azimuth_rad, input.width_m)
-                .is_err()
-            {
+            else {
                 return;
-            }
-            let (mut volume, mut mass) = (0.0, 0.0);
-            let mut k = 0;
-            for j in j0..j1 {
-                for i in i0..i1 {
-                    let h0 = before[k];
-                    k += 1;
-                    let h1 = world.terrain.cell(i, j).unwrap_or(h0);
-                    if h0.is_finite() && h1 < h0 {
-                        let dv = (h0 - h1) * area;
-                        volume += dv;
-                        mass += dv * world.cell_density(i, j, effects);
-                    }
+            };
+            let mut mass = volume * (default_density + effects.density_kg_per_m3);
+            for (i, j, excess, h0) in odd {
+                let h1 = world.terrain.cell(i, j).unwrap_or(h0);
+                if h0.is_finite() && h1 < h0 {
+                    mass += (h0 - h1) * area * excess;
                 }
             }
             (volume, mass)
