@@ -967,10 +967,21 @@ impl Hydraulics {
                                  p_before: f64,
                                  volume: f64,
                                  dvdt: f64,
-                                 supplied,
-                                 drained,
+                                 supplied: bool,
+                                 drained: bool,
                                  other| {
                 let c = p.fluid.bulk_modulus_pa * dt_s / volume.max(1e-6);
+                // A dead-ended chamber (spool centred, no leakage) between tank pressure and its
+                // port relief exchanges no oil: the make-up orifice is shut at or above tank pressure
+                // and the relief below its cracking pressure, so Eq. 2 is linear there and its
+                // backward-Euler root `P' = P - c dV/dt` is exact when it lies in that range (the
+                // solver would land on it to rounding after one evaluation), with no inflow slope.
+                if !supplied && !drained && leak == 0.0 {
+                    let pn = p_old + c * (0.0 - dvdt);
+                    if pn >= tank && pn <= port_relief.crack {
+                        return (pn, c);
+                    }
+                }
                 // The inflow slope at the last pressure the solver evaluated: within its 10 Pa tolerance
                 // of the root, so it stands in for the slope at the root without another evaluation.
                 // With it, the second derivative there (signed, and its terms' magnitudes).
