@@ -115,6 +115,7 @@ pub fn read_trace(path: &Path) -> anyhow::Result<Vec<(u16, Sample)>> {
                 }
                 current.time_s = t;
                 current.angles_rad = [a.boom_rad, a.stick_rad, a.bucket_rad];
+                current.swing_rad = a.swing_rad;
                 pending = Some(current);
             }
             Message::JointRates(r) => {
@@ -198,12 +199,17 @@ pub fn read_scans(dir: &Path) -> anyhow::Result<Vec<ScanFile>> {
         .collect()
 }
 
-/// The terrain section of a scan along its digging plane, in the base frame (x from the swing axis,
-/// z up): points within 0.5 m of the plane, median height per 0.1 m bin, gaps interpolated. The
-/// machine position follows from the sensor pose and the machine file's `[sensor]` mount.
-pub fn scan_section(scan: &ScanFile, machine: &MachineConfig) -> Option<SectionProfile> {
-    let h = scan.sensor.heading_rad;
-    let mount = h + machine.sensor.bearing_rad;
+/// The terrain section of a scan along the digging plane at world azimuth `plane_azimuth_rad`, in the
+/// base frame (x from the swing axis, z up): points within 0.5 m of the plane, median height per 0.1 m
+/// bin, gaps interpolated. The machine position follows from the sensor pose (its heading is the
+/// azimuth the cab faced during the scan) and the machine file's `[sensor]` mount.
+pub fn scan_section(
+    scan: &ScanFile,
+    machine: &MachineConfig,
+    plane_azimuth_rad: f64,
+) -> Option<SectionProfile> {
+    let mount = scan.sensor.heading_rad + machine.sensor.bearing_rad;
+    let h = plane_azimuth_rad;
     let origin = [
         scan.sensor.x_m - machine.sensor.radial_offset_m * mount.cos(),
         scan.sensor.y_m - machine.sensor.radial_offset_m * mount.sin(),
@@ -257,14 +263,32 @@ pub fn scan_section(scan: &ScanFile, machine: &MachineConfig) -> Option<SectionP
     SectionProfile::new(R0_M + first as f64 * STEP_M, STEP_M, values).ok()
 }
 
+/// Swing angle at time `t_s`: the sample nearest in time (samples in time order).
+fn swing_at(samples: &[(u16, Sample)], t_s: f64) -> Option<f64> {
+    let k = samples.partition_point(|(_, s)| s.time_s < t_s);
+    let near = |j: usize| {
+        samples
+            .get(j)
+            .map(|(_, s)| ((s.time_s - t_s).abs(), s.swing_rad))
+    };
+    let best = match (k.checked_sub(1).and_then(near), near(k)) {
+        (Some(a), Some(b)) => Some(if a.0 <= b.0 { a } else { b }),
+        (a, b) => a.or(b),
+    }?;
+    (best.0 < 0.5).then_some(best.1)
+}
+
 /// Reads a session folder into one record per dig index (every sample of that work cycle), each with
-/// the section of the last scan before its Autodig started.
+/// the section of the last scan before its Autodig started, cut along the dig's own digging plane:
+/// the machine heading at the scan (the scan's heading less the swing angle then) plus the swing
+/// angle when the dig starts (the cab usually faces the dump, not the dig, while it scans).
 ///
 /// # Errors
 /// Reading the trace or the scans.
 pub fn read_session(dir: &Path, machine: &MachineConfig) -> anyhow::Result<Vec<DigRecord>> {
     let samples = read_trace(&dir.join("trace.log"))?;
     let scans = read_scans(dir)?;
+    let scan_swing: Vec<Option<f64>> = scans.iter().map(|s| swing_at(&samples, s.time_s)).collect();
     let mut records: Vec<DigRecord> = Vec::new();
     for (index, s) in samples {
         match records.last_mut() {
@@ -281,13 +305,18 @@ pub fn read_session(dir: &Path, machine: &MachineConfig) -> anyhow::Result<Vec<D
             .samples
             .iter()
             .find(|s| s.stage != StageTag::Outside || s.load == LoadTag::InSoil)
-            .map(|s| s.time_s);
-        if let Some(t0) = dig_start {
+            .map(|s| (s.time_s, s.swing_rad));
+        if let Some((t0, dig_swing)) = dig_start {
             r.section = scans
                 .iter()
+                .zip(&scan_swing)
                 .rev()
-                .find(|s| s.time_s <= t0 + 1e-9)
-                .and_then(|s| scan_section(s, machine));
+                .find(|(s, _)| s.time_s <= t0 + 1e-9)
+                .and_then(|(s, swing)| {
+                    // Without the swing angle at the scan, the scan's own heading is the best guess.
+                    let base_heading = s.sensor.heading_rad - swing.unwrap_or(dig_swing);
+                    scan_section(s, machine, base_heading + dig_swing)
+                });
         }
     }
     records.retain(|r| r.samples.len() >= 200 && r.validate().is_ok());

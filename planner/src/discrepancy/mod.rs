@@ -139,6 +139,8 @@ pub struct Sample {
     pub rates_rad_per_s: [f64; 3],
     /// Measured swing rate, rad/s.
     pub swing_rate_rad_per_s: f64,
+    /// Measured swing angle, rad (the digging plane's azimuth is the machine heading plus it).
+    pub swing_rad: f64,
     /// Measured head pressures, Pa.
     pub head_pa: [f64; 3],
     /// Measured rod pressures, Pa.
