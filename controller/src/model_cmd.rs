@@ -116,6 +116,10 @@ pub struct TrainArgs {
     /// instead of the delayed commands themselves.
     #[arg(long)]
     pub spool_lag: bool,
+    /// Also feed every network the command and force of the third cylinder, so each sees all three
+    /// valves and loads (the boom's crossover flow comes from the stick's pump).
+    #[arg(long, conflicts_with_all = ["thesis_inputs", "orifice_inputs"])]
+    pub third_inputs: bool,
     /// Machine file (default: the built-in config/machine.toml).
     #[arg(long, value_name = "FILE")]
     pub machine: Option<PathBuf>,
@@ -1175,6 +1179,7 @@ fn train(a: &TrainArgs) -> anyhow::Result<()> {
         orifice_inputs: a.orifice_inputs,
         teacher_forcing_epochs: a.teacher_epochs,
         force_noise: a.force_noise,
+        third_inputs: a.third_inputs,
         command_lag_s: if a.spool_lag {
             machine.hydraulics.lag_time_constant_s
         } else {
@@ -1199,6 +1204,8 @@ fn train(a: &TrainArgs) -> anyhow::Result<()> {
         config.seed,
         if config.orifice_inputs {
             "coupled + orifice drives"
+        } else if config.third_inputs {
+            "all three cylinders' command and force"
         } else if config.coupled_inputs {
             "coupled (partner command and force)"
         } else {

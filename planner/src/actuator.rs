@@ -68,6 +68,10 @@ const IN_PARTNER_FORCE: usize = 4;
 /// largest the cylinder held in the training data ([`orifice_drive`]).
 const IN_ORIFICE: usize = 5;
 const IN_PARTNER_ORIFICE: usize = 6;
+/// In the all-cylinder layout ([`TrainConfig::third_inputs`]) the last two slots carry the delayed
+/// command and the force of the third cylinder instead of the orifice drives.
+const IN_THIRD_COMMAND: usize = 5;
+const IN_THIRD_FORCE: usize = 6;
 
 /// The cylinder whose flow network `j` shares: boom <- bucket (shared pump), stick <- boom (crossover),
 /// bucket <- boom (shared pump).
@@ -75,6 +79,15 @@ const fn partner(j: usize) -> usize {
     match j {
         0 => 2,
         _ => 0,
+    }
+}
+
+/// The cylinder that is neither `j` nor its partner: boom <- stick (the crossover brings pump 2's flow,
+/// which the stick's load sets), stick <- bucket, bucket <- stick.
+const fn third(j: usize) -> usize {
+    match j {
+        1 => 2,
+        _ => 1,
     }
 }
 
@@ -288,6 +301,10 @@ pub struct TrainConfig {
     /// main-stage lag behind the transport delay; the machine file's `lag_time_constant_s`). Zero: the
     /// delayed command itself (Fig. 17).
     pub command_lag_s: f64,
+    /// With the coupled inputs, every network also gets the delayed command and the force of the third
+    /// cylinder, so it sees all three valves and loads (the boom's crossover flow comes from the stick's
+    /// pump and depends on the stick's load). Excludes `orifice_inputs`.
+    pub third_inputs: bool,
 }
 
 /// Loss of the free-running (BPTT) phase and of early stopping on the validation digs.
@@ -339,6 +356,7 @@ impl Default for TrainConfig {
             free_run_loss: FreeRunLoss::Squared,
             force_noise: 0.0,
             command_lag_s: 0.0,
+            third_inputs: false,
         }
     }
 }
@@ -357,6 +375,12 @@ impl TrainConfig {
         }
         if self.orifice_inputs && !self.coupled_inputs {
             return bad("orifice_inputs", "needs coupled_inputs");
+        }
+        if self.third_inputs && (self.orifice_inputs || !self.coupled_inputs) {
+            return bad(
+                "third_inputs",
+                "needs coupled_inputs and excludes orifice_inputs",
+            );
         }
         for (field, value) in [
             ("validation_fraction", self.validation_fraction),
@@ -475,6 +499,8 @@ struct Network {
     /// Reference forces of the orifice drive, N, `[own, partner]`, each `[extending, retracting]`
     /// (positive magnitudes).
     orifice_ref_n: [[f64; 2]; 2],
+    /// The last two slots carry the third cylinder's command and force (not the orifice drives).
+    third: bool,
     /// `W1` (hidden x inputs, row-major), `b1` (hidden), `w2` (hidden), `s` (inputs), `b2`.
     params: Vec<f64>,
 }
@@ -583,7 +609,11 @@ impl Network {
         raw[IN_VELOCITY] = velocity;
         raw[IN_PARTNER_COMMAND] = delayed[o];
         raw[IN_PARTNER_FORCE] = force_n[o];
-        if self.inputs == MAX_INPUTS {
+        if self.third {
+            let t = third(j);
+            raw[IN_THIRD_COMMAND] = delayed[t];
+            raw[IN_THIRD_FORCE] = force_n[t];
+        } else if self.inputs == MAX_INPUTS {
             let [own, other] = &self.orifice_ref_n;
             raw[IN_ORIFICE] = orifice_drive(delayed[j], force_n[j], own);
             raw[IN_PARTNER_ORIFICE] = orifice_drive(delayed[o], force_n[o], other);
@@ -628,16 +658,22 @@ struct NetworkFile {
     orifice_reference_force_n: Option<[[f64; 2]; 2]>,
 }
 
-fn input_names(j: usize, inputs: usize) -> Vec<String> {
+fn input_names(j: usize, inputs: usize, with_third: bool) -> Vec<String> {
     let other = Joint::ALL[partner(j)];
+    let t = Joint::ALL[third(j)];
+    let (fifth, sixth) = if with_third {
+        (format!("delayed_{t}_command"), format!("{t}_force_n"))
+    } else {
+        ("orifice_drive".to_owned(), format!("{other}_orifice_drive"))
+    };
     [
         "delayed_command".to_owned(),
         "force_n".to_owned(),
         "previous_velocity_m_per_s".to_owned(),
         format!("delayed_{other}_command"),
         format!("{other}_force_n"),
-        "orifice_drive".to_owned(),
-        format!("{other}_orifice_drive"),
+        fifth,
+        sixth,
     ]
     .into_iter()
     .take(inputs)
@@ -658,7 +694,7 @@ impl From<&Network> for NetworkFile {
                 .unwrap_or_default()
         };
         Self {
-            inputs: input_names(net.joint.index(), net.inputs),
+            inputs: input_names(net.joint.index(), net.inputs, net.third),
             activation: net.activation,
             input_offset: net.input_offset[..net.inputs].to_vec(),
             input_scale: net.input_scale[..net.inputs].to_vec(),
@@ -669,7 +705,8 @@ impl From<&Network> for NetworkFile {
             output_weights: slice(net.w2_at(), net.hidden),
             shortcut_weights: slice(net.skip_at(), net.inputs),
             output_bias: p.get(net.b2_at()).copied().unwrap_or(0.0),
-            orifice_reference_force_n: (net.inputs == MAX_INPUTS).then_some(net.orifice_ref_n),
+            orifice_reference_force_n: (net.inputs == MAX_INPUTS && !net.third)
+                .then_some(net.orifice_ref_n),
         }
     }
 }
@@ -686,13 +723,17 @@ impl NetworkFile {
         if inputs != thesis_inputs(j) && inputs != COUPLED_INPUTS && inputs != MAX_INPUTS {
             return bad("input count is neither Fig. 17's, the coupled nor the orifice layout");
         }
-        let orifice_ref_n = match (inputs == MAX_INPUTS, self.orifice_reference_force_n) {
+        let with_third = inputs == MAX_INPUTS && self.inputs == input_names(j, inputs, true);
+        let orifice_ref_n = match (
+            inputs == MAX_INPUTS && !with_third,
+            self.orifice_reference_force_n,
+        ) {
             (false, None) => [[1.0; 2]; 2],
             (true, Some(r)) if r.iter().flatten().all(|f| f.is_finite() && *f > 0.0) => r,
             (true, _) => return bad("orifice reference forces missing or not positive"),
             (false, Some(_)) => return bad("orifice reference forces without orifice inputs"),
         };
-        if self.inputs != input_names(j, inputs) {
+        if self.inputs != input_names(j, inputs, with_third) {
             return bad("input names do not match the layout");
         }
         let hidden = self.hidden_weights.len();
@@ -755,6 +796,7 @@ impl NetworkFile {
             velocity_scale: vs,
             output_limit: limit / vs,
             orifice_ref_n,
+            third: with_third,
             params,
         })
     }
@@ -1309,6 +1351,7 @@ fn new_network(
     let joint = Joint::ALL[j];
     let inputs = match (config.coupled_inputs, config.orifice_inputs) {
         (true, true) => MAX_INPUTS,
+        (true, false) if config.third_inputs => MAX_INPUTS,
         (true, false) => COUPLED_INPUTS,
         (false, _) => thesis_inputs(j),
     };
@@ -1354,6 +1397,15 @@ fn new_network(
         input_offset[slot] = mean;
         input_scale[slot] = if std > 1e-9 { std } else { 1.0 };
     }
+    if config.third_inputs {
+        // The third cylinder's command stays as it is (a fraction), its force is standardised.
+        let t = third(j);
+        let (t_mean, t_std) = mean_std(seqs.iter().flat_map(|s| s.force.iter().map(move |f| f[t])));
+        input_offset[IN_THIRD_COMMAND] = 0.0;
+        input_scale[IN_THIRD_COMMAND] = 1.0;
+        input_offset[IN_THIRD_FORCE] = t_mean;
+        input_scale[IN_THIRD_FORCE] = if t_std > 1e-9 { t_std } else { 1.0 };
+    }
     let hidden = config.hidden_units;
     let count = Network::param_count(inputs, hidden);
     let bound = 1.0 / (inputs as f64).sqrt();
@@ -1370,6 +1422,7 @@ fn new_network(
         velocity_scale: v_std,
         output_limit: VELOCITY_LIMIT_FACTOR * v_peak / v_std,
         orifice_ref_n,
+        third: config.third_inputs,
         params: Vec::new(),
     };
     // Start the shortcut near Eq. 4's slow first-order response: v(t+1) = 0.9 v(t) + ...
@@ -2060,6 +2113,53 @@ mod tests {
                 ActuatorDig { samples }
             })
             .collect()
+    }
+
+    #[test]
+    fn third_inputs_round_trip_and_are_validated() {
+        let digs = synthetic_digs(4, 60, 8);
+        let config = TrainConfig {
+            teacher_forcing_epochs: 20,
+            free_run_epochs: 5,
+            coupled_inputs: true,
+            third_inputs: true,
+            ..test_config()
+        };
+        let (model, _) = train(&digs, &config, |_| {}).unwrap();
+        let text = model.to_json().unwrap();
+        // The boom network names the stick's command and force (the crossover), not orifice drives.
+        assert!(text.contains("\"delayed_stick_command\""));
+        assert!(text.contains("\"stick_force_n\""));
+        assert!(!text.contains("orifice"));
+        let back = ActuatorModel::from_json(&text).unwrap();
+        let (a, b) = (
+            back.evaluate(&digs).unwrap(),
+            model.evaluate(&digs).unwrap(),
+        );
+        for (x, y) in a.cylinders.iter().zip(&b.cylinders) {
+            assert!((x.mae_m_per_s - y.mae_m_per_s).abs() < 1e-12);
+        }
+        // The third cylinder's force changes the boom's prediction.
+        let mut s1 = model.initial_state([0.0; 3], [0.5; 3]).unwrap();
+        let mut s2 = s1;
+        let v1 = model.step(&mut s1, [0.5; 3], [1e5, 0.0, 1e5]).unwrap();
+        let v2 = model.step(&mut s2, [0.5; 3], [1e5, 2e5, 1e5]).unwrap();
+        assert_ne!(v1[0], v2[0]);
+        for bad in [
+            TrainConfig {
+                orifice_inputs: true,
+                ..config.clone()
+            },
+            TrainConfig {
+                coupled_inputs: false,
+                ..config.clone()
+            },
+        ] {
+            assert!(matches!(
+                train(&digs, &bad, |_| {}),
+                Err(ActuatorError::InvalidConfig { .. })
+            ));
+        }
     }
 
     /// The dead band acts on the lagged spool, which the networks cannot rebuild from the delayed
