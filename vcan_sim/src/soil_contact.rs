@@ -462,7 +462,8 @@ impl SoilContact {
         let at_r = |offset: f64| world.height(tip[0] + offset * u[0], tip[1] + offset * u[1]);
         let v = input.tip_velocity_base;
         let ahead = if v[0] > 0.0 { 0.15 } else { -0.15 };
-        let surface = at_r(0.0).max(at_r(ahead));
+        // `at_r(0.0)` is `ground` (the same point on the same terrain).
+        let surface = ground.max(at_r(ahead));
         let depth_vertical = surface - tip[2];
         self.in_contact = depth_vertical > 0.0;
         let alpha = ((at_r(0.25) - at_r(-0.25)) / 0.5).atan();
