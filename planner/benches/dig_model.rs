@@ -155,6 +155,40 @@ fn main() {
         share(per_step - act_ns - soil_ns)
     );
 
+    // Another actuator file side by side (same run, same load): `DIG_BENCH_ACTUATOR=FILE`.
+    if let Ok(path) = std::env::var("DIG_BENCH_ACTUATOR") {
+        let text = std::fs::read_to_string(&path).unwrap();
+        let other = ActuatorModel::from_json(&text).unwrap();
+        let other_model = model.clone().with_actuator(other.clone()).unwrap();
+        let other_summary = other_model.evaluate(&one, &site).unwrap();
+        let (other_best, _, _) = time_it(1000, 1, || {
+            black_box(other_model.evaluate(black_box(&one), &site).unwrap());
+        });
+        let mut state = other.initial_state([0.0; 3], [0.0; 3]).unwrap();
+        let (other_act, _, _) = time_it(300, 100, || {
+            black_box(
+                other
+                    .step(
+                        &mut state,
+                        black_box([0.4, 1.0, 0.7]),
+                        black_box([2e5, 1.5e5, 1e5]),
+                    )
+                    .unwrap(),
+            );
+        });
+        let other_per_step = other_best / other_summary.steps.max(1) as f64 * 1e9;
+        println!(
+            "  {path} ({} hidden units): {:.2} s dig, fastest {:.3} ms, {other_per_step:.0} ns/step ({:.2}x the shipped), networks {:.0} ns ({:.2}x); a 6 s dig {:.3} ms (target < 0.6 ms)",
+            other.hidden_units(),
+            other_summary.time_s,
+            other_best * 1e3,
+            other_per_step / per_step,
+            other_act * 1e9,
+            other_act / act,
+            other_per_step * 600.0 * 1e-6,
+        );
+    }
+
     // Candidates as the refined planner makes them.
     let starts: Vec<DigStart> = (0..300).map(|i| start(5.5 + 0.01 * f64::from(i))).collect();
     let t0 = Instant::now();
