@@ -466,10 +466,10 @@ impl SoilContact {
         let surface = ground.max(at_r(ahead));
         let depth_vertical = surface - tip[2];
         self.in_contact = depth_vertical > 0.0;
-        let alpha = ((at_r(0.25) - at_r(-0.25)) / 0.5).atan();
 
         let mut force = [0.0, 0.0];
         if self.in_contact {
+            let alpha = ((at_r(0.25) - at_r(-0.25)) / 0.5).atan();
             let soil = world.soil_at(tip[0], tip[1], effects);
             // Eq. 17 measures d perpendicular to the terrain.
             let d = depth_vertical * alpha.cos();
