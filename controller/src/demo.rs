@@ -265,6 +265,22 @@ pub struct DigRecord {
     /// The planner's predicted swept volume of the chosen dig, m^3 (planned digs only).
     #[serde(default)]
     pub predicted_volume_m3: Option<f64>,
+    /// The planner's predicted dig time, s (planned digs only).
+    #[serde(default)]
+    pub predicted_time_s: Option<f64>,
+    /// The planner's predicted dig energy, kJ (planned digs only).
+    #[serde(default)]
+    pub predicted_energy_kj: Option<f64>,
+    /// The lowest tip height the dig model predicted, base frame, m (planned digs only).
+    #[serde(default)]
+    pub predicted_min_tip_z_m: Option<f64>,
+    /// Where the bucket met the terrain: the first tip point of the action below the true pre-dig
+    /// surface, `(r, z)` in the base frame, m.
+    #[serde(default)]
+    pub contact_start: Option<[f64; 2]>,
+    /// The lowest tip height of the executed action, base frame, m.
+    #[serde(default)]
+    pub min_tip_z_m: Option<f64>,
     /// Autodig's soil hardness index for this dig.
     #[serde(default)]
     pub hardness_index: Option<f64>,
@@ -723,6 +739,9 @@ fn true_section(machine: &EmbeddedMachine, swing_rad: f64) -> Vec<TipPoint> {
 struct PlannedInfo {
     quality: Option<f64>,
     volume_m3: Option<f64>,
+    time_s: Option<f64>,
+    energy_kj: Option<f64>,
+    min_tip_z_m: Option<f64>,
     start: Option<[f64; 3]>,
 }
 
@@ -888,6 +907,9 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
                             ActionChoice::Dig(d) => PlannedInfo {
                                 quality: Some(d.quality.quality),
                                 volume_m3: Some(d.summary.swept_volume_m3),
+                                time_s: Some(d.summary.time_s),
+                                energy_kj: Some(d.summary.energy_kj()),
+                                min_tip_z_m: Some(d.summary.min_tip_z_m),
                                 start: Some([
                                     d.pose.x_m,
                                     d.pose.z_m,
@@ -1003,6 +1025,11 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
                     perception: false,
                     quality: info.quality,
                     predicted_volume_m3: info.volume_m3,
+                    predicted_time_s: info.time_s,
+                    predicted_energy_kj: info.energy_kj,
+                    predicted_min_tip_z_m: info.min_tip_z_m,
+                    contact_start: None,
+                    min_tip_z_m: None,
                     hardness_index: Some(node.cycle().hardness_index()),
                     pose: Some([pose.x_m, pose.y_m, pose.heading_rad]),
                     planned_start: info.start,
@@ -1056,6 +1083,20 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
             c.swept_volume_m3 = d.swept_volume_m3;
             c.end_reason = d.end_reason.map(|r| format!("{r:?}"));
             c.perception = d.perception;
+            c.min_tip_z_m = c
+                .trajectory
+                .iter()
+                .map(|p| p.z_m)
+                .filter(|z| z.is_finite())
+                .reduce(f64::min);
+            c.contact_start = c.trajectory.iter().find_map(|p| {
+                let below = c
+                    .section
+                    .iter()
+                    .min_by(|a, b| (a.x_m - p.x_m).abs().total_cmp(&(b.x_m - p.x_m).abs()))
+                    .is_some_and(|s| (s.x_m - p.x_m).abs() < 0.05 && p.z_m < s.z_m - 0.02);
+                below.then_some([p.x_m, p.z_m])
+            });
             // The map's dead reckoning of the pass: no material above the tip's path (the toe of
             // the face is out of the sensor's sight behind the crest).
             if let (Some(s), Some([x_m, y_m, heading_rad])) = (&mut session, c.pose) {
