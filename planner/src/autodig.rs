@@ -1712,7 +1712,7 @@ mod tests {
             AutodigMaps::from_toml_str(&bad),
             Err(MapsError::PressureOutOfRange { point: 4, .. })
         ));
-        let bad = BUILTIN_MAPS_TOML.replace("[[0, 100], [75, 100]", "[[0, 150], [75, 100]");
+        let bad = BUILTIN_MAPS_TOML.replace("[[0, 100], [77, 100]", "[[0, 150], [77, 100]");
         assert!(matches!(
             AutodigMaps::from_toml_str(&bad),
             Err(MapsError::CommandOutOfRange { point: 0, .. })
