@@ -1,6 +1,6 @@
 //! The thesis reproductions (`excavator-ctl experiment`) in a reduced run: the trends that hold today.
-//! Those that do not (Table 1's consistent payload with perception; Table 2's time, swept volume and
-//! x3 energy; Fig. 52's soft-soil half) are listed in the README section and not asserted.
+//! Those that do not (Table 1's consistent payload with perception; Table 2's swept volume and x3
+//! energy; Fig. 52's soft-soil energy) are listed in docs/autodig.md and not asserted.
 
 #![allow(clippy::unwrap_used)]
 
@@ -30,8 +30,10 @@ fn energy_rises_from_the_nominal_soil_force() {
     assert!(rows.iter().all(|(_, m)| m.completed == 1), "{rows:?}");
     assert!(rows[0].1.payload_kg > 0.8 * 2550.0, "{rows:?}");
     assert!(rows[1].1.energy_kj > rows[0].1.energy_kj, "{rows:?}");
-    // x3 is not asserted: in hard soil the boom lifts the edge out early and the x3 energy falls
-    // below x2 and x1 (README, "Reproducing the thesis's Autodig results": not reproduced).
+    // Autodig slows the bucket in the harder soil (thesis 4.4): the dig takes longer at x2.
+    assert!(rows[1].1.time_s > rows[0].1.time_s, "{rows:?}");
+    // x3 is not asserted: its energy is within the seed spread of x2's (docs/autodig.md, "Retuning
+    // the Dig maps": not reproduced).
 }
 
 #[test]
@@ -43,6 +45,7 @@ fn fig52_report_prints_the_thesis_comparison() {
         out: "out/experiment".into(),
         planner: None,
         maps: None,
+        base_scale: controller::experiment::TABLE2_BASE_SCALE,
     })
     .unwrap();
     assert!(
@@ -72,4 +75,6 @@ fn fig52_high_index_does_better_in_hard_soil() {
         "{rows:?}"
     );
     assert!(soft1.time_s < soft5.time_s, "{rows:?}");
+    // In the soft soil the low index fills the bucket too (Fig. 52, top).
+    assert!(soft1.payload_kg > 0.95 * 2550.0, "{rows:?}");
 }
