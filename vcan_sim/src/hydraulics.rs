@@ -613,6 +613,50 @@ fn solve_decreasing_accepting(
     (p, false)
 }
 
+/// How oil can enter or leave a chamber this step, for [`chamber_root_without_solver`].
+#[derive(Debug, Clone, Copy)]
+enum ChamberPath<'a> {
+    /// No open path (spool centred or inside its overlap, no leakage).
+    DeadEnd,
+    /// Fed from the gallery at the given pressure through this meter-in orifice only.
+    In(&'a Orifice, f64),
+    /// Drained to tank through this meter-out orifice only.
+    Out(&'a Orifice),
+    /// Crossover or leakage: left to the Newton solve.
+    Solve,
+}
+
+/// Eq. 2's backward-Euler root and the piston's oil stiffness `dP'/d(dV/dt) = -c / (1 - c dQ/dP')`
+/// for a chamber that needs no solver, when the root lies between tank pressure and the port relief's
+/// cracking pressure `crack_pa` (make-up and relief shut there); `None` otherwise.
+/// - A dead-ended chamber exchanges no oil, so Eq. 2 is linear and its root `P' = P - c dV/dt` is
+///   exact, with no inflow slope (the solver landed on it to rounding after one evaluation).
+/// - With `closed_form`, a chamber with one open metering orifice takes
+///   [`one_orifice_chamber_root`].
+#[inline(always)]
+fn chamber_root_without_solver(
+    path: ChamberPath<'_>,
+    p_old: f64,
+    c: f64,
+    dvdt: f64,
+    tank_pa: f64,
+    crack_pa: f64,
+    closed_form: bool,
+) -> Option<(f64, f64)> {
+    let base = p_old + c * (0.0 - dvdt);
+    let (pn, slope) = match path {
+        ChamberPath::DeadEnd => (base, 0.0),
+        ChamberPath::In(orifice, gallery) if closed_form => {
+            one_orifice_chamber_root(orifice, true, gallery, base, c)?
+        }
+        ChamberPath::Out(orifice) if closed_form => {
+            one_orifice_chamber_root(orifice, false, tank_pa, base, c)?
+        }
+        _ => return None,
+    };
+    (pn >= tank_pa && pn <= crack_pa).then(|| (pn, c / (1.0 - c * slope).max(1.0)))
+}
+
 /// Eq. 2's backward-Euler root `P' = base + c Q(P')` (`base = P - c dV/dt`) for a chamber whose only
 /// open path is `orifice` (Eq. 1 with its laminar region) from the fixed pressure `fixed_pa` into it
 /// (`supplied`: a gallery through a meter-in orifice and its check valve) or from it to `fixed_pa`
@@ -620,9 +664,10 @@ fn solve_decreasing_accepting(
 /// `P' - tank`) both cases read `dp + c Q(dp) = C` with `C = g - base` or `base - tank`, increasing in
 /// `dp`: in the laminar region `dp = C / (1 + c k_l)`, else `u^2 + c k u - C = 0`, whose positive root
 /// `u = 2 C / (c k + sqrt((c k)^2 + 4 C))` is taken in the form without cancellation. Returns the
-/// chamber pressure and the inflow slope `dQ/dP'` there; `None` when no oil flows (`C <= 0`: the check
-/// valve shuts, or the chamber would drain below tank, where the make-up opens). The caller checks that
-/// the root lies where the make-up and the port relief are shut.
+/// chamber pressure and the inflow slope `dQ/dP'` there. When `C <= 0` a supplied chamber's check
+/// valve shuts and the root is `base` (no flow, slope zero); a drained chamber would fall below tank,
+/// where the make-up opens: `None`. The caller checks that the root lies where the make-up and the
+/// port relief are shut.
 #[inline]
 fn one_orifice_chamber_root(
     orifice: &Orifice,
@@ -636,8 +681,14 @@ fn one_orifice_chamber_root(
     } else {
         base - fixed_pa
     };
-    if orifice.k == 0.0 || drive.is_nan() || drive <= 0.0 {
+    if orifice.k == 0.0 || drive.is_nan() {
         return None;
+    }
+    if drive <= 0.0 {
+        // A supplied chamber at or above its gallery: the check valve holds, no oil flows, and the
+        // root is `base` itself (a stall against the main relief). A drained chamber below tank
+        // would draw through the make-up: left to the solver.
+        return supplied.then_some((base, 0.0));
     }
     let laminar_dp = drive / (1.0 + c * orifice.laminar_slope);
     let (dp, slope) = if laminar_dp < orifice.laminar_dp_pa {
@@ -1012,45 +1063,11 @@ impl Hydraulics {
             let previous = self.previous_chamber_pa[i];
             let solve_chamber = |p_old: f64,
                                  p_before: f64,
-                                 volume: f64,
+                                 c: f64,
                                  dvdt: f64,
                                  supplied: bool,
                                  drained: bool,
                                  other| {
-                let c = p.fluid.bulk_modulus_pa * dt_s / volume.max(1e-6);
-                // A dead-ended chamber (spool centred, no leakage) between tank pressure and its
-                // port relief exchanges no oil: the make-up orifice is shut at or above tank pressure
-                // and the relief below its cracking pressure, so Eq. 2 is linear there and its
-                // backward-Euler root `P' = P - c dV/dt` is exact when it lies in that range (the
-                // solver would land on it to rounding after one evaluation), with no inflow slope.
-                // A valve whose spool is inside its overlap has its metering orifices shut too.
-                let open_in =
-                    supplied && (meter_in_i.k > 0.0 || (has_cross && crossover_orifice.k > 0.0));
-                let open_out = drained && meter_out_i.k > 0.0;
-                if !open_in && !open_out && leak == 0.0 {
-                    let pn = p_old + c * (0.0 - dvdt);
-                    if pn >= tank && pn <= port_relief.crack {
-                        return (pn, c);
-                    }
-                }
-                // A chamber fed or drained through its one metering orifice (no crossover, no
-                // leakage), between tank pressure and its port relief: Eq. 2's root in closed form
-                // ([`one_orifice_chamber_root`]), with the inflow slope there.
-                if self.closed_form && leak == 0.0 && !(supplied && has_cross) {
-                    let root = if open_in {
-                        one_orifice_chamber_root(&meter_in_i, true, gallery, p_old - c * dvdt, c)
-                    } else if open_out {
-                        one_orifice_chamber_root(&meter_out_i, false, tank, p_old - c * dvdt, c)
-                    } else {
-                        None
-                    };
-                    if let Some((pn, d)) = root
-                        && pn >= tank
-                        && pn <= port_relief.crack
-                    {
-                        return (pn, c / (1.0 - c * d).max(1.0));
-                    }
-                }
                 // The inflow slope at the last pressure the solver evaluated: within its 10 Pa tolerance
                 // of the root, so it stands in for the slope at the root without another evaluation.
                 // With it, the second derivative there (signed, and its terms' magnitudes).
@@ -1086,24 +1103,62 @@ impl Hydraulics {
                 // Stiffness of the chamber seen by the piston: dP'/d(dV/dt) = -c / (1 - c dQ/dP).
                 (pn, c / (1.0 - c * d).max(1.0))
             };
-            let (head0, head_gain) = solve_chamber(
+            // The chambers that need no solver (`chamber_root_without_solver`): the path of oil
+            // into or out of each, and Eq. 2's factor `c = beta dt / V`.
+            let path = |supplied: bool, drained: bool| {
+                if leak != 0.0 || (supplied && has_cross) {
+                    ChamberPath::Solve
+                } else if supplied && meter_in_i.k > 0.0 {
+                    ChamberPath::In(&meter_in_i, gallery)
+                } else if drained && meter_out_i.k > 0.0 {
+                    ChamberPath::Out(&meter_out_i)
+                } else {
+                    ChamberPath::DeadEnd
+                }
+            };
+            let (head_dvdt, rod_dvdt) = (ch.area_head * v, -ch.area_rod * v);
+            let c_head = p.fluid.bulk_modulus_pa * dt_s / ch.head_volume(state.position).max(1e-6);
+            let c_rod = p.fluid.bulk_modulus_pa * dt_s / ch.rod_volume(state.position).max(1e-6);
+            let (head0, head_gain) = chamber_root_without_solver(
+                path(head_in, head_out),
                 state.head_pa,
-                previous[0],
-                ch.head_volume(state.position),
-                ch.area_head * v,
-                head_in,
-                head_out,
+                c_head,
+                head_dvdt,
+                tank,
+                port_relief.crack,
+                self.closed_form,
+            )
+            .unwrap_or_else(|| {
+                solve_chamber(
+                    state.head_pa,
+                    previous[0],
+                    c_head,
+                    head_dvdt,
+                    head_in,
+                    head_out,
+                    state.rod_pa,
+                )
+            });
+            let (rod0, rod_gain) = chamber_root_without_solver(
+                path(head_out, head_in),
                 state.rod_pa,
-            );
-            let (rod0, rod_gain) = solve_chamber(
-                state.rod_pa,
-                previous[1],
-                ch.rod_volume(state.position),
-                -ch.area_rod * v,
-                head_out,
-                head_in,
-                state.head_pa,
-            );
+                c_rod,
+                rod_dvdt,
+                tank,
+                port_relief.crack,
+                self.closed_form,
+            )
+            .unwrap_or_else(|| {
+                solve_chamber(
+                    state.rod_pa,
+                    previous[1],
+                    c_rod,
+                    rod_dvdt,
+                    head_out,
+                    head_in,
+                    state.head_pa,
+                )
+            });
 
             // Eq. 3: M x'' = P1 A1 - P2 A2 - F. The piston velocity enters Eq. 2 through dV/dt, so the
             // new pressures are linear in the new velocity v':
@@ -1429,17 +1484,27 @@ mod tests {
                 for (supplied, fixed) in [(true, 2.5e7), (false, 2.0e5)] {
                     for base in [-3.0e6, 1.0e5, 1.999e5, 2.01e5, 4.0e5, 5.0e6, 2.49e7, 2.6e7] {
                         let root = one_orifice_chamber_root(&orifice, supplied, fixed, base, c);
+                        // The meter-in's check valve shuts for a drop of zero or less.
                         let inflow = |pn: f64| {
                             let (q, d) =
                                 orifice.flow(if supplied { fixed - pn } else { pn - fixed });
-                            if supplied { (q, -d) } else { (-q, -d) }
+                            if supplied {
+                                if q > 0.0 { (q, -d) } else { (0.0, 0.0) }
+                            } else {
+                                (-q, -d)
+                            }
                         };
                         let residual = |pn: f64| base + c * inflow(pn).0 - pn;
                         let drive = if supplied { fixed - base } else { base - fixed };
                         let Some((pn, slope)) = root else {
-                            assert!(drive <= 0.0, "no root for drive {drive}");
+                            assert!(!supplied && drive <= 0.0, "no root for drive {drive}");
                             continue;
                         };
+                        if drive <= 0.0 {
+                            // The check valve holds: no flow, the root is `base`.
+                            assert!(supplied && pn == base && slope == 0.0 && residual(pn) == 0.0);
+                            continue;
+                        }
                         // Bisection on the decreasing residual between the fixed pressure and base.
                         let (mut lo, mut hi) = if supplied {
                             (base, fixed)
