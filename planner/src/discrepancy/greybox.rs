@@ -187,6 +187,28 @@ pub struct GreyBoxParams {
     pub soil: SoilProperties,
     /// Multiplies the FEE force (calibrated on nominal digs).
     pub soil_force_factor: f64,
+    /// Effective bulk modulus of oil and hoses (Eq. 2 `beta`), Pa.
+    #[serde(default = "default_bulk_modulus_pa")]
+    pub bulk_modulus_pa: f64,
+    /// Oil volume of a chamber at its stroke end (hoses, valve ports), m^3.
+    #[serde(default = "default_dead_volume_m3")]
+    pub dead_volume_m3: f64,
+    /// The Eq. 2 chamber balance in the velocity relation: oil compression at the measured pressure
+    /// rates, and no meter-in bound on a chamber below tank pressure (anti-cavitation make-up).
+    #[serde(default)]
+    pub chamber_balance: bool,
+    /// Cross-piston leakage of the nominal model, m^3/(s Pa) (calibrated on effect-free sessions;
+    /// the `internal_leakage` candidate adds to it).
+    #[serde(default)]
+    pub internal_leakage_m3_per_s_pa: f64,
+}
+
+fn default_bulk_modulus_pa() -> f64 {
+    1.2e9
+}
+
+fn default_dead_volume_m3() -> f64 {
+    2.0e-3
 }
 
 impl GreyBoxParams {
@@ -234,6 +256,10 @@ impl GreyBoxParams {
                 cohesion_pa: 8000.0,
             },
             soil_force_factor: 1.0,
+            bulk_modulus_pa: h.bulk_modulus_pa,
+            dead_volume_m3: default_dead_volume_m3(),
+            internal_leakage_m3_per_s_pa: 0.0,
+            chamber_balance: false,
         }
     }
 
@@ -263,6 +289,12 @@ impl GreyBoxParams {
             ("crossover", self.crossover_full > self.crossover_start),
             ("soil_force_factor", self.soil_force_factor >= 0.0),
             ("damping_n_s_per_m", self.damping_n_s_per_m >= 0.0),
+            ("bulk_modulus_pa", self.bulk_modulus_pa > 0.0),
+            ("dead_volume_m3", self.dead_volume_m3 > 0.0),
+            (
+                "internal_leakage_m3_per_s_pa",
+                self.internal_leakage_m3_per_s_pa >= 0.0,
+            ),
         ];
         for (name, ok) in positive {
             if !ok {
@@ -334,6 +366,9 @@ pub struct PreparedRecord {
     velocity: Vec<[f64; 3]>,
     /// Measured cylinder accelerations (central differences), m/s^2.
     accel: Vec<[f64; 3]>,
+    /// Oil flow taken by the compression of each cylinder's `[head, rod]` chamber (Eq. 2:
+    /// `V / beta dp/dt`, the measured pressures' central differences), m^3/s.
+    compression: Vec<[[f64; 2]; 3]>,
     /// Cylinder forces holding the links against gravity at the measured angles, N.
     gravity_force: Vec<[f64; 3]>,
     /// Their derivative with respect to a common offset of the three resolvers, N/rad.
@@ -415,6 +450,7 @@ impl PreparedRecord {
         let mut gravity_force_per_rad = vec![[0.0; 3]; n];
         let mut mass = vec![[0.0; 3]; n];
         let mut in_stroke = vec![[false; 3]; n];
+        let mut chamber_strokes = vec![None; n];
         const D_RAD: f64 = 1e-3;
         for (k, s) in record.samples.iter().enumerate() {
             let q = JointAngles {
@@ -428,6 +464,7 @@ impl PreparedRecord {
             velocity[k] = [0, 1, 2].map(|i| arms[i] * s.rates_rad_per_s[i]);
             if let Ok(len) = kin.cylinder_lengths(&q) {
                 let len = len.to_vector();
+                chamber_strokes[k] = Some([len[0], len[1], len[2]]);
                 in_stroke[k] = [0, 1, 2].map(|i| {
                     len[i] > strokes[i].0 + STROKE_MARGIN_M
                         && len[i] < strokes[i].1 - STROKE_MARGIN_M
@@ -448,12 +485,29 @@ impl PreparedRecord {
             mass[k] = cylinder_masses(&kin, cfg, &params.inertia_floor_kg_m2, &q, &arms);
         }
         let mut accel = vec![[0.0; 3]; n];
+        let mut compression = vec![[[0.0; 2]; 3]; n];
         // Central differences over one sample each side: the oil-column oscillations of a stopping
         // link are a few hertz, which wider stencils would attenuate.
         for k in 1..n.saturating_sub(1) {
-            let dt = record.samples[k + 1].time_s - record.samples[k - 1].time_s;
+            let (before, after) = (&record.samples[k - 1], &record.samples[k + 1]);
+            let dt = after.time_s - before.time_s;
             if dt > 0.0 {
                 accel[k] = [0, 1, 2].map(|i| (velocity[k + 1][i] - velocity[k - 1][i]) / dt);
+                // Eq. 2: the chamber volume at the measured stroke, dead volume included.
+                if let (true, Some(len)) = (params.chamber_balance, chamber_strokes[k]) {
+                    compression[k] = [0, 1, 2].map(|i| {
+                        let x = (len[i] - strokes[i].0).clamp(0.0, strokes[i].1 - strokes[i].0);
+                        let v_head = params.dead_volume_m3 + params.head_area_m2[i] * x;
+                        let v_rod = params.dead_volume_m3
+                            + params.rod_area_m2[i] * (strokes[i].1 - strokes[i].0 - x);
+                        let dh = (after.head_pa[i] - before.head_pa[i]) / dt;
+                        let dr = (after.rod_pa[i] - before.rod_pa[i]) / dt;
+                        [
+                            v_head / params.bulk_modulus_pa * dh,
+                            v_rod / params.bulk_modulus_pa * dr,
+                        ]
+                    });
+                }
             }
         }
         // Samples where a resolver rate disagrees with the angle's own derivative (a link held at an
@@ -535,6 +589,7 @@ impl PreparedRecord {
             measured,
             velocity,
             accel,
+            compression,
             gravity_force,
             gravity_force_per_rad,
             mass,
@@ -738,13 +793,37 @@ fn cylinder_velocity(
     gallery_pa: f64,
     crossover: Option<(f64, f64)>,
     leak: f64,
+    compression: [f64; 2],
 ) -> f64 {
     let (ah, ar) = (params.head_area_m2[i], params.rod_area_m2[i]);
     let leak_flow = leak * (head_pa - rod_pa);
+    let [c_head, c_rod] = compression;
     let a = metering(params, spool);
-    if a <= 0.0 {
-        // Closed spool: only the cross-piston leakage moves the piston.
+    if a <= 0.0 && !params.chamber_balance {
+        // Closed spool, without the chamber balance: only the cross-piston leakage moves it.
         return -leak_flow / ah;
+    }
+    // With the chamber balance, a chamber below tank pressure is filled through its
+    // anti-cavitation check valve as well (an unknown make-up inflow).
+    let makeup_below = if params.chamber_balance {
+        params.tank_pa
+    } else {
+        f64::NEG_INFINITY
+    };
+    if a <= 0.0 {
+        // Closed spool: the piston moves by the oil that leaks across it and by the compression of
+        // the trapped oil (Eq. 2): head `0 = A_h v + L dp + C_h`, rod `0 = -A_r v - L dp + C_r`;
+        // the two estimates weighted as `A^2` (inverse to the variance a flow error gives them).
+        // A chamber below tank pressure draws make-up oil through its anti-cavitation check valve,
+        // so its own balance is unknown and only the other chamber's counts.
+        let v_head = -(leak_flow + c_head) / ah;
+        let v_rod = (c_rod - leak_flow) / ar;
+        let w_head = if head_pa < makeup_below { 0.0 } else { ah * ah };
+        let w_rod = if rod_pa < makeup_below { 0.0 } else { ar * ar };
+        if w_head + w_rod <= 0.0 {
+            return 0.0;
+        }
+        return (w_head * v_head + w_rod * v_rod) / (w_head + w_rod);
     }
     let lam = params.laminar_dp_pa;
     let k_in = params.meter_in_k[i] * a * meter_in_scale;
@@ -761,7 +840,10 @@ fn cylinder_velocity(
     } else {
         0.0
     };
-    let mut w_in = if dp_in > 2.0e5 && k_in > 0.0 {
+    // An inlet chamber below tank pressure (an overrunning load) is filled through its
+    // anti-cavitation check valve as well: the meter-in orifice does not bound its flow, and the
+    // meter-out orifice alone sets the speed.
+    let mut w_in = if dp_in > 2.0e5 && k_in > 0.0 && p_in >= makeup_below {
         dp_in * a_in * a_in / (k_in * k_in)
     } else {
         0.0
@@ -770,18 +852,26 @@ fn cylinder_velocity(
         let dpx = cross_pa - p_in;
         if dpx > 0.0 && xk > 0.0 {
             q_in += orifice(xk, dpx, lam);
-            w_in = w_in.max(dpx * a_in * a_in / ((k_in + xk) * (k_in + xk)));
+            if p_in >= makeup_below {
+                w_in = w_in.max(dpx * a_in * a_in / ((k_in + xk) * (k_in + xk)));
+            }
         }
     }
     let dp_out = (p_out - tank).max(0.0);
     let q_out = orifice(k_out, dp_out, lam);
     let w_out = dp_out.max(1.0e4) * a_out * a_out / (k_out * k_out);
-    // Continuity with leakage L (p_h - p_r) from head to rod:
-    //   head: Q_head_in = A_h v + L dp,  rod: Q_rod_in = -A_r v - L dp.
+    // Continuity with leakage L (p_h - p_r) from head to rod and the oil compression C (Eq. 2):
+    //   head: Q_head_in = A_h v + L dp + C_h,  rod: Q_rod_in = -A_r v - L dp + C_r.
     let (v_in, v_out) = if spool > 0.0 {
-        ((q_in - leak_flow) / ah, (q_out - leak_flow) / ar)
+        (
+            (q_in - leak_flow - c_head) / ah,
+            (q_out - leak_flow + c_rod) / ar,
+        )
     } else {
-        (-(q_in + leak_flow) / ar, -(q_out + leak_flow) / ah)
+        (
+            -(q_in + leak_flow - c_rod) / ar,
+            -(q_out + leak_flow + c_head) / ah,
+        )
     };
     (w_in * v_in + w_out * v_out) / (w_in + w_out)
 }
@@ -964,7 +1054,7 @@ pub fn replay(
     }
     let offset = aug.get(C::PressureSensorOffset);
     let resolver = aug.get(C::ResolverOffset);
-    let leak = aug.get(C::InternalLeakage).max(0.0);
+    let leak = params.internal_leakage_m3_per_s_pa + aug.get(C::InternalLeakage).max(0.0);
     let sharing = aug.get(C::FlowSharing).clamp(0.0, 1.0);
     let max_flow =
         params.pump_max_flow_m3_per_s * (1.0 - aug.get(C::PumpSaturation)).clamp(0.0, 1.0);
@@ -1028,6 +1118,7 @@ pub fn replay(
                     gallery,
                     cross,
                     leak,
+                    rec.compression[k][i],
                 );
             }
         }
@@ -1194,6 +1285,33 @@ pub fn bypass_constant(params: &GreyBoxParams, spools: [f64; 2]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The chamber balance: a closed spool moves by the compression flows of both chambers (each
+    /// alone gives the same speed when they agree), and an inlet chamber below tank pressure leaves
+    /// the speed to the meter-out orifice; without the option neither changes the relation.
+    #[test]
+    fn chamber_balance_compression_and_makeup() {
+        let mut params = super::super::AugmentedModel::nominal().unwrap().params;
+        let (ah, ar) = (params.head_area_m2[1], params.rod_area_m2[1]);
+        let v = -0.02;
+        // Retracting at 2 cm/s with closed ports: the head is compressed, the rod expands.
+        let comp = [-ah * v, ar * v];
+        let closed = |p: &GreyBoxParams| {
+            cylinder_velocity(p, 1, 0.0, 1.0, 8.0e6, 4.0e6, 9.0e6, None, 0.0, comp)
+        };
+        assert_eq!(closed(&params), 0.0);
+        params.chamber_balance = true;
+        assert!((closed(&params) - v).abs() < 1e-12, "{}", closed(&params));
+        // Extending with the head (inlet) below tank: the meter-out estimate alone.
+        let overrun = |p: &GreyBoxParams, head: f64| {
+            cylinder_velocity(p, 1, 0.8, 1.0, head, 6.0e6, 10.0e6, None, 0.0, [0.0; 2])
+        };
+        let k_out = params.meter_out_k[1] * metering(&params, 0.8);
+        let meter_out_only = orifice(k_out, 6.0e6 - params.tank_pa, params.laminar_dp_pa) / ar;
+        assert!((overrun(&params, 1.0e5) - meter_out_only).abs() < 1e-9);
+        params.chamber_balance = false;
+        assert!((overrun(&params, 1.0e5) - meter_out_only).abs() > 1e-3);
+    }
 
     /// The warm-started solve finds the flow balance's unique root from any starting guess, and the
     /// neutral-valve cache returns what a fresh solve gives.

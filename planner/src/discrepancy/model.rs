@@ -233,7 +233,7 @@ impl ActuatorDynamics for GreyBoxActuator {
             p.pump_max_flow_m3_per_s * (1.0 - a.get(Candidate::PumpSaturation)).clamp(0.0, 1.0);
         let share =
             (1.0 - a.get(Candidate::FlowSharing).clamp(0.0, 1.0) * s[2].abs()).clamp(0.0, 1.0);
-        let leak = a.get(Candidate::InternalLeakage).max(0.0);
+        let leak = p.internal_leakage_m3_per_s_pa + a.get(Candidate::InternalLeakage).max(0.0);
         // Pump 1 feeds boom and bucket in proportion to their spool openings; pump 2 the stick.
         let (ob, ok) = (s[0].abs(), s[2].abs());
         let split = if ob + ok > 0.0 { ob / (ob + ok) } else { 0.5 };
