@@ -620,8 +620,9 @@ enum ChamberPath<'a> {
     DeadEnd,
     /// Fed from the gallery at the given pressure through this meter-in orifice only.
     In(&'a Orifice, f64),
-    /// Drained to tank through this meter-out orifice only.
-    Out(&'a Orifice),
+    /// Drained to tank through this meter-out orifice only (and the make-up orifice, second, below
+    /// tank pressure).
+    Out(&'a Orifice, &'a Orifice),
     /// Crossover or leakage: left to the Newton solve.
     Solve,
 }
@@ -632,7 +633,8 @@ enum ChamberPath<'a> {
 /// - A dead-ended chamber exchanges no oil, so Eq. 2 is linear and its root `P' = P - c dV/dt` is
 ///   exact, with no inflow slope (the solver landed on it to rounding after one evaluation).
 /// - With `closed_form`, a chamber with one open metering orifice takes
-///   [`one_orifice_chamber_root`].
+///   [`one_orifice_chamber_root`]; a drained chamber drawn below tank pressure takes it with the
+///   meter-out and make-up orifices as one (both from tank; the root between zero and tank).
 #[inline(always)]
 fn chamber_root_without_solver(
     path: ChamberPath<'_>,
@@ -649,8 +651,25 @@ fn chamber_root_without_solver(
         ChamberPath::In(orifice, gallery) if closed_form => {
             one_orifice_chamber_root(orifice, true, gallery, base, c)?
         }
-        ChamberPath::Out(orifice) if closed_form => {
-            one_orifice_chamber_root(orifice, false, tank_pa, base, c)?
+        ChamberPath::Out(orifice, makeup) if closed_form => {
+            match one_orifice_chamber_root(orifice, false, tank_pa, base, c) {
+                Some(root) => root,
+                None => {
+                    // Drawn below tank pressure (`base < tank`): oil flows back in from tank
+                    // through the meter-out orifice and the make-up orifice alike, two orifices from
+                    // one pressure with one laminar limit, i.e. one orifice of their summed
+                    // constants; the root lies between zero (the solver's bracket) and tank.
+                    debug_assert_eq!(orifice.laminar_dp_pa, makeup.laminar_dp_pa);
+                    let both = Orifice {
+                        k: orifice.k + makeup.k,
+                        laminar_slope: orifice.laminar_slope + makeup.laminar_slope,
+                        laminar_dp_pa: orifice.laminar_dp_pa,
+                    };
+                    let (pn, slope) = one_orifice_chamber_root(&both, true, tank_pa, base, c)?;
+                    return (pn >= 0.0 && pn <= tank_pa)
+                        .then(|| (pn, c / (1.0 - c * slope).max(1.0)));
+                }
+            }
         }
         _ => return None,
     };
@@ -665,8 +684,9 @@ fn chamber_root_without_solver(
 /// `dp`: in the laminar region `dp = C / (1 + c k_l)`, else `u^2 + c k u - C = 0`, whose positive root
 /// `u = 2 C / (c k + sqrt((c k)^2 + 4 C))` is taken in the form without cancellation. Returns the
 /// chamber pressure and the inflow slope `dQ/dP'` there. When `C <= 0` a supplied chamber's check
-/// valve shuts and the root is `base` (no flow, slope zero); a drained chamber would fall below tank,
-/// where the make-up opens: `None`. The caller checks that the root lies where the make-up and the
+/// valve shuts and the root is `base` (no flow, slope zero); a drained chamber at `C = 0` sits at tank
+/// pressure (no flow, the laminar slope), below that it would fall below tank, where the make-up
+/// opens: `None`. The caller checks that the root lies where the make-up and the
 /// port relief are shut.
 #[inline]
 fn one_orifice_chamber_root(
@@ -688,7 +708,14 @@ fn one_orifice_chamber_root(
         // A supplied chamber at or above its gallery: the check valve holds, no oil flows, and the
         // root is `base` itself (a stall against the main relief). A drained chamber below tank
         // would draw through the make-up: left to the solver.
-        return supplied.then_some((base, 0.0));
+        return if supplied {
+            Some((base, 0.0))
+        } else if drive == 0.0 {
+            // Exactly at tank pressure: no flow, the meter-out's laminar slope (two-way).
+            Some((fixed_pa, -orifice.laminar_slope))
+        } else {
+            None
+        };
     }
     let laminar_dp = drive / (1.0 + c * orifice.laminar_slope);
     let (dp, slope) = if laminar_dp < orifice.laminar_dp_pa {
@@ -1111,7 +1138,7 @@ impl Hydraulics {
                 } else if supplied && meter_in_i.k > 0.0 {
                     ChamberPath::In(&meter_in_i, gallery)
                 } else if drained && meter_out_i.k > 0.0 {
-                    ChamberPath::Out(&meter_out_i)
+                    ChamberPath::Out(&meter_out_i, &makeup_orifice)
                 } else {
                     ChamberPath::DeadEnd
                 }
@@ -1482,7 +1509,9 @@ mod tests {
             let orifice = Orifice::new(&oc, area);
             for c in [1.0e8, 2.0e9, 5.0e10] {
                 for (supplied, fixed) in [(true, 2.5e7), (false, 2.0e5)] {
-                    for base in [-3.0e6, 1.0e5, 1.999e5, 2.01e5, 4.0e5, 5.0e6, 2.49e7, 2.6e7] {
+                    for base in [
+                        -3.0e6, 1.0e5, 1.999e5, 2.0e5, 2.01e5, 4.0e5, 5.0e6, 2.49e7, 2.5e7, 2.6e7,
+                    ] {
                         let root = one_orifice_chamber_root(&orifice, supplied, fixed, base, c);
                         // The meter-in's check valve shuts for a drop of zero or less.
                         let inflow = |pn: f64| {
@@ -1497,12 +1526,18 @@ mod tests {
                         let residual = |pn: f64| base + c * inflow(pn).0 - pn;
                         let drive = if supplied { fixed - base } else { base - fixed };
                         let Some((pn, slope)) = root else {
-                            assert!(!supplied && drive <= 0.0, "no root for drive {drive}");
+                            assert!(!supplied && drive < 0.0, "no root for drive {drive}");
                             continue;
                         };
-                        if drive <= 0.0 {
+                        if drive <= 0.0 && supplied {
                             // The check valve holds: no flow, the root is `base`.
-                            assert!(supplied && pn == base && slope == 0.0 && residual(pn) == 0.0);
+                            assert!(pn == base && slope == 0.0 && residual(pn) == 0.0);
+                            continue;
+                        }
+                        if drive == 0.0 {
+                            // A drained chamber at tank pressure: no flow, Eq. 1's laminar slope.
+                            assert!(pn == fixed && slope == -orifice.laminar_slope);
+                            assert!(residual(pn) == 0.0);
                             continue;
                         }
                         // Bisection on the decreasing residual between the fixed pressure and base.
