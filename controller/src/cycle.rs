@@ -48,6 +48,16 @@ use crate::safety::{ArmMode, ControlFault};
 /// (docs/ARCHITECTURE.md: boom up; stick and bucket extension lower their angles).
 pub const JOINT_SIGN: [f64; 3] = [1.0, -1.0, -1.0];
 
+/// MoveToDig stall escalation: a joint whose error has not shrunk by this much for
+/// [`STALL_WAIT_S`] is stalled, rad (0.2 deg). Judged on the angle, not the rate signal: a
+/// cylinder chattering in place reports a rate without getting anywhere.
+const STALL_PROGRESS_RAD: f64 = 0.0035;
+
+/// MoveToDig stall escalation: how long a joint may make no progress before its command grows, s.
+const STALL_WAIT_S: f64 = 0.5;
+
+const STALL_BOOST_PER_S: f64 = 0.25;
+
 /// Where a dig or cleanup starts, before Autodig's Boom-Down (or the cleanup probe).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
@@ -679,6 +689,13 @@ pub struct WorkCycle {
     last_now_s: f64,
     /// MoveToDig: the tip has been lifted to the start height once (lift-first is not re-entered).
     lifted: bool,
+    /// MoveToDig stall escalation per implement joint: the extra command magnitude
+    /// ([`STALL_BOOST_PER_S`]), the smallest error so far and when it last shrank
+    /// ([`STALL_PROGRESS_RAD`]); and the time of the last move step.
+    stall_boost: [f64; 3],
+    stall_best_rad: [f64; 3],
+    stall_progress_s: [f64; 3],
+    last_move_s: Option<f64>,
     /// Hook for an external action source (`crate::planned`): hold in Idle when the actions run out.
     external_plan: bool,
     /// Control faults of the current action so far.
@@ -737,6 +754,10 @@ impl WorkCycle {
             track_target_m: 0.0,
             last_now_s: 0.0,
             lifted: false,
+            stall_boost: [0.0; 3],
+            stall_best_rad: [f64::INFINITY; 3],
+            stall_progress_s: [0.0; 3],
+            last_move_s: None,
             external_plan: false,
             failed_attempts: 0,
             retry_pending: false,
@@ -930,6 +951,9 @@ impl WorkCycle {
         self.phase_since_s = now_s;
         self.settle_since_s = None;
         self.lifted = false;
+        self.stall_boost = [0.0; 3];
+        self.stall_best_rad = [f64::INFINITY; 3];
+        self.last_move_s = None;
     }
 
     fn hold(&self) -> CycleOutput {
@@ -1070,6 +1094,42 @@ impl WorkCycle {
         (cmd, err.iter().all(|e| e.abs() <= g.tolerance))
     }
 
+    /// Stall escalation of the move's P-controller: the command of a joint that is commanded but
+    /// has not come [`STALL_PROGRESS_RAD`] closer to its target for [`STALL_WAIT_S`] grows by
+    /// [`STALL_BOOST_PER_S`] (up to `max_command`), and is held while the joint makes progress; a
+    /// joint that reaches its tolerance or reverses starts from zero again.
+    fn escalate_stalled(&mut self, now_s: f64, implement: &mut [f64; 3], error_rad: [f64; 3]) {
+        let dt_s = self
+            .last_move_s
+            .map_or(0.0, |t| (now_s - t).clamp(0.0, 0.1));
+        self.last_move_s = Some(now_s);
+        let max = self.config.joint.max_command;
+        for (i, cmd) in implement.iter_mut().enumerate() {
+            let err = error_rad[i].abs();
+            let boost = &mut self.stall_boost[i];
+            // Restart when the joint is not commanded or the command reverses.
+            if *cmd == 0.0 || !err.is_finite() || (*boost != 0.0 && boost.signum() != cmd.signum())
+            {
+                *boost = 0.0;
+                self.stall_best_rad[i] = f64::INFINITY;
+                continue;
+            }
+            if !self.stall_best_rad[i].is_finite()
+                || err < self.stall_best_rad[i] - STALL_PROGRESS_RAD
+            {
+                self.stall_best_rad[i] = err;
+                self.stall_progress_s[i] = now_s;
+            }
+            let magnitude = if now_s - self.stall_progress_s[i] > STALL_WAIT_S {
+                (boost.abs() + STALL_BOOST_PER_S * dt_s).min(max)
+            } else {
+                boost.abs()
+            };
+            *boost = magnitude.copysign(*cmd);
+            *cmd = (cmd.abs() + magnitude).min(max).copysign(*cmd);
+        }
+    }
+
     fn swing_toward(&self, swing_rad: f64, rate_rad_per_s: f64, target_rad: f64) -> (f64, bool) {
         let err = wrap_angle(target_rad - swing_rad);
         (
@@ -1090,10 +1150,21 @@ impl WorkCycle {
             self.next_action(now_s);
             return Ok(CycleCommand::Neutral);
         };
+        let s = est.state();
         if self.timed_out(now_s) {
+            tracing::warn!(
+                boom_err_deg = (target.boom_rad - s.joints.boom_rad).to_degrees(),
+                stick_err_deg = (target.stick_rad - s.joints.stick_rad).to_degrees(),
+                bucket_err_deg = (target.bucket_rad - s.joints.bucket_rad).to_degrees(),
+                swing_err_deg = action
+                    .swing_rad()
+                    .map(|t| wrap_angle(t - s.swing_rad).to_degrees()),
+                lifted = self.lifted,
+                tip_z_m = s.tip.z_m,
+                "move to the dig timed out"
+            );
             return Err(ControlFault::Timeout("move to the dig"));
         }
-        let s = est.state();
         let (mut implement, implement_done) = self.implement_toward(&s.joints, &target);
         // Lift first: while the tip is well below the start pose only the boom moves (up), so the
         // bucket is not dragged through the ground; the swing waits until the boom is up too.
@@ -1126,6 +1197,15 @@ impl WorkCycle {
             // P-controller's minimum command crawl, and the boom would wait seconds for them.
             implement[0] = 0.0;
         }
+        self.escalate_stalled(
+            now_s,
+            &mut implement,
+            [
+                target.boom_rad - s.joints.boom_rad,
+                target.stick_rad - s.joints.stick_rad,
+                target.bucket_rad - s.joints.bucket_rad,
+            ],
+        );
         let boom_clear =
             !low && s.joints.boom_rad >= target.boom_rad - 3.0 * self.config.joint.tolerance;
         let (swing, swing_done) = match action.swing_rad() {
@@ -1841,6 +1921,52 @@ mod tests {
         c.on_fault(true);
         c.step(0.3, &e, Some(ArmMode::Valve)).unwrap();
         assert_eq!((c.phase(), c.action_index()), (Phase::TrackBack, 1));
+    }
+
+    #[test]
+    fn a_stalled_move_opens_its_valve_further_and_holds_while_it_progresses() {
+        // Target: boom, bucket and swing where the machine is; the stick 0.1 rad (5.7 deg) short.
+        let (boom, stick, bucket) = (0.2, -1.3, -0.5);
+        let mut c = cycle(CycleConfig {
+            scan: false,
+            actions: vec![Action::Dig {
+                swing_rad: 0.0,
+                start: StartPose::Joints {
+                    boom_rad: boom,
+                    stick_rad: stick - 0.1,
+                    bucket_rad: bucket,
+                },
+            }],
+            ..CycleConfig::default()
+        });
+        c.start();
+        let stick_command = |c: &mut WorkCycle, q_stick: f64, t: f64| {
+            let e = est_at([boom, q_stick, bucket, 0.0], 0.0, t);
+            match c.step(t, &e, Some(ArmMode::Valve)).unwrap().command {
+                CycleCommand::Valves(v) => v[1].abs(),
+                other => panic!("expected valve commands, got {other:?}"),
+            }
+        };
+        let first = stick_command(&mut c, stick, 0.0);
+        assert!((first - 0.2).abs() < 1e-9, "P-controller minimum: {first}");
+        // Not moving: after STALL_WAIT_S the command grows at STALL_BOOST_PER_S.
+        let mut t = 0.0;
+        let mut last = first;
+        while t < 2.0 {
+            t += 0.01;
+            last = stick_command(&mut c, stick, t);
+        }
+        let expected = 0.2 + STALL_BOOST_PER_S * (2.0 - STALL_WAIT_S);
+        assert!((last - expected).abs() < 0.02, "{last} vs {expected}");
+        // Progress (0.3 deg closer each step, 3 deg in all): the command is held, not grown further.
+        let mut q = stick;
+        for _ in 0..10 {
+            t += 0.01;
+            q -= 0.005;
+            let now = stick_command(&mut c, q, t);
+            assert!(now <= last + 1e-9 && now > 0.5, "{now} vs {last}");
+            last = now;
+        }
     }
 
     #[test]
