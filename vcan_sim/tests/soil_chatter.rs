@@ -1,0 +1,95 @@
+//! Known issue (docs/simulator.md "Known issues"): a cylinder stalled with the bucket deep in the bench
+//! chatters at the soil-contact update rate, and the reported joint rate does not match the motion.
+//!
+//! The soil force depends on the direction of the tip velocity (the FEE wedge and the bearing
+//! resistances oppose the travel, mobilised by `tanh(speed / 0.01 m/s)`), is computed from the
+//! velocity at the 200 Hz soil update and held for the next 5 physics steps. Against the ~1e5 N of a
+//! 0.9 m deep edge that explicit, held resistance overshoots: within one hold it reverses the
+//! cylinder, the next update sees the opposite travel and flips the force, and the cylinders settle
+//! into a limit cycle of period 10 physics steps (velocity sign alternating every 5 steps) with no net
+//! motion. The 100 Hz sensor sampling samples every 10th step, always at the same phase of that cycle,
+//! so it reports a steady rate (here the bucket at ~ -0.74 rad/s) while the angle does not move.
+//!
+//! `cargo test -p vcan_sim --test soil_chatter -- --ignored --nocapture` prints the figures.
+
+// Test helpers panic on setup failure by design (clippy only exempts `#[test]` bodies).
+#![allow(clippy::unwrap_used)]
+
+use planner::machine::MachineConfig;
+use vcan_sim::effects::EffectSet;
+use vcan_sim::hydraulics::{BUCKET, STICK};
+use vcan_sim::plant::Plant;
+use vcan_sim::scenario::Scenario;
+
+/// The default bench with the implement at the stalled pose of the planned demo session: stick
+/// -1.3135 rad, bucket -0.482 rad, the boom lowered until the tip is ~0.9 m below the bench top.
+fn plant_in_the_bench() -> Plant {
+    let mut sc = Scenario::default_bench().unwrap();
+    sc.start.boom_deg = 28.0;
+    sc.start.stick_deg = (-1.3135f64).to_degrees();
+    sc.start.bucket_deg = (-0.482f64).to_degrees();
+    let p = Plant::new(
+        &MachineConfig::default_machine().unwrap(),
+        &sc,
+        EffectSet::nominal(),
+    )
+    .unwrap();
+    let ts = p.true_state();
+    let depth = p.world.height(ts.tip_world[0], ts.tip_world[1]) - ts.tip_world[2];
+    assert!((0.8..1.0).contains(&depth), "tip depth {depth} m");
+    p
+}
+
+#[test]
+#[ignore = "known issue: the 200 Hz held soil force makes a stalled cylinder chatter at 100 Hz, \
+            aliased by the 100 Hz sensor sampling into a steady rate without motion \
+            (docs/simulator.md, Known issues)"]
+fn reported_rate_agrees_with_the_motion_of_a_cylinder_stalled_in_the_bench() {
+    let mut p = plant_in_the_bench();
+    // Stick retract 24 %, bucket retract 42 % (the demo's commands), 2 s to settle.
+    let cmd = [0.0, -0.24, -0.42, 0.0, 0.0, 0.0];
+    for _ in 0..2000 {
+        p.step(cmd);
+    }
+    // Then 3 s: integrate the joint rate as sampled at 100 Hz (every 10th physics step, as the
+    // gateway does) and count the velocity sign changes of the cylinders per physics step.
+    let q0 = p.sensed_truth().angles_rad;
+    let mut integrated = [0.0; 2];
+    let mut sign_changes = [0usize; 2];
+    let mut last_v = [0.0f64; 2];
+    for n in 1..=3000 {
+        p.step(cmd);
+        for (k, i) in [STICK, BUCKET].into_iter().enumerate() {
+            let v = p.hydraulics.actuators[i].velocity;
+            if v * last_v[k] < 0.0 {
+                sign_changes[k] += 1;
+            }
+            last_v[k] = v;
+        }
+        if n % 10 == 0 {
+            let rates = p.sensed_truth().rates_rad_per_s;
+            integrated[0] += rates[1] * 0.01;
+            integrated[1] += rates[2] * 0.01;
+        }
+    }
+    let q1 = p.sensed_truth().angles_rad;
+    let moved = [q1[1] - q0[1], q1[2] - q0[2]];
+    println!(
+        "3 s: stick moved {:+.4} rad, sampled rate integrates to {:+.4} rad, {} sign changes; \
+         bucket moved {:+.4} rad, sampled rate integrates to {:+.4} rad, {} sign changes",
+        moved[0], integrated[0], sign_changes[0], moved[1], integrated[1], sign_changes[1]
+    );
+    for k in 0..2 {
+        assert!(
+            (integrated[k] - moved[k]).abs() <= 0.05 + 0.2 * moved[k].abs(),
+            "joint {k}: the sampled rate integrates to {} rad, the joint moved {} rad",
+            integrated[k],
+            moved[k]
+        );
+        assert!(
+            sign_changes[k] < 30,
+            "joint {k}: the velocity changed sign {} times in 3000 steps",
+            sign_changes[k]
+        );
+    }
+}
