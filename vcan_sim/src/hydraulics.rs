@@ -331,10 +331,6 @@ pub struct ActuatorLoad {
     pub blocked_extend: bool,
     /// When true the actuator is blocked by a rigid obstacle in the retraction direction.
     pub blocked_retract: bool,
-    /// Magnitude of a resistance opposing the actuator's motion (N), not part of `force`: the soil's
-    /// resistance to the current travel. Applied like the Coulomb friction, in the implicit velocity
-    /// solve: it can stop the actuator but never reverse it, and holds it at rest up to this force.
-    pub resistance_n: f64,
 }
 
 /// State of one actuator.
@@ -1203,7 +1199,7 @@ impl Hydraulics {
             } else {
                 (
                     p.nominal_damping_n_s_per_m + effects.viscous_friction_n_s_per_m,
-                    effects.coulomb_friction_n + load.resistance_n.max(0.0),
+                    effects.coulomb_friction_n,
                 )
             };
             let stiffness =
@@ -1337,51 +1333,6 @@ mod tests {
                 a.head_pa
             );
         }
-    }
-
-    /// The soil resistance (`ActuatorLoad::resistance_n`) in the implicit solve: a resistance larger
-    /// than the moving cylinder's drive brings it to rest without reversing it, holds it there, and a
-    /// smaller one only slows it.
-    #[test]
-    fn resistance_stops_a_moving_cylinder_without_reversing_it() {
-        let params = HydraulicParams::default();
-        let eff = HydraulicEffects::default();
-        let mut h = Hydraulics::new(params, [0.5; 4]);
-        let loads = free_loads();
-        let mut spools = [0.0; 4];
-        spools[BUCKET] = 0.4;
-        run(&mut h, spools, &loads, 1.0);
-        let slow_speed = h.actuators[BUCKET].velocity;
-        assert!(slow_speed > 0.05, "{slow_speed}");
-        // A resistance of a few times the drive the relief can give.
-        let mut resisted = loads;
-        resisted[BUCKET].resistance_n = 3.0 * relief_force(&params, BUCKET);
-        let mut stopped_at = None;
-        for k in 0..2000 {
-            h.step(DT_S, spools, &resisted, &eff);
-            let v = h.actuators[BUCKET].velocity;
-            assert!(v >= 0.0, "step {k}: reversed to {v} m/s");
-            if v == 0.0 && stopped_at.is_none() {
-                stopped_at = Some((k, h.actuators[BUCKET].position));
-            }
-        }
-        let (k, x) = stopped_at.expect("the resistance stops the cylinder");
-        assert!(k < 50, "stopped after {k} steps");
-        assert_eq!(h.actuators[BUCKET].position, x, "held at rest");
-        // A third of the relief force and the valve fully open: it moves again, slower than free.
-        resisted[BUCKET].resistance_n = relief_force(&params, BUCKET) / 3.0;
-        spools[BUCKET] = 1.0;
-        run(&mut h, spools, &resisted, 1.0);
-        let v = h.actuators[BUCKET].velocity;
-        let mut free = Hydraulics::new(params, [0.5; 4]);
-        run(&mut free, spools, &loads, 1.0);
-        let free_speed = free.actuators[BUCKET].velocity;
-        assert!(v > 0.0 && v < free_speed, "{v} vs free {free_speed}");
-    }
-
-    /// Head-side force of a cylinder at the main relief pressure (N).
-    fn relief_force(params: &HydraulicParams, i: usize) -> f64 {
-        params.pumps[0].main_relief_pa * params.cylinders[i].head_area_m2()
     }
 
     #[test]

@@ -167,8 +167,6 @@ pub struct Plant {
     time_s: f64,
     steps: u64,
     cached_loads: [ActuatorLoad; N_ACTUATORS],
-    /// Per cylinder, the sign of the travel the soil resistance in `cached_loads` opposes (0: none).
-    soil_resisted_dir: [f64; 3],
     /// Gravity on or off (off for no-load hydraulic tests).
     pub gravity: bool,
 }
@@ -248,7 +246,6 @@ impl Plant {
             time_s: 0.0,
             steps: 0,
             cached_loads: [ActuatorLoad::default(); N_ACTUATORS],
-            soil_resisted_dir: [0.0; 3],
             gravity: true,
         };
         plant.settle();
@@ -379,52 +376,6 @@ impl Plant {
         ]
     }
 
-    /// Moves the part of the soil load that resists each cylinder's current motion from the explicit
-    /// `force` of `loads` to `resistance_n`, and holds a cylinder it has stopped.
-    ///
-    /// The soil force opposes the travel it was computed for and is held for [`SOIL_SUBSTEPS`] steps:
-    /// as an explicit load it reversed a cylinder it stopped within the hold, and the cylinders fell
-    /// into a 10-step limit cycle without net motion (docs/simulator.md, "Known issues";
-    /// `tests/soil_chatter.rs`). In the implicit velocity solve it can stop a cylinder but not
-    /// reverse it. The part pushing along a cylinder's motion stays an explicit load. A stopped
-    /// cylinder meets no mobilised resistance at the next update (the creep law of `SoilContact` needs
-    /// speed), so while the edge stays in the soil and the valve still drives it the way it moved, the
-    /// last resistance holds it (static friction); otherwise it would creep on in 5 ms bursts.
-    fn apply_soil_resistance(
-        &mut self,
-        frame: &PoseFrame,
-        loads: &mut [ActuatorLoad; N_ACTUATORS],
-    ) {
-        if !self.contact.in_contact && self.soil_force == TipForce::default() {
-            self.soil_resisted_dir = [0.0; 3];
-            return;
-        }
-        let soil = if self.soil_force == TipForce::default() {
-            [0.0; 3]
-        } else {
-            self.linkage.cylinder_loads_at(
-                &self.link,
-                frame,
-                &self.soil_force,
-                self.payload_kg(),
-                false,
-            )
-        };
-        for (i, load) in loads.iter_mut().enumerate().take(3) {
-            let v = self.hydraulics.actuators[i].velocity;
-            let dir = self.soil_resisted_dir[i];
-            if soil[i] * v > 0.0 {
-                load.force -= soil[i];
-                load.resistance_n = soil[i].abs();
-                self.soil_resisted_dir[i] = v.signum();
-            } else if v == 0.0 && self.contact.in_contact && self.spool2[i] * dir > 0.0 {
-                load.resistance_n = self.cached_loads[i].resistance_n;
-            } else {
-                self.soil_resisted_dir[i] = 0.0;
-            }
-        }
-    }
-
     fn soil_contact(&mut self, dt: f64, frame: &PoseFrame) {
         let points = &frame.points;
         let fx = self.effects;
@@ -498,9 +449,7 @@ impl Plant {
             }
             let frame = self.linkage.frame(&self.link.q);
             self.soil_contact(dt * SOIL_SUBSTEPS as f64, &frame);
-            let mut loads = self.loads(&frame);
-            self.apply_soil_resistance(&frame, &mut loads);
-            self.cached_loads = loads;
+            self.cached_loads = self.loads(&frame);
         }
         self.steps += 1;
         let loads = self.cached_loads;

