@@ -36,7 +36,7 @@ use planner::cleanup::{
     Cleanup, CleanupConfig, CleanupInputs, CleanupOutput, CleanupPlan, FloorEstimate, FloorPolicy,
     HandOverReason,
 };
-use planner::kinematics::{BucketPose, JointAngles, Kinematics, wrap_angle};
+use planner::kinematics::{BucketPose, Joint, JointAngles, Kinematics, wrap_angle};
 use planner::terrain::{SectionProfile, SweptVolume, TerrainError, TerrainGrid};
 use serde::{Deserialize, Serialize};
 
@@ -57,6 +57,10 @@ const STALL_PROGRESS_RAD: f64 = 0.0035;
 const STALL_WAIT_S: f64 = 0.5;
 
 const STALL_BOOST_PER_S: f64 = 0.25;
+
+/// Dump: a bucket that has not opened further for this long at full command is held (resting in the
+/// spoil, or still in the cut: its port at relief); the boom then lifts while it keeps opening, s.
+const STALL_RELIFT_S: f64 = 3.0;
 
 /// Where a dig or cleanup starts, before Autodig's Boom-Down (or the cleanup probe).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -1538,7 +1542,23 @@ impl WorkCycle {
         } else {
             JOINT_SIGN[2] * self.config.joint.max_command
         };
-        Ok(CycleCommand::Valves([0.0, 0.0, bucket, 0.0, 0.0, 0.0]))
+        // A bucket that cannot open (resting in the spoil, or still in the cut) is lifted clear by
+        // the boom while it keeps opening.
+        if !self.stall_best_rad[2].is_finite() || err < self.stall_best_rad[2] - STALL_PROGRESS_RAD
+        {
+            self.stall_best_rad[2] = err;
+            self.stall_progress_s[2] = now_s;
+        }
+        let boom_max_rad = est.kinematics().joint_limits(Joint::Boom).1 - 0.05;
+        let boom = if !open
+            && now_s - self.stall_progress_s[2] > STALL_RELIFT_S
+            && s.joints.boom_rad < boom_max_rad
+        {
+            self.config.joint.max_command
+        } else {
+            0.0
+        };
+        Ok(CycleCommand::Valves([boom, 0.0, bucket, 0.0, 0.0, 0.0]))
     }
 
     fn step_track(&mut self, now_s: f64, est: &Estimator) -> Result<CycleCommand, ControlFault> {
@@ -1966,6 +1986,49 @@ mod tests {
             let now = stick_command(&mut c, q, t);
             assert!(now <= last + 1e-9 && now > 0.5, "{now} vs {last}");
             last = now;
+        }
+    }
+
+    #[test]
+    fn a_bucket_that_cannot_open_in_the_dump_is_lifted_clear() {
+        let mut c = cycle(CycleConfig {
+            scan: false,
+            ..CycleConfig::default()
+        });
+        c.start();
+        c.set_phase(Phase::Dump, 0.0);
+        let commands = |c: &mut WorkCycle, bucket_rad: f64, t: f64| {
+            let e = est_at([0.5, -1.3, bucket_rad, 1.0], 0.0, t);
+            match c.step(t, &e, Some(ArmMode::Valve)).unwrap().command {
+                CycleCommand::Valves(v) => v,
+                other => panic!("expected valve commands, got {other:?}"),
+            }
+        };
+        let max = c.config.joint.max_command;
+        let first = commands(&mut c, -1.5, 0.0);
+        assert_eq!((first[0], first[2].abs()), (0.0, max), "uncurl only");
+        // Opening: no lift.
+        let mut t = 0.0;
+        let mut q = -1.5;
+        while t < 4.0 {
+            t += 0.01;
+            q += 0.002;
+            assert_eq!(commands(&mut c, q, t)[0], 0.0, "at {t} s");
+        }
+        // Held (resting in the spoil): after STALL_RELIFT_S the boom lifts while the bucket opens.
+        let held_from = t;
+        while t < held_from + STALL_RELIFT_S + 0.1 {
+            t += 0.01;
+            let v = commands(&mut c, q, t);
+            let expect = if t - held_from > STALL_RELIFT_S + 0.02 {
+                max
+            } else if t - held_from < STALL_RELIFT_S - 0.02 {
+                0.0
+            } else {
+                v[0]
+            };
+            assert_eq!(v[0], expect, "at {t} s");
+            assert_eq!(v[2].abs(), max);
         }
     }
 
