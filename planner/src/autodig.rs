@@ -566,19 +566,6 @@ impl AutodigMaps {
     }
 }
 
-/// Serde helper: the field is radians in Rust and degrees in the config text.
-mod serde_deg {
-    use serde::{Deserialize, Deserializer, Serializer};
-
-    pub(super) fn serialize<S: Serializer>(rad: &f64, s: S) -> Result<S::Ok, S::Error> {
-        s.serialize_f64(rad.to_degrees())
-    }
-
-    pub(super) fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
-        f64::deserialize(d).map(f64::to_radians)
-    }
-}
-
 /// Ground-contact detection in Boom-Down (thesis 3.1): the boom head pressure drops and/or the rod
 /// pressure rises relative to a baseline measured while the boom lowers freely, held for `debounce_s`
 /// so that shaking of the machine is not taken for contact.
@@ -639,7 +626,7 @@ pub struct PerceptionConfig {
     /// close in ends with a small payload; with them the swept volume ends the dig and the payload
     /// stays consistent across the starts (Table 1). The limit only keeps the bucket from coming
     /// under the machine (as the cleanup's stick limit, 3.3). Default -120 deg.
-    #[serde(rename = "stick_limit_deg", with = "serde_deg")]
+    #[serde(rename = "stick_limit_deg", with = "crate::machine::degrees")]
     pub stick_limit_rad: f64,
 }
 
@@ -665,20 +652,20 @@ impl Default for PerceptionConfig {
 pub struct AutodigConfig {
     /// Dig ends when `stick_abs <= beta` (stick in, near vertical; Table 1 starts at -87..-50 deg).
     /// Default -100 deg.
-    #[serde(rename = "beta_deg", with = "serde_deg")]
+    #[serde(rename = "beta_deg", with = "crate::machine::degrees")]
     pub beta_rad: f64,
     /// Pre-Dig ends when the bucket has curled to `bucket_abs <= rho1`. Default -80 deg: from an opened
     /// bucket (about -50 deg) the curl bites the edge in, and the stick does the rest in Dig.
-    #[serde(rename = "rho1_deg", with = "serde_deg")]
+    #[serde(rename = "rho1_deg", with = "crate::machine::degrees")]
     pub rho1_rad: f64,
     /// Dig ends when `bucket_abs <= rho2`. Default -180 deg.
-    #[serde(rename = "rho2_deg", with = "serde_deg")]
+    #[serde(rename = "rho2_deg", with = "crate::machine::degrees")]
     pub rho2_rad: f64,
     /// Capture needs `bucket_abs <= rho3` so material stays in during the swing. Default -210 deg.
-    #[serde(rename = "rho3_deg", with = "serde_deg")]
+    #[serde(rename = "rho3_deg", with = "crate::machine::degrees")]
     pub rho3_rad: f64,
     /// Capture (plain) needs `boom >= gamma` so the bucket clears the bench. Default 25 deg.
-    #[serde(rename = "gamma_deg", with = "serde_deg")]
+    #[serde(rename = "gamma_deg", with = "crate::machine::degrees")]
     pub gamma_rad: f64,
     /// Relief pressure of the boom, stick and bucket circuits, Pa: 100 % in the maps. Default 34.3e6 each.
     pub relief_pressure_pa: [f64; 3],

@@ -127,18 +127,6 @@ pub enum CleanupError {
     },
 }
 
-mod serde_deg {
-    use serde::{Deserialize, Deserializer, Serializer};
-
-    pub(super) fn serialize<S: Serializer>(rad: &f64, s: S) -> Result<S::Ok, S::Error> {
-        s.serialize_f64(rad.to_degrees())
-    }
-
-    pub(super) fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
-        f64::deserialize(d).map(f64::to_radians)
-    }
-}
-
 /// Cleanup parameters. Angles are radians in Rust, degrees in TOML/JSON.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -174,10 +162,10 @@ pub struct CleanupConfig {
     /// upward, it curls the bucket against the position loop (rod port at relief) and the edge rides
     /// over the layer; at -130 the edge cuts it (closed loop: residual 0.10 m at -130 and -125,
     /// 0.13-0.20 m at -135 to -150).
-    #[serde(rename = "bucket_abs_deg", with = "serde_deg")]
+    #[serde(rename = "bucket_abs_deg", with = "crate::machine::degrees")]
     pub bucket_abs_rad: f64,
     /// Hand over when `stick_abs <= stick_limit` (stick in, bucket near the tracks). Default -115 deg.
-    #[serde(rename = "stick_limit_deg", with = "serde_deg")]
+    #[serde(rename = "stick_limit_deg", with = "crate::machine::degrees")]
     pub stick_limit_rad: f64,
     /// Relief pressures `[boom, stick, bucket]`, Pa. Default 34.3e6 each.
     pub relief_pressure_pa: [f64; 3],
