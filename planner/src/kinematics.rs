@@ -1072,19 +1072,7 @@ impl Kinematics {
             bodies[n] = (m, joints[n][0] + d * (abs[n] + ang).cos());
         }
         bodies[3] = (payload_kg.max(0.0), self.payload_centroid(q)[0]);
-        let mut g = Vector3::zeros();
-        for i in 0..3 {
-            let xi = joints[i][0];
-            let mut sum = 0.0;
-            // The payload rides on the bucket (link 4), so it loads every joint.
-            for (n, (m, x)) in bodies.iter().enumerate() {
-                if n >= i {
-                    sum += m * (x - xi);
-                }
-            }
-            g[i] = GRAVITY_M_PER_S2 * sum; // Eq. A4
-        }
-        g
+        gravity_torques_of_bodies([joints[0][0], joints[1][0], joints[2][0]], &bodies)
     }
 
     /// Joint torques the actuators must supply to hold a tip force `f` (soil on bucket): `tau = G - J^T f`
@@ -1218,6 +1206,24 @@ pub fn wrap_angle(a: f64) -> f64 {
         x += 2.0 * PI;
     }
     x
+}
+
+/// Eq. A4 from positions: `G_i = g sum_{n >= i} m_n (x_n - x_i)`, N m, with `joint_x_m` the
+/// horizontal positions of the boom foot, stick pin and bucket pin, and `bodies` the (mass kg, centre of
+/// gravity x m) of boom, stick, bucket and payload. The payload rides on the bucket (link 4), so it
+/// loads every joint.
+#[must_use]
+#[inline]
+pub fn gravity_torques_of_bodies(joint_x_m: [f64; 3], bodies: &[(f64, f64); 4]) -> Vector3<f64> {
+    let mut g = Vector3::zeros();
+    for (i, xi) in joint_x_m.iter().enumerate() {
+        let mut sum = 0.0;
+        for (m, x) in &bodies[i..] {
+            sum += m * (x - xi);
+        }
+        g[i] = GRAVITY_M_PER_S2 * sum; // Eq. A4
+    }
+    g
 }
 
 #[cfg(test)]

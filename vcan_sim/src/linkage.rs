@@ -13,7 +13,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 use planner::kinematics::{JointAngles, Kinematics, KinematicsError, LinkagePoints, TipForce};
-use planner::machine::{GRAVITY_M_PER_S2, MachineConfig};
+use planner::machine::MachineConfig;
 
 /// Stroke geometry and statics of the implement.
 #[derive(Debug, Clone)]
@@ -250,17 +250,10 @@ impl Linkage {
             (self.masses[2].0, frame.cogs_m[2][0]),
             (payload_kg.max(0.0), frame.payload_centroid_m[0]),
         ];
-        let mut g = Vector3::zeros();
-        for i in 0..3 {
-            let xi = joints[i][0];
-            let mut sum = 0.0;
-            for (n, (m, x)) in bodies.iter().enumerate() {
-                if n >= i {
-                    sum += m * (x - xi);
-                }
-            }
-            g[i] = GRAVITY_M_PER_S2 * sum; // Eq. A4
-        }
+        let g = planner::kinematics::gravity_torques_of_bodies(
+            [joints[0][0], joints[1][0], joints[2][0]],
+            &bodies,
+        ); // Eq. A4
         g - soil_torques // Eq. A2
     }
 
@@ -364,6 +357,7 @@ impl Linkage {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use planner::machine::GRAVITY_M_PER_S2;
 
     fn linkage() -> Linkage {
         Linkage::new(&MachineConfig::default_machine().unwrap()).unwrap()
