@@ -1447,6 +1447,35 @@ mod tests {
         assert!(evaluations <= 2, "{evaluations} evaluations");
     }
 
+    /// Runs `a` and `b` through `script` (seconds, spools) with the same loads and effects and returns
+    /// the largest pressure (Pa) and velocity difference over all steps; asserts the end positions
+    /// agree within 1e-7.
+    fn run_side_by_side(
+        a: &mut Hydraulics,
+        b: &mut Hydraulics,
+        script: &[(f64, [f64; 4])],
+        loads: &[ActuatorLoad; N_ACTUATORS],
+        effects: &HydraulicEffects,
+    ) -> (f64, f64) {
+        let (mut dp_max, mut dv_max) = (0.0_f64, 0.0_f64);
+        for &(seconds, spools) in script {
+            for _ in 0..(seconds / DT_S).round() as usize {
+                a.step(DT_S, spools, loads, effects);
+                b.step(DT_S, spools, loads, effects);
+                for (x, y) in a.actuators.iter().zip(&b.actuators) {
+                    dp_max = dp_max.max((x.head_pa - y.head_pa).abs());
+                    dp_max = dp_max.max((x.rod_pa - y.rod_pa).abs());
+                    dv_max = dv_max.max((x.velocity - y.velocity).abs());
+                }
+            }
+        }
+        eprintln!("max differences: {dp_max} Pa, {dv_max} m/s");
+        for (x, y) in a.actuators.iter().zip(&b.actuators) {
+            assert!((x.position - y.position).abs() < 1e-7, "{x:?} vs {y:?}");
+        }
+        (dp_max, dv_max)
+    }
+
     /// The chamber solves' unevaluated Newton steps (accepted within 1 Pa of the root by the Taylor
     /// bound, then corrected by the known second-order term) against solving every chamber until the
     /// step is below 10 Pa, as before: on a scripted run with gravity-like loads, leakage, full and
@@ -1479,22 +1508,7 @@ mod tests {
             (0.3, [-1.0, 1.0, -1.0, -1.0]),
             (1.0, [0.0; 4]),
         ];
-        let (mut dp_max, mut dv_max) = (0.0_f64, 0.0_f64);
-        for (seconds, spools) in script {
-            for _ in 0..(seconds / DT_S).round() as usize {
-                fast.step(DT_S, spools, &loads, &effects);
-                exact.step(DT_S, spools, &loads, &effects);
-                for (a, b) in fast.actuators.iter().zip(&exact.actuators) {
-                    dp_max = dp_max.max((a.head_pa - b.head_pa).abs());
-                    dp_max = dp_max.max((a.rod_pa - b.rod_pa).abs());
-                    dv_max = dv_max.max((a.velocity - b.velocity).abs());
-                }
-            }
-        }
-        eprintln!("max differences: {dp_max} Pa, {dv_max} m/s");
-        for (a, b) in fast.actuators.iter().zip(&exact.actuators) {
-            assert!((a.position - b.position).abs() < 1e-7, "{a:?} vs {b:?}");
-        }
+        let (dp_max, dv_max) = run_side_by_side(&mut fast, &mut exact, &script, &loads, &effects);
         assert!(dp_max < 1.0, "pressures differ by up to {dp_max} Pa");
         assert!(dv_max < 1e-7, "velocities differ by up to {dv_max}");
     }
@@ -1597,22 +1611,7 @@ mod tests {
             (0.5, [0.05, -0.08, 0.1, 0.02]),
             (1.0, [0.0; 4]),
         ];
-        let (mut dp_max, mut dv_max) = (0.0_f64, 0.0_f64);
-        for (seconds, spools) in script {
-            for _ in 0..(seconds / DT_S).round() as usize {
-                fast.step(DT_S, spools, &loads, &effects);
-                newton.step(DT_S, spools, &loads, &effects);
-                for (a, b) in fast.actuators.iter().zip(&newton.actuators) {
-                    dp_max = dp_max.max((a.head_pa - b.head_pa).abs());
-                    dp_max = dp_max.max((a.rod_pa - b.rod_pa).abs());
-                    dv_max = dv_max.max((a.velocity - b.velocity).abs());
-                }
-            }
-        }
-        eprintln!("max differences: {dp_max} Pa, {dv_max} m/s");
-        for (a, b) in fast.actuators.iter().zip(&newton.actuators) {
-            assert!((a.position - b.position).abs() < 1e-7, "{a:?} vs {b:?}");
-        }
+        let (dp_max, dv_max) = run_side_by_side(&mut fast, &mut newton, &script, &loads, &effects);
         assert!(dp_max < 10.0, "pressures differ by up to {dp_max} Pa");
         assert!(dv_max < 1e-7, "velocities differ by up to {dv_max}");
     }
