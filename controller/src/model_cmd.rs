@@ -70,6 +70,19 @@ pub enum ModelCommand {
     Table2(Table2Args),
 }
 
+/// Which measured signal the training and evaluation cylinder velocities come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum VelocitySource {
+    /// Moment arm times the sampled joint rate (`JointRates`). When a cylinder stalls deep in the soil
+    /// the simulator's rate can be a phantom (docs/simulator.md, Known issues).
+    #[default]
+    Rates,
+    /// Moment arm times the slope of the resolver angles (`JointAngles`): a least-squares line over
+    /// `2 ANGLE_SLOPE_HALF_WINDOW + 1` samples, i.e. the velocity that integrates to the positions
+    /// the dig model predicts.
+    Angles,
+}
+
 /// Arguments of `model train`.
 #[derive(Debug, Args)]
 pub struct TrainArgs {
@@ -120,6 +133,9 @@ pub struct TrainArgs {
     /// valves and loads (the boom's crossover flow comes from the stick's pump).
     #[arg(long, conflicts_with_all = ["thesis_inputs", "orifice_inputs"])]
     pub third_inputs: bool,
+    /// The target velocity signal (see [`VelocitySource`]).
+    #[arg(long, value_enum, default_value_t = VelocitySource::Rates)]
+    pub velocity: VelocitySource,
     /// Machine file (default: the built-in config/machine.toml).
     #[arg(long, value_name = "FILE")]
     pub machine: Option<PathBuf>,
@@ -140,6 +156,13 @@ pub struct EvaluateArgs {
     /// Evaluate on every dig instead of the held-out test digs.
     #[arg(long)]
     pub all: bool,
+    /// The target velocity signal (see [`VelocitySource`]).
+    #[arg(long, value_enum, default_value_t = VelocitySource::Rates)]
+    pub velocity: VelocitySource,
+    /// Also split the error by samples where the rate and the resolver angles disagree (the
+    /// simulator's phantom rate of a stalled cylinder) and report it against both targets.
+    #[arg(long)]
+    pub breakdown: bool,
     /// Machine file (default: the built-in config/machine.toml).
     #[arg(long, value_name = "FILE")]
     pub machine: Option<PathBuf>,
@@ -933,15 +956,84 @@ fn generate(a: &GenerateArgs) -> anyhow::Result<()> {
 
 #[derive(Debug, Clone, Copy)]
 struct Tagged {
-    sample: ActuatorSample,
+    sample: TraceSample,
+    /// Moment arms at the sample's pose, m.
+    arms: [f64; 3],
+    /// Sensed joint angles `[boom, stick, bucket]`, rad.
+    angles_rad: [f64; 3],
     /// `Some(dig index)` when a ControllerStatus said Dig or Cleanup.
     dig: Option<u16>,
 }
 
+/// Half width, in samples, of the least-squares slope that turns the resolver angles into rates
+/// ([`VelocitySource::Angles`]): 11 samples at 100 Hz. The resolvers are quantised to 14 bits
+/// (3.8e-4 rad) with 2e-4 rad of noise; a one-step difference would carry 0.03 rad/s of noise, the
+/// slope over 0.1 s about 0.002 rad/s.
+pub const ANGLE_SLOPE_HALF_WINDOW: usize = 5;
+
+/// One training sample of a trace with both velocity signals.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TraceSample {
+    /// The sample, its velocities from the sampled joint rates ([`VelocitySource::Rates`]).
+    pub sample: ActuatorSample,
+    /// Cylinder velocities from the slope of the resolver angles ([`VelocitySource::Angles`]), m/s.
+    pub angle_velocity_m_per_s: [f64; 3],
+}
+
+/// One dig of a trace with both velocity signals ([`read_training_digs`]).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TraceDig {
+    /// Samples in time order.
+    pub samples: Vec<TraceSample>,
+}
+
+impl TraceDig {
+    /// The dig as actuator training data with the velocities from `source`.
+    #[must_use]
+    pub fn to_actuator_dig(&self, source: VelocitySource) -> ActuatorDig {
+        ActuatorDig {
+            samples: self
+                .samples
+                .iter()
+                .map(|s| match source {
+                    VelocitySource::Rates => s.sample,
+                    VelocitySource::Angles => ActuatorSample {
+                        velocity_m_per_s: s.angle_velocity_m_per_s,
+                        ..s.sample
+                    },
+                })
+                .collect(),
+        }
+    }
+}
+
+/// Least-squares slope of `angles` against `times` over the samples `lo..=hi`, rad/s.
+fn angle_slope(tagged: &[Tagged], lo: usize, hi: usize) -> [f64; 3] {
+    let window = &tagged[lo..=hi];
+    let n = window.len() as f64;
+    let t_mean = window.iter().map(|s| s.sample.sample.time_s).sum::<f64>() / n;
+    let stt: f64 = window
+        .iter()
+        .map(|s| (s.sample.sample.time_s - t_mean).powi(2))
+        .sum();
+    [0, 1, 2].map(|j| {
+        if stt <= 0.0 {
+            return 0.0;
+        }
+        let q_mean = window.iter().map(|s| s.angles_rad[j]).sum::<f64>() / n;
+        window
+            .iter()
+            .map(|s| (s.sample.sample.time_s - t_mean) * (s.angles_rad[j] - q_mean))
+            .sum::<f64>()
+            / stt
+    })
+}
+
 /// Reads the training digs of one trace: samples at every `JointAngles` frame with the latest
-/// commands, pressures (-> Eq. A20 forces) and rates (-> cylinder velocities through the moment arms),
-/// segmented by `ControllerStatus` (activity Dig or Cleanup, per dig index) or, in traces without it,
-/// by command activity (runs of non-neutral commands, split by 1 s of neutral).
+/// commands, pressures (-> Eq. A20 forces) and cylinder velocities through the moment arms, both from
+/// the sampled rates and from the slope of the resolver angles ([`TraceSample`]), segmented by
+/// `ControllerStatus` (activity Dig or Cleanup, per dig index) or, in traces without it, by command
+/// activity (runs of non-neutral commands, split by 1 s of neutral).
 ///
 /// # Errors
 /// Opening or reading the file.
@@ -949,7 +1041,7 @@ pub fn read_training_digs(
     path: &Path,
     kin: &Kinematics,
     areas: [(f64, f64); 3],
-) -> anyhow::Result<Vec<ActuatorDig>> {
+) -> anyhow::Result<Vec<TraceDig>> {
     let file = File::open(path).with_context(|| format!("opening {}", path.display()))?;
     let reader = TraceReader::new(BufReader::new(file), ReadMode::Skip);
     let mut command = [0.0; 3];
@@ -979,13 +1071,23 @@ pub fn read_training_digs(
                 Some((Activity::Dig | Activity::Cleanup, i)) => Some(*i),
                 _ => None,
             };
+            let angles_rad = [q.boom_rad, q.stick_rad, q.bucket_rad];
             if sample
                 .force_n
                 .iter()
                 .chain(&sample.velocity_m_per_s)
+                .chain(&angles_rad)
                 .all(|v| v.is_finite())
             {
-                tagged.push(Tagged { sample, dig });
+                tagged.push(Tagged {
+                    sample: TraceSample {
+                        sample,
+                        angle_velocity_m_per_s: [0.0; 3],
+                    },
+                    arms: [arms[0], arms[1], arms[2]],
+                    angles_rad,
+                    dig,
+                });
             }
         }
     };
@@ -1029,13 +1131,43 @@ pub fn read_training_digs(
         }
     }
     flush(&mut pending, &rates, &command, &head, &rod, &status);
+    // Angle-derived velocities: the slope over the neighbouring samples of the same run (no gap
+    // above 50 ms), at the sample's moment arms.
+    let run_start: Vec<usize> = {
+        let mut start = 0;
+        (0..tagged.len())
+            .map(|k| {
+                if k > 0
+                    && tagged[k].sample.sample.time_s - tagged[k - 1].sample.sample.time_s > 0.05
+                {
+                    start = k;
+                }
+                start
+            })
+            .collect()
+    };
+    let mut run_end = vec![0; tagged.len()];
+    for k in (0..tagged.len()).rev() {
+        run_end[k] = if k + 1 < tagged.len() && run_start[k + 1] == run_start[k] {
+            run_end[k + 1]
+        } else {
+            k
+        };
+    }
+    for k in 0..tagged.len() {
+        let lo = k.saturating_sub(ANGLE_SLOPE_HALF_WINDOW).max(run_start[k]);
+        let hi = (k + ANGLE_SLOPE_HALF_WINDOW).min(run_end[k]);
+        let w = angle_slope(&tagged, lo, hi);
+        let arms = tagged[k].arms;
+        tagged[k].sample.angle_velocity_m_per_s = [0, 1, 2].map(|j| arms[j] * w[j]);
+    }
     let mut digs = Vec::new();
-    let mut current: Vec<ActuatorSample> = Vec::new();
+    let mut current: Vec<TraceSample> = Vec::new();
     let mut current_key: Option<u16> = None;
     let mut neutral_since: Option<f64> = None;
-    let finish = |current: &mut Vec<ActuatorSample>, digs: &mut Vec<ActuatorDig>| {
+    let finish = |current: &mut Vec<TraceSample>, digs: &mut Vec<TraceDig>| {
         if current.len() >= 50 {
-            digs.push(ActuatorDig {
+            digs.push(TraceDig {
                 samples: std::mem::take(current),
             });
         } else {
@@ -1047,13 +1179,13 @@ pub fn read_training_digs(
             s.dig
         } else {
             // Command activity: a dig runs while some command is non-neutral, until 1 s of neutral.
-            let active = s.sample.command.iter().any(|u| u.abs() > 1e-3);
+            let active = s.sample.sample.command.iter().any(|u| u.abs() > 1e-3);
             if active {
                 neutral_since = None;
                 Some(0)
             } else {
-                let since = *neutral_since.get_or_insert(s.sample.time_s);
-                (s.sample.time_s - since < 1.0 && !current.is_empty()).then_some(0)
+                let since = *neutral_since.get_or_insert(s.sample.sample.time_s);
+                (s.sample.sample.time_s - since < 1.0 && !current.is_empty()).then_some(0)
             }
         };
         if key != current_key {
@@ -1068,11 +1200,11 @@ pub fn read_training_digs(
     Ok(digs)
 }
 
-/// Reads the digs of `traces` for training or evaluation (cut short at implausible speeds).
-fn load_digs(
+/// Reads the digs of `traces` for training or evaluation (cut short at implausible sampled rates).
+fn load_trace_digs(
     traces: &[PathBuf],
     machine: &planner::machine::MachineConfig,
-) -> anyhow::Result<Vec<ActuatorDig>> {
+) -> anyhow::Result<Vec<TraceDig>> {
     let kin = Kinematics::new(machine)?;
     let c = &machine.cylinders;
     let areas = [&c.boom, &c.stick, &c.bucket].map(|c| (c.head_area_m2(), c.rod_area_m2()));
@@ -1083,7 +1215,8 @@ fn load_digs(
             // A cylinder faster than the pumps can drive it is a glitch, not hydraulics: keep the
             // dig up to it.
             if let Some(k) = dig.samples.iter().position(|s| {
-                s.velocity_m_per_s
+                s.sample
+                    .velocity_m_per_s
                     .iter()
                     .any(|v| v.abs() > MAX_CYLINDER_SPEED_M_PER_S)
             }) {
@@ -1107,6 +1240,18 @@ fn load_digs(
         );
     }
     Ok(digs)
+}
+
+/// The digs of `traces` with the velocities from `source`.
+fn load_digs(
+    traces: &[PathBuf],
+    machine: &planner::machine::MachineConfig,
+    source: VelocitySource,
+) -> anyhow::Result<Vec<ActuatorDig>> {
+    Ok(load_trace_digs(traces, machine)?
+        .iter()
+        .map(|d| d.to_actuator_dig(source))
+        .collect())
 }
 
 fn load_machine(path: Option<&Path>) -> anyhow::Result<planner::machine::MachineConfig> {
@@ -1134,9 +1279,74 @@ fn print_errors(report: &planner::actuator::EvaluationReport) {
     }
 }
 
+/// A sample's sampled rate is counted as a phantom (a stalled cylinder's aliased chatter, docs/simulator.md
+/// Known issues) when the resolver angles say the cylinder moves slower than this, m/s ...
+const PHANTOM_ANGLE_SPEED_M_PER_S: f64 = 0.01;
+/// ... while the rate says it moves faster than this, m/s.
+const PHANTOM_RATE_SPEED_M_PER_S: f64 = 0.02;
+
+/// The error of `model` on `digs` split by phantom-rate samples ([`PHANTOM_ANGLE_SPEED_M_PER_S`]),
+/// against both target signals. Prints one table.
+fn print_breakdown(model: &ActuatorModel, digs: &[TraceDig]) -> anyhow::Result<()> {
+    // Per cylinder: [all, phantom] x (steps, |e| vs rates, |e| vs angles); peaks of both signals.
+    let mut sums = [[(0usize, 0.0_f64, 0.0_f64); 2]; 3];
+    let mut peaks = [[0.0_f64; 2]; 3];
+    for dig in digs {
+        let by_rates = model.simulate(&dig.to_actuator_dig(VelocitySource::Rates))?;
+        let by_angles = model.simulate(&dig.to_actuator_dig(VelocitySource::Angles))?;
+        for (r, g) in by_rates.iter().zip(&by_angles).skip(1) {
+            for j in 0..3 {
+                let (rate, angle) = (r.measured_m_per_s[j], g.measured_m_per_s[j]);
+                let phantom = angle.abs() < PHANTOM_ANGLE_SPEED_M_PER_S
+                    && rate.abs() > PHANTOM_RATE_SPEED_M_PER_S;
+                peaks[j][0] = peaks[j][0].max(rate.abs());
+                peaks[j][1] = peaks[j][1].max(angle.abs());
+                for (class, sum) in sums[j].iter_mut().enumerate() {
+                    if class == 0 || phantom {
+                        sum.0 += 1;
+                        sum.1 += (r.predicted_m_per_s[j] - rate).abs();
+                        sum.2 += (g.predicted_m_per_s[j] - angle).abs();
+                    }
+                }
+            }
+        }
+    }
+    println!(
+        "error by target signal; phantom samples: resolver speed < {PHANTOM_ANGLE_SPEED_M_PER_S} m/s while the rate says > {PHANTOM_RATE_SPEED_M_PER_S} m/s"
+    );
+    println!(
+        "  cylinder  MAE vs rates  MAE vs angles  phantom samples  their share of |e| vs rates  MAE vs rates without them"
+    );
+    for (j, joint) in Joint::ALL.iter().enumerate() {
+        let [all, ph] = sums[j];
+        let pct = |x: f64, peak: f64| if peak > 0.0 { 100.0 * x / peak } else { 0.0 };
+        let n = all.0.max(1) as f64;
+        let rest_n = (all.0 - ph.0).max(1) as f64;
+        println!(
+            "  {:<8}  {:>10.2} %  {:>11.2} %  {:>8} ({:>4.1} %)  {:>18.1} %  {:>16.2} %",
+            joint.to_string(),
+            pct(all.1 / n, peaks[j][0]),
+            pct(all.2 / n, peaks[j][1]),
+            ph.0,
+            100.0 * ph.0 as f64 / n,
+            if all.1 > 0.0 {
+                100.0 * ph.1 / all.1
+            } else {
+                0.0
+            },
+            pct((all.1 - ph.1) / rest_n, peaks[j][0]),
+        );
+    }
+    println!(
+        "  (each % of that signal's peak on these digs: rates {:.3} / {:.3} / {:.3} m/s, angles {:.3} / {:.3} / {:.3} m/s)",
+        peaks[0][0], peaks[1][0], peaks[2][0], peaks[0][1], peaks[1][1], peaks[2][1]
+    );
+    Ok(())
+}
+
 fn evaluate(a: &EvaluateArgs) -> anyhow::Result<()> {
     let machine = load_machine(a.machine.as_deref())?;
-    let digs = load_digs(&a.trace, &machine)?;
+    let trace_digs = load_trace_digs(&a.trace, &machine)?;
     let text = match &a.model {
         Some(p) => {
             std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?
@@ -1144,28 +1354,40 @@ fn evaluate(a: &EvaluateArgs) -> anyhow::Result<()> {
         None => planner::dig_model::NOMINAL_ACTUATOR_JSON.to_owned(),
     };
     let model = ActuatorModel::from_json(&text)?;
-    let chosen: Vec<ActuatorDig> = if a.all {
-        digs
+    let chosen: Vec<TraceDig> = if a.all {
+        trace_digs
     } else {
         let config = TrainConfig {
             seed: a.seed,
             ..TrainConfig::default()
         };
-        let split = planner::actuator::split_digs(digs.len(), &config)?;
-        split.test.iter().map(|&i| digs[i].clone()).collect()
+        let split = planner::actuator::split_digs(trace_digs.len(), &config)?;
+        split.test.iter().map(|&i| trace_digs[i].clone()).collect()
     };
-    let report = model.evaluate(&chosen)?;
+    let digs: Vec<ActuatorDig> = chosen
+        .iter()
+        .map(|d| d.to_actuator_dig(a.velocity))
+        .collect();
+    let report = model.evaluate(&digs)?;
     println!(
-        "{} digs ({} steps), free-running (thesis Figs. 19-21: 5-8 %; target < 5 %):",
-        report.digs, report.steps
+        "{} digs ({} steps), target: velocities from the {}, free-running (thesis Figs. 19-21: 5-8 %; target < 5 %):",
+        report.digs,
+        report.steps,
+        match a.velocity {
+            VelocitySource::Rates => "sampled joint rates",
+            VelocitySource::Angles => "resolver angles' slope",
+        }
     );
     print_errors(&report);
+    if a.breakdown {
+        print_breakdown(&model, &chosen)?;
+    }
     Ok(())
 }
 
 fn train(a: &TrainArgs) -> anyhow::Result<()> {
     let machine = load_machine(a.machine.as_deref())?;
-    let digs = load_digs(&a.trace, &machine)?;
+    let digs = load_digs(&a.trace, &machine, a.velocity)?;
     let config = TrainConfig {
         seed: a.seed,
         hidden_units: a.hidden,
@@ -1194,10 +1416,11 @@ fn train(a: &TrainArgs) -> anyhow::Result<()> {
     };
     let samples: usize = digs.iter().map(|d| d.samples.len()).sum();
     println!(
-        "training on {} digs ({} samples) from {} trace(s): {} hidden units, delay {} steps, spool lag {} s, seed {}, {} inputs",
+        "training on {} digs ({} samples) from {} trace(s), velocities from the {:?}: {} hidden units, delay {} steps, spool lag {} s, seed {}, {} inputs",
         digs.len(),
         samples,
         a.trace.len(),
+        a.velocity,
         config.hidden_units,
         config.delay_steps,
         config.command_lag_s,
