@@ -63,6 +63,10 @@ pub fn approach_joints(
     }
 }
 
+/// A bucket pass that comes this close to a planned dig's start tip confirms that dig, m
+/// ([`PlannedSession::observe_bucket_pass`]).
+pub const CONFIRM_PASS_DISTANCE_M: f64 = 0.6;
+
 /// The predefined sequence's track-back distance (6.2: "a typical distance selected by the
 /// perception based dig planner (1.3 meters)").
 pub const PREDEFINED_BACKUP_M: f64 = 1.3;
@@ -220,6 +224,11 @@ pub struct PlannedSession {
     regression: HardnessRegression,
     hardness_index: Option<f64>,
     dig_starts: Vec<JointAngles>,
+    /// World-frame start tips of planned digs whose bucket pass has not been observed yet, oldest
+    /// first. The caller observes a dig's pass after it has planned the next action (the statistics
+    /// arrive as the cycle turns idle), so the newest entry is not judged; an older one still here
+    /// was abandoned (its move to the start timed out).
+    unconfirmed_digs: Vec<[f64; 3]>,
     steps: Vec<SessionStep>,
     finished: bool,
 }
@@ -261,6 +270,7 @@ impl PlannedSession {
             regression: HardnessRegression::nominal()?,
             hardness_index: None,
             dig_starts: Vec::new(),
+            unconfirmed_digs: Vec::new(),
             steps: Vec::new(),
             finished: false,
         })
@@ -392,6 +402,19 @@ impl PlannedSession {
             .iter()
             .map(|&(r, z)| pose.world_from_base(swing_rad, r, z))
             .collect();
+        // The pass confirms the oldest planned dig it went through (Boom-Down lowers the tip onto
+        // the planned start).
+        let through = |start: &[f64; 3]| {
+            path.iter().any(|p| {
+                (p[0] - start[0])
+                    .hypot(p[1] - start[1])
+                    .hypot(p[2] - start[2])
+                    < CONFIRM_PASS_DISTANCE_M
+            })
+        };
+        if let Some(i) = self.unconfirmed_digs.iter().position(through) {
+            self.unconfirmed_digs.remove(i);
+        }
         let [x0, y0, _] = pose.world_from_base(swing_rad, 0.0, 0.0);
         let [x1, y1, _] = pose.world_from_base(swing_rad, 1.0, 0.0);
         let lateral = [-(y1 - y0), x1 - x0];
@@ -399,18 +422,19 @@ impl PlannedSession {
             .carve_swath(&path, lateral, self.planner.bucket_width_m())
     }
 
-    /// Takes estimated empirical soil properties (Eqs. 21-23): the dig model predicts with them and
-    /// the hardness index follows the regression of 5.2 (Eq. 25). Returns the index, which the caller
-    /// gives Autodig.
+    /// Takes estimated empirical soil properties (Eqs. 21-23): the hardness index follows the
+    /// regression of 5.2 (Eq. 25) and is given to the dig model (and returned, for Autodig). The dig
+    /// model keeps its analytical soil (the modified FEE of the moving bucket with bearing, Eqs.
+    /// 14-18): the linear Eq. 21 fitted on the recent digs has no term for the bucket's direction of
+    /// motion or for its back pushed into the soil and measures depth on the pre-dig surface, so for
+    /// starts high on the face it let the predicted tip sink 0.5-1.2 m deeper than Autodig took it
+    /// (issue #7, docs/planner.md).
     ///
     /// # Errors
     /// [`SessionError::Plan`] for non-finite coefficients.
     pub fn set_soil_estimate(&mut self, soil: EmpiricalSoilModel) -> Result<f64> {
         let index = self.regression.index_for_model(&soil)?;
         let model = self.planner.model_mut();
-        model
-            .set_soil(planner::dig_model::SoilModel::Empirical(soil))
-            .map_err(PlanError::from)?;
         model.set_hardness_index(index).map_err(PlanError::from)?;
         self.hardness_index = Some(index);
         Ok(index)
@@ -437,11 +461,20 @@ impl PlannedSession {
                 (a, None)
             }
             Strategy::Planned => {
+                let judged = self.unconfirmed_digs.len().saturating_sub(1);
+                for tip in self.unconfirmed_digs.drain(..judged) {
+                    self.state.record_abandoned_dig(tip);
+                }
                 let plan = self.planner.plan(self.mapper.grid(), pose, &self.state)?;
                 let regions = plan.coarse.regions.len();
                 let action = match &plan.action {
                     ActionChoice::Dig(d) => {
                         self.state.record_dig(d.region_index, regions);
+                        self.unconfirmed_digs.push(pose.world_from_base(
+                            d.swing_rad,
+                            d.pose.x_m,
+                            d.pose.z_m,
+                        ));
                         let q =
                             approach_joints(self.planner.kinematics(), d.joints, APPROACH_HEIGHT_M);
                         self.dig_starts.push(q);
@@ -456,6 +489,7 @@ impl PlannedSession {
                     }
                     ActionChoice::TrackBack { distance_m } => {
                         self.state.record_track_back();
+                        self.unconfirmed_digs.clear();
                         Some(Action::TrackBack {
                             distance_m: *distance_m,
                         })

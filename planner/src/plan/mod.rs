@@ -228,7 +228,17 @@ pub struct PlannerState {
     /// Cleanups executed per swing-angle bin since the last track back (5.1.2: "not cleanable" after
     /// repeated tries), keyed by the bin index of [`CleanupConfig::swing_step_rad`].
     pub cleanup_tries: std::collections::BTreeMap<i32, u32>,
+    /// World-frame tips `[x, y, z]` of dig starts the work cycle could not reach since the last track
+    /// back (its move to the start timed out): the refined planner does not choose a start within
+    /// [`ABANDONED_START_RADIUS_M`] of one again (the map is unchanged, so it would choose the same
+    /// start forever; issue #7: one start chosen 28 times in a row, 40 s each).
+    #[serde(default)]
+    pub abandoned_starts: Vec<[f64; 3]>,
 }
+
+/// Distance from an abandoned dig start within which the refined planner chooses no start, m (a
+/// candidate grid step and a half: 0.2 m in `d`, 5 deg in `alpha`).
+pub const ABANDONED_START_RADIUS_M: f64 = 0.3;
 
 impl PlannerState {
     /// Records that a cleanup ran at `swing_rad` (call when the controller executed a planned cleanup).
@@ -241,6 +251,13 @@ impl PlannerState {
     /// Records a track back: the swing angles of the material changed, so the counters restart.
     pub fn record_track_back(&mut self) {
         self.cleanup_tries.clear();
+        self.abandoned_starts.clear();
+    }
+
+    /// Records that the dig starting with the tip at `tip_world` (world frame) was abandoned before
+    /// it dug: the machine could not reach the start.
+    pub fn record_abandoned_dig(&mut self, tip_world: [f64; 3]) {
+        self.abandoned_starts.push(tip_world);
     }
 
     /// Records that the dig in region `index` (dig order) was executed: the pointer moves past it.
@@ -444,7 +461,16 @@ impl<A: ActuatorDynamics> Planner<A> {
             if !region.has_material {
                 continue;
             }
-            let r = self.refine(grid, pose, region)?;
+            let mut r = self.refine(grid, pose, region)?;
+            if !state.abandoned_starts.is_empty() {
+                let near_abandoned = |c: &refined::Candidate| {
+                    let [x, y, z] = pose.world_from_base(region.swing_rad, c.pose.x_m, c.pose.z_m);
+                    state.abandoned_starts.iter().any(|a| {
+                        (a[0] - x).hypot(a[1] - y).hypot(a[2] - z) < ABANDONED_START_RADIUS_M
+                    })
+                };
+                r.best = refined::select_best(&r.candidates, region, &self.kin, near_abandoned);
+            }
             if let Some(b) = &r.best
                 && best
                     .as_ref()
@@ -521,6 +547,31 @@ mod tests {
         cfg.refined.d_step_m = 0.6;
         cfg.refined.alpha_step_rad = 10f64.to_radians();
         Planner::new(&machine, DigModel::nominal().expect("model"), cfg).expect("planner")
+    }
+
+    #[test]
+    fn an_abandoned_start_is_not_chosen_again_until_a_track_back() {
+        let planner = test_planner(-0.5);
+        let grid = bench();
+        let pose = MachinePose::default();
+        let mut state = PlannerState::default();
+        let first = planner.plan(&grid, &pose, &state).expect("plan");
+        let d = first.best_dig.expect("a dig on the bench");
+        let tip = pose.world_from_base(d.swing_rad, d.pose.x_m, d.pose.z_m);
+        state.record_abandoned_dig(tip);
+        let second = planner.plan(&grid, &pose, &state).expect("plan");
+        let e = second.best_dig.expect("another dig on the bench");
+        let other = pose.world_from_base(e.swing_rad, e.pose.x_m, e.pose.z_m);
+        let dist = (other[0] - tip[0])
+            .hypot(other[1] - tip[1])
+            .hypot(other[2] - tip[2]);
+        assert!(
+            dist >= ABANDONED_START_RADIUS_M,
+            "{dist} m from the abandoned start"
+        );
+        state.record_track_back();
+        let third = planner.plan(&grid, &pose, &state).expect("plan");
+        assert_eq!(third.best_dig.map(|b| b.pose), Some(d.pose));
     }
 
     #[test]

@@ -21,7 +21,7 @@
 use super::coarse::DigRegion;
 use super::{PlanError, Result, non_negative, positive};
 use crate::dig_model::{ActuatorDynamics, DigModel, DigModelError, DigSite, DigStart, DigSummary};
-use crate::kinematics::{BucketPose, JointAngles, MachinePose};
+use crate::kinematics::{BucketPose, JointAngles, Kinematics, MachinePose};
 use crate::terrain::{SectionProfile, TerrainGrid};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::FRAC_PI_2;
@@ -529,32 +529,7 @@ pub fn refine<A: ActuatorDynamics>(
             Err(_) => c.status = CandidateStatus::ModelFailed,
         }
     }
-    // Exhaustive search; ties keep the first (smallest d, then smallest alpha): deterministic.
-    let mut best: Option<(usize, f64)> = None;
-    for (i, c) in candidates.iter().enumerate() {
-        if let Some(q) = c.quality
-            && q.quality > 0.0
-            && best.is_none_or(|(_, bq)| q.quality > bq)
-        {
-            best = Some((i, q.quality));
-        }
-    }
-    let best = match best.and_then(|(i, _)| candidates.get(i)) {
-        Some(c) => match (c.summary, c.quality, kin.inverse(&c.pose)) {
-            (Some(summary), Some(quality), Ok(joints)) => Some(DigChoice {
-                region_index: region.index,
-                swing_rad: region.swing_rad,
-                d_m: c.d_m,
-                alpha_rad: c.alpha_rad,
-                pose: c.pose,
-                joints,
-                summary,
-                quality,
-            }),
-            _ => None,
-        },
-        None => None,
-    };
+    let best = select_best(&candidates, region, kin, |_| false);
     Ok(RefinedPlan {
         region: *region,
         d_values_m: d_values,
@@ -563,6 +538,40 @@ pub fn refine<A: ActuatorDynamics>(
         section,
         best,
     })
+}
+
+/// The best valid candidate with a quality above zero, skipping those `excluded` says (exhaustive
+/// search; ties keep the first, smallest `d` then smallest `alpha`: deterministic).
+pub fn select_best(
+    candidates: &[Candidate],
+    region: &DigRegion,
+    kin: &Kinematics,
+    excluded: impl Fn(&Candidate) -> bool,
+) -> Option<DigChoice> {
+    let mut best: Option<(usize, f64)> = None;
+    for (i, c) in candidates.iter().enumerate() {
+        if let Some(q) = c.quality
+            && q.quality > 0.0
+            && best.is_none_or(|(_, bq)| q.quality > bq)
+            && !excluded(c)
+        {
+            best = Some((i, q.quality));
+        }
+    }
+    let c = candidates.get(best?.0)?;
+    match (c.summary, c.quality, kin.inverse(&c.pose)) {
+        (Some(summary), Some(quality), Ok(joints)) => Some(DigChoice {
+            region_index: region.index,
+            swing_rad: region.swing_rad,
+            d_m: c.d_m,
+            alpha_rad: c.alpha_rad,
+            pose: c.pose,
+            joints,
+            summary,
+            quality,
+        }),
+        _ => None,
+    }
 }
 
 #[cfg(test)]
