@@ -224,6 +224,12 @@ impl TerrainGrid {
         h.is_finite().then_some(h)
     }
 
+    /// The heights of row `j` (cells `(0..nx, j)`, NaN where unknown), `None` outside the grid.
+    #[must_use]
+    pub fn row(&self, j: usize) -> Option<&[f64]> {
+        (j < self.ny).then(|| &self.heights[j * self.nx..(j + 1) * self.nx])
+    }
+
     /// Sets the height of cell `(i, j)`; `None` marks it unknown.
     ///
     /// # Errors
@@ -481,9 +487,20 @@ impl TerrainGrid {
         );
         let area = self.cell_area();
         let mut removed = 0.0;
+        // `proj(cell_center(i, j))` is `x_i u + y_j v` per component: the column products once per
+        // cut and the row products once per row, summed per cell (the same products and sums, so
+        // bit for bit the same projections).
+        let columns: Vec<(f64, f64)> = (i0..i1)
+            .map(|i| {
+                let x = self.cell_center(i, 0)[0];
+                (x * u[0], x * v[0])
+            })
+            .collect();
         for j in j0..j1 {
-            for i in i0..i1 {
-                let (sc, tc) = proj(self.cell_center(i, j));
+            let y = self.cell_center(0, j)[1];
+            let (yu, yv) = (y * u[1], y * v[1]);
+            for (i, &(xu, xv)) in (i0..i1).zip(&columns) {
+                let (sc, tc) = (xu + yu, xv + yv);
                 // Half-open in the direction of travel: [start, end).
                 let inside = if s1 < s0 {
                     sc > smin && sc <= smax
