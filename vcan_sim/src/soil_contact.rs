@@ -232,7 +232,7 @@ impl World {
         //    margin far above rounding is added.
         let cone_radius_m = (3.0 * volume_m3 / (std::f64::consts::PI * slope.max(1e-3))).cbrt();
         let near = ((1.5 * cone_radius_m / res).ceil() + 1.0).min(DEPOSIT_REACH_M / res);
-        let mut near_bases = Vec::new();
+        let mut near_bases = Vec::with_capacity(256);
         self.deposit_window([x_m, y_m], near, |_, _, h, d2| {
             near_bases.push(d2.sqrt() * slope + h);
         });
@@ -243,13 +243,26 @@ impl World {
         // 2. Only cells whose base is below that bound can receive material: the others are skipped
         //    without a square root. The apex of the kept cells is the apex of the whole window (the
         //    same lowest bases in the same order), and the skipped ones would add exactly zero.
-        let mut cells = Vec::new();
-        self.deposit_window([x_m, y_m], DEPOSIT_REACH_M / res, |i, j, h, d2| {
-            let rise = upper - h;
-            if rise > 0.0 && d2 * slope * slope < rise * rise {
-                cells.push((i, j, d2.sqrt() * slope + h));
-            }
-        });
+        //    A block of cells of a row is skipped whole when its lowest cell cannot receive material
+        //    even at the block's least distance from the centre (every cell's `d2` is at least that,
+        //    its rise at most the lowest cell's, and the test is monotone under rounding): the same
+        //    cells are kept, in the same order, without the square-distance test on most of the
+        //    window where the ground around the cone is level.
+        let mut cells = Vec::with_capacity(256);
+        self.deposit_blocks(
+            [x_m, y_m],
+            DEPOSIT_REACH_M / res,
+            |d2, lowest| {
+                let rise = upper - lowest;
+                rise > 0.0 && d2 * slope * slope < rise * rise
+            },
+            |i, j, h, d2| {
+                let rise = upper - h;
+                if rise > 0.0 && d2 * slope * slope < rise * rise {
+                    cells.push((i, j, d2.sqrt() * slope + h));
+                }
+            },
+        );
         // 3. The apex `a` solves `g(a) = sum max(a - base, 0) - target = 0`, with `g` convex, piecewise
         //    linear and increasing. Newton's method from the upper bound, `a' = a - g(a) / g'(a) =
         //    (target + sum of the bases below a) / their count` (step 1's bound over the cells below
@@ -290,10 +303,19 @@ impl World {
 
     /// Calls `f(i, j, height, squared distance from the point)` for the known cells within `reach`
     /// cells of the cell holding `point` (which is on the map), row by row.
-    fn deposit_window(
+    fn deposit_window(&self, point: [f64; 2], reach: f64, f: impl FnMut(usize, usize, f64, f64)) {
+        self.deposit_blocks(point, reach, |_, _| true, f);
+    }
+
+    /// [`Self::deposit_window`] over the blocks of up to [`DEPOSIT_BLOCK`] cells of a row for which
+    /// `keep(lower bound of the blocks' squared distances from the point, lowest known height in
+    /// the block)` holds (the lowest height is infinite when none is known). Cells are visited in
+    /// the same order as by the whole window.
+    fn deposit_blocks(
         &self,
         point: [f64; 2],
         reach: f64,
+        mut keep: impl FnMut(f64, f64) -> bool,
         mut f: impl FnMut(usize, usize, f64, f64),
     ) {
         let t = &self.terrain;
@@ -312,25 +334,48 @@ impl World {
             (cj as isize + reach).min(ny - 1) as usize,
         );
         // The squared x distances of the window's columns, once (the same products as per cell, so
-        // `dx^2 + dy^2` is bit for bit the same).
+        // `dx^2 + dy^2` is bit for bit the same), and the smallest of each block.
         let dx2: Vec<f64> = (i0..i1 + 1)
             .map(|i| {
                 let dx = t.cell_center(i, j0)[0] - x_m;
                 dx * dx
             })
             .collect();
+        let block_dx2: Vec<f64> = dx2
+            .chunks(DEPOSIT_BLOCK)
+            .map(|c| c.iter().copied().fold(f64::INFINITY, f64::min))
+            .collect();
         for j in j0..j1 + 1 {
+            let Some(heights) = t.row(j) else {
+                continue;
+            };
+            let heights = &heights[i0..i1 + 1];
             let dy = t.cell_center(i0, j)[1] - y_m;
             let dy2 = dy * dy;
-            for (k, &dx2) in dx2.iter().enumerate() {
-                let i = i0 + k;
-                if let Some(h) = t.cell(i, j) {
-                    f(i, j, h, dx2 + dy2);
+            for (b, (block, block_dx2)) in heights.chunks(DEPOSIT_BLOCK).zip(&block_dx2).enumerate()
+            {
+                // The lowest known height (`h < lowest` is false for the NaN of an unknown cell).
+                let lowest = block.iter().fold(
+                    f64::INFINITY,
+                    |lowest, &h| if h < lowest { h } else { lowest },
+                );
+                if !keep(block_dx2 + dy2, lowest) {
+                    continue;
+                }
+                let k0 = b * DEPOSIT_BLOCK;
+                for (k, &h) in block.iter().enumerate() {
+                    // Heights are finite or NaN (unknown), as `TerrainGrid::cell` reads them.
+                    if h.is_finite() {
+                        f(i0 + k0 + k, j, h, dx2[k0 + k] + dy2);
+                    }
                 }
             }
         }
     }
 }
+
+/// Cells per block of a row in [`World::deposit_blocks`].
+const DEPOSIT_BLOCK: usize = 8;
 
 /// How far from its centre a spill or dump cone may reach (m).
 const DEPOSIT_REACH_M: f64 = 2.5;
