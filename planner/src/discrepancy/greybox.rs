@@ -29,10 +29,11 @@
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
+use super::soil_replay::{self, CutSection};
 use super::{DigRecord, DiscrepancyError, LoadTag, Result};
 use crate::kinematics::{Joint, JointAngles, Kinematics, TipForce};
 use crate::machine::MachineConfig;
-use crate::soil::{self, Contact, SoilProperties};
+use crate::soil::{BearingParams, SoilProperties};
 
 /// Physics substep of the spool integration, s (the simulator's and the valve's 1 kHz).
 const SPOOL_DT_S: f64 = 0.001;
@@ -47,6 +48,9 @@ const REST_SPEED_M_PER_S: f64 = 2.0e-3;
 const MOVING_SPEED_M_PER_S: f64 = 0.02;
 /// Largest cylinder acceleration at which a sample enters the force signals, m/s^2.
 const QUASI_STATIC_ACCEL_M_PER_S2: f64 = 0.5;
+/// Samples (0.3 s) a cylinder's valve command must have been open (beyond the spool overlap) for a
+/// sample to enter that cylinder's force signal.
+const SPOOL_OPEN_SAMPLES: usize = 30;
 /// Pressure readings at or below this are taken as clamped at the sensor's zero, Pa.
 const CLAMPED_READING_PA: f64 = 1.0e3;
 /// Margin from the stroke ends where the end stops may carry force, m.
@@ -187,6 +191,10 @@ pub struct GreyBoxParams {
     pub soil: SoilProperties,
     /// Multiplies the FEE force (calibrated on nominal digs).
     pub soil_force_factor: f64,
+    /// Bearing resistance of an edge or back pushed into the soil (the planner's moving-bucket soil
+    /// model, [`crate::soil::MovingBucketSoil`]).
+    #[serde(default)]
+    pub bearing: BearingParams,
     /// Effective bulk modulus of oil and hoses (Eq. 2 `beta`), Pa.
     #[serde(default = "default_bulk_modulus_pa")]
     pub bulk_modulus_pa: f64,
@@ -256,6 +264,7 @@ impl GreyBoxParams {
                 cohesion_pa: 8000.0,
             },
             soil_force_factor: 1.0,
+            bearing: BearingParams::default(),
             bulk_modulus_pa: h.bulk_modulus_pa,
             dead_volume_m3: default_dead_volume_m3(),
             internal_leakage_m3_per_s_pa: 0.0,
@@ -323,6 +332,9 @@ impl GreyBoxParams {
                 "grey-box parameters must be finite".into(),
             ));
         }
+        self.bearing
+            .validate()
+            .map_err(|e| DiscrepancyError::Invalid(format!("grey-box bearing parameters: {e}")))?;
         Ok(())
     }
 }
@@ -530,7 +542,29 @@ impl PreparedRecord {
         }
         let mut measured = vec![[f64::NAN; N_SIGNALS]; n];
         let mut soil_terms = vec![None; n];
+        // The section along the digging plane as the edge leaves it (cut in the Autodig stages, when
+        // the bucket is in the digging plane), and the tip of the previous sample.
+        let mut cut = record.section.as_ref().map(CutSection::new);
+        let mut last_tip: Option<[f64; 2]> = None;
+        let mut open_for = [0usize; 3];
         for (k, s) in record.samples.iter().enumerate() {
+            let q = JointAngles {
+                boom_rad: s.angles_rad[0],
+                stick_rad: s.angles_rad[1],
+                bucket_rad: s.angles_rad[2],
+            };
+            let pose = kin.forward(&q);
+            let tip = [pose.x_m, pose.z_m];
+            if let Some(c) = cut.as_mut() {
+                if s.stage == super::StageTag::Outside {
+                    last_tip = None;
+                } else {
+                    if let Some(prev) = last_tip {
+                        c.cut(prev, tip);
+                    }
+                    last_tip = Some(tip);
+                }
+            }
             let m = &mut measured[k];
             if k < WARMUP_SAMPLES {
                 continue;
@@ -552,9 +586,20 @@ impl PreparedRecord {
             // Only moving cylinders: at rest, dry friction (stiction) holds any force up to its
             // limit and oil trapped behind closed spools keeps whatever pressure it had, so a
             // resting cylinder's force says nothing definite about the model.
+            // A cylinder whose valve has been closed within the last SPOOL_OPEN_SAMPLES moves only as
+            // the oil column behind the closed spool springs back and forth: its force is then
+            // mostly the inertia of that oscillation, which 100 Hz samples do not resolve.
+            for i in 0..3 {
+                open_for[i] = if s.command[i].abs() > params.overlap {
+                    open_for[i] + 1
+                } else {
+                    0
+                };
+            }
             if s.load == LoadTag::EmptyFreeAir && all_consistent && !stalled[k] && steady {
                 for i in 0..3 {
                     if in_stroke[k][i]
+                        && open_for[i] > SPOOL_OPEN_SAMPLES
                         && gravity_force[k][i].is_finite()
                         && velocity[k][i].abs() > MOVING_SPEED_M_PER_S
                     {
@@ -563,9 +608,11 @@ impl PreparedRecord {
                     }
                 }
             }
-            if let (true, true, Some(section)) =
-                (s.stage.in_soil(), all_consistent, &record.section)
-            {
+            // The soil signals in the cutting stages (Dig, Capture): in the PreDig penetration the
+            // bearing resistance dominates, which switches with the direction of the edge's motion
+            // at the creep speed and so hangs on the noise of the measured rates.
+            let cutting = matches!(s.stage, super::StageTag::Dig | super::StageTag::Capture);
+            if let (true, true, Some(section)) = (cutting, all_consistent, &cut) {
                 soil_terms[k] = soil_terms_of(
                     &kin,
                     cfg,
@@ -608,13 +655,22 @@ impl PreparedRecord {
     }
 }
 
+/// Slowest tip speed at which a sample enters the soil signals, m/s: the soil force builds up from
+/// rest over the creep speed (1 cm/s), so below a few times it the force hangs on the speed itself;
+/// a stalled bucket's force is that of whatever holds it.
+const SOIL_MOVING_SPEED_M_PER_S: f64 = 0.05;
+
+/// The soil terms of one sample: the measured tip force (Eqs. A20-A23 from the pressures, less
+/// inertia and seal damping) at zero payload and per kg of payload, and the modelled soil force
+/// ([`soil_replay`]) on the section cut so far, at nominal soil and per unit of cohesion and density
+/// (the force is affine in both: Eqs. 14-17 and the bearing pressure are linear in `c` and `gamma`).
 #[allow(clippy::too_many_arguments)]
 fn soil_terms_of(
     kin: &Kinematics,
     cfg: &MachineConfig,
     params: &GreyBoxParams,
     s: &super::Sample,
-    section: &crate::terrain::SectionProfile,
+    section: &CutSection,
     velocity: [f64; 3],
     accel: [f64; 3],
     mass: [f64; 3],
@@ -625,10 +681,29 @@ fn soil_terms_of(
         bucket_rad: s.angles_rad[2],
     };
     let pose = kin.forward(&q);
-    let volume = s.swept_volume_m3.clamp(0.0, cfg.bucket.capacity_m3);
-    let Ok(Contact::InContact(gamma)) = soil::dig_geometry(&pose, section, volume) else {
+    let rates = Vector3::new(
+        s.rates_rad_per_s[0],
+        s.rates_rad_per_s[1],
+        s.rates_rad_per_s[2],
+    );
+    let tip_v = kin.jacobian(&q) * rates; // Eq. A3
+    let tip_velocity = [tip_v[0], tip_v[1]];
+    if tip_velocity[0].hypot(tip_velocity[1]) < SOIL_MOVING_SPEED_M_PER_S {
         return None;
-    };
+    }
+    let width = cfg.bucket.width_m;
+    // The soil that has passed over the edge: the area cut from the section times the width, up to
+    // the bucket's capacity (the rest spills).
+    let volume = (section.removed_area_m2() * width).clamp(0.0, cfg.bucket.capacity_m3);
+    let motion = section.motion(
+        [pose.x_m, pose.z_m],
+        pose.bucket_abs_rad,
+        tip_velocity,
+        volume,
+    )?;
+    if motion.vertical_depth_m <= 0.0 {
+        return None;
+    }
     // Measured soil force: Eq. A20 forces less inertia and seal damping, then Eq. A23.
     let forces = Vector3::from_fn(|i, _| {
         s.head_pa[i] * params.head_area_m2[i]
@@ -640,30 +715,26 @@ fn soil_terms_of(
     let f1 = kin
         .tip_force_from_cylinder_forces(&q, &forces, 1000.0)
         .ok()?;
-    let xc = kin.centroid_offset_x_m(&q);
-    let width = cfg.bucket.width_m;
-    let fee = |psi: &SoilProperties| soil::fee_tip_force(psi, &gamma, width, xc).ok();
-    let base = fee(&params.soil)?;
+    let force =
+        |psi: &SoilProperties| soil_replay::soil_force(psi, &params.bearing, width, &motion);
+    let base = force(&params.soil)?;
     let mut more_c = params.soil;
     more_c.cohesion_pa += 1000.0;
     let mut more_gamma = params.soil;
     more_gamma.density_kg_per_m3 += 100.0;
-    let fc = fee(&more_c)?;
-    let fg = fee(&more_gamma)?;
+    let fc = force(&more_c)?;
+    let fg = force(&more_gamma)?;
     let k = params.soil_force_factor;
     let out = SoilTerms {
         measured0: [f0.fx_n, f0.fz_n],
         measured_per_kg: [(f1.fx_n - f0.fx_n) / 1000.0, (f1.fz_n - f0.fz_n) / 1000.0],
         payload_volume_m3: volume,
-        fee0: [k * base.fx_n, k * base.fz_n],
+        fee0: [k * base[0], k * base[1]],
         fee_per_pa: [
-            k * (fc.fx_n - base.fx_n) / 1000.0,
-            k * (fc.fz_n - base.fz_n) / 1000.0,
+            k * (fc[0] - base[0]) / 1000.0,
+            k * (fc[1] - base[1]) / 1000.0,
         ],
-        fee_per_density: [
-            k * (fg.fx_n - base.fx_n) / 100.0,
-            k * (fg.fz_n - base.fz_n) / 100.0,
-        ],
+        fee_per_density: [k * (fg[0] - base[0]) / 100.0, k * (fg[1] - base[1]) / 100.0],
     };
     let all = out
         .measured0

@@ -24,6 +24,7 @@ pub mod effects;
 pub mod fit;
 pub mod greybox;
 pub mod model;
+pub mod soil_replay;
 pub mod stats;
 
 pub use effects::Candidate;
