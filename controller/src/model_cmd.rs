@@ -83,6 +83,20 @@ pub enum VelocitySource {
     Angles,
 }
 
+/// Which cylinder forces the networks are trained and evaluated with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum ForceSource {
+    /// From the measured head and rod pressures (Eq. A20).
+    #[default]
+    Measured,
+    /// What the dig model feeds the networks: the statics `F = (G - J^T f) / r` (Eqs. A2, A4, A7,
+    /// A19, clamped to the port relief) with the model's soil force `f` (`DigModel::soil_force_at`,
+    /// the nominal soil with the dig's cohesion) at the trace's pose and cylinder velocities, over the
+    /// pre-dig section lowered to the sensed tip path, and the payload of the sensed swept volume.
+    /// Needs `model generate-data`'s `setups.json` next to the traces (the pre-dig section and soil).
+    Statics,
+}
+
 /// Arguments of `model train`.
 #[derive(Debug, Args)]
 pub struct TrainArgs {
@@ -136,6 +150,9 @@ pub struct TrainArgs {
     /// The target velocity signal (see [`VelocitySource`]).
     #[arg(long, value_enum, default_value_t = VelocitySource::Rates)]
     pub velocity: VelocitySource,
+    /// The force inputs (see [`ForceSource`]).
+    #[arg(long, value_enum, default_value_t = ForceSource::Measured)]
+    pub forces: ForceSource,
     /// Machine file (default: the built-in config/machine.toml).
     #[arg(long, value_name = "FILE")]
     pub machine: Option<PathBuf>,
@@ -159,6 +176,9 @@ pub struct EvaluateArgs {
     /// The target velocity signal (see [`VelocitySource`]).
     #[arg(long, value_enum, default_value_t = VelocitySource::Rates)]
     pub velocity: VelocitySource,
+    /// The force inputs (see [`ForceSource`]).
+    #[arg(long, value_enum, default_value_t = ForceSource::Measured)]
+    pub forces: ForceSource,
     /// Also split the error by samples where the rate and the resolver angles disagree (the
     /// simulator's phantom rate of a stalled cylinder) and report it against both targets.
     #[arg(long)]
@@ -978,6 +998,8 @@ pub struct TraceSample {
     pub sample: ActuatorSample,
     /// Cylinder velocities from the slope of the resolver angles ([`VelocitySource::Angles`]), m/s.
     pub angle_velocity_m_per_s: [f64; 3],
+    /// Sensed joint angles `[boom, stick, bucket]`, rad.
+    pub angles_rad: [f64; 3],
 }
 
 /// One dig of a trace with both velocity signals ([`read_training_digs`]).
@@ -1083,6 +1105,7 @@ pub fn read_training_digs(
                     sample: TraceSample {
                         sample,
                         angle_velocity_m_per_s: [0.0; 3],
+                        angles_rad,
                     },
                     arms: [arms[0], arms[1], arms[2]],
                     angles_rad,
@@ -1204,14 +1227,28 @@ pub fn read_training_digs(
 fn load_trace_digs(
     traces: &[PathBuf],
     machine: &planner::machine::MachineConfig,
+    forces: ForceSource,
 ) -> anyhow::Result<Vec<TraceDig>> {
     let kin = Kinematics::new(machine)?;
     let c = &machine.cylinders;
     let areas = [&c.boom, &c.stick, &c.bucket].map(|c| (c.head_area_m2(), c.rod_area_m2()));
     let mut digs = Vec::new();
     let mut implausible = 0usize;
+    let mut setups: std::collections::HashMap<PathBuf, Vec<DigSetup>> =
+        std::collections::HashMap::new();
+    let mut model = match forces {
+        ForceSource::Measured => None,
+        ForceSource::Statics => Some(DigModel::nominal()?),
+    };
     for path in traces {
-        for mut dig in read_training_digs(path, &kin, areas)? {
+        let mut trace_digs = read_training_digs(path, &kin, areas)?;
+        if let Some(model) = model.as_mut() {
+            let setup = trace_setup(path, &mut setups)?;
+            for dig in &mut trace_digs {
+                replace_with_statics(dig, &setup, model, &kin, machine)?;
+            }
+        }
+        for mut dig in trace_digs {
             // A cylinder faster than the pumps can drive it is a glitch, not hydraulics: keep the
             // dig up to it.
             if let Some(k) = dig.samples.iter().position(|s| {
@@ -1242,13 +1279,123 @@ fn load_trace_digs(
     Ok(digs)
 }
 
-/// The digs of `traces` with the velocities from `source`.
+/// The setup of a `model generate-data` trace (`dig_NNN.log`) from `setups.json` in its folder.
+fn trace_setup(
+    path: &Path,
+    cache: &mut std::collections::HashMap<PathBuf, Vec<DigSetup>>,
+) -> anyhow::Result<DigSetup> {
+    let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let index: usize = path
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .and_then(|s| s.strip_prefix("dig_"))
+        .and_then(|s| s.parse().ok())
+        .with_context(|| {
+            format!(
+                "--forces statics needs generate-data traces named dig_NNN.log, not {}",
+                path.display()
+            )
+        })?;
+    if !cache.contains_key(&dir) {
+        let file = dir.join("setups.json");
+        let text = std::fs::read_to_string(&file)
+            .with_context(|| format!("reading {} (--forces statics)", file.display()))?;
+        cache.insert(dir.clone(), serde_json::from_str(&text)?);
+    }
+    cache
+        .get(&dir)
+        .and_then(|v| v.iter().find(|s| s.index == index))
+        .cloned()
+        .with_context(|| format!("no setup {index} in {}/setups.json", dir.display()))
+}
+
+/// Replaces the measured forces of `dig` by the ones the dig model would feed the networks at the
+/// recorded states ([`ForceSource::Statics`]): the model's soil force for the pose and the sampled
+/// cylinder velocities over the pre-dig section lowered to the sensed tip path (the dig model's cut
+/// surface), with the payload of the sensed swept volume (perception, 3.2), through the statics
+/// `F = (G - J^T f) / r` (Eqs. A2, A4, A7, A19), clamped to the port relief as in the dig model.
+fn replace_with_statics(
+    dig: &mut TraceDig,
+    setup: &DigSetup,
+    model: &mut DigModel,
+    kin: &Kinematics,
+    machine: &planner::machine::MachineConfig,
+) -> anyhow::Result<()> {
+    let cfg = sim_config(setup)?;
+    let world = World::from_scenario(&cfg.scenario)?;
+    let profile = section_of(&world, &cfg)?;
+    let soil = &cfg.scenario.soil;
+    let psi = planner::soil::SoilProperties {
+        density_kg_per_m3: soil.density_kg_per_m3,
+        failure_angle_rad: soil.failure_angle_deg.to_radians(),
+        friction_angle_rad: soil.friction_angle_deg.to_radians(),
+        tool_friction_angle_rad: soil.tool_friction_angle_deg.to_radians(),
+        cohesion_pa: soil.cohesion_pa,
+    };
+    model.set_soil(planner::dig_model::SoilModel::Analytical(psi))?;
+    let capacity = machine.bucket.capacity_m3;
+    let port_relief = STATICS_PORT_RELIEF_FACTOR * machine.hydraulics.relief_pressure_pa;
+    let c = &machine.cylinders;
+    let areas = [&c.boom, &c.stick, &c.bucket].map(|c| (c.head_area_m2(), c.rod_area_m2()));
+    let mut swept = SweptVolume::new(profile.clone(), machine.bucket.width_m)?;
+    let (r0, step) = (profile.r_start_m(), profile.step_m());
+    let n = ((profile.r_end_m() - r0) / step).round() as usize + 1;
+    let mut heights: Vec<f64> = (0..n)
+        .map(|k| profile.height_at((r0 + k as f64 * step).min(profile.r_end_m())))
+        .collect::<Result<_, _>>()?;
+    let mut last_tip: Option<[f64; 2]> = None;
+    for s in &mut dig.samples {
+        let [b, st, bu] = s.angles_rad;
+        let q = JointAngles {
+            boom_rad: b,
+            stick_rad: st,
+            bucket_rad: bu,
+        };
+        let tip = kin.forward(&q);
+        let v_s = swept.update(tip.x_m, tip.z_m)?.min(capacity);
+        // The cut surface: the section lowered to the straight path between successive tips.
+        if let Some(from) = last_tip {
+            let to = [tip.x_m, tip.z_m];
+            let dx = to[0] - from[0];
+            if dx.abs() > 1e-12 {
+                let (lo, hi) = (from[0].min(to[0]), from[0].max(to[0]));
+                for (k, h) in heights.iter_mut().enumerate() {
+                    let r = r0 + k as f64 * step;
+                    if r >= lo && r <= hi {
+                        *h = h.min(from[1] + (r - from[0]) / dx * (to[1] - from[1]));
+                    }
+                }
+            }
+        }
+        last_tip = Some([tip.x_m, tip.z_m]);
+        let surface = SectionProfile::new(r0, step, heights.clone())?;
+        let f = model.soil_force_at(&q, s.sample.velocity_m_per_s, &surface, v_s)?;
+        let forces = kin.cylinder_forces_from_tip_force(&q, &f, v_s * psi.density_kg_per_m3)?;
+        for j in 0..3 {
+            let f = forces[j];
+            if !f.is_finite() {
+                bail!(
+                    "non-finite statics force in the replay of dig {}",
+                    setup.index
+                );
+            }
+            s.sample.force_n[j] = f.clamp(-port_relief * areas[j].1, port_relief * areas[j].0);
+        }
+    }
+    Ok(())
+}
+
+/// Port-relief pressure as a multiple of the main relief, as the dig model clamps its statics.
+const STATICS_PORT_RELIEF_FACTOR: f64 = 1.08;
+
+/// The digs of `traces` with the velocities from `source` and the forces from `forces`.
 fn load_digs(
     traces: &[PathBuf],
     machine: &planner::machine::MachineConfig,
     source: VelocitySource,
+    forces: ForceSource,
 ) -> anyhow::Result<Vec<ActuatorDig>> {
-    Ok(load_trace_digs(traces, machine)?
+    Ok(load_trace_digs(traces, machine, forces)?
         .iter()
         .map(|d| d.to_actuator_dig(source))
         .collect())
@@ -1346,7 +1493,7 @@ fn print_breakdown(model: &ActuatorModel, digs: &[TraceDig]) -> anyhow::Result<(
 
 fn evaluate(a: &EvaluateArgs) -> anyhow::Result<()> {
     let machine = load_machine(a.machine.as_deref())?;
-    let trace_digs = load_trace_digs(&a.trace, &machine)?;
+    let trace_digs = load_trace_digs(&a.trace, &machine, a.forces)?;
     let text = match &a.model {
         Some(p) => {
             std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?
@@ -1381,13 +1528,59 @@ fn evaluate(a: &EvaluateArgs) -> anyhow::Result<()> {
     print_errors(&report);
     if a.breakdown {
         print_breakdown(&model, &chosen)?;
+        if a.forces == ForceSource::Statics {
+            let measured = load_trace_digs(&a.trace, &machine, ForceSource::Measured)?;
+            print_force_gap(&measured, &trace_digs_all(&a.trace, &machine)?, &machine);
+        }
     }
     Ok(())
 }
 
+/// All digs of `traces` with the statics forces (the same digs as [`ForceSource::Measured`] gives).
+fn trace_digs_all(
+    traces: &[PathBuf],
+    machine: &planner::machine::MachineConfig,
+) -> anyhow::Result<Vec<TraceDig>> {
+    load_trace_digs(traces, machine, ForceSource::Statics)
+}
+
+/// How far the dig model's statics forces lie from the measured ones over all samples: mean and
+/// mean absolute difference (statics - measured) per cylinder, as head-side pressure, MPa.
+fn print_force_gap(
+    measured: &[TraceDig],
+    statics: &[TraceDig],
+    machine: &planner::machine::MachineConfig,
+) {
+    let c = &machine.cylinders;
+    let head = [&c.boom, &c.stick, &c.bucket].map(|c| c.head_area_m2());
+    let mut sums = [(0.0_f64, 0.0_f64); 3];
+    let mut n = 0usize;
+    for (m, s) in measured.iter().zip(statics) {
+        for (a, b) in m.samples.iter().zip(&s.samples) {
+            for j in 0..3 {
+                let d = (b.sample.force_n[j] - a.sample.force_n[j]) / head[j] * 1e-6;
+                sums[j].0 += d;
+                sums[j].1 += d.abs();
+            }
+            n += 1;
+        }
+    }
+    let n = n.max(1) as f64;
+    println!(
+        "statics - measured force over all {} samples, as head pressure [MPa]: mean {:+.2} / {:+.2} / {:+.2}, mean |.| {:.2} / {:.2} / {:.2} (boom / stick / bucket)",
+        n,
+        sums[0].0 / n,
+        sums[1].0 / n,
+        sums[2].0 / n,
+        sums[0].1 / n,
+        sums[1].1 / n,
+        sums[2].1 / n
+    );
+}
+
 fn train(a: &TrainArgs) -> anyhow::Result<()> {
     let machine = load_machine(a.machine.as_deref())?;
-    let digs = load_digs(&a.trace, &machine, a.velocity)?;
+    let digs = load_digs(&a.trace, &machine, a.velocity, a.forces)?;
     let config = TrainConfig {
         seed: a.seed,
         hidden_units: a.hidden,
@@ -2018,4 +2211,113 @@ fn table2(a: &Table2Args) -> anyhow::Result<()> {
     let mut out = std::io::stdout().lock();
     out.flush()?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tagged_at(t: f64, angles_rad: [f64; 3]) -> Tagged {
+        Tagged {
+            sample: TraceSample {
+                sample: ActuatorSample {
+                    time_s: t,
+                    command: [0.0; 3],
+                    force_n: [0.0; 3],
+                    velocity_m_per_s: [0.0; 3],
+                },
+                angle_velocity_m_per_s: [0.0; 3],
+                angles_rad,
+            },
+            arms: [1.0; 3],
+            angles_rad,
+            dig: None,
+        }
+    }
+
+    #[test]
+    fn angle_slope_recovers_the_rate_of_quantised_resolver_angles() {
+        // Ramps at 0.2, -0.05 and 0 rad/s, quantised to 14 bits like the simulator's resolvers.
+        let quantum = std::f64::consts::TAU / 16384.0;
+        let rates = [0.2, -0.05, 0.0];
+        let tagged: Vec<Tagged> = (0..40)
+            .map(|k| {
+                let t = k as f64 * 0.01;
+                tagged_at(t, rates.map(|w| (0.3 + w * t / quantum).round() * quantum))
+            })
+            .collect();
+        let w = angle_slope(&tagged, 10, 20);
+        for j in 0..3 {
+            assert!(
+                (w[j] - rates[j]).abs() < 0.01,
+                "joint {j}: {} against {}",
+                w[j],
+                rates[j]
+            );
+        }
+        // A single sample has no slope.
+        assert_eq!(angle_slope(&tagged, 5, 5), [0.0; 3]);
+    }
+
+    #[test]
+    fn a_generated_trace_reads_back_with_both_velocities_and_statics_forces() {
+        let dir = tempfile::tempdir().unwrap();
+        let setups = random_setups(3, 3, true).unwrap();
+        let mut paths = Vec::new();
+        for setup in &setups {
+            let path = dir.path().join(format!("dig_{:03}.log", setup.index));
+            let mut w =
+                TraceWriter::new(BufWriter::new(File::create(&path).unwrap()), "vcan0", true);
+            run_sim_dig(setup, Some(&mut w)).unwrap();
+            w.flush().unwrap();
+            paths.push(path);
+        }
+        std::fs::write(
+            dir.path().join("setups.json"),
+            serde_json::to_string(&setups).unwrap(),
+        )
+        .unwrap();
+        let machine = planner::machine::MachineConfig::default_machine().unwrap();
+        let measured = load_trace_digs(&paths, &machine, ForceSource::Measured).unwrap();
+        let statics = load_trace_digs(&paths, &machine, ForceSource::Statics).unwrap();
+        assert_eq!(measured.len(), 3);
+        assert_eq!(statics.len(), 3);
+        // The two velocity signals describe the same motion: their means over the dig agree to a
+        // small fraction of the peak speed (they differ sample by sample by noise and smoothing).
+        for (dig, j) in measured.iter().flat_map(|d| [(d, 0), (d, 1), (d, 2)]) {
+            let s = &dig.samples;
+            let peak = s
+                .iter()
+                .map(|x| x.sample.velocity_m_per_s[j].abs())
+                .fold(0.0, f64::max);
+            let mean_rate = s.iter().map(|x| x.sample.velocity_m_per_s[j]).sum::<f64>();
+            let mean_angle = s.iter().map(|x| x.angle_velocity_m_per_s[j]).sum::<f64>();
+            let n = s.len() as f64;
+            assert!(
+                ((mean_rate - mean_angle) / n).abs() < 0.05 * peak,
+                "cylinder {j}: mean {} against {} m/s, peak {peak}",
+                mean_rate / n,
+                mean_angle / n
+            );
+        }
+        // Statics forces: finite, within the port relief, not the measured ones, and the same samples
+        // otherwise.
+        let relief = STATICS_PORT_RELIEF_FACTOR * machine.hydraulics.relief_pressure_pa;
+        let c = &machine.cylinders;
+        let head = [&c.boom, &c.stick, &c.bucket].map(|c| c.head_area_m2());
+        let mut differs = false;
+        let pairs = measured.iter().zip(&statics).flat_map(|(m, s)| {
+            assert_eq!(m.samples.len(), s.samples.len());
+            m.samples.iter().zip(&s.samples)
+        });
+        for (m, s) in pairs {
+            assert_eq!(m.sample.time_s, s.sample.time_s);
+            assert_eq!(m.sample.velocity_m_per_s, s.sample.velocity_m_per_s);
+            for ((f, a), fm) in s.sample.force_n.iter().zip(head).zip(m.sample.force_n) {
+                assert!(f.is_finite() && *f <= relief * a + 1e-6);
+                differs |= (f - fm).abs() > 1.0;
+            }
+        }
+        assert!(differs);
+    }
 }
