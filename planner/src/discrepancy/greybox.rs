@@ -596,7 +596,11 @@ impl PreparedRecord {
                     0
                 };
             }
-            if s.load == LoadTag::EmptyFreeAir && all_consistent && !stalled[k] && steady {
+            // Boom-Down ends when the bucket meets the ground, which then carries part of the
+            // links' weight (effect-free sessions: boom force 49 kN measured against 184 kN of
+            // gravity there), so it is not free air for the force relation.
+            let free_air = s.load == LoadTag::EmptyFreeAir && s.stage != super::StageTag::BoomDown;
+            if free_air && all_consistent && !stalled[k] && steady {
                 for i in 0..3 {
                     if in_stroke[k][i]
                         && open_for[i] > SPOOL_OPEN_SAMPLES
