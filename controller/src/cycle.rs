@@ -58,6 +58,20 @@ const STALL_WAIT_S: f64 = 0.5;
 
 const STALL_BOOST_PER_S: f64 = 0.25;
 
+/// MoveToDig: while the stick or the bucket still has far to go, the tip is kept this far above the
+/// highest known terrain between it and the start (the boom lifts first), m.
+const MOVE_CLEARANCE_M: f64 = 0.4;
+
+/// MoveToDig close enough: a move whose tip has come within this distance of the start's tip (r, z)
+/// and has stopped getting closer begins the dig from there, m.
+const MOVE_CLOSE_ENOUGH_M: f64 = 0.3;
+
+/// MoveToDig close enough: how long the tip must have stopped getting closer (by 1 cm), s.
+const MOVE_CLOSE_ENOUGH_WAIT_S: f64 = 2.0;
+
+/// MoveToDig close enough: the largest remaining swing error, rad (2 deg).
+const MOVE_CLOSE_ENOUGH_SWING_RAD: f64 = 0.035;
+
 /// Dump: a bucket that has not opened further for this long at full command is held (resting in the
 /// spoil, or still in the cut: its port at relief); the boom then lifts while it keeps opening, s.
 const STALL_RELIFT_S: f64 = 3.0;
@@ -700,6 +714,12 @@ pub struct WorkCycle {
     stall_best_rad: [f64; 3],
     stall_progress_s: [f64; 3],
     last_move_s: Option<f64>,
+    /// MoveToDig close enough: the tip's least distance to the start's tip so far and when it last
+    /// shrank by 1 cm.
+    move_best_m: f64,
+    move_progress_s: f64,
+    /// MoveToDig: the boom is lifting the tip back to its terrain clearance.
+    clearing: bool,
     /// Hook for an external action source (`crate::planned`): hold in Idle when the actions run out.
     external_plan: bool,
     /// Control faults of the current action so far.
@@ -762,6 +782,9 @@ impl WorkCycle {
             stall_best_rad: [f64::INFINITY; 3],
             stall_progress_s: [0.0; 3],
             last_move_s: None,
+            move_best_m: f64::INFINITY,
+            move_progress_s: 0.0,
+            clearing: false,
             external_plan: false,
             failed_attempts: 0,
             retry_pending: false,
@@ -958,6 +981,9 @@ impl WorkCycle {
         self.stall_boost = [0.0; 3];
         self.stall_best_rad = [f64::INFINITY; 3];
         self.last_move_s = None;
+        self.move_best_m = f64::INFINITY;
+        self.move_progress_s = now_s;
+        self.clearing = false;
     }
 
     fn hold(&self) -> CycleOutput {
@@ -1172,7 +1198,8 @@ impl WorkCycle {
         let (mut implement, implement_done) = self.implement_toward(&s.joints, &target);
         // Lift first: while the tip is well below the start pose only the boom moves (up), so the
         // bucket is not dragged through the ground; the swing waits until the boom is up too.
-        let target_z = est.kinematics().forward(&target).z_m;
+        let target_tip = est.kinematics().forward(&target);
+        let target_z = target_tip.z_m;
         // Latched: once lifted, the boom's P-controller alone settles it. Re-entering the full lift
         // whenever a gravity-assisted lowering overshot made a limit cycle (boom +-4 degrees) that
         // timed out the move.
@@ -1183,22 +1210,55 @@ impl WorkCycle {
         // Boom up first, boom down last: bringing the stick in (or out) at a boom still below its
         // target sweeps the bucket down through the bench (from the dump pose to a start close in, at
         // a stick of -87 degrees, it came to rest on the face with the boom stalled 4 degrees short).
-        let boom_err = target.boom_rad - s.joints.boom_rad;
         let boom_band = 3.0 * self.config.joint.tolerance;
-        if low || boom_err > boom_band {
-            // Full lift: at part command the open-centre bypass keeps the gallery below the boom's
-            // holding pressure and the loaded boom stalls (as in SwingToDump).
-            implement = [self.config.joint.max_command, 0.0, 0.0];
-        } else if boom_err < -boom_band
-            && [
+        // Terrain clearance: with the boom at its start angle, swinging the stick through the
+        // vertical or opening the bucket sweeps the tip up to 0.7 m below the start height, into the
+        // bench top when the start is down the face (the bucket then stalled in the cut, the stick
+        // 16 deg short, and the move timed out). While the stick or the bucket has far to go, the boom
+        // goal is the angle that keeps the tip clear of the known terrain between the tip and the
+        // start; the boom comes down to the start angle last.
+        // The swing must be done too before the boom comes down: a bucket lowered onto the face
+        // while the swing still turns is dragged sideways through the soil and the swing stalls
+        // short of its tolerance.
+        let swing_far = action
+            .swing_rad()
+            .is_some_and(|t| wrap_angle(t - s.swing_rad).abs() > self.config.swing.tolerance);
+        let far = swing_far
+            || [
                 target.stick_rad - s.joints.stick_rad,
                 target.bucket_rad - s.joints.bucket_rad,
             ]
             .iter()
-            .any(|e| e.abs() > boom_band)
-        {
+            .any(|e| e.abs() > boom_band);
+        let clear_z = if far {
+            let r = (s.tip.x_m.min(target_tip.x_m), s.tip.x_m.max(target_tip.x_m));
+            let swing = action.swing_rad().unwrap_or(s.swing_rad);
+            self.highest_terrain(&s.pose, swing, r)
+                .map(|h| h + MOVE_CLEARANCE_M)
+        } else {
+            None
+        };
+        let boom_goal = clear_z.map_or(target.boom_rad, |z| {
+            target.boom_rad.max(boom_for_tip_z(est, &s.joints, z))
+        });
+        // Clearing: the tip sank 0.1 m below the clearance height (the stick or bucket swept it
+        // down); the boom lifts alone until the tip is 0.1 m above it (hysteresis, so the stick
+        // and bucket do not stop and go every period).
+        self.clearing = match clear_z {
+            Some(z) if self.clearing => s.tip.z_m < z + 0.1,
+            Some(z) => s.tip.z_m < z - 0.1,
+            None => false,
+        };
+        let boom_err = boom_goal - s.joints.boom_rad;
+        if low || self.clearing || boom_err > boom_band {
+            // Full lift: at part command the open-centre bypass keeps the gallery below the boom's
+            // holding pressure and the loaded boom stalls (as in SwingToDump).
+            implement = [self.config.joint.max_command, 0.0, 0.0];
+        } else if far && (boom_err < -boom_band || boom_goal > target.boom_rad) {
             // Lowering waits only for the large stick and bucket moves: their last degrees at the
-            // P-controller's minimum command crawl, and the boom would wait seconds for them.
+            // P-controller's minimum command crawl, and the boom would wait seconds for them. Held
+            // too while the clearance goal is above the start angle (the P-controller would lower
+            // it toward the start).
             implement[0] = 0.0;
         }
         self.escalate_stalled(
@@ -1217,7 +1277,9 @@ impl WorkCycle {
             Some(_) => (0.0, false),
             None => (0.0, true),
         };
-        if self.settled(implement_done && swing_done, now_s) {
+        if self.settled(implement_done && swing_done, now_s)
+            || self.close_enough(now_s, est, &target_tip, &action)
+        {
             self.begin_dig(now_s, est, &action);
             return Ok(CycleCommand::Neutral);
         }
@@ -1229,6 +1291,64 @@ impl WorkCycle {
             0.0,
             0.0,
         ]))
+    }
+
+    /// MoveToDig close enough: the tip within [`MOVE_CLOSE_ENOUGH_M`] of the start's tip, the swing
+    /// within [`MOVE_CLOSE_ENOUGH_SWING_RAD`], and no 1 cm of progress for
+    /// [`MOVE_CLOSE_ENOUGH_WAIT_S`]. A bucket that rests on the face a few degrees short of its start
+    /// pose (its last degrees stalled against the soil) starts Autodig there: Boom-Down and Pre-Dig
+    /// begin from wherever the bucket is, and waiting for the time-out would abandon the action.
+    fn close_enough(
+        &mut self,
+        now_s: f64,
+        est: &Estimator,
+        target_tip: &BucketPose,
+        action: &Action,
+    ) -> bool {
+        let s = est.state();
+        let dist = (s.tip.x_m - target_tip.x_m).hypot(s.tip.z_m - target_tip.z_m);
+        if !dist.is_finite() {
+            return false;
+        }
+        if dist < self.move_best_m - 0.01 {
+            self.move_best_m = dist;
+            self.move_progress_s = now_s;
+        }
+        let swing_ok = action
+            .swing_rad()
+            .is_none_or(|t| wrap_angle(t - s.swing_rad).abs() <= MOVE_CLOSE_ENOUGH_SWING_RAD);
+        let stopped = now_s - self.move_progress_s >= MOVE_CLOSE_ENOUGH_WAIT_S;
+        if dist <= MOVE_CLOSE_ENOUGH_M && swing_ok && stopped {
+            tracing::info!(
+                tip_error_m = dist,
+                "move to the dig: stopped close to the start, digging from here"
+            );
+            return true;
+        }
+        false
+    }
+
+    /// The highest known terrain (base-frame z) along the digging plane at `swing_rad` between the
+    /// radii `r_m.0..=r_m.1` (0.1 m apart), or `None` without a terrain map or known cells there.
+    fn highest_terrain(
+        &self,
+        pose: &planner::kinematics::MachinePose,
+        swing_rad: f64,
+        r_m: (f64, f64),
+    ) -> Option<f64> {
+        let terrain = self.terrain.as_ref()?;
+        let (a, b) = r_m;
+        if !(a.is_finite() && b.is_finite()) {
+            return None;
+        }
+        let n = ((b - a) / 0.1).ceil().clamp(0.0, 200.0) as usize;
+        (0..=n)
+            .filter_map(|k| {
+                let r = (a + k as f64 * 0.1).min(b);
+                let [x, y, _] = pose.world_from_base(swing_rad, r, 0.0);
+                terrain.height_at(x, y).ok().filter(|h| h.is_finite())
+            })
+            .reduce(f64::max)
     }
 
     fn begin_dig(&mut self, now_s: f64, est: &Estimator, action: &Action) {
@@ -1585,6 +1705,37 @@ impl WorkCycle {
 /// The terrain section along the digging plane from `r_min_m` to `r_max_m`, cut to the run of known
 /// cells that contains the tip's radius `tip_r_m` (or the longest known run): the range sensor does
 /// not see the ground right under the boom, and the map has no cells beyond its scan.
+/// The boom angle that puts the tip at base-frame height `z_m` with the stick and bucket of `joints`
+/// (bisection between the current boom angle and the boom's upper limit; the limit if even that
+/// leaves the tip lower, the current angle if the tip is already higher).
+fn boom_for_tip_z(est: &Estimator, joints: &JointAngles, z_m: f64) -> f64 {
+    let k = est.kinematics();
+    let z_at = |boom_rad: f64| {
+        k.forward(&JointAngles {
+            boom_rad,
+            ..*joints
+        })
+        .z_m
+    };
+    let (mut lo, mut hi) = (joints.boom_rad, k.joint_limits(Joint::Boom).1 - 0.05);
+    if !(z_m.is_finite() && lo < hi) || z_at(lo) >= z_m {
+        return lo;
+    }
+    if z_at(hi) <= z_m {
+        return hi;
+    }
+    // The tip rises with the boom over its range (the boom foot is behind and below the tip).
+    for _ in 0..20 {
+        let mid = 0.5 * (lo + hi);
+        if z_at(mid) < z_m {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    hi
+}
+
 fn known_section(
     terrain: &TerrainGrid,
     pose: &planner::kinematics::MachinePose,
@@ -1987,6 +2138,59 @@ mod tests {
             assert!(now <= last + 1e-9 && now > 0.5, "{now} vs {last}");
             last = now;
         }
+    }
+
+    #[test]
+    fn a_move_stopped_close_to_the_start_digs_from_there() {
+        // The stick 0.03 rad (1.7 deg, tip ~0.1 m) short of its start and not getting closer (its
+        // bucket resting on the face): the dig begins after MOVE_CLOSE_ENOUGH_WAIT_S, not at the
+        // move's time-out.
+        let (boom, stick, bucket) = (0.2, -1.3, -0.5);
+        let mut c = cycle(CycleConfig {
+            scan: false,
+            actions: vec![Action::Dig {
+                swing_rad: 0.0,
+                start: StartPose::Joints {
+                    boom_rad: boom,
+                    stick_rad: stick - 0.03,
+                    bucket_rad: bucket,
+                },
+            }],
+            ..CycleConfig::default()
+        });
+        c.start();
+        let e = est_at([boom, stick, bucket, 0.0], 0.0, 0.0);
+        let mut t = 0.0;
+        while t < MOVE_CLOSE_ENOUGH_WAIT_S - 0.1 {
+            c.step(t, &e, Some(ArmMode::Valve)).unwrap();
+            assert_eq!(c.phase(), Phase::MoveToDig, "at {t} s");
+            t += 0.01;
+        }
+        while t < MOVE_CLOSE_ENOUGH_WAIT_S + 0.2 {
+            c.step(t, &e, Some(ArmMode::Valve)).unwrap();
+            t += 0.01;
+        }
+        assert_eq!(c.phase(), Phase::Autodig);
+        // Far from the start (the stick 0.3 rad short) it keeps moving.
+        let mut c = cycle(CycleConfig {
+            scan: false,
+            actions: vec![Action::Dig {
+                swing_rad: 0.0,
+                start: StartPose::Joints {
+                    boom_rad: boom,
+                    stick_rad: stick - 0.3,
+                    bucket_rad: bucket,
+                },
+            }],
+            ..CycleConfig::default()
+        });
+        c.start();
+        let mut t = 0.0;
+        while t < 3.0 {
+            c.step(t, &e, Some(ArmMode::Valve)).unwrap();
+            t += 0.01;
+        }
+        assert_eq!(c.phase(), Phase::MoveToDig);
     }
 
     #[test]
