@@ -1367,6 +1367,9 @@ mod tests {
     #[test]
     fn chamber_balance_compression_and_makeup() {
         let mut params = super::super::AugmentedModel::nominal().unwrap().params;
+        // The relation itself, without the shipped model's chamber balance and calibrated leakage.
+        params.chamber_balance = false;
+        params.internal_leakage_m3_per_s_pa = 0.0;
         let (ah, ar) = (params.head_area_m2[1], params.rod_area_m2[1]);
         let v = -0.02;
         // Retracting at 2 cm/s with closed ports: the head is compressed, the rod expands.
