@@ -2094,23 +2094,29 @@ mod tests {
         assert_eq!((c.phase(), c.action_index()), (Phase::TrackBack, 1));
     }
 
-    #[test]
-    fn a_stalled_move_opens_its_valve_further_and_holds_while_it_progresses() {
-        // Target: boom, bucket and swing where the machine is; the stick 0.1 rad (5.7 deg) short.
-        let (boom, stick, bucket) = (0.2, -1.3, -0.5);
+    /// A started cycle whose one action is a dig from these joint angles, no scan, straight ahead.
+    fn moving_to(boom_rad: f64, stick_rad: f64, bucket_rad: f64) -> WorkCycle {
         let mut c = cycle(CycleConfig {
             scan: false,
             actions: vec![Action::Dig {
                 swing_rad: 0.0,
                 start: StartPose::Joints {
-                    boom_rad: boom,
-                    stick_rad: stick - 0.1,
-                    bucket_rad: bucket,
+                    boom_rad,
+                    stick_rad,
+                    bucket_rad,
                 },
             }],
             ..CycleConfig::default()
         });
         c.start();
+        c
+    }
+
+    #[test]
+    fn a_stalled_move_opens_its_valve_further_and_holds_while_it_progresses() {
+        // Target: boom, bucket and swing where the machine is; the stick 0.1 rad (5.7 deg) short.
+        let (boom, stick, bucket) = (0.2, -1.3, -0.5);
+        let mut c = moving_to(boom, stick - 0.1, bucket);
         let stick_command = |c: &mut WorkCycle, q_stick: f64, t: f64| {
             let e = est_at([boom, q_stick, bucket, 0.0], 0.0, t);
             match c.step(t, &e, Some(ArmMode::Valve)).unwrap().command {
@@ -2146,19 +2152,7 @@ mod tests {
         // bucket resting on the face): the dig begins after MOVE_CLOSE_ENOUGH_WAIT_S, not at the
         // move's time-out.
         let (boom, stick, bucket) = (0.2, -1.3, -0.5);
-        let mut c = cycle(CycleConfig {
-            scan: false,
-            actions: vec![Action::Dig {
-                swing_rad: 0.0,
-                start: StartPose::Joints {
-                    boom_rad: boom,
-                    stick_rad: stick - 0.03,
-                    bucket_rad: bucket,
-                },
-            }],
-            ..CycleConfig::default()
-        });
-        c.start();
+        let mut c = moving_to(boom, stick - 0.03, bucket);
         let e = est_at([boom, stick, bucket, 0.0], 0.0, 0.0);
         let mut t = 0.0;
         while t < MOVE_CLOSE_ENOUGH_WAIT_S - 0.1 {
@@ -2172,19 +2166,7 @@ mod tests {
         }
         assert_eq!(c.phase(), Phase::Autodig);
         // Far from the start (the stick 0.3 rad short) it keeps moving.
-        let mut c = cycle(CycleConfig {
-            scan: false,
-            actions: vec![Action::Dig {
-                swing_rad: 0.0,
-                start: StartPose::Joints {
-                    boom_rad: boom,
-                    stick_rad: stick - 0.3,
-                    bucket_rad: bucket,
-                },
-            }],
-            ..CycleConfig::default()
-        });
-        c.start();
+        let mut c = moving_to(boom, stick - 0.3, bucket);
         let mut t = 0.0;
         while t < 3.0 {
             c.step(t, &e, Some(ArmMode::Valve)).unwrap();
