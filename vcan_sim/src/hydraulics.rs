@@ -1490,11 +1490,7 @@ mod tests {
         let mut fast = Hydraulics::new(params, start);
         let mut exact = Hydraulics::new(params, start);
         exact.accept_unevaluated = false;
-        let loads = TEST_MASS_KG.map(|mass| ActuatorLoad {
-            force: 0.8 * mass,
-            mass,
-            ..ActuatorLoad::default()
-        });
+        let loads = gravity_like_loads();
         let effects = HydraulicEffects {
             internal_leakage: 2e-12,
             ..HydraulicEffects::default()
@@ -1584,6 +1580,15 @@ mod tests {
         }
     }
 
+    /// The side-by-side runs' loads: a gravity-like force of 0.8 N per kg of [`TEST_MASS_KG`].
+    fn gravity_like_loads() -> [ActuatorLoad; 4] {
+        TEST_MASS_KG.map(|mass| ActuatorLoad {
+            force: 0.8 * mass,
+            mass,
+            ..ActuatorLoad::default()
+        })
+    }
+
     /// The closed-form chamber roots against the Newton solves they replace, on the scripted run of
     /// the test above without leakage (where the closed form applies to every chamber with one open
     /// metering orifice): pressures within the Newton solves' 10 Pa tolerance (measured 0.97 Pa),
@@ -1595,11 +1600,7 @@ mod tests {
         let mut fast = Hydraulics::new(params, start);
         let mut newton = Hydraulics::new(params, start);
         newton.closed_form = false;
-        let loads = TEST_MASS_KG.map(|mass| ActuatorLoad {
-            force: 0.8 * mass,
-            mass,
-            ..ActuatorLoad::default()
-        });
+        let loads = gravity_like_loads();
         let effects = HydraulicEffects::default();
         let script: [(f64, [f64; 4]); 8] = [
             (1.0, [0.7, -0.5, 0.6, 0.3]),
