@@ -72,6 +72,9 @@ const MOVE_CLOSE_ENOUGH_WAIT_S: f64 = 2.0;
 /// MoveToDig close enough: the largest remaining swing error, rad (2 deg).
 const MOVE_CLOSE_ENOUGH_SWING_RAD: f64 = 0.035;
 
+/// MoveToDig: spacing of the terrain heights along the digging plane the clearance is judged on, m.
+const CLEARANCE_STEP_M: f64 = 0.1;
+
 /// Dump: a bucket that has not opened further for this long at full command is held (resting in the
 /// spoil, or still in the cut: its port at relief); the boom then lifts while it keeps opening, s.
 const STALL_RELIFT_S: f64 = 3.0;
@@ -720,6 +723,9 @@ pub struct WorkCycle {
     move_progress_s: f64,
     /// MoveToDig: the boom is lifting the tip back to its terrain clearance.
     clearing: bool,
+    /// MoveToDig: the terrain heights along the start's digging plane, every [`CLEARANCE_STEP_M`]
+    /// from the swing axis (NaN where unknown); filled on the first use in a move.
+    clearance_profile: Vec<f64>,
     /// Hook for an external action source (`crate::planned`): hold in Idle when the actions run out.
     external_plan: bool,
     /// Control faults of the current action so far.
@@ -785,6 +791,7 @@ impl WorkCycle {
             move_best_m: f64::INFINITY,
             move_progress_s: 0.0,
             clearing: false,
+            clearance_profile: Vec::new(),
             external_plan: false,
             failed_attempts: 0,
             retry_pending: false,
@@ -926,6 +933,7 @@ impl WorkCycle {
     pub fn provide_terrain(&mut self, terrain: TerrainGrid) {
         self.terrain = Some(terrain);
         self.terrain_fresh = true;
+        self.clearance_profile.clear();
     }
 
     /// Called by the node when a fault stopped motion: a failed action is abandoned (its partial
@@ -984,6 +992,7 @@ impl WorkCycle {
         self.move_best_m = f64::INFINITY;
         self.move_progress_s = now_s;
         self.clearing = false;
+        self.clearance_profile.clear();
     }
 
     fn hold(&self) -> CycleOutput {
@@ -1329,25 +1338,37 @@ impl WorkCycle {
     }
 
     /// The highest known terrain (base-frame z) along the digging plane at `swing_rad` between the
-    /// radii `r_m.0..=r_m.1` (0.1 m apart), or `None` without a terrain map or known cells there.
+    /// radii `r_m.0..=r_m.1`, or `None` without a terrain map or known cells there. The plane's
+    /// heights (every [`CLEARANCE_STEP_M`] out to `section_r_max_m`) are looked up once per move and
+    /// kept in `clearance_profile`; each control period only takes the maximum over the range.
     fn highest_terrain(
-        &self,
+        &mut self,
         pose: &planner::kinematics::MachinePose,
         swing_rad: f64,
         r_m: (f64, f64),
     ) -> Option<f64> {
         let terrain = self.terrain.as_ref()?;
+        if self.clearance_profile.is_empty() {
+            let n = (self.config.section_r_max_m / CLEARANCE_STEP_M)
+                .ceil()
+                .clamp(0.0, 1000.0) as usize;
+            self.clearance_profile.extend((0..=n).map(|k| {
+                let [x, y, _] = pose.world_from_base(swing_rad, k as f64 * CLEARANCE_STEP_M, 0.0);
+                terrain.height_at(x, y).unwrap_or(f64::NAN)
+            }));
+        }
         let (a, b) = r_m;
         if !(a.is_finite() && b.is_finite()) {
             return None;
         }
-        let n = ((b - a) / 0.1).ceil().clamp(0.0, 200.0) as usize;
-        (0..=n)
-            .filter_map(|k| {
-                let r = (a + k as f64 * 0.1).min(b);
-                let [x, y, _] = pose.world_from_base(swing_rad, r, 0.0);
-                terrain.height_at(x, y).ok().filter(|h| h.is_finite())
-            })
+        let last = self.clearance_profile.len().saturating_sub(1) as f64;
+        let ka = (a / CLEARANCE_STEP_M).floor().clamp(0.0, last) as usize;
+        let kb = (b / CLEARANCE_STEP_M).ceil().clamp(0.0, last) as usize;
+        self.clearance_profile
+            .get(ka..=kb)?
+            .iter()
+            .copied()
+            .filter(|h| h.is_finite())
             .reduce(f64::max)
     }
 
