@@ -562,6 +562,20 @@ mod tests {
         Kinematics::new(&MachineConfig::default_machine().expect("machine")).expect("kin")
     }
 
+    /// The plans for the machine at the origin with the default geometry and tracking settings.
+    fn plan_on(grid: &TerrainGrid, cfg: &CleanupConfig, state: &PlannerState) -> CleanupTrackPlan {
+        plan_cleanup_and_tracking(
+            grid,
+            &MachinePose::default(),
+            &kin(),
+            geo(),
+            cfg,
+            &TrackingConfig::default(),
+            state,
+        )
+        .expect("plan")
+    }
+
     fn geo() -> Geometry {
         Geometry {
             floor_z_m: 0.0,
@@ -620,16 +634,7 @@ mod tests {
     fn boundary_cleanup_and_tracking_on_a_pile() {
         let grid = pile(4.0, 6.0, 1.0, 0.4);
         let state = PlannerState::default();
-        let p = plan_cleanup_and_tracking(
-            &grid,
-            &MachinePose::default(),
-            &kin(),
-            geo(),
-            &CleanupConfig::default(),
-            &TrackingConfig::default(),
-            &state,
-        )
-        .expect("plan");
+        let p = plan_on(&grid, &CleanupConfig::default(), &state);
         assert!(p.material_found);
         let ahead = p
             .candidates
@@ -669,16 +674,7 @@ mod tests {
             min_radius_m: 2.0,
             ..CleanupConfig::default()
         };
-        let p = plan_cleanup_and_tracking(
-            &grid,
-            &MachinePose::default(),
-            &kin(),
-            geo(),
-            &cfg,
-            &TrackingConfig::default(),
-            &PlannerState::default(),
-        )
-        .expect("plan");
+        let p = plan_on(&grid, &cfg, &PlannerState::default());
         let limits: Vec<f64> = p
             .candidates
             .iter()
@@ -704,18 +700,7 @@ mod tests {
         let grid = pile(4.0, 6.0, 1.0, 0.4);
         let cfg = CleanupConfig::default();
         let mut state = PlannerState::default();
-        let run = |state: &PlannerState| {
-            plan_cleanup_and_tracking(
-                &grid,
-                &MachinePose::default(),
-                &kin(),
-                geo(),
-                &cfg,
-                &TrackingConfig::default(),
-                state,
-            )
-            .expect("plan")
-        };
+        let run = |state: &PlannerState| plan_on(&grid, &cfg, state);
         let first = run(&state).chosen.expect("chosen");
         for _ in 0..cfg.max_tries - 1 {
             state.record_cleanup(first.swing_rad, &cfg);
@@ -743,16 +728,7 @@ mod tests {
         );
         // Too short: a pile right at the minimum radius.
         let near = pile(3.4, 3.7, 1.0, 0.4);
-        let p = plan_cleanup_and_tracking(
-            &near,
-            &MachinePose::default(),
-            &kin(),
-            geo(),
-            &cfg,
-            &TrackingConfig::default(),
-            &PlannerState::default(),
-        )
-        .expect("plan");
+        let p = plan_on(&near, &cfg, &PlannerState::default());
         let ahead = p
             .candidates
             .iter()
@@ -765,16 +741,7 @@ mod tests {
     fn fresh_walls_and_the_bench_beyond_reach() {
         // A vertical 1.5 m wall: steeper than repose, so its neighbourhood is not cleaned.
         let grid = pile(6.0, 6.6, 1.0, 1.5);
-        let p = plan_cleanup_and_tracking(
-            &grid,
-            &MachinePose::default(),
-            &kin(),
-            geo(),
-            &CleanupConfig::default(),
-            &TrackingConfig::default(),
-            &PlannerState::default(),
-        )
-        .expect("plan");
+        let p = plan_on(&grid, &CleanupConfig::default(), &PlannerState::default());
         let ahead = p
             .candidates
             .iter()
@@ -783,16 +750,7 @@ mod tests {
         assert_eq!(ahead.status, CleanupStatus::NextToWall);
         // A bench running past the reach: nothing to clean, no backing up.
         let bench = pile(3.0, 40.0, 40.0, 2.0);
-        let p = plan_cleanup_and_tracking(
-            &bench,
-            &MachinePose::default(),
-            &kin(),
-            geo(),
-            &CleanupConfig::default(),
-            &TrackingConfig::default(),
-            &PlannerState::default(),
-        )
-        .expect("plan");
+        let p = plan_on(&bench, &CleanupConfig::default(), &PlannerState::default());
         assert!(
             p.candidates
                 .iter()
@@ -817,18 +775,7 @@ mod tests {
             }
         })
         .expect("grid");
-        let run = |state: &PlannerState| {
-            plan_cleanup_and_tracking(
-                &grid,
-                &MachinePose::default(),
-                &kin(),
-                geo(),
-                &CleanupConfig::default(),
-                &TrackingConfig::default(),
-                state,
-            )
-            .expect("plan")
-        };
+        let run = |state: &PlannerState| plan_on(&grid, &CleanupConfig::default(), state);
         let p = run(&PlannerState::default());
         assert!(
             p.candidates
