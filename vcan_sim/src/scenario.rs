@@ -3,7 +3,8 @@
 //!
 //! The world frame is `x` east, `y` north, `z` up (docs/ARCHITECTURE.md). The machine stands on the
 //! ground plane `z = 0`; the bench is a block of soil of the given height ahead of it, with a sloped
-//! face; digging should stop at `floor_elevation_m`.
+//! face; digging should stop at `floor_elevation_m`. A bench may declare the native ground below that
+//! floor (`[native_soil]`), harder than the bench material above it.
 //!
 //! Errors name the file, the line and the field: parse errors come with toml's span, validation errors
 //! with the line of the offending key.
@@ -264,6 +265,11 @@ pub struct Scenario {
     pub soil: SoilSpec,
     /// Regions with other soil (later ones win).
     pub soil_regions: Vec<SoilRegion>,
+    /// The native ground below `bench.floor_elevation_m` (`[native_soil]`), when the bench declares
+    /// it: a layered ground whose lower layer has its own soil everywhere on the map (the soil
+    /// regions apply above the floor only); see [`crate::soil_contact`] for how a cut that reaches
+    /// it is resisted. `None` (the default): one soil from the surface down, as before.
+    pub native_soil: Option<SoilSpec>,
     /// Hard inclusions.
     pub boulders: BoulderSpec,
     /// Spoil pile.
@@ -476,6 +482,9 @@ impl Scenario {
             ));
         }
         soil("soil", &self.soil)?;
+        if let Some(native) = &self.native_soil {
+            soil("native_soil", native)?;
+        }
         for (i, r) in self.soil_regions.iter().enumerate() {
             soil(&format!("soil_regions.{i}.soil"), &r.soil)?;
             if !(r.x_max_m > r.x_min_m && r.y_max_m > r.y_min_m) {
@@ -567,6 +576,27 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(msg.starts_with("b.toml:2: field `effects.bogus`"), "{msg}");
+    }
+
+    #[test]
+    fn native_soil_is_off_unless_declared_and_validated() {
+        assert_eq!(Scenario::default_bench().unwrap().native_soil, None);
+        let text = "[bench]\nfloor_elevation_m = -2.0\n[native_soil]\ncohesion_pa = 40000.0\n";
+        let s = Scenario::from_toml_str_named(text, "b.toml").unwrap();
+        let native = s.native_soil.unwrap();
+        assert_eq!(native.cohesion_pa, 40000.0);
+        assert_eq!(
+            native.density_kg_per_m3,
+            SoilSpec::default().density_kg_per_m3
+        );
+        let text = "[native_soil]\ncohesion_pa = 40000.0\nfriction_angle_deg = 95.0\n";
+        let msg = Scenario::from_toml_str_named(text, "b.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.starts_with("b.toml:3: field `native_soil.friction_angle_deg`"),
+            "{msg}"
+        );
     }
 
     #[test]

@@ -19,10 +19,22 @@
 //!   payload's weight acts at its centroid through the gravity torques (Eq. A4), which replaces the
 //!   moment of Eq. 19. Moving down into the ground meets a bearing resistance, and a boulder is a stiff
 //!   obstacle the edge cannot cut.
+//! - **Layered ground.** A bench may declare the native ground below its floor elevation
+//!   (`[native_soil]` in the scenario, [`World::native_soil`]): the compacted ground a bench stands on,
+//!   harder than the loosened bench material. When the edge is below the floor the Eq. 17 terms are
+//!   split by layer along the wedge of Fig. 25 ([`layered_failure_force_n`]): with `f` the share of
+//!   the cut depth below the floor, the cohesion term (acting along the failure plane, whose length is
+//!   proportional to `d`) takes `1 - f` of the bench's `c N_c` and `f` of the native one's; the weight
+//!   term (the wedge's area, proportional to `d^2`: the part below the floor is the similar triangle
+//!   of depth `f d`) takes `1 - f^2` and `f^2`; the surcharge (the swept bench material, `gamma` of
+//!   the bench) is carried across the plane with `N_q` weighted `1 - f`, `f`. The friction angle of
+//!   Eq. 18 is weighted by `f`, the edge's bearing takes the native soil over the share of its face
+//!   below the floor, and the material cut below the floor has the native density. A cut entirely
+//!   above the floor is computed exactly as without the layer.
 
 use planner::kinematics::TipForce;
 use planner::machine::GRAVITY_M_PER_S2;
-use planner::soil::{DigGeometry, SoilProperties, fee_force_n};
+use planner::soil::{DigGeometry, SoilProperties, fee_factors, fee_force_n};
 use planner::terrain::{TerrainError, TerrainGrid};
 use rand::{RngExt, SeedableRng};
 
@@ -37,6 +49,13 @@ fn soil_properties(s: &SoilSpec) -> SoilProperties {
         tool_friction_angle_rad: s.tool_friction_angle_deg.to_radians(),
         cohesion_pa: s.cohesion_pa,
     }
+}
+
+/// A soil with the hidden soil effects added (cohesion not below 0, density not below 100 kg/m^3).
+fn with_effects(mut c: SoilProperties, effects: &SoilEffects) -> SoilProperties {
+    c.cohesion_pa = (c.cohesion_pa + effects.cohesion_pa).max(0.0);
+    c.density_kg_per_m3 = (c.density_kg_per_m3 + effects.density_kg_per_m3).max(100.0);
+    c
 }
 
 /// Soil changes applied everywhere (the `soil_cohesion` and `soil_density` hidden effects).
@@ -77,6 +96,10 @@ pub struct World {
     soil: Vec<SoilProperties>,
     /// The scenario's default soil (cells outside every soil region).
     default_soil: SoilProperties,
+    /// The native ground below `floor_elevation_m` (`None`: the cell soils all the way down).
+    native_soil: Option<SoilProperties>,
+    /// Elevation of the layer boundary, the bench's floor (m, world z).
+    floor_elevation_m: f64,
     /// Summed-area table of the cells whose density differs from the default, `(nx + 1) x (ny + 1)`:
     /// a cut whose box holds none of them takes its mass from the removed volume in one product.
     odd_density_sums: Vec<u32>,
@@ -159,6 +182,8 @@ impl World {
             terrain,
             soil,
             default_soil: default,
+            native_soil: s.native_soil.as_ref().map(soil_properties),
+            floor_elevation_m: b.floor_elevation_m,
             odd_density_sums,
             boulders,
             repose_rad: s.spoil.repose_deg.to_radians(),
@@ -169,7 +194,7 @@ impl World {
     pub fn soil_at(&self, x_m: f64, y_m: f64, effects: &SoilEffects) -> SoilProperties {
         let nx = self.terrain.nx();
         let (i, j) = self.terrain.cell_index(x_m, y_m).unwrap_or((0, 0));
-        let mut c = self
+        let c = self
             .soil
             .get(j * nx + i)
             .copied()
@@ -180,9 +205,14 @@ impl World {
                 tool_friction_angle_rad: 0.35,
                 failure_angle_rad: 0.5,
             });
-        c.cohesion_pa = (c.cohesion_pa + effects.cohesion_pa).max(0.0);
-        c.density_kg_per_m3 = (c.density_kg_per_m3 + effects.density_kg_per_m3).max(100.0);
-        c
+        with_effects(c, effects)
+    }
+
+    /// The native ground below the floor elevation with the soil effects applied (`None` when the
+    /// bench declares no layer), and that elevation (m, world z).
+    pub fn native_soil(&self, effects: &SoilEffects) -> Option<(SoilProperties, f64)> {
+        self.native_soil
+            .map(|native| (with_effects(native, effects), self.floor_elevation_m))
     }
 
     /// Whether every cell in columns `i0..i1` and rows `j0..j1` has the default density.
@@ -540,12 +570,31 @@ impl SoilContact {
                 rake_rad: -rho, // the thesis's sign (planner::soil)
                 swept_volume_m3: self.content.volume_m3,
             };
-            let f = failure_force_n(&soil, &gamma, input.width_m);
+            // The native ground below the floor (layered benches): the share of the cut depth below
+            // the floor (the wedge's failure plane runs from the edge up to the surface) and the
+            // share of the edge's bearing face below it.
+            let native = world.native_soil(effects);
+            let (native, below, edge_below) = match native {
+                Some((native, floor_m)) if tip[2] < floor_m => (
+                    native,
+                    ((floor_m - tip[2]) / depth_vertical).clamp(0.0, 1.0),
+                    ((floor_m - tip[2]) / EDGE_THICKNESS_M).clamp(0.0, 1.0),
+                ),
+                _ => (soil, 0.0, 0.0),
+            };
+            let f = if below > 0.0 {
+                layered_failure_force_n(&soil, &native, below, &gamma, input.width_m)
+            } else {
+                failure_force_n(&soil, &gamma, input.width_m)
+            };
             let speed = v[0].hypot(v[1]);
             let mobilised = f * (speed / CREEP_SPEED_M_PER_S).tanh();
             // Eq. 18: the tool force on the soil is at delta from the blade normal; on the bucket it is
-            // the opposite: against the normal, and up the blade by friction.
-            let (sd, cd) = soil.tool_friction_angle_rad.sin_cos();
+            // the opposite: against the normal, and up the blade by friction. On a layered cut delta
+            // is weighted by the share of the blade's contact below the floor.
+            let delta = (1.0 - below) * soil.tool_friction_angle_rad
+                + below * native.tool_friction_angle_rad;
+            let (sd, cd) = delta.sin_cos();
             force[0] += mobilised * (-cd * n[0] + sd * b[0]);
             force[1] += mobilised * (-cd * n[1] + sd * b[1]);
             // Bearing resistance (bearing pressure c N_c + gamma g d N_q + q0): the cutting edge pushed in
@@ -554,9 +603,18 @@ impl SoilContact {
             // the soil (speed against the opening) bears over width x BACK_BEARING_LENGTH_M, directed
             // toward the opening. Motion into the opening meets the FEE wedge above. (A plate area for
             // any downward motion stopped a sharp edge at the surface with ~1e5 N.)
-            let pressure = soil.cohesion_pa * 40.0
-                + soil.density_kg_per_m3 * GRAVITY_M_PER_S2 * d.max(0.0) * 30.0
-                + 2.0e4;
+            // On a layered cut the native ground bears over the share of the edge's face below the
+            // floor (the same share for the back plate, which rides behind the edge).
+            let bearing = |s: &SoilProperties| {
+                s.cohesion_pa * 40.0
+                    + s.density_kg_per_m3 * GRAVITY_M_PER_S2 * d.max(0.0) * 30.0
+                    + 2.0e4
+            };
+            let pressure = if edge_below > 0.0 {
+                (1.0 - edge_below) * bearing(&soil) + edge_below * bearing(&native)
+            } else {
+                bearing(&soil)
+            };
             let v_tip_first = -(v[0] * b[0] + v[1] * b[1]);
             if v_tip_first > 0.0 {
                 let edge = pressure
@@ -659,7 +717,12 @@ impl SoilContact {
         let j0 = (((y0 - oy) / res).floor().max(0.0) as usize).min(t.ny());
         let j1 = (((y1 - oy) / res).ceil().max(0.0) as usize).min(t.ny());
         let area = res * res;
-        let (volume, mass) = if world.default_density_in(i0, i1, j0, j1) {
+        // The native ground of a layered bench has its own density below the floor.
+        let native_below = world
+            .native_soil
+            .filter(|_| from[2].min(to[2]) < world.floor_elevation_m)
+            .map(|n| n.density_kg_per_m3);
+        let (volume, mass) = if native_below.is_none() && world.default_density_in(i0, i1, j0, j1) {
             // One soil density under the whole edge path: the mass is the removed volume times it.
             let Ok(volume) = world
                 .terrain
@@ -675,16 +738,18 @@ impl SoilContact {
             // times the default density plus, for each of them, its removed volume times the
             // difference (the same mass as summing every cell with its own density, to rounding,
             // without copying the whole box).
+            // Below the floor of a layered bench every cell of the box is visited: the part of its
+            // removed column below the floor has the native density.
             let nx = t.nx();
             let default_density = world.default_soil.density_kg_per_m3;
             let mut odd = Vec::new();
             for j in j0..j1 {
-                if world.default_density_in(i0, i1, j, j + 1) {
+                if native_below.is_none() && world.default_density_in(i0, i1, j, j + 1) {
                     continue;
                 }
                 for i in i0..i1 {
                     let excess = world.soil[j * nx + i].density_kg_per_m3 - default_density;
-                    if excess != 0.0 {
+                    if excess != 0.0 || native_below.is_some() {
                         odd.push((i, j, excess, t.cell(i, j).unwrap_or(f64::NAN)));
                     }
                 }
@@ -696,10 +761,20 @@ impl SoilContact {
                 return;
             };
             let mut mass = volume * (default_density + effects.density_kg_per_m3);
+            let floor_m = world.floor_elevation_m;
             for (i, j, excess, h0) in odd {
                 let h1 = world.terrain.cell(i, j).unwrap_or(h0);
                 if h0.is_finite() && h1 < h0 {
-                    mass += (h0 - h1) * area * excess;
+                    match native_below {
+                        Some(native) => {
+                            // The column [h1, h0] splits at the floor: above it the cell's soil,
+                            // below it the native ground.
+                            let under = (h0.min(floor_m) - h1).max(0.0);
+                            mass += (h0 - h1 - under) * area * excess
+                                + under * area * (native - default_density);
+                        }
+                        None => mass += (h0 - h1) * area * excess,
+                    }
                 }
             }
             (volume, mass)
@@ -776,16 +851,75 @@ fn failure_force_n(soil: &SoilProperties, gamma: &DigGeometry, width_m: f64) -> 
     if gamma.depth_m <= 0.0 {
         return 0.0;
     }
+    fee_force_n(soil, &rake_within_limit(soil, gamma), width_m).unwrap_or(0.0)
+}
+
+/// The geometry with the rake held [`RAKE_LIMIT_MARGIN_RAD`] from the wedge's failure limit of `soil`.
+fn rake_within_limit(soil: &SoilProperties, gamma: &DigGeometry) -> DigGeometry {
     let limit = std::f64::consts::PI
         - soil.failure_angle_rad
         - soil.friction_angle_rad
         - soil.tool_friction_angle_rad;
     let rake = (-gamma.rake_rad).min(limit - RAKE_LIMIT_MARGIN_RAD);
-    let gamma = DigGeometry {
+    DigGeometry {
         rake_rad: -rake,
         ..*gamma
+    }
+}
+
+/// The FEE force magnitude on the bucket for a cut reaching from the bench material (`upper`) into
+/// the native ground below the floor (`lower`), N: Eq. 17's terms split along the wedge of Fig. 25,
+/// with `below` the share of the cut depth `d` under the floor (the failure plane is straight from
+/// the edge to the surface, so the same share of its length):
+///
+/// `F = d^2 w g [(1 - f^2) gamma_u N_w,u + f^2 gamma_l N_w,l] + w d [(1 - f) c_u N_c,u + f c_l N_c,l]
+///      + V_s gamma_u g [(1 - f) N_q,u + f N_q,l]`
+///
+/// The weight term is the wedge's area (`~ d^2`; the part below the floor is the similar triangle of
+/// depth `f d`), the cohesion term acts along the failure plane (`~ d`), and the surcharge is the
+/// swept bench material carried across that plane. Each layer's factors are its own (Eq. 17), with the
+/// rake held from its own failure limit as in [`failure_force_n`]. `below = 0` gives
+/// [`failure_force_n`] of the upper soil exactly, `below = 1` the lower soil's wedge under the bench
+/// material's surcharge. A layering approximation (a superposition of the two wedges' terms), not a
+/// two-layer wedge analysis: the failure plane's angle is not re-solved for the layers.
+fn layered_failure_force_n(
+    upper: &SoilProperties,
+    lower: &SoilProperties,
+    below: f64,
+    gamma: &DigGeometry,
+    width_m: f64,
+) -> f64 {
+    let f = below.clamp(0.0, 1.0);
+    if f <= 0.0 {
+        return failure_force_n(upper, gamma, width_m);
+    }
+    if gamma.depth_m <= 0.0 || !(width_m.is_finite() && width_m > 0.0) {
+        return 0.0;
+    }
+    let (Ok(nu), Ok(nl)) = (
+        fee_factors(upper, &rake_within_limit(upper, gamma)),
+        fee_factors(lower, &rake_within_limit(lower, gamma)),
+    ) else {
+        return 0.0;
     };
-    fee_force_n(soil, &gamma, width_m).unwrap_or(0.0)
+    let g = GRAVITY_M_PER_S2;
+    let d = gamma.depth_m;
+    let weight = d
+        * d
+        * width_m
+        * g
+        * ((1.0 - f * f) * upper.density_kg_per_m3 * nu.n_w
+            + f * f * lower.density_kg_per_m3 * nl.n_w);
+    let cohesion =
+        width_m * d * ((1.0 - f) * upper.cohesion_pa * nu.n_c + f * lower.cohesion_pa * nl.n_c);
+    let surcharge =
+        gamma.swept_volume_m3 * upper.density_kg_per_m3 * g * ((1.0 - f) * nu.n_q + f * nl.n_q);
+    let force = weight + cohesion + surcharge;
+    if force.is_finite() {
+        force.max(0.0)
+    } else {
+        0.0
+    }
 }
 
 #[cfg(test)]
@@ -1058,6 +1192,138 @@ mod tests {
         assert!(tip_first > 0.0 && tip_first < 3.0e4, "{tip_first} N");
         let back_first = pushed_down(-std::f64::consts::PI);
         assert!(back_first > 1.0e5, "{back_first} N");
+    }
+
+    /// The extended-operation bench (`config/bench_extended.toml`: floor at -2 m, face from x 4 to
+    /// 6 m, the floor beyond) with its native ground, without it, or with the layer boundary moved.
+    fn extended_world(native: bool, floor_m: f64) -> World {
+        let text = include_str!("../../config/bench_extended.toml");
+        let mut s = Scenario::from_toml_str_named(text, "bench_extended.toml").unwrap();
+        assert!(
+            s.native_soil.is_some(),
+            "the extended bench declares its native ground"
+        );
+        if !native {
+            s.native_soil = None;
+        }
+        s.bench.floor_elevation_m = floor_m;
+        World::from_scenario(&s).unwrap()
+    }
+
+    /// Drags the edge toward the machine at height `z` from `x0` for `length_m`; returns the soil
+    /// force on the last step and the contact state (content, ledger).
+    fn drag(w: &mut World, x0: f64, z: f64, length_m: f64) -> (TipForce, SoilContact) {
+        let mut contact = SoilContact::default();
+        let effects = SoilEffects::default();
+        let mut x = x0;
+        let mut f = TipForce::default();
+        while x > x0 - length_m {
+            f = contact.step(w, &input_at(x, z), 1e-3, &effects);
+            x -= 0.0005;
+        }
+        (f, contact)
+    }
+
+    #[test]
+    fn layered_fee_splits_the_terms_and_is_the_upper_soils_fee_without_depth_below() {
+        let upper = soil_properties(&SoilSpec::default());
+        let lower = soil_properties(&SoilSpec {
+            density_kg_per_m3: 2000.0,
+            cohesion_pa: 40_000.0,
+            friction_angle_deg: 38.0,
+            tool_friction_angle_deg: 22.0,
+            failure_angle_deg: 30.0,
+        });
+        let gamma = DigGeometry {
+            depth_m: 0.4,
+            slope_rad: 0.0,
+            rake_rad: -1.0,
+            swept_volume_m3: 0.5,
+        };
+        let upper_only = failure_force_n(&upper, &gamma, 1.3);
+        assert_eq!(
+            layered_failure_force_n(&upper, &lower, 0.0, &gamma, 1.3),
+            upper_only
+        );
+        // Harder the more of the cut is below the floor, continuous at the boundary.
+        let mut last = upper_only;
+        for f in [1e-6, 0.1, 0.25, 0.5, 0.75, 1.0] {
+            let layered = layered_failure_force_n(&upper, &lower, f, &gamma, 1.3);
+            assert!(layered > last, "share {f}: {layered} <= {last}");
+            last = layered;
+        }
+        let near = layered_failure_force_n(&upper, &lower, 1e-6, &gamma, 1.3);
+        assert!((near - upper_only).abs() < 1e-3 * upper_only);
+        // All of it below: the lower soil's wedge (Eq. 17) under the upper soil's surcharge.
+        let n = fee_factors(&lower, &gamma).unwrap();
+        let g = GRAVITY_M_PER_S2;
+        let expected = 0.4 * 0.4 * 1.3 * 2000.0 * g * n.n_w
+            + 40_000.0 * 1.3 * 0.4 * n.n_c
+            + 0.5 * 1700.0 * g * n.n_q;
+        assert!(
+            (last - expected).abs() < 1e-9 * expected,
+            "{last} vs {expected}"
+        );
+        // The same soil in both layers: the one-soil FEE for any share.
+        for f in [0.3, 1.0] {
+            let same = layered_failure_force_n(&upper, &upper, f, &gamma, 1.3);
+            assert!((same - upper_only).abs() < 1e-9 * upper_only);
+        }
+    }
+
+    /// A cut 0.3 m below the floor meets the native ground: harder than the same cut (the same
+    /// surface, depth and edge path) where the layer boundary lies below it, and the material it
+    /// takes has the native density; a cut entirely above the floor is unchanged by the layer.
+    #[test]
+    fn a_cut_below_the_floor_is_harder_and_a_cut_above_it_is_unchanged() {
+        // On the floor beyond the toe (surface z -2 m), the edge at -2.3 m.
+        let (below, below_contact) = drag(&mut extended_world(true, -2.0), 8.0, -2.3, 0.2);
+        let (above, above_contact) = drag(&mut extended_world(true, -3.0), 8.0, -2.3, 0.2);
+        let (plain, plain_contact) = drag(&mut extended_world(false, -3.0), 8.0, -2.3, 0.2);
+        assert!(above.fx_n > 1000.0, "{above:?}");
+        assert!(
+            below.fx_n > 2.0 * above.fx_n,
+            "below the floor {below:?}, above it {above:?}"
+        );
+        assert_eq!(above, plain);
+        // The same volume cut, at the native density below the floor.
+        let (vb, va) = (
+            below_contact.content.volume_m3,
+            above_contact.content.volume_m3,
+        );
+        assert!(va > 0.05 && (vb - va).abs() < 1e-9, "{vb} vs {va} m^3");
+        let density = below_contact.content.mass_kg / vb;
+        assert!((density - 2000.0).abs() < 1e-6, "{density} kg/m^3");
+        assert!((above_contact.content.mass_kg / va - 1700.0).abs() < 1e-6);
+        assert_eq!(above_contact.content, plain_contact.content);
+        // Through the face above the floor (x 5 m, z -1.5 m, floor -2 m): the same force, bucket
+        // content and terrain with the layer as without it.
+        let mut layered = extended_world(true, -2.0);
+        let mut single = extended_world(false, -2.0);
+        let (a, ac) = drag(&mut layered, 6.0, -1.5, 1.0);
+        let (b, bc) = drag(&mut single, 6.0, -1.5, 1.0);
+        assert!(ac.content.volume_m3 > 0.1, "{:?}", ac.content);
+        assert_eq!(a, b);
+        assert_eq!(ac.content, bc.content);
+        assert_eq!(ac.ledger, bc.ledger);
+        // Mass bookkeeping holds across the layers.
+        let l = below_contact.ledger;
+        let balance = l.removed_kg - below_contact.content.mass_kg - l.spilled_kg;
+        assert!(balance.abs() < 1e-9 * l.removed_kg, "{balance} kg");
+    }
+
+    /// A cut that starts in the bench material above the floor and goes below it takes the native
+    /// density only for the part below the floor.
+    #[test]
+    fn a_cut_across_the_floor_splits_its_mass_at_the_floor() {
+        // At the toe (x 6 -> 5.6 m: the face from z -2 up to -1.6 m) with the edge at -2.2 m: 0.2 m
+        // of native ground under the face material.
+        let (_, layered) = drag(&mut extended_world(true, -2.0), 6.0, -2.2, 0.4);
+        let (_, single) = drag(&mut extended_world(false, -2.0), 6.0, -2.2, 0.4);
+        let v = layered.content.volume_m3;
+        assert!((v - single.content.volume_m3).abs() < 1e-9);
+        let density = layered.content.mass_kg / v;
+        assert!(density > 1750.0 && density < 1990.0, "{density} kg/m^3");
     }
 
     #[test]
