@@ -347,6 +347,9 @@ fn replay_csv(
     for sig in Signal::ALL {
         let _ = write!(s, ",{0}_measured,{0}_nominal,{0}_augmented", sig.name());
     }
+    s.push_str(
+        ",soil_depth_m,soil_volume_m3,soil_x_per_pa,soil_z_per_pa,soil_x_per_kg_m3,soil_z_per_kg_m3,soil_x_per_payload_kg,soil_z_per_payload_kg",
+    );
     s.push('\n');
     let cell = |v: f64| {
         if v.is_finite() {
@@ -379,6 +382,25 @@ fn replay_csv(
                 cell(p_old[k][j]),
                 cell(p_new[k][j])
             );
+        }
+        // The soil relation's terms: depth, payload volume and the sensitivities of the modelled
+        // soil force to cohesion and density and of the measured one to the payload mass.
+        match rec.soil_terms().get(k).copied().flatten() {
+            Some(t) => {
+                let _ = write!(
+                    s,
+                    ",{:.4},{:.4},{},{},{},{},{},{}",
+                    t.depth_m,
+                    t.payload_volume_m3,
+                    cell(t.fee_per_pa[0]),
+                    cell(t.fee_per_pa[1]),
+                    cell(t.fee_per_density[0]),
+                    cell(t.fee_per_density[1]),
+                    cell(t.measured_per_kg[0]),
+                    cell(t.measured_per_kg[1])
+                );
+            }
+            None => s.push_str(",,,,,,,,"),
         }
         s.push('\n');
     }

@@ -392,14 +392,23 @@ pub struct PreparedRecord {
     soil: Vec<Option<SoilTerms>>,
 }
 
-#[derive(Debug, Clone, Copy)]
-struct SoilTerms {
-    measured0: [f64; 2],
-    measured_per_kg: [f64; 2],
-    payload_volume_m3: f64,
-    fee0: [f64; 2],
-    fee_per_pa: [f64; 2],
-    fee_per_density: [f64; 2],
+/// The soil terms of one sample (base frame `[x, z]`, N): what the soil signals are made of.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SoilTerms {
+    /// Measured soil force on the bucket at zero payload (Eqs. A20-A23).
+    pub measured0: [f64; 2],
+    /// Change of the measured soil force per kg of payload.
+    pub measured_per_kg: [f64; 2],
+    /// Soil in the bucket (the cut area times the width, up to the capacity), m^3.
+    pub payload_volume_m3: f64,
+    /// Vertical depth of the edge below the cut surface, m.
+    pub depth_m: f64,
+    /// Modelled soil force at the nominal soil.
+    pub fee0: [f64; 2],
+    /// Its change per Pa of cohesion.
+    pub fee_per_pa: [f64; 2],
+    /// Its change per kg/m^3 of density.
+    pub fee_per_density: [f64; 2],
 }
 
 /// Reflected masses of the cylinders, kg (diagonal of the joint-space inertia over the squared moment
@@ -653,6 +662,11 @@ impl PreparedRecord {
         self.samples.len()
     }
 
+    /// The soil terms of every sample (`None` outside the soil signals).
+    pub fn soil_terms(&self) -> &[Option<SoilTerms>] {
+        &self.soil
+    }
+
     /// True for a record without samples.
     pub fn is_empty(&self) -> bool {
         self.samples.is_empty()
@@ -733,6 +747,7 @@ fn soil_terms_of(
         measured0: [f0.fx_n, f0.fz_n],
         measured_per_kg: [(f1.fx_n - f0.fx_n) / 1000.0, (f1.fz_n - f0.fz_n) / 1000.0],
         payload_volume_m3: volume,
+        depth_m: motion.vertical_depth_m,
         fee0: [k * base[0], k * base[1]],
         fee_per_pa: [
             k * (fc[0] - base[0]) / 1000.0,
