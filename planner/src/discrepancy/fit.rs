@@ -9,7 +9,8 @@
 //! `-2 ln L` of independent samples and `n_eff = sum_s n_s / kappa_s`. Held-out score of a candidate:
 //! `dBIC = chi2_test(0) - chi2_test(m) - ln(n_eff_test)` (one parameter). It is significant when
 //! `dBIC` exceeds [`AnalysisConfig::min_delta_bic`] and it explains at least
-//! [`AnalysisConfig::min_explained`] of the held-out chi-square of the signals it acts on (or
+//! [`AnalysisConfig::min_explained`] of the held-out chi-square of the signals it acts on, on the
+//! samples where it changes the prediction by more than a tenth of the residual spread (or
 //! `dBIC` exceeds [`AnalysisConfig::strong_delta_bic`] and it explains at least
 //! [`AnalysisConfig::strong_explained`]: signals with few independent samples, the forces), and it
 //! raises no signal's held-out RMS by more than 10 %; the thresholds were calibrated on
@@ -35,7 +36,8 @@ pub struct AnalysisConfig {
     pub candidates: Vec<Candidate>,
     /// Minimum held-out BIC improvement for a candidate to be significant.
     pub min_delta_bic: f64,
-    /// Minimum fraction of the held-out chi-square a candidate must explain.
+    /// Minimum fraction of the held-out chi-square a candidate must explain on the samples where it
+    /// acts (with [`AnalysisConfig::min_delta_bic`]).
     pub min_explained: f64,
     /// A candidate is also significant with a smaller held-out BIC improvement, at least this one,
     /// if it explains at least [`AnalysisConfig::strong_explained`] of the held-out chi-square of
@@ -83,8 +85,11 @@ pub struct CandidateScore {
     pub train_chi2_drop: f64,
     /// Held-out BIC improvement (positive = better than without it).
     pub heldout_delta_bic: f64,
-    /// Fraction of the held-out chi-square it explains.
+    /// Fraction of the held-out chi-square of its signals it explains.
     pub heldout_explained: f64,
+    /// Fraction of the held-out chi-square of its signals it explains on the samples where it
+    /// changes the prediction by more than a tenth of the residual spread.
+    pub heldout_explained_acted: f64,
     /// Whether it passed the thresholds and worsened no signal by more than 10 %.
     pub significant: bool,
 }
@@ -146,6 +151,10 @@ pub struct AnalysisResult {
     /// Decorrelation factor per signal (samples per independent sample).
     pub kappa: Vec<f64>,
 }
+
+/// A candidate acts on a sample's signal where it moves the prediction by more than this fraction
+/// of the signal's residual spread; its explained share is taken over those samples.
+const ACTED_FRACTION: f64 = 0.1;
 
 /// A candidate may raise no signal's held-out RMS by more than this factor.
 const MAX_SIGNAL_WORSENING: f64 = 1.1;
@@ -221,6 +230,28 @@ impl<'a> Evaluator<'a> {
             replay(rec, self.params, aug, groups, out);
         }
         sse(&self.records, &self.scratch).0
+    }
+
+    /// Chi-square of `groups`' signals `[base, last evaluation]` on the samples where the last
+    /// [`Evaluator::sse_with`] changed the prediction by more than [`ACTED_FRACTION`] of the
+    /// signal's residual spread `sigma` (where the candidate acts at all).
+    fn acted_chi2(&self, w: &Weights, sigma: &[f64], groups: SignalGroups) -> [f64; 2] {
+        let mut total = [0.0; 2];
+        for ((rec, out), base) in self.records.iter().zip(&self.scratch).zip(&self.base) {
+            for ((m, p), b) in rec.measured.iter().zip(out).zip(base) {
+                for j in (0..N_SIGNALS).filter(|j| groups_contain(groups, *j)) {
+                    let (r0, r1) = (m[j] - b[j], m[j] - p[j]);
+                    if r0.is_finite()
+                        && r1.is_finite()
+                        && (p[j] - b[j]).abs() > ACTED_FRACTION * sigma[j]
+                    {
+                        total[0] += r0 * r0 * w.inv_var[j];
+                        total[1] += r1 * r1 * w.inv_var[j];
+                    }
+                }
+            }
+        }
+        total
     }
 
     fn base_sse(&self) -> ([f64; N_SIGNALS], [usize; N_SIGNALS]) {
@@ -459,8 +490,8 @@ pub fn analyse(
             let test_sse = test_eval.sse_with(&a, groups);
             let test_chi = chi2(&w, &test_sse);
             let delta_bic = test_chi0 - test_chi - n_eff(&w.inv_var, &kappa_r).ln();
-            // Explained share of the chi-square of the signals the candidate acts on (a friction
-            // must explain the forces, not the whole record).
+            // Explained share of the held-out chi-square of the signals the candidate acts on (a
+            // friction must explain the forces, not the whole record) ...
             let own: f64 = (0..N_SIGNALS)
                 .filter(|j| groups_contain(groups, *j))
                 .map(|j| test_base_sse[j] * w.inv_var[j])
@@ -470,12 +501,20 @@ pub fn analyse(
             } else {
                 0.0
             };
+            // ... and on the samples where it acts at all (a flow sharing acts only while the boom
+            // and bucket valves are open together, a pump saturation only at the flow limit).
+            let [own0, own1] = test_eval.acted_chi2(&w, &sigma_r, groups);
+            let explained_acted = if own0 > 0.0 {
+                (own0 - own1) / own0
+            } else {
+                0.0
+            };
             // A physical augmentation that is right does not make any signal clearly worse.
             let consistent = (0..N_SIGNALS).all(|j| {
                 n_test[j] < 100 || test_sse[j] <= MAX_SIGNAL_WORSENING.powi(2) * test_base_sse[j]
             });
             let significant = consistent
-                && ((delta_bic > config.min_delta_bic && explained > config.min_explained)
+                && ((delta_bic > config.min_delta_bic && explained_acted > config.min_explained)
                     || (delta_bic > config.strong_delta_bic
                         && explained > config.strong_explained));
             scores.push((
@@ -487,6 +526,7 @@ pub fn analyse(
                     train_chi2_drop: train_chi0 - fx,
                     heldout_delta_bic: delta_bic,
                     heldout_explained: explained,
+                    heldout_explained_acted: explained_acted,
                     significant,
                 },
             ));
