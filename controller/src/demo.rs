@@ -20,7 +20,9 @@
 //! - `scans/scan_NNNN.json`: the range scans the controller used (docs/scan-protocol.md format);
 //! - `summary.json`, `summary.md`: per dig weight, time, energy, swept volume (thesis 6.1) and totals;
 //! - `trajectories.svg`, `terrain_before.svg`, `terrain_after.svg`, `dig_stats.svg` ([`crate::plots`]);
-//! - planned and predefined: `bench_after_NNN.svg` (Fig. 55), `dig_sequence.svg` (Fig. 56).
+//! - planned and predefined: `bench_after_NNN.svg` (Fig. 55), `dig_sequence.svg` (Fig. 56), and
+//!   `soil_samples.json`: per dig the soil estimator's samples (`Gamma` and the tip force from the
+//!   pressures, 4.3.4) for `excavator-ctl model soil-cv` ([`crate::soil_cv`]).
 //!
 //! One thread alternates the simulator (10 ms, ten 1 kHz physics steps) and the controller step, as in
 //! the closed-loop tests; the run is deterministic for a seed.
@@ -828,6 +830,9 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
     let budget_s = SIM_BUDGET_PER_DIG_S * f64::from(args.digs.max(1));
     let mut result: anyhow::Result<()> = Ok(());
     let mut soil = SoilMonitor::default();
+    // Every dig's soil samples (4.3.5), for `soil_samples.json` and `model soil-cv`.
+    let mut soil_samples = crate::soil_cv::SoilSamplesFile::default();
+    let mut dig_soil_samples: Vec<planner::estimate::SoilSample> = Vec::new();
     let mut planned_info: Vec<PlannedInfo> = Vec::new();
     let mut session_over: Option<String> = None;
     let mut plan_ms: Vec<f64> = Vec::new();
@@ -995,6 +1000,7 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
                     }
                     _ => None,
                 };
+                dig_soil_samples.clear();
                 if let Some(s) = &session {
                     soil.begin(crate::planned::plane_section(
                         s.terrain(),
@@ -1060,12 +1066,15 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
                 x_m: st.tip.x_m,
                 z_m: st.tip.z_m,
             });
-            if phase == Phase::Autodig && steps.is_multiple_of(2) {
-                soil.sample(
+            if phase == Phase::Autodig
+                && steps.is_multiple_of(2)
+                && let Some(sample) = soil.sample(
                     &st.tip,
                     st.tip_force,
                     node.cycle().swept_volume_m3().unwrap_or(0.0),
-                );
+                )
+            {
+                dig_soil_samples.push(sample);
             }
         }
         let stats = node.statistics();
@@ -1109,6 +1118,12 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
                 let carved = s.observe_bucket_pass(&pose, d.swing_rad, &path);
                 tracing::debug!(carved, "bucket pass carved into the map");
                 node.provide_terrain(s.terrain().clone());
+            }
+            if !dig_soil_samples.is_empty() {
+                soil_samples.digs.push(crate::soil_cv::SoilDigSamples {
+                    index: c.index,
+                    samples: std::mem::take(&mut dig_soil_samples),
+                });
             }
             records.push(c);
             // 5.2 online: the soil estimate of the recent digs sets the next digs' index.
@@ -1297,6 +1312,11 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
         });
     }
     write_outputs(out, &summary, &terrain_before, &after, &plan, &snapshots)?;
+    std::fs::write(
+        out.join("soil_samples.json"),
+        serde_json::to_vec(&soil_samples)?,
+    )
+    .with_context(|| format!("writing {}", out.join("soil_samples.json").display()))?;
     Ok(summary)
 }
 

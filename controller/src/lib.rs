@@ -39,6 +39,7 @@ pub mod plots;
 pub mod run;
 pub mod safety;
 pub mod scan_client;
+pub mod soil_cv;
 pub mod trace_tool;
 
 pub use cycle::{Action, CycleConfig, DigStats, WorkCycle};

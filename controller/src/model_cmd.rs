@@ -68,6 +68,8 @@ pub enum ModelCommand {
     Compare(CompareArgs),
     /// Thesis Table 2 with the dig model: force factor 1, 2, 3.
     Table2(Table2Args),
+    /// Cross-validate the soil models (thesis 4.3.5) on a `demo` session's `soil_samples.json`.
+    SoilCv(crate::soil_cv::SoilCvArgs),
 }
 
 /// Which measured signal the training and evaluation cylinder velocities come from.
@@ -253,6 +255,7 @@ pub fn run(cmd: ModelCommand) -> anyhow::Result<()> {
         ModelCommand::GenerateData(a) => generate(&a),
         ModelCommand::Compare(a) => compare(&a),
         ModelCommand::Table2(a) => table2(&a),
+        ModelCommand::SoilCv(a) => crate::soil_cv::run(&a),
     }
 }
 

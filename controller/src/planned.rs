@@ -629,20 +629,30 @@ impl SoilMonitor {
     }
 
     /// One sample during the dig: the tip pose, the measured soil force on the tip and the swept
-    /// volume so far. Poses out of the ground, or without a force or section, are skipped.
-    pub fn sample(&mut self, tip: &BucketPose, force: Option<TipForce>, swept_volume_m3: f64) {
+    /// volume so far. Poses out of the ground, or without a force or section, are skipped; the sample
+    /// kept is returned.
+    pub fn sample(
+        &mut self,
+        tip: &BucketPose,
+        force: Option<TipForce>,
+        swept_volume_m3: f64,
+    ) -> Option<SoilSample> {
         let (Some(section), Some(force)) = (&self.section, force) else {
-            return;
+            return None;
         };
         if !(force.fx_n.is_finite() && force.fz_n.is_finite() && force.my_nm.is_finite()) {
-            return;
+            return None;
         }
         if let Ok(Contact::InContact(geometry)) =
             dig_geometry(tip, section, swept_volume_m3.max(0.0))
             && geometry.depth_m > 0.05
         {
-            self.window.push(SoilSample { geometry, force });
+            let sample = SoilSample { geometry, force };
+            self.window.push(sample);
             self.fresh += 1;
+            Some(sample)
+        } else {
+            None
         }
     }
 

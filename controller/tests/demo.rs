@@ -84,6 +84,13 @@ fn demo_writes_all_outputs_with_the_documented_fields_for_two_digs() {
         "controller frames"
     );
     assert!(trace.lines().count() as u64 >= json["totals"]["trace_frames"].as_u64().unwrap());
+    // The soil estimator's samples of the planned session, for `model soil-cv`.
+    let soil: controller::soil_cv::SoilSamplesFile =
+        serde_json::from_slice(&std::fs::read(out.join("soil_samples.json")).unwrap()).unwrap();
+    assert!(soil.digs.iter().all(|d| d.index < 2));
+    assert!(soil.digs.iter().flat_map(|d| &d.samples).all(|s| {
+        s.geometry.depth_m > 0.0 && s.force.fx_n.is_finite() && s.force.fz_n.is_finite()
+    }));
 }
 
 #[test]

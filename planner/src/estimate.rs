@@ -285,6 +285,27 @@ impl Default for SoilBounds {
     }
 }
 
+impl SoilBounds {
+    /// Whether the wedge of Eqs. 14-17 can fail for `geometry` in the soil at the middle of the box:
+    /// Eq. 17's denominator `cos(rho + delta) + sin(rho + delta) cot(beta + phi) = sin(beta + phi +
+    /// rho + delta) / sin(beta + phi)` is positive there (`rho` the classical rake of Fig. 25,
+    /// `-rake_rad`). The static FEE does not describe a bucket whose cutting face is turned further
+    /// back (an opened bucket pulled in): a window of such samples leaves the analytical fit a sliver of
+    /// the box where every sample is finite, or none ([`EstimateError::NoFeasibleStart`]).
+    #[must_use]
+    pub fn fee_domain(&self, geometry: &DigGeometry) -> bool {
+        let mid = |lo: f64, hi: f64| 0.5 * (lo + hi);
+        let angles = mid(self.lower.failure_angle_rad, self.upper.failure_angle_rad)
+            + mid(self.lower.friction_angle_rad, self.upper.friction_angle_rad)
+            + mid(
+                self.lower.tool_friction_angle_rad,
+                self.upper.tool_friction_angle_rad,
+            );
+        let total = angles - geometry.rake_rad;
+        total.is_finite() && total > 0.0 && total.sin() > FEE_EPS && total < std::f64::consts::PI
+    }
+}
+
 fn to_array(p: &SoilProperties) -> [f64; 5] {
     [
         p.density_kg_per_m3,
@@ -905,6 +926,9 @@ pub struct DigError {
     pub dig: usize,
     /// Samples predicted.
     pub samples: usize,
+    /// Samples the fitted model could not evaluate (singular FEE geometry, Eq. 17), not predicted.
+    #[serde(default)]
+    pub unpredictable: usize,
     /// Samples in the estimation window.
     pub window_samples: usize,
     /// Mean absolute error of the force magnitude `|(F_x, F_z)|`, N.
@@ -934,7 +958,8 @@ pub struct CrossValidationReport {
 ///
 /// # Errors
 /// [`EstimateError::NotEnoughDigs`] (fewer than two), [`EstimateError::InvalidConfig`] for a zero
-/// window, the fit errors, and [`EstimateError::Soil`] where a prediction is singular.
+/// window, and the fit errors. Samples the fitted model cannot evaluate are counted in
+/// [`DigError::unpredictable`], not errors.
 pub fn cross_validate(
     digs: &[Vec<SoilSample>],
     window_samples: usize,
@@ -977,15 +1002,19 @@ pub fn cross_validate(
             }
             let fitted = FittedSoilModel::fit(&window, model)?;
             let predict = |g: &DigGeometry| fitted.predict(g, 0.0);
-            let errors = digs[i]
-                .iter()
-                .map(|s| {
-                    Ok(
-                        (predict(&s.geometry)?.force_magnitude_n() - s.force.force_magnitude_n())
-                            .abs(),
-                    )
-                })
-                .collect::<Result<Vec<f64>>>()?;
+            // A sample whose geometry the fitted model cannot evaluate (the static FEE's wedge
+            // cannot fail there, Eq. 17) is not predicted; it is counted.
+            let mut unpredictable = 0;
+            let mut errors = Vec::with_capacity(digs[i].len());
+            for s in &digs[i] {
+                match predict(&s.geometry) {
+                    Ok(f) => {
+                        errors.push((f.force_magnitude_n() - s.force.force_magnitude_n()).abs())
+                    }
+                    Err(EstimateError::Soil(_)) => unpredictable += 1,
+                    Err(e) => return Err(e),
+                }
+            }
             let mae_n = if errors.is_empty() {
                 0.0
             } else {
@@ -995,6 +1024,7 @@ pub fn cross_validate(
                 DigError {
                     dig: i,
                     samples: errors.len(),
+                    unpredictable,
                     window_samples: window.len(),
                     mae_n,
                 },
