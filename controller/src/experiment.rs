@@ -375,6 +375,11 @@ fn default_start() -> StartPose {
 /// 8 kPa 85/100/100 %, 16 kPa 61/75/100 %, 20 kPa 63/-/95 %, 24 kPa 62/(dump timeout)/83 %,
 /// 32 kPa 61/66/69 %, 40 kPa 43/44/44 %, 50 kPa 32/32/26 %. The index matters between the default
 /// soil and about three times its cohesion.
+///
+/// With the retuned maps (at ca9b67c, seeds 1-3, fill of index 1 / index 5): 16 kPa 75-85 / 100 %,
+/// 20 kPa 80-83 / 91-96 %, 24 kPa 73-74 / 82-85 %, 28 kPa 68 / 75-77 %, 32 kPa 62-63 / 67-69 %. A
+/// harder soil does not bring index 1 to the thesis's half while index 5 stays full: from 20 kPa
+/// index 5 stops filling first, so the hard soil stays at 16 kPa.
 pub const FIG52_SOILS: [(&str, f64); 2] = [("soft", 8_000.0), ("hard", 16_000.0)];
 
 /// Fig. 52 rows: `(soil, hardness index, mean)`.

@@ -1,6 +1,7 @@
 //! The thesis reproductions (`excavator-ctl experiment`) in a reduced run: the trends that hold today.
 //! Those that do not (Table 1's payload with perception from the closest start is still 17 % short of
-//! full; Table 2's swept volume and x3 energy; Fig. 52's soft-soil energy) are listed in
+//! full: the boom's lift at the stick's relief takes the edge out of the ground; Table 2's swept
+//! volume and x3 energy; Fig. 52's soft-soil energy and its hard-soil half) are listed in
 //! docs/autodig.md and not asserted.
 
 #![allow(clippy::unwrap_used)]
@@ -9,8 +10,8 @@ use controller::experiment::{ExperimentArgs, Which, report, table1, table2};
 
 /// Table 1 (thesis 3.2): every start digs; without the enhancements the fixed beta gives more material
 /// and a longer dig the farther out the dig starts; with them the payload is more consistent across
-/// the starts than without, and where the payloads are alike (the far start, both full) the dig is
-/// faster.
+/// the starts than without, the closest start brings more than without them (thesis: 2418 against
+/// 1880 kg), and where the payloads are alike (the far start, both full) the dig is faster.
 #[test]
 fn table1_perception_is_more_consistent_and_faster_where_payloads_match() {
     let rows = table1(1).unwrap();
@@ -33,6 +34,7 @@ fn table1_perception_is_more_consistent_and_faster_where_payloads_match() {
         hi - lo
     };
     assert!(spread(&with) < 0.7 * spread(&plain), "{rows:?}");
+    assert!(with[0].payload_kg > 1.2 * plain[0].payload_kg, "{rows:?}");
     assert!(
         (with[2].payload_kg - plain[2].payload_kg).abs() < 0.05 * plain[2].payload_kg,
         "{rows:?}"
@@ -72,8 +74,9 @@ fn fig52_report_prints_the_thesis_comparison() {
     assert!(text.contains("Thesis"), "{text}");
 }
 
-/// Fig. 52's effect of the hardness index: in the hard soil the high index fills more and spends less
-/// energy per kilogram than the low one; in the soft soil the low index is faster.
+/// Fig. 52's effect of the hardness index: in the hard soil the high index fills the bucket and the low
+/// one only partly (thesis: about half; here about 80 %), and the high index spends less energy per
+/// kilogram; in the soft soil both fill and the low index is faster.
 #[test]
 fn fig52_high_index_does_better_in_hard_soil() {
     let rows = controller::experiment::fig52(1).unwrap();
@@ -87,6 +90,8 @@ fn fig52_high_index_does_better_in_hard_soil() {
     let (hard1, hard5) = (get("hard", 1.0), get("hard", 5.0));
     assert!(rows.iter().all(|(_, _, m)| m.completed == 1), "{rows:?}");
     assert!(hard5.payload_kg > 1.2 * hard1.payload_kg, "{rows:?}");
+    assert!(hard5.payload_kg > 0.95 * 2550.0, "{rows:?}");
+    assert!(hard1.payload_kg < 0.9 * 2550.0, "{rows:?}");
     assert!(
         hard5.energy_kj / hard5.payload_kg < hard1.energy_kj / hard1.payload_kg,
         "{rows:?}"
