@@ -97,6 +97,10 @@ pub enum ForceSource {
     /// pre-dig section lowered to the sensed tip path, and the payload of the sensed swept volume.
     /// Needs `model generate-data`'s `setups.json` next to the traces (the pre-dig section and soil).
     Statics,
+    /// Training only: every dig twice, once with the measured and once with the statics forces (same
+    /// target velocities), so the networks learn what both force signals share and stay usable with
+    /// the dig model's statics. Evaluation with `mixed` uses the measured forces.
+    Mixed,
 }
 
 /// Arguments of `model train`.
@@ -140,6 +144,19 @@ pub struct TrainArgs {
     /// Teacher-forcing epochs before the free-running phase.
     #[arg(long, default_value_t = 300)]
     pub teacher_epochs: usize,
+    /// Digs per Adam step (mini-batches reshuffled every epoch, both phases); 0: the whole training set
+    /// per step (one update per epoch, as the shipped networks were trained before 22 November).
+    #[arg(long, default_value_t = 0)]
+    pub batch_digs: usize,
+    /// Also feed every network the rate of change of its own cylinder force over the last step (Eq. 2:
+    /// the chamber pressure changes with the difference between valve flow and displacement, so it
+    /// shows a load being taken up or let go).
+    #[arg(long, conflicts_with_all = ["thesis_inputs", "orifice_inputs", "third_inputs"])]
+    pub force_rate: bool,
+    /// With `--force-rate`: probability with which a training dig's force rate is zeroed for one step
+    /// of the optimiser, so the networks also learn the quasi-static case the dig model uses them in.
+    #[arg(long, default_value_t = 0.0, requires = "force_rate")]
+    pub force_rate_dropout: f64,
     /// Feed the networks the delayed commands through a first-order lag with the machine file's spool
     /// time constant (`lag_time_constant_s`): an estimate of the spool positions the valves meter with,
     /// instead of the delayed commands themselves.
@@ -185,6 +202,10 @@ pub struct EvaluateArgs {
     /// simulator's phantom rate of a stalled cylinder) and report it against both targets.
     #[arg(long)]
     pub breakdown: bool,
+    /// Also write every evaluated step as CSV (dig, time, Autodig stage, commands, forces, chamber and
+    /// pump pressures, both velocity signals, the free-running prediction) for diagnosis.
+    #[arg(long, value_name = "FILE")]
+    pub dump: Option<PathBuf>,
     /// Machine file (default: the built-in config/machine.toml).
     #[arg(long, value_name = "FILE")]
     pub machine: Option<PathBuf>,
@@ -1003,6 +1024,15 @@ pub struct TraceSample {
     pub angle_velocity_m_per_s: [f64; 3],
     /// Sensed joint angles `[boom, stick, bucket]`, rad.
     pub angles_rad: [f64; 3],
+    /// Measured head-side pressures `[boom, stick, bucket]`, Pa (diagnosis: `evaluate --dump`).
+    pub head_pa: [f64; 3],
+    /// Measured rod-side pressures `[boom, stick, bucket]`, Pa.
+    pub rod_pa: [f64; 3],
+    /// Measured pump gallery pressures `[pump 1 (boom, bucket), pump 2 (stick, swing)]`, Pa (0 in
+    /// traces without `PumpPressures`).
+    pub pump_pa: [f64; 2],
+    /// Autodig stage of the latest `ControllerStatus` (0 without one).
+    pub stage: u8,
 }
 
 /// One dig of a trace with both velocity signals ([`read_training_digs`]).
@@ -1073,8 +1103,9 @@ pub fn read_training_digs(
     let mut head = [0.0; 3];
     let mut rod = [0.0; 3];
     let mut rates: Option<[f64; 3]> = None;
+    let mut pump = [0.0; 2];
     let mut pending: Option<(f64, JointAngles)> = None;
-    let mut status: Option<(Activity, u16)> = None;
+    let mut status: Option<(Activity, u16, u8)> = None;
     let mut seen_status = false;
     let mut tagged: Vec<Tagged> = Vec::new();
     let mut flush = |pending: &mut Option<(f64, JointAngles)>,
@@ -1082,7 +1113,8 @@ pub fn read_training_digs(
                      command: &[f64; 3],
                      head: &[f64; 3],
                      rod: &[f64; 3],
-                     status: &Option<(Activity, u16)>| {
+                     pump: &[f64; 2],
+                     status: &Option<(Activity, u16, u8)>| {
         if let (Some((t, q)), Some(w)) = (pending.take(), rates)
             && let Ok(arms) = kin.moment_arms(&q)
         {
@@ -1093,7 +1125,7 @@ pub fn read_training_digs(
                 velocity_m_per_s: [0, 1, 2].map(|j| arms[j] * w[j]),
             };
             let dig = match status {
-                Some((Activity::Dig | Activity::Cleanup, i)) => Some(*i),
+                Some((Activity::Dig | Activity::Cleanup, i, _)) => Some(*i),
                 _ => None,
             };
             let angles_rad = [q.boom_rad, q.stick_rad, q.bucket_rad];
@@ -1109,6 +1141,10 @@ pub fn read_training_digs(
                         sample,
                         angle_velocity_m_per_s: [0.0; 3],
                         angles_rad,
+                        head_pa: *head,
+                        rod_pa: *rod,
+                        pump_pa: *pump,
+                        stage: status.map_or(0, |s| s.2),
                     },
                     arms: [arms[0], arms[1], arms[2]],
                     angles_rad,
@@ -1125,7 +1161,7 @@ pub fn read_training_digs(
         let t = record.timestamp_ns as f64 * 1e-9;
         match decoded.message {
             Message::JointAngles(a) => {
-                flush(&mut pending, &rates, &command, &head, &rod, &status);
+                flush(&mut pending, &rates, &command, &head, &rod, &pump, &status);
                 pending = Some((
                     t,
                     JointAngles {
@@ -1151,12 +1187,13 @@ pub fn read_training_digs(
             }
             Message::ControllerStatus(s) => {
                 seen_status = true;
-                status = Some((s.activity, s.dig_index));
+                status = Some((s.activity, s.dig_index, s.stage as u8));
             }
+            Message::PumpPressures(p) => pump = [p.pump1_pa, p.pump2_pa],
             _ => {}
         }
     }
-    flush(&mut pending, &rates, &command, &head, &rod, &status);
+    flush(&mut pending, &rates, &command, &head, &rod, &pump, &status);
     // Angle-derived velocities: the slope over the neighbouring samples of the same run (no gap
     // above 50 ms), at the sample's moment arms.
     let run_start: Vec<usize> = {
@@ -1240,7 +1277,7 @@ fn load_trace_digs(
     let mut setups: std::collections::HashMap<PathBuf, Vec<DigSetup>> =
         std::collections::HashMap::new();
     let mut model = match forces {
-        ForceSource::Measured => None,
+        ForceSource::Measured | ForceSource::Mixed => None,
         ForceSource::Statics => Some(DigModel::nominal()?),
     };
     for path in traces {
@@ -1398,10 +1435,15 @@ fn load_digs(
     source: VelocitySource,
     forces: ForceSource,
 ) -> anyhow::Result<Vec<ActuatorDig>> {
-    Ok(load_trace_digs(traces, machine, forces)?
+    let mut digs: Vec<ActuatorDig> = load_trace_digs(traces, machine, forces)?
         .iter()
         .map(|d| d.to_actuator_dig(source))
-        .collect())
+        .collect();
+    if forces == ForceSource::Mixed {
+        let statics = load_trace_digs(traces, machine, ForceSource::Statics)?;
+        digs.extend(statics.iter().map(|d| d.to_actuator_dig(source)));
+    }
+    Ok(digs)
 }
 
 fn load_machine(path: Option<&Path>) -> anyhow::Result<planner::machine::MachineConfig> {
@@ -1529,6 +1571,10 @@ fn evaluate(a: &EvaluateArgs) -> anyhow::Result<()> {
         }
     );
     print_errors(&report);
+    if let Some(path) = &a.dump {
+        write_dump(path, &model, &chosen, &digs)?;
+        println!("wrote {}", path.display());
+    }
     if a.breakdown {
         print_breakdown(&model, &chosen)?;
         if a.forces == ForceSource::Statics {
@@ -1536,6 +1582,50 @@ fn evaluate(a: &EvaluateArgs) -> anyhow::Result<()> {
             print_force_gap(&measured, &trace_digs_all(&a.trace, &machine)?, &machine);
         }
     }
+    Ok(())
+}
+
+/// Writes `evaluate --dump`'s CSV: one row per predicted step, with the trace sample nearest in time.
+fn write_dump(
+    path: &Path,
+    model: &ActuatorModel,
+    chosen: &[TraceDig],
+    digs: &[ActuatorDig],
+) -> anyhow::Result<()> {
+    let file = File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    let mut out = BufWriter::new(file);
+    writeln!(
+        out,
+        "dig,t,stage,u0,u1,u2,f0,f1,f2,ph0,ph1,ph2,pr0,pr1,pr2,pump1,pump2,vr0,vr1,vr2,va0,va1,va2,vt0,vt1,vt2,vp0,vp1,vp2"
+    )?;
+    for (d, (trace, dig)) in chosen.iter().zip(digs).enumerate() {
+        let steps = model.simulate(dig)?;
+        let times: Vec<f64> = trace.samples.iter().map(|s| s.sample.time_s).collect();
+        for step in steps.iter().skip(1) {
+            let k = times.partition_point(|&t| t < step.time_s);
+            let k = if k > 0
+                && (k == times.len() || step.time_s - times[k - 1] < times[k] - step.time_s)
+            {
+                k - 1
+            } else {
+                k.min(times.len() - 1)
+            };
+            let s = &trace.samples[k];
+            let mut row = vec![d as f64, step.time_s, f64::from(s.stage)];
+            row.extend(s.sample.command);
+            row.extend(s.sample.force_n);
+            row.extend(s.head_pa);
+            row.extend(s.rod_pa);
+            row.extend(s.pump_pa);
+            row.extend(s.sample.velocity_m_per_s);
+            row.extend(s.angle_velocity_m_per_s);
+            row.extend(step.measured_m_per_s);
+            row.extend(step.predicted_m_per_s);
+            let text: Vec<String> = row.iter().map(|v| format!("{v:.6e}")).collect();
+            writeln!(out, "{}", text.join(","))?;
+        }
+    }
+    out.flush()?;
     Ok(())
 }
 
@@ -1596,6 +1686,9 @@ fn train(a: &TrainArgs) -> anyhow::Result<()> {
         coupled_inputs: !a.thesis_inputs,
         orifice_inputs: a.orifice_inputs,
         teacher_forcing_epochs: a.teacher_epochs,
+        batch_digs: a.batch_digs,
+        force_rate_input: a.force_rate,
+        force_rate_dropout: a.force_rate_dropout,
         force_noise: a.force_noise,
         third_inputs: a.third_inputs,
         command_lag_s: if a.spool_lag {
@@ -1612,7 +1705,7 @@ fn train(a: &TrainArgs) -> anyhow::Result<()> {
     };
     let samples: usize = digs.iter().map(|d| d.samples.len()).sum();
     println!(
-        "training on {} digs ({} samples) from {} trace(s), velocities from the {:?}: {} hidden units, delay {} steps, spool lag {} s, seed {}, {} inputs",
+        "training on {} digs ({} samples) from {} trace(s), velocities from the {:?}: {} hidden units, delay {} steps, spool lag {} s, seed {}, batches of {} digs, {} inputs",
         digs.len(),
         samples,
         a.trace.len(),
@@ -1621,8 +1714,11 @@ fn train(a: &TrainArgs) -> anyhow::Result<()> {
         config.delay_steps,
         config.command_lag_s,
         config.seed,
+        config.batch_digs,
         if config.orifice_inputs {
             "coupled + orifice drives"
+        } else if config.force_rate_input {
+            "coupled + own force rate"
         } else if config.third_inputs {
             "all three cylinders' command and force"
         } else if config.coupled_inputs {
@@ -2231,6 +2327,10 @@ mod tests {
                 },
                 angle_velocity_m_per_s: [0.0; 3],
                 angles_rad,
+                head_pa: [0.0; 3],
+                rod_pa: [0.0; 3],
+                pump_pa: [0.0; 2],
+                stage: 0,
             },
             arms: [1.0; 3],
             angles_rad,

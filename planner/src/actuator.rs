@@ -55,6 +55,8 @@ pub const MAX_HIDDEN: usize = 16;
 const MAX_INPUTS: usize = 7;
 /// Inputs of the coupled layout (own and partner command and force, previous velocity).
 const COUPLED_INPUTS: usize = 5;
+/// Inputs of the coupled layout with the force rate ([`TrainConfig::force_rate_input`]).
+const FORCE_RATE_INPUTS: usize = 6;
 /// Input slots: delayed own command, cylinder force, previous velocity, the delayed command and the
 /// force of the cylinder sharing its flow (the partner: boom and bucket share a pump, the stick's pump
 /// feeds the boom through the crossover). Fig. 17 gives the boom the bucket command (slot 3) only.
@@ -72,6 +74,11 @@ const IN_PARTNER_ORIFICE: usize = 6;
 /// command and the force of the third cylinder instead of the orifice drives.
 const IN_THIRD_COMMAND: usize = 5;
 const IN_THIRD_FORCE: usize = 6;
+/// In the force-rate layout ([`TrainConfig::force_rate_input`]) slot 5 carries the rate of change of the
+/// own cylinder force over the last step, N/s: Eq. 2's `dP/dt = beta (Q - A v) / V` ties it to the
+/// difference between the valve's flow and the cylinder's displacement, i.e. to the velocity change the
+/// command and force alone do not show (a load taken up or let go).
+const IN_FORCE_RATE: usize = 5;
 
 /// The cylinder whose flow network `j` shares: boom <- bucket (shared pump), stick <- boom (crossover),
 /// bucket <- boom (shared pump).
@@ -305,6 +312,17 @@ pub struct TrainConfig {
     /// cylinder, so it sees all three valves and loads (the boom's crossover flow comes from the stick's
     /// pump and depends on the stick's load). Excludes `orifice_inputs`.
     pub third_inputs: bool,
+    /// Digs per Adam step (mini-batches, reshuffled every epoch) in both phases; 0: the whole training
+    /// set per step (full batch, one step per epoch). With 260 training digs and batches of 16 an epoch
+    /// costs the same and makes 17 updates instead of one.
+    pub batch_digs: usize,
+    /// With the coupled inputs, every network also gets the rate of change of its own cylinder force
+    /// over the last step (N/s; Eq. 2, [`IN_FORCE_RATE`]). Excludes `orifice_inputs` and `third_inputs`.
+    pub force_rate_input: bool,
+    /// With `force_rate_input`: the probability with which a training dig's force rate is set to zero
+    /// for one Adam step (drawn per dig and batch, both phases), so the networks also learn the
+    /// quasi-static case in which the dig model uses them ([`ActuatorState::with_static_forces`]).
+    pub force_rate_dropout: f64,
 }
 
 /// Loss of the free-running (BPTT) phase and of early stopping on the validation digs.
@@ -357,6 +375,9 @@ impl Default for TrainConfig {
             force_noise: 0.0,
             command_lag_s: 0.0,
             third_inputs: false,
+            batch_digs: 0,
+            force_rate_input: false,
+            force_rate_dropout: 0.0,
         }
     }
 }
@@ -375,6 +396,18 @@ impl TrainConfig {
         }
         if self.orifice_inputs && !self.coupled_inputs {
             return bad("orifice_inputs", "needs coupled_inputs");
+        }
+        if self.force_rate_input
+            && (self.orifice_inputs || self.third_inputs || !self.coupled_inputs)
+        {
+            return bad(
+                "force_rate_input",
+                "needs coupled_inputs and excludes orifice_inputs and third_inputs",
+            );
+        }
+        if !(self.force_rate_dropout.is_finite() && (0.0..=1.0).contains(&self.force_rate_dropout))
+        {
+            return bad("force_rate_dropout", "must be in [0, 1]");
         }
         if self.third_inputs && (self.orifice_inputs || !self.coupled_inputs) {
             return bad(
@@ -501,6 +534,8 @@ struct Network {
     orifice_ref_n: [[f64; 2]; 2],
     /// The last two slots carry the third cylinder's command and force (not the orifice drives).
     third: bool,
+    /// `1 / dt`, 1/s: turns a force change over one step into the force rate ([`IN_FORCE_RATE`]).
+    rate_per_s: f64,
     /// `W1` (hidden x inputs, row-major), `b1` (hidden), `w2` (hidden), `s` (inputs), `b2`.
     params: Vec<f64>,
 }
@@ -600,6 +635,7 @@ impl Network {
         j: usize,
         delayed: &[f64; 3],
         force_n: &[f64; 3],
+        previous_force_n: &[f64; 3],
         velocity: f64,
     ) -> [f64; MAX_INPUTS] {
         let o = partner(j);
@@ -609,7 +645,9 @@ impl Network {
         raw[IN_VELOCITY] = velocity;
         raw[IN_PARTNER_COMMAND] = delayed[o];
         raw[IN_PARTNER_FORCE] = force_n[o];
-        if self.third {
+        if self.inputs == FORCE_RATE_INPUTS {
+            raw[IN_FORCE_RATE] = (force_n[j] - previous_force_n[j]) * self.rate_per_s;
+        } else if self.third {
             let t = third(j);
             raw[IN_THIRD_COMMAND] = delayed[t];
             raw[IN_THIRD_FORCE] = force_n[t];
@@ -661,7 +699,9 @@ struct NetworkFile {
 fn input_names(j: usize, inputs: usize, with_third: bool) -> Vec<String> {
     let other = Joint::ALL[partner(j)];
     let t = Joint::ALL[third(j)];
-    let (fifth, sixth) = if with_third {
+    let (fifth, sixth) = if inputs == FORCE_RATE_INPUTS {
+        ("force_rate_n_per_s".to_owned(), String::new())
+    } else if with_third {
         (format!("delayed_{t}_command"), format!("{t}_force_n"))
     } else {
         ("orifice_drive".to_owned(), format!("{other}_orifice_drive"))
@@ -712,7 +752,7 @@ impl From<&Network> for NetworkFile {
 }
 
 impl NetworkFile {
-    fn into_network(self, joint: Joint) -> Result<Network, ActuatorError> {
+    fn into_network(self, joint: Joint, dt_s: f64) -> Result<Network, ActuatorError> {
         let bad = |what: &str| {
             Err(ActuatorError::InvalidModel(format!(
                 "{joint} network: {what}"
@@ -720,8 +760,14 @@ impl NetworkFile {
         };
         let j = joint.index();
         let inputs = self.input_offset.len();
-        if inputs != thesis_inputs(j) && inputs != COUPLED_INPUTS && inputs != MAX_INPUTS {
-            return bad("input count is neither Fig. 17's, the coupled nor the orifice layout");
+        if inputs != thesis_inputs(j)
+            && inputs != COUPLED_INPUTS
+            && inputs != FORCE_RATE_INPUTS
+            && inputs != MAX_INPUTS
+        {
+            return bad(
+                "input count is neither Fig. 17's, the coupled, the force-rate nor the orifice layout",
+            );
         }
         let with_third = inputs == MAX_INPUTS && self.inputs == input_names(j, inputs, true);
         let orifice_ref_n = match (
@@ -797,6 +843,7 @@ impl NetworkFile {
             output_limit: limit / vs,
             orifice_ref_n,
             third: with_third,
+            rate_per_s: 1.0 / dt_s,
             params,
         })
     }
@@ -866,9 +913,23 @@ pub struct ActuatorState {
     commands: [[f64; 3]; MAX_DELAY_STEPS],
     /// The lagged delayed commands (spool estimate), the networks' command inputs.
     spool: [f64; 3],
+    /// The forces of the last step, N (the force-rate input); `None` before the first step.
+    force_n: Option<[f64; 3]>,
+    /// The forces are quasi-static (the dig model's statics, which carry no pressure dynamics): the
+    /// force-rate input is held at zero ([`ActuatorState::with_static_forces`]).
+    static_forces: bool,
 }
 
 impl ActuatorState {
+    /// The same state for quasi-static force inputs (the dig model's statics, Eqs. A2-A19): the
+    /// networks' force-rate input (Eq. 2, [`TrainConfig::force_rate_input`]) is held at zero, since a
+    /// static force has no compressibility transient to report. No effect on networks without it.
+    #[must_use]
+    pub fn with_static_forces(mut self) -> Self {
+        self.static_forces = true;
+        self
+    }
+
     /// Velocities `[boom, stick, bucket]` predicted by the last step (or the initial ones), m/s.
     #[must_use]
     pub fn velocity_m_per_s(&self) -> [f64; 3] {
@@ -951,6 +1012,8 @@ impl ActuatorModel {
             head: 0,
             commands: [command; MAX_DELAY_STEPS],
             spool: command,
+            force_n: None,
+            static_forces: false,
         })
     }
 
@@ -986,10 +1049,22 @@ impl ActuatorModel {
             *s += gain * (u - *s);
         }
         let delayed = state.spool;
+        let previous_force = if state.static_forces {
+            force_n
+        } else {
+            state.force_n.unwrap_or(force_n)
+        };
+        state.force_n = Some(force_n);
         let mut hidden = [0.0; MAX_HIDDEN];
         let mut velocity = [0.0; 3];
         for (j, net) in self.networks.iter().enumerate() {
-            let raw = net.raw_inputs(j, &delayed, &force_n, state.velocity_m_per_s[j]);
+            let raw = net.raw_inputs(
+                j,
+                &delayed,
+                &force_n,
+                &previous_force,
+                state.velocity_m_per_s[j],
+            );
             let x = net.normalise(&raw);
             let y = net.forward(&net.params, &x, &mut hidden);
             // A non-finite y can only come from overflowing weights; hold the previous speed then.
@@ -1135,9 +1210,9 @@ impl ActuatorModel {
             ));
         }
         let networks = [
-            file.boom.into_network(Joint::Boom)?,
-            file.stick.into_network(Joint::Stick)?,
-            file.bucket.into_network(Joint::Bucket)?,
+            file.boom.into_network(Joint::Boom, file.dt_s)?,
+            file.stick.into_network(Joint::Stick, file.dt_s)?,
+            file.bucket.into_network(Joint::Bucket, file.dt_s)?,
         ];
         if networks
             .iter()
@@ -1304,6 +1379,7 @@ fn resample(dig: &ActuatorDig, index: usize, dt_s: f64) -> Result<Sequence, Actu
 
 /// One network's training data: per step the normalised exogenous inputs (slot [`IN_VELOCITY`] unused)
 /// and the normalised measured velocity.
+#[derive(Clone)]
 struct NetSequence {
     exo: Vec<[f64; MAX_INPUTS]>,
     target: Vec<f64>,
@@ -1323,7 +1399,9 @@ fn net_sequences(
             let mut target = Vec::with_capacity(n);
             let spool = spool_inputs(&seq.command, delay, gain);
             for (k, delayed) in spool.iter().enumerate() {
-                let mut x = net.normalise(&net.raw_inputs(j, delayed, &seq.force[k], 0.0));
+                let previous = &seq.force[k.saturating_sub(1)];
+                let mut x =
+                    net.normalise(&net.raw_inputs(j, delayed, &seq.force[k], previous, 0.0));
                 x[IN_VELOCITY] = 0.0;
                 exo.push(x);
                 target.push(seq.velocity[k][j] / net.velocity_scale);
@@ -1352,6 +1430,7 @@ fn new_network(
     let inputs = match (config.coupled_inputs, config.orifice_inputs) {
         (true, true) => MAX_INPUTS,
         (true, false) if config.third_inputs => MAX_INPUTS,
+        (true, false) if config.force_rate_input => FORCE_RATE_INPUTS,
         (true, false) => COUPLED_INPUTS,
         (false, _) => thesis_inputs(j),
     };
@@ -1397,6 +1476,16 @@ fn new_network(
         input_offset[slot] = mean;
         input_scale[slot] = if std > 1e-9 { std } else { 1.0 };
     }
+    if config.force_rate_input {
+        let rates = seqs.iter().flat_map(|s| {
+            s.force
+                .windows(2)
+                .map(move |w| (w[1][j] - w[0][j]) / config.dt_s)
+        });
+        let (mean, std) = mean_std(rates);
+        input_offset[IN_FORCE_RATE] = mean;
+        input_scale[IN_FORCE_RATE] = if std > 1e-9 { std } else { 1.0 };
+    }
     if config.third_inputs {
         // The third cylinder's command stays as it is (a fraction), its force is standardised.
         let t = third(j);
@@ -1423,6 +1512,7 @@ fn new_network(
         output_limit: VELOCITY_LIMIT_FACTOR * v_peak / v_std,
         orifice_ref_n,
         third: config.third_inputs,
+        rate_per_s: 1.0 / config.dt_s,
         params: Vec::new(),
     };
     // Start the shortcut near Eq. 4's slow first-order response: v(t+1) = 0.9 v(t) + ...
@@ -1479,7 +1569,7 @@ fn clip(grad: &mut [f64], max_norm: f64) {
 }
 
 /// Teacher-forced loss and gradient: every step sees the measured previous velocity.
-fn teacher_forced(net: &Network, params: &[f64], data: &[NetSequence], grad: &mut [f64]) -> f64 {
+fn teacher_forced(net: &Network, params: &[f64], data: &[&NetSequence], grad: &mut [f64]) -> f64 {
     grad.iter_mut().for_each(|g| *g = 0.0);
     let count = data
         .iter()
@@ -1504,7 +1594,7 @@ fn teacher_forced(net: &Network, params: &[f64], data: &[NetSequence], grad: &mu
 fn free_run(
     net: &Network,
     params: &[f64],
-    data: &[NetSequence],
+    data: &[&NetSequence],
     loss_kind: FreeRunLoss,
     force_offsets: &[[f64; 2]],
     mut grad: Option<&mut [f64]>,
@@ -1563,6 +1653,64 @@ fn free_run(
         }
     }
     loss / count
+}
+
+/// The mini-batches of one epoch: `order` reshuffled with `rng` and cut into runs of `size` digs (the
+/// last one shorter); `size` 0 or at least the number of digs: one batch of all digs, in order.
+fn batches(order: &mut [usize], size: usize, rng: &mut ChaCha8Rng) -> Vec<Vec<usize>> {
+    if size == 0 || size >= order.len() {
+        return vec![order.to_vec()];
+    }
+    for i in (1..order.len()).rev() {
+        order.swap(i, rng.random_range(0..=i));
+    }
+    order.chunks(size).map(<[usize]>::to_vec).collect()
+}
+
+/// For [`TrainConfig::force_rate_dropout`]: per dig of `batch`, a copy with the force-rate input at
+/// zero (normalised `-offset / scale`) with the configured probability, otherwise `None`.
+fn rate_dropout(
+    net: &Network,
+    batch: &[usize],
+    data: &[NetSequence],
+    config: &TrainConfig,
+    rng: &mut ChaCha8Rng,
+) -> Vec<Option<NetSequence>> {
+    let p = config.force_rate_dropout;
+    if !(p > 0.0 && net.inputs == FORCE_RATE_INPUTS) {
+        return vec![None; batch.len()];
+    }
+    let zero = -net.input_offset[IN_FORCE_RATE] / net.input_scale[IN_FORCE_RATE];
+    batch
+        .iter()
+        .map(|&i| {
+            (rng.random::<f64>() < p).then(|| {
+                let mut seq = data[i].clone();
+                seq.exo.iter_mut().for_each(|x| x[IN_FORCE_RATE] = zero);
+                seq
+            })
+        })
+        .collect()
+}
+
+/// The sequences of `batch`, the dropped-out copies where there are any.
+fn batch_data<'a>(
+    batch: &[usize],
+    data: &'a [NetSequence],
+    dropped: &'a [Option<NetSequence>],
+) -> Vec<&'a NetSequence> {
+    batch
+        .iter()
+        .zip(dropped)
+        .map(|(&i, d)| d.as_ref().unwrap_or(&data[i]))
+        .collect()
+}
+
+/// The share of the training steps in `batch` (to sum the batches' mean losses to the epoch's mean).
+fn batch_weight(batch: &[&NetSequence], all: &[NetSequence]) -> f64 {
+    let steps = |s: &NetSequence| s.target.len().saturating_sub(1);
+    let total = all.iter().map(steps).sum::<usize>().max(1) as f64;
+    batch.iter().map(|s| steps(s)).sum::<usize>() as f64 / total
 }
 
 /// The split of digs (by index) into training, validation and test sets.
@@ -1658,7 +1806,8 @@ pub fn train(
         let mut net = new_network(j, &train_seqs, config, &mut rng)?;
         let gain = lag_gain(config.dt_s, config.command_lag_s);
         let train_data = net_sequences(&net, j, &train_seqs, config.delay_steps, gain);
-        let val_data = net_sequences(&net, j, &val_seqs, config.delay_steps, gain);
+        let val_owned = net_sequences(&net, j, &val_seqs, config.delay_steps, gain);
+        let val_data: Vec<&NetSequence> = val_owned.iter().collect();
         let mut params = std::mem::take(&mut net.params);
         let mut grad = vec![0.0; params.len()];
         let mut best = (
@@ -1667,10 +1816,17 @@ pub fn train(
         );
 
         let mut adam = Adam::new(params.len(), config.learning_rate);
+        let mut order: Vec<usize> = (0..train_data.len()).collect();
         for epoch in 1..=config.teacher_forcing_epochs {
-            let train_loss = teacher_forced(&net, &params, &train_data, &mut grad);
-            clip(&mut grad, config.gradient_clip);
-            adam.update(&mut params, &grad);
+            let mut train_loss = 0.0;
+            for batch in batches(&mut order, config.batch_digs, &mut rng) {
+                let dropped = rate_dropout(&net, &batch, &train_data, config, &mut rng);
+                let data = batch_data(&batch, &train_data, &dropped);
+                train_loss += teacher_forced(&net, &params, &data, &mut grad)
+                    * batch_weight(&data, &train_data);
+                clip(&mut grad, config.gradient_clip);
+                adam.update(&mut params, &grad);
+            }
             let val = free_run(&net, &params, &val_data, config.free_run_loss, &[], None);
             if val < best.0 {
                 best = (val, params.clone());
@@ -1710,20 +1866,32 @@ pub fn train(
                     ];
                 }
             }
-            let train_loss = free_run(
-                &net,
-                &params,
-                &train_data,
-                config.free_run_loss,
-                &offsets,
-                Some(&mut grad),
-            );
-            if !train_loss.is_finite() || grad.iter().any(|g| !g.is_finite()) {
+            let mut train_loss = 0.0;
+            let mut diverged = false;
+            for batch in batches(&mut order, config.batch_digs, &mut rng) {
+                let dropped = rate_dropout(&net, &batch, &train_data, config, &mut rng);
+                let data = batch_data(&batch, &train_data, &dropped);
+                let offs: Vec<[f64; 2]> = batch.iter().map(|&i| offsets[i]).collect();
+                let loss = free_run(
+                    &net,
+                    &params,
+                    &data,
+                    config.free_run_loss,
+                    &offs,
+                    Some(&mut grad),
+                );
+                if !loss.is_finite() || grad.iter().any(|g| !g.is_finite()) {
+                    diverged = true;
+                    break;
+                }
+                train_loss += loss * batch_weight(&data, &train_data);
+                clip(&mut grad, config.gradient_clip);
+                adam.update(&mut params, &grad);
+            }
+            if diverged {
                 params.clone_from(&best.1);
                 break;
             }
-            clip(&mut grad, config.gradient_clip);
-            adam.update(&mut params, &grad);
             let val = free_run(&net, &params, &val_data, config.free_run_loss, &[], None);
             free_run_epochs[j] = epoch;
             done += 1;
@@ -2152,6 +2320,71 @@ mod tests {
             },
             TrainConfig {
                 coupled_inputs: false,
+                ..config.clone()
+            },
+        ] {
+            assert!(matches!(
+                train(&digs, &bad, |_| {}),
+                Err(ActuatorError::InvalidConfig { .. })
+            ));
+        }
+    }
+
+    #[test]
+    fn force_rate_input_round_trips_and_is_held_at_zero_for_static_forces() {
+        let digs = synthetic_digs(6, 60, 9);
+        let config = TrainConfig {
+            teacher_forcing_epochs: 20,
+            free_run_epochs: 5,
+            coupled_inputs: true,
+            force_rate_input: true,
+            batch_digs: 2,
+            ..test_config()
+        };
+        let (model, _) = train(&digs, &config, |_| {}).unwrap();
+        let text = model.to_json().unwrap();
+        assert!(text.contains("\"force_rate_n_per_s\""));
+        let back = ActuatorModel::from_json(&text).unwrap();
+        let (a, b) = (
+            back.evaluate(&digs).unwrap(),
+            model.evaluate(&digs).unwrap(),
+        );
+        for (x, y) in a.cylinders.iter().zip(&b.cylinders) {
+            assert!((x.mae_m_per_s - y.mae_m_per_s).abs() < 1e-12);
+        }
+        // A force step moves the prediction through the rate; with static forces it does not.
+        let dynamic = model.initial_state([0.0; 3], [0.5; 3]).unwrap();
+        let (mut d, mut s, mut flat) = (dynamic, dynamic.with_static_forces(), dynamic);
+        for state in [&mut d, &mut s, &mut flat] {
+            model.step(state, [0.5; 3], [1e5; 3]).unwrap();
+        }
+        let vd = model.step(&mut d, [0.5; 3], [2e5; 3]).unwrap();
+        let vs = model.step(&mut s, [0.5; 3], [2e5; 3]).unwrap();
+        assert_ne!(vd, vs);
+        // The static state equals a dynamic one whose previous force was already the new force.
+        let mut f = model.initial_state([0.0; 3], [0.5; 3]).unwrap();
+        f.force_n = Some([2e5; 3]);
+        f.velocity_m_per_s = flat.velocity_m_per_s;
+        f.spool = flat.spool;
+        f.head = flat.head;
+        f.commands = flat.commands;
+        assert_eq!(model.step(&mut f, [0.5; 3], [2e5; 3]).unwrap(), vs);
+        // Mini-batches and dropout are deterministic for a seed; dropout needs a valid probability.
+        let dropout = TrainConfig {
+            force_rate_dropout: 0.5,
+            ..config.clone()
+        };
+        assert_eq!(
+            train(&digs, &dropout, |_| {}).unwrap().0,
+            train(&digs, &dropout, |_| {}).unwrap().0
+        );
+        for bad in [
+            TrainConfig {
+                third_inputs: true,
+                ..config.clone()
+            },
+            TrainConfig {
+                force_rate_dropout: 1.5,
                 ..config.clone()
             },
         ] {

@@ -176,7 +176,8 @@ impl ActuatorDynamics for ActuatorModel {
     }
 
     fn initial_state(&self) -> Result<ActuatorState> {
-        Ok(ActuatorModel::initial_state(self, [0.0; 3], [0.0; 3])?)
+        // The dig model's forces are statics (no pressure dynamics): no force-rate input.
+        Ok(ActuatorModel::initial_state(self, [0.0; 3], [0.0; 3])?.with_static_forces())
     }
 
     #[inline]
