@@ -155,6 +155,10 @@ pub struct AnalysisResult {
 /// of the signal's residual spread; its explained share is taken over those samples.
 const ACTED_FRACTION: f64 = 0.1;
 
+/// A named magnitude must differ from zero by more than this many standard uncertainties (Wald
+/// test): a magnitude at the search's resolution is no effect, however the held-out cost reacts.
+const MIN_MAGNITUDE_Z: f64 = 3.0;
+
 /// A candidate may raise no signal's held-out RMS by more than this factor.
 const MAX_SIGNAL_WORSENING: f64 = 1.1;
 
@@ -513,6 +517,7 @@ pub fn analyse(
                 n_test[j] < 100 || test_sse[j] <= MAX_SIGNAL_WORSENING.powi(2) * test_base_sse[j]
             });
             let significant = consistent
+                && x.abs() > MIN_MAGNITUDE_Z * uncertainty
                 && ((delta_bic > config.min_delta_bic && explained_acted > config.min_explained)
                     || (delta_bic > config.strong_delta_bic
                         && explained > config.strong_explained));
