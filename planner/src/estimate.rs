@@ -289,7 +289,8 @@ impl SoilBounds {
     /// Whether the wedge of Eqs. 14-17 can fail for `geometry` in the soil at the middle of the box:
     /// Eq. 17's denominator `cos(rho + delta) + sin(rho + delta) cot(beta + phi) = sin(beta + phi +
     /// rho + delta) / sin(beta + phi)` is positive there (`rho` the classical rake of Fig. 25,
-    /// `-rake_rad`). The static FEE does not describe a bucket whose cutting face is turned further
+    /// `-rake_rad`), by [`crate::soil::WEDGE_LIMIT_MARGIN_RAD`] short of the limit where the force
+    /// diverges. The static FEE does not describe a bucket whose cutting face is turned further
     /// back (an opened bucket pulled in): a window of such samples leaves the analytical fit a sliver of
     /// the box where every sample is finite, or none ([`EstimateError::NoFeasibleStart`]).
     #[must_use]
@@ -302,7 +303,9 @@ impl SoilBounds {
                 self.upper.tool_friction_angle_rad,
             );
         let total = angles - geometry.rake_rad;
-        total.is_finite() && total > 0.0 && total.sin() > FEE_EPS && total < std::f64::consts::PI
+        total.is_finite()
+            && total > crate::soil::WEDGE_LIMIT_MARGIN_RAD
+            && total < std::f64::consts::PI - crate::soil::WEDGE_LIMIT_MARGIN_RAD
     }
 }
 
