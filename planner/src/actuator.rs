@@ -317,7 +317,7 @@ pub struct TrainConfig {
     /// costs the same and makes 17 updates instead of one.
     pub batch_digs: usize,
     /// With the coupled inputs, every network also gets the rate of change of its own cylinder force
-    /// over the last step (N/s; Eq. 2, [`IN_FORCE_RATE`]). Excludes `orifice_inputs` and `third_inputs`.
+    /// over the last step (N/s; Eq. 2, input `IN_FORCE_RATE`). Excludes `orifice_inputs` and `third_inputs`.
     pub force_rate_input: bool,
     /// With `force_rate_input`: the probability with which a training dig's force rate is set to zero
     /// for one Adam step (drawn per dig and batch, both phases), so the networks also learn the

@@ -22,7 +22,7 @@
 //! - **Layered ground.** A bench may declare the native ground below its floor elevation
 //!   (`[native_soil]` in the scenario, [`World::native_soil`]): the compacted ground a bench stands on,
 //!   harder than the loosened bench material. When the edge is below the floor the Eq. 17 terms are
-//!   split by layer along the wedge of Fig. 25 ([`layered_failure_force_n`]): with `f` the share of
+//!   split by layer along the wedge of Fig. 25 (`layered_failure_force_n`): with `f` the share of
 //!   the cut depth below the floor, the cohesion term (acting along the failure plane, whose length is
 //!   proportional to `d`) takes `1 - f` of the bench's `c N_c` and `f` of the native one's; the weight
 //!   term (the wedge's area, proportional to `d^2`: the part below the floor is the similar triangle
