@@ -2036,6 +2036,29 @@ mod tests {
             .collect()
     }
 
+    /// `text` (the JSON of `model`) reads back into a model that scores the same on `digs` (JSON
+    /// floats round-trip to within an ulp or so); returns it.
+    fn assert_round_trips(
+        model: &ActuatorModel,
+        text: &str,
+        digs: &[ActuatorDig],
+    ) -> ActuatorModel {
+        let back = ActuatorModel::from_json(text).unwrap();
+        let (a, b) = (back.evaluate(digs).unwrap(), model.evaluate(digs).unwrap());
+        for (x, y) in a.cylinders.iter().zip(&b.cylinders) {
+            assert!((x.mae_m_per_s - y.mae_m_per_s).abs() < 1e-12);
+        }
+        back
+    }
+
+    /// Training with `config` is refused as an invalid configuration.
+    fn assert_rejected(digs: &[ActuatorDig], config: &TrainConfig) {
+        assert!(matches!(
+            train(digs, config, |_| {}),
+            Err(ActuatorError::InvalidConfig { .. })
+        ));
+    }
+
     fn test_config() -> TrainConfig {
         TrainConfig {
             dt_s: DT_S,
@@ -2091,15 +2114,7 @@ mod tests {
         let (model, _) = train(&digs, &config, |_| {}).unwrap();
         let text = model.to_json().unwrap();
         assert!(text.contains(ACTUATOR_FORMAT));
-        let back = ActuatorModel::from_json(&text).unwrap();
-        // JSON floats round-trip to within an ulp or so.
-        let (a, b) = (
-            back.evaluate(&digs).unwrap(),
-            model.evaluate(&digs).unwrap(),
-        );
-        for (x, y) in a.cylinders.iter().zip(&b.cylinders) {
-            assert!((x.mae_m_per_s - y.mae_m_per_s).abs() < 1e-12);
-        }
+        let back = assert_round_trips(&model, &text, &digs);
         assert_eq!(back.delay_steps(), model.delay_steps());
         let wrong_version = text.replace("\"version\": 1", "\"version\": 99");
         assert!(matches!(
@@ -2299,14 +2314,7 @@ mod tests {
         assert!(text.contains("\"delayed_stick_command\""));
         assert!(text.contains("\"stick_force_n\""));
         assert!(!text.contains("orifice"));
-        let back = ActuatorModel::from_json(&text).unwrap();
-        let (a, b) = (
-            back.evaluate(&digs).unwrap(),
-            model.evaluate(&digs).unwrap(),
-        );
-        for (x, y) in a.cylinders.iter().zip(&b.cylinders) {
-            assert!((x.mae_m_per_s - y.mae_m_per_s).abs() < 1e-12);
-        }
+        assert_round_trips(&model, &text, &digs);
         // The third cylinder's force changes the boom's prediction.
         let mut s1 = model.initial_state([0.0; 3], [0.5; 3]).unwrap();
         let mut s2 = s1;
@@ -2323,10 +2331,7 @@ mod tests {
                 ..config.clone()
             },
         ] {
-            assert!(matches!(
-                train(&digs, &bad, |_| {}),
-                Err(ActuatorError::InvalidConfig { .. })
-            ));
+            assert_rejected(&digs, &bad);
         }
     }
 
@@ -2344,14 +2349,7 @@ mod tests {
         let (model, _) = train(&digs, &config, |_| {}).unwrap();
         let text = model.to_json().unwrap();
         assert!(text.contains("\"force_rate_n_per_s\""));
-        let back = ActuatorModel::from_json(&text).unwrap();
-        let (a, b) = (
-            back.evaluate(&digs).unwrap(),
-            model.evaluate(&digs).unwrap(),
-        );
-        for (x, y) in a.cylinders.iter().zip(&b.cylinders) {
-            assert!((x.mae_m_per_s - y.mae_m_per_s).abs() < 1e-12);
-        }
+        assert_round_trips(&model, &text, &digs);
         // A force step moves the prediction through the rate; with static forces it does not.
         let dynamic = model.initial_state([0.0; 3], [0.5; 3]).unwrap();
         let (mut d, mut s, mut flat) = (dynamic, dynamic.with_static_forces(), dynamic);
@@ -2388,10 +2386,7 @@ mod tests {
                 ..config.clone()
             },
         ] {
-            assert!(matches!(
-                train(&digs, &bad, |_| {}),
-                Err(ActuatorError::InvalidConfig { .. })
-            ));
+            assert_rejected(&digs, &bad);
         }
     }
 
