@@ -1117,6 +1117,22 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
                 };
                 let carved = s.observe_bucket_pass(&pose, d.swing_rad, &path);
                 tracing::debug!(carved, "bucket pass carved into the map");
+                if c.action == ActionKind::Dig
+                    && let (Some([r_m, z_m, _]), Some(predicted_m3)) =
+                        (c.planned_start, c.predicted_volume_m3)
+                    && s.observe_dig_outcome(
+                        pose.world_from_base(d.swing_rad, r_m, z_m),
+                        c.swept_volume_m3,
+                        predicted_m3,
+                    )
+                {
+                    tracing::info!(
+                        dig = c.index,
+                        swept_m3 = c.swept_volume_m3,
+                        predicted_m3,
+                        "barren dig: its start is not planned again until a track back"
+                    );
+                }
                 node.provide_terrain(s.terrain().clone());
             }
             if !dig_soil_samples.is_empty() {

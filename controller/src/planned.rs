@@ -67,6 +67,11 @@ pub fn approach_joints(
 /// ([`PlannedSession::observe_bucket_pass`]).
 pub const CONFIRM_PASS_DISTANCE_M: f64 = 0.6;
 
+/// A planned dig that swept less than this share of the dig model's predicted volume found the map
+/// wrong at its start (material the sensor showed that was not there): the start is not chosen again
+/// until the next track back ([`PlannedSession::observe_dig_outcome`]).
+pub const BARREN_DIG_SHARE: f64 = 0.25;
+
 /// The predefined sequence's track-back distance (6.2: "a typical distance selected by the
 /// perception based dig planner (1.3 meters)").
 pub const PREDEFINED_BACKUP_M: f64 = 1.3;
@@ -422,6 +427,27 @@ impl PlannedSession {
             .carve_swath(&path, lateral, self.planner.bucket_width_m())
     }
 
+    /// A planned dig ended: it started with the tip at `start_world` (world frame), swept
+    /// `swept_m3` where the dig model predicted `predicted_m3`. A barren dig (under
+    /// [`BARREN_DIG_SHARE`] of the prediction: the bucket met little or no soil where the map showed
+    /// it) marks its start like an abandoned one, so the planner does not send the bucket back there
+    /// until the next track back. Returns whether it did.
+    pub fn observe_dig_outcome(
+        &mut self,
+        start_world: [f64; 3],
+        swept_m3: f64,
+        predicted_m3: f64,
+    ) -> bool {
+        let barren = swept_m3.is_finite()
+            && predicted_m3.is_finite()
+            && predicted_m3 > 0.0
+            && swept_m3 < BARREN_DIG_SHARE * predicted_m3;
+        if barren {
+            self.state.record_abandoned_dig(start_world);
+        }
+        barren
+    }
+
     /// Takes estimated empirical soil properties (Eqs. 21-23): the hardness index follows the
     /// regression of 5.2 (Eq. 25) and is given to the dig model (and returned, for Autodig). The dig
     /// model keeps its analytical soil (the modified FEE of the moving bucket with bearing, Eqs.
@@ -737,6 +763,42 @@ mod tests {
             .as_ref()
             .map_or(0, |p| p.coarse.regions.len());
         assert_eq!(s.state().region_pointer, (d.region_index + 1) % n);
+    }
+
+    #[test]
+    fn a_barren_dig_keeps_the_planner_away_from_its_start_until_a_track_back() {
+        let mut s = session(Strategy::Planned);
+        s.observe_scan(&bench_points()).expect("scan");
+        let pose = MachinePose::default();
+        s.next_action(&pose).expect("plan").expect("an action");
+        let Some(ActionChoice::Dig(d)) = s.steps()[0].plan.as_ref().map(|p| p.action.clone())
+        else {
+            panic!("dig plan expected");
+        };
+        let start = pose.world_from_base(d.swing_rad, d.pose.x_m, d.pose.z_m);
+        // A dig that filled as predicted, or nearly empty with no prediction, marks nothing.
+        assert!(!s.observe_dig_outcome(start, 1.8, 2.0));
+        assert!(!s.observe_dig_outcome(start, 0.0, 0.0));
+        assert!(!s.observe_dig_outcome(start, f64::NAN, 2.0));
+        assert!(s.state().abandoned_starts.is_empty());
+        // A dig that swept under a quarter of its prediction marks its start.
+        assert!(s.observe_dig_outcome(start, 0.3, 2.0));
+        assert_eq!(s.state().abandoned_starts, vec![start]);
+        let Some(Action::Dig { .. }) = s.next_action(&pose).expect("plan") else {
+            panic!("dig expected");
+        };
+        let Some(ActionChoice::Dig(next)) = s.steps()[1].plan.as_ref().map(|p| p.action.clone())
+        else {
+            panic!("dig plan expected");
+        };
+        let again = pose.world_from_base(next.swing_rad, next.pose.x_m, next.pose.z_m);
+        let dist = (again[0] - start[0])
+            .hypot(again[1] - start[1])
+            .hypot(again[2] - start[2]);
+        assert!(
+            dist > planner::plan::ABANDONED_START_RADIUS_M,
+            "{dist} m from the barren start"
+        );
     }
 
     #[test]
