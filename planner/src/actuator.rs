@@ -2051,6 +2051,19 @@ mod tests {
         back
     }
 
+    /// `a` and `b` (a model and its JSON round trip) step alike for ten steps.
+    fn assert_steps_alike(a: &ActuatorModel, b: &ActuatorModel) {
+        let mut s1 = a.initial_state([0.0; 3], [0.0; 3]).unwrap();
+        let mut s2 = b.initial_state([0.0; 3], [0.0; 3]).unwrap();
+        for _ in 0..10 {
+            let va = a.step(&mut s1, [0.5, -0.3, 0.8], [1e5, -2e4, 5e4]).unwrap();
+            let vb = b.step(&mut s2, [0.5, -0.3, 0.8], [1e5, -2e4, 5e4]).unwrap();
+            for (x, y) in va.iter().zip(&vb) {
+                assert!((x - y).abs() < 1e-9);
+            }
+        }
+    }
+
     /// Training with `config` is refused as an invalid configuration.
     fn assert_rejected(digs: &[ActuatorDig], config: &TrainConfig) {
         assert!(matches!(
@@ -2136,20 +2149,7 @@ mod tests {
         let (model, _) = train(&digs, &coupled, |_| {}).unwrap();
         let text = model.to_json().unwrap();
         assert!(text.contains("\"boom_force_n\"") && text.contains("\"bucket_force_n\""));
-        let back = ActuatorModel::from_json(&text).unwrap();
-        let mut s1 = model.initial_state([0.0; 3], [0.0; 3]).unwrap();
-        let mut s2 = back.initial_state([0.0; 3], [0.0; 3]).unwrap();
-        for _ in 0..10 {
-            let a = model
-                .step(&mut s1, [0.5, -0.3, 0.8], [1e5, -2e4, 5e4])
-                .unwrap();
-            let b = back
-                .step(&mut s2, [0.5, -0.3, 0.8], [1e5, -2e4, 5e4])
-                .unwrap();
-            for (x, y) in a.iter().zip(&b) {
-                assert!((x - y).abs() < 1e-9);
-            }
-        }
+        assert_steps_alike(&model, &ActuatorModel::from_json(&text).unwrap());
         let renamed = text.replacen("\"boom_force_n\"", "\"swing_force_n\"", 1);
         assert!(ActuatorModel::from_json(&renamed).is_err());
         // The orifice layout stores its reference forces; without them the file is rejected.
@@ -2161,20 +2161,7 @@ mod tests {
         let (model, _) = train(&digs, &orifice, |_| {}).unwrap();
         let text = model.to_json().unwrap();
         assert!(text.contains("\"bucket_orifice_drive\"") && text.contains("orifice_reference"));
-        let back = ActuatorModel::from_json(&text).unwrap();
-        let mut s1 = model.initial_state([0.0; 3], [0.0; 3]).unwrap();
-        let mut s2 = back.initial_state([0.0; 3], [0.0; 3]).unwrap();
-        for _ in 0..10 {
-            let a = model
-                .step(&mut s1, [0.5, -0.3, 0.8], [1e5, -2e4, 5e4])
-                .unwrap();
-            let b = back
-                .step(&mut s2, [0.5, -0.3, 0.8], [1e5, -2e4, 5e4])
-                .unwrap();
-            for (x, y) in a.iter().zip(&b) {
-                assert!((x - y).abs() < 1e-9);
-            }
-        }
+        assert_steps_alike(&model, &ActuatorModel::from_json(&text).unwrap());
         let value: serde_json::Value = serde_json::from_str(&text).unwrap();
         let mut stripped = value.clone();
         stripped["stick"]
