@@ -1446,7 +1446,7 @@ fn load_digs(
     Ok(digs)
 }
 
-fn load_machine(path: Option<&Path>) -> anyhow::Result<planner::machine::MachineConfig> {
+pub(crate) fn load_machine(path: Option<&Path>) -> anyhow::Result<planner::machine::MachineConfig> {
     Ok(match path {
         Some(p) => planner::machine::MachineConfig::from_toml_file(p)?,
         None => planner::machine::MachineConfig::default_machine()?,

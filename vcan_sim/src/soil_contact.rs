@@ -582,11 +582,8 @@ impl SoilContact {
                 ),
                 _ => (soil, 0.0, 0.0),
             };
-            let f = if below > 0.0 {
-                layered_failure_force_n(&soil, &native, below, &gamma, input.width_m)
-            } else {
-                failure_force_n(&soil, &gamma, input.width_m)
-            };
+            // Without depth below the floor this is the bench soil's failure_force_n.
+            let f = layered_failure_force_n(&soil, &native, below, &gamma, input.width_m);
             let speed = v[0].hypot(v[1]);
             let mobilised = f * (speed / CREEP_SPEED_M_PER_S).tanh();
             // Eq. 18: the tool force on the soil is at delta from the blade normal; on the bucket it is
