@@ -18,6 +18,7 @@
 //! input is the load of a cylinder pushing toward extension (bucket curling, stick pulling in, boom
 //! lifting), which the head port carries. See docs/autodig.md.
 
+use crate::input_check::{InputError, check, check_port_pressures};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 use std::fmt::Write as _;
@@ -30,9 +31,6 @@ pub const BUILTIN_MAPS_TOML: &str = include_str!("../../config/autodig_maps.toml
 
 /// Largest plausible joint angle magnitude (rad); beyond it the resolver reading is garbage.
 const MAX_ANGLE_RAD: f64 = 4.0 * PI;
-/// Plausible pressure range (Pa): transducers may read slightly below zero; 100 MPa is far above relief.
-const MIN_PRESSURE_PA: f64 = -1.0e6;
-const MAX_PRESSURE_PA: f64 = 100.0e6;
 /// Tolerance on cylinder extension fractions before a reading counts as out of range.
 const EXTENSION_SLACK: f64 = 0.1;
 /// Plausible magnitude of the perception inputs (m^3, m).
@@ -145,6 +143,15 @@ pub enum AutodigError {
         /// What is wrong with it.
         reason: &'static str,
     },
+}
+
+impl InputError for AutodigError {
+    fn non_finite(input: &'static str) -> Self {
+        Self::NonFinite { input }
+    }
+    fn out_of_range(input: &'static str, value: f64) -> Self {
+        Self::OutOfRange { input, value }
+    }
 }
 
 /// Errors loading or validating [`AutodigMaps`]; they name the curve and the point.
@@ -818,44 +825,14 @@ impl AutodigInputs {
 
     fn validate(&self) -> Result<(), AutodigError> {
         const ANGLE: [&str; 3] = ["boom_rad", "stick_rad", "bucket_rad"];
-        const HEAD: [&str; 3] = [
-            "boom head_pressure_pa",
-            "stick head_pressure_pa",
-            "bucket head_pressure_pa",
-        ];
-        const ROD: [&str; 3] = [
-            "boom rod_pressure_pa",
-            "stick rod_pressure_pa",
-            "bucket rod_pressure_pa",
-        ];
         const EXT: [&str; 3] = [
             "boom extension_fraction",
             "stick extension_fraction",
             "bucket extension_fraction",
         ];
-        let check = |input: &'static str, v: f64, lo: f64, hi: f64| {
-            if !v.is_finite() {
-                Err(AutodigError::NonFinite { input })
-            } else if v < lo || v > hi {
-                Err(AutodigError::OutOfRange { input, value: v })
-            } else {
-                Ok(())
-            }
-        };
         for j in 0..3 {
             check(ANGLE[j], self.joint_rad[j], -MAX_ANGLE_RAD, MAX_ANGLE_RAD)?;
-            check(
-                HEAD[j],
-                self.head_pressure_pa[j],
-                MIN_PRESSURE_PA,
-                MAX_PRESSURE_PA,
-            )?;
-            check(
-                ROD[j],
-                self.rod_pressure_pa[j],
-                MIN_PRESSURE_PA,
-                MAX_PRESSURE_PA,
-            )?;
+            check_port_pressures(j, self.head_pressure_pa[j], self.rod_pressure_pa[j])?;
             check(
                 EXT[j],
                 self.extension_fraction[j],

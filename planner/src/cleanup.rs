@@ -25,13 +25,12 @@
 //! `bucket_abs = boom + stick + bucket`.
 
 use crate::autodig::Joint;
+use crate::input_check::{InputError, check, check_port_pressures};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 
 const MAX_ANGLE_RAD: f64 = 4.0 * PI;
 const MAX_COORD_M: f64 = 100.0;
-const MIN_PRESSURE_PA: f64 = -1.0e6;
-const MAX_PRESSURE_PA: f64 = 100.0e6;
 
 /// Whether the floor elevation is detected once and reused, or on every cleanup.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -125,6 +124,15 @@ pub enum CleanupError {
         /// How far the probe went down, m.
         depth_m: f64,
     },
+}
+
+impl InputError for CleanupError {
+    fn non_finite(input: &'static str) -> Self {
+        Self::NonFinite { input }
+    }
+    fn out_of_range(input: &'static str, value: f64) -> Self {
+        Self::OutOfRange { input, value }
+    }
 }
 
 /// Cleanup parameters. Angles are radians in Rust, degrees in TOML/JSON.
@@ -357,25 +365,6 @@ pub struct CleanupInputs {
 
 impl CleanupInputs {
     fn validate(&self) -> Result<(), CleanupError> {
-        const HEAD: [&str; 3] = [
-            "boom head_pressure_pa",
-            "stick head_pressure_pa",
-            "bucket head_pressure_pa",
-        ];
-        const ROD: [&str; 3] = [
-            "boom rod_pressure_pa",
-            "stick rod_pressure_pa",
-            "bucket rod_pressure_pa",
-        ];
-        let check = |input: &'static str, v: f64, lo: f64, hi: f64| {
-            if !v.is_finite() {
-                Err(CleanupError::NonFinite { input })
-            } else if v < lo || v > hi {
-                Err(CleanupError::OutOfRange { input, value: v })
-            } else {
-                Ok(())
-            }
-        };
         check("tip_x_m", self.tip_x_m, -MAX_COORD_M, MAX_COORD_M)?;
         check("tip_z_m", self.tip_z_m, -MAX_COORD_M, MAX_COORD_M)?;
         check(
@@ -385,18 +374,7 @@ impl CleanupInputs {
             MAX_ANGLE_RAD,
         )?;
         for j in 0..3 {
-            check(
-                HEAD[j],
-                self.head_pressure_pa[j],
-                MIN_PRESSURE_PA,
-                MAX_PRESSURE_PA,
-            )?;
-            check(
-                ROD[j],
-                self.rod_pressure_pa[j],
-                MIN_PRESSURE_PA,
-                MAX_PRESSURE_PA,
-            )?;
+            check_port_pressures(j, self.head_pressure_pa[j], self.rod_pressure_pa[j])?;
         }
         Ok(())
     }

@@ -27,6 +27,7 @@ pub mod cleanup;
 pub mod dig_model;
 pub mod discrepancy;
 pub mod estimate;
+mod input_check;
 pub mod kinematics;
 pub mod machine;
 pub mod plan;
