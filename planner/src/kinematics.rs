@@ -127,6 +127,15 @@ pub enum KinematicsError {
 /// Result alias for this module.
 pub type Result<T> = std::result::Result<T, KinematicsError>;
 
+/// `Ok` if `finite` holds, else [`KinematicsError::NonFinite`] naming `what`.
+fn ensure_finite(finite: bool, what: &'static str) -> Result<()> {
+    if finite {
+        Ok(())
+    } else {
+        Err(KinematicsError::NonFinite { what })
+    }
+}
+
 /// Implement joint angles, rad (docs/ARCHITECTURE.md).
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct JointAngles {
@@ -727,11 +736,7 @@ impl Kinematics {
     /// # Errors
     /// [`KinematicsError::NonFinite`] or the first [`KinematicsError::JointLimit`].
     pub fn check_limits(&self, q: &JointAngles) -> Result<()> {
-        if !q.is_finite() {
-            return Err(KinematicsError::NonFinite {
-                what: "joint angles",
-            });
-        }
+        ensure_finite(q.is_finite(), "joint angles")?;
         for joint in Joint::ALL {
             let (min_rad, max_rad) = self.limits[joint.index()];
             let angle_rad = q.get(joint);
@@ -753,11 +758,7 @@ impl Kinematics {
     /// [`KinematicsError::LinkageInfeasible`] where the linkage cannot assemble,
     /// [`KinematicsError::Singular`] at a toggle, [`KinematicsError::NonFinite`].
     pub fn bucket_linkage(&self, bucket_rad: f64) -> Result<BucketLinkageState> {
-        if !bucket_rad.is_finite() {
-            return Err(KinematicsError::NonFinite {
-                what: "bucket angle",
-            });
-        }
+        ensure_finite(bucket_rad.is_finite(), "bucket angle")?;
         self.four_bar.state(bucket_rad)
     }
 
@@ -766,11 +767,7 @@ impl Kinematics {
     /// # Errors
     /// [`KinematicsError::NonFinite`]; for the bucket, those of [`Self::bucket_linkage`].
     pub fn cylinder_length(&self, joint: Joint, angle_rad: f64) -> Result<f64> {
-        if !angle_rad.is_finite() {
-            return Err(KinematicsError::NonFinite {
-                what: "joint angle",
-            });
-        }
+        ensure_finite(angle_rad.is_finite(), "joint angle")?;
         Ok(match joint {
             Joint::Boom => self.boom.length(angle_rad),
             Joint::Stick => self.stick.length(angle_rad),
@@ -783,11 +780,7 @@ impl Kinematics {
     /// # Errors
     /// As [`Self::cylinder_length`].
     pub fn moment_arm(&self, joint: Joint, angle_rad: f64) -> Result<f64> {
-        if !angle_rad.is_finite() {
-            return Err(KinematicsError::NonFinite {
-                what: "joint angle",
-            });
-        }
+        ensure_finite(angle_rad.is_finite(), "joint angle")?;
         Ok(match joint {
             Joint::Boom => self.boom.moment_arm(angle_rad),
             Joint::Stick => self.stick.moment_arm(angle_rad),
@@ -801,11 +794,7 @@ impl Kinematics {
     /// # Errors
     /// [`KinematicsError::CylinderLimit`] outside the stroke (1 mm tolerance), [`KinematicsError::NonFinite`].
     pub fn joint_angle(&self, joint: Joint, length_m: f64) -> Result<f64> {
-        if !length_m.is_finite() {
-            return Err(KinematicsError::NonFinite {
-                what: "cylinder length",
-            });
-        }
+        ensure_finite(length_m.is_finite(), "cylinder length")?;
         let (min_m, max_m) = self.stroke[joint.index()];
         if length_m < min_m - 1e-3 || length_m > max_m + 1e-3 {
             return Err(KinematicsError::CylinderLimit {
@@ -999,11 +988,10 @@ impl Kinematics {
     /// [`KinematicsError::NonFinite`], [`KinematicsError::OutOfReach`], [`KinematicsError::JointLimit`],
     /// [`KinematicsError::CylinderLimit`].
     pub fn inverse(&self, pose: &BucketPose) -> Result<JointAngles> {
-        if !(pose.x_m.is_finite() && pose.z_m.is_finite() && pose.bucket_abs_rad.is_finite()) {
-            return Err(KinematicsError::NonFinite {
-                what: "bucket pose",
-            });
-        }
+        ensure_finite(
+            pose.x_m.is_finite() && pose.z_m.is_finite() && pose.bucket_abs_rad.is_finite(),
+            "bucket pose",
+        )?;
         let pin = sub(
             [pose.x_m, pose.z_m],
             scale(dir(pose.bucket_abs_rad), self.l4),
@@ -1140,11 +1128,10 @@ impl Kinematics {
         tau: &Vector3<f64>,
         payload_kg: f64,
     ) -> Result<TipForce> {
-        if !q.is_finite() || !tau.iter().all(|x| x.is_finite()) || !payload_kg.is_finite() {
-            return Err(KinematicsError::NonFinite {
-                what: "joint angles, torques or payload",
-            });
-        }
+        ensure_finite(
+            q.is_finite() && tau.iter().all(|x| x.is_finite()) && payload_kg.is_finite(),
+            "joint angles, torques or payload",
+        )?;
         if q.stick_rad.sin().abs() < 1e-6 {
             return Err(KinematicsError::Singular {
                 what: "stick stretched (Jacobian singular)",
