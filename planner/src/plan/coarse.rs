@@ -339,20 +339,29 @@ mod tests {
 
     const WIDTH_M: f64 = 1.3;
 
+    /// The coarse plan with the default kinematics, a `WIDTH_M` bucket and default refined settings.
+    fn plan_at(
+        grid: &TerrainGrid,
+        pose: &MachinePose,
+        floor_z_m: f64,
+        cfg: &CoarseConfig,
+    ) -> Result<CoarsePlan> {
+        plan_regions(
+            grid,
+            pose,
+            &kin(),
+            WIDTH_M,
+            floor_z_m,
+            cfg,
+            &RefinedConfig::default(),
+        )
+    }
+
     #[test]
     fn regions_cover_the_angular_extent_and_are_adjacent_at_the_far_boundary() {
         let grid = bench_with_edge(30.0);
         let cfg = CoarseConfig::default();
-        let plan = plan_regions(
-            &grid,
-            &MachinePose::default(),
-            &kin(),
-            WIDTH_M,
-            0.0,
-            &cfg,
-            &RefinedConfig::default(),
-        )
-        .expect("plan");
+        let plan = plan_at(&grid, &MachinePose::default(), 0.0, &cfg).expect("plan");
         let n = plan.regions.len();
         assert!(n >= 5, "{n}");
         let a = cfg.angular_extent_rad;
@@ -382,30 +391,18 @@ mod tests {
             spoil_side: SpoilSide::Left,
             ..cfg
         };
-        let plan_l = plan_regions(
-            &grid,
-            &MachinePose::default(),
-            &kin(),
-            WIDTH_M,
-            0.0,
-            &left,
-            &RefinedConfig::default(),
-        )
-        .expect("plan");
+        let plan_l = plan_at(&grid, &MachinePose::default(), 0.0, &left).expect("plan");
         assert!(plan_l.regions[0].swing_rad > 0.0 && plan_l.regions[n - 1].swing_rad < 0.0);
     }
 
     #[test]
     fn a_bench_edge_nearer_than_the_reach_is_the_far_boundary() {
         let grid = bench_with_edge(7.0);
-        let plan = plan_regions(
+        let plan = plan_at(
             &grid,
             &MachinePose::default(),
-            &kin(),
-            WIDTH_M,
             0.0,
             &CoarseConfig::default(),
-            &RefinedConfig::default(),
         )
         .expect("plan");
         for r in &plan.regions {
@@ -420,14 +417,11 @@ mod tests {
     #[test]
     fn flat_floor_has_no_material_and_bad_input_is_an_error() {
         let grid = TerrainGrid::new_flat(-5.0, -10.0, 0.1, 200, 200, 0.0).expect("grid");
-        let plan = plan_regions(
+        let plan = plan_at(
             &grid,
             &MachinePose::default(),
-            &kin(),
-            WIDTH_M,
             0.0,
             &CoarseConfig::default(),
-            &RefinedConfig::default(),
         )
         .expect("plan");
         assert!(plan.regions.iter().all(|r| !r.has_material));
@@ -435,28 +429,14 @@ mod tests {
             x_m: f64::NAN,
             ..MachinePose::default()
         };
-        assert!(
-            plan_regions(
-                &grid,
-                &nan,
-                &kin(),
-                WIDTH_M,
-                0.0,
-                &CoarseConfig::default(),
-                &RefinedConfig::default()
-            )
-            .is_err()
-        );
+        assert!(plan_at(&grid, &nan, 0.0, &CoarseConfig::default()).is_err());
         // A floor far below anything reachable.
         assert!(matches!(
-            plan_regions(
+            plan_at(
                 &grid,
                 &MachinePose::default(),
-                &kin(),
-                WIDTH_M,
                 -40.0,
-                &CoarseConfig::default(),
-                &RefinedConfig::default()
+                &CoarseConfig::default()
             ),
             Err(PlanError::NoWorkspace { .. })
         ));
