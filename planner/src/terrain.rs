@@ -230,6 +230,12 @@ impl TerrainGrid {
         (j < self.ny).then(|| &self.heights[j * self.nx..(j + 1) * self.nx])
     }
 
+    /// All heights, row-major `j * nx + i`, for in-place passes over many cells (NaN = unknown: a
+    /// caller must write finite heights only, or NaN to mark a cell unknown).
+    pub fn heights_mut(&mut self) -> &mut [f64] {
+        &mut self.heights
+    }
+
     /// Sets the height of cell `(i, j)`; `None` marks it unknown.
     ///
     /// # Errors

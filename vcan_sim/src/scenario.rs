@@ -137,6 +137,23 @@ impl Default for BenchSpec {
     }
 }
 
+/// The bench material's surface (`[terrain]`): slope stability after the bucket cuts and the seeded
+/// initial undulation of the bench top and face. Both are off unless the bench declares them (the cut
+/// then leaves exactly the swept shape and the bench is the regular block or cut of [`BenchSpec`]).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct TerrainSpec {
+    /// Angle of repose of the bench material (degrees): ground the bucket has cut that is left steeper
+    /// than this slumps to it (a mass-conserving relaxation of the height grid near the cuts,
+    /// [`crate::soil_contact`]). `None`: off.
+    pub repose_deg: Option<f64>,
+    /// Standard deviation of the seeded undulation added to the bench top and face above the floor, m
+    /// (a smooth Gaussian random field drawn from the scenario seed). 0: off.
+    pub undulation_std_m: f64,
+    /// Correlation length of the undulation (Gaussian covariance `exp(-r^2 / (2 L^2))`), m.
+    pub undulation_correlation_m: f64,
+}
+
 /// The terrain grid.
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -270,6 +287,8 @@ pub struct Scenario {
     /// regions apply above the floor only); see [`crate::soil_contact`] for how a cut that reaches
     /// it is resisted. `None` (the default): one soil from the surface down, as before.
     pub native_soil: Option<SoilSpec>,
+    /// Slope stability and initial undulation of the bench material (`[terrain]`, off when absent).
+    pub terrain: TerrainSpec,
     /// Hard inclusions.
     pub boulders: BoulderSpec,
     /// Spoil pile.
@@ -491,6 +510,19 @@ impl Scenario {
                 return Err((format!("soil_regions.{i}.x_max_m"), "empty region".into()));
             }
         }
+        let t = &self.terrain;
+        if let Some(repose) = t.repose_deg {
+            within("terrain.repose_deg", repose, 15.0, 60.0)?;
+        }
+        within("terrain.undulation_std_m", t.undulation_std_m, 0.0, 1.0)?;
+        if t.undulation_std_m > 0.0 {
+            within(
+                "terrain.undulation_correlation_m",
+                t.undulation_correlation_m,
+                0.2,
+                20.0,
+            )?;
+        }
         let bo = &self.boulders;
         if bo.random_count > 0 {
             positive("boulders.min_radius_m", bo.min_radius_m)?;
@@ -597,6 +629,30 @@ mod tests {
             msg.starts_with("b.toml:3: field `native_soil.friction_angle_deg`"),
             "{msg}"
         );
+    }
+
+    #[test]
+    fn terrain_surface_is_off_unless_declared_and_validated() {
+        assert_eq!(
+            Scenario::default_bench().unwrap().terrain,
+            TerrainSpec::default()
+        );
+        let text = "[terrain]\nrepose_deg = 45.0\nundulation_std_m = 0.1\nundulation_correlation_m = 1.5\n";
+        let t = Scenario::from_toml_str_named(text, "b.toml")
+            .unwrap()
+            .terrain;
+        assert_eq!(t.repose_deg, Some(45.0));
+        assert_eq!(t.undulation_std_m, 0.1);
+        let text = "[terrain]\nundulation_std_m = 0.1\nundulation_correlation_m = 0.0\n";
+        let msg = Scenario::from_toml_str_named(text, "b.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.starts_with("b.toml:3: field `terrain.undulation_correlation_m`"),
+            "{msg}"
+        );
+        let text = "[terrain]\nrepose_deg = 80.0\n";
+        assert!(Scenario::from_toml_str_named(text, "b.toml").is_err());
     }
 
     #[test]

@@ -107,7 +107,39 @@ pub struct World {
     pub boulders: Vec<Boulder>,
     /// Angle of repose of spilled material (rad).
     pub repose_rad: f64,
+    /// Slope stability of the bench material after cuts (`[terrain] repose_deg`), off when `None`.
+    slump: Option<Slump>,
 }
+
+/// The angle-of-repose relaxation of the bench material near the cuts ([`World::advance_slopes`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Slump {
+    /// `tan` of the bench material's angle of repose.
+    tan_repose: f64,
+    /// Cells `[i0, i1, j0, j1]` (inclusive) the bucket cut or a slump moved since the last pass.
+    dirty: Option<[usize; 4]>,
+    /// Time since the last pass, s (runs while something is dirty).
+    clock_s: f64,
+}
+
+/// Period of the slope relaxation passes, s (5 Hz: a slump of a 1 m wall of 0.1 m cells settles
+/// within a few seconds of simulated time).
+const SLUMP_PERIOD_S: f64 = 0.2;
+/// Gauss-Seidel sweeps per pass (fewer when a sweep moves nothing).
+const SLUMP_SWEEPS: usize = 4;
+/// Share of half a neighbour pair's excess height over the repose limit moved per visit (1 sets the
+/// pair exactly at the limit).
+const SLUMP_RATE: f64 = 1.0;
+/// Cells added around the cut or moved cells for the next pass (how far a slump spreads per pass).
+const SLUMP_MARGIN_CELLS: usize = 3;
+/// Smallest height moved between two cells, m (below it the pair counts as at rest).
+const SLUMP_MIN_MOVE_M: f64 = 1.0e-4;
+/// Sweeps of the relaxation over the whole grid that settle an undulating bench before the start.
+const INITIAL_SETTLE_SWEEPS: usize = 400;
+/// Undulation: Fourier modes of the random field and the height over the floor over which its
+/// amplitude tapers to zero at the toe, m.
+const UNDULATION_MODES: usize = 64;
+const UNDULATION_TAPER_M: f64 = 0.5;
 
 impl World {
     /// Builds the terrain, soil map and boulders of a scenario.
@@ -130,6 +162,16 @@ impl World {
                 0.0
             }
         })?;
+        let mut terrain = terrain;
+        if s.terrain.undulation_std_m > 0.0 {
+            add_undulation(
+                &mut terrain,
+                s.seed,
+                s.terrain.undulation_std_m,
+                s.terrain.undulation_correlation_m,
+                b.floor_elevation_m,
+            );
+        }
         let default = soil_properties(&s.soil);
         let mut soil = vec![default; nx * ny];
         for j in 0..ny {
@@ -178,7 +220,7 @@ impl World {
                 radius_m: radius,
             });
         }
-        Ok(Self {
+        let mut world = Self {
             terrain,
             soil,
             default_soil: default,
@@ -187,7 +229,131 @@ impl World {
             odd_density_sums,
             boulders,
             repose_rad: s.spoil.repose_deg.to_radians(),
-        })
+            slump: s.terrain.repose_deg.map(|deg| Slump {
+                tan_repose: deg.to_radians().tan(),
+                dirty: None,
+                clock_s: 0.0,
+            }),
+        };
+        // An undulating bench that slumps starts at rest: where the undulation left the ground
+        // steeper than the repose angle (on the face) it has already slumped.
+        if world.slump.is_some() && s.terrain.undulation_std_m > 0.0 {
+            world.relax_slopes([0, nx - 1, 0, ny - 1], INITIAL_SETTLE_SWEEPS);
+        }
+        Ok(world)
+    }
+
+    /// Whether the bench material slumps after cuts (`[terrain] repose_deg` declared).
+    pub fn slumps(&self) -> bool {
+        self.slump.is_some()
+    }
+
+    /// Marks the cells `i0..i1`, `j0..j1` (exclusive ends) as cut, for the next relaxation pass.
+    fn note_cut(&mut self, i0: usize, i1: usize, j0: usize, j1: usize) {
+        if let Some(slump) = &mut self.slump
+            && i1 > i0
+            && j1 > j0
+        {
+            slump.dirty = Some(union(slump.dirty, [i0, i1 - 1, j0, j1 - 1]));
+        }
+    }
+
+    /// Advances the slope relaxation by `dt_s` (called by [`SoilContact::step`] while the edge is
+    /// out of the soil): every [`SLUMP_PERIOD_S`] while cells are dirty, one
+    /// pass of [`Self::relax_slopes`] over them and [`SLUMP_MARGIN_CELLS`] around; the cells it moved
+    /// stay dirty for the next pass, so a slump spreads and settles over a few passes. Nothing to do
+    /// (one branch) when the bench does not slump or nothing was cut.
+    pub fn advance_slopes(&mut self, dt_s: f64) {
+        let Some(slump) = &mut self.slump else {
+            return;
+        };
+        let Some(dirty) = slump.dirty else {
+            return;
+        };
+        slump.clock_s += dt_s.max(0.0);
+        if slump.clock_s < SLUMP_PERIOD_S {
+            return;
+        }
+        slump.clock_s = 0.0;
+        let m = SLUMP_MARGIN_CELLS;
+        let window = [
+            dirty[0].saturating_sub(m),
+            dirty[1] + m,
+            dirty[2].saturating_sub(m),
+            dirty[3] + m,
+        ];
+        let moved = self.relax_slopes(window, SLUMP_SWEEPS);
+        if let Some(slump) = &mut self.slump {
+            slump.dirty = moved;
+        }
+    }
+
+    /// Angle-of-repose relaxation (avalanching) of the cells `window = [i0, i1, j0, j1]` (inclusive,
+    /// clipped to the grid): `sweeps` Gauss-Seidel sweeps over the pairs of 8-connected neighbours
+    /// inside the window; where the height difference of a pair exceeds `tan(repose)` times their
+    /// distance, [`SLUMP_RATE`] of half the excess moves from the higher cell to the lower one (half
+    /// the excess would leave the pair at the repose slope). Height moves between cells of equal
+    /// area, so the terrain's volume is conserved (to rounding). Below the floor of a layered bench
+    /// the native ground does not slump (a cell gives material down to the floor at most). Returns
+    /// the cells that moved (inclusive box), `None` when none did or the bench does not slump.
+    ///
+    /// The standard cellular relaxation of a granular surface to its angle of repose (a sandpile or
+    /// "thermal erosion" model: Bak, Tang & Wiesenfeld 1987; Musgrave, Kolb & Mace 1989; Sumner,
+    /// O'Brien & Hodgins 1998 for excavated soil).
+    pub fn relax_slopes(&mut self, window: [usize; 4], sweeps: usize) -> Option<[usize; 4]> {
+        let tan = self.slump?.tan_repose;
+        let (nx, ny) = (self.terrain.nx(), self.terrain.ny());
+        let res = self.terrain.resolution_m();
+        let full = [
+            window[0].min(nx - 1),
+            window[1].min(nx - 1),
+            window[2].min(ny - 1),
+            window[3].min(ny - 1),
+        ];
+        let floor_m = if self.native_soil.is_some() {
+            self.floor_elevation_m
+        } else {
+            f64::NEG_INFINITY
+        };
+        let axis = tan * res;
+        let diagonal = axis * std::f64::consts::SQRT_2;
+        let h = self.terrain.heights_mut();
+        let mut moved: Option<[usize; 4]> = None;
+        let mut w = full;
+        for _ in 0..sweeps {
+            let [i0, i1, j0, j1] = w;
+            let mut swept: Option<[usize; 4]> = None;
+            for j in j0..=j1 {
+                for i in i0..=i1 {
+                    let a = j * nx + i;
+                    // East, north, north-east, north-west: every pair of the window once.
+                    if i < i1 {
+                        relax_pair(h, a, a + 1, axis, floor_m, nx, &mut swept);
+                    }
+                    if j < j1 {
+                        relax_pair(h, a, a + nx, axis, floor_m, nx, &mut swept);
+                        if i < i1 {
+                            relax_pair(h, a, a + nx + 1, diagonal, floor_m, nx, &mut swept);
+                        }
+                        if i > i0 {
+                            relax_pair(h, a, a + nx - 1, diagonal, floor_m, nx, &mut swept);
+                        }
+                    }
+                }
+            }
+            let Some(b) = swept else {
+                break;
+            };
+            moved = Some(union(moved, b));
+            // The next sweep: where this one moved material, one cell around, within the window.
+            w = [
+                b[0].saturating_sub(1).max(full[0]),
+                (b[1] + 1).min(full[1]),
+                b[2].saturating_sub(1).max(full[2]),
+                (b[3] + 1).min(full[3]),
+            ];
+        }
+        moved
     }
 
     /// Soil at a world point (the default cell at the map edge), with the soil effects applied.
@@ -404,6 +570,105 @@ impl World {
     }
 }
 
+/// One pair of neighbour cells `a`, `b` of the relaxation ([`World::relax_slopes`]): where their
+/// height difference exceeds `limit` (`tan(repose)` times their distance), [`SLUMP_RATE`] of half the
+/// excess moves from the higher to the lower cell, the higher one not below `floor_m`; moves under
+/// [`SLUMP_MIN_MOVE_M`] are left. Adds both cells to `moved` when material moved.
+#[inline]
+fn relax_pair(
+    h: &mut [f64],
+    a: usize,
+    b: usize,
+    limit: f64,
+    floor_m: f64,
+    nx: usize,
+    moved: &mut Option<[usize; 4]>,
+) {
+    let diff = h[a] - h[b];
+    // NaN for an unknown cell.
+    if diff.is_nan() || diff.abs() <= limit {
+        return;
+    }
+    let (high, low) = if diff > 0.0 { (a, b) } else { (b, a) };
+    let q = (0.5 * SLUMP_RATE * (diff.abs() - limit)).min(h[high] - floor_m);
+    if q <= SLUMP_MIN_MOVE_M {
+        return;
+    }
+    h[high] -= q;
+    h[low] += q;
+    let (ia, ja, ib, jb) = (a % nx, a / nx, b % nx, b / nx);
+    *moved = Some(union(
+        *moved,
+        [ia.min(ib), ia.max(ib), ja.min(jb), ja.max(jb)],
+    ));
+}
+
+/// The smallest box `[i0, i1, j0, j1]` (inclusive) holding `a` (if any) and `b`.
+fn union(a: Option<[usize; 4]>, b: [usize; 4]) -> [usize; 4] {
+    match a {
+        Some(a) => [
+            a[0].min(b[0]),
+            a[1].max(b[1]),
+            a[2].min(b[2]),
+            a[3].max(b[3]),
+        ],
+        None => b,
+    }
+}
+
+/// Adds a smooth Gaussian random field of standard deviation `std_m` and correlation length
+/// `correlation_m` (covariance `std^2 exp(-r^2 / (2 L^2))`) to the cells above `floor_m`, tapered to
+/// zero over [`UNDULATION_TAPER_M`] above the floor so the toe meets the floor, and never below it.
+/// The field is the spectral sum of [`UNDULATION_MODES`] random cosines (the randomisation method,
+/// Shinozuka & Deodatis 1991): `n(x) = sqrt(2 / M) sum cos(k_m . x + phi_m)`, wave vectors
+/// `k_m ~ N(0, I / L^2)` (the Gaussian covariance's spectral density), phases uniform, unit variance;
+/// drawn from `seed`, so a scenario and seed give the same bench.
+fn add_undulation(
+    terrain: &mut TerrainGrid,
+    seed: u64,
+    std_m: f64,
+    correlation_m: f64,
+    floor_m: f64,
+) {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x005E_ED0F_BE4C);
+    let (nx, ny) = (terrain.nx(), terrain.ny());
+    let xs: Vec<f64> = (0..nx).map(|i| terrain.cell_center(i, 0)[0]).collect();
+    let ys: Vec<f64> = (0..ny).map(|j| terrain.cell_center(0, j)[1]).collect();
+    let mut field = vec![0.0; nx * ny];
+    let mut normal = || {
+        // Box-Muller.
+        let u1: f64 = rng.random_range(f64::EPSILON..1.0);
+        let u2: f64 = rng.random_range(0.0..1.0);
+        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+    };
+    let modes: Vec<[f64; 2]> = (0..2 * UNDULATION_MODES)
+        .map(|_| normal())
+        .collect::<Vec<_>>()
+        .chunks(2)
+        .map(|k| [k[0] / correlation_m, k[1] / correlation_m])
+        .collect();
+    let amplitude = std_m * (2.0 / UNDULATION_MODES as f64).sqrt();
+    for k in modes {
+        let phase = rng.random_range(0.0..std::f64::consts::TAU);
+        // cos(kx x + phi + ky y) = cos(kx x + phi) cos(ky y) - sin(kx x + phi) sin(ky y).
+        let (sx, cx): (Vec<f64>, Vec<f64>) =
+            xs.iter().map(|x| (k[0] * x + phase).sin_cos()).unzip();
+        for (j, y) in ys.iter().enumerate() {
+            let (sy, cy) = (k[1] * y).sin_cos();
+            for i in 0..nx {
+                field[j * nx + i] += amplitude * (cx[i] * cy - sx[i] * sy);
+            }
+        }
+    }
+    let h = terrain.heights_mut();
+    for (h, n) in h.iter_mut().zip(field) {
+        if h.is_finite() && *h > floor_m {
+            let taper = ((*h - floor_m) / UNDULATION_TAPER_M).clamp(0.0, 1.0);
+            *h = (*h + taper * n).max(floor_m);
+        }
+    }
+}
+
 /// Cells per block of a row in [`World::deposit_blocks`].
 const DEPOSIT_BLOCK: usize = 8;
 
@@ -528,6 +793,7 @@ impl SoilContact {
         let ground = world.height(tip[0], tip[1]);
         if tip[2] > ground + 0.6 && self.content.volume_m3 <= 0.0 && self.pending_spill_m3 <= 0.0 {
             self.in_contact = false;
+            world.advance_slopes(dt_s);
             return self.boulder_force(world, input);
         }
 
@@ -639,6 +905,13 @@ impl SoilContact {
         force[1] += boulder.fz_n;
         // 3. Capacity, spill and dump.
         self.spill(world, input, dt_s);
+        // 4. Ground the cuts left steeper than its angle of repose slumps (benches that declare it),
+        //    once the edge is out of the soil: while it cuts, the bucket holds the walls around it
+        //    and the soil failing ahead of the edge goes into the bucket (the cut and Eq. 17 above),
+        //    not into the cells under the bucket behind the edge.
+        if !self.in_contact {
+            world.advance_slopes(dt_s);
+        }
         TipForce {
             fx_n: force[0],
             fz_n: force[1],
@@ -776,6 +1049,9 @@ impl SoilContact {
             }
             (volume, mass)
         };
+        if volume > 0.0 {
+            world.note_cut(i0, i1, j0, j1);
+        }
         self.ledger.removed_kg += mass;
         self.content.volume_m3 += volume;
         self.content.mass_kg += mass;
@@ -1204,7 +1480,224 @@ mod tests {
             s.native_soil = None;
         }
         s.bench.floor_elevation_m = floor_m;
+        // The regular face (no slump, no undulation): these tests are about the layered force.
+        s.terrain = crate::scenario::TerrainSpec::default();
         World::from_scenario(&s).unwrap()
+    }
+
+    /// The extended bench with its `[terrain]` as declared, or as given.
+    fn extended_world_with(terrain: Option<crate::scenario::TerrainSpec>) -> (Scenario, World) {
+        let text = include_str!("../../config/bench_extended.toml");
+        let mut s = Scenario::from_toml_str_named(text, "bench_extended.toml").unwrap();
+        if let Some(t) = terrain {
+            s.terrain = t;
+        }
+        let w = World::from_scenario(&s).unwrap();
+        (s, w)
+    }
+
+    fn sum_heights(w: &World) -> f64 {
+        let t = &w.terrain;
+        (0..t.ny())
+            .flat_map(|j| t.row(j).unwrap().iter().copied())
+            .filter(|h| h.is_finite())
+            .sum()
+    }
+
+    /// The steepest slope between 8-connected neighbours in a box, as an angle (degrees).
+    fn steepest_deg(w: &World, i0: usize, i1: usize, j0: usize, j1: usize) -> f64 {
+        let t = &w.terrain;
+        let res = t.resolution_m();
+        let mut worst: f64 = 0.0;
+        for j in j0..j1 {
+            for i in i0..i1 {
+                let h = t.cell(i, j).unwrap();
+                for (di, dj) in [(1, 0), (0, 1), (1, 1)] {
+                    let d = res * ((di * di + dj * dj) as f64).sqrt();
+                    let g = (h - t.cell(i + di, j + dj).unwrap()).abs() / d;
+                    worst = worst.max(g.atan().to_degrees());
+                }
+                if i > 0 {
+                    let g = (h - t.cell(i - 1, j + 1).unwrap()).abs() / (res * 2f64.sqrt());
+                    worst = worst.max(g.atan().to_degrees());
+                }
+            }
+        }
+        worst
+    }
+
+    #[test]
+    fn a_vertical_cut_wall_slumps_to_the_repose_angle_and_conserves_volume() {
+        let spec = crate::scenario::TerrainSpec {
+            repose_deg: Some(40.0),
+            ..Default::default()
+        };
+        let (_, mut w) = extended_world_with(Some(spec));
+        // A 1 m deep, 1 m wide trench with vertical walls in the bench top behind the crest.
+        let (i0, j0) = w.terrain.cell_index(-3.0, -0.5).unwrap();
+        let (i1, j1) = w.terrain.cell_index(-2.0, 0.5).unwrap();
+        for j in j0..j1 {
+            for i in i0..i1 {
+                let h = w.terrain.cell(i, j).unwrap();
+                w.terrain.set_cell(i, j, Some(h - 1.0)).unwrap();
+            }
+        }
+        let before = sum_heights(&w);
+        assert!(steepest_deg(&w, i0 - 20, i1 + 20, j0 - 20, j1 + 20) > 80.0);
+        // A cut marks the cells; passes run every SLUMP_PERIOD_S until nothing moves.
+        w.note_cut(i0, i1, j0, j1);
+        let mut passes = 0;
+        while w.slump.unwrap().dirty.is_some() && passes < 10_000 {
+            w.advance_slopes(SLUMP_PERIOD_S);
+            passes += 1;
+        }
+        let after = sum_heights(&w);
+        eprintln!("{passes} passes; volume {before} -> {after} (cell heights summed)");
+        assert!(passes > 3 && passes < 10_000, "{passes}");
+        assert!(
+            (after - before).abs() < 1e-9 * before.abs().max(1.0),
+            "{before} {after}"
+        );
+        // At rest every slope is within the move threshold of the repose angle.
+        let steepest = steepest_deg(&w, i0 - 20, i1 + 20, j0 - 20, j1 + 20);
+        assert!(steepest < 40.5, "{steepest} deg");
+        // The trench was partly filled: its bottom rose, the rim fell.
+        let mid = w.height(-2.5, 0.0);
+        assert!(mid > -0.9, "{mid}");
+        assert!(w.height(-3.1, 0.0) < -0.05);
+        // The undisturbed 45 degree face far from the trench is untouched (nothing marked there).
+        assert!((w.height(5.0, 3.0) + 1.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn the_native_ground_below_the_floor_does_not_slump() {
+        let spec = crate::scenario::TerrainSpec {
+            repose_deg: Some(30.0),
+            ..Default::default()
+        };
+        let (_, mut w) = extended_world_with(Some(spec));
+        // A 0.5 m deep hole below the floor beyond the toe.
+        let (i0, j0) = w.terrain.cell_index(8.0, -0.5).unwrap();
+        let (i1, j1) = w.terrain.cell_index(9.0, 0.5).unwrap();
+        for j in j0..j1 {
+            for i in i0..i1 {
+                w.terrain.set_cell(i, j, Some(-2.5)).unwrap();
+            }
+        }
+        let before = sum_heights(&w);
+        w.relax_slopes([i0 - 10, i1 + 10, j0 - 10, j1 + 10], 500);
+        assert_eq!(sum_heights(&w), before);
+        assert_eq!(w.height(8.5, 0.0), -2.5, "the hole stays: native ground");
+        assert!(steepest_deg(&w, i0 - 5, i1 + 5, j0 - 5, j1 + 5) > 75.0);
+        // Without the layer the same soil slumps into it.
+        let (mut s, _) = extended_world_with(Some(spec));
+        s.native_soil = None;
+        let mut w = World::from_scenario(&s).unwrap();
+        for j in j0..j1 {
+            for i in i0..i1 {
+                w.terrain.set_cell(i, j, Some(-2.5)).unwrap();
+            }
+        }
+        w.relax_slopes([i0 - 10, i1 + 10, j0 - 10, j1 + 10], 500);
+        let steepest = steepest_deg(&w, i0 - 5, i1 + 5, j0 - 5, j1 + 5);
+        assert!(steepest < 30.5, "{steepest}");
+        assert!(w.height(8.0, 0.0) > -2.4, "the rim fell in");
+    }
+
+    #[test]
+    fn a_dig_with_slumping_keeps_the_ledger_and_the_terrain_volume_exact() {
+        let spec = crate::scenario::TerrainSpec {
+            repose_deg: Some(45.0),
+            ..Default::default()
+        };
+        let (_, mut w) = extended_world_with(Some(spec));
+        let before = sum_heights(&w);
+        let area = w.terrain.resolution_m().powi(2);
+        let mut contact = SoilContact::default();
+        let effects = SoilEffects::default();
+        // 0.5 m deep through the face toward the machine (crest at 4 m, toe at 6 m; above the
+        // floor, so every cut cell has the bench density), then out.
+        let mut x: f64 = 5.4;
+        while x > 3.5 {
+            let z = (4.0 - x).clamp(-1.4, 0.0) - 0.5;
+            contact.step(&mut w, &input_at(x, z), 5e-3, &effects);
+            x -= 0.0025;
+        }
+        let mut out = input_at(3.0, 3.0);
+        out.bucket_abs_rad = -0.6;
+        for _ in 0..1000 {
+            contact.step(&mut w, &out, 5e-3, &effects);
+        }
+        let l = contact.ledger;
+        assert!(l.removed_kg > 500.0, "{l:?}");
+        assert!(
+            (l.removed_kg - contact.content.mass_kg - l.spilled_kg).abs() < 1e-9 * l.removed_kg
+        );
+        // Heights summed: what left the terrain is the cut volume less what was deposited back,
+        // with the slumps moving material in between.
+        let cut_m3 = l.removed_kg / 1700.0;
+        let change_m3 = (before - sum_heights(&w)) * area;
+        assert!(
+            (change_m3 - (cut_m3 - l.deposited_m3)).abs() < 1e-6,
+            "{change_m3} vs {cut_m3} - {}",
+            l.deposited_m3
+        );
+        assert!(w.slump.unwrap().dirty.is_none(), "settled within 5 s");
+    }
+
+    #[test]
+    fn the_undulation_has_the_declared_spread_is_smooth_and_leaves_the_floor() {
+        let spec = crate::scenario::TerrainSpec {
+            repose_deg: None,
+            undulation_std_m: 0.1,
+            undulation_correlation_m: 1.5,
+        };
+        let (s, w) = extended_world_with(Some(spec));
+        let (_, plain) = extended_world_with(Some(crate::scenario::TerrainSpec::default()));
+        // On the bench top behind the crest: the field itself.
+        let mut d = Vec::new();
+        let mut step = Vec::new();
+        let mut y = -9.0;
+        while y < 9.0 {
+            let mut x = -19.0;
+            while x < 3.0 {
+                d.push(w.height(x, y) - plain.height(x, y));
+                step.push(w.height(x + 0.1, y) - w.height(x, y));
+                x += 0.1;
+            }
+            y += 0.1;
+        }
+        let n = d.len() as f64;
+        let mean = d.iter().sum::<f64>() / n;
+        let std = (d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt();
+        let rms_step = (step.iter().map(|v| v * v).sum::<f64>() / n).sqrt();
+        eprintln!("mean {mean:.3} m, std {std:.3} m, rms step over 0.1 m {rms_step:.4} m");
+        assert!((0.07..0.13).contains(&std), "{std}");
+        assert!(mean.abs() < 0.05, "{mean}");
+        // Smooth: the slope's rms is std / L (0.067 for 0.1 m over 1.5 m), a step of 0.0067 m.
+        assert!(rms_step < 0.012, "{rms_step}");
+        // The floor beyond the toe is untouched and nothing is below it.
+        assert_eq!(w.height(10.0, 0.0), -2.0);
+        for j in 0..w.terrain.ny() {
+            for &h in w.terrain.row(j).unwrap() {
+                assert!(h >= s.bench.floor_elevation_m);
+            }
+        }
+        // With the bench material's repose angle declared it starts at rest: nothing steeper.
+        let (_, settled) = extended_world_with(Some(crate::scenario::TerrainSpec {
+            repose_deg: Some(45.0),
+            ..spec
+        }));
+        let (nx, ny) = (settled.terrain.nx(), settled.terrain.ny());
+        let steepest = steepest_deg(&settled, 1, nx - 2, 0, ny - 2);
+        assert!(steepest < 45.1, "{steepest}");
+        assert!((sum_heights(&settled) - sum_heights(&w)).abs() < 1e-6);
+        // The same seed gives the same bench, another seed another one.
+        let (_, again) = extended_world_with(Some(spec));
+        assert_eq!(again.terrain, w.terrain);
+        let mut s2 = s.clone();
+        s2.seed += 1;
+        assert_ne!(World::from_scenario(&s2).unwrap().terrain, w.terrain);
     }
 
     /// Drags the edge toward the machine at height `z` from `x0` for `length_m`; returns the soil
