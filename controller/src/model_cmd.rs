@@ -172,9 +172,31 @@ pub struct TrainArgs {
     /// The force inputs (see [`ForceSource`]).
     #[arg(long, value_enum, default_value_t = ForceSource::Measured)]
     pub forces: ForceSource,
+    /// Learning-rate schedule: the step size of both phases falls along a half cosine to this
+    /// fraction of its starting value (1: constant).
+    #[arg(long, default_value_t = 1.0)]
+    pub final_rate: f64,
+    /// Trainings per network from different initial weights and batch orders; the one with the lowest
+    /// validation loss is kept (the split and the test digs stay the seed's).
+    #[arg(long, default_value_t = 1)]
+    pub restarts: usize,
+    /// Free-running epochs without a validation improvement before stopping.
+    #[arg(long, default_value_t = 60)]
+    pub patience: usize,
     /// Machine file (default: the built-in config/machine.toml).
     #[arg(long, value_name = "FILE")]
     pub machine: Option<PathBuf>,
+}
+
+/// Which digs of `train`'s split `model evaluate` runs on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum EvalSplit {
+    /// The held-out test digs (the reported figure).
+    Test,
+    /// The validation digs (early stopping; the split to choose between trainings on).
+    Validation,
+    /// The training digs.
+    Train,
 }
 
 /// Arguments of `model evaluate`.
@@ -192,6 +214,13 @@ pub struct EvaluateArgs {
     /// Evaluate on every dig instead of the held-out test digs.
     #[arg(long)]
     pub all: bool,
+    /// Which digs of the seed's split to evaluate on (ignored with `--all`).
+    #[arg(long, value_enum, default_value_t = EvalSplit::Test)]
+    pub split: EvalSplit,
+    /// Hold the force-rate input at zero, as the dig model does with its quasi-static forces
+    /// (with `--forces statics`: the networks as the dig model runs them).
+    #[arg(long)]
+    pub zero_rate: bool,
     /// The target velocity signal (see [`VelocitySource`]).
     #[arg(long, value_enum, default_value_t = VelocitySource::Rates)]
     pub velocity: VelocitySource,
@@ -1554,13 +1583,22 @@ fn evaluate(a: &EvaluateArgs) -> anyhow::Result<()> {
             ..TrainConfig::default()
         };
         let split = planner::actuator::split_digs(trace_digs.len(), &config)?;
-        split.test.iter().map(|&i| trace_digs[i].clone()).collect()
+        let picked = match a.split {
+            EvalSplit::Test => &split.test,
+            EvalSplit::Validation => &split.validation,
+            EvalSplit::Train => &split.train,
+        };
+        picked.iter().map(|&i| trace_digs[i].clone()).collect()
     };
     let digs: Vec<ActuatorDig> = chosen
         .iter()
         .map(|d| d.to_actuator_dig(a.velocity))
         .collect();
-    let report = model.evaluate(&digs)?;
+    let report = if a.zero_rate {
+        model.evaluate_static(&digs)?
+    } else {
+        model.evaluate(&digs)?
+    };
     println!(
         "{} digs ({} steps), target: velocities from the {}, free-running (thesis Figs. 19-21: 5-8 %; target < 5 %):",
         report.digs,
@@ -1691,6 +1729,9 @@ fn train(a: &TrainArgs) -> anyhow::Result<()> {
         force_rate_dropout: a.force_rate_dropout,
         force_noise: a.force_noise,
         third_inputs: a.third_inputs,
+        final_rate_fraction: a.final_rate,
+        restarts: a.restarts,
+        patience: a.patience,
         command_lag_s: if a.spool_lag {
             machine.hydraulics.lag_time_constant_s
         } else {
@@ -1751,6 +1792,13 @@ fn train(a: &TrainArgs) -> anyhow::Result<()> {
         report.validation_digs.len(),
         report.test_digs.len(),
         a.out.display()
+    );
+    println!(
+        "free-running epochs {:?}, best validation loss (mean squared, normalised) {:.4e} / {:.4e} / {:.4e}",
+        report.free_run_epochs,
+        report.validation_loss[0],
+        report.validation_loss[1],
+        report.validation_loss[2]
     );
     println!("held-out test digs, free-running (thesis Figs. 19-21: 5-8 %; target < 5 %):");
     print_errors(&report.test);

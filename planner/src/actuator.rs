@@ -323,6 +323,14 @@ pub struct TrainConfig {
     /// for one Adam step (drawn per dig and batch, both phases), so the networks also learn the
     /// quasi-static case in which the dig model uses them ([`ActuatorState::with_static_forces`]).
     pub force_rate_dropout: f64,
+    /// Learning-rate schedule of both phases: the Adam step size falls from the phase's rate to this
+    /// fraction of it over the phase's epochs along a half cosine (1: constant rate, as before). A
+    /// falling rate lets mini-batch training settle instead of hopping around the minimum.
+    pub final_rate_fraction: f64,
+    /// Trainings per network from different initial weights and mini-batch orders (the split stays
+    /// the seed's); the one with the lowest free-running validation loss is kept (never the test
+    /// digs). 1: one training, as before.
+    pub restarts: usize,
 }
 
 /// Loss of the free-running (BPTT) phase and of early stopping on the validation digs.
@@ -378,6 +386,8 @@ impl Default for TrainConfig {
             batch_digs: 0,
             force_rate_input: false,
             force_rate_dropout: 0.0,
+            final_rate_fraction: 1.0,
+            restarts: 1,
         }
     }
 }
@@ -422,6 +432,15 @@ impl TrainConfig {
             if !(value.is_finite() && (0.0..0.5).contains(&value)) {
                 return bad(field, "must be in [0, 0.5)");
             }
+        }
+        if !(self.final_rate_fraction.is_finite()
+            && self.final_rate_fraction > 0.0
+            && self.final_rate_fraction <= 1.0)
+        {
+            return bad("final_rate_fraction", "must be in (0, 1]");
+        }
+        if self.restarts == 0 {
+            return bad("restarts", "must be at least 1");
         }
         if !(self.force_noise.is_finite() && self.force_noise >= 0.0) {
             return bad("force_noise", "must be finite and not negative");
@@ -1086,19 +1105,23 @@ impl ActuatorModel {
     /// # Errors
     /// As [`evaluate`](Self::evaluate).
     pub fn simulate(&self, dig: &ActuatorDig) -> Result<Vec<PredictedStep>, ActuatorError> {
-        self.simulate_dig(dig, 0)
+        self.simulate_dig(dig, 0, false)
     }
 
     fn simulate_dig(
         &self,
         dig: &ActuatorDig,
         index: usize,
+        static_forces: bool,
     ) -> Result<Vec<PredictedStep>, ActuatorError> {
         let seq = resample(dig, index, self.dt_s)?;
         let (Some(&v0), Some(&u0)) = (seq.velocity.first(), seq.command.first()) else {
             return Ok(Vec::new());
         };
         let mut state = self.initial_state(v0, u0)?;
+        if static_forces {
+            state = state.with_static_forces();
+        }
         let mut out = Vec::with_capacity(seq.len());
         out.push(PredictedStep {
             time_s: seq.t0,
@@ -1122,10 +1145,27 @@ impl ActuatorModel {
     /// [`ActuatorError::NonFiniteSample`], [`ActuatorError::TimeNotIncreasing`],
     /// [`ActuatorError::CommandOutOfRange`], [`ActuatorError::DigTooShort`] for bad digs.
     pub fn evaluate(&self, digs: &[ActuatorDig]) -> Result<EvaluationReport, ActuatorError> {
+        self.evaluate_with(digs, false)
+    }
+
+    /// [`ActuatorModel::evaluate`] with the force-rate input held at zero
+    /// ([`ActuatorState::with_static_forces`]), as the dig model runs the networks on its statics.
+    ///
+    /// # Errors
+    /// As [`ActuatorModel::evaluate`].
+    pub fn evaluate_static(&self, digs: &[ActuatorDig]) -> Result<EvaluationReport, ActuatorError> {
+        self.evaluate_with(digs, true)
+    }
+
+    fn evaluate_with(
+        &self,
+        digs: &[ActuatorDig],
+        static_forces: bool,
+    ) -> Result<EvaluationReport, ActuatorError> {
         let mut sums = [(0.0_f64, 0.0_f64, 0.0_f64); 3];
         let mut steps = 0usize;
         for (index, dig) in digs.iter().enumerate() {
-            for step in self.simulate_dig(dig, index)?.iter().skip(1) {
+            for step in self.simulate_dig(dig, index, static_forces)?.iter().skip(1) {
                 for (j, sum) in sums.iter_mut().enumerate() {
                     let e = step.predicted_m_per_s[j] - step.measured_m_per_s[j];
                     sum.0 += e.abs();
@@ -1759,6 +1799,189 @@ fn split_with(count: usize, config: &TrainConfig, rng: &mut ChaCha8Rng) -> DigSp
     }
 }
 
+/// One network's training ([`train`]): what it needs besides the generator.
+struct NetworkTraining<'a> {
+    j: usize,
+    config: &'a TrainConfig,
+    train_seqs: &'a [Sequence],
+    val_seqs: &'a [Sequence],
+    /// Epochs done before this training (progress).
+    done: usize,
+    /// Epochs planned in all (progress).
+    total: usize,
+}
+
+/// A trained network with its free-running epochs and best validation loss.
+struct NetworkRun {
+    network: Network,
+    free_run_epochs: usize,
+    validation_loss: f64,
+}
+
+/// The Adam step size of `epoch` (1-based) of `epochs`: [`TrainConfig::final_rate_fraction`]'s half
+/// cosine from `rate` down to `fraction x rate`.
+fn scheduled_rate(rate: f64, fraction: f64, epoch: usize, epochs: usize) -> f64 {
+    if epochs <= 1 || fraction >= 1.0 {
+        return rate;
+    }
+    let progress = (epoch.saturating_sub(1)) as f64 / (epochs - 1) as f64;
+    rate * (fraction + (1.0 - fraction) * 0.5 * (1.0 + (std::f64::consts::PI * progress).cos()))
+}
+
+/// Trains network `ctx.j` (teacher forcing, then free-running BPTT with early stopping on the
+/// validation digs) and returns the weights with the lowest free-running validation loss.
+fn train_network(
+    ctx: &NetworkTraining<'_>,
+    rng: &mut ChaCha8Rng,
+    progress: &mut impl FnMut(&TrainProgress),
+) -> Result<NetworkRun, ActuatorError> {
+    let NetworkTraining {
+        j,
+        config,
+        train_seqs,
+        val_seqs,
+        mut done,
+        total,
+    } = *ctx;
+    let joint = Joint::ALL[j];
+    let mut net = new_network(j, train_seqs, config, rng)?;
+    let gain = lag_gain(config.dt_s, config.command_lag_s);
+    let train_data = net_sequences(&net, j, train_seqs, config.delay_steps, gain);
+    let val_owned = net_sequences(&net, j, val_seqs, config.delay_steps, gain);
+    let val_data: Vec<&NetSequence> = val_owned.iter().collect();
+    let mut params = std::mem::take(&mut net.params);
+    let mut grad = vec![0.0; params.len()];
+    let mut best = (
+        free_run(&net, &params, &val_data, config.free_run_loss, &[], None),
+        params.clone(),
+    );
+    let mut free_run_epochs = 0;
+
+    let mut adam = Adam::new(params.len(), config.learning_rate);
+    let mut order: Vec<usize> = (0..train_data.len()).collect();
+    for epoch in 1..=config.teacher_forcing_epochs {
+        adam.rate = scheduled_rate(
+            config.learning_rate,
+            config.final_rate_fraction,
+            epoch,
+            config.teacher_forcing_epochs,
+        );
+        let mut train_loss = 0.0;
+        for batch in batches(&mut order, config.batch_digs, rng) {
+            let dropped = rate_dropout(&net, &batch, &train_data, config, rng);
+            let data = batch_data(&batch, &train_data, &dropped);
+            train_loss +=
+                teacher_forced(&net, &params, &data, &mut grad) * batch_weight(&data, &train_data);
+            clip(&mut grad, config.gradient_clip);
+            adam.update(&mut params, &grad);
+        }
+        let val = free_run(&net, &params, &val_data, config.free_run_loss, &[], None);
+        if val < best.0 {
+            best = (val, params.clone());
+        }
+        done += 1;
+        let phase = TrainPhase::TeacherForcing;
+        let epochs = config.teacher_forcing_epochs;
+        progress(&TrainProgress {
+            joint,
+            phase,
+            epoch,
+            epochs,
+            done,
+            total,
+            train_loss,
+            validation_loss: val,
+        });
+    }
+
+    // Continue from the best free-running weights so far: teacher forcing can end on weights whose
+    // free run is poor even when an earlier epoch's was good.
+    params.clone_from(&best.1);
+    let mut adam = Adam::new(params.len(), config.free_run_learning_rate);
+    let mut since_best = 0;
+    let mut offsets = vec![[0.0; 2]; train_data.len()];
+    for epoch in 1..=config.free_run_epochs {
+        adam.rate = scheduled_rate(
+            config.free_run_learning_rate,
+            config.final_rate_fraction,
+            epoch,
+            config.free_run_epochs,
+        );
+        if config.force_noise > 0.0 {
+            let normal = |rng: &mut ChaCha8Rng| {
+                // Box-Muller.
+                let (u1, u2): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random());
+                (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+            };
+            for o in &mut offsets {
+                *o = [
+                    config.force_noise * normal(rng),
+                    config.force_noise * normal(rng),
+                ];
+            }
+        }
+        let mut train_loss = 0.0;
+        let mut diverged = false;
+        for batch in batches(&mut order, config.batch_digs, rng) {
+            let dropped = rate_dropout(&net, &batch, &train_data, config, rng);
+            let data = batch_data(&batch, &train_data, &dropped);
+            let offs: Vec<[f64; 2]> = batch.iter().map(|&i| offsets[i]).collect();
+            let loss = free_run(
+                &net,
+                &params,
+                &data,
+                config.free_run_loss,
+                &offs,
+                Some(&mut grad),
+            );
+            if !loss.is_finite() || grad.iter().any(|g| !g.is_finite()) {
+                diverged = true;
+                break;
+            }
+            train_loss += loss * batch_weight(&data, &train_data);
+            clip(&mut grad, config.gradient_clip);
+            adam.update(&mut params, &grad);
+        }
+        if diverged {
+            break;
+        }
+        let val = free_run(&net, &params, &val_data, config.free_run_loss, &[], None);
+        free_run_epochs = epoch;
+        done += 1;
+        let phase = TrainPhase::FreeRun;
+        let epochs = config.free_run_epochs;
+        progress(&TrainProgress {
+            joint,
+            phase,
+            epoch,
+            epochs,
+            done,
+            total,
+            train_loss,
+            validation_loss: val,
+        });
+        if val < best.0 {
+            best = (val, params.clone());
+            since_best = 0;
+        } else {
+            since_best += 1;
+            if since_best >= config.patience {
+                break;
+            }
+        }
+    }
+    let (validation_loss, best_params) = best;
+    if best_params.iter().any(|p| !p.is_finite()) {
+        return Err(ActuatorError::Diverged { joint });
+    }
+    net.params = best_params;
+    Ok(NetworkRun {
+        network: net,
+        free_run_epochs,
+        validation_loss,
+    })
+}
+
 /// Trains the three networks on `digs` (thesis 4.2.3): splits the digs (deterministically for the
 /// seed) into training, validation and test sets, trains each network with teacher forcing and then
 /// free-running backpropagation through time with early stopping on the validation digs, and reports
@@ -1796,135 +2019,53 @@ pub fn train(
     let (train_seqs, val_seqs) = (pick(train_digs), pick(validation_digs));
 
     let per_net = config.teacher_forcing_epochs + config.free_run_epochs;
-    let total = 3 * per_net;
+    let total = 3 * per_net * config.restarts;
     let mut done = 0;
     let mut networks = Vec::with_capacity(3);
     let mut free_run_epochs = [0; 3];
     let mut validation_loss = [0.0; 3];
     for j in 0..3 {
-        let joint = Joint::ALL[j];
-        let mut net = new_network(j, &train_seqs, config, &mut rng)?;
-        let gain = lag_gain(config.dt_s, config.command_lag_s);
-        let train_data = net_sequences(&net, j, &train_seqs, config.delay_steps, gain);
-        let val_owned = net_sequences(&net, j, &val_seqs, config.delay_steps, gain);
-        let val_data: Vec<&NetSequence> = val_owned.iter().collect();
-        let mut params = std::mem::take(&mut net.params);
-        let mut grad = vec![0.0; params.len()];
-        let mut best = (
-            free_run(&net, &params, &val_data, config.free_run_loss, &[], None),
-            params.clone(),
-        );
-
-        let mut adam = Adam::new(params.len(), config.learning_rate);
-        let mut order: Vec<usize> = (0..train_data.len()).collect();
-        for epoch in 1..=config.teacher_forcing_epochs {
-            let mut train_loss = 0.0;
-            for batch in batches(&mut order, config.batch_digs, &mut rng) {
-                let dropped = rate_dropout(&net, &batch, &train_data, config, &mut rng);
-                let data = batch_data(&batch, &train_data, &dropped);
-                train_loss += teacher_forced(&net, &params, &data, &mut grad)
-                    * batch_weight(&data, &train_data);
-                clip(&mut grad, config.gradient_clip);
-                adam.update(&mut params, &grad);
-            }
-            let val = free_run(&net, &params, &val_data, config.free_run_loss, &[], None);
-            if val < best.0 {
-                best = (val, params.clone());
-            }
-            done += 1;
-            let phase = TrainPhase::TeacherForcing;
-            let epochs = config.teacher_forcing_epochs;
-            progress(&TrainProgress {
-                joint,
-                phase,
-                epoch,
-                epochs,
-                done,
-                total,
-                train_loss,
-                validation_loss: val,
-            });
-        }
-
-        // Continue from the best free-running weights so far: teacher forcing can end on weights whose
-        // free run is poor even when an earlier epoch's was good.
-        params.clone_from(&best.1);
-        let mut adam = Adam::new(params.len(), config.free_run_learning_rate);
-        let mut since_best = 0;
-        let mut offsets = vec![[0.0; 2]; train_data.len()];
-        for epoch in 1..=config.free_run_epochs {
-            if config.force_noise > 0.0 {
-                let normal = |rng: &mut ChaCha8Rng| {
-                    // Box-Muller.
-                    let (u1, u2): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random());
-                    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
-                };
-                for o in &mut offsets {
-                    *o = [
-                        config.force_noise * normal(&mut rng),
-                        config.force_noise * normal(&mut rng),
-                    ];
-                }
-            }
-            let mut train_loss = 0.0;
-            let mut diverged = false;
-            for batch in batches(&mut order, config.batch_digs, &mut rng) {
-                let dropped = rate_dropout(&net, &batch, &train_data, config, &mut rng);
-                let data = batch_data(&batch, &train_data, &dropped);
-                let offs: Vec<[f64; 2]> = batch.iter().map(|&i| offsets[i]).collect();
-                let loss = free_run(
-                    &net,
-                    &params,
-                    &data,
-                    config.free_run_loss,
-                    &offs,
-                    Some(&mut grad),
-                );
-                if !loss.is_finite() || grad.iter().any(|g| !g.is_finite()) {
-                    diverged = true;
-                    break;
-                }
-                train_loss += loss * batch_weight(&data, &train_data);
-                clip(&mut grad, config.gradient_clip);
-                adam.update(&mut params, &grad);
-            }
-            if diverged {
-                params.clone_from(&best.1);
-                break;
-            }
-            let val = free_run(&net, &params, &val_data, config.free_run_loss, &[], None);
-            free_run_epochs[j] = epoch;
-            done += 1;
-            let phase = TrainPhase::FreeRun;
-            let epochs = config.free_run_epochs;
-            progress(&TrainProgress {
-                joint,
-                phase,
-                epoch,
-                epochs,
-                done,
-                total,
-                train_loss,
-                validation_loss: val,
-            });
-            if val < best.0 {
-                best = (val, params.clone());
-                since_best = 0;
+        let mut kept: Option<NetworkRun> = None;
+        for restart in 0..config.restarts {
+            // The first training draws from the split's generator (as before restarts existed), the
+            // others from their own, seeded from the seed, the network and the restart.
+            let mut own;
+            let rng = if restart == 0 {
+                &mut rng
             } else {
-                since_best += 1;
-                if since_best >= config.patience {
-                    break;
-                }
+                own = ChaCha8Rng::seed_from_u64(
+                    config
+                        .seed
+                        .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+                        .wrapping_add((restart * 3 + j) as u64),
+                );
+                &mut own
+            };
+            let ctx = NetworkTraining {
+                j,
+                config,
+                train_seqs: &train_seqs,
+                val_seqs: &val_seqs,
+                done,
+                total,
+            };
+            let run = train_network(&ctx, rng, &mut progress)?;
+            done += per_net;
+            if kept
+                .as_ref()
+                .is_none_or(|k| run.validation_loss < k.validation_loss)
+            {
+                kept = Some(run);
             }
         }
-        done = (j + 1) * per_net;
-        let (best_loss, best_params) = best;
-        if best_params.iter().any(|p| !p.is_finite()) {
-            return Err(ActuatorError::Diverged { joint });
-        }
-        validation_loss[j] = best_loss;
-        net.params = best_params;
-        networks.push(net);
+        let Some(run) = kept else {
+            return Err(ActuatorError::Diverged {
+                joint: Joint::ALL[j],
+            });
+        };
+        free_run_epochs[j] = run.free_run_epochs;
+        validation_loss[j] = run.validation_loss;
+        networks.push(run.network);
     }
     let networks: [Network; 3] = networks
         .try_into()
@@ -2370,6 +2511,72 @@ mod tests {
             },
             TrainConfig {
                 force_rate_dropout: 1.5,
+                ..config.clone()
+            },
+        ] {
+            assert_rejected(&digs, &bad);
+        }
+    }
+
+    #[test]
+    fn rate_schedule_falls_from_the_rate_to_its_fraction() {
+        assert_eq!(scheduled_rate(0.01, 1.0, 7, 100), 0.01);
+        assert!((scheduled_rate(0.01, 0.1, 1, 100) - 0.01).abs() < 1e-15);
+        assert!((scheduled_rate(0.01, 0.1, 100, 100) - 0.001).abs() < 1e-15);
+        assert!((scheduled_rate(0.01, 0.1, 50, 99) - 0.0055).abs() < 1e-15);
+        let rates: Vec<f64> = (1..=100)
+            .map(|e| scheduled_rate(0.01, 0.1, e, 100))
+            .collect();
+        assert!(rates.windows(2).all(|w| w[1] < w[0]));
+    }
+
+    #[test]
+    fn restarts_keep_the_lowest_validation_loss_and_are_validated() {
+        let digs = synthetic_digs(8, 60, 5);
+        let config = TrainConfig {
+            teacher_forcing_epochs: 15,
+            free_run_epochs: 10,
+            coupled_inputs: true,
+            force_rate_input: true,
+            batch_digs: 2,
+            final_rate_fraction: 0.1,
+            ..test_config()
+        };
+        let (one, one_report) = train(&digs, &config, |_| {}).unwrap();
+        let three = TrainConfig {
+            restarts: 3,
+            ..config.clone()
+        };
+        let mut last_total = 0;
+        let (many, many_report) = train(&digs, &three, |p| last_total = p.total).unwrap();
+        assert_eq!(last_total, 3 * 3 * 25);
+        // The first training of each network is the single training, so the kept one is no worse on
+        // the validation digs, and the split (hence the test digs) is the same.
+        for j in 0..3 {
+            assert!(many_report.validation_loss[j] <= one_report.validation_loss[j]);
+        }
+        assert_eq!(one_report.test_digs, many_report.test_digs);
+        assert_eq!(many, train(&digs, &three, |_| {}).unwrap().0);
+        assert_ne!(one, many, "no restart won on any network");
+        // Held at zero, the force rate changes the free-running figures of a force-rate network.
+        let test: Vec<ActuatorDig> = one_report
+            .test_digs
+            .iter()
+            .map(|&i| digs[i].clone())
+            .collect();
+        assert_eq!(one.evaluate(&test).unwrap(), one_report.test);
+        assert_ne!(one.evaluate_static(&test).unwrap(), one_report.test);
+        for bad in [
+            TrainConfig {
+                restarts: 0,
+                ..config.clone()
+            },
+            TrainConfig {
+                final_rate_fraction: 0.0,
+                ..config.clone()
+            },
+            TrainConfig {
+                final_rate_fraction: 1.5,
                 ..config.clone()
             },
         ] {
