@@ -208,6 +208,24 @@ pub fn scan_section(
     machine: &MachineConfig,
     plane_azimuth_rad: f64,
 ) -> Option<SectionProfile> {
+    scan_section_beside(scan, machine, plane_azimuth_rad, 0.0, 0.5)
+}
+
+/// Lateral offsets of the lanes beside the digging plane (each side), m: the terrain a full
+/// bucket's spill spreads over (planner::discrepancy::soil_replay::SPILL_REACH_M).
+const LANE_OFFSETS_M: [f64; 4] = [1.0, 1.5, 2.0, 2.5];
+/// Half width of a lane, m.
+const LANE_HALF_WIDTH_M: f64 = 0.25;
+
+/// As [`scan_section`], for the points within `half_width_m` of the line parallel to the digging
+/// plane at `lateral_m` (left positive).
+pub fn scan_section_beside(
+    scan: &ScanFile,
+    machine: &MachineConfig,
+    plane_azimuth_rad: f64,
+    lateral_m: f64,
+    half_width_m: f64,
+) -> Option<SectionProfile> {
     let mount = scan.sensor.heading_rad + machine.sensor.bearing_rad;
     let h = plane_azimuth_rad;
     let origin = [
@@ -222,7 +240,7 @@ pub fn scan_section(
         let (dx, dy) = (p[0] - origin[0], p[1] - origin[1]);
         let along = dx * h.cos() + dy * h.sin();
         let lateral = -dx * h.sin() + dy * h.cos();
-        if lateral.abs() > 0.5 || !p[2].is_finite() {
+        if (lateral - lateral_m).abs() > half_width_m || !p[2].is_finite() {
             continue;
         }
         let b = ((along - R0_M) / STEP_M).round();
@@ -297,6 +315,7 @@ pub fn read_session(dir: &Path, machine: &MachineConfig) -> anyhow::Result<Vec<D
                 index: u32::from(index),
                 samples: vec![s],
                 section: None,
+                lanes: Vec::new(),
             }),
         }
     }
@@ -307,16 +326,25 @@ pub fn read_session(dir: &Path, machine: &MachineConfig) -> anyhow::Result<Vec<D
             .find(|s| s.stage != StageTag::Outside || s.load == LoadTag::InSoil)
             .map(|s| (s.time_s, s.swing_rad));
         if let Some((t0, dig_swing)) = dig_start {
-            r.section = scans
+            let scan = scans
                 .iter()
                 .zip(&scan_swing)
                 .rev()
-                .find(|(s, _)| s.time_s <= t0 + 1e-9)
-                .and_then(|(s, swing)| {
-                    // Without the swing angle at the scan, the scan's own heading is the best guess.
-                    let base_heading = s.sensor.heading_rad - swing.unwrap_or(dig_swing);
-                    scan_section(s, machine, base_heading + dig_swing)
-                });
+                .find(|(s, _)| s.time_s <= t0 + 1e-9);
+            if let Some((s, swing)) = scan {
+                // Without the swing angle at the scan, the scan's own heading is the best guess.
+                let base_heading = s.sensor.heading_rad - swing.unwrap_or(dig_swing);
+                let azimuth = base_heading + dig_swing;
+                r.section = scan_section(s, machine, azimuth);
+                r.lanes = LANE_OFFSETS_M
+                    .iter()
+                    .flat_map(|o| [*o, -*o])
+                    .filter_map(|o| {
+                        scan_section_beside(s, machine, azimuth, o, LANE_HALF_WIDTH_M)
+                            .map(|l| (o, l))
+                    })
+                    .collect();
+            }
         }
     }
     records.retain(|r| r.samples.len() >= 200 && r.validate().is_ok());

@@ -348,7 +348,7 @@ fn replay_csv(
         let _ = write!(s, ",{0}_measured,{0}_nominal,{0}_augmented", sig.name());
     }
     s.push_str(
-        ",soil_depth_m,soil_volume_m3,soil_x_per_pa,soil_z_per_pa,soil_x_per_kg_m3,soil_z_per_kg_m3,soil_x_per_payload_kg,soil_z_per_payload_kg",
+        ",soil_depth_m,soil_slope_tan,soil_volume_m3,soil_x_per_pa,soil_z_per_pa,soil_x_per_kg_m3,soil_z_per_kg_m3,soil_x_per_payload_kg,soil_z_per_payload_kg",
     );
     s.push('\n');
     let cell = |v: f64| {
@@ -389,8 +389,9 @@ fn replay_csv(
             Some(t) => {
                 let _ = write!(
                     s,
-                    ",{:.4},{:.4},{},{},{},{},{},{}",
+                    ",{:.4},{:.4},{:.4},{},{},{},{},{},{}",
                     t.depth_m,
+                    t.slope_tan,
                     t.payload_volume_m3,
                     cell(t.fee_per_pa[0]),
                     cell(t.fee_per_pa[1]),
@@ -400,7 +401,7 @@ fn replay_csv(
                     cell(t.measured_per_kg[1])
                 );
             }
-            None => s.push_str(",,,,,,,,"),
+            None => s.push_str(",,,,,,,,,"),
         }
         s.push('\n');
     }

@@ -209,6 +209,20 @@ pub struct GreyBoxParams {
     /// the `internal_leakage` candidate adds to it).
     #[serde(default)]
     pub internal_leakage_m3_per_s_pa: f64,
+
+    /// The spill of a full bucket on the terrain in the soil relation: what the edge cuts beyond the
+    /// capacity piles up around the edge at [`Self::spill_repose_rad`], and out of the soil the
+    /// bucket holds less as its opening tips down ([`soil_replay::CutSection::spill`]). Off: the
+    /// spill leaves the terrain untouched and the bucket holds the cut volume up to its capacity.
+    #[serde(default)]
+    pub spill_pile: bool,
+    /// Angle of repose of the soil a full bucket spills at its edge, rad.
+    #[serde(default = "default_spill_repose_rad")]
+    pub spill_repose_rad: f64,
+}
+
+fn default_spill_repose_rad() -> f64 {
+    37f64.to_radians()
 }
 
 fn default_bulk_modulus_pa() -> f64 {
@@ -269,6 +283,8 @@ impl GreyBoxParams {
             dead_volume_m3: default_dead_volume_m3(),
             internal_leakage_m3_per_s_pa: 0.0,
             chamber_balance: false,
+            spill_pile: false,
+            spill_repose_rad: default_spill_repose_rad(),
         }
     }
 
@@ -303,6 +319,10 @@ impl GreyBoxParams {
             (
                 "internal_leakage_m3_per_s_pa",
                 self.internal_leakage_m3_per_s_pa >= 0.0,
+            ),
+            (
+                "spill_repose_rad",
+                self.spill_repose_rad > 0.0 && self.spill_repose_rad < 1.5,
             ),
         ];
         for (name, ok) in positive {
@@ -399,10 +419,12 @@ pub struct SoilTerms {
     pub measured0: [f64; 2],
     /// Change of the measured soil force per kg of payload.
     pub measured_per_kg: [f64; 2],
-    /// Soil in the bucket (the cut area times the width, up to the capacity), m^3.
+    /// Soil in the bucket (the volume cut less what spilled, up to the capacity), m^3.
     pub payload_volume_m3: f64,
     /// Vertical depth of the edge below the cut surface, m.
     pub depth_m: f64,
+    /// Terrain slope at the edge, `tan(alpha)`.
+    pub slope_tan: f64,
     /// Modelled soil force at the nominal soil.
     pub fee0: [f64; 2],
     /// Its change per Pa of cohesion.
@@ -553,7 +575,15 @@ impl PreparedRecord {
         let mut soil_terms = vec![None; n];
         // The section along the digging plane as the edge leaves it (cut in the Autodig stages, when
         // the bucket is in the digging plane), and the tip of the previous sample.
-        let mut cut = record.section.as_ref().map(CutSection::new);
+        let mut cut = record.section.as_ref().and_then(|section| {
+            CutSection::new(
+                section,
+                &record.lanes,
+                cfg.bucket.width_m,
+                cfg.bucket.capacity_m3,
+                params.spill_repose_rad,
+            )
+        });
         let mut last_tip: Option<[f64; 2]> = None;
         let mut open_for = [0usize; 3];
         for (k, s) in record.samples.iter().enumerate() {
@@ -564,6 +594,13 @@ impl PreparedRecord {
             };
             let pose = kin.forward(&q);
             let tip = [pose.x_m, pose.z_m];
+            let rates = Vector3::new(
+                s.rates_rad_per_s[0],
+                s.rates_rad_per_s[1],
+                s.rates_rad_per_s[2],
+            );
+            let tip_v = kin.jacobian(&q) * rates; // Eq. A3
+            let tip_velocity = [tip_v[0], tip_v[1]];
             if let Some(c) = cut.as_mut() {
                 if s.stage == super::StageTag::Outside {
                     last_tip = None;
@@ -574,8 +611,25 @@ impl PreparedRecord {
                     last_tip = Some(tip);
                 }
             }
+            // After this sample's soil terms, the bucket spills what it cannot hold (on the
+            // section, for the samples after it).
+            let spill_dt_s = record
+                .samples
+                .get(k + 1)
+                .map_or(0.01, |next| next.time_s - s.time_s);
+            let spill = |c: &mut CutSection| {
+                if params.spill_pile && s.stage != super::StageTag::Outside {
+                    let in_soil = c
+                        .motion(tip, pose.bucket_abs_rad, tip_velocity)
+                        .is_some_and(|m| m.vertical_depth_m > 0.0);
+                    c.spill(tip, pose.bucket_abs_rad, in_soil, spill_dt_s);
+                }
+            };
             let m = &mut measured[k];
             if k < WARMUP_SAMPLES {
+                if let Some(c) = cut.as_mut() {
+                    spill(c);
+                }
                 continue;
             }
             let all_consistent = consistent[k].iter().all(|c| *c);
@@ -632,6 +686,7 @@ impl PreparedRecord {
                     params,
                     s,
                     section,
+                    tip_velocity,
                     velocity[k],
                     accel[k],
                     mass[k],
@@ -641,6 +696,9 @@ impl PreparedRecord {
                     m[8] = t.measured0[0] + payload * t.measured_per_kg[0];
                     m[9] = t.measured0[1] + payload * t.measured_per_kg[1];
                 }
+            }
+            if let Some(c) = cut.as_mut() {
+                spill(c);
             }
         }
         Ok(Self {
@@ -689,6 +747,7 @@ fn soil_terms_of(
     params: &GreyBoxParams,
     s: &super::Sample,
     section: &CutSection,
+    tip_velocity: [f64; 2],
     velocity: [f64; 3],
     accel: [f64; 3],
     mass: [f64; 3],
@@ -699,26 +758,14 @@ fn soil_terms_of(
         bucket_rad: s.angles_rad[2],
     };
     let pose = kin.forward(&q);
-    let rates = Vector3::new(
-        s.rates_rad_per_s[0],
-        s.rates_rad_per_s[1],
-        s.rates_rad_per_s[2],
-    );
-    let tip_v = kin.jacobian(&q) * rates; // Eq. A3
-    let tip_velocity = [tip_v[0], tip_v[1]];
     if tip_velocity[0].hypot(tip_velocity[1]) < SOIL_MOVING_SPEED_M_PER_S {
         return None;
     }
     let width = cfg.bucket.width_m;
-    // The soil that has passed over the edge: the area cut from the section times the width, up to
-    // the bucket's capacity (the rest spills).
-    let volume = (section.removed_area_m2() * width).clamp(0.0, cfg.bucket.capacity_m3);
-    let motion = section.motion(
-        [pose.x_m, pose.z_m],
-        pose.bucket_abs_rad,
-        tip_velocity,
-        volume,
-    )?;
+    // What the bucket holds: the volume cut from the terrain less what spilled (at most the
+    // capacity; the spill is on the section).
+    let volume = section.content_m3().clamp(0.0, cfg.bucket.capacity_m3);
+    let motion = section.motion([pose.x_m, pose.z_m], pose.bucket_abs_rad, tip_velocity)?;
     if motion.vertical_depth_m <= 0.0 {
         return None;
     }
@@ -748,6 +795,7 @@ fn soil_terms_of(
         measured_per_kg: [(f1.fx_n - f0.fx_n) / 1000.0, (f1.fz_n - f0.fz_n) / 1000.0],
         payload_volume_m3: volume,
         depth_m: motion.vertical_depth_m,
+        slope_tan: motion.slope_tan,
         fee0: [k * base[0], k * base[1]],
         fee_per_pa: [
             k * (fc[0] - base[0]) / 1000.0,

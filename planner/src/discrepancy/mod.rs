@@ -166,6 +166,9 @@ pub struct DigRecord {
     pub samples: Vec<Sample>,
     /// Terrain section along the digging plane from the last scan before the dig, base frame.
     pub section: Option<SectionProfile>,
+    /// Sections parallel to it from the same scan, `(lateral offset m, section)` (left positive):
+    /// the terrain beside the cut, where a full bucket's spill spreads.
+    pub lanes: Vec<(f64, SectionProfile)>,
 }
 
 impl DigRecord {
