@@ -3,12 +3,30 @@
 //! text; [`crate::demo`] writes it.
 
 use planner::terrain::TerrainGrid;
+use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use crate::demo::DigRecord;
 
-fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
+/// A plotters error as an `anyhow` error.
+pub(crate) fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
     anyhow::anyhow!("drawing the plot: {e}")
+}
+
+/// Draws an SVG image of `size` pixels on a white background with `draw`, and returns its text.
+fn svg_image(
+    size: (u32, u32),
+    draw: impl FnOnce(&DrawingArea<SVGBackend<'_>, Shift>) -> anyhow::Result<()>,
+) -> anyhow::Result<String> {
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
+        root.fill(&WHITE).map_err(err)?;
+        draw(&root)?;
+        root.present().map_err(err)?;
+    }
+    Ok(svg)
 }
 
 fn color(i: usize) -> RGBColor {
@@ -50,11 +68,8 @@ pub fn trajectories_svg(digs: &[DigRecord]) -> anyhow::Result<String> {
     } else {
         4.5
     };
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, (900, 560)).into_drawing_area();
-        root.fill(&WHITE).map_err(err)?;
-        let mut chart = ChartBuilder::on(&root)
+    svg_image((900, 560), |root| {
+        let mut chart = ChartBuilder::on(root)
             .caption(
                 "bucket-tip trajectories per dig over the pre-dig terrain section (base frame)",
                 ("sans-serif", 16),
@@ -104,9 +119,8 @@ pub fn trajectories_svg(digs: &[DigRecord]) -> anyhow::Result<String> {
             .label_font(("sans-serif", 11))
             .draw()
             .map_err(err)?;
-        root.present().map_err(err)?;
-    }
-    Ok(svg)
+        Ok(())
+    })
 }
 
 /// A terrain elevation map (world frame, x east, y north) of the region around the machine, 0.2 m
@@ -119,10 +133,7 @@ pub fn terrain_svg(terrain: &TerrainGrid, title: &str) -> anyhow::Result<String>
     const Y: (f64, f64) = (-9.0, 9.0);
     const CELL: f64 = 0.2;
     const Z: (f64, f64) = (0.0, 2.5);
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, (760, 680)).into_drawing_area();
-        root.fill(&WHITE).map_err(err)?;
+    svg_image((760, 680), |root| {
         let (map, legend) = root.split_horizontally(680);
         let mut chart = ChartBuilder::on(&map)
             .caption(title, ("sans-serif", 16))
@@ -178,9 +189,8 @@ pub fn terrain_svg(terrain: &TerrainGrid, title: &str) -> anyhow::Result<String>
                 ))
                 .map_err(err)?;
         }
-        root.present().map_err(err)?;
-    }
-    Ok(svg)
+        Ok(())
+    })
 }
 
 fn heat(f: f64) -> RGBColor {
@@ -209,10 +219,7 @@ fn heat(f: f64) -> RGBColor {
 /// # Errors
 /// A plotting error.
 pub fn dig_stats_svg(digs: &[DigRecord]) -> anyhow::Result<String> {
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, (760, 720)).into_drawing_area();
-        root.fill(&WHITE).map_err(err)?;
+    svg_image((760, 720), |root| {
         let panels = root.split_evenly((3, 1));
         let n = digs.len().max(1) as f64;
         type Get = fn(&DigRecord) -> f64;
@@ -227,13 +234,7 @@ pub fn dig_stats_svg(digs: &[DigRecord]) -> anyhow::Result<String> {
         ];
         for (area, (label, get, thesis)) in panels.iter().zip(series) {
             let top = digs.iter().map(get).fold(thesis, f64::max).max(1e-3) * 1.15;
-            let mut chart = ChartBuilder::on(area)
-                .caption(label, ("sans-serif", 14))
-                .margin(8)
-                .x_label_area_size(28)
-                .y_label_area_size(50)
-                .build_cartesian_2d(-0.5..(n - 0.5), 0.0..top)
-                .map_err(err)?;
+            let mut chart = dig_panel(area, label, n, top)?;
             chart
                 .configure_mesh()
                 .disable_x_mesh()
@@ -244,27 +245,58 @@ pub fn dig_stats_svg(digs: &[DigRecord]) -> anyhow::Result<String> {
                 .map_err(err)?;
             chart
                 .draw_series(digs.iter().enumerate().map(|(i, d)| {
-                    let c = if d.action == crate::cycle::ActionKind::Cleanup {
-                        color(1)
-                    } else {
-                        color(0)
-                    };
                     let x = i as f64;
-                    Rectangle::new([(x - 0.35, 0.0), (x + 0.35, get(d))], c.filled())
+                    Rectangle::new(
+                        [(x - 0.35, 0.0), (x + 0.35, get(d))],
+                        action_color(d).filled(),
+                    )
                 }))
                 .map_err(err)?;
-            chart
-                .draw_series(DashedLineSeries::new(
-                    vec![(-0.5, thesis), (n - 0.5, thesis)],
-                    5,
-                    4,
-                    BLACK.mix(0.6).stroke_width(1),
-                ))
-                .map_err(err)?;
+            draw_level(&mut chart, n, thesis)?;
         }
-        root.present().map_err(err)?;
+        Ok(())
+    })
+}
+
+/// A chart in the coordinates of plotters' SVG drawing, both axes `f64`.
+type Chart<'a, 'b> = ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// One panel of the per-dig statistics: dig numbers `0..n` along x, `0..top` up.
+fn dig_panel<'a, 'b>(
+    area: &'a DrawingArea<SVGBackend<'b>, Shift>,
+    label: &str,
+    n: f64,
+    top: f64,
+) -> anyhow::Result<Chart<'a, 'b>> {
+    ChartBuilder::on(area)
+        .caption(label, ("sans-serif", 14))
+        .margin(8)
+        .x_label_area_size(28)
+        .y_label_area_size(50)
+        .build_cartesian_2d(-0.5..(n - 0.5), 0.0..top)
+        .map_err(err)
+}
+
+/// A dig's colour in the per-dig panels: cleanups orange, other actions blue.
+fn action_color(d: &DigRecord) -> RGBColor {
+    if d.action == crate::cycle::ActionKind::Cleanup {
+        color(1)
+    } else {
+        color(0)
     }
-    Ok(svg)
+}
+
+/// A dashed level at `y` across a per-dig panel of `n` digs.
+fn draw_level(chart: &mut Chart<'_, '_>, n: f64, y: f64) -> anyhow::Result<()> {
+    chart
+        .draw_series(DashedLineSeries::new(
+            vec![(-0.5, y), (n - 0.5, y)],
+            5,
+            4,
+            BLACK.mix(0.6).stroke_width(1),
+        ))
+        .map_err(err)?;
+    Ok(())
 }
 
 /// The bench after some digs (thesis Fig. 55): true terrain elevation over the whole map (world frame,
@@ -305,11 +337,7 @@ pub fn bench_svg(terrain: &TerrainGrid, pose: [f64; 3], title: &str) -> anyhow::
     let width_px = 760u32;
     let height_px =
         (f64::from(width_px - 80) * (y1 - oy) / (x1 - ox)).clamp(200.0, 900.0) as u32 + 90;
-    let mut svg = String::new();
-    {
-        let root =
-            SVGBackend::with_string(&mut svg, (width_px + 80, height_px)).into_drawing_area();
-        root.fill(&WHITE).map_err(err)?;
+    svg_image((width_px + 80, height_px), |root| {
         let (map, legend) = root.split_horizontally(width_px);
         let mut chart = ChartBuilder::on(&map)
             .caption(title, ("sans-serif", 15))
@@ -382,9 +410,8 @@ pub fn bench_svg(terrain: &TerrainGrid, pose: [f64; 3], title: &str) -> anyhow::
                 ))
                 .map_err(err)?;
         }
-        root.present().map_err(err)?;
-    }
-    Ok(svg)
+        Ok(())
+    })
 }
 
 /// The statistics of a session in dig order (thesis Fig. 56): weight (kN) with the half-full line,
@@ -393,10 +420,7 @@ pub fn bench_svg(terrain: &TerrainGrid, pose: [f64; 3], title: &str) -> anyhow::
 /// # Errors
 /// A plotting error.
 pub fn dig_sequence_svg(digs: &[DigRecord], full_bucket_n: f64) -> anyhow::Result<String> {
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, (860, 760)).into_drawing_area();
-        root.fill(&WHITE).map_err(err)?;
+    svg_image((860, 760), |root| {
         let panels = root.split_evenly((3, 1));
         let n = digs.len().max(1) as f64;
         // A backup happened between two digs whose machine poses differ.
@@ -427,13 +451,7 @@ pub fn dig_sequence_svg(digs: &[DigRecord], full_bucket_n: f64) -> anyhow::Resul
                 .fold(line.unwrap_or(0.0), f64::max)
                 .max(1e-3)
                 * 1.15;
-            let mut chart = ChartBuilder::on(area)
-                .caption(label, ("sans-serif", 14))
-                .margin(8)
-                .x_label_area_size(28)
-                .y_label_area_size(50)
-                .build_cartesian_2d(-0.5..(n - 0.5), 0.0..top)
-                .map_err(err)?;
+            let mut chart = dig_panel(area, &label, n, top)?;
             chart
                 .configure_mesh()
                 .disable_x_mesh()
@@ -449,29 +467,18 @@ pub fn dig_sequence_svg(digs: &[DigRecord], full_bucket_n: f64) -> anyhow::Resul
                     .map_err(err)?;
             }
             chart
-                .draw_series(digs.iter().enumerate().map(|(i, d)| {
-                    let c = if d.action == crate::cycle::ActionKind::Cleanup {
-                        color(1)
-                    } else {
-                        color(0)
-                    };
-                    Circle::new((i as f64, get(d)), 3, c.filled())
-                }))
+                .draw_series(
+                    digs.iter()
+                        .enumerate()
+                        .map(|(i, d)| Circle::new((i as f64, get(d)), 3, action_color(d).filled())),
+                )
                 .map_err(err)?;
             if let Some(v) = line {
-                chart
-                    .draw_series(DashedLineSeries::new(
-                        vec![(-0.5, v), (n - 0.5, v)],
-                        5,
-                        4,
-                        BLACK.mix(0.6).stroke_width(1),
-                    ))
-                    .map_err(err)?;
+                draw_level(&mut chart, n, v)?;
             }
         }
-        root.present().map_err(err)?;
-    }
-    Ok(svg)
+        Ok(())
+    })
 }
 
 /// The bucket weights of the dig actions in order for two strategies (thesis Fig. 60): the planner
@@ -508,11 +515,8 @@ pub fn weight_sequence_svg(
         let x1 = pts.last().map_or(0.0, |p| p.0);
         Some(vec![(0.0, my - k * mx), (x1, my + k * (x1 - mx))])
     };
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, (860, 440)).into_drawing_area();
-        root.fill(&WHITE).map_err(err)?;
-        let mut chart = ChartBuilder::on(&root)
+    svg_image((860, 440), |root| {
+        let mut chart = ChartBuilder::on(root)
             .caption(
                 "bucket weight of the normal digs in order: x planner, o predefined sequence (Fig. 60)",
                 ("sans-serif", 15),
@@ -559,9 +563,8 @@ pub fn weight_sequence_svg(
             .border_style(BLACK)
             .draw()
             .map_err(err)?;
-        root.present().map_err(err)?;
-    }
-    Ok(svg)
+        Ok(())
+    })
 }
 
 /// The optimal Autodig index against the average soil force (thesis Fig. 53): one point per soil
@@ -575,11 +578,8 @@ pub fn hardness_fit_svg(
     slope_per_kn: f64,
 ) -> anyhow::Result<String> {
     let x_hi = points.iter().map(|p| p.0).fold(1.0, f64::max) * 1.1;
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, (760, 480)).into_drawing_area();
-        root.fill(&WHITE).map_err(err)?;
-        let mut chart = ChartBuilder::on(&root)
+    svg_image((760, 480), |root| {
+        let mut chart = ChartBuilder::on(root)
             .caption(
                 "optimal Autodig hardness index vs average soil force (Fig. 53)",
                 ("sans-serif", 15),
@@ -611,9 +611,8 @@ pub fn hardness_fit_svg(
                 BLACK.stroke_width(2),
             ))
             .map_err(err)?;
-        root.present().map_err(err)?;
-    }
-    Ok(svg)
+        Ok(())
+    })
 }
 
 /// The refined planner's evaluated candidate grid of one region (thesis Figs. 47/48). Left: the
@@ -660,10 +659,7 @@ pub fn refined_grid_svg(
         .best
         .as_ref()
         .map(|b| (b.d_m, b.alpha_rad.to_degrees()));
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, (1100, 520)).into_drawing_area();
-        root.fill(&WHITE).map_err(err)?;
+    svg_image((1100, 520), |root| {
         let root = root.titled(title, ("sans-serif", 16)).map_err(err)?;
         let (left, right) = root.split_horizontally(520);
 
@@ -809,7 +805,6 @@ pub fn refined_grid_svg(
                 )))
                 .map_err(err)?;
         }
-        root.present().map_err(err)?;
-    }
-    Ok(svg)
+        Ok(())
+    })
 }

@@ -25,6 +25,7 @@ use plotters::prelude::*;
 use super::InputArgs;
 use super::input;
 use super::signals::{self, SignalRef};
+use crate::plots::err;
 
 /// Plot presets.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -374,10 +375,6 @@ fn padded(lo: f64, hi: f64) -> (f64, f64) {
     }
     let m = (hi - lo) * 0.05;
     (lo - m, hi + m)
-}
-
-fn err(e: impl std::fmt::Display) -> anyhow::Error {
-    anyhow::anyhow!("drawing the plot: {e}")
 }
 
 fn draw_panel(
