@@ -1,9 +1,7 @@
 //! Reading traces: a file or stdin, streamed record by record, malformed lines reported by number.
 //!
-//! [`firmware_bridge::trace::TraceReader`] in `ReadMode::Skip` counts skipped lines but does not say
-//! which ones (only a `tracing` debug event), and `ReadMode::Stop` ends at the first. The tools must
-//! name every bad line and carry on, so [`Records`] runs the same loop over
-//! [`firmware_bridge::trace::parse_line`] with the same rules: empty lines are ignored, a last line
+//! [`Records`] is [`firmware_bridge::trace::TraceReader`] in `ReadMode::Report`: empty lines are
+//! ignored, every malformed line is an error naming its line and the stream carries on, a last line
 //! without a newline that does not parse is [`TraceError::Truncated`] and ends the stream (the file
 //! was cut while being written), an I/O error ends the stream.
 
@@ -12,7 +10,7 @@ use std::io::{self, BufRead, BufReader, Write};
 use std::path::Path;
 
 use anyhow::Context as _;
-use firmware_bridge::trace::{LineError, TraceError, TraceRecord, parse_line};
+use firmware_bridge::trace::{ReadMode, TraceError, TraceReader, TraceRecord};
 
 /// Read buffer size: large enough that the kernel read calls do not dominate decoding.
 const READ_BUFFER_BYTES: usize = 256 * 1024;
@@ -45,33 +43,25 @@ pub fn is_stdin(path: &Path) -> bool {
 /// the stream). Memory is one line buffer.
 #[derive(Debug)]
 pub struct Records<R: BufRead> {
-    input: R,
-    line_no: u64,
-    buf: Vec<u8>,
-    done: bool,
-    malformed: u64,
+    reader: TraceReader<R>,
 }
 
 impl<R: BufRead> Records<R> {
     /// Records of `input`.
     pub fn new(input: R) -> Self {
         Self {
-            input,
-            line_no: 0,
-            buf: Vec::with_capacity(128),
-            done: false,
-            malformed: 0,
+            reader: TraceReader::new(input, ReadMode::Report),
         }
     }
 
     /// Lines read so far (including empty and malformed ones).
     pub fn lines_read(&self) -> u64 {
-        self.line_no
+        self.reader.lines_read()
     }
 
     /// Malformed (including truncated) lines seen so far.
     pub fn malformed(&self) -> u64 {
-        self.malformed
+        self.reader.skipped()
     }
 }
 
@@ -79,55 +69,7 @@ impl<R: BufRead> Iterator for Records<R> {
     type Item = Result<TraceRecord, TraceError>;
 
     fn next(&mut self) -> Option<Self::Item> {
-        while !self.done {
-            self.buf.clear();
-            match self.input.read_until(b'\n', &mut self.buf) {
-                Ok(0) => {
-                    self.done = true;
-                    return None;
-                }
-                Ok(_) => {}
-                Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
-                Err(source) => {
-                    self.done = true;
-                    return Some(Err(TraceError::Io {
-                        line: self.line_no,
-                        source,
-                    }));
-                }
-            }
-            self.line_no += 1;
-            let complete = self.buf.last() == Some(&b'\n');
-            let parsed = match std::str::from_utf8(&self.buf) {
-                Ok(text) => {
-                    let text = text.trim_end_matches(['\n', '\r']);
-                    if text.trim().is_empty() {
-                        continue;
-                    }
-                    parse_line(text)
-                }
-                Err(_) => Err(LineError::NotUtf8),
-            };
-            return Some(match parsed {
-                Ok(rec) => Ok(rec),
-                Err(kind) => {
-                    self.malformed += 1;
-                    if complete {
-                        Err(TraceError::Malformed {
-                            line: self.line_no,
-                            kind,
-                        })
-                    } else {
-                        self.done = true;
-                        Err(TraceError::Truncated {
-                            line: self.line_no,
-                            kind,
-                        })
-                    }
-                }
-            });
-        }
-        None
+        self.reader.next()
     }
 }
 

@@ -366,6 +366,9 @@ pub enum ReadMode {
     /// Skip malformed lines and count them ([`TraceReader::skipped`]). A truncated last line is
     /// still reported, as the final item.
     Skip,
+    /// Yield every malformed line as an error with its line number and carry on after it (counted
+    /// as in [`ReadMode::Skip`]). A truncated last line is reported, as the final item.
+    Report,
 }
 
 /// A streaming reader over a `candump -L` log: an iterator of records, with memory independent of the
@@ -393,7 +396,7 @@ impl<R: BufRead> TraceReader<R> {
         }
     }
 
-    /// Malformed lines skipped so far ([`ReadMode::Skip`]).
+    /// Malformed lines so far, a truncated last line included ([`ReadMode::Skip`], [`ReadMode::Report`]).
     pub fn skipped(&self) -> u64 {
         self.skipped
     }
@@ -457,6 +460,13 @@ impl<R: BufRead> Iterator for TraceReader<R> {
                     ReadMode::Skip => {
                         self.skipped += 1;
                         tracing::debug!(line = self.line_no, %kind, "skipping malformed trace line");
+                    }
+                    ReadMode::Report => {
+                        self.skipped += 1;
+                        return Some(Err(TraceError::Malformed {
+                            line: self.line_no,
+                            kind,
+                        }));
                     }
                 },
             }
@@ -553,6 +563,17 @@ mod tests {
         let mut skip = TraceReader::new(text.as_bytes(), ReadMode::Skip);
         assert_eq!(skip.by_ref().filter(|r| r.is_ok()).count(), 2);
         assert_eq!(skip.skipped(), 1);
+
+        let report: Vec<_> = TraceReader::new(text.as_bytes(), ReadMode::Report).collect();
+        assert_eq!(report.len(), 3);
+        assert!(report[0].is_ok() && report[2].is_ok());
+        assert!(matches!(
+            report[1],
+            Err(TraceError::Malformed {
+                line: 2,
+                kind: LineError::Timestamp
+            })
+        ));
     }
 
     #[test]
