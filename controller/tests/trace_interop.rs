@@ -44,8 +44,8 @@ fn fixture(dir: &Path, frames: u64) -> PathBuf {
     path
 }
 
-/// The decoded part of each line (after `::`), which does not depend on the time or interface.
-fn decoded_bodies(path: &Path) -> Vec<String> {
+/// `trace decode` of the log at `path` (all messages, with signal values), as text.
+fn decoded_text(path: &Path) -> String {
     let input = std::io::BufReader::new(std::fs::File::open(path).unwrap());
     let mut out = Vec::new();
     decode::decode_stream(
@@ -57,8 +57,12 @@ fn decoded_bodies(path: &Path) -> Vec<String> {
         false,
     )
     .unwrap();
-    String::from_utf8(out)
-        .unwrap()
+    String::from_utf8(out).unwrap()
+}
+
+/// The decoded part of each line (after `::`), which does not depend on the time or interface.
+fn decoded_bodies(path: &Path) -> Vec<String> {
+    decoded_text(path)
         .lines()
         .map(|l| l.split_once(" :: ").unwrap().1.to_string())
         .collect()
@@ -81,17 +85,7 @@ fn nine_digit_timestamps_decode() {
     let ns_log = dir.path().join("ns.log");
     std::fs::write(&ns_log, ns).unwrap();
     assert_eq!(decoded_bodies(&log), decoded_bodies(&ns_log));
-    let mut out = Vec::new();
-    decode::decode_stream(
-        std::io::BufReader::new(std::fs::File::open(&ns_log).unwrap()),
-        DecodeFilter::default(),
-        true,
-        &mut out,
-        &mut std::io::sink(),
-        false,
-    )
-    .unwrap();
-    let first = String::from_utf8(out).unwrap();
+    let first = decoded_text(&ns_log);
     assert!(first.starts_with("(1700000000.000"), "{first}");
     assert!(
         first
