@@ -1447,6 +1447,17 @@ mod tests {
         assert!(evaluations <= 2, "{evaluations} evaluations");
     }
 
+    /// The scripted run of the side-by-side tests, `(seconds, spools)`: full and partial commands,
+    /// reversals, the crossover, stalls at the end stops and relief (each test then adds its ending).
+    const MIXED_RUN: [(f64, [f64; 4]); 6] = [
+        (1.0, [0.7, -0.5, 0.6, 0.3]),
+        (1.5, [-0.4, 0.9, -0.3, -0.5]),
+        (1.0, [1.0, 0.0, 0.0, 0.4]),
+        (2.5, [0.0, -1.0, -1.0, 0.0]),
+        (0.5, [0.2, 0.3, 1.0, 0.8]),
+        (0.3, [-1.0, 1.0, -1.0, -1.0]),
+    ];
+
     /// Runs `a` and `b` through `script` (seconds, spools) with the same loads and effects and returns
     /// the largest pressure (Pa) and velocity difference over all steps; asserts the end positions
     /// agree within 1e-7.
@@ -1495,15 +1506,7 @@ mod tests {
             internal_leakage: 2e-12,
             ..HydraulicEffects::default()
         };
-        let script: [(f64, [f64; 4]); 7] = [
-            (1.0, [0.7, -0.5, 0.6, 0.3]),
-            (1.5, [-0.4, 0.9, -0.3, -0.5]),
-            (1.0, [1.0, 0.0, 0.0, 0.4]),
-            (2.5, [0.0, -1.0, -1.0, 0.0]),
-            (0.5, [0.2, 0.3, 1.0, 0.8]),
-            (0.3, [-1.0, 1.0, -1.0, -1.0]),
-            (1.0, [0.0; 4]),
-        ];
+        let script: Vec<_> = MIXED_RUN.into_iter().chain([(1.0, [0.0; 4])]).collect();
         let (dp_max, dv_max) = run_side_by_side(&mut fast, &mut exact, &script, &loads, &effects);
         assert!(dp_max < 1.0, "pressures differ by up to {dp_max} Pa");
         assert!(dv_max < 1e-7, "velocities differ by up to {dv_max}");
@@ -1602,16 +1605,10 @@ mod tests {
         newton.closed_form = false;
         let loads = gravity_like_loads();
         let effects = HydraulicEffects::default();
-        let script: [(f64, [f64; 4]); 8] = [
-            (1.0, [0.7, -0.5, 0.6, 0.3]),
-            (1.5, [-0.4, 0.9, -0.3, -0.5]),
-            (1.0, [1.0, 0.0, 0.0, 0.4]),
-            (2.5, [0.0, -1.0, -1.0, 0.0]),
-            (0.5, [0.2, 0.3, 1.0, 0.8]),
-            (0.3, [-1.0, 1.0, -1.0, -1.0]),
-            (0.5, [0.05, -0.08, 0.1, 0.02]),
-            (1.0, [0.0; 4]),
-        ];
+        let script: Vec<_> = MIXED_RUN
+            .into_iter()
+            .chain([(0.5, [0.05, -0.08, 0.1, 0.02]), (1.0, [0.0; 4])])
+            .collect();
         let (dp_max, dv_max) = run_side_by_side(&mut fast, &mut newton, &script, &loads, &effects);
         assert!(dp_max < 10.0, "pressures differ by up to {dp_max} Pa");
         assert!(dv_max < 1e-7, "velocities differ by up to {dv_max}");
