@@ -259,8 +259,8 @@ impl World {
     }
 
     /// Advances the slope relaxation by `dt_s` (called by [`SoilContact::step`] while the edge is
-    /// out of the soil): every [`SLUMP_PERIOD_S`] while cells are dirty, one
-    /// pass of [`Self::relax_slopes`] over them and [`SLUMP_MARGIN_CELLS`] around; the cells it moved
+    /// out of the soil): every `SLUMP_PERIOD_S` while cells are dirty, one
+    /// pass of [`Self::relax_slopes`] over them and `SLUMP_MARGIN_CELLS` around; the cells it moved
     /// stay dirty for the next pass, so a slump spreads and settles over a few passes. Nothing to do
     /// (one branch) when the bench does not slump or nothing was cut.
     pub fn advance_slopes(&mut self, dt_s: f64) {
@@ -291,7 +291,7 @@ impl World {
     /// Angle-of-repose relaxation (avalanching) of the cells `window = [i0, i1, j0, j1]` (inclusive,
     /// clipped to the grid): `sweeps` Gauss-Seidel sweeps over the pairs of 8-connected neighbours
     /// inside the window; where the height difference of a pair exceeds `tan(repose)` times their
-    /// distance, [`SLUMP_RATE`] of half the excess moves from the higher cell to the lower one (half
+    /// distance, `SLUMP_RATE` of half the excess moves from the higher cell to the lower one (half
     /// the excess would leave the pair at the repose slope). Height moves between cells of equal
     /// area, so the terrain's volume is conserved (to rounding). Below the floor of a layered bench
     /// the native ground does not slump (a cell gives material down to the floor at most). Returns
@@ -571,9 +571,9 @@ impl World {
 }
 
 /// One pair of neighbour cells `a`, `b` of the relaxation ([`World::relax_slopes`]): where their
-/// height difference exceeds `limit` (`tan(repose)` times their distance), [`SLUMP_RATE`] of half the
+/// height difference exceeds `limit` (`tan(repose)` times their distance), `SLUMP_RATE` of half the
 /// excess moves from the higher to the lower cell, the higher one not below `floor_m`; moves under
-/// [`SLUMP_MIN_MOVE_M`] are left. Adds both cells to `moved` when material moved.
+/// `SLUMP_MIN_MOVE_M` are left. Adds both cells to `moved` when material moved.
 #[inline]
 fn relax_pair(
     h: &mut [f64],
