@@ -154,6 +154,10 @@ pub struct DemoArgs {
     /// Plot the bench after this many digs (Fig. 55; repeatable; the end of the session always).
     #[arg(long = "bench-after", value_name = "N", default_values_t = [12u32])]
     pub bench_after: Vec<u32>,
+    /// Predefined strategy: plain Autodig (3.1, Dig ending on the fixed beta and Capture on the
+    /// fixed gamma) instead of Autodig with the perception enhancements (3.2).
+    #[arg(long)]
+    pub predefined_plain: bool,
     /// Predefined strategy: the fixed start joints (library callers; overrides `predefined_from`).
     #[arg(skip)]
     pub predefined_joints: Option<JointAngles>,
@@ -179,6 +183,7 @@ impl DemoArgs {
             hardness: None,
             predefined_from: None,
             bench_after: vec![12],
+            predefined_plain: false,
             predefined_joints: None,
         }
     }
@@ -590,6 +595,15 @@ pub fn setup(args: &DemoArgs) -> anyhow::Result<(SimConfig, ControllerConfig, Au
             .cycle
             .carry_boom_rad
             .max(EXTENDED_CARRY_BOOM_DEG.to_radians());
+        if args.strategy == DemoStrategy::Predefined {
+            // Thesis 6.2: the floor detected once and reused "was not implemented for the
+            // predefined excavation sequence": its cleanups detect the floor every time.
+            config.cycle.floor_policy = planner::cleanup::FloorPolicy::DetectEveryTime;
+            if args.predefined_plain {
+                // Plain Autodig (3.1): Dig ends on its fixed beta, Capture on its fixed gamma.
+                config.cycle.perception = false;
+            }
+        }
         let st = &sim.scenario.start;
         config.estimator.initial_pose = MachinePose {
             x_m: st.x_m,
