@@ -19,7 +19,9 @@
 //! **Predefined sequence** (6.2, for comparison): one set of implement joint angles for all digs (the
 //! median of the planner's choices: [`median_joints`]), the swing stepped across the regions from the
 //! spoil side; after one dig in every region a cleanup in every region started at the far reach
-//! (without perception there is no distance to the material); then a fixed 1.3 m track back; repeat.
+//! (without perception there is no distance to the material), each detecting the floor anew (6.2:
+//! the floor reuse "was not implemented for the predefined excavation sequence"); then a fixed 1.3 m
+//! track back; repeat.
 
 use planner::cleanup::CleanupPlan;
 use planner::dig_model::{ActuatorDynamics, DigModel};
