@@ -64,7 +64,12 @@ pub fn magnitudes(c: Candidate) -> [f64; 2] {
         Candidate::ViscousFriction => [2.0e5, 8.0e5],
         Candidate::InternalLeakage => [3.0e-12, 1.0e-11],
         Candidate::PressureSensorOffset => [2.0e5, -8.0e5],
-        Candidate::ResolverOffset => [0.01, -0.04],
+        // Beyond the safety layer's 1 degree tolerance (0.017 rad) a resolver offset stops the machine
+        // at the first stroke end it drives a joint to: the bucket curls to its stop in every Capture
+        // (-0.04 ended the session in the first dig), the boom rises to its top stop (+0.04 would
+        // read 1.054 rad there against a limit of 1.032), so the large case is just inside it
+        // (docs/discrepancy.md, 2026-11-22 resolver offset).
+        Candidate::ResolverOffset => [0.01, -0.015],
         Candidate::SoilCohesion => [10_000.0, 40_000.0],
         Candidate::SoilDensity => [200.0, 600.0],
     }

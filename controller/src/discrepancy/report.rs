@@ -421,8 +421,8 @@ fn dig_svg(
     {
         let root = SVGBackend::with_string(&mut svg, (1200, 1500)).into_drawing_area();
         root.fill(&WHITE).map_err(err)?;
-        let panels = root.split_evenly((N_SIGNALS / 2, 2));
-        for (j, area) in panels.iter().enumerate() {
+        let panels = root.split_evenly((N_SIGNALS.div_ceil(2), 2));
+        for (j, area) in panels.iter().enumerate().take(N_SIGNALS) {
             let sig = Signal::ALL[j];
             let scale = if sig.unit() == "Pa" {
                 1e-6

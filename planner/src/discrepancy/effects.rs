@@ -190,6 +190,8 @@ impl Candidate {
             pumps: hydraulic && self != Candidate::InternalLeakage,
             force,
             soil,
+            // The end-stop angles read the resolvers directly.
+            stops: self == Candidate::ResolverOffset,
         }
     }
 

@@ -55,6 +55,17 @@ const SPOOL_OPEN_SAMPLES: usize = 30;
 const CLAMPED_READING_PA: f64 = 1.0e3;
 /// Margin from the stroke ends where the end stops may carry force, m.
 const STROKE_MARGIN_M: f64 = 0.01;
+/// End-stop relation: a link whose reading is within this of a stroke-limited end of its range may be
+/// at that end stop, rad (the offsets it can see; beyond 1 degree the controller's safety layer
+/// stops the machine at the first stop it reaches, docs/discrepancy.md).
+const STOP_WINDOW_RAD: f64 = 0.05;
+/// End-stop relation: largest resolver rate of a link at rest, rad/s.
+const STOP_REST_RATE_RAD_PER_S: f64 = 0.005;
+/// End-stop relation: the cylinder force beyond the one holding the link against gravity must push
+/// the link towards the end by more than this, N: twice the largest dry friction of the effect
+/// library (50 kN), so a link held by stiction or by oil trapped at a modest pressure short of the
+/// stop is not taken for one at the stop.
+const STOP_PRESS_FORCE_N: f64 = 100_000.0;
 
 /// The predicted signals.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -80,10 +91,14 @@ pub enum Signal {
     SoilForceX,
     /// Soil force on the bucket, vertical (base z), N.
     SoilForceZ,
+    /// End-stop angle: the reading of a link pressed against a stroke end (at rest, the cylinder
+    /// pushing it towards the end far beyond its weight) less the end's angle from the machine
+    /// geometry (Appendix A, the cylinder stroke), rad.
+    StopAngle,
 }
 
 /// Number of signals.
-pub const N_SIGNALS: usize = 10;
+pub const N_SIGNALS: usize = 11;
 
 impl Signal {
     /// Every signal in array order.
@@ -98,6 +113,7 @@ impl Signal {
         Signal::BucketForce,
         Signal::SoilForceX,
         Signal::SoilForceZ,
+        Signal::StopAngle,
     ];
 
     /// Index in signal arrays.
@@ -118,6 +134,7 @@ impl Signal {
             Signal::BucketForce => "bucket_force",
             Signal::SoilForceX => "soil_force_x",
             Signal::SoilForceZ => "soil_force_z",
+            Signal::StopAngle => "stop_angle",
         }
     }
 
@@ -126,6 +143,7 @@ impl Signal {
         match self.index() {
             0..=2 => "m/s",
             3..=4 => "Pa",
+            10 => "rad",
             _ => "N",
         }
     }
@@ -486,7 +504,11 @@ impl PreparedRecord {
         let mut scratch_rec = record.clone();
         if let Ok(v) = std::env::var("RO_ORACLE") {
             let o: f64 = v.parse().unwrap_or(0.0);
-            for s in &mut scratch_rec.samples { for a in &mut s.angles_rad { *a -= o; } }
+            for s in &mut scratch_rec.samples {
+                for a in &mut s.angles_rad {
+                    *a -= o;
+                }
+            }
         }
         let record = &scratch_rec;
         record.validate()?;
@@ -500,6 +522,8 @@ impl PreparedRecord {
         let mut mass = vec![[0.0; 3]; n];
         let mut in_stroke = vec![[false; 3]; n];
         let mut chamber_strokes = vec![None; n];
+        let mut arms_at = vec![[0.0; 3]; n];
+        let stop_angles = Joint::ALL.map(|j| kin.stroke_limited_range(j));
         const D_RAD: f64 = 1e-3;
         for (k, s) in record.samples.iter().enumerate() {
             let q = JointAngles {
@@ -511,6 +535,7 @@ impl PreparedRecord {
                 continue;
             };
             velocity[k] = [0, 1, 2].map(|i| arms[i] * s.rates_rad_per_s[i]);
+            arms_at[k] = [arms[0], arms[1], arms[2]];
             if let Ok(len) = kin.cylinder_lengths(&q) {
                 let len = len.to_vector();
                 chamber_strokes[k] = Some([len[0], len[1], len[2]]);
@@ -678,6 +703,41 @@ impl PreparedRecord {
                     {
                         m[5 + i] = s.head_pa[i] * params.head_area_m2[i]
                             - s.rod_pa[i] * params.rod_area_m2[i]; // Eq. A20
+                    }
+                }
+            }
+            // End stops: a link at rest within STOP_WINDOW_RAD of a stroke-limited end, pressed
+            // towards it by far more than its weight and any dry friction could hold (in free air
+            // or carrying: neither the ground nor the soil holds it), rests at that end, whose
+            // angle the machine geometry fixes; its reading less that angle is the resolver's
+            // offset (end-stop calibration). The bucket rests curled at its stop, the oil behind the
+            // closed spool at 5-32 MPa, for most of every work cycle.
+            if s.load != LoadTag::InSoil && s.stage == super::StageTag::Outside {
+                for i in 0..3 {
+                    if s.rates_rad_per_s[i].abs() >= STOP_REST_RATE_RAD_PER_S
+                        || !gravity_force[k][i].is_finite()
+                    {
+                        continue;
+                    }
+                    let (lo, hi) = stop_angles[i];
+                    let a = s.angles_rad[i];
+                    let toward = if (a - lo).abs() < STOP_WINDOW_RAD {
+                        Some((lo, -1.0))
+                    } else if (a - hi).abs() < STOP_WINDOW_RAD {
+                        Some((hi, 1.0))
+                    } else {
+                        None
+                    };
+                    let Some((end, dir)) = toward else {
+                        continue;
+                    };
+                    // Virtual work: the joint torque of a cylinder force is the force times the
+                    // moment arm (dL/dq).
+                    let excess = s.head_pa[i] * params.head_area_m2[i]
+                        - s.rod_pa[i] * params.rod_area_m2[i]
+                        - gravity_force[k][i];
+                    if excess.abs() > STOP_PRESS_FORCE_N && (excess * arms_at[k][i]) * dir > 0.0 {
+                        m[N_SIGNALS - 1] = a - end;
                     }
                 }
             }
@@ -1158,6 +1218,8 @@ pub struct SignalGroups {
     pub force: bool,
     /// Soil forces.
     pub soil: bool,
+    /// End-stop angles.
+    pub stops: bool,
 }
 
 impl SignalGroups {
@@ -1167,6 +1229,7 @@ impl SignalGroups {
         pumps: true,
         force: true,
         soil: true,
+        stops: true,
     };
 
     /// Whether the group of signal index `s` is among these.
@@ -1175,7 +1238,8 @@ impl SignalGroups {
             0..=2 => self.hydraulic,
             3..=4 => self.pumps,
             5..=7 => self.force,
-            _ => self.soil,
+            8..=9 => self.soil,
+            _ => self.stops,
         }
     }
 }
@@ -1346,6 +1410,10 @@ pub fn replay(
                 o[5 + i] = f + sensor;
             }
         }
+        // End stops: the reading of a link at its stop is the stop's angle plus the offset.
+        if groups.stops && m[N_SIGNALS - 1].is_finite() {
+            o[N_SIGNALS - 1] = resolver;
+        }
         if groups.soil
             && let Some(t) = rec.soil[k]
         {
@@ -1495,5 +1563,98 @@ mod tests {
         // An open orifice is never served from the cache.
         let open = cache.solve(&params, neutral, &meter, 1.0e6);
         assert!((open - pump_pressure(&params, neutral, &meter, 1.0e6)).abs() < 1e-9);
+    }
+}
+
+#[cfg(test)]
+mod stop_tests {
+    use super::*;
+    use crate::discrepancy::{LoadTag, Sample, StageTag};
+
+    /// A record of the bucket resting at its curl stop (readings offset by `offset_rad`), its
+    /// cylinder pressing towards the stop with `press_n` of hydraulic force beyond gravity (negative:
+    /// away from it).
+    fn resting_at_stop(offset_rad: f64, press_n: f64) -> (DigRecord, MachineConfig, GreyBoxParams) {
+        let cfg = MachineConfig::default_machine().unwrap();
+        let params = super::super::AugmentedModel::nominal().unwrap().params;
+        let kin = Kinematics::new(&cfg).unwrap();
+        let (lo, _) = kin.stroke_limited_range(Joint::Bucket);
+        let q = JointAngles {
+            boom_rad: 0.5,
+            stick_rad: -1.5,
+            bucket_rad: lo,
+        };
+        let arm = kin.moment_arms(&q).unwrap()[2];
+        let gravity = gravity_forces(&kin, &q).unwrap()[2];
+        // Towards the lower end: the force's torque `F dL/dq` negative.
+        let force = gravity - press_n * arm.signum();
+        // Eq. A20 `p_h A_h - p_r A_r = F`, the other chamber at 0.3 MPa.
+        let (ah, ar, low) = (params.head_area_m2[2], params.rod_area_m2[2], 3.0e5);
+        let (head, rod) = if force >= 0.0 {
+            ((force + low * ar) / ah, low)
+        } else {
+            (low, (low * ah - force) / ar)
+        };
+        let samples = (0..200)
+            .map(|k| Sample {
+                time_s: 0.01 * k as f64,
+                angles_rad: [0.5 + offset_rad, -1.5 + offset_rad, lo + offset_rad],
+                head_pa: [12.0e6, 6.0e6, head],
+                rod_pa: [3.0e5, 3.0e5, rod],
+                pump_pa: [2.0e6, 2.0e6],
+                stage: StageTag::Outside,
+                load: LoadTag::Loaded,
+                ..Sample::default()
+            })
+            .collect();
+        let record = DigRecord {
+            index: 0,
+            samples,
+            section: None,
+            lanes: Vec::new(),
+        };
+        (record, cfg, params)
+    }
+
+    fn stop_signal(rec: &PreparedRecord) -> Vec<f64> {
+        rec.measured
+            .iter()
+            .map(|m| m[Signal::StopAngle.index()])
+            .filter(|v| v.is_finite())
+            .collect()
+    }
+
+    /// A bucket pressed into its curl stop reads the stop's angle plus the resolver offset, for
+    /// either sign of the offset (a reading beyond the stroke-limited range included), and the
+    /// replay with that offset predicts it; a bucket pressed away from the stop, or only with a
+    /// force dry friction could hold, is not at the stop.
+    #[test]
+    fn end_stop_reads_the_resolver_offset() {
+        for offset in [0.012, -0.015, 0.0] {
+            let (record, cfg, params) = resting_at_stop(offset, 250_000.0);
+            let rec = PreparedRecord::new(&record, &cfg, &params).unwrap();
+            let stops = stop_signal(&rec);
+            assert_eq!(stops.len(), 200 - WARMUP_SAMPLES, "offset {offset}");
+            assert!(stops.iter().all(|v| (v - offset).abs() < 1e-9), "{stops:?}");
+            let mut aug = Augmentation::nominal();
+            aug.set(super::super::Candidate::ResolverOffset, offset);
+            let groups = super::super::Candidate::ResolverOffset.groups();
+            assert!(groups.stops && !groups.hydraulic);
+            let mut out = Vec::new();
+            replay(&rec, &params, &aug, SignalGroups::ALL, &mut out);
+            for (m, p) in rec.measured.iter().zip(&out) {
+                let j = Signal::StopAngle.index();
+                if m[j].is_finite() {
+                    assert!((m[j] - p[j]).abs() < 1e-9);
+                } else {
+                    assert!(p[j].is_nan());
+                }
+            }
+        }
+        for press in [-250_000.0, 40_000.0] {
+            let (record, cfg, params) = resting_at_stop(0.01, press);
+            let rec = PreparedRecord::new(&record, &cfg, &params).unwrap();
+            assert!(stop_signal(&rec).is_empty(), "pressing {press} N");
+        }
     }
 }
