@@ -62,9 +62,9 @@ const STOP_WINDOW_RAD: f64 = 0.05;
 /// End-stop relation: largest resolver rate of a link at rest, rad/s.
 const STOP_REST_RATE_RAD_PER_S: f64 = 0.005;
 /// End-stop relation: the cylinder force beyond the one holding the link against gravity must push
-/// the link towards the end by more than this, N: twice the largest dry friction of the effect
-/// library (50 kN), so a link held by stiction or by oil trapped at a modest pressure short of the
-/// stop is not taken for one at the stop.
+/// the link towards the end by more than this, N, plus what the heaviest payload could take: twice
+/// the largest dry friction of the effect library (50 kN), so a link held by stiction or by oil
+/// trapped at a modest pressure short of the stop is not taken for one at the stop.
 const STOP_PRESS_FORCE_N: f64 = 100_000.0;
 
 /// The predicted signals.
@@ -523,6 +523,11 @@ impl PreparedRecord {
         let mut in_stroke = vec![[false; 3]; n];
         let mut chamber_strokes = vec![None; n];
         let mut arms_at = vec![[0.0; 3]; n];
+        // The cylinder forces a full bucket of the model's soil adds (the payload is unknown outside
+        // the soil: a loaded boom held up short of its top stop needs about 250 kN more than the
+        // empty links, which is no push into the stop).
+        let mut payload_force = vec![[f64::NAN; 3]; n];
+        let full_payload_kg = cfg.bucket.capacity_m3 * params.soil.density_kg_per_m3;
         let stop_angles = Joint::ALL.map(|j| kin.stroke_limited_range(j));
         const D_RAD: f64 = 1e-3;
         for (k, s) in record.samples.iter().enumerate() {
@@ -546,6 +551,11 @@ impl PreparedRecord {
             }
             if let Some(g) = gravity_forces(&kin, &q) {
                 gravity_force[k] = g;
+                if let Ok(f) =
+                    kin.cylinder_forces_from_tip_force(&q, &TipForce::default(), full_payload_kg)
+                {
+                    payload_force[k] = [0, 1, 2].map(|i| f[i] - g[i]);
+                }
                 // The true angles are the readings minus the offset: dF/d(offset) = -dF/dq.
                 let shifted = JointAngles {
                     boom_rad: q.boom_rad - D_RAD,
@@ -716,6 +726,7 @@ impl PreparedRecord {
                 for i in 0..3 {
                     if s.rates_rad_per_s[i].abs() >= STOP_REST_RATE_RAD_PER_S
                         || !gravity_force[k][i].is_finite()
+                        || !payload_force[k][i].is_finite()
                     {
                         continue;
                     }
@@ -736,7 +747,11 @@ impl PreparedRecord {
                     let excess = s.head_pa[i] * params.head_area_m2[i]
                         - s.rod_pa[i] * params.rod_area_m2[i]
                         - gravity_force[k][i];
-                    if excess.abs() > STOP_PRESS_FORCE_N && (excess * arms_at[k][i]) * dir > 0.0 {
+                    // Both in the direction of the end (`sign(dL/dq) dir` positive); a payload
+                    // held in that direction could be what the cylinder pushes against.
+                    let towards = arms_at[k][i].signum() * dir;
+                    let payload = (payload_force[k][i] * towards).max(0.0);
+                    if excess * towards > STOP_PRESS_FORCE_N + payload {
                         m[N_SIGNALS - 1] = a - end;
                     }
                 }
@@ -1627,7 +1642,7 @@ mod stop_tests {
     /// A bucket pressed into its curl stop reads the stop's angle plus the resolver offset, for
     /// either sign of the offset (a reading beyond the stroke-limited range included), and the
     /// replay with that offset predicts it; a bucket pressed away from the stop, or only with a
-    /// force dry friction could hold, is not at the stop.
+    /// force dry friction or a full bucket's payload could take, is not at the stop.
     #[test]
     fn end_stop_reads_the_resolver_offset() {
         for offset in [0.012, -0.015, 0.0] {
@@ -1639,7 +1654,7 @@ mod stop_tests {
             let mut aug = Augmentation::nominal();
             aug.set(super::super::Candidate::ResolverOffset, offset);
             let groups = super::super::Candidate::ResolverOffset.groups();
-            assert!(groups.stops && !groups.hydraulic);
+            assert!(groups.stops && !groups.hydraulic && !groups.force);
             let mut out = Vec::new();
             replay(&rec, &params, &aug, SignalGroups::ALL, &mut out);
             for (m, p) in rec.measured.iter().zip(&out) {
@@ -1651,7 +1666,8 @@ mod stop_tests {
                 }
             }
         }
-        for press in [-250_000.0, 40_000.0] {
+        // Away from the stop; within dry friction; within what holding a full bucket needs.
+        for press in [-250_000.0, 40_000.0, 150_000.0] {
             let (record, cfg, params) = resting_at_stop(0.01, press);
             let rec = PreparedRecord::new(&record, &cfg, &params).unwrap();
             assert!(stop_signal(&rec).is_empty(), "pressing {press} N");
