@@ -219,11 +219,22 @@ pub fn scan_section(
     scan_section_beside(scan, machine, plane_azimuth_rad, 0.0, SECTION_HALF_WIDTH_M)
 }
 
-/// Lateral offsets of the lanes beside the digging plane (each side), m: the terrain a full
-/// bucket's spill spreads over (planner::discrepancy::soil_replay::SPILL_REACH_M).
-const LANE_OFFSETS_M: [f64; 4] = [1.0, 1.5, 2.0, 2.5];
-/// Half width of a lane, m.
-const LANE_HALF_WIDTH_M: f64 = 0.25;
+/// Lanes beside the digging plane (each side): lateral offset and the half width of the band of
+/// scan points each is made of, m. Across the bucket width every 0.25 m: the ground the edge cuts is
+/// not the section's all across (the trench of a neighbouring or earlier dig, an earlier dig's spill
+/// pile along its own plane), and taking the section across the width cut 0.1-0.5 m^3 more per dig
+/// than the simulator did (effect-free session none_s200, docs/discrepancy.md, 2026-11-22 soil
+/// effects). Beyond it, out to the reach of a full bucket's spill
+/// (planner::discrepancy::soil_replay::SPILL_REACH_M), every 0.5 m.
+pub const LANES_M: [(f64, f64); 7] = [
+    (0.25, 0.125),
+    (0.5, 0.125),
+    (0.75, 0.125),
+    (1.0, 0.25),
+    (1.5, 0.25),
+    (2.0, 0.25),
+    (2.5, 0.25),
+];
 
 /// As [`scan_section`], for the points within `half_width_m` of the line parallel to the digging
 /// plane at `lateral_m` (left positive).
@@ -344,12 +355,11 @@ pub fn read_session(dir: &Path, machine: &MachineConfig) -> anyhow::Result<Vec<D
                 let base_heading = s.sensor.heading_rad - swing.unwrap_or(dig_swing);
                 let azimuth = base_heading + dig_swing;
                 r.section = scan_section(s, machine, azimuth);
-                r.lanes = LANE_OFFSETS_M
+                r.lanes = LANES_M
                     .iter()
-                    .flat_map(|o| [*o, -*o])
-                    .filter_map(|o| {
-                        scan_section_beside(s, machine, azimuth, o, LANE_HALF_WIDTH_M)
-                            .map(|l| (o, l))
+                    .flat_map(|&(o, w)| [(o, w), (-o, w)])
+                    .filter_map(|(o, w)| {
+                        scan_section_beside(s, machine, azimuth, o, w).map(|l| (o, l))
                     })
                     .collect();
             }

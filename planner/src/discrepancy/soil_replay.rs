@@ -35,10 +35,11 @@ pub const SLOPE_HALF_BASE_M: f64 = 0.25;
 /// Half the width of the local grid across the digging plane, m: the reach of a spill pile.
 pub const SPILL_REACH_M: f64 = 2.5;
 /// Lateral distance from the plane beyond which the grid takes the terrain from the lanes beside the
-/// section ([`CutSection::new`]), m.
-pub const LANE_FROM_M: f64 = 0.75;
-/// Spacing of the lanes, m.
-pub const LANE_SPACING_M: f64 = 0.5;
+/// section ([`CutSection::new`]), m: half the spacing of the lanes across the bucket width (0.25 m).
+pub const LANE_FROM_M: f64 = 0.125;
+/// Largest lateral distance from a lane at which the grid takes its terrain (half the spacing of the
+/// outer lanes), m; farther from every lane, the section's.
+pub const LANE_REACH_M: f64 = 0.25;
 /// Out of the soil the bucket holds `capacity x clamp((opening_up + RETENTION_OFFSET) /
 /// RETENTION_SPAN)`, `opening_up` the sine of the opening's elevation: full while the opening
 /// faces up to 30 degrees below the horizontal, empty when it faces down 30 degrees past it.
@@ -90,8 +91,9 @@ impl CutSection {
         let nx = ((section.r_end_m() - section.r_start_m()) / step).round() as usize + 1;
         let ny = 2 * (SPILL_REACH_M / step).round() as usize + 1;
         let origin = [section.r_start_m() - 0.5 * step, -(ny as f64) * 0.5 * step];
-        // The section within the bucket's cut (and up to half a lane spacing beyond), the nearest
-        // lane beside it where the scan saw the ground there, else the section.
+        // The section on the plane (within half a lane spacing), elsewhere the nearest lane where the
+        // scan saw the ground there, else the section: the ground across the bucket width is not the
+        // section's all across (a neighbouring dig's trench, an earlier spill pile).
         let grid = TerrainGrid::from_fn(origin[0], origin[1], step, nx.max(2), ny, |r, y| {
             let centre = section
                 .height_at(r.min(section.r_end_m()))
@@ -101,7 +103,7 @@ impl CutSection {
             }
             lanes
                 .iter()
-                .filter(|(o, _)| (o - y).abs() <= LANE_SPACING_M * 0.5 + 1e-9)
+                .filter(|(o, _)| (o - y).abs() <= LANE_REACH_M + 1e-9)
                 .min_by(|a, b| (a.0 - y).abs().total_cmp(&(b.0 - y).abs()))
                 .and_then(|(_, l)| l.height_at(r).ok())
                 .unwrap_or(centre)
@@ -332,6 +334,28 @@ mod tests {
         drag(&mut s, 8.0, 6.0, 0.7);
         assert!((s.removed_m3() - v).abs() < 1e-12);
         assert!(s.height_at(20.0).is_none());
+    }
+
+    #[test]
+    fn lanes_across_the_bucket_width_set_the_ground_the_edge_cuts() {
+        // The section at 1.0 m; 0.5 m beside the plane (each side) a neighbouring trench already
+        // cut to 0.7 m, 0.25 m beside it the ground at 1.0 m.
+        let lanes = [
+            (0.25, flat(1.0)),
+            (-0.25, flat(1.0)),
+            (0.5, flat(0.7)),
+            (-0.5, flat(0.7)),
+        ];
+        let mut s = CutSection::new(&flat(1.0), &lanes, 1.3, 10.0, 0.65).expect("grid");
+        drag(&mut s, 8.0, 6.0, 0.7);
+        // The 13 grid rows across the 1.3 m width: the seven within 0.3 m of the plane hold 0.3 m
+        // above the edge, the six beyond (nearest the 0.5 m lanes) nothing.
+        let v = s.removed_m3();
+        assert!((v - 7.0 * 0.1 * 2.0 * 0.3).abs() < 0.05, "{v}");
+        // Without the lanes the section stands for the whole width.
+        let mut flat_all = CutSection::new(&flat(1.0), &[], 1.3, 10.0, 0.65).expect("grid");
+        drag(&mut flat_all, 8.0, 6.0, 0.7);
+        assert!(flat_all.removed_m3() > v + 0.3, "{}", flat_all.removed_m3());
     }
 
     #[test]
