@@ -501,16 +501,6 @@ impl PreparedRecord {
     /// # Errors
     /// [`DiscrepancyError`] when the record is invalid or the machine geometry cannot be built.
     pub fn new(record: &DigRecord, cfg: &MachineConfig, params: &GreyBoxParams) -> Result<Self> {
-        let mut scratch_rec = record.clone();
-        if let Ok(v) = std::env::var("RO_ORACLE") {
-            let o: f64 = v.parse().unwrap_or(0.0);
-            for s in &mut scratch_rec.samples {
-                for a in &mut s.angles_rad {
-                    *a -= o;
-                }
-            }
-        }
-        let record = &scratch_rec;
         record.validate()?;
         params.validate()?;
         let kin = Kinematics::new(cfg)?;
