@@ -37,6 +37,7 @@ use planner::cleanup::{
     HandOverReason,
 };
 use planner::kinematics::{BucketPose, Joint, JointAngles, Kinematics, wrap_angle};
+use planner::machine::GRAVITY_M_PER_S2;
 use planner::terrain::{SectionProfile, SweptVolume, TerrainError, TerrainGrid};
 use serde::{Deserialize, Serialize};
 
@@ -603,6 +604,9 @@ struct DigRecord {
     last_lengths_m: Option<[f64; 3]>,
     last_s: Option<f64>,
     weigh: WeighAverage,
+    /// Weigh found the implement supported: lifts so far and the boom angle of the current lift.
+    weigh_lifts: u32,
+    weigh_lift_to_rad: Option<f64>,
 }
 
 /// Weigh: deviations of the payload estimate from its running mean smaller than this do not count as a
@@ -611,6 +615,19 @@ const WEIGH_DEADBAND_N: f64 = 1_000.0;
 /// Weigh: how long past `weigh_settle_s + weigh_window_s` to wait for the end of a whole oscillation
 /// period before falling back to the plain mean, s (two periods of the default machine's 2 Hz).
 const WEIGH_MAX_EXTRA_S: f64 = 1.0;
+/// Weigh: a payload estimate below minus this is not a payload but a bucket the ground carries (a dig
+/// or cleanup that ended with the bucket resting on the soil: the boom cylinder then holds less than
+/// the empty implement's weight, seen as -2500 to -4800 kg in 100-dig sessions), kg. The boom lifts
+/// [`WEIGH_LIFT_RAD`] and the weighing starts over, at most [`WEIGH_MAX_LIFTS`] times; after that the
+/// weight is reported unknown.
+const WEIGH_SUPPORTED_KG: f64 = 300.0;
+/// Weigh: the boom lift that takes a supported bucket off the ground, rad (about 8.6 deg: 0.5-0.8 m
+/// at the tip on the default machine).
+const WEIGH_LIFT_RAD: f64 = 0.15;
+/// Weigh: lifts before the weight is reported unknown.
+const WEIGH_MAX_LIFTS: u32 = 2;
+/// Weigh: a lift that takes longer ends anyway (a boom against its stop or stalled), s.
+const WEIGH_LIFT_MAX_S: f64 = 3.0;
 
 /// The payload estimate averaged over whole periods of the implement's oscillation (Weigh).
 ///
@@ -1421,6 +1438,8 @@ impl WorkCycle {
             last_lengths_m: None,
             last_s: None,
             weigh: WeighAverage::default(),
+            weigh_lifts: 0,
+            weigh_lift_to_rad: None,
         });
         match action {
             Action::Cleanup { plan, .. } => {
@@ -1589,6 +1608,27 @@ impl WorkCycle {
     }
 
     fn step_weigh(&mut self, now_s: f64, est: &Estimator) -> CycleCommand {
+        let s = est.state();
+        // Lifting a bucket the ground carried (below): full boom lift until the target angle or
+        // the time limit, then the weighing starts over (settle, window).
+        if let Some(r) = &mut self.record
+            && let Some(target) = r.weigh_lift_to_rad
+        {
+            if s.joints.boom_rad < target && now_s - self.phase_since_s < WEIGH_LIFT_MAX_S {
+                return CycleCommand::Valves([
+                    self.config.joint.max_command,
+                    0.0,
+                    0.0,
+                    0.0,
+                    0.0,
+                    0.0,
+                ]);
+            }
+            r.weigh_lift_to_rad = None;
+            r.weigh = WeighAverage::default();
+            self.phase_since_s = now_s;
+            return CycleCommand::Neutral;
+        }
         let elapsed = now_s - self.phase_since_s;
         let settle = self.config.weigh_settle_s;
         if elapsed >= settle {
@@ -1603,8 +1643,42 @@ impl WorkCycle {
                 if let Some(r) = &mut self.record
                     && let Some(w) = r.weigh.mean_n(boundary)
                 {
-                    r.stats.weight_n = Some(w);
+                    if w < -WEIGH_SUPPORTED_KG * GRAVITY_M_PER_S2 {
+                        if r.weigh_lifts < WEIGH_MAX_LIFTS {
+                            r.weigh_lifts += 1;
+                            r.weigh_lift_to_rad = Some(s.joints.boom_rad + WEIGH_LIFT_RAD);
+                            tracing::info!(
+                                weight_n = w,
+                                lift = r.weigh_lifts,
+                                "weigh: the ground carries the bucket; lifting and weighing again"
+                            );
+                            self.phase_since_s = now_s;
+                            return CycleCommand::Valves([
+                                self.config.joint.max_command,
+                                0.0,
+                                0.0,
+                                0.0,
+                                0.0,
+                                0.0,
+                            ]);
+                        }
+                        tracing::warn!(
+                            weight_n = w,
+                            "weigh: still supported after lifting; weight unknown"
+                        );
+                        r.stats.weight_n = None;
+                    } else {
+                        r.stats.weight_n = Some(w);
+                    }
                 }
+                tracing::debug!(
+                    weight_n = ?self.record.as_ref().and_then(|r| r.stats.weight_n),
+                    joints = ?s.joints,
+                    extension = ?s.extension_fraction,
+                    torque_nm = ?s.joint_torque_nm,
+                    tip_z_m = s.tip.z_m,
+                    "weighed"
+                );
                 self.set_phase(Phase::SwingToDump, now_s);
             }
         }
@@ -1840,6 +1914,10 @@ mod tests {
     }
 
     fn feed(e: &mut Estimator, q: [f64; 4], odo: f64, t: f64) {
+        feed_pressures(e, q, odo, t, 8e6, 1e6);
+    }
+
+    fn feed_pressures(e: &mut Estimator, q: [f64; 4], odo: f64, t: f64, head_pa: f64, rod_pa: f64) {
         e.on_message(
             &Message::JointAngles(firmware_bridge::messages::JointAngles {
                 boom_rad: q[0],
@@ -1863,8 +1941,8 @@ mod tests {
                     cylinder: c,
                     flow_percent: 0.0,
                     state: ValveState::Block,
-                    head_pressure_pa: 8e6,
-                    rod_pressure_pa: 1e6,
+                    head_pressure_pa: head_pa,
+                    rod_pressure_pa: rod_pa,
                 }),
                 t,
             );
@@ -2011,8 +2089,7 @@ mod tests {
         assert_eq!(a.mean_n(false), Some(20_000.0));
     }
 
-    #[test]
-    fn weighing_averages_the_static_payload_estimate() {
+    fn weighing_cycle() -> WorkCycle {
         let mut c = cycle(CycleConfig::default());
         c.phase = Phase::Weigh;
         c.phase_since_s = 0.0;
@@ -2035,17 +2112,65 @@ mod tests {
             last_lengths_m: None,
             last_s: None,
             weigh: WeighAverage::default(),
+            weigh_lifts: 0,
+            weigh_lift_to_rad: None,
         });
-        let e = est_at([0.3, -1.6, -0.9, 0.0], 0.0, 0.0);
+        c
+    }
+
+    fn est_with_head(head_pa: f64) -> Estimator {
+        let (k, m) = kin();
+        let mut e = Estimator::new(k, m.tracks.gauge_m, EstimatorConfig::default());
+        feed_pressures(&mut e, [0.3, -1.6, -0.9, 0.0], 0.0, 0.0, head_pa, 1e6);
+        e
+    }
+
+    #[test]
+    fn weighing_averages_the_static_payload_estimate() {
+        let mut c = weighing_cycle();
+        // 16 MPa in every head at this pose: about 840 kg in the bucket.
+        let e = est_with_head(16e6);
         let expect = e.payload_weight_n().unwrap();
+        assert!(expect > 0.0, "{expect}");
         let mut t = 0.0;
         while c.phase() == Phase::Weigh && t < 3.0 {
-            c.step(t, &e, Some(ArmMode::Valve)).unwrap();
+            let out = c.step(t, &e, Some(ArmMode::Valve)).unwrap();
+            assert!(matches!(out.command, CycleCommand::Neutral), "{out:?}");
             t += 0.01;
         }
         assert_eq!(c.phase(), Phase::SwingToDump);
         let w = c.record.unwrap().stats.weight_n.unwrap();
         assert!((w - expect).abs() < 1e-6);
+    }
+
+    /// A bucket the ground carries weighs less than nothing: the boom lifts and the weighing starts
+    /// over; still supported after the last lift, the weight is reported unknown, not negative.
+    #[test]
+    fn weighing_lifts_a_supported_bucket_and_never_reports_a_negative_payload() {
+        let mut c = weighing_cycle();
+        // 2 MPa in every head: the boom holds less than the empty implement (about -2300 kg).
+        let e = est_with_head(2e6);
+        assert!(e.payload_estimate_kg().unwrap() < -WEIGH_SUPPORTED_KG);
+        let (mut t, mut lift_steps) = (0.0, 0);
+        while c.phase() == Phase::Weigh && t < 30.0 {
+            let out = c.step(t, &e, Some(ArmMode::Valve)).unwrap();
+            if let CycleCommand::Valves(v) = out.command {
+                assert!(v[0] > 0.0 && v[1..].iter().all(|x| *x == 0.0), "{v:?}");
+                lift_steps += 1;
+            }
+            t += 0.01;
+        }
+        assert_eq!(c.phase(), Phase::SwingToDump);
+        let r = c.record.unwrap();
+        assert_eq!(r.weigh_lifts, WEIGH_MAX_LIFTS);
+        // The boom never reaches the lift target here (the estimator does not move), so each lift
+        // ends on its time limit.
+        let expect_steps = f64::from(WEIGH_MAX_LIFTS) * WEIGH_LIFT_MAX_S / 0.01;
+        assert!(
+            (f64::from(lift_steps) - expect_steps).abs() <= 4.0,
+            "{lift_steps}"
+        );
+        assert_eq!(r.stats.weight_n, None);
     }
 
     #[test]
