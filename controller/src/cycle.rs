@@ -1609,20 +1609,14 @@ impl WorkCycle {
 
     fn step_weigh(&mut self, now_s: f64, est: &Estimator) -> CycleCommand {
         let s = est.state();
+        let lift = CycleCommand::Valves([self.config.joint.max_command, 0.0, 0.0, 0.0, 0.0, 0.0]);
         // Lifting a bucket the ground carried (below): full boom lift until the target angle or
         // the time limit, then the weighing starts over (settle, window).
         if let Some(r) = &mut self.record
             && let Some(target) = r.weigh_lift_to_rad
         {
             if s.joints.boom_rad < target && now_s - self.phase_since_s < WEIGH_LIFT_MAX_S {
-                return CycleCommand::Valves([
-                    self.config.joint.max_command,
-                    0.0,
-                    0.0,
-                    0.0,
-                    0.0,
-                    0.0,
-                ]);
+                return lift;
             }
             r.weigh_lift_to_rad = None;
             r.weigh = WeighAverage::default();
@@ -1653,14 +1647,7 @@ impl WorkCycle {
                                 "weigh: the ground carries the bucket; lifting and weighing again"
                             );
                             self.phase_since_s = now_s;
-                            return CycleCommand::Valves([
-                                self.config.joint.max_command,
-                                0.0,
-                                0.0,
-                                0.0,
-                                0.0,
-                                0.0,
-                            ]);
+                            return lift;
                         }
                         tracing::warn!(
                             weight_n = w,
