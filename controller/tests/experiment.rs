@@ -65,6 +65,7 @@ fn fig52_report_prints_the_thesis_comparison() {
         planner: None,
         maps: None,
         base_scale: controller::experiment::TABLE2_BASE_SCALE,
+        scaling: controller::experiment::Table2Scaling::Soil,
     })
     .unwrap();
     assert!(

@@ -163,6 +163,8 @@ pub struct Plant {
     link: LinkageState,
     link_stale: bool,
     soil_force: TipForce,
+    /// [`Scenario::soil_force_factor`] (1 when absent).
+    soil_force_factor: f64,
     sensors: Sensors,
     time_s: f64,
     steps: u64,
@@ -242,6 +244,7 @@ impl Plant {
             link,
             link_stale: false,
             soil_force: TipForce::default(),
+            soil_force_factor: scenario.soil_force_factor.unwrap_or(1.0),
             sensors: Sensors::new(SensorSpec::default(), scenario.seed),
             time_s: 0.0,
             steps: 0,
@@ -402,7 +405,13 @@ impl Plant {
             cohesion_pa: fx.get(Effect::SoilCohesion),
             density_kg_per_m3: fx.get(Effect::SoilDensity),
         };
-        self.soil_force = self.contact.step(&mut self.world, &input, dt, &soil_fx);
+        let f = self.contact.step(&mut self.world, &input, dt, &soil_fx);
+        let k = self.soil_force_factor;
+        self.soil_force = TipForce {
+            fx_n: k * f.fx_n,
+            fz_n: k * f.fz_n,
+            my_nm: k * f.my_nm,
+        };
     }
 
     /// Advances the machine by one physics step [`PHYSICS_DT_S`] with the valve commands
@@ -567,6 +576,40 @@ mod tests {
             effects,
         )
         .unwrap()
+    }
+
+    /// Table 2's force factor scales the soil's force on the bucket: the two machines move alike
+    /// until the bucket first touches the soil, and then the force of one is twice the other's.
+    #[test]
+    fn soil_force_factor_scales_the_force_on_the_bucket() {
+        let mut scenario = Scenario::default_bench().unwrap();
+        let machine = MachineConfig::default_machine().unwrap();
+        let mut one = Plant::new(&machine, &scenario, EffectSet::nominal()).unwrap();
+        scenario.soil_force_factor = Some(2.0);
+        scenario.validate().unwrap();
+        let mut two = Plant::new(&machine, &scenario, EffectSet::nominal()).unwrap();
+        let mut touched = false;
+        for _ in 0..(20.0 / PHYSICS_DT_S) as usize {
+            // Boom down, stick out: the bucket comes down onto the bench.
+            one.step([-0.6, -0.3, 0.0, 0.0, 0.0, 0.0]);
+            two.step([-0.6, -0.3, 0.0, 0.0, 0.0, 0.0]);
+            let (f1, f2) = (one.true_state().soil_force_n, two.true_state().soil_force_n);
+            if f1[0].hypot(f1[1]) > 1.0 {
+                assert!(
+                    (f2[0] - 2.0 * f1[0]).abs() < 1e-6 * f1[0].abs().max(1.0),
+                    "{f1:?} {f2:?}"
+                );
+                assert!(
+                    (f2[1] - 2.0 * f1[1]).abs() < 1e-6 * f1[1].abs().max(1.0),
+                    "{f1:?} {f2:?}"
+                );
+                touched = true;
+                break;
+            }
+        }
+        assert!(touched, "the bucket never reached the soil");
+        scenario.soil_force_factor = Some(-1.0);
+        assert!(scenario.validate().is_err());
     }
 
     #[test]

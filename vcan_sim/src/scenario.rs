@@ -297,6 +297,11 @@ pub struct Scenario {
     pub start: StartPose,
     /// Hidden effects (`name = value`), off when absent.
     pub effects: std::collections::BTreeMap<String, f64>,
+    /// Multiplies the soil's force on the bucket (`soil_force_factor = 2.0`; the cutting force of
+    /// Eq. 17, bearing and boulder contact) without changing the soil itself: what the bucket holds
+    /// weighs the same. Thesis 4.4, Table 2: "the force output of the analytical model was multiplied
+    /// by the force factor". `None` (the default): 1.
+    pub soil_force_factor: Option<f64>,
 }
 
 /// The bundled default scenario (`config/bench.toml`).
@@ -453,6 +458,9 @@ impl Scenario {
                     format!("must be in [{lo}, {hi}], got {v}"),
                 ))
             }
+        }
+        if let Some(k) = self.soil_force_factor {
+            within("soil_force_factor", k, 0.0, 10.0)?;
         }
         fn soil(prefix: &str, s: &SoilSpec) -> std::result::Result<(), (String, String)> {
             within(
