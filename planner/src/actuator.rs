@@ -1856,6 +1856,20 @@ fn train_network(
         params.clone(),
     );
     let mut free_run_epochs = 0;
+    // After every epoch of either phase: count it and tell the caller.
+    let mut report = |phase, epoch, epochs, train_loss, validation_loss| {
+        done += 1;
+        progress(&TrainProgress {
+            joint,
+            phase,
+            epoch,
+            epochs,
+            done,
+            total,
+            train_loss,
+            validation_loss,
+        });
+    };
 
     let mut adam = Adam::new(params.len(), config.learning_rate);
     let mut order: Vec<usize> = (0..train_data.len()).collect();
@@ -1879,19 +1893,13 @@ fn train_network(
         if val < best.0 {
             best = (val, params.clone());
         }
-        done += 1;
-        let phase = TrainPhase::TeacherForcing;
-        let epochs = config.teacher_forcing_epochs;
-        progress(&TrainProgress {
-            joint,
-            phase,
+        report(
+            TrainPhase::TeacherForcing,
             epoch,
-            epochs,
-            done,
-            total,
+            config.teacher_forcing_epochs,
             train_loss,
-            validation_loss: val,
-        });
+            val,
+        );
     }
 
     // Continue from the best free-running weights so far: teacher forcing can end on weights whose
@@ -1947,19 +1955,13 @@ fn train_network(
         }
         let val = free_run(&net, &params, &val_data, config.free_run_loss, &[], None);
         free_run_epochs = epoch;
-        done += 1;
-        let phase = TrainPhase::FreeRun;
-        let epochs = config.free_run_epochs;
-        progress(&TrainProgress {
-            joint,
-            phase,
+        report(
+            TrainPhase::FreeRun,
             epoch,
-            epochs,
-            done,
-            total,
+            config.free_run_epochs,
             train_loss,
-            validation_loss: val,
-        });
+            val,
+        );
         if val < best.0 {
             best = (val, params.clone());
             since_best = 0;
