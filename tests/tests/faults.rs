@@ -35,8 +35,11 @@ const REST_AFTER_FRAMES: usize = 250;
 
 /// Scheduling jitter allowance for one frame's timestamp.
 fn jitter_s() -> f64 {
-    // Measured in the VM at load 8-9: the simulator's loop woke up to 320 ms late.
-    if env::in_vm() { 0.35 } else { 0.03 }
+    // Measured in the VM at load 8-9: the simulator's loop woke up to 320 ms late; with two busy
+    // loops beside the VM the first status after the last heartbeat came 237 ms after it. The
+    // simulation-time bound (the status count) is the exact check; this one only catches a gateway
+    // that faults late on any clock.
+    if env::in_vm() { 0.5 } else { 0.03 }
 }
 
 /// Waits until Autodig is in the soil (Pre-Dig or Dig).
