@@ -8,7 +8,7 @@ use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
-use firmware_bridge::messages::{Activity, AutodigStageCode, Message};
+use firmware_bridge::messages::{Activity, AutodigStageCode, GatewayMode, Message};
 use firmware_bridge::trace::{ReadMode, TraceReader};
 use planner::discrepancy::{DigRecord, LoadTag, Sample, StageTag};
 use planner::machine::MachineConfig;
@@ -74,9 +74,22 @@ fn load_tag(status: &Status) -> LoadTag {
     }
 }
 
+/// Time after the gateway leaves its closed-loop position mode during which the spools still stand
+/// where its position control left them, s: the replay starts every record's spool state at rest and
+/// leaves out its first 0.5 s for the same reason (`planner::discrepancy::greybox`).
+pub const POSITION_MODE_SETTLE_S: f64 = 0.5;
+
 /// Reads `trace.log` into samples tagged with the dig index, one per `JointAngles` frame, with the
 /// latest readings and the commands the controller sent in answer to them (in force until the next
 /// sample).
+///
+/// Samples while the gateway runs its closed-loop position mode (`GatewayStatus` mode
+/// `ArmedPosition`, the controller sending `PositionSetpoint`s: the cleanup) and for
+/// [`POSITION_MODE_SETTLE_S`] after it are left out: the gateway's own position control sets the
+/// spools then, and the bus carries no valve command, so the replay would drive the valves with the
+/// last `AuxValveCommand` (neutral) while the machine moves and the pumps stand at 15-20 MPa
+/// (session soil_cohesion_10000: pump 1 residual 4.4 MPa RMS on those samples against 0.11 MPa on
+/// the rest, docs/discrepancy.md, 2026-11-25).
 ///
 /// # Errors
 /// Opening or reading the file; a trace without controller status frames.
@@ -87,6 +100,8 @@ pub fn read_trace(path: &Path) -> anyhow::Result<Vec<(u16, Sample)>> {
     let mut pending: Option<Sample> = None;
     let mut current = Sample::default();
     let mut status: Option<Status> = None;
+    // Time the gateway was last seen in position mode.
+    let mut position_mode_at = f64::NEG_INFINITY;
     let push =
         |pending: &mut Option<Sample>, out: &mut Vec<(u16, Sample)>, cmd: &Sample, st: &Status| {
             if let Some(mut s) = pending.take() {
@@ -112,6 +127,10 @@ pub fn read_trace(path: &Path) -> anyhow::Result<Vec<(u16, Sample)>> {
             Message::JointAngles(a) => {
                 if let Some(st) = status {
                     push(&mut pending, &mut out, &current, &st);
+                }
+                if t - position_mode_at <= POSITION_MODE_SETTLE_S {
+                    pending = None;
+                    continue;
                 }
                 current.time_s = t;
                 current.angles_rad = [a.boom_rad, a.stick_rad, a.bucket_rad];
@@ -151,6 +170,10 @@ pub fn read_trace(path: &Path) -> anyhow::Result<Vec<(u16, Sample)>> {
                     3 => current.swing_command = c.to_fraction(),
                     _ => {}
                 }
+            }
+            Message::PositionSetpoint(_) => position_mode_at = t,
+            Message::GatewayStatus(g) if g.mode == GatewayMode::ArmedPosition => {
+                position_mode_at = t;
             }
             Message::ControllerStatus(s) => {
                 status = Some(Status {
@@ -411,5 +434,79 @@ mod tests {
         // The trench itself, as a lane beside the plane.
         let lane = scan_section_beside(&scan, &machine, 0.0, 0.42, 0.1).expect("lane");
         assert!((lane.height_at(6.0).expect("on") - 1.0).abs() < 1e-9);
+    }
+
+    /// A cleanup's position-mode phase (gateway `ArmedPosition`, `PositionSetpoint`s, no valve
+    /// commands) from 1.0 to 2.0 s in a 4 s trace: its samples and those of the settling time after
+    /// it are left out, the others kept with their dig index.
+    #[test]
+    fn samples_under_the_gateways_position_mode_are_left_out() {
+        use firmware_bridge::messages::{
+            ControllerStatus, GatewayFaults, GatewayStatus, JointAngles, PositionSetpoint,
+        };
+        use firmware_bridge::trace::{Direction, Recorder};
+
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("trace.log");
+        let rec = Recorder::create(&path, "vcan0").expect("recorder");
+        let put = |t_s: f64, m: Message| {
+            let frame = m.encode().expect("encode");
+            rec.record((t_s * 1e9).round() as u64, Direction::Receive, &frame);
+        };
+        let position = |t_s: f64| (1.0..2.0).contains(&t_s);
+        put(
+            0.0,
+            Message::ControllerStatus(ControllerStatus {
+                activity: Activity::Cleanup,
+                dig_index: 3,
+                ..Default::default()
+            }),
+        );
+        for k in 1..400 {
+            let t = 0.01 * f64::from(k);
+            if k % 5 == 0 {
+                put(
+                    t,
+                    Message::GatewayStatus(GatewayStatus {
+                        mode: if position(t) {
+                            GatewayMode::ArmedPosition
+                        } else {
+                            GatewayMode::ArmedValve
+                        },
+                        faults: GatewayFaults(0),
+                        alive_counter: (k / 5 % 256) as u8,
+                        unexpected_frames: 0,
+                        rejected_frames: 0,
+                    }),
+                );
+            }
+            if position(t) {
+                put(t, Message::PositionSetpoint(PositionSetpoint::default()));
+            }
+            put(
+                t + 0.001,
+                Message::JointAngles(JointAngles {
+                    boom_rad: 0.1,
+                    ..Default::default()
+                }),
+            );
+        }
+        rec.close().expect("close");
+
+        let samples = read_trace(&path).expect("read");
+        let times: Vec<f64> = samples.iter().map(|(_, s)| s.time_s).collect();
+        assert!(samples.iter().all(|(d, _)| *d == 3));
+        // Before the position mode: every angle frame (0.011 .. 0.991 s).
+        assert_eq!(times.iter().filter(|t| **t < 1.0).count(), 99);
+        // Under it and for the settling time after its last status (1.95 s) and setpoint (1.99 s):
+        // nothing.
+        let settled = 1.99 + POSITION_MODE_SETTLE_S;
+        assert!(times.iter().all(|t| *t < 1.0 || *t > settled), "{times:?}");
+        // After it: the rest.
+        assert_eq!(
+            times.iter().filter(|t| **t > settled).count(),
+            times.len() - 99
+        );
+        assert!(times.iter().filter(|t| **t > settled).count() > 100);
     }
 }
