@@ -473,20 +473,45 @@ fn cylinder_masses(
         (&m.stick, cfg.links.stick_m),
         (&m.bucket, cfg.links.bucket_m),
     ];
-    let mut bodies = [(0.0, [0.0, 0.0], 0.0); 3];
+    let mut bodies = [Body::default(); 3];
     for (n, (link, length)) in links.iter().enumerate() {
         let c = [
             joints[n][0] + link.cog_distance_m * (abs[n] + link.cog_angle_rad).cos(),
             joints[n][1] + link.cog_distance_m * (abs[n] + link.cog_angle_rad).sin(),
         ];
-        bodies[n] = (link.mass_kg, c, link.mass_kg * length * length / 12.0);
+        bodies[n] = Body {
+            link: n,
+            mass_kg: link.mass_kg,
+            centroid: c,
+            own_inertia_kg_m2: link.mass_kg * length * length / 12.0,
+        };
     }
-    let mut out = *floor;
+    reflected_masses(*floor, &joints, &bodies, arms)
+}
+
+/// A rigid body carried by a link (`0` boom, `1` stick, `2` bucket) for the inertia sums of Eq. A1.
+#[derive(Debug, Clone, Copy, Default)]
+struct Body {
+    link: usize,
+    mass_kg: f64,
+    centroid: [f64; 2],
+    own_inertia_kg_m2: f64,
+}
+
+/// Reflected mass at each cylinder, kg: the moment of inertia about joint `i` of every body on
+/// link `i` or beyond it (`m d^2 + I_own`, Eq. A1), added to `start_kg_m2`, over the cylinder's
+/// moment arm squared.
+fn reflected_masses(
+    start_kg_m2: [f64; 3],
+    joints: &[[f64; 2]; 3],
+    bodies: &[Body],
+    arms: &Vector3<f64>,
+) -> [f64; 3] {
+    let mut out = start_kg_m2;
     for (i, joint) in joints.iter().enumerate() {
-        for (n, (mass, c, own)) in bodies.iter().enumerate() {
-            if n >= i {
-                out[i] += mass * ((c[0] - joint[0]).powi(2) + (c[1] - joint[1]).powi(2)) + own;
-            }
+        for b in bodies.iter().filter(|b| b.link >= i) {
+            let d2 = (b.centroid[0] - joint[0]).powi(2) + (b.centroid[1] - joint[1]).powi(2);
+            out[i] += b.mass_kg * d2 + b.own_inertia_kg_m2;
         }
     }
     [0, 1, 2].map(|i| out[i] / arms[i].powi(2).max(1e-4))
@@ -848,12 +873,18 @@ const SLOPE_SENSITIVITY_N: f64 = 1.0e4;
 fn payload_reflected_mass_per_kg(kin: &Kinematics, q: &JointAngles) -> Option<[f64; 3]> {
     let arms = kin.moment_arms(q).ok()?;
     let p = kin.linkage_points(q);
-    let joints = [p.boom_foot, p.stick_pin, p.bucket_pin];
-    let c = kin.payload_centroid(q);
-    Some([0, 1, 2].map(|i| {
-        let d2 = (c[0] - joints[i][0]).powi(2) + (c[1] - joints[i][1]).powi(2);
-        (d2 + PAYLOAD_GYRATION_M * PAYLOAD_GYRATION_M) / arms[i].powi(2).max(1e-4)
-    }))
+    let payload = Body {
+        link: 2,
+        mass_kg: 1.0,
+        centroid: kin.payload_centroid(q),
+        own_inertia_kg_m2: PAYLOAD_GYRATION_M * PAYLOAD_GYRATION_M,
+    };
+    Some(reflected_masses(
+        [0.0; 3],
+        &[p.boom_foot, p.stick_pin, p.bucket_pin],
+        &[payload],
+        &arms,
+    ))
 }
 
 /// The soil terms of one sample: the measured tip force (Eqs. A20-A23 from the pressures, less
