@@ -46,6 +46,9 @@ struct Status {
     stage: AutodigStageCode,
     dig_index: u16,
     swept_volume_m3: f64,
+    /// In the work cycle's Weigh: the controller reports `Idle` between the end of a dig (Autodig
+    /// or cleanup) and the swing to the dump of the same dig index.
+    weighing: bool,
 }
 
 fn stage_tag(code: AutodigStageCode) -> StageTag {
@@ -59,6 +62,9 @@ fn stage_tag(code: AutodigStageCode) -> StageTag {
 }
 
 fn load_tag(status: &Status) -> LoadTag {
+    if status.weighing {
+        return LoadTag::Weighing;
+    }
     let stage = stage_tag(status.stage);
     if stage.in_soil() || status.activity == Activity::Cleanup {
         return LoadTag::InSoil;
@@ -176,11 +182,20 @@ pub fn read_trace(path: &Path) -> anyhow::Result<Vec<(u16, Sample)>> {
                 position_mode_at = t;
             }
             Message::ControllerStatus(s) => {
+                // Weigh follows the dig (Autodig, or a cleanup ending in Autodig) of the same index
+                // and shows as Idle until the swing to the dump.
+                let weighing = s.activity == Activity::Idle
+                    && status.is_some_and(|p| {
+                        p.dig_index == s.dig_index
+                            && (p.weighing
+                                || matches!(p.activity, Activity::Dig | Activity::Cleanup))
+                    });
                 status = Some(Status {
                     activity: s.activity,
                     stage: s.stage,
                     dig_index: s.dig_index,
                     swept_volume_m3: s.swept_volume_m3,
+                    weighing,
                 });
             }
             _ => {}
@@ -508,5 +523,78 @@ mod tests {
             times.len() - 99
         );
         assert!(times.iter().filter(|t| **t > settled).count() > 100);
+    }
+
+    /// The work cycle's Weigh shows as `Idle` between a dig and its swing to the dump: those samples
+    /// are tagged `Weighing`; an `Idle` that follows anything else (the start of a session, a swing)
+    /// or comes with the next dig index is not.
+    #[test]
+    fn idle_after_a_dig_of_the_same_index_is_the_weighing() {
+        use firmware_bridge::messages::{ControllerStatus, JointAngles};
+        use firmware_bridge::trace::{Direction, Recorder};
+
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("trace.log");
+        let rec = Recorder::create(&path, "vcan0").expect("recorder");
+        let put = |t_s: f64, m: Message| {
+            let frame = m.encode().expect("encode");
+            rec.record((t_s * 1e9).round() as u64, Direction::Receive, &frame);
+        };
+        // (from, activity, dig index)
+        let phases = [
+            (0.0, Activity::Idle, 0),
+            (1.0, Activity::Dig, 1),
+            (2.0, Activity::Idle, 1),
+            (3.0, Activity::SwingToDump, 1),
+            (4.0, Activity::Idle, 1),
+            (5.0, Activity::Cleanup, 2),
+            (6.0, Activity::Idle, 2),
+            (7.0, Activity::Idle, 3),
+        ];
+        for k in 0..800 {
+            let t = 0.01 * f64::from(k);
+            if k % 10 == 0 {
+                let (_, activity, dig_index) = phases
+                    .iter()
+                    .rev()
+                    .find(|(from, _, _)| *from <= t + 1e-9)
+                    .copied()
+                    .expect("phase");
+                put(
+                    t,
+                    Message::ControllerStatus(ControllerStatus {
+                        activity,
+                        dig_index,
+                        ..Default::default()
+                    }),
+                );
+            }
+            put(t + 0.001, Message::JointAngles(JointAngles::default()));
+        }
+        rec.close().expect("close");
+
+        let samples = read_trace(&path).expect("read");
+        // A sample takes the status in force when its successor arrives (the controller's answer
+        // to it): the last sample before a status change is tagged with the new one.
+        for (d, s) in samples
+            .iter()
+            .filter(|(_, s)| (s.time_s - s.time_s.round()).abs() > 0.02)
+        {
+            let weighing = (2.0..3.0).contains(&s.time_s) || (6.0..7.0).contains(&s.time_s);
+            assert_eq!(
+                s.load == LoadTag::Weighing,
+                weighing,
+                "t = {:.3} s, dig {d}: {:?}",
+                s.time_s,
+                s.load
+            );
+        }
+        assert!(
+            samples
+                .iter()
+                .filter(|(_, s)| s.load == LoadTag::Weighing)
+                .count()
+                > 150
+        );
     }
 }

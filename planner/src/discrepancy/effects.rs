@@ -187,7 +187,15 @@ impl Candidate {
             // offset, the forces of the 40 kPa cohesion session fitted -0.021 rad (dBIC 261).
             Candidate::ResolverOffset => (false, false, false),
             Candidate::PressureSensorOffset => (true, true, false),
-            Candidate::SoilCohesion | Candidate::SoilDensity => (false, false, true),
+            Candidate::SoilCohesion => (false, false, true),
+            // Fitted and scored on the weighed payload alone (the replay of the augmented model
+            // also moves the FEE forces, Eqs. 14-17, and the planner's dig model uses it there): the
+            // payload is the density times the volume in the bucket, which is the capacity for a
+            // full one, to a fraction of a percent (effect-free sessions: means 2545-2557 kg against
+            // 2550 kg); in the soil force relation the replay's terrain left an effect-free bias
+            // like -210 kg/m^3 in x, and in z the FEE and payload-weight terms nearly cancel
+            // (docs/discrepancy.md, 2026-11-25 and 2026-11-26 soil effects).
+            Candidate::SoilDensity => (false, false, false),
         };
         SignalGroups {
             hydraulic,
@@ -198,6 +206,12 @@ impl Candidate {
             soil,
             // The end-stop angles read the resolvers directly.
             stops: self == Candidate::ResolverOffset,
+            // The weighed payload: the soil's density times the volume in the bucket; a pressure
+            // offset shifts the cylinder forces it is weighed from.
+            payload: matches!(
+                self,
+                Candidate::SoilDensity | Candidate::PressureSensorOffset
+            ),
         }
     }
 

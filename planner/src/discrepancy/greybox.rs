@@ -99,10 +99,14 @@ pub enum Signal {
     /// pushing it towards the end far beyond its weight) less the end's angle from the machine
     /// geometry (Appendix A, the cylinder stroke), rad.
     StopAngle,
+    /// Payload mass while the work cycle weighs the bucket (valves neutral, implement held up): the
+    /// static least-squares estimate from the joint torques less the links' gravity (Eqs. A20-A22),
+    /// as the controller weighs, kg.
+    PayloadMass,
 }
 
 /// Number of signals.
-pub const N_SIGNALS: usize = 11;
+pub const N_SIGNALS: usize = 12;
 
 impl Signal {
     /// Every signal in array order.
@@ -118,6 +122,7 @@ impl Signal {
         Signal::SoilForceX,
         Signal::SoilForceZ,
         Signal::StopAngle,
+        Signal::PayloadMass,
     ];
 
     /// Index in signal arrays.
@@ -139,6 +144,7 @@ impl Signal {
             Signal::SoilForceX => "soil_force_x",
             Signal::SoilForceZ => "soil_force_z",
             Signal::StopAngle => "stop_angle",
+            Signal::PayloadMass => "payload_mass",
         }
     }
 
@@ -148,6 +154,7 @@ impl Signal {
             0..=2 => "m/s",
             3..=4 => "Pa",
             10 => "rad",
+            11 => "kg",
             _ => "N",
         }
     }
@@ -432,6 +439,17 @@ pub struct PreparedRecord {
     /// Soil: measured tip force at zero payload `[fx, fz]` and its change per kg of payload, the
     /// payload volume, the FEE force at nominal soil and its change per Pa of cohesion and per kg/m^3.
     soil: Vec<Option<SoilTerms>>,
+    /// Payload: the terms of the weighing samples.
+    payload: Vec<Option<PayloadTerms>>,
+}
+
+/// The payload terms of one weighing sample: what the payload signal is made of.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PayloadTerms {
+    /// Soil in the bucket by the replay (the volume cut, up to the capacity), m^3.
+    pub volume_m3: f64,
+    /// Change of the weighed payload per Pa of a common pressure-sensor offset, kg/Pa.
+    pub per_offset_pa: f64,
 }
 
 /// The soil terms of one sample (base frame `[x, z]`, N): what the soil signals are made of.
@@ -633,6 +651,8 @@ impl PreparedRecord {
         }
         let mut measured = vec![[f64::NAN; N_SIGNALS]; n];
         let mut soil_terms = vec![None; n];
+        let mut payload_terms = vec![None; n];
+        let mut weighing_since = f64::NAN;
         // The section along the digging plane as the edge leaves it (cut in the Autodig stages, when
         // the bucket is in the digging plane), and the tip of the previous sample.
         let mut cut = record.section.as_ref().and_then(|section| {
@@ -784,8 +804,47 @@ impl PreparedRecord {
                     let towards = arms_at[k][i].signum() * dir;
                     let payload = (payload_force[k][i] * towards).max(0.0);
                     if excess * towards > STOP_PRESS_FORCE_N + payload {
-                        m[N_SIGNALS - 1] = a - end;
+                        m[Signal::StopAngle.index()] = a - end;
                     }
+                }
+            }
+            // The payload, weighed as the controller does: valves neutral, the implement held up,
+            // after the settling time, each cylinder away from its stroke ends.
+            if s.load == LoadTag::Weighing {
+                if weighing_since.is_nan() {
+                    weighing_since = s.time_s;
+                }
+            } else {
+                weighing_since = f64::NAN;
+            }
+            let neutral = s
+                .command
+                .iter()
+                .chain([&s.swing_command])
+                .all(|u| u.abs() <= params.overlap);
+            if s.time_s - weighing_since >= WEIGH_SETTLE_S
+                && neutral
+                && let (Some(len), Some(c)) = (chamber_strokes[k], cut.as_ref())
+                && let Some((mass_kg, per_offset_pa)) = weighed_payload(
+                    &kin,
+                    params,
+                    s,
+                    &q,
+                    &arms_at[k],
+                    &len,
+                    &strokes,
+                    (mass[k], weigh_accel(&velocity, &record.samples, k)),
+                )
+            {
+                let volume_m3 = c.content_m3().clamp(0.0, cfg.bucket.capacity_m3);
+                // An empty bucket weighs the pressure noise and the implement's ringing (the
+                // cleanups of the effect-free sessions: -40 +- 180 kg per sample).
+                if volume_m3 >= WEIGH_MIN_FILL * cfg.bucket.capacity_m3 {
+                    m[Signal::PayloadMass.index()] = mass_kg;
+                    payload_terms[k] = Some(PayloadTerms {
+                        volume_m3,
+                        per_offset_pa,
+                    });
                 }
             }
             // The soil signals in the Dig stage: in the PreDig penetration the bearing resistance
@@ -829,6 +888,7 @@ impl PreparedRecord {
             gravity_force_per_rad,
             mass,
             soil: soil_terms,
+            payload: payload_terms,
         })
     }
 
@@ -865,6 +925,81 @@ const SLOPE_TRUST_TAN: f64 = 0.1;
 /// [`SLOPE_TRUST_TAN`] in the slope may make for a sample to enter the soil signals, N: about the
 /// relation's own residual RMS in the Dig stage of the effect-free sessions (8-10 kN).
 const SLOPE_SENSITIVITY_N: f64 = 1.0e4;
+
+/// Time the controller's Weigh lets the implement settle before it averages, s (the work cycle's
+/// `weigh_settle_s` default): the oil columns ring for a while after the valves close.
+const WEIGH_SETTLE_S: f64 = 0.8;
+
+/// Half width of the central difference of the cylinder velocities that gives the accelerations of
+/// the weighing, samples: the implement's oscillation while it is weighed is about 1.5 Hz, which a
+/// difference over +-0.05 s keeps (sin(0.47)/0.47 = 0.96) while it averages out the rate noise that a
+/// one-sample difference amplifies (per-sample payload scatter 116-476 kg against 400 kg with it).
+const WEIGH_ACCEL_HALF_SAMPLES: usize = 5;
+
+/// Cylinder accelerations at sample `k` for the weighing (see [`WEIGH_ACCEL_HALF_SAMPLES`]), m/s^2.
+fn weigh_accel(velocity: &[[f64; 3]], samples: &[super::Sample], k: usize) -> [f64; 3] {
+    let h = WEIGH_ACCEL_HALF_SAMPLES;
+    let (Some(lo), hi) = (k.checked_sub(h), k + h) else {
+        return [0.0; 3];
+    };
+    if hi >= samples.len() {
+        return [0.0; 3];
+    }
+    let dt = samples[hi].time_s - samples[lo].time_s;
+    if dt <= 0.0 {
+        return [0.0; 3];
+    }
+    [0, 1, 2].map(|i| (velocity[hi][i] - velocity[lo][i]) / dt)
+}
+
+/// Smallest bucket fill (fraction of the capacity, by the replay's cut volume) that is weighed.
+const WEIGH_MIN_FILL: f64 = 0.1;
+
+/// Fraction of a cylinder's stroke at either end within which it does not take part in the weighing
+/// (the controller's `weigh_stroke_end_margin`): a cylinder on its end stop carries an unknown force.
+const WEIGH_STROKE_END_MARGIN: f64 = 0.01;
+
+/// The payload estimate of one sample, kg, and its change per Pa of a common pressure offset: the
+/// least-squares mass `m` of `tau - M acc - g0 = m (a + r b acc)` over the cylinders away from their
+/// stroke ends (`tau` the joint torques of the Eq. A20 forces, Eqs. A21-A22; `M acc` the links'
+/// reflected inertia; `g0` the links' gravity torques and `a` the gravity torque per kg of payload at
+/// its centroid, Eq. A19; `r b acc` the payload's own inertia per kg, Eq. A1 with the payload as a
+/// body). The controller weighs statically and averages over whole periods of the implement's
+/// oscillation on its oil columns (about 1.5 Hz, +-40 % of the payload); per sample, the inertia
+/// takes that oscillation out.
+#[allow(clippy::too_many_arguments)]
+fn weighed_payload(
+    kin: &Kinematics,
+    params: &GreyBoxParams,
+    s: &super::Sample,
+    q: &JointAngles,
+    arms: &[f64; 3],
+    len: &[f64; 3],
+    strokes: &[(f64, f64); 3],
+    (mass, accel): ([f64; 3], [f64; 3]),
+) -> Option<(f64, f64)> {
+    let g0 = kin.gravity_torques(q, 0.0);
+    let a = kin.gravity_torques(q, 1.0) - g0;
+    let per_kg = payload_reflected_mass_per_kg(kin, q)?;
+    let (mut num, mut per_pa, mut denom) = (0.0, 0.0, 0.0);
+    for i in 0..3 {
+        let (lo, hi) = strokes[i];
+        let e = (len[i] - lo) / (hi - lo);
+        if e <= WEIGH_STROKE_END_MARGIN || e >= 1.0 - WEIGH_STROKE_END_MARGIN {
+            continue;
+        }
+        let force = s.head_pa[i] * params.head_area_m2[i] - s.rod_pa[i] * params.rod_area_m2[i]; // Eq. A20
+        let b = a[i] + arms[i] * per_kg[i] * accel[i];
+        num += b * (arms[i] * (force - mass[i] * accel[i]) - g0[i]);
+        per_pa += b * arms[i] * (params.head_area_m2[i] - params.rod_area_m2[i]);
+        denom += b * b;
+    }
+    if !(denom.is_finite() && denom > 1e-9) {
+        return None;
+    }
+    let m = num / denom;
+    (m.is_finite() && per_pa.is_finite()).then_some((m, per_pa / denom))
+}
 
 /// Reflected mass of one kilogram of payload at each cylinder, kg/kg: `(d_i^2 + k^2) / r_i^2`, `d_i`
 /// the distance of the payload centroid from joint `i`, `k` its radius of gyration, `r_i` the
@@ -1362,6 +1497,8 @@ pub struct SignalGroups {
     pub soil: bool,
     /// End-stop angles.
     pub stops: bool,
+    /// Payload mass at the weighing.
+    pub payload: bool,
 }
 
 impl SignalGroups {
@@ -1372,6 +1509,7 @@ impl SignalGroups {
         force: true,
         soil: true,
         stops: true,
+        payload: true,
     };
 
     /// Whether the group of signal index `s` is among these.
@@ -1381,7 +1519,8 @@ impl SignalGroups {
             3..=4 => self.pumps,
             5..=7 => self.force,
             8..=9 => self.soil,
-            _ => self.stops,
+            10 => self.stops,
+            _ => self.payload,
         }
     }
 }
@@ -1557,8 +1696,14 @@ pub fn replay(
             }
         }
         // End stops: the reading of a link at its stop is the stop's angle plus the offset.
-        if groups.stops && m[N_SIGNALS - 1].is_finite() {
-            o[N_SIGNALS - 1] = resolver;
+        if groups.payload
+            && let Some(t) = rec.payload[k]
+        {
+            o[Signal::PayloadMass.index()] =
+                t.volume_m3 * (params.soil.density_kg_per_m3 + density) + offset * t.per_offset_pa;
+        }
+        if groups.stops && m[Signal::StopAngle.index()].is_finite() {
+            o[Signal::StopAngle.index()] = resolver;
         }
         if groups.soil
             && let Some(t) = rec.soil[k]
@@ -1876,5 +2021,85 @@ mod stop_tests {
         }
         // The boom carries the payload farthest from its joint: the most inertia per kg.
         assert!(per_kg[0] * arms[0].powi(2) > per_kg[2] * arms[2].powi(2));
+    }
+
+    /// The weighing recovers the payload that set the pressures (the cylinder forces of a held
+    /// payload, Eq. A19, as head or rod pressure), statically and while the implement accelerates
+    /// (the links' and the payload's reflected inertia added to the forces), leaves out a cylinder
+    /// at its stroke end, and its offset term is the estimate's change for a common pressure offset.
+    #[test]
+    fn weighing_recovers_the_held_payload() {
+        let cfg = MachineConfig::default_machine().unwrap();
+        let kin = Kinematics::new(&cfg).unwrap();
+        let params = super::super::AugmentedModel::nominal().unwrap().params;
+        let q = JointAngles {
+            boom_rad: 0.5,
+            stick_rad: -1.2,
+            bucket_rad: -0.6,
+        };
+        let strokes = Joint::ALL.map(|j| kin.stroke(j));
+        let len = kin.cylinder_lengths(&q).unwrap().to_vector();
+        let len = [len[0], len[1], len[2]];
+        let arms = kin.moment_arms(&q).unwrap();
+        let arms = [arms[0], arms[1], arms[2]];
+        let mass = cylinder_masses(
+            &kin,
+            &cfg,
+            &params.inertia_floor_kg_m2,
+            &q,
+            &Vector3::from(arms),
+        );
+        let per_kg = payload_reflected_mass_per_kg(&kin, &q).unwrap();
+        let payload_kg = 2550.0;
+        let sample_for = |accel: [f64; 3], offset_pa: f64| {
+            let held = kin
+                .cylinder_forces_from_tip_force(&q, &TipForce::default(), payload_kg)
+                .unwrap();
+            let mut s = super::super::Sample::default();
+            for i in 0..3 {
+                let f = held[i] + (mass[i] + payload_kg * per_kg[i]) * accel[i];
+                if f >= 0.0 {
+                    s.head_pa[i] = f / params.head_area_m2[i];
+                } else {
+                    s.rod_pa[i] = -f / params.rod_area_m2[i];
+                }
+                s.head_pa[i] += offset_pa;
+                s.rod_pa[i] += offset_pa;
+            }
+            s
+        };
+        let weigh = |s: &super::super::Sample, accel: [f64; 3], len: &[f64; 3]| {
+            weighed_payload(&kin, &params, s, &q, &arms, len, &strokes, (mass, accel)).unwrap()
+        };
+        let (m, per_pa) = weigh(&sample_for([0.0; 3], 0.0), [0.0; 3], &len);
+        assert!((m - payload_kg).abs() < 1e-6 * payload_kg, "static: {m} kg");
+        let accel = [0.3, -0.2, 0.4];
+        let (m, _) = weigh(&sample_for(accel, 0.0), accel, &len);
+        // The payload's inertia enters the least squares through its regressor: exact up to the
+        // weighting of the cylinders.
+        assert!(
+            (m - payload_kg).abs() < 1e-3 * payload_kg,
+            "accelerating: {m} kg"
+        );
+        // A common offset moves the estimate by its offset term.
+        let offset = 2.0e5;
+        let (m_off, _) = weigh(&sample_for([0.0; 3], offset), [0.0; 3], &len);
+        assert!(
+            (m_off - payload_kg - offset * per_pa).abs() < 1e-6 * payload_kg,
+            "offset: {m_off} kg, per Pa {per_pa}"
+        );
+        // About 10 kg for a 0.2 MPa offset on this pose.
+        assert!(
+            per_pa.abs() > 1e-5,
+            "the offset term is not negligible: {per_pa}"
+        );
+        // A cylinder at its stroke end does not take part: the other two still weigh the payload.
+        let mut at_end = len;
+        at_end[2] = strokes[2].1;
+        let (m_end, _) = weigh(&sample_for([0.0; 3], 0.0), [0.0; 3], &at_end);
+        assert!(
+            (m_end - payload_kg).abs() < 1e-6 * payload_kg,
+            "at the end: {m_end} kg"
+        );
     }
 }

@@ -123,6 +123,10 @@ pub enum LoadTag {
     InSoil,
     /// Carrying or dumping a payload of unknown mass.
     Loaded,
+    /// The work cycle's Weigh after a dig: valves neutral, the loaded implement held up in the air
+    /// (briefly lifted if the ground carried it) while the controller averages its static payload
+    /// estimate.
+    Weighing,
 }
 
 /// One 100 Hz sample of a measured trace, aligned at the resolver frame.
