@@ -809,19 +809,17 @@ impl PreparedRecord {
                 }
             }
             // The payload, weighed as the controller does: valves neutral, the implement held up,
-            // after the settling time, each cylinder away from its stroke ends.
-            if s.load == LoadTag::Weighing {
-                if weighing_since.is_nan() {
-                    weighing_since = s.time_s;
-                }
-            } else {
-                weighing_since = f64::NAN;
-            }
+            // the settling time after the valves closed, each cylinder away from its stroke ends.
             let neutral = s
                 .command
                 .iter()
                 .chain([&s.swing_command])
                 .all(|u| u.abs() <= params.overlap);
+            if s.load != LoadTag::Weighing {
+                weighing_since = f64::NAN;
+            } else if weighing_since.is_nan() || !neutral {
+                weighing_since = s.time_s;
+            }
             if s.time_s - weighing_since >= WEIGH_SETTLE_S
                 && neutral
                 && let (Some(len), Some(c)) = (chamber_strokes[k], cut.as_ref())
@@ -837,8 +835,11 @@ impl PreparedRecord {
                 )
             {
                 let volume_m3 = c.content_m3().clamp(0.0, cfg.bucket.capacity_m3);
-                // An empty bucket weighs the pressure noise and the implement's ringing (the
-                // cleanups of the effect-free sessions: -40 +- 180 kg per sample).
+                // A full bucket only: it holds its capacity, which the cut volume beyond it does not
+                // change. A part-filled one holds what the cut put in less what poured out as it
+                // left the soil with its opening tipped down, which this replay does not follow
+                // (the 40 kPa cohesion sessions, 0.3-0.6 m^3 cut: 450-690 kg weighed against
+                // 570-900 kg for the cut volume).
                 if volume_m3 >= WEIGH_MIN_FILL * cfg.bucket.capacity_m3 {
                     m[Signal::PayloadMass.index()] = mass_kg;
                     payload_terms[k] = Some(PayloadTerms {
@@ -875,6 +876,20 @@ impl PreparedRecord {
             }
             if let Some(c) = cut.as_mut() {
                 spill(c);
+            }
+        }
+        // A weighing that lifts the bucket afterwards (the controller found it carried by the ground)
+        // weighed the ground before the lift: those samples are out.
+        let mut lift_follows = false;
+        for k in (0..n).rev() {
+            let s = &record.samples[k];
+            if s.load != LoadTag::Weighing {
+                lift_follows = false;
+            } else if s.command.iter().any(|u| u.abs() > params.overlap) {
+                lift_follows = true;
+            } else if lift_follows {
+                measured[k][Signal::PayloadMass.index()] = f64::NAN;
+                payload_terms[k] = None;
             }
         }
         Ok(Self {
@@ -953,7 +968,7 @@ fn weigh_accel(velocity: &[[f64; 3]], samples: &[super::Sample], k: usize) -> [f
 }
 
 /// Smallest bucket fill (fraction of the capacity, by the replay's cut volume) that is weighed.
-const WEIGH_MIN_FILL: f64 = 0.1;
+const WEIGH_MIN_FILL: f64 = 0.95;
 
 /// Fraction of a cylinder's stroke at either end within which it does not take part in the weighing
 /// (the controller's `weigh_stroke_end_margin`): a cylinder on its end stop carries an unknown force.
