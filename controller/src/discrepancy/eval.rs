@@ -98,6 +98,8 @@ pub struct CaseResult {
     pub best_rms_change_percent: Option<f64>,
     /// Which signal that was.
     pub best_signal: Option<String>,
+    /// The same on the samples where the augmented model acts (`SignalRms::acted`), %.
+    pub best_acted_rms_change_percent: Option<f64>,
     /// Analysis wall time, s.
     pub analysis_s: f64,
 }
@@ -151,6 +153,7 @@ fn run_case(
         .map_or("none".to_string(), |e| e.name.to_string());
     let (mut magnitude_error_percent, mut best_rms_change_percent, mut best_signal) =
         (None, None, None);
+    let mut best_acted_rms_change_percent = None;
     if let Some((c, v)) = hidden {
         if let Some(e) = r.named_effects.iter().find(|e| e.name == c.name()) {
             magnitude_error_percent = Some(100.0 * (e.magnitude - v) / v.abs());
@@ -165,6 +168,12 @@ fn run_case(
             best_rms_change_percent = Some(super::report::reduction_percent(m.before, m.after));
             best_signal = Some(m.signal.to_string());
         }
+        best_acted_rms_change_percent = r
+            .rms
+            .iter()
+            .filter(|m| sigs.contains(&m.signal) && m.acted.0 > 0 && m.acted.1 > 0.0)
+            .map(|m| super::report::reduction_percent(m.acted.1, m.acted.2))
+            .min_by(f64::total_cmp);
     }
     Ok(CaseResult {
         case,
@@ -181,6 +190,7 @@ fn run_case(
         magnitude_error_percent,
         best_rms_change_percent,
         best_signal,
+        best_acted_rms_change_percent,
         analysis_s,
     })
 }
@@ -246,6 +256,10 @@ pub fn confusion_text(results: &[CaseResult]) -> String {
         .iter()
         .filter(|c| c.best_rms_change_percent.is_some_and(|e| e <= -50.0))
         .count();
+    let acted_ok = with
+        .iter()
+        .filter(|c| c.best_acted_rms_change_percent.is_some_and(|e| e <= -50.0))
+        .count();
     let none_ok = without.iter().filter(|c| c.named == "none").count();
     let pct = |a: usize, b: usize| {
         if b > 0 {
@@ -274,6 +288,12 @@ pub fn confusion_text(results: &[CaseResult]) -> String {
     );
     let _ = writeln!(
         s,
+        "  on the samples where the augmented model acts: {acted_ok}/{} ({:.0} %)",
+        with.len(),
+        pct(acted_ok, with.len())
+    );
+    let _ = writeln!(
+        s,
         "effect-free sessions with no effect named: {none_ok}/{} ({:.0} %, target >= 90 %)",
         without.len(),
         pct(none_ok, without.len())
@@ -281,19 +301,21 @@ pub fn confusion_text(results: &[CaseResult]) -> String {
     let _ = writeln!(s, "\nper case:");
     let _ = writeln!(
         s,
-        "{:<40} {:>5} {:<24} {:>10} {:>12} {:>8}",
-        "case", "digs", "named", "mag err %", "rms change %", "time s"
+        "{:<40} {:>5} {:<24} {:>10} {:>12} {:>8} {:>8}",
+        "case", "digs", "named", "mag err %", "rms change %", "acted %", "time s"
     );
     for c in results {
         let _ = writeln!(
             s,
-            "{:<40} {:>5} {:<24} {:>10} {:>12} {:>8.1}",
+            "{:<40} {:>5} {:<24} {:>10} {:>12} {:>8} {:>8.1}",
             c.case,
             c.digs,
             c.named,
             c.magnitude_error_percent
                 .map_or("-".into(), |e| format!("{e:+.1}")),
             c.best_rms_change_percent
+                .map_or("-".into(), |e| format!("{e:+.1}")),
+            c.best_acted_rms_change_percent
                 .map_or("-".into(), |e| format!("{e:+.1}")),
             c.analysis_s
         );
@@ -369,6 +391,7 @@ pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
                 magnitude_error_percent: None,
                 best_rms_change_percent: None,
                 best_signal: None,
+                best_acted_rms_change_percent: None,
                 analysis_s: 0.0,
             });
             bar.inc(1);

@@ -127,6 +127,12 @@ pub struct SignalRms {
     pub after: f64,
     /// Per Autodig stage: `(stage, samples, before, after)`.
     pub per_stage: Vec<(&'static str, usize, f64, f64)>,
+    /// Where the augmentation acts: `(samples, before, after)` over the samples whose prediction it
+    /// moves by more than a tenth of the signal's nominal residual spread (the same share of samples
+    /// the significance test's "acted" figure takes; a flow sharing acts only while the boom and
+    /// bucket valves are open together, a leakage only across a pressure difference). Zeros when
+    /// it acts nowhere.
+    pub acted: (usize, f64, f64),
 }
 
 /// Everything the analysis found.
@@ -582,7 +588,7 @@ pub fn analyse(
     }
     progress(total, total);
 
-    let rms = before_after(&test, params, &config.base, &aug);
+    let rms = before_after(&test, params, &config.base, &aug, &sigma);
     Ok(AnalysisResult {
         named_effects: named,
         augmentation: aug,
@@ -596,15 +602,18 @@ pub fn analyse(
     })
 }
 
-/// Residual RMS per signal (and per stage) of records under the model `before` and the augmented one.
+/// Residual RMS per signal (and per stage, and where the augmentation acts by more than
+/// [`ACTED_FRACTION`] of `sigma`) of records under the model `before` and the augmented one.
 pub fn before_after(
     records: &[&PreparedRecord],
     params: &GreyBoxParams,
     before: &Augmentation,
     aug: &Augmentation,
+    sigma: &[f64],
 ) -> Vec<SignalRms> {
     let nominal = *before;
     let mut acc = vec![([0.0; 2], 0usize); N_SIGNALS];
+    let mut acted_acc = vec![([0.0; 2], 0usize); N_SIGNALS];
     let mut stage_acc = vec![vec![([0.0; 2], 0usize); super::StageTag::ALL.len()]; N_SIGNALS];
     let (mut p0, mut p1) = (Vec::new(), Vec::new());
     for rec in records {
@@ -624,6 +633,12 @@ pub fn before_after(
                     stage_acc[j][st].0[0] += r0 * r0;
                     stage_acc[j][st].0[1] += r1 * r1;
                     stage_acc[j][st].1 += 1;
+                    let spread = sigma.get(j).copied().unwrap_or(0.0);
+                    if (p1[k][j] - p0[k][j]).abs() > ACTED_FRACTION * spread {
+                        acted_acc[j].0[0] += r0 * r0;
+                        acted_acc[j].0[1] += r1 * r1;
+                        acted_acc[j].1 += 1;
+                    }
                 }
             }
         }
@@ -648,6 +663,10 @@ pub fn before_after(
                         (st.name(), n, rms(s[0], n), rms(s[1], n))
                     })
                     .collect(),
+                acted: {
+                    let (s, n) = acted_acc[j];
+                    (n, rms(s[0], n), rms(s[1], n))
+                },
             }
         })
         .collect()
