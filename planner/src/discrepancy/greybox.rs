@@ -878,18 +878,22 @@ impl PreparedRecord {
                 spill(c);
             }
         }
-        // A weighing that lifts the bucket afterwards (the controller found it carried by the ground)
-        // weighed the ground before the lift: those samples are out.
-        let mut lift_follows = false;
+        // A weighing that lifts the bucket and weighs again (the controller found it carried by the
+        // ground) weighed the ground before the lift: those samples are out. (The last sample of a
+        // weighing carries the first command of the swing to the dump, which is no lift.)
+        let (mut lift_follows, mut weighed_after) = (false, false);
         for k in (0..n).rev() {
             let s = &record.samples[k];
             if s.load != LoadTag::Weighing {
-                lift_follows = false;
+                (lift_follows, weighed_after) = (false, false);
             } else if s.command.iter().any(|u| u.abs() > params.overlap) {
-                lift_follows = true;
-            } else if lift_follows {
-                measured[k][Signal::PayloadMass.index()] = f64::NAN;
-                payload_terms[k] = None;
+                lift_follows |= weighed_after;
+            } else {
+                weighed_after = true;
+                if lift_follows {
+                    measured[k][Signal::PayloadMass.index()] = f64::NAN;
+                    payload_terms[k] = None;
+                }
             }
         }
         Ok(Self {
