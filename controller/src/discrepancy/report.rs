@@ -505,7 +505,7 @@ fn rms_svg(r: &AnalysisResult) -> anyhow::Result<String> {
         .collect();
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, (900, 420)).into_drawing_area();
+        let root = SVGBackend::with_string(&mut svg, (1300, 420)).into_drawing_area();
         root.fill(&WHITE).map_err(err)?;
         let mut chart = ChartBuilder::on(&root)
             .caption(
@@ -518,10 +518,17 @@ fn rms_svg(r: &AnalysisResult) -> anyhow::Result<String> {
             .build_cartesian_2d(0.0..rows.len().max(1) as f64, 0.0..120.0)
             .map_err(err)?;
         let names: Vec<String> = rows.iter().map(|m| m.signal.to_string()).collect();
+        // A label under the middle of every bar (ticks every half bar, the names on the middles).
         chart
             .configure_mesh()
-            .x_labels(rows.len().max(1))
-            .x_label_formatter(&|x| names.get(x.floor() as usize).cloned().unwrap_or_default())
+            .x_labels(2 * rows.len().max(1) + 1)
+            .x_label_formatter(&|x| {
+                if (x - x.floor() - 0.5).abs() < 0.01 {
+                    names.get(x.floor() as usize).cloned().unwrap_or_default()
+                } else {
+                    String::new()
+                }
+            })
             .y_desc("%")
             .draw()
             .map_err(err)?;
