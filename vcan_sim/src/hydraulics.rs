@@ -1263,6 +1263,33 @@ mod tests {
         }
     }
 
+    /// The cross-piston leakage effect lets a cylinder held by its rod chamber behind a closed
+    /// spool drift at `L (p_rod - p_head) / A_rod`: the rod chamber loses the leak flow and the
+    /// head, at tank, takes it and make-up oil.
+    #[test]
+    fn leakage_lets_a_held_cylinder_drift_at_the_leak_flow_over_its_area() {
+        let params = HydraulicParams::default();
+        let leak = 1.0e-11;
+        let eff = HydraulicEffects {
+            internal_leakage: leak,
+            ..HydraulicEffects::default()
+        };
+        let mut h = Hydraulics::new(params, [0.5, 0.5, 0.5, 0.0]);
+        let mut loads = free_loads();
+        let rod_pa = 30.0e6;
+        loads[STICK].force = -rod_pa * h.rod_area_m2(STICK);
+        for _ in 0..2000 {
+            h.step(DT_S, [0.0; 4], &loads, &eff);
+        }
+        let a = h.actuators[STICK];
+        let expected = leak * (a.rod_pa - a.head_pa) / h.rod_area_m2(STICK);
+        assert!(
+            (a.velocity - expected).abs() < 0.05 * expected,
+            "drift {} m/s against {expected} m/s ({a:?})",
+            a.velocity
+        );
+    }
+
     #[test]
     fn orifice_flow_follows_eq1_and_is_continuous_at_laminar_limit() {
         let fluid = FluidParams::default();
