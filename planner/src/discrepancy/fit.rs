@@ -606,7 +606,7 @@ pub fn analyse(
 }
 
 /// Residual RMS per signal (and per stage, and where the augmentation acts by more than
-/// [`ACTED_FRACTION`] of `sigma`) of records under the model `before` and the augmented one.
+/// a tenth of `sigma`) of records under the model `before` and the augmented one.
 pub fn before_after(
     records: &[&PreparedRecord],
     params: &GreyBoxParams,
