@@ -412,22 +412,10 @@ impl Estimator {
         }
         let g0 = self.kin.gravity_torques(&s.joints, 0.0);
         let a = self.kin.gravity_torques(&s.joints, 1.0) - g0;
-        let tau = Vector3::from(s.joint_torque_nm);
         let margin = self.config.weigh_stroke_end_margin;
-        let (mut num, mut denom) = (0.0, 0.0);
-        for i in 0..3 {
-            let e = s.extension_fraction[i];
-            if e <= margin || e >= 1.0 - margin {
-                continue;
-            }
-            num += a[i] * (tau[i] - g0[i]);
-            denom += a[i] * a[i];
-        }
-        if !(denom.is_finite() && denom > 1e-9) {
-            return None;
-        }
-        let m = num / denom;
-        m.is_finite().then_some(m)
+        let usable = s.extension_fraction.map(|e| e > margin && e < 1.0 - margin);
+        let excess = [0, 1, 2].map(|i| s.joint_torque_nm[i] - g0[i]);
+        planner::kinematics::payload_least_squares(&[a[0], a[1], a[2]], &excess, usable)
     }
 
     /// The payload weight from [`Self::payload_estimate_kg`], N.

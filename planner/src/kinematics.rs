@@ -1185,6 +1185,30 @@ impl Kinematics {
     }
 }
 
+/// Least-squares payload mass from the joints that may weigh it, kg: `m` minimising
+/// `sum_i (excess_i - m regressor_i)^2` over the joints with `usable[i]`, where `excess` is the joint
+/// torque beyond what the empty implement needs (Eqs. A21-A22 less the links' A19 gravity torques)
+/// and `regressor` the torque one kilogram of payload adds (its gravity torque, A19, and where the
+/// implement accelerates its inertia). `None` when no usable joint carries a regressor. Linear in
+/// `excess`, so the same call gives the estimate's change for a change of the torques.
+#[must_use]
+pub fn payload_least_squares(
+    regressor: &[f64; 3],
+    excess_torque_nm: &[f64; 3],
+    usable: [bool; 3],
+) -> Option<f64> {
+    let (mut num, mut denom) = (0.0, 0.0);
+    for i in (0..3).filter(|i| usable[*i]) {
+        num += regressor[i] * excess_torque_nm[i];
+        denom += regressor[i] * regressor[i];
+    }
+    if !(denom.is_finite() && denom > 1e-9) {
+        return None;
+    }
+    let m = num / denom;
+    m.is_finite().then_some(m)
+}
+
 /// Wraps an angle to `(-pi, pi]`.
 #[must_use]
 pub fn wrap_angle(a: f64) -> f64 {

@@ -31,7 +31,7 @@ use serde::{Deserialize, Serialize};
 
 use super::soil_replay::{self, CutSection};
 use super::{DigRecord, DiscrepancyError, LoadTag, Result};
-use crate::kinematics::{Joint, JointAngles, Kinematics, TipForce};
+use crate::kinematics::{Joint, JointAngles, Kinematics, TipForce, payload_least_squares};
 use crate::machine::MachineConfig;
 use crate::soil::{BearingParams, SoilProperties};
 
@@ -1030,24 +1030,22 @@ fn weighed_payload(
     let g0 = kin.gravity_torques(q, 0.0);
     let a = kin.gravity_torques(q, 1.0) - g0;
     let per_kg = payload_reflected_mass_per_kg(kin, q)?;
-    let (mut num, mut per_pa, mut denom) = (0.0, 0.0, 0.0);
-    for i in 0..3 {
+    let usable = [0, 1, 2].map(|i| {
         let (lo, hi) = strokes[i];
         let e = (len[i] - lo) / (hi - lo);
-        if e <= WEIGH_STROKE_END_MARGIN || e >= 1.0 - WEIGH_STROKE_END_MARGIN {
-            continue;
-        }
+        e > WEIGH_STROKE_END_MARGIN && e < 1.0 - WEIGH_STROKE_END_MARGIN
+    });
+    let regressor = [0, 1, 2].map(|i| a[i] + arms[i] * per_kg[i] * accel[i]);
+    let excess = [0, 1, 2].map(|i| {
         let force = s.head_pa[i] * params.head_area_m2[i] - s.rod_pa[i] * params.rod_area_m2[i]; // Eq. A20
-        let b = a[i] + arms[i] * per_kg[i] * accel[i];
-        num += b * (arms[i] * (force - mass[i] * accel[i]) - g0[i]);
-        per_pa += b * arms[i] * (params.head_area_m2[i] - params.rod_area_m2[i]);
-        denom += b * b;
-    }
-    if !(denom.is_finite() && denom > 1e-9) {
-        return None;
-    }
-    let m = num / denom;
-    (m.is_finite() && per_pa.is_finite()).then_some((m, per_pa / denom))
+        arms[i] * (force - mass[i] * accel[i]) - g0[i]
+    });
+    // A common offset adds `(A_h - A_r) offset` to every force (A20).
+    let per_pa_torque =
+        [0, 1, 2].map(|i| arms[i] * (params.head_area_m2[i] - params.rod_area_m2[i]));
+    let m = payload_least_squares(&regressor, &excess, usable)?;
+    let per_pa = payload_least_squares(&regressor, &per_pa_torque, usable)?;
+    Some((m, per_pa))
 }
 
 /// Reflected mass of one kilogram of payload at each cylinder, kg/kg: `(d_i^2 + k^2) / r_i^2`, `d_i`
