@@ -451,6 +451,16 @@ mod tests {
         assert!((lane.height_at(6.0).expect("on") - 1.0).abs() < 1e-9);
     }
 
+    /// Writes `m` into the trace as received at `t_s`.
+    fn record(rec: &firmware_bridge::trace::Recorder, t_s: f64, m: &Message) {
+        let frame = m.encode().expect("encode");
+        rec.record(
+            (t_s * 1e9).round() as u64,
+            firmware_bridge::trace::Direction::Receive,
+            &frame,
+        );
+    }
+
     /// A cleanup's position-mode phase (gateway `ArmedPosition`, `PositionSetpoint`s, no valve
     /// commands) from 1.0 to 2.0 s in a 4 s trace: its samples and those of the settling time after
     /// it are left out, the others kept with their dig index.
@@ -459,15 +469,12 @@ mod tests {
         use firmware_bridge::messages::{
             ControllerStatus, GatewayFaults, GatewayStatus, JointAngles, PositionSetpoint,
         };
-        use firmware_bridge::trace::{Direction, Recorder};
+        use firmware_bridge::trace::Recorder;
 
         let dir = tempfile::tempdir().expect("tempdir");
         let path = dir.path().join("trace.log");
         let rec = Recorder::create(&path, "vcan0").expect("recorder");
-        let put = |t_s: f64, m: Message| {
-            let frame = m.encode().expect("encode");
-            rec.record((t_s * 1e9).round() as u64, Direction::Receive, &frame);
-        };
+        let put = |t_s: f64, m: Message| record(&rec, t_s, &m);
         let position = |t_s: f64| (1.0..2.0).contains(&t_s);
         put(
             0.0,
@@ -531,15 +538,12 @@ mod tests {
     #[test]
     fn idle_after_a_dig_of_the_same_index_is_the_weighing() {
         use firmware_bridge::messages::{ControllerStatus, JointAngles};
-        use firmware_bridge::trace::{Direction, Recorder};
+        use firmware_bridge::trace::Recorder;
 
         let dir = tempfile::tempdir().expect("tempdir");
         let path = dir.path().join("trace.log");
         let rec = Recorder::create(&path, "vcan0").expect("recorder");
-        let put = |t_s: f64, m: Message| {
-            let frame = m.encode().expect("encode");
-            rec.record((t_s * 1e9).round() as u64, Direction::Receive, &frame);
-        };
+        let put = |t_s: f64, m: Message| record(&rec, t_s, &m);
         // (from, activity, dig index)
         let phases = [
             (0.0, Activity::Idle, 0),
