@@ -247,16 +247,40 @@ pub fn decode_physical(sig: &SignalDesc, data: &[u8]) -> Result<f64, DecodeError
     decode_raw(sig, data).map(|raw| raw_to_physical(sig, raw))
 }
 
-/// `raw * factor + offset`. For factors like 0.0001 whose reciprocal is an integer it divides by the
-/// reciprocal instead, which is correctly rounded (5236 -> 0.5236, not 0.5236000000000001).
+/// `raw * factor + offset`, correctly rounded for decimal factors.
+///
+/// A factor like 0.4 or 0.0001 is not exact in binary, so `raw * factor` can land one ulp off the
+/// decimal value (3 * 0.4 = 1.2000000000000002). The factor is written as `numerator / 10^k` with
+/// the smallest such `k` and the value computed as `(raw * numerator) / 10^k`, one correctly rounded
+/// division of exact integers (5236 * 0.0001 -> 0.5236, 3 * 0.4 -> 1.2). That keeps decoding the same
+/// physical value from a coarse and a fine signal bit-identical.
 pub fn raw_to_physical(sig: &SignalDesc, raw: i64) -> f64 {
-    let inverse = 1.0 / sig.factor;
-    let scaled = if sig.factor < 1.0 && (inverse - inverse.round()).abs() < 1e-9 {
-        raw as f64 / inverse.round()
-    } else {
-        raw as f64 * sig.factor
+    let scaled = match decimal_factor(sig.factor) {
+        Some((numerator, denominator))
+            if (raw.unsigned_abs() as f64) * (numerator as f64) < 9.0e15 =>
+        {
+            (raw as f64 * numerator as f64) / denominator as f64
+        }
+        _ => raw as f64 * sig.factor,
     };
     scaled + sig.offset
+}
+
+/// `factor` as `numerator / 10^k` (both exact integers in `f64`), if it has at most nine decimals.
+fn decimal_factor(factor: f64) -> Option<(i64, i64)> {
+    let mut denominator: i64 = 1;
+    for _ in 0..=9 {
+        let numerator = factor * denominator as f64;
+        let rounded = numerator.round();
+        if rounded != 0.0
+            && (numerator - rounded).abs() <= 1e-9 * rounded.abs()
+            && rounded.abs() < 1e9
+        {
+            return Some((rounded as i64, denominator));
+        }
+        denominator *= 10;
+    }
+    None
 }
 
 /// The raw value that encodes `value`, rounded to the nearest step.
@@ -337,6 +361,22 @@ mod tests {
             extract_raw(&position_setpoint::BOOM_SETPOINT, &data),
             Some(-1)
         );
+    }
+
+    #[test]
+    fn decimal_factors_decode_correctly_rounded() {
+        let coarse = aux_valve_command_boom::PORT_FLOW_COMMAND; // 0.4 %/bit
+        let fine = aux_valve_command_boom::PORT_FLOW_COMMAND_FINE; // 0.0025 %/bit
+        assert_eq!(raw_to_physical(&coarse, 3), 1.2);
+        assert_eq!(raw_to_physical(&fine, 480), 1.2);
+        for raw in 0..=250 {
+            assert_eq!(
+                raw_to_physical(&coarse, raw),
+                raw_to_physical(&fine, raw * 160),
+                "coarse raw {raw}"
+            );
+        }
+        assert_eq!(raw_to_physical(&joint_angles::BOOM_ANGLE, 5236), 0.5236);
     }
 
     #[test]
