@@ -252,7 +252,7 @@ pub fn decode_physical(sig: &SignalDesc, data: &[u8]) -> Result<f64, DecodeError
 /// A factor like 0.4 or 0.0001 is not exact in binary, so `raw * factor` can land one ulp off the
 /// decimal value (3 * 0.4 = 1.2000000000000002). The factor is written as `numerator / 10^k` with
 /// the smallest such `k` and the value computed as `(raw * numerator) / 10^k`, one correctly rounded
-/// division of exact integers (5236 * 0.0001 -> 0.5236, 3 * 0.4 -> 1.2). That keeps decoding the same
+/// division of exact integers (3 * 0.4 -> 1.2, not 1.2000000000000002). That keeps decoding the same
 /// physical value from a coarse and a fine signal bit-identical.
 pub fn raw_to_physical(sig: &SignalDesc, raw: i64) -> f64 {
     let scaled = match decimal_factor(sig.factor) {
@@ -376,7 +376,7 @@ mod tests {
                 "coarse raw {raw}"
             );
         }
-        assert_eq!(raw_to_physical(&joint_angles::BOOM_ANGLE, 5236), 0.5236);
+        assert_eq!(raw_to_physical(&joint_angles::BOOM_ANGLE, 1234), 0.1234);
     }
 
     #[test]
