@@ -84,6 +84,20 @@ const LOAD_CHECK_MARGIN_PA: f64 = 7.0e5;
 /// A chamber behind a closed spool reading less than this above tank may be taking make-up oil
 /// through its anti-cavitation check valve, Pa: four standard deviations of the transducer noise.
 const MAKEUP_MARGIN_PA: f64 = 2.0e5;
+/// An open valve's velocity relation is noise-dominated, and the sample stays out of the velocity
+/// signal, when its inlet reads within this of its supply (no meter-in estimate: the load, not the
+/// valve, sets the speed) and its outlet within [`NOISY_OUTLET_DP_PA`] of tank, Pa. The meter-in
+/// estimate is weighted out below this drop in `cylinder_velocity`.
+const NOISY_INLET_DP_PA: f64 = 2.0e5;
+/// See [`NOISY_INLET_DP_PA`]: an outlet drop of 0.5 MPa gives the meter-out flow to about 7 % with the
+/// transducer noise (0.05 MPa per reading, `sqrt(2) 0.05 / (2 x 0.5)`), Pa.
+const NOISY_OUTLET_DP_PA: f64 = 5.0e5;
+/// A measured cylinder velocity that zig-zags by more than this from one sample to the next and back
+/// is an oscillation at the sampling's Nyquist rate (the oil column of a link hanging behind a closed
+/// spool, its other chamber emptied), which no model sampled at 100 Hz can follow; the sample stays
+/// out of the velocity signal, m/s (about five standard deviations of the difference of two
+/// resolver-rate readings of a resting link).
+const ALIASED_ZIGZAG_M_PER_S: f64 = 0.02;
 /// Pressure readings at or below this are taken as clamped at the sensor's zero, Pa.
 const CLAMPED_READING_PA: f64 = 1.0e3;
 /// Margin from the stroke ends where the end stops may carry force, m.
@@ -754,8 +768,17 @@ impl PreparedRecord {
             // m^3/(s Pa) of leakage the simulator does not have.)
             let pump_limit_pa = params.relief_pa + params.relief_override_pa;
             for i in 0..3 {
+                // (effect-free sessions of a simulator with a stiffer soil contact: the bucket
+                // pressing into the soil with its head at the pump pressure, 11 % of the Dig samples
+                // and half the bucket velocity residual there; the stick hanging on its rod's oil
+                // column with the head emptied by leakage.)
+                let noisy = load_limited(params, s, i)
+                    || (k > 0
+                        && k + 1 < n
+                        && aliased_zigzag(velocity[k - 1][i], velocity[k][i], velocity[k + 1][i]));
                 if in_stroke[k][i]
                     && consistent[k][i]
+                    && !noisy
                     && s.head_pa[i].max(s.rod_pa[i]) < pump_limit_pa
                 {
                     m[i] = velocity[k][i];
@@ -1271,6 +1294,40 @@ fn series_bypass(k: f64, fractions: &[f64]) -> f64 {
         inv += 1.0 / (k * f).powi(2);
     }
     if inv > 0.0 { inv.sqrt().recip() } else { 0.0 }
+}
+
+/// Whether cylinder `i`'s velocity relation is noise-dominated at sample `s`: its valve open, its
+/// inlet reading within [`NOISY_INLET_DP_PA`] of its supply either way (the load, not the valve,
+/// limits the flow, `cylinder_velocity` weights the meter-in estimate out, and the load check is
+/// not clearly shut either: an inlet well above its supply is a dead end whose own balance gives
+/// the speed) and its outlet within
+/// [`NOISY_OUTLET_DP_PA`] of tank, so neither metering orifice's drop is known better than the
+/// reading noise.
+fn load_limited(params: &GreyBoxParams, s: &super::Sample, i: usize) -> bool {
+    let u = s.command[i];
+    let (p_in, p_out) = if u > 0.0 {
+        (s.head_pa[i], s.rod_pa[i])
+    } else {
+        (s.rod_pa[i], s.head_pa[i])
+    };
+    // The boom also takes pump 2's flow through the crossover; the stick is on pump 2.
+    let supply = match i {
+        0 => s.pump_pa[0].max(s.pump_pa[1]),
+        1 => s.pump_pa[1],
+        _ => s.pump_pa[0],
+    };
+    u.abs() > params.overlap
+        && (supply - p_in).abs() < NOISY_INLET_DP_PA
+        && p_out - params.tank_pa < NOISY_OUTLET_DP_PA
+}
+
+/// Whether a measured velocity zig-zags (`before -> now -> after`) by more than
+/// [`ALIASED_ZIGZAG_M_PER_S`] each way: an oscillation at the sampling's Nyquist rate.
+fn aliased_zigzag(before: f64, now: f64, after: f64) -> bool {
+    let (back, ahead) = (now - before, after - now);
+    back.abs() > ALIASED_ZIGZAG_M_PER_S
+        && ahead.abs() > ALIASED_ZIGZAG_M_PER_S
+        && back * ahead < 0.0
 }
 
 /// Cylinder velocity from the two metering orifices and the measured pressures (Eq. 1, continuity).
@@ -2102,6 +2159,49 @@ mod stop_tests {
             let since = if k < 200 { k } else { k - 200 };
             assert_eq!(*w, since >= WARMUP_SAMPLES, "sample {k}");
         }
+    }
+
+    /// A bucket pressing into the soil with its head at the pump pressure and its rod at tank is
+    /// load-limited (neither orifice's drop is known); with 3 MPa across its meter-in, with its
+    /// valve closed, or with its outlet loaded it is not.
+    #[test]
+    fn load_limited_needs_both_drops_within_the_noise() {
+        let params = super::super::AugmentedModel::nominal().unwrap().params;
+        let mut s = super::super::Sample::default();
+        s.command[2] = 0.8;
+        s.pump_pa = [20.0e6, 2.0e6];
+        s.head_pa[2] = 19.9e6;
+        s.rod_pa[2] = params.tank_pa + 0.2e6;
+        assert!(load_limited(&params, &s, 2));
+        let mut metering = s.clone();
+        metering.head_pa[2] = 17.0e6;
+        assert!(!load_limited(&params, &metering, 2));
+        let mut closed = s.clone();
+        closed.command[2] = 0.0;
+        assert!(!load_limited(&params, &closed, 2));
+        let mut loaded_outlet = s.clone();
+        loaded_outlet.rod_pa[2] = 3.0e6;
+        assert!(!load_limited(&params, &loaded_outlet, 2));
+        // Retracting: the rod is the inlet. The stick is on pump 2.
+        let mut stick = super::super::Sample::default();
+        stick.command[1] = -0.5;
+        stick.pump_pa = [2.0e6, 15.0e6];
+        stick.rod_pa[1] = 14.95e6;
+        stick.head_pa[1] = params.tank_pa;
+        assert!(load_limited(&params, &stick, 1));
+        // An inlet well above its supply (load check shut) is not.
+        stick.pump_pa = [15.0e6, 2.0e6];
+        assert!(!load_limited(&params, &stick, 1));
+    }
+
+    #[test]
+    fn aliased_zigzag_is_a_large_reversal_both_ways() {
+        assert!(aliased_zigzag(0.10, 0.16, 0.09));
+        assert!(aliased_zigzag(0.0, -0.03, 0.0));
+        // A steady ramp, a step, and resolver noise (a few mm/s) are not.
+        assert!(!aliased_zigzag(0.0, 0.05, 0.10));
+        assert!(!aliased_zigzag(0.0, 0.2, 0.2));
+        assert!(!aliased_zigzag(0.0, 0.006, -0.004));
     }
 
     /// The weighing recovers the payload that set the pressures (the cylinder forces of a held
