@@ -2173,13 +2173,13 @@ mod stop_tests {
         s.head_pa[2] = 19.9e6;
         s.rod_pa[2] = params.tank_pa + 0.2e6;
         assert!(load_limited(&params, &s, 2));
-        let mut metering = s.clone();
+        let mut metering = s;
         metering.head_pa[2] = 17.0e6;
         assert!(!load_limited(&params, &metering, 2));
-        let mut closed = s.clone();
+        let mut closed = s;
         closed.command[2] = 0.0;
         assert!(!load_limited(&params, &closed, 2));
-        let mut loaded_outlet = s.clone();
+        let mut loaded_outlet = s;
         loaded_outlet.rod_pa[2] = 3.0e6;
         assert!(!load_limited(&params, &loaded_outlet, 2));
         // Retracting: the rod is the inlet. The stick is on pump 2.
