@@ -811,8 +811,13 @@ impl PreparedRecord {
             let free_air = s.load == LoadTag::EmptyFreeAir && s.stage != super::StageTag::BoomDown;
             if free_air && all_consistent && !stalled[k] && steady {
                 for i in 0..3 {
+                    // A chamber reading at the sensor's zero hides its true pressure (anything
+                    // up to the magnitude of a negative offset), and with it the force.
+                    let readable =
+                        s.head_pa[i] > CLAMPED_READING_PA && s.rod_pa[i] > CLAMPED_READING_PA;
                     if in_stroke[k][i]
                         && open_for[i] > SPOOL_OPEN_SAMPLES
+                        && readable
                         && gravity_force[k][i].is_finite()
                         && velocity[k][i].abs() > MOVING_SPEED_M_PER_S
                     {
