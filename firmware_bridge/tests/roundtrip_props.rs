@@ -262,3 +262,25 @@ proptest! {
         }
     }
 }
+
+/// The frame proptest found (CI, 2026-11-26): a boom flow command with only the standard 0.4 %/bit
+/// byte (raw 3) and the fine field "not available" decoded to 1.2000000000000002 %, which re-encoded
+/// through the fine field decoded to 1.2 %. Decimal factors now decode correctly rounded.
+#[test]
+fn coarse_only_flow_command_decodes_to_what_it_re_encodes_to() {
+    let id = dbc::MESSAGES[0].default_id;
+    let frame = CanFrame::new_extended(id, &[3, 0, 112, 0, 255, 0, 0, 0]).expect("valid frame");
+    let decoded = Message::decode(&frame).expect("decodes");
+    let Message::AuxValveCommand(cmd) = decoded.message else {
+        panic!("not a valve command: {decoded:?}");
+    };
+    assert_eq!(cmd.flow_percent, 1.2);
+    let again = decoded
+        .message
+        .encode_from(decoded.id.source_address())
+        .expect("re-encodes");
+    assert_eq!(
+        Message::decode(&again).expect("decodes").message,
+        decoded.message
+    );
+}
