@@ -80,6 +80,14 @@ const CLEARANCE_STEP_M: f64 = 0.1;
 /// spoil, or still in the cut: its port at relief); the boom then lifts while it keeps opening, s.
 const STALL_RELIFT_S: f64 = 3.0;
 
+/// Dump: a bucket whose opening port has stayed at or above this fraction of its relief pressure for
+/// [`RELIEF_RELIFT_S`] is held too, even while it creeps open (a bucket pushed back into the spoil
+/// pile yields slowly at relief); the boom lifts it clear.
+const RELIEF_RELIFT_FRACTION: f64 = 0.9;
+
+/// Dump: how long the opening port must stay near relief before the boom lifts, s.
+const RELIEF_RELIFT_S: f64 = 0.5;
+
 /// Where a dig or cleanup starts, before Autodig's Boom-Down (or the cleanup probe).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
@@ -733,6 +741,8 @@ pub struct WorkCycle {
     stall_boost: [f64; 3],
     stall_best_rad: [f64; 3],
     stall_progress_s: [f64; 3],
+    /// Dump: since when the bucket's opening port has been near relief ([`RELIEF_RELIFT_FRACTION`]).
+    relief_since_s: Option<f64>,
     last_move_s: Option<f64>,
     /// MoveToDig close enough: the tip's least distance to the start's tip so far and when it last
     /// shrank by 1 cm.
@@ -804,6 +814,7 @@ impl WorkCycle {
             stall_boost: [0.0; 3],
             stall_best_rad: [f64::INFINITY; 3],
             stall_progress_s: [0.0; 3],
+            relief_since_s: None,
             last_move_s: None,
             move_best_m: f64::INFINITY,
             move_progress_s: 0.0,
@@ -1005,6 +1016,7 @@ impl WorkCycle {
         self.lifted = false;
         self.stall_boost = [0.0; 3];
         self.stall_best_rad = [f64::INFINITY; 3];
+        self.relief_since_s = None;
         self.last_move_s = None;
         self.move_best_m = f64::INFINITY;
         self.move_progress_s = now_s;
@@ -1751,9 +1763,21 @@ impl WorkCycle {
             self.stall_best_rad[2] = err;
             self.stall_progress_s[2] = now_s;
         }
+        // Opening retracts the bucket cylinder (`JOINT_SIGN`): the rod port carries the load.
+        let at_relief = !open
+            && s.rod_pressure_pa[2]
+                >= RELIEF_RELIFT_FRACTION * self.autodig_config.relief_pressure_pa[2];
+        self.relief_since_s = if at_relief {
+            self.relief_since_s.or(Some(now_s))
+        } else {
+            None
+        };
+        let held_at_relief = self
+            .relief_since_s
+            .is_some_and(|since| now_s - since >= RELIEF_RELIFT_S);
         let boom_max_rad = est.kinematics().joint_limits(Joint::Boom).1 - 0.05;
         let boom = if !open
-            && now_s - self.stall_progress_s[2] > STALL_RELIFT_S
+            && (now_s - self.stall_progress_s[2] > STALL_RELIFT_S || held_at_relief)
             && s.joints.boom_rad < boom_max_rad
         {
             self.config.joint.max_command
@@ -2349,6 +2373,52 @@ mod tests {
             assert_eq!(v[0], expect, "at {t} s");
             assert_eq!(v[2].abs(), max);
         }
+    }
+
+    /// A bucket that creeps open against the spoil with its opening (rod) port at relief is held as
+    /// well: the boom lifts it clear after RELIEF_RELIFT_S, although the angle keeps progressing.
+    #[test]
+    fn a_bucket_creeping_open_at_relief_is_lifted_clear() {
+        let mut c = cycle(CycleConfig {
+            scan: false,
+            ..CycleConfig::default()
+        });
+        c.start();
+        c.set_phase(Phase::Dump, 0.0);
+        let relief = c.autodig_config.relief_pressure_pa[2];
+        let commands = |c: &mut WorkCycle, bucket_rad: f64, t: f64, rod_pa: f64| {
+            let (k, m) = kin();
+            let mut e = Estimator::new(k, m.tracks.gauge_m, EstimatorConfig::default());
+            feed_pressures(&mut e, [0.5, -1.3, bucket_rad, 1.0], 0.0, t, 1.0e6, rod_pa);
+            match c.step(t, &e, Some(ArmMode::Valve)).unwrap().command {
+                CycleCommand::Valves(v) => v,
+                other => panic!("expected valve commands, got {other:?}"),
+            }
+        };
+        let max = c.config.joint.max_command;
+        // Opening at 0.4 rad/s with a light rod: no lift.
+        let (mut t, mut q) = (0.0, -1.5);
+        while t < 1.0 {
+            t += 0.01;
+            q += 0.004;
+            assert_eq!(commands(&mut c, q, t, 5.0e6)[0], 0.0, "at {t} s");
+        }
+        // Creeping at 0.4 rad/s still, but the rod at relief: the boom lifts after RELIEF_RELIFT_S.
+        let since = t;
+        while t < since + RELIEF_RELIFT_S + 0.1 {
+            t += 0.01;
+            q += 0.004;
+            let boom = commands(&mut c, q, t, 0.95 * relief)[0];
+            if t - since > RELIEF_RELIFT_S + 0.02 {
+                assert_eq!(boom, max, "at {t} s");
+            } else if t - since < RELIEF_RELIFT_S - 0.02 {
+                assert_eq!(boom, 0.0, "at {t} s");
+            }
+        }
+        // The rod relieved: no lift.
+        t += 0.01;
+        q += 0.004;
+        assert_eq!(commands(&mut c, q, t, 5.0e6)[0], 0.0);
     }
 
     #[test]

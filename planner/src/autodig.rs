@@ -683,6 +683,12 @@ pub struct AutodigConfig {
     /// A cylinder is at its stroke limit when its extension fraction is within this of 0 or 1.
     /// Default 0.01.
     pub cylinder_limit_margin: f64,
+    /// Capture: while the bucket has not reached rho3 and its head pressure is at least this
+    /// percent of relief, the boom keeps lifting even after its own end condition holds. The curl
+    /// is then held by soil the pre-dig terrain (perception, 3.2) or gamma does not account for,
+    /// such as the material spilled around the edge, and lifting frees it instead of holding the
+    /// bucket at relief. 100 turns it off. Default 90.
+    pub capture_lift_at_bucket_percent: f64,
     /// Ground-contact detection in Boom-Down.
     pub contact: ContactConfig,
     /// Perception enhancements (3.2).
@@ -701,6 +707,7 @@ impl Default for AutodigConfig {
             hardness_index: 3.0,
             boom_down_command: -0.5,
             cylinder_limit_margin: 0.01,
+            capture_lift_at_bucket_percent: 90.0,
             contact: ContactConfig::default(),
             perception: PerceptionConfig::default(),
         }
@@ -756,6 +763,11 @@ impl AutodigConfig {
         }
         if !(0.0..0.5).contains(&self.cylinder_limit_margin) {
             return bad("cylinder_limit_margin", "must be in [0, 0.5)");
+        }
+        if !(self.capture_lift_at_bucket_percent > 0.0
+            && self.capture_lift_at_bucket_percent <= 100.0)
+        {
+            return bad("capture_lift_at_bucket_percent", "must be in (0, 100]");
         }
         let c = &self.contact;
         let times = [
@@ -1201,11 +1213,16 @@ impl Autodig {
             ],
             // 3.1: boom and bucket 100 %, stick 0. Each stops once its own end condition holds, so
             // the bucket is not driven into its end stop (relief) while the boom finishes, and it
-            // curls again if lifting the boom rotates it back past rho3.
+            // curls again if lifting the boom rotates it back past rho3. A curl held near relief
+            // keeps the boom lifting (`capture_lift_at_bucket_percent`).
             Stage::Capture => {
                 let bucket_ok = inputs.bucket_abs_rad() <= self.config.rho3_rad
                     || self.at_extend_limit(inputs, Joint::Bucket);
-                let boom_ok = self.capture_boom_reason(inputs).is_some();
+                let bucket_held = !bucket_ok
+                    && self.config.capture_lift_at_bucket_percent < 100.0
+                    && self.pressure_pct(inputs, Joint::Bucket)
+                        >= self.config.capture_lift_at_bucket_percent;
+                let boom_ok = self.capture_boom_reason(inputs).is_some() && !bucket_held;
                 [
                     if boom_ok { 0.0 } else { 1.0 },
                     0.0,
@@ -1555,6 +1572,20 @@ mod tests {
         i.joint_rad = joints([30.0, -100.0, -141.0]);
         let out = ad.step(&i, 0.01).expect("valid");
         assert_eq!(out.end_reason, Some(EndReason::BucketAngleRho3));
+
+        // Boom done, bucket short of rho3 and held at relief: the boom lifts it free; with the
+        // pressure down again it stops.
+        let mut ad = in_stage(Stage::Capture, AutodigConfig::default());
+        i.joint_rad = joints([30.0, -100.0, -100.0]);
+        i.head_pressure_pa[Joint::Bucket.index()] = 0.95 * RELIEF_PA;
+        assert_eq!(ad.step(&i, 0.0).expect("valid").command, [1.0, 0.0, 1.0]);
+        i.head_pressure_pa[Joint::Bucket.index()] = 0.5 * RELIEF_PA;
+        assert_eq!(ad.step(&i, 0.01).expect("valid").command, [0.0, 0.0, 1.0]);
+        let mut off = AutodigConfig::default();
+        off.capture_lift_at_bucket_percent = 100.0;
+        let mut ad = in_stage(Stage::Capture, off);
+        i.head_pressure_pa[Joint::Bucket.index()] = RELIEF_PA;
+        assert_eq!(ad.step(&i, 0.0).expect("valid").command, [0.0, 0.0, 1.0]);
     }
 
     #[test]
