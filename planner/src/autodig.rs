@@ -1581,8 +1581,10 @@ mod tests {
         assert_eq!(ad.step(&i, 0.0).expect("valid").command, [1.0, 0.0, 1.0]);
         i.head_pressure_pa[Joint::Bucket.index()] = 0.5 * RELIEF_PA;
         assert_eq!(ad.step(&i, 0.01).expect("valid").command, [0.0, 0.0, 1.0]);
-        let mut off = AutodigConfig::default();
-        off.capture_lift_at_bucket_percent = 100.0;
+        let off = AutodigConfig {
+            capture_lift_at_bucket_percent: 100.0,
+            ..AutodigConfig::default()
+        };
         let mut ad = in_stage(Stage::Capture, off);
         i.head_pressure_pa[Joint::Bucket.index()] = RELIEF_PA;
         assert_eq!(ad.step(&i, 0.0).expect("valid").command, [0.0, 0.0, 1.0]);
