@@ -2332,21 +2332,33 @@ mod tests {
         assert_eq!(c.phase(), Phase::MoveToDig);
     }
 
-    #[test]
-    fn a_bucket_that_cannot_open_in_the_dump_is_lifted_clear() {
+    /// A cycle without scans, started and in its Dump phase.
+    fn dumping() -> WorkCycle {
         let mut c = cycle(CycleConfig {
             scan: false,
             ..CycleConfig::default()
         });
         c.start();
         c.set_phase(Phase::Dump, 0.0);
-        let commands = |c: &mut WorkCycle, bucket_rad: f64, t: f64| {
-            let e = est_at([0.5, -1.3, bucket_rad, 1.0], 0.0, t);
-            match c.step(t, &e, Some(ArmMode::Valve)).unwrap().command {
-                CycleCommand::Valves(v) => v,
-                other => panic!("expected valve commands, got {other:?}"),
-            }
-        };
+        c
+    }
+
+    /// One Dump step with the bucket at `bucket_rad` and the bucket's rod at `rod_pa` (heads 8 MPa).
+    fn dump_step(c: &mut WorkCycle, bucket_rad: f64, t: f64, rod_pa: f64) -> [f64; 6] {
+        let (k, m) = kin();
+        let mut e = Estimator::new(k, m.tracks.gauge_m, EstimatorConfig::default());
+        feed_pressures(&mut e, [0.5, -1.3, bucket_rad, 1.0], 0.0, t, 8e6, rod_pa);
+        match c.step(t, &e, Some(ArmMode::Valve)).unwrap().command {
+            CycleCommand::Valves(v) => v,
+            other => panic!("expected valve commands, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_bucket_that_cannot_open_in_the_dump_is_lifted_clear() {
+        let mut c = dumping();
+        let commands =
+            |c: &mut WorkCycle, bucket_rad: f64, t: f64| dump_step(c, bucket_rad, t, 1e6);
         let max = c.config.joint.max_command;
         let first = commands(&mut c, -1.5, 0.0);
         assert_eq!((first[0], first[2].abs()), (0.0, max), "uncurl only");
@@ -2379,22 +2391,9 @@ mod tests {
     /// well: the boom lifts it clear after RELIEF_RELIFT_S, although the angle keeps progressing.
     #[test]
     fn a_bucket_creeping_open_at_relief_is_lifted_clear() {
-        let mut c = cycle(CycleConfig {
-            scan: false,
-            ..CycleConfig::default()
-        });
-        c.start();
-        c.set_phase(Phase::Dump, 0.0);
+        let mut c = dumping();
         let relief = c.autodig_config.relief_pressure_pa[2];
-        let commands = |c: &mut WorkCycle, bucket_rad: f64, t: f64, rod_pa: f64| {
-            let (k, m) = kin();
-            let mut e = Estimator::new(k, m.tracks.gauge_m, EstimatorConfig::default());
-            feed_pressures(&mut e, [0.5, -1.3, bucket_rad, 1.0], 0.0, t, 1.0e6, rod_pa);
-            match c.step(t, &e, Some(ArmMode::Valve)).unwrap().command {
-                CycleCommand::Valves(v) => v,
-                other => panic!("expected valve commands, got {other:?}"),
-            }
-        };
+        let commands = dump_step;
         let max = c.config.joint.max_command;
         // Opening at 0.4 rad/s with a light rod: no lift.
         let (mut t, mut q) = (0.0, -1.5);
