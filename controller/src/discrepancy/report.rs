@@ -120,6 +120,13 @@ fn markdown(a: &Analysis, measured: &[PathBuf], figures: &[String]) -> String {
     let _ = writeln!(s, "## Held-out residual RMS, before and after\n");
     let _ = writeln!(
         s,
+        "The velocity signals (measured and predicted alike, here, in the plots and in the replay CSV) are \
+         centred moving averages over {} samples, the prefilter of the prediction error \
+         (`planner::discrepancy::prefilter_velocities`).\n",
+        2 * planner::discrepancy::VELOCITY_PREFILTER_HALF + 1
+    );
+    let _ = writeln!(
+        s,
         "| signal | unit | samples | before | after | change |\n|---|---|---|---|---|---|"
     );
     for m in &r.rms {

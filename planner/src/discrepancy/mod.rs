@@ -29,7 +29,9 @@ pub mod stats;
 
 pub use effects::Candidate;
 pub use fit::{AnalysisConfig, AnalysisResult, NamedEffect, analyse};
-pub use greybox::{Augmentation, GreyBoxParams, Signal};
+pub use greybox::{
+    Augmentation, GreyBoxParams, Signal, VELOCITY_PREFILTER_HALF, prefilter_velocities,
+};
 pub use model::{AugmentedModel, GreyBoxActuator};
 
 use crate::terrain::SectionProfile;
