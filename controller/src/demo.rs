@@ -733,7 +733,7 @@ pub fn scan_request(node: &ControllerNode) -> ScanRequest {
 }
 
 /// The true terrain along the digging plane (base frame `(r, z)`, r from 1 to 12 m).
-fn true_section(machine: &EmbeddedMachine, swing_rad: f64) -> Vec<TipPoint> {
+pub(crate) fn true_section(machine: &EmbeddedMachine, swing_rad: f64) -> Vec<TipPoint> {
     let plant = machine.plant();
     let pose = plant.pose();
     (0..=220)

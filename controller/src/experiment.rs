@@ -14,6 +14,7 @@
 //! Table 2 and Fig. 52 start every dig from the same pose on the default bench; Table 1 starts on level
 //! material at the tracks' level (see [`table1_with`]). Each run is one dig action.
 
+use anyhow::Context as _;
 use clap::{Args, ValueEnum};
 use firmware_bridge::transport::{InProcessBus, VirtualClock};
 use planner::autodig::AutodigMaps;
@@ -22,6 +23,7 @@ use vcan_sim::embedded::EmbeddedMachine;
 use vcan_sim::sensors::ScanRequest;
 
 use crate::cycle::{Action, Phase, StartPose};
+use crate::demo::TipPoint;
 use crate::node::{ControllerConfig, ControllerNode};
 
 /// Which reproduction.
@@ -56,7 +58,8 @@ pub struct ExperimentArgs {
     /// `extended`: digs per strategy.
     #[arg(long, default_value_t = 100, value_name = "N")]
     pub digs: u32,
-    /// `extended`, `hardness-fit`: output folder.
+    /// Output folder: `extended` and `hardness-fit` write their sessions and figures there,
+    /// `table1`, `table2` and `fig52` their trajectory plot (`table1.svg`, `fig39.svg`, `fig52.svg`).
     #[arg(long, default_value = "out/experiment", value_name = "DIR")]
     pub out: std::path::PathBuf,
     /// `extended`: planner settings (default: the built-in config/planner.toml).
@@ -110,7 +113,7 @@ impl ExperimentArgs {
 }
 
 /// The outcome of one dig.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct DigOutcome {
     /// The simulator's bucket content after Capture, kg.
     pub payload_kg: f64,
@@ -124,6 +127,11 @@ pub struct DigOutcome {
     pub swept_volume_m3: f64,
     /// Whether the dig completed (weighed) in time.
     pub completed: bool,
+    /// The bucket tip during Autodig (the controller's forward kinematics of the sensed angles, base
+    /// frame).
+    pub path: Vec<TipPoint>,
+    /// The true terrain along the digging plane before the dig (base frame).
+    pub section: Vec<TipPoint>,
 }
 
 /// A dig start with the stick at `stick_abs_deg` (to the horizontal), the bucket opened to -55 deg and
@@ -174,6 +182,8 @@ pub fn run_dig(
     let mut inbox = Vec::new();
     let mut payload_kg = 0.0;
     let mut weighed = false;
+    let section = crate::demo::true_section(&machine, 0.0);
+    let mut path = Vec::new();
     while clock.now_s() < 90.0 && node.statistics().is_empty() && !node.finished() {
         machine.advance(crate::demo::PERIOD_S);
         inbox.clear();
@@ -188,6 +198,13 @@ pub fn run_dig(
             if let Ok(grid) = node.cycle().config().scan_grid.terrain(&scan.points) {
                 node.provide_terrain(grid);
             }
+        }
+        if node.cycle().phase() == Phase::Autodig {
+            let tip = node.state().tip;
+            path.push(TipPoint {
+                x_m: tip.x_m,
+                z_m: tip.z_m,
+            });
         }
         if !weighed && node.cycle().phase() == Phase::Weigh {
             weighed = true;
@@ -209,6 +226,8 @@ pub fn run_dig(
             energy_kj: d.energy_kj(),
             swept_volume_m3: d.swept_volume_m3,
             completed: true,
+            path,
+            section,
         },
         None => DigOutcome {
             payload_kg,
@@ -217,12 +236,14 @@ pub fn run_dig(
             energy_kj: f64::NAN,
             swept_volume_m3: f64::NAN,
             completed: false,
+            path,
+            section,
         },
     })
 }
 
 /// Means of several digs.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Mean {
     /// Payload, kg.
     pub payload_kg: f64,
@@ -234,6 +255,8 @@ pub struct Mean {
     pub swept_volume_m3: f64,
     /// Digs that completed, of the runs.
     pub completed: usize,
+    /// The first run's dig (seed 1), for the trajectory plots.
+    pub first: Option<DigOutcome>,
 }
 
 fn mean(outcomes: &[DigOutcome]) -> Mean {
@@ -245,7 +268,39 @@ fn mean(outcomes: &[DigOutcome]) -> Mean {
         energy_kj: done.iter().map(|o| o.energy_kj).sum::<f64>() / n,
         swept_volume_m3: done.iter().map(|o| o.swept_volume_m3).sum::<f64>() / n,
         completed: done.len(),
+        first: outcomes.first().cloned(),
     }
+}
+
+/// One curve of a trajectory plot: its label and the dig behind it (`None`: nothing to draw).
+fn curve(label: String, m: &Mean) -> crate::plots::TipCurve {
+    let (path, section) = m
+        .first
+        .as_ref()
+        .map(|d| (d.path.clone(), d.section.clone()))
+        .unwrap_or_default();
+    crate::plots::TipCurve {
+        label,
+        path,
+        section,
+    }
+}
+
+/// Writes a trajectory figure `name` into `out` and returns the line the report prints about it.
+fn write_figure(
+    out: &std::path::Path,
+    name: &str,
+    title: &str,
+    panels: &[(String, Vec<crate::plots::TipCurve>)],
+) -> anyhow::Result<String> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let path = out.join(name);
+    std::fs::write(&path, crate::plots::tip_paths_svg(title, panels)?)
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(format!(
+        "\nTrajectories (seed 1, the tip from the sensed angles over the true pre-dig section): {}\n",
+        path.display()
+    ))
 }
 
 /// `time | payload` table cells of a mean, or dashes with the count when no dig completed; a count
@@ -483,10 +538,8 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
                  thesis plain: time, payload | thesis perception: time, payload |"
             );
             let _ = writeln!(s, "|---|---|---|---|---|---|---|");
-            for ((stick, plain, with), t) in table1_with(args.runs, &args.autodig_maps()?)?
-                .iter()
-                .zip(thesis)
-            {
+            let rows = table1_with(args.runs, &args.autodig_maps()?)?;
+            for ((stick, plain, with), t) in rows.iter().zip(thesis) {
                 let _ = writeln!(
                     s,
                     "| {stick:.0} deg | {} | {} | {:.2} s, {:.0} kg | {:.2} s, {:.0} kg |",
@@ -498,6 +551,22 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
                     t.4 * LB_TO_KG
                 );
             }
+            let panel = |name: &str, pick: fn(&(f64, Mean, Mean)) -> &Mean| {
+                let curves = rows
+                    .iter()
+                    .map(|r| curve(format!("stick {:.0} deg", r.0), pick(r)))
+                    .collect();
+                (name.to_string(), curves)
+            };
+            s.push_str(&write_figure(
+                &args.out,
+                "table1.svg",
+                "Table 1: Autodig from three stick angles",
+                &[
+                    panel("plain (fixed beta, gamma)", |r| &r.1),
+                    panel("with the perception enhancements", |r| &r.2),
+                ],
+            )?);
         }
         Which::Table2 => {
             let thesis = [
@@ -520,21 +589,29 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
                 "| factor | time | swept volume | energy | payload | thesis: time, volume, energy |"
             );
             let _ = writeln!(s, "|---|---|---|---|---|---|");
-            for ((k, m), t) in table2_with(
+            let rows = table2_with(
                 args.runs,
                 &args.autodig_maps()?,
                 args.base_scale,
                 args.scaling,
-            )?
-            .iter()
-            .zip(thesis)
-            {
+            )?;
+            for ((k, m), t) in rows.iter().zip(thesis) {
                 let _ = writeln!(
                     s,
                     "| {k:.1} | {:.2} s | {:.2} m^3 | {:.0} kJ | {:.0} kg | {} s, {} m^3, {} kJ |",
                     m.time_s, m.swept_volume_m3, m.energy_kj, m.payload_kg, t.1, t.2, t.3
                 );
             }
+            let curves = rows
+                .iter()
+                .map(|(k, m)| curve(format!("force factor {k:.0}"), m))
+                .collect();
+            s.push_str(&write_figure(
+                &args.out,
+                "fig39.svg",
+                "Fig. 39 / Table 2: the same dig at three soil force levels",
+                &[(String::new(), curves)],
+            )?);
         }
         Which::Extended => s.push_str(&extended_report(args)?),
         Which::HardnessFit => s.push_str(&hardness_fit_report(args)?),
@@ -548,7 +625,8 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
             );
             let _ = writeln!(s, "| soil | index | fill | time | energy | swept volume |");
             let _ = writeln!(s, "|---|---|---|---|---|---|");
-            for (soil, index, m) in fig52_with(args.runs, &args.autodig_maps()?)? {
+            let rows = fig52_with(args.runs, &args.autodig_maps()?)?;
+            for (soil, index, m) in &rows {
                 let _ = writeln!(
                     s,
                     "| {soil} | {index:.0} | {:.0} % | {:.2} s | {:.0} kJ | {:.2} m^3 |",
@@ -563,6 +641,34 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
                 "\nThesis: soft soil, both indices fill the bucket; the higher index digs too deep, +60 % time \
                  and +75 % energy. Hard soil: the low index fills about 50 %, the high index fully."
             );
+            let panels: Vec<_> = FIG52_SOILS
+                .iter()
+                .map(|(soil, cohesion)| {
+                    let curves = rows
+                        .iter()
+                        .filter(|r| r.0 == *soil)
+                        .map(|(_, index, m)| {
+                            curve(
+                                format!(
+                                    "index {index:.0}: fill {:.0} %",
+                                    100.0 * m.payload_kg / 2550.0
+                                ),
+                                m,
+                            )
+                        })
+                        .collect();
+                    (
+                        format!("{soil} soil (c = {:.0} kPa)", cohesion / 1000.0),
+                        curves,
+                    )
+                })
+                .collect();
+            s.push_str(&write_figure(
+                &args.out,
+                "fig52.svg",
+                "Fig. 52: Autodig's soil hardness index 1 and 5",
+                &panels,
+            )?);
         }
     }
     Ok(s)

@@ -292,6 +292,10 @@ pub struct Table2Args {
     /// Start depth of the tip below the surface, m.
     #[arg(long, default_value_t = 0.02)]
     pub start_depth: f64,
+    /// Also write the three predicted tip paths over the bench section (thesis Fig. 39) to
+    /// `DIR/fig39_model.svg`.
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
 }
 
 /// Runs a `model` subcommand.
@@ -2300,6 +2304,21 @@ pub fn table2_rows(
     start_depth_m: f64,
     start_bucket_deg: f64,
 ) -> anyhow::Result<Vec<Table2Row>> {
+    Ok(
+        table2_predictions(model, start_r, start_depth_m, start_bucket_deg)?
+            .into_iter()
+            .map(|(row, _)| row)
+            .collect(),
+    )
+}
+
+/// [`table2_rows`] with each factor's predicted dig.
+fn table2_predictions(
+    model: &DigModel,
+    start_r: f64,
+    start_depth_m: f64,
+    start_bucket_deg: f64,
+) -> anyhow::Result<Vec<(Table2Row, planner::dig_model::DigPrediction)>> {
     let site = default_site()?;
     let start = DigStart::Pose(BucketPose {
         x_m: start_r,
@@ -2310,20 +2329,39 @@ pub fn table2_rows(
     for factor in [1.0, 2.0, 3.0] {
         let mut m = model.clone();
         m.set_force_factor(factor)?;
-        let s = m.evaluate(&start, &site)?;
-        rows.push(Table2Row {
-            force_factor: factor,
-            time_s: s.time_s,
-            volume_m3: s.swept_volume_m3,
-            energy_kj: s.energy_kj(),
-        });
+        let p = m.predict(&start, &site)?;
+        let s = &p.summary;
+        rows.push((
+            Table2Row {
+                force_factor: factor,
+                time_s: s.time_s,
+                volume_m3: s.swept_volume_m3,
+                energy_kj: s.energy_kj(),
+            },
+            p,
+        ));
     }
     Ok(rows)
 }
 
+/// The section of the default bench as [`TipPoint`]s (every 0.05 m from 1 to 12 m).
+fn default_section() -> anyhow::Result<Vec<crate::demo::TipPoint>> {
+    let site = default_site()?;
+    Ok((0..=220)
+        .filter_map(|k| {
+            let r = 1.0 + 0.05 * f64::from(k);
+            site.profile()
+                .height_at(r)
+                .ok()
+                .map(|z| crate::demo::TipPoint { x_m: r, z_m: z })
+        })
+        .collect())
+}
+
 fn table2(a: &Table2Args) -> anyhow::Result<()> {
     let model = load_model(a.model.as_deref())?;
-    let rows = table2_rows(&model, a.start_r, a.start_depth, a.start_bucket_deg)?;
+    let predicted = table2_predictions(&model, a.start_r, a.start_depth, a.start_bucket_deg)?;
+    let rows: Vec<Table2Row> = predicted.iter().map(|(r, _)| *r).collect();
     println!(
         "Table 2 with the dig model (tip {:.2} m deep at r = {:.2} m on the default bench, bucket {:.0} deg)",
         a.start_depth, a.start_r, a.start_bucket_deg
@@ -2355,6 +2393,38 @@ fn table2(a: &Table2Args) -> anyhow::Result<()> {
         "energy rises throughout",
         rows[1].energy_kj > rows[0].energy_kj && rows[2].energy_kj > rows[1].energy_kj,
     );
+    if let Some(dir) = &a.out {
+        let section = default_section()?;
+        let curves = predicted
+            .iter()
+            .map(|(r, p)| crate::plots::TipCurve {
+                label: format!(
+                    "force factor {:.0}: {:.2} m^3, {:?}",
+                    r.force_factor, r.volume_m3, p.summary.end
+                ),
+                path: p
+                    .samples
+                    .iter()
+                    .map(|s| crate::demo::TipPoint {
+                        x_m: s.tip_x_m,
+                        z_m: s.tip_z_m,
+                    })
+                    .collect(),
+                section: section.clone(),
+            })
+            .collect();
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let path = dir.join("fig39_model.svg");
+        std::fs::write(
+            &path,
+            crate::plots::tip_paths_svg(
+                "Fig. 39 with the dig model: the same start at three soil force levels",
+                &[(String::new(), curves)],
+            )?,
+        )
+        .with_context(|| format!("writing {}", path.display()))?;
+        println!("  trajectories: {}", path.display());
+    }
     let mut out = std::io::stdout().lock();
     out.flush()?;
     Ok(())
@@ -2363,6 +2433,26 @@ fn table2(a: &Table2Args) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `model table2 --out DIR` draws the three predicted digs, each over the bench section.
+    #[test]
+    fn table2_writes_the_three_predicted_paths() {
+        let dir = tempfile::tempdir().unwrap();
+        table2(&Table2Args {
+            model: None,
+            start_r: 7.8,
+            start_bucket_deg: -55.0,
+            start_depth: 0.02,
+            out: Some(dir.path().to_path_buf()),
+        })
+        .unwrap();
+        let svg = std::fs::read_to_string(dir.path().join("fig39_model.svg")).unwrap();
+        for k in 1..=3 {
+            assert!(svg.contains(&format!("force factor {k}:")), "{svg}");
+        }
+        // Three paths and three dashed sections (a dashed line is drawn as one polyline a dash).
+        assert!(svg.matches("<polyline").count() >= 6, "{svg}");
+    }
 
     fn tagged_at(t: f64, angles_rad: [f64; 3]) -> Tagged {
         Tagged {

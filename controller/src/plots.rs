@@ -7,7 +7,7 @@ use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
-use crate::demo::DigRecord;
+use crate::demo::{DigRecord, TipPoint};
 
 /// A plotters error as an `anyhow` error.
 pub(crate) fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
@@ -119,6 +119,115 @@ pub fn trajectories_svg(digs: &[DigRecord]) -> anyhow::Result<String> {
             .label_font(("sans-serif", 11))
             .draw()
             .map_err(err)?;
+        Ok(())
+    })
+}
+
+/// One curve of [`tip_paths_svg`]: a dig's tip path over the terrain section it started on.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TipCurve {
+    /// Legend text.
+    pub label: String,
+    /// The tip path, base frame.
+    pub path: Vec<TipPoint>,
+    /// The pre-dig terrain along the digging plane, base frame.
+    pub section: Vec<TipPoint>,
+}
+
+/// Tip paths of a few digs side by side, one panel per `(title, curves)`, each curve over its pre-dig
+/// terrain section (dashed, same colour), all panels on the same axes (thesis Figs. 39 and 52).
+///
+/// # Errors
+/// A plotting error.
+pub fn tip_paths_svg(title: &str, panels: &[(String, Vec<TipCurve>)]) -> anyhow::Result<String> {
+    let finite = |p: &&TipPoint| p.x_m.is_finite() && p.z_m.is_finite();
+    let paths = || {
+        panels
+            .iter()
+            .flat_map(|(_, c)| c)
+            .flat_map(|c| &c.path)
+            .filter(finite)
+    };
+    let (x_lo, x_hi) = paths().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+        (a.min(p.x_m), b.max(p.x_m))
+    });
+    let (x_lo, x_hi) = if x_lo < x_hi {
+        (x_lo - 1.0, x_hi + 1.0)
+    } else {
+        (1.0, 10.0)
+    };
+    let in_view = |p: &&TipPoint| (x_lo..=x_hi).contains(&p.x_m);
+    let sections = panels
+        .iter()
+        .flat_map(|(_, c)| c)
+        .flat_map(|c| &c.section)
+        .filter(finite)
+        .filter(in_view);
+    let (z_lo, z_hi) = paths()
+        .chain(sections)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+            (a.min(p.z_m), b.max(p.z_m))
+        });
+    let (z_lo, z_hi) = if z_lo < z_hi {
+        (z_lo - 0.3, z_hi + 0.3)
+    } else {
+        (-1.0, 4.0)
+    };
+    let n = panels.len().max(1);
+    svg_image((520 * n as u32, 480), |root| {
+        let root = root.titled(title, ("sans-serif", 18)).map_err(err)?;
+        for ((name, curves), area) in panels.iter().zip(root.split_evenly((1, n))) {
+            let mut chart = ChartBuilder::on(&area)
+                .caption(name, ("sans-serif", 14))
+                .margin(10)
+                .x_label_area_size(35)
+                .y_label_area_size(45)
+                .build_cartesian_2d(x_lo..x_hi, z_lo..z_hi)
+                .map_err(err)?;
+            chart
+                .configure_mesh()
+                .x_desc("x [m] (from the swing axis)")
+                .y_desc("z [m]")
+                .draw()
+                .map_err(err)?;
+            for (i, c) in curves.iter().enumerate() {
+                let col = color(i);
+                let section: Vec<(f64, f64)> = c
+                    .section
+                    .iter()
+                    .filter(finite)
+                    .filter(in_view)
+                    .map(|p| (p.x_m, p.z_m))
+                    .collect();
+                chart
+                    .draw_series(DashedLineSeries::new(
+                        section,
+                        4,
+                        3,
+                        col.mix(0.5).stroke_width(1),
+                    ))
+                    .map_err(err)?;
+                let path: Vec<(f64, f64)> = c
+                    .path
+                    .iter()
+                    .filter(finite)
+                    .map(|p| (p.x_m, p.z_m))
+                    .collect();
+                chart
+                    .draw_series(LineSeries::new(path, col.stroke_width(2)))
+                    .map_err(err)?
+                    .label(c.label.clone())
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], col));
+            }
+            chart
+                .configure_series_labels()
+                .position(SeriesLabelPosition::LowerLeft)
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .label_font(("sans-serif", 11))
+                .draw()
+                .map_err(err)?;
+        }
         Ok(())
     })
 }

@@ -22,7 +22,8 @@ fn table1_perception_is_more_consistent_and_faster_where_payloads_match() {
             "{stick}: {rows:?}"
         );
     }
-    let (plain, with): (Vec<_>, Vec<_>) = rows.iter().map(|(_, p, w)| (*p, *w)).unzip();
+    let (plain, with): (Vec<_>, Vec<_>) =
+        rows.iter().map(|(_, p, w)| (p.clone(), w.clone())).unzip();
     assert!(plain[0].payload_kg < plain[1].payload_kg, "{rows:?}");
     assert!(plain[1].payload_kg <= plain[2].payload_kg, "{rows:?}");
     assert!(plain[0].time_s < plain[1].time_s, "{rows:?}");
@@ -57,11 +58,12 @@ fn energy_rises_from_the_nominal_soil_force() {
 
 #[test]
 fn fig52_report_prints_the_thesis_comparison() {
+    let out = tempfile::tempdir().unwrap();
     let text = report(&ExperimentArgs {
         which: Which::Fig52,
         runs: 1,
         digs: 100,
-        out: "out/experiment".into(),
+        out: out.path().to_path_buf(),
         planner: None,
         maps: None,
         base_scale: controller::experiment::TABLE2_BASE_SCALE,
@@ -73,6 +75,14 @@ fn fig52_report_prints_the_thesis_comparison() {
         "{text}"
     );
     assert!(text.contains("Thesis"), "{text}");
+    // The trajectory plot: both soils' panels, both indices' curves, each a drawn path.
+    let svg = std::fs::read_to_string(out.path().join("fig52.svg")).unwrap();
+    assert!(
+        svg.contains("hard soil") && svg.contains("soft soil"),
+        "{svg}"
+    );
+    assert_eq!(svg.matches("index 5: fill").count(), 2, "{svg}");
+    assert!(svg.matches("<polyline").count() >= 8, "{svg}");
 }
 
 /// Fig. 52's effect of the hardness index: in the hard soil the high index fills the bucket and the low
@@ -84,7 +94,7 @@ fn fig52_high_index_does_better_in_hard_soil() {
     let get = |soil: &str, index: f64| {
         rows.iter()
             .find(|(s, i, _)| *s == soil && *i == index)
-            .map(|r| r.2)
+            .map(|r| r.2.clone())
             .unwrap()
     };
     let (soft1, soft5) = (get("soft", 1.0), get("soft", 5.0));
