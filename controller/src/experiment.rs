@@ -113,7 +113,7 @@ impl ExperimentArgs {
 }
 
 /// The outcome of one dig.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Clone, PartialEq)]
 pub struct DigOutcome {
     /// The simulator's bucket content after Capture, kg.
     pub payload_kg: f64,
@@ -132,6 +132,23 @@ pub struct DigOutcome {
     pub path: Vec<TipPoint>,
     /// The true terrain along the digging plane before the dig (base frame).
     pub section: Vec<TipPoint>,
+}
+
+/// The figures, and the number of points of the path and section (a test's failure message prints the
+/// rows).
+impl std::fmt::Debug for DigOutcome {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DigOutcome")
+            .field("payload_kg", &self.payload_kg)
+            .field("weight_n", &self.weight_n)
+            .field("time_s", &self.time_s)
+            .field("energy_kj", &self.energy_kj)
+            .field("swept_volume_m3", &self.swept_volume_m3)
+            .field("completed", &self.completed)
+            .field("path_points", &self.path.len())
+            .field("section_points", &self.section.len())
+            .finish()
+    }
 }
 
 /// A dig start with the stick at `stick_abs_deg` (to the horizontal), the bucket opened to -55 deg and
