@@ -485,7 +485,8 @@ pub struct DemoSummary {
     /// Cleanup actions completed.
     #[serde(default)]
     pub cleanups: usize,
-    /// Why the session ended (`dig count reached`, `nothing left to do`, `stopped`, `time budget`).
+    /// Why the session ended (`dig count reached`, `bench removed: ...`, `nothing left to do`,
+    /// `stopped`, `time budget`).
     #[serde(default)]
     pub end: String,
     /// Tables 3-5 figures.
@@ -948,7 +949,7 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
                     node.push_action(a)?;
                 }
                 Ok(None) => {
-                    session_over = Some("nothing left to do".to_owned());
+                    session_over = Some(s.end_reason().unwrap_or("nothing left to do").to_owned());
                     node.set_external_plan(false);
                 }
                 Err(e) => {

@@ -238,6 +238,8 @@ pub struct PlannedSession {
     unconfirmed_digs: Vec<[f64; 3]>,
     steps: Vec<SessionStep>,
     finished: bool,
+    /// Why [`Self::next_action`] returned `None`.
+    end_reason: Option<String>,
 }
 
 impl PlannedSession {
@@ -280,7 +282,16 @@ impl PlannedSession {
             unconfirmed_digs: Vec::new(),
             steps: Vec::new(),
             finished: false,
+            end_reason: None,
         })
+    }
+
+    /// Why the session is over (`None` while it goes on): `bench removed` (nothing in view after the
+    /// planner's blind track backs), or `nothing left to do` (material in view, but no dig, track
+    /// back or cleanup possible), or no predefined sequence.
+    #[must_use]
+    pub fn end_reason(&self) -> Option<&str> {
+        self.end_reason.as_deref()
     }
 
     /// Replaces the hardness regression (5.2) the online index follows.
@@ -482,6 +493,7 @@ impl PlannedSession {
             Strategy::Predefined => {
                 let Some(seq) = &self.predefined else {
                     self.finished = true;
+                    self.end_reason = Some("no predefined sequence".to_owned());
                     return Ok(None);
                 };
                 let a = seq.action(self.predefined_index);
@@ -516,7 +528,8 @@ impl PlannedSession {
                         })
                     }
                     ActionChoice::TrackBack { distance_m } => {
-                        self.state.record_track_back();
+                        self.state
+                            .record_track_back(!plan.cleanup_track.material_found);
                         self.unconfirmed_digs.clear();
                         Some(Action::TrackBack {
                             distance_m: *distance_m,
@@ -554,6 +567,19 @@ impl PlannedSession {
             }
             None => {
                 self.finished = true;
+                let blind = self
+                    .steps
+                    .last()
+                    .is_some_and(|st| matches!(st.action, Action::TrackBack { .. }))
+                    && self.state.blind_track_backs > 0;
+                self.end_reason = Some(if blind {
+                    format!(
+                        "bench removed: no material in view after {} track backs",
+                        self.state.blind_track_backs
+                    )
+                } else {
+                    "nothing left to do".to_owned()
+                });
                 Ok(None)
             }
         }

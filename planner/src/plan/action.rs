@@ -56,7 +56,9 @@ pub enum ActionChoice {
     },
     /// Clean up along the chosen plan.
     Cleanup(CleanupCandidate),
-    /// Fig. 42 asks for a cleanup but no plan is eligible: nothing useful to do from here.
+    /// Fig. 42 asks for a cleanup but no plan is eligible, or for another track back with no
+    /// material in view after [`super::ActionConfig::max_blind_track_backs`] of them: nothing useful
+    /// to do from here.
     Nothing,
 }
 

@@ -113,6 +113,13 @@ pub struct ActionConfig {
     /// (the thesis refines one region per cycle; this keeps a poor region from stopping the dig).
     /// Default true.
     pub search_all_regions: bool,
+    /// With no material in view, Fig. 42 tracks back (the bench the machine stands on lies behind
+    /// the sensor's view); after this many such blind track backs in a row the bench is taken as
+    /// removed and the planner chooses nothing, which ends the session (thesis test 3: "bench
+    /// removed"). Without the limit a machine that reached the end of its bench, or of a simulated
+    /// map, tracked back 3 m at a time until its time budget ran out (a 200-dig session: 3250 track
+    /// backs, about 10 km). Default 2.
+    pub max_blind_track_backs: u32,
 }
 
 impl Default for ActionConfig {
@@ -121,6 +128,7 @@ impl Default for ActionConfig {
             min_quality: 3.0,
             min_track_distance_m: 0.5,
             search_all_regions: true,
+            max_blind_track_backs: 2,
         }
     }
 }
@@ -234,6 +242,10 @@ pub struct PlannerState {
     /// start forever; issue #7: one start chosen 28 times in a row, 40 s each).
     #[serde(default)]
     pub abandoned_starts: Vec<[f64; 3]>,
+    /// Track backs in a row that were made with no material in view (reset by a dig or a cleanup,
+    /// and by a track back with material in view); see [`ActionConfig::max_blind_track_backs`].
+    #[serde(default)]
+    pub blind_track_backs: u32,
 }
 
 /// Distance from an abandoned dig start within which the refined planner chooses no start, m (a
@@ -246,12 +258,20 @@ impl PlannerState {
         if let Some(bin) = cfg.bin(swing_rad) {
             *self.cleanup_tries.entry(bin).or_insert(0) += 1;
         }
+        self.blind_track_backs = 0;
     }
 
     /// Records a track back: the swing angles of the material changed, so the counters restart.
-    pub fn record_track_back(&mut self) {
+    /// `blind`: the plan that chose it saw no material (its
+    /// [`CleanupTrackPlan::material_found`] was false).
+    pub fn record_track_back(&mut self, blind: bool) {
         self.cleanup_tries.clear();
         self.abandoned_starts.clear();
+        self.blind_track_backs = if blind {
+            self.blind_track_backs.saturating_add(1)
+        } else {
+            0
+        };
     }
 
     /// Records that the dig starting with the tip at `tip_world` (world frame) was abandoned before
@@ -265,6 +285,7 @@ impl PlannerState {
         if region_count > 0 {
             self.region_pointer = (region_index + 1) % region_count;
         }
+        self.blind_track_backs = 0;
     }
 }
 
@@ -485,12 +506,20 @@ impl<A: ActuatorDynamics> Planner<A> {
             }
         }
         let cleanup_track = self.cleanup_and_tracking(grid, pose, state)?;
-        let action = select_action(
+        let action = match select_action(
             best.as_ref(),
             &cleanup_track,
             min_q,
             self.config.action.min_track_distance_m,
-        );
+        ) {
+            ActionChoice::TrackBack { .. }
+                if !cleanup_track.material_found
+                    && state.blind_track_backs >= self.config.action.max_blind_track_backs =>
+            {
+                ActionChoice::Nothing
+            }
+            a => a,
+        };
         Ok(Plan {
             coarse,
             refined,
@@ -569,7 +598,7 @@ mod tests {
             dist >= ABANDONED_START_RADIUS_M,
             "{dist} m from the abandoned start"
         );
-        state.record_track_back();
+        state.record_track_back(false);
         let third = planner.plan(&grid, &pose, &state).expect("plan");
         assert_eq!(third.best_dig.map(|b| b.pose), Some(d.pose));
     }
@@ -692,7 +721,38 @@ mod tests {
         s.record_cleanup(0.1, &cfg);
         s.record_cleanup(f64::NAN, &cfg);
         assert_eq!(s.cleanup_tries.values().sum::<u32>(), 2);
-        s.record_track_back();
+        s.record_track_back(false);
         assert!(s.cleanup_tries.is_empty());
+    }
+
+    /// With nothing in view the planner tracks back `max_blind_track_backs` times, then chooses
+    /// nothing (the bench is removed); a dig, a cleanup or material in view resets the count.
+    #[test]
+    fn blind_track_backs_end_in_nothing_after_the_limit() {
+        let planner = test_planner(0.0);
+        let pose = MachinePose::default();
+        let flat = TerrainGrid::new_flat(-8.0, -10.0, 0.1, 240, 200, 0.0).expect("flat");
+        let limit = planner.config().action.max_blind_track_backs;
+        assert_eq!(limit, 2);
+        let mut state = PlannerState::default();
+        for _ in 0..limit {
+            let plan = planner.plan(&flat, &pose, &state).expect("plan");
+            assert!(!plan.cleanup_track.material_found);
+            assert!(matches!(plan.action, ActionChoice::TrackBack { .. }));
+            state.record_track_back(true);
+        }
+        let plan = planner.plan(&flat, &pose, &state).expect("plan");
+        assert_eq!(plan.action, ActionChoice::Nothing);
+        // Material in view: the bench ahead is dug whatever the count.
+        let plan = planner.plan(&bench(), &pose, &state).expect("plan");
+        assert!(matches!(plan.action, ActionChoice::Dig(_)));
+        let mut s = state.clone();
+        s.record_dig(0, 3);
+        assert_eq!(s.blind_track_backs, 0);
+        let mut s = state.clone();
+        s.record_cleanup(0.0, &CleanupConfig::default());
+        assert_eq!(s.blind_track_backs, 0);
+        state.record_track_back(false);
+        assert_eq!(state.blind_track_backs, 0);
     }
 }
