@@ -34,6 +34,8 @@ pub struct MachineNode {
     steps: u64,
     valve_commands: [f64; 6],
     encode_errors: u64,
+    /// Whether the machine stands outside the simulated terrain map (warned once on leaving).
+    off_map: bool,
 }
 
 impl MachineNode {
@@ -51,7 +53,14 @@ impl MachineNode {
             steps: 0,
             valve_commands: [0.0; 6],
             encode_errors: 0,
+            off_map: false,
         }
+    }
+
+    /// Whether the machine stands outside the simulated terrain map: the terrain there is not
+    /// simulated, so scans see nothing and a planner finds no material.
+    pub fn off_map(&self) -> bool {
+        self.off_map
     }
 
     /// Simulation time (s).
@@ -112,6 +121,22 @@ impl MachineNode {
             self.sensor_frames(&r, out);
         }
         if self.steps.is_multiple_of(STATUS_PERIOD_STEPS) {
+            let pose = self.plant.pose();
+            let off_map = self
+                .plant
+                .world
+                .terrain
+                .height_at(pose.x_m, pose.y_m)
+                .is_err();
+            if off_map && !self.off_map {
+                tracing::warn!(
+                    x_m = pose.x_m,
+                    y_m = pose.y_m,
+                    "the machine left the simulated terrain map: the terrain beyond is not simulated \
+                     (scans see nothing there; grid.* in the bench file sets the map)"
+                );
+            }
+            self.off_map = off_map;
             let status = self.gateway.next_status();
             self.push(Message::GatewayStatus(status), out);
             let odo = |v: f64| v.clamp(-199_999.0, 199_999.0);
@@ -199,5 +224,27 @@ pub fn steps_in(dt_s: f64) -> u64 {
         (dt_s / PHYSICS_DT_S).round() as u64
     } else {
         0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::SimConfig;
+
+    /// Steps one status period (when the map check runs) and reports whether the node is off its map.
+    fn off_map_after_one_status_period(start_x_m: f64) -> bool {
+        let mut cfg = SimConfig::load::<&str>(None, None, None, &[]).expect("built-in config");
+        cfg.scenario.start.x_m = start_x_m;
+        let mut node = MachineNode::new(cfg.build().expect("plant"));
+        let mut out = Vec::new();
+        node.run_steps(STATUS_PERIOD_STEPS, &mut out);
+        node.off_map()
+    }
+
+    #[test]
+    fn a_machine_outside_the_terrain_map_is_reported_off_map() {
+        assert!(!off_map_after_one_status_period(0.0));
+        assert!(off_map_after_one_status_period(-100.0));
     }
 }
