@@ -10,6 +10,7 @@ use anyhow::Context as _;
 use planner::discrepancy::greybox::{N_SIGNALS, PreparedRecord, SignalGroups, replay};
 use planner::discrepancy::model::ModelEffect;
 use planner::discrepancy::{AnalysisResult, AugmentedModel, Signal};
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use serde::Serialize;
 
@@ -443,11 +444,14 @@ fn dig_svg(
                 "N" => "kN",
                 u => u,
             };
-            let series = |vals: &dyn Fn(usize) -> f64| -> Vec<(f64, f64)> {
-                (0..rec.len())
-                    .filter(|k| rec.measured[*k][j].is_finite() && vals(*k).is_finite())
-                    .map(|k| (rec.samples[k].time_s - t0, vals(k) * scale))
-                    .collect()
+            // The samples where the signal is defined, in runs of consecutive samples: a line joins
+            // the samples of a run only (a signal left out for seconds is not drawn across the gap).
+            let series = |vals: &dyn Fn(usize) -> f64| -> Vec<Vec<(f64, f64)>> {
+                runs_of(
+                    (0..rec.len())
+                        .filter(|k| rec.measured[*k][j].is_finite() && vals(*k).is_finite())
+                        .map(|k| (k, (rec.samples[k].time_s - t0, vals(k) * scale))),
+                )
             };
             let meas = series(&|k| rec.measured[k][j]);
             let old_s = series(&|k| p_old[k][j]);
@@ -456,7 +460,7 @@ fn dig_svg(
                 continue;
             }
             let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-            for (_, y) in meas.iter().chain(&old_s).chain(&new_s) {
+            for (_, y) in meas.iter().chain(&old_s).chain(&new_s).flatten() {
                 lo = lo.min(*y);
                 hi = hi.max(*y);
             }
@@ -473,21 +477,13 @@ fn dig_svg(
                 .build_cartesian_2d(0.0..t_end, (lo - pad)..(hi + pad))
                 .map_err(err)?;
             chart.configure_mesh().x_desc("t [s]").draw().map_err(err)?;
-            chart
-                .draw_series(LineSeries::new(meas, BLACK.stroke_width(1)))
-                .map_err(err)?
-                .label("measured")
-                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], BLACK));
-            chart
-                .draw_series(LineSeries::new(old_s, BLUE.mix(0.7).stroke_width(1)))
-                .map_err(err)?
-                .label("nominal model")
-                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], BLUE));
-            chart
-                .draw_series(LineSeries::new(new_s, RED.mix(0.7).stroke_width(1)))
-                .map_err(err)?
-                .label("augmented model")
-                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], RED));
+            for (runs, color, label) in [
+                (meas, BLACK.to_rgba(), "measured"),
+                (old_s, BLUE.mix(0.7), "nominal model"),
+                (new_s, RED.mix(0.7), "augmented model"),
+            ] {
+                draw_runs(&mut chart, runs, color, label)?;
+            }
             if j == 0 {
                 chart
                     .configure_series_labels()
@@ -501,6 +497,49 @@ fn dig_svg(
         root.present().map_err(err)?;
     }
     Ok(svg)
+}
+
+/// Splits `(sample index, point)` pairs, in increasing index, into runs of consecutive indices.
+fn runs_of(points: impl IntoIterator<Item = (usize, (f64, f64))>) -> Vec<Vec<(f64, f64)>> {
+    let mut runs: Vec<Vec<(f64, f64)>> = Vec::new();
+    let mut last: Option<usize> = None;
+    for (k, point) in points {
+        match runs.last_mut() {
+            Some(run) if last.is_some_and(|l| l + 1 == k) => run.push(point),
+            _ => runs.push(vec![point]),
+        }
+        last = Some(k);
+    }
+    runs
+}
+
+/// Draws the runs of one series (lines; a run of one sample as a dot), with one legend entry.
+fn draw_runs<DB: DrawingBackend>(
+    chart: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    runs: Vec<Vec<(f64, f64)>>,
+    color: RGBAColor,
+    label: &str,
+) -> anyhow::Result<()> {
+    let style = ShapeStyle::from(color).stroke_width(1);
+    let mut labelled = false;
+    for run in runs {
+        let drawn = if run.len() == 1 {
+            chart
+                .draw_series(run.into_iter().map(|p| Circle::new(p, 2, style.filled())))
+                .map_err(err)?
+        } else {
+            chart
+                .draw_series(LineSeries::new(run, style))
+                .map_err(err)?
+        };
+        if !labelled {
+            drawn
+                .label(label)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], style));
+            labelled = true;
+        }
+    }
+    Ok(())
 }
 
 /// Held-out RMS before and after as percentages of the nominal RMS, per signal.
@@ -557,4 +596,20 @@ fn rms_svg(r: &AnalysisResult) -> anyhow::Result<String> {
         root.present().map_err(err)?;
     }
     Ok(svg)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A signal left out for a while is drawn as separate runs, not joined across the gap.
+    #[test]
+    fn runs_break_at_gaps_in_the_sample_index() {
+        let p = |k: usize| (k, (k as f64, 1.0));
+        let runs = runs_of([p(3), p(4), p(5), p(9), p(11), p(12)]);
+        assert_eq!(runs.len(), 3);
+        assert_eq!(runs.iter().map(Vec::len).collect::<Vec<_>>(), [3, 1, 2]);
+        assert_eq!(runs[1], [(9.0, 1.0)]);
+        assert!(runs_of(std::iter::empty()).is_empty());
+    }
 }
