@@ -73,6 +73,13 @@ const MOVE_CLOSE_ENOUGH_WAIT_S: f64 = 2.0;
 /// MoveToDig close enough: the largest remaining swing error, rad (2 deg).
 const MOVE_CLOSE_ENOUGH_SWING_RAD: f64 = 0.035;
 
+/// MoveToDig blocked: a commanded implement cylinder whose port has been at
+/// [`RELIEF_RELIFT_FRACTION`] of relief this long, with the tip no longer getting closer (for
+/// [`MOVE_CLOSE_ENOUGH_WAIT_S`]) and not close enough to dig, is pushing against something it cannot
+/// move (the bucket's back or side on the terrain, which the map along the digging plane does not
+/// show): the move is abandoned then, not at its time-out, s.
+const MOVE_BLOCKED_S: f64 = 2.0;
+
 /// MoveToDig: spacing of the terrain heights along the digging plane the clearance is judged on, m.
 const CLEARANCE_STEP_M: f64 = 0.1;
 
@@ -741,7 +748,8 @@ pub struct WorkCycle {
     stall_boost: [f64; 3],
     stall_best_rad: [f64; 3],
     stall_progress_s: [f64; 3],
-    /// Dump: since when the bucket's opening port has been near relief ([`RELIEF_RELIFT_FRACTION`]).
+    /// Dump: since when the bucket's opening port has been near relief ([`RELIEF_RELIFT_FRACTION`]);
+    /// MoveToDig: since when a commanded implement cylinder has been ([`MOVE_BLOCKED_S`]).
     relief_since_s: Option<f64>,
     last_move_s: Option<f64>,
     /// MoveToDig close enough: the tip's least distance to the start's tip so far and when it last
@@ -1220,7 +1228,14 @@ impl WorkCycle {
         };
         let s = est.state();
         if self.timed_out(now_s) {
+            let swing = action.swing_rad().unwrap_or(s.swing_rad);
+            let ground_at_tip =
+                self.highest_terrain(&s.pose, swing, (s.tip.x_m - 0.05, s.tip.x_m + 0.05));
+            let target_z = est.kinematics().forward(&target).z_m;
             tracing::warn!(
+                ?ground_at_tip,
+                target_z,
+                tip_x_m = s.tip.x_m,
                 boom_err_deg = (target.boom_rad - s.joints.boom_rad).to_degrees(),
                 stick_err_deg = (target.stick_rad - s.joints.stick_rad).to_degrees(),
                 bucket_err_deg = (target.bucket_rad - s.joints.bucket_rad).to_degrees(),
@@ -1229,6 +1244,15 @@ impl WorkCycle {
                     .map(|t| wrap_angle(t - s.swing_rad).to_degrees()),
                 lifted = self.lifted,
                 tip_z_m = s.tip.z_m,
+                tip_error_m = {
+                    let t = est.kinematics().forward(&target);
+                    (s.tip.x_m - t.x_m).hypot(s.tip.z_m - t.z_m)
+                },
+                best_tip_error_m = self.move_best_m,
+                since_progress_s = now_s - self.move_progress_s,
+                joints_deg = ?[s.joints.boom_rad, s.joints.stick_rad, s.joints.bucket_rad]
+                    .map(f64::to_degrees),
+                clearing = self.clearing,
                 "move to the dig timed out"
             );
             return Err(ControlFault::Timeout("move to the dig"));
@@ -1315,11 +1339,41 @@ impl WorkCycle {
             Some(_) => (0.0, false),
             None => (0.0, true),
         };
+        // Blocked: a commanded cylinder pushing at relief (the port its valve command pressurises:
+        // extending, a positive command, fills the head).
+        let relief = &self.autodig_config.relief_pressure_pa;
+        let at_relief = (0..3).any(|i| {
+            let u = implement[i];
+            let port_pa = if u > 0.0 {
+                s.head_pressure_pa[i]
+            } else {
+                s.rod_pressure_pa[i]
+            };
+            u != 0.0 && port_pa >= RELIEF_RELIFT_FRACTION * relief[i]
+        });
+        self.relief_since_s = if at_relief {
+            self.relief_since_s.or(Some(now_s))
+        } else {
+            None
+        };
         if self.settled(implement_done && swing_done, now_s)
             || self.close_enough(now_s, est, &target_tip, &action)
         {
             self.begin_dig(now_s, est, &action);
             return Ok(CycleCommand::Neutral);
+        }
+        let blocked = self
+            .relief_since_s
+            .is_some_and(|since| now_s - since >= MOVE_BLOCKED_S)
+            && now_s - self.move_progress_s >= MOVE_CLOSE_ENOUGH_WAIT_S;
+        if blocked {
+            tracing::warn!(
+                tip_error_m = self.move_best_m,
+                joints_deg = ?[s.joints.boom_rad, s.joints.stick_rad, s.joints.bucket_rad]
+                    .map(f64::to_degrees),
+                "move to the dig blocked: pushing at relief without getting closer"
+            );
+            return Err(ControlFault::Blocked("move to the dig"));
         }
         Ok(CycleCommand::Valves([
             implement[0],
@@ -2330,6 +2384,46 @@ mod tests {
             t += 0.01;
         }
         assert_eq!(c.phase(), Phase::MoveToDig);
+    }
+
+    #[test]
+    fn a_move_blocked_at_relief_is_abandoned_before_its_time_out() {
+        // The stick 0.1 rad short of its start (the tip more than MOVE_CLOSE_ENOUGH_M off) and
+        // pushing at relief without getting closer: the move is given up once it has been blocked
+        // MOVE_BLOCKED_S and has not progressed for MOVE_CLOSE_ENOUGH_WAIT_S, not at the move's
+        // time-out; not at relief, it keeps moving.
+        let (boom, stick, bucket) = (0.2, -1.3, -0.5);
+        let (k, m) = kin();
+        let tip = |q_stick: f64| {
+            k.forward(&JointAngles {
+                boom_rad: boom,
+                stick_rad: q_stick,
+                bucket_rad: bucket,
+            })
+        };
+        let (a, b) = (tip(stick), tip(stick - 0.1));
+        assert!((a.x_m - b.x_m).hypot(a.z_m - b.z_m) > MOVE_CLOSE_ENOUGH_M);
+        for (head_pa, blocked) in [(34.0e6, true), (8.0e6, false)] {
+            let mut c = moving_to(boom, stick - 0.1, bucket);
+            let mut e = Estimator::new(k.clone(), m.tracks.gauge_m, EstimatorConfig::default());
+            let mut t = 0.0;
+            let mut fault = None;
+            while t < 5.0 && fault.is_none() {
+                feed_pressures(&mut e, [boom, stick, bucket, 0.0], 0.0, t, head_pa, 1e6);
+                fault = c.step(t, &e, Some(ArmMode::Valve)).err();
+                t += 0.01;
+            }
+            if blocked {
+                assert_eq!(fault, Some(ControlFault::Blocked("move to the dig")), "{t}");
+                assert!(
+                    t >= MOVE_BLOCKED_S.max(MOVE_CLOSE_ENOUGH_WAIT_S) && t < 3.0,
+                    "{t}"
+                );
+            } else {
+                assert_eq!(fault, None);
+                assert_eq!(c.phase(), Phase::MoveToDig);
+            }
+        }
     }
 
     /// A cycle without scans, started and in its Dump phase.

@@ -96,6 +96,9 @@ pub enum ControlFault {
     /// A motion did not finish in time.
     #[error("timeout: {0}")]
     Timeout(&'static str),
+    /// A motion pushed at relief without progress: something it cannot move is in the way.
+    #[error("blocked: {0}")]
+    Blocked(&'static str),
 }
 
 /// Why motion stopped.
