@@ -86,39 +86,15 @@ pub fn trajectories_svg(digs: &[DigRecord]) -> anyhow::Result<String> {
             .draw()
             .map_err(err)?;
         for (i, d) in digs.iter().enumerate() {
-            let c = color(i);
-            let section: Vec<(f64, f64)> = d.section.iter().map(|p| (p.x_m, p.z_m)).collect();
-            chart
-                .draw_series(DashedLineSeries::new(
-                    section,
-                    4,
-                    3,
-                    c.mix(0.5).stroke_width(1),
-                ))
-                .map_err(err)?;
-            let path: Vec<(f64, f64)> = d
-                .trajectory
-                .iter()
-                .filter(|p| p.x_m.is_finite() && p.z_m.is_finite())
-                .map(|p| (p.x_m, p.z_m))
-                .collect();
-            chart
-                .draw_series(LineSeries::new(path, c.stroke_width(2)))
-                .map_err(err)?
-                .label(format!(
-                    "#{} {:?} swing {:.0} deg",
-                    d.index, d.action, d.swing_deg
-                ))
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c));
+            draw_tip_path(
+                &mut chart,
+                &d.section,
+                &d.trajectory,
+                color(i),
+                format!("#{} {:?} swing {:.0} deg", d.index, d.action, d.swing_deg),
+            )?;
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 11))
-            .draw()
-            .map_err(err)?;
+        draw_legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
         Ok(())
     })
 }
@@ -191,45 +167,64 @@ pub fn tip_paths_svg(title: &str, panels: &[(String, Vec<TipCurve>)]) -> anyhow:
                 .draw()
                 .map_err(err)?;
             for (i, c) in curves.iter().enumerate() {
-                let col = color(i);
-                let section: Vec<(f64, f64)> = c
-                    .section
-                    .iter()
-                    .filter(finite)
-                    .filter(in_view)
-                    .map(|p| (p.x_m, p.z_m))
-                    .collect();
-                chart
-                    .draw_series(DashedLineSeries::new(
-                        section,
-                        4,
-                        3,
-                        col.mix(0.5).stroke_width(1),
-                    ))
-                    .map_err(err)?;
-                let path: Vec<(f64, f64)> = c
-                    .path
-                    .iter()
-                    .filter(finite)
-                    .map(|p| (p.x_m, p.z_m))
-                    .collect();
-                chart
-                    .draw_series(LineSeries::new(path, col.stroke_width(2)))
-                    .map_err(err)?
-                    .label(c.label.clone())
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], col));
+                let section: Vec<TipPoint> = c.section.iter().filter(in_view).copied().collect();
+                draw_tip_path(&mut chart, &section, &c.path, color(i), c.label.clone())?;
             }
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::LowerLeft)
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .label_font(("sans-serif", 11))
-                .draw()
-                .map_err(err)?;
+            draw_legend(&mut chart, SeriesLabelPosition::LowerLeft)?;
         }
         Ok(())
     })
+}
+
+/// The chart type of the tip-path plots: base-frame `x` and `z`, m.
+type TipChart<'a, 'b> =
+    ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// Draws one dig's tip path (solid, labelled) over its pre-dig terrain section (dashed, the same
+/// colour); points that are not finite are left out.
+fn draw_tip_path(
+    chart: &mut TipChart<'_, '_>,
+    section: &[TipPoint],
+    path: &[TipPoint],
+    col: RGBColor,
+    label: String,
+) -> anyhow::Result<()> {
+    let xz = |points: &[TipPoint]| -> Vec<(f64, f64)> {
+        points
+            .iter()
+            .filter(|p| p.x_m.is_finite() && p.z_m.is_finite())
+            .map(|p| (p.x_m, p.z_m))
+            .collect()
+    };
+    chart
+        .draw_series(DashedLineSeries::new(
+            xz(section),
+            4,
+            3,
+            col.mix(0.5).stroke_width(1),
+        ))
+        .map_err(err)?;
+    chart
+        .draw_series(LineSeries::new(xz(path), col.stroke_width(2)))
+        .map_err(err)?
+        .label(label)
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], col));
+    Ok(())
+}
+
+/// The legend box of the tip-path plots.
+fn draw_legend<'a, 'b: 'a>(
+    chart: &mut TipChart<'a, 'b>,
+    position: SeriesLabelPosition,
+) -> anyhow::Result<()> {
+    chart
+        .configure_series_labels()
+        .position(position)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 11))
+        .draw()
+        .map_err(err)
 }
 
 /// A terrain elevation map (world frame, x east, y north) of the region around the machine, 0.2 m
