@@ -749,7 +749,8 @@ pub struct WorkCycle {
     stall_best_rad: [f64; 3],
     stall_progress_s: [f64; 3],
     /// Dump: since when the bucket's opening port has been near relief ([`RELIEF_RELIFT_FRACTION`]);
-    /// MoveToDig: since when a commanded implement cylinder has been ([`MOVE_BLOCKED_S`]).
+    /// MoveToDig: since when a commanded implement cylinder's port has been near relief
+    /// ([`MOVE_BLOCKED_S`]).
     relief_since_s: Option<f64>,
     last_move_s: Option<f64>,
     /// MoveToDig close enough: the tip's least distance to the start's tip so far and when it last
@@ -1231,10 +1232,10 @@ impl WorkCycle {
             let swing = action.swing_rad().unwrap_or(s.swing_rad);
             let ground_at_tip =
                 self.highest_terrain(&s.pose, swing, (s.tip.x_m - 0.05, s.tip.x_m + 0.05));
-            let target_z = est.kinematics().forward(&target).z_m;
+            let target_tip = est.kinematics().forward(&target);
             tracing::warn!(
                 ?ground_at_tip,
-                target_z,
+                target_z = target_tip.z_m,
                 tip_x_m = s.tip.x_m,
                 boom_err_deg = (target.boom_rad - s.joints.boom_rad).to_degrees(),
                 stick_err_deg = (target.stick_rad - s.joints.stick_rad).to_degrees(),
@@ -1244,10 +1245,7 @@ impl WorkCycle {
                     .map(|t| wrap_angle(t - s.swing_rad).to_degrees()),
                 lifted = self.lifted,
                 tip_z_m = s.tip.z_m,
-                tip_error_m = {
-                    let t = est.kinematics().forward(&target);
-                    (s.tip.x_m - t.x_m).hypot(s.tip.z_m - t.z_m)
-                },
+                tip_error_m = (s.tip.x_m - target_tip.x_m).hypot(s.tip.z_m - target_tip.z_m),
                 best_tip_error_m = self.move_best_m,
                 since_progress_s = now_s - self.move_progress_s,
                 joints_deg = ?[s.joints.boom_rad, s.joints.stick_rad, s.joints.bucket_rad]
@@ -1368,7 +1366,7 @@ impl WorkCycle {
             && now_s - self.move_progress_s >= MOVE_CLOSE_ENOUGH_WAIT_S;
         if blocked {
             tracing::warn!(
-                tip_error_m = self.move_best_m,
+                best_tip_error_m = self.move_best_m,
                 joints_deg = ?[s.joints.boom_rad, s.joints.stick_rad, s.joints.bucket_rad]
                     .map(f64::to_degrees),
                 "move to the dig blocked: pushing at relief without getting closer"
