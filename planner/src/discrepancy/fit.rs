@@ -678,6 +678,8 @@ pub fn before_after(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
 
     #[test]
     fn golden_section_finds_a_parabola_minimum_inside_bounds() {
@@ -690,13 +692,8 @@ mod tests {
 
     #[test]
     fn integrated_time_is_one_for_white_noise_and_larger_for_a_random_walk() {
-        let mut state = 12345u64;
-        let mut uniform = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((state >> 11) as f64 / (1u64 << 53) as f64) - 0.5
-        };
+        let mut rng = ChaCha8Rng::seed_from_u64(12345);
+        let mut uniform = || rng.random::<f64>() - 0.5;
         let white: Vec<f64> = (0..5000).map(|_| uniform()).collect();
         assert!(integrated_time(&white) < 1.3);
         let mut x = 0.0;

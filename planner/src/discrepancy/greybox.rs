@@ -2082,6 +2082,8 @@ mod tests {
 mod stop_tests {
     use super::*;
     use crate::discrepancy::{LoadTag, Sample, StageTag};
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
 
     /// A record of the bucket resting at its curl stop (readings offset by `offset_rad`), its
     /// cylinder pressing towards the stop with `press_n` of hydraulic force beyond gravity (negative:
@@ -2263,13 +2265,8 @@ mod stop_tests {
     /// the window, needs a whole window of defined samples and leaves the other signals alone.
     #[test]
     fn prefilter_keeps_a_bias_and_cuts_white_noise() {
-        let mut state = 99u64;
-        let mut uniform = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((state >> 11) as f64 / (1u64 << 53) as f64) - 0.5
-        };
+        let mut rng = ChaCha8Rng::seed_from_u64(99);
+        let mut uniform = || rng.random::<f64>() - 0.5;
         let n = 20_000;
         let mut series: Vec<[f64; N_SIGNALS]> = (0..n)
             .map(|_| {

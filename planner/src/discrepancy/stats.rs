@@ -240,18 +240,13 @@ pub fn localise(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
 
     #[test]
     fn correlation_of_a_shifted_copy_peaks_at_its_lag() {
-        let mut state = 99u64;
-        let a: Vec<f64> = (0..400)
-            .map(|_| {
-                state = state
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                (state >> 11) as f64 / (1u64 << 53) as f64
-            })
-            .collect();
+        let mut rng = ChaCha8Rng::seed_from_u64(99);
+        let a: Vec<f64> = (0..400).map(|_| rng.random::<f64>()).collect();
         let b: Vec<f64> = (0..400).map(|k| a[(k + 400 - 3) % 400]).collect();
         assert!(correlation(&b, &a, 3) > 0.95);
         assert!(correlation(&b, &a, 0).abs() < 0.3);
