@@ -1882,16 +1882,22 @@ pub const VELOCITY_PREFILTER_HALF: usize = 2;
 /// internal_leakage_1e-11: held-out stick velocity RMS 8.3 -> 5.0 mm/s raw, 6.2 -> 1.9 mm/s
 /// through this filter; docs/discrepancy.md).
 pub fn prefilter_velocities(series: &mut [[f64; N_SIGNALS]]) {
-    let h = VELOCITY_PREFILTER_HALF;
-    let width = (2 * h + 1) as f64;
+    const H: usize = VELOCITY_PREFILTER_HALF;
+    const W: usize = 2 * H + 1;
     let n = series.len();
     for i in 0..3 {
-        let raw: Vec<f64> = series.iter().map(|s| s[i]).collect();
-        for (k, s) in series.iter_mut().enumerate() {
-            s[i] = if k >= h && k + h < n {
-                let window = &raw[k - h..=k + h];
-                if window.iter().all(|v| v.is_finite()) {
-                    window.iter().sum::<f64>() / width
+        // In place (the replay runs this on every candidate evaluation): the raw values of the
+        // window `k - H ..= k + H` in a ring, the ones before `k` already overwritten in `series`.
+        let mut ring = [f64::NAN; W];
+        for (k, slot) in ring.iter_mut().enumerate().take(H.min(n)) {
+            *slot = series[k][i];
+        }
+        for k in 0..n {
+            ring[(k + H) % W] = series.get(k + H).map_or(f64::NAN, |s| s[i]);
+            series[k][i] = if k >= H && k + H < n {
+                let window = (k - H..=k + H).map(|j| ring[j % W]);
+                if window.clone().all(f64::is_finite) {
+                    window.sum::<f64>() / W as f64
                 } else {
                     f64::NAN
                 }
