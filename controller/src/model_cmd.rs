@@ -272,6 +272,10 @@ pub struct CompareArgs {
     /// Output folder for `compare.svg` and `compare.json`.
     #[arg(long, default_value = "model-compare")]
     pub out: PathBuf,
+    /// Factor on the soil's force on the bucket in both the simulator and the dig model (thesis
+    /// Table 2's force factor), to compare them in harder soil than the default bench's.
+    #[arg(long, default_value_t = 1.0)]
+    pub force_factor: f64,
     /// Print both trajectories every 0.2 s.
     #[arg(long)]
     pub verbose: bool,
@@ -356,6 +360,14 @@ pub struct DigSetup {
     pub start_depth_m: f64,
     /// Start joint angles, rad.
     pub start: JointAngles,
+    /// Factor on the soil's force on the bucket (thesis Table 2; the simulator's
+    /// `soil_force_factor`, the dig model's force factor). 1 in files written before it existed.
+    #[serde(default = "unit_factor")]
+    pub soil_force_factor: f64,
+}
+
+fn unit_factor() -> f64 {
+    1.0
 }
 
 /// The simulator configuration of a setup (default machine and bench, changed as the setup says).
@@ -373,6 +385,9 @@ pub fn sim_config(setup: &DigSetup) -> anyhow::Result<SimConfig> {
     s.start.stick_deg = setup.start.stick_rad.to_degrees();
     s.start.bucket_deg = setup.start.bucket_rad.to_degrees();
     s.start.swing_deg = 0.0;
+    if setup.soil_force_factor != 1.0 {
+        s.soil_force_factor = Some(setup.soil_force_factor);
+    }
     Ok(cfg)
 }
 
@@ -411,6 +426,7 @@ pub fn random_setups(n: usize, seed: u64, vary: bool) -> anyhow::Result<Vec<DigS
                 hardness_index: 3.0,
                 start_depth_m: rng.uniform(0.0, 0.05),
                 start: JointAngles::default(),
+                soil_force_factor: 1.0,
             };
             if vary {
                 setup.face_x_m = rng.uniform(2.5, 4.0);
@@ -714,7 +730,9 @@ pub fn run_sim_dig_diagnosed(
                             &now,
                             plant.contact.content.volume_m3,
                         )?;
-                        Some([f.fx_n, f.fz_n])
+                        // `soil_force_at` is before the force factor; the simulator's is after.
+                        let k = setup.soil_force_factor;
+                        Some([k * f.fx_n, k * f.fz_n])
                     }
                     None => None,
                 };
@@ -882,6 +900,7 @@ pub fn compare_dig(
 ) -> anyhow::Result<(DigComparison, DigPrediction)> {
     let mut model = model.clone();
     model.set_hardness_index(sim.setup.hardness_index)?;
+    model.set_force_factor(sim.setup.soil_force_factor)?;
     let site = DigSite::new(sim.profile.clone(), 0.0)?;
     let pred = model
         .predict(&DigStart::Joints(sim.start_joints), &site)
@@ -1831,8 +1850,17 @@ fn compare(a: &CompareArgs) -> anyhow::Result<()> {
     if a.digs == 0 {
         bail!("--digs must be at least 1");
     }
+    if !(a.force_factor.is_finite() && (0.0..=10.0).contains(&a.force_factor)) {
+        bail!(
+            "--force-factor must be within 0..=10, got {}",
+            a.force_factor
+        );
+    }
     let model = load_model(a.model.as_deref())?;
-    let setups = random_setups(a.digs, a.seed, false)?;
+    let mut setups = random_setups(a.digs, a.seed, false)?;
+    for s in &mut setups {
+        s.soil_force_factor = a.force_factor;
+    }
     let bar = indicatif::ProgressBar::new(setups.len() as u64);
     let runs: Vec<anyhow::Result<(SimDig, DigComparison, DigPrediction)>> = setups
         .par_iter()
@@ -1849,8 +1877,9 @@ fn compare(a: &CompareArgs) -> anyhow::Result<()> {
         rows.push(r.map_err(|e| anyhow::anyhow!("{e:#}"))?);
     }
     println!(
-        "dig model vs simulator, {} digs (thesis Fig. 41: within 12-15 %; target 15 %)",
-        rows.len()
+        "dig model vs simulator, {} digs, soil force x{} (thesis Fig. 41: within 12-15 %; target 15 %)",
+        rows.len(),
+        a.force_factor
     );
     println!(
         "  dig  traj RMS [m]  time sim/model [s]  energy sim/model [kJ]  volume sim/model [m^3]  err time/energy/volume [%]  lowest z sim/model [m]  soil F open loop [%]  end sim / model"
@@ -2452,6 +2481,24 @@ mod tests {
         }
         // Three paths and three dashed sections (a dashed line is drawn as one polyline a dash).
         assert!(svg.matches("<polyline").count() >= 6, "{svg}");
+    }
+
+    /// `compare --force-factor` reaches the simulator through the setup; `setups.json` files written
+    /// before the field existed load with factor 1.
+    #[test]
+    fn a_setup_carries_the_soil_force_factor_to_the_simulator() {
+        let mut setup = random_setups(1, 7, false).unwrap().remove(0);
+        assert_eq!(setup.soil_force_factor, 1.0);
+        assert_eq!(sim_config(&setup).unwrap().scenario.soil_force_factor, None);
+        setup.soil_force_factor = 2.0;
+        assert_eq!(
+            sim_config(&setup).unwrap().scenario.soil_force_factor,
+            Some(2.0)
+        );
+        let mut json = serde_json::to_value(&setup).unwrap();
+        json.as_object_mut().unwrap().remove("soil_force_factor");
+        let old: DigSetup = serde_json::from_value(json).unwrap();
+        assert_eq!(old.soil_force_factor, 1.0);
     }
 
     fn tagged_at(t: f64, angles_rad: [f64; 3]) -> Tagged {
