@@ -20,6 +20,7 @@ use firmware_bridge::transport::{InProcessBus, VirtualClock};
 use planner::autodig::AutodigMaps;
 use vcan_sim::SimConfig;
 use vcan_sim::embedded::EmbeddedMachine;
+use vcan_sim::scenario::SoilContactIntegration;
 use vcan_sim::sensors::ScanRequest;
 
 use crate::cycle::{Action, Phase, StartPose};
@@ -75,6 +76,28 @@ pub struct ExperimentArgs {
     /// `table2`: how the factor makes the soil harder.
     #[arg(long, value_enum, default_value_t = Table2Scaling::Soil)]
     pub scaling: Table2Scaling,
+    /// `table1`, `table2`, `fig52`: how the simulator integrates the soil's force (`held`, the
+    /// calibrated plant, or `implicit`, without the contact chatter; docs/simulator.md).
+    #[arg(long, value_enum, default_value_t = SoilContact::Held)]
+    pub soil_contact: SoilContact,
+}
+
+/// `--soil-contact`: [`vcan_sim::scenario::SoilContactIntegration`] on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SoilContact {
+    /// The force of each 5 ms contact update held until the next (the default plant).
+    Held,
+    /// The force as a function of the tip velocity at every 1 ms step, taken implicitly.
+    Implicit,
+}
+
+impl From<SoilContact> for SoilContactIntegration {
+    fn from(c: SoilContact) -> Self {
+        match c {
+            SoilContact::Held => SoilContactIntegration::Held,
+            SoilContact::Implicit => SoilContactIntegration::Implicit,
+        }
+    }
 }
 
 /// How Table 2's force factor is applied in the simulator.
@@ -356,7 +379,11 @@ pub const TABLE1_CREST_X_M: f64 = 11.0;
 /// # Errors
 /// As [`run_dig`].
 pub fn table1(seeds: u64) -> anyhow::Result<Vec<(f64, Mean, Mean)>> {
-    table1_with(seeds, &AutodigMaps::builtin()?)
+    table1_with(
+        seeds,
+        &AutodigMaps::builtin()?,
+        SoilContactIntegration::Held,
+    )
 }
 
 /// [`table1`] with the given maps.
@@ -371,13 +398,18 @@ pub fn table1(seeds: u64) -> anyhow::Result<Vec<(f64, Mean, Mean)>> {
 ///
 /// # Errors
 /// As [`run_dig`].
-pub fn table1_with(seeds: u64, maps: &AutodigMaps) -> anyhow::Result<Vec<(f64, Mean, Mean)>> {
+pub fn table1_with(
+    seeds: u64,
+    maps: &AutodigMaps,
+    contact: SoilContactIntegration,
+) -> anyhow::Result<Vec<(f64, Mean, Mean)>> {
     let mut sim = SimConfig::load::<&str>(None, None, None, &[])?;
     sim.scenario = vcan_sim::scenario::Scenario::from_toml_str_named(
         crate::demo::EXTENDED_BENCH_TOML,
         "config/bench_extended.toml",
     )?;
     sim.scenario.bench.face_x_m = TABLE1_CREST_X_M;
+    sim.scenario.soil_contact = contact;
     let mut rows = Vec::new();
     for stick in [-87.0, -70.0, -50.0] {
         let start = start_with_stick_angle_over(stick, 0.0);
@@ -417,6 +449,7 @@ pub fn table2(seeds: u64) -> anyhow::Result<Vec<(f64, Mean)>> {
         &AutodigMaps::builtin()?,
         TABLE2_BASE_SCALE,
         Table2Scaling::Soil,
+        SoilContactIntegration::Held,
     )
 }
 
@@ -429,6 +462,7 @@ pub fn table2_with(
     maps: &AutodigMaps,
     base_scale: f64,
     scaling: Table2Scaling,
+    contact: SoilContactIntegration,
 ) -> anyhow::Result<Vec<(f64, Mean)>> {
     anyhow::ensure!(
         base_scale.is_finite() && base_scale > 0.0,
@@ -440,6 +474,7 @@ pub fn table2_with(
     let mut rows = Vec::new();
     for k in [1.0, 2.0, 3.0] {
         let mut sim = base.clone();
+        sim.scenario.soil_contact = contact;
         match scaling {
             Table2Scaling::Force => {
                 scale_soil(&mut sim, base_scale);
@@ -491,7 +526,11 @@ pub const FIG52_SOILS: [(&str, f64); 2] = [("soft", 8_000.0), ("hard", 16_000.0)
 /// # Errors
 /// As [`run_dig`].
 pub fn fig52(seeds: u64) -> anyhow::Result<Vec<(&'static str, f64, Mean)>> {
-    fig52_with(seeds, &AutodigMaps::builtin()?)
+    fig52_with(
+        seeds,
+        &AutodigMaps::builtin()?,
+        SoilContactIntegration::Held,
+    )
 }
 
 /// [`fig52`] with the given maps.
@@ -501,6 +540,7 @@ pub fn fig52(seeds: u64) -> anyhow::Result<Vec<(&'static str, f64, Mean)>> {
 pub fn fig52_with(
     seeds: u64,
     maps: &AutodigMaps,
+    contact: SoilContactIntegration,
 ) -> anyhow::Result<Vec<(&'static str, f64, Mean)>> {
     let base = SimConfig::load::<&str>(None, None, None, &[])?;
     let start = default_start();
@@ -508,6 +548,7 @@ pub fn fig52_with(
     for (name, cohesion) in FIG52_SOILS {
         let mut sim = base.clone();
         sim.scenario.soil.cohesion_pa = cohesion;
+        sim.scenario.soil_contact = contact;
         for index in [1.0, 5.0] {
             let mut config = ControllerConfig::default();
             config.autodig.hardness_index = index;
@@ -536,6 +577,15 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
     use std::fmt::Write as _;
     let mut s = String::new();
     // Writing into a String cannot fail.
+    if args.soil_contact == SoilContact::Implicit
+        && matches!(args.which, Which::Table1 | Which::Table2 | Which::Fig52)
+    {
+        let _ = writeln!(
+            s,
+            "Simulator soil contact: implicit (no contact chatter; the maps and soils are calibrated on \
+             the held plant)\n"
+        );
+    }
     match args.which {
         Which::Table1 => {
             let thesis = [
@@ -555,7 +605,7 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
                  thesis plain: time, payload | thesis perception: time, payload |"
             );
             let _ = writeln!(s, "|---|---|---|---|---|---|---|");
-            let rows = table1_with(args.runs, &args.autodig_maps()?)?;
+            let rows = table1_with(args.runs, &args.autodig_maps()?, args.soil_contact.into())?;
             for ((stick, plain, with), t) in rows.iter().zip(thesis) {
                 let _ = writeln!(
                     s,
@@ -611,6 +661,7 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
                 &args.autodig_maps()?,
                 args.base_scale,
                 args.scaling,
+                args.soil_contact.into(),
             )?;
             for ((k, m), t) in rows.iter().zip(thesis) {
                 let _ = writeln!(
@@ -642,7 +693,7 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
             );
             let _ = writeln!(s, "| soil | index | fill | time | energy | swept volume |");
             let _ = writeln!(s, "|---|---|---|---|---|---|");
-            let rows = fig52_with(args.runs, &args.autodig_maps()?)?;
+            let rows = fig52_with(args.runs, &args.autodig_maps()?, args.soil_contact.into())?;
             for (soil, index, m) in &rows {
                 let _ = writeln!(
                     s,

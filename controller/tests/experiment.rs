@@ -68,6 +68,7 @@ fn fig52_report_prints_the_thesis_comparison() {
         maps: None,
         base_scale: controller::experiment::TABLE2_BASE_SCALE,
         scaling: controller::experiment::Table2Scaling::Soil,
+        soil_contact: controller::experiment::SoilContact::Held,
     })
     .unwrap();
     assert!(

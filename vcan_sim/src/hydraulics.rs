@@ -26,6 +26,7 @@
 //! The swing motor uses the same chamber model with displacement `D` (m^3/rad) in place of the areas.
 //! Everything here is pure computation; no clocks, no I/O.
 
+use nalgebra::{Matrix3, Vector3};
 use serde::Deserialize;
 
 /// Index of the boom actuator in actuator arrays.
@@ -327,10 +328,28 @@ pub struct ActuatorLoad {
     pub force: f64,
     /// Effective mass reflected to the actuator (kg, or kg m^2 for the swing).
     pub mass: f64,
+    /// How the force changes with the linkage's actuator velocities, `dF/dv_j` for the boom, stick
+    /// and bucket actuators (N s/m; zero for the swing). The soil's resistance on the bucket rises
+    /// steeply with speed near rest; [`Hydraulics::step`] takes it implicitly, so a load held between
+    /// contact updates cannot drive the actuators into a limit cycle.
+    pub damping: [f64; 3],
     /// When true the actuator is blocked by a rigid obstacle in the extension direction.
     pub blocked_extend: bool,
     /// When true the actuator is blocked by a rigid obstacle in the retraction direction.
     pub blocked_retract: bool,
+}
+
+/// One actuator's implicit mechanics (Eq. 3 with the oil stiffness of Eq. 2) before the loads'
+/// velocity coupling is solved: `inertia v' = numerator`.
+#[derive(Debug, Clone, Copy, Default)]
+struct Pending {
+    inertia: f64,
+    numerator: f64,
+    coulomb: f64,
+    head0: f64,
+    head_gain: f64,
+    rod0: f64,
+    rod_gain: f64,
 }
 
 /// State of one actuator.
@@ -993,6 +1012,7 @@ impl Hydraulics {
         self.pump_flow_m3_per_s = pump_flow;
 
         // 2 and 3. Chamber pressures (implicit Euler of Eq. 2) and mechanics (Eq. 3).
+        let mut pending = [Pending::default(); N_ACTUATORS];
         for i in 0..N_ACTUATORS {
             let ch = self.chambers(i);
             let spool = spools[i];
@@ -1206,7 +1226,57 @@ impl Hydraulics {
                 head_gain * ch.area_head * ch.area_head + rod_gain * ch.area_rod * ch.area_rod;
             let drive0 = head0 * ch.area_head - rod0 * ch.area_rod - load.force;
             let inertia = mass + dt_s * (damping + stiffness);
-            let mut v_new = (mass * v + dt_s * (drive0 + stiffness * v)) / inertia;
+            pending[i] = Pending {
+                inertia,
+                numerator: mass * v + dt_s * (drive0 + stiffness * v),
+                coulomb,
+                head0,
+                head_gain,
+                rod0,
+                rod_gain,
+            };
+        }
+        // The loads' velocity dependence (soil resistance, `ActuatorLoad::damping`) is implicit too:
+        // F(v') = F(v) + D (v' - v) couples the linkage's three actuators,
+        //   (diag(inertia) + dt D) v' = numerator + dt D v.
+        let mut v_solved = [0.0; N_ACTUATORS];
+        for i in 0..N_ACTUATORS {
+            v_solved[i] = pending[i].numerator / pending[i].inertia;
+        }
+        let coupled = loads[..SWING]
+            .iter()
+            .any(|l| l.damping.iter().any(|&d| d != 0.0 && d.is_finite()));
+        if coupled {
+            let v_old = Vector3::new(
+                self.actuators[0].velocity,
+                self.actuators[1].velocity,
+                self.actuators[2].velocity,
+            );
+            let d = Matrix3::from_fn(|i, j| {
+                let x = loads[i].damping[j];
+                if x.is_finite() { x } else { 0.0 }
+            });
+            let a = Matrix3::from_diagonal(&Vector3::from_fn(|i, _| pending[i].inertia)) + dt_s * d;
+            let b = Vector3::from_fn(|i, _| pending[i].numerator) + dt_s * d * v_old;
+            if let Some(v) = a.lu().solve(&b).filter(|v| v.iter().all(|x| x.is_finite())) {
+                v_solved[..SWING].copy_from_slice(v.as_slice());
+            }
+        }
+        for i in 0..N_ACTUATORS {
+            let ch = self.chambers(i);
+            let state = self.actuators[i];
+            let load = loads[i];
+            let Pending {
+                inertia,
+                coulomb,
+                head0,
+                head_gain,
+                rod0,
+                rod_gain,
+                ..
+            } = pending[i];
+            let v = state.velocity;
+            let mut v_new = v_solved[i];
             // Coulomb friction with stiction: it can stop the actuator but never reverse it.
             let dv_friction = dt_s * coulomb / inertia;
             v_new = if v_new.abs() <= dv_friction {

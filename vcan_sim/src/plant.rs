@@ -17,16 +17,18 @@ use crate::hydraulics::{
     SWING,
 };
 use crate::linkage::{Linkage, LinkageState, PoseFrame};
-use crate::scenario::Scenario;
+use crate::scenario::{Scenario, SoilContactIntegration};
 use crate::sensors::{
     Scan, ScanRequest, SensedTruth, SensorEffects, SensorReadings, SensorSpec, Sensors,
 };
-use crate::soil_contact::{ContactInput, MassLedger, SoilContact, SoilEffects, World};
+use crate::soil_contact::{ContactInput, ContactLaw, MassLedger, SoilContact, SoilEffects, World};
 
 /// Physics step (s): 1 kHz.
 pub const PHYSICS_DT_S: f64 = 1.0e-3;
-/// Soil contact (cutting, fill, FEE force) and the linkage loads run every this many physics steps
-/// (5 ms, 200 Hz) and are held in between; the hydraulics runs every step. The bucket edge moves ~1-3 mm in that time, far below a terrain cell.
+/// Soil contact (cutting, fill, the geometry of the FEE force) and the linkage loads run every this
+/// many physics steps (5 ms, 200 Hz) and are held in between; the hydraulics and the soil force's
+/// velocity dependence ([`ContactLaw`]) run every step. The bucket edge moves ~1-3 mm in 5 ms, far
+/// below a terrain cell.
 pub const SOIL_SUBSTEPS: u64 = 5;
 /// Track speed time constant (s).
 const TRACK_TIME_CONSTANT_S: f64 = 0.3;
@@ -163,11 +165,23 @@ pub struct Plant {
     link: LinkageState,
     link_stale: bool,
     soil_force: TipForce,
+    /// The soil's force as a function of the tip velocity, from the last contact update; evaluated
+    /// at every physics step.
+    contact_law: ContactLaw,
+    /// Per boom, stick, bucket actuator: the tip velocity per unit actuator velocity (`[vx, vz]`,
+    /// Eq. A3 through the cylinder arms) and the actuator load per unit tip force (`[per fx, per
+    /// fz]`), at the last contact update.
+    tip_per_actuator: [[f64; 2]; 3],
+    load_per_tip_force: [[f64; 2]; 3],
     /// [`Scenario::soil_force_factor`] (1 when absent).
     soil_force_factor: f64,
+    /// [`Scenario::soil_contact`].
+    contact_integration: SoilContactIntegration,
     sensors: Sensors,
     time_s: f64,
     steps: u64,
+    /// The loads without the soil's force (gravity, payload, reflected masses) at the last contact
+    /// update.
     cached_loads: [ActuatorLoad; N_ACTUATORS],
     /// Gravity on or off (off for no-load hydraulic tests).
     pub gravity: bool,
@@ -244,7 +258,11 @@ impl Plant {
             link,
             link_stale: false,
             soil_force: TipForce::default(),
+            contact_law: ContactLaw::default(),
+            tip_per_actuator: [[0.0; 2]; 3],
+            load_per_tip_force: [[0.0; 2]; 3],
             soil_force_factor: scenario.soil_force_factor.unwrap_or(1.0),
+            contact_integration: scenario.soil_contact,
             sensors: Sensors::new(SensorSpec::default(), scenario.seed),
             time_s: 0.0,
             steps: 0,
@@ -342,16 +360,41 @@ impl Plant {
         }
     }
 
-    /// Loads on the actuators at the current pose, with its geometry.
-    fn loads(&self, frame: &PoseFrame) -> [ActuatorLoad; N_ACTUATORS] {
+    /// Loads on the actuators at the current pose, with its geometry. With
+    /// [`SoilContactIntegration::Held`] they include the soil's force of this contact update; with
+    /// [`SoilContactIntegration::Implicit`] they are the loads without it, and the maps
+    /// [`Self::step`] applies the soil's force and its velocity gradient through
+    /// (`tip_per_actuator`, `load_per_tip_force`).
+    fn loads(&mut self, frame: &PoseFrame) -> [ActuatorLoad; N_ACTUATORS] {
         let payload = self.payload_kg();
-        let forces = self.linkage.cylinder_loads_at(
-            &self.link,
-            frame,
-            &self.soil_force,
-            payload,
-            self.gravity,
-        );
+        let loads_with = |soil: &TipForce| {
+            self.linkage
+                .cylinder_loads_at(&self.link, frame, soil, payload, self.gravity)
+        };
+        let held = self.contact_integration == SoilContactIntegration::Held;
+        let forces = if held {
+            loads_with(&self.soil_force)
+        } else {
+            loads_with(&TipForce::default())
+        };
+        // The cylinder loads are linear in the tip force (Eqs. A19-A23).
+        if !held {
+            let per_fx = loads_with(&TipForce {
+                fx_n: 1.0,
+                ..TipForce::default()
+            });
+            let per_fz = loads_with(&TipForce {
+                fz_n: 1.0,
+                ..TipForce::default()
+            });
+            for i in 0..3 {
+                self.load_per_tip_force[i] = [per_fx[i] - forces[i], per_fz[i] - forces[i]];
+                let mut unit = [0.0; 3];
+                unit[i] = 1.0;
+                let rates = self.linkage.joint_rates(&self.link, unit);
+                self.tip_per_actuator[i] = self.linkage.tip_velocity_at(frame, rates);
+            }
+        }
         let masses = self.linkage.cylinder_masses_at(&self.link, frame, payload);
         let tip_x_m = frame.points.tip[0];
         let swing_inertia = self.cfg.swing.inertia_kg_m2 + payload * tip_x_m * tip_x_m;
@@ -405,13 +448,56 @@ impl Plant {
             cohesion_pa: fx.get(Effect::SoilCohesion),
             density_kg_per_m3: fx.get(Effect::SoilDensity),
         };
-        let f = self.contact.step(&mut self.world, &input, dt, &soil_fx);
+        self.contact_law = self.contact.step_law(&mut self.world, &input, dt, &soil_fx);
+        if self.contact_integration == SoilContactIntegration::Held {
+            // The force at this update's velocity, held for the next SOIL_SUBSTEPS steps.
+            let f = self.contact_law.force(tip_v);
+            let k = self.soil_force_factor;
+            self.soil_force = TipForce {
+                fx_n: k * f.fx_n,
+                fz_n: k * f.fz_n,
+                my_nm: k * f.my_nm,
+            };
+        }
+    }
+
+    /// The loads at the current actuator velocities: the cached loads plus the soil's force from
+    /// the contact law, with its velocity gradient `dF_i/dv_j = a_i . G . J_j` for the hydraulics'
+    /// implicit step (`ActuatorLoad::damping`).
+    fn loads_with_soil(&mut self) -> [ActuatorLoad; N_ACTUATORS] {
+        let mut loads = self.cached_loads;
+        let law = &self.contact_law;
+        if *law == ContactLaw::default() {
+            self.soil_force = TipForce::default();
+            return loads;
+        }
         let k = self.soil_force_factor;
+        let mut v_tip = [0.0; 2];
+        for (i, j) in self.tip_per_actuator.iter().enumerate() {
+            let v = self.hydraulics.actuators[i].velocity;
+            v_tip[0] += j[0] * v;
+            v_tip[1] += j[1] * v;
+        }
+        let f = law.force(v_tip);
+        let g = law.gradient(v_tip);
         self.soil_force = TipForce {
             fx_n: k * f.fx_n,
             fz_n: k * f.fz_n,
             my_nm: k * f.my_nm,
         };
+        for (i, load) in loads.iter_mut().take(3).enumerate() {
+            let a = self.load_per_tip_force[i];
+            load.force += a[0] * self.soil_force.fx_n + a[1] * self.soil_force.fz_n;
+            // a . G (the load on actuator i per unit tip velocity), then . J_j.
+            let ag = [
+                k * (a[0] * g[0][0] + a[1] * g[1][0]),
+                k * (a[0] * g[0][1] + a[1] * g[1][1]),
+            ];
+            for (j, tip) in self.tip_per_actuator.iter().enumerate() {
+                load.damping[j] = ag[0] * tip[0] + ag[1] * tip[1];
+            }
+        }
+        loads
     }
 
     /// Advances the machine by one physics step [`PHYSICS_DT_S`] with the valve commands
@@ -449,8 +535,10 @@ impl Plant {
         }
         let spools = self.spool2;
 
-        // Soil contact at the current pose and the loads of gravity, payload and soil on the
-        // cylinders (Appendix), at 200 Hz: they depend on the pose, which moves little in 5 ms.
+        // Soil contact at the current pose (the cut, the fill and the contact law) and the loads of
+        // gravity and payload on the cylinders (Appendix), at 200 Hz: they depend on the pose, which
+        // moves little in 5 ms. The soil's force depends steeply on the velocity as well, so it is
+        // evaluated from the contact law at every step and its gradient taken implicitly.
         if self.steps.is_multiple_of(SOIL_SUBSTEPS) {
             if self.link_stale {
                 self.link = self.link_from_tables();
@@ -461,7 +549,10 @@ impl Plant {
             self.cached_loads = self.loads(&frame);
         }
         self.steps += 1;
-        let loads = self.cached_loads;
+        let loads = match self.contact_integration {
+            SoilContactIntegration::Held => self.cached_loads,
+            SoilContactIntegration::Implicit => self.loads_with_soil(),
+        };
         let hfx = HydraulicEffects {
             flow_sharing: fx.get(Effect::FlowSharing),
             pump_saturation: fx.get(Effect::PumpSaturation),
@@ -610,6 +701,56 @@ mod tests {
         assert!(touched, "the bucket never reached the soil");
         scenario.soil_force_factor = Some(-1.0);
         assert!(scenario.validate().is_err());
+    }
+
+    /// The bucket pushed into the bench and then held (valves neutral) while a leaking stick lets it
+    /// creep: the soil's force settles to what holds the creeping bucket instead of swinging between
+    /// full resistance and none at every contact update (the limit cycle of a steep damper held
+    /// explicitly for 5 ms against the oil column: with [`SoilContactIntegration::Held`] 179 kN,
+    /// jumping by up to 218 kN per step).
+    #[test]
+    fn a_bucket_held_in_the_soil_rests_without_chatter_with_implicit_contact() {
+        let mut scenario = Scenario::default_bench().unwrap();
+        scenario.soil_contact = SoilContactIntegration::Implicit;
+        let mut p = Plant::new(
+            &MachineConfig::default_machine().unwrap(),
+            &scenario,
+            EffectSet::from_args(&["internal_leakage=1e-11"]).unwrap(),
+        )
+        .unwrap();
+        let mut pushed = 0;
+        for _ in 0..(20.0 / PHYSICS_DT_S) as usize {
+            p.step([-0.6, -0.3, 0.0, 0.0, 0.0, 0.0]);
+            let f = p.true_state().soil_force_n;
+            if f[0].hypot(f[1]) > 1.0 {
+                pushed += 1;
+            }
+            if pushed >= 500 {
+                break;
+            }
+        }
+        assert!(pushed >= 500, "the bucket never reached the soil");
+        let mut forces = Vec::new();
+        for _ in 0..3000 {
+            p.step([0.0; 6]);
+            forces.push(p.true_state().soil_force_n);
+        }
+        // After a settling second: the largest change of the force from one 1 ms step to the next.
+        let held = &forces[1000..];
+        let largest_jump = held
+            .windows(2)
+            .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+            .fold(0.0, f64::max);
+        let largest = held.iter().map(|f| f[0].hypot(f[1])).fold(0.0, f64::max);
+        // Before the contact law was evaluated per step: 179 kN, jumping by up to 218 kN per step.
+        assert!(
+            largest > 1.0e3,
+            "the soil no longer holds the bucket: {largest} N"
+        );
+        assert!(
+            largest_jump < 2.0e3,
+            "the force jumps by {largest_jump} N per step (largest {largest} N)"
+        );
     }
 
     #[test]

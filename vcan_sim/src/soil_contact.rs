@@ -769,6 +769,98 @@ const BACK_BEARING_LENGTH_M: f64 = 0.25;
 const BOULDER_STIFFNESS: f64 = 2.0e7;
 const BOULDER_DAMPING: f64 = 2.0e5;
 
+/// The soil's force on the bucket as a function of the tip velocity, for the geometry of one contact
+/// step: the FEE failure force (Eq. 18) and the bearing of the edge and of the back, each mobilised
+/// from rest over [`CREEP_SPEED_M_PER_S`], plus a force that does not depend on the velocity (the
+/// boulders). The plant evaluates it at every physics step with the current velocity and takes its
+/// velocity gradient implicitly: the mobilisation is a steep damper (force / creep speed, ~1e7 N s/m)
+/// that, held explicitly over a 5 ms contact step against the oil column, drove the stick into a
+/// 100 Hz limit cycle with load swings of about 1 MN.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ContactLaw {
+    /// Fully mobilised FEE failure force (N).
+    pub failure_n: f64,
+    /// Blade direction (edge toward the pin), base frame.
+    pub blade: [f64; 2],
+    /// `(sin, cos)` of the soil-tool friction angle delta.
+    pub friction: (f64, f64),
+    /// Fully mobilised bearing force of the edge pushed in tip first (N), along `blade`.
+    pub edge_n: f64,
+    /// Fully mobilised bearing force of the back pushed in (N), along `opening`.
+    pub back_n: f64,
+    /// Direction the bucket opening faces, base frame.
+    pub opening: [f64; 2],
+    /// Force independent of the velocity (boulders; penalty and damping held for the step), N.
+    pub held: [f64; 2],
+}
+
+impl ContactLaw {
+    /// The force on the bucket at tip velocity `v` (base frame `[vx, vz]`).
+    pub fn force(&self, v: [f64; 2]) -> TipForce {
+        let (f, _) = self.evaluate(v, false);
+        TipForce {
+            fx_n: f[0],
+            fz_n: f[1],
+            my_nm: 0.0,
+        }
+    }
+
+    /// `d force / d v` (2 x 2, row = force component, column = velocity component) at `v`, with the
+    /// directions of the forces held (the travel direction at `v`).
+    pub fn gradient(&self, v: [f64; 2]) -> [[f64; 2]; 2] {
+        self.evaluate(v, true).1
+    }
+
+    fn evaluate(&self, v: [f64; 2], want_gradient: bool) -> ([f64; 2], [[f64; 2]; 2]) {
+        let mut force = self.held;
+        let mut grad = [[0.0; 2]; 2];
+        // `scale * tanh(s / creep)` along `dir`, with `s` of gradient `ds` in the velocity.
+        let mut add = |scale: f64, s: f64, ds: [f64; 2], dir: [f64; 2]| {
+            let x = s / CREEP_SPEED_M_PER_S;
+            let t = x.tanh();
+            force[0] += scale * t * dir[0];
+            force[1] += scale * t * dir[1];
+            if want_gradient {
+                let slope = scale * (1.0 - t * t) / CREEP_SPEED_M_PER_S;
+                for r in 0..2 {
+                    for c in 0..2 {
+                        grad[r][c] += slope * dir[r] * ds[c];
+                    }
+                }
+            }
+        };
+        let b = self.blade;
+        if self.failure_n != 0.0 {
+            // The normal into the soil ahead of the edge, on the side the edge travels.
+            let travel_sign = if v[0] > 0.0 { 1.0 } else { -1.0 };
+            let mut n = [b[1], -b[0]];
+            if n[0] * travel_sign < 0.0 {
+                n = [-n[0], -n[1]];
+            }
+            let (sd, cd) = self.friction;
+            // Eq. 18 on the bucket: against the normal, and up the blade by friction.
+            let dir = [-cd * n[0] + sd * b[0], -cd * n[1] + sd * b[1]];
+            let speed = v[0].hypot(v[1]);
+            let ds = if speed > 1e-12 {
+                [v[0] / speed, v[1] / speed]
+            } else {
+                [0.0, 0.0]
+            };
+            add(self.failure_n, speed, ds, dir);
+        }
+        let tip_first = -(v[0] * b[0] + v[1] * b[1]);
+        if self.edge_n != 0.0 && tip_first > 0.0 {
+            add(self.edge_n, tip_first, [-b[0], -b[1]], b);
+        }
+        let o = self.opening;
+        let back_first = -(v[0] * o[0] + v[1] * o[1]);
+        if self.back_n != 0.0 && back_first > 0.0 {
+            add(self.back_n, back_first, [-o[0], -o[1]], o);
+        }
+        (force, grad)
+    }
+}
+
 impl SoilContact {
     /// Moves the edge, cuts the terrain, updates the bucket content and returns the force of the soil
     /// on the bucket (base frame, at the cutting edge).
@@ -779,9 +871,22 @@ impl SoilContact {
         dt_s: f64,
         effects: &SoilEffects,
     ) -> TipForce {
+        self.step_law(world, input, dt_s, effects)
+            .force(input.tip_velocity_base)
+    }
+
+    /// As [`Self::step`], returning the force as a function of the tip velocity (for the geometry
+    /// of this step) instead of its value at `input.tip_velocity_base`.
+    pub fn step_law(
+        &mut self,
+        world: &mut World,
+        input: &ContactInput,
+        dt_s: f64,
+        effects: &SoilEffects,
+    ) -> ContactLaw {
         let tip = input.tip_world;
         if !tip.iter().all(|v| v.is_finite()) {
-            return TipForce::default();
+            return ContactLaw::default();
         }
         // 1. Cut along the edge's path and move the material into the bucket.
         if let Some(prev) = self.last_tip {
@@ -794,7 +899,11 @@ impl SoilContact {
         if tip[2] > ground + 0.6 && self.content.volume_m3 <= 0.0 && self.pending_spill_m3 <= 0.0 {
             self.in_contact = false;
             world.advance_slopes(dt_s);
-            return self.boulder_force(world, input);
+            let boulder = self.boulder_force(world, input);
+            return ContactLaw {
+                held: [boulder.fx_n, boulder.fz_n],
+                ..ContactLaw::default()
+            };
         }
 
         // 2. Soil geometry at the edge (Gamma = (d, alpha, rho, V_s)).
@@ -808,7 +917,7 @@ impl SoilContact {
         let depth_vertical = surface - tip[2];
         self.in_contact = depth_vertical > 0.0;
 
-        let mut force = [0.0, 0.0];
+        let mut law = ContactLaw::default();
         if self.in_contact {
             let alpha = ((at_r(0.25) - at_r(-0.25)) / 0.5).atan();
             let soil = world.soil_at(tip[0], tip[1], effects);
@@ -822,10 +931,6 @@ impl SoilContact {
             let nb = b[0].hypot(b[1]).max(1e-9);
             let b = [b[0] / nb, b[1] / nb];
             let travel_sign = if v[0] > 0.0 { 1.0 } else { -1.0 };
-            let mut n = [b[1], -b[0]];
-            if n[0] * travel_sign < 0.0 {
-                n = [-n[0], -n[1]];
-            }
             // Rake angle (Fig. 25): between the blade and the terrain surface behind the edge.
             let blade_from_travel = b[1].atan2(b[0] * travel_sign);
             let rho = (std::f64::consts::PI - blade_from_travel + alpha * travel_sign)
@@ -850,16 +955,15 @@ impl SoilContact {
             };
             // Without depth below the floor this is the bench soil's failure_force_n.
             let f = layered_failure_force_n(&soil, &native, below, &gamma, input.width_m);
-            let speed = v[0].hypot(v[1]);
-            let mobilised = f * (speed / CREEP_SPEED_M_PER_S).tanh();
             // Eq. 18: the tool force on the soil is at delta from the blade normal; on the bucket it is
-            // the opposite: against the normal, and up the blade by friction. On a layered cut delta
-            // is weighted by the share of the blade's contact below the floor.
+            // the opposite: against the normal, and up the blade by friction (`ContactLaw`),
+            // mobilised from rest over the creep speed. On a layered cut delta is weighted by the
+            // share of the blade's contact below the floor.
             let delta = (1.0 - below) * soil.tool_friction_angle_rad
                 + below * native.tool_friction_angle_rad;
-            let (sd, cd) = delta.sin_cos();
-            force[0] += mobilised * (-cd * n[0] + sd * b[0]);
-            force[1] += mobilised * (-cd * n[1] + sd * b[1]);
+            law.failure_n = f;
+            law.blade = b;
+            law.friction = delta.sin_cos();
             // Bearing resistance (bearing pressure c N_c + gamma g d N_q + q0): the cutting edge pushed in
             // tip first (its speed along the bucket line, pin -> tip) bears on its face, bucket width x
             // EDGE_THICKNESS_M, directed back up the blade; the bucket's back (bottom plate) pushed into
@@ -878,31 +982,14 @@ impl SoilContact {
             } else {
                 bearing(&soil)
             };
-            let v_tip_first = -(v[0] * b[0] + v[1] * b[1]);
-            if v_tip_first > 0.0 {
-                let edge = pressure
-                    * input.width_m
-                    * EDGE_THICKNESS_M
-                    * (v_tip_first / CREEP_SPEED_M_PER_S).tanh();
-                force[0] += edge * b[0];
-                force[1] += edge * b[1];
-            }
+            law.edge_n = pressure * input.width_m * EDGE_THICKNESS_M;
             // The opening faces bucket_abs - 90 degrees (as in `spill`).
             let (sa, ca) = input.bucket_abs_rad.sin_cos();
-            let opening = [sa, -ca];
-            let v_back_first = -(v[0] * opening[0] + v[1] * opening[1]);
-            if v_back_first > 0.0 {
-                let back = pressure
-                    * input.width_m
-                    * BACK_BEARING_LENGTH_M
-                    * (v_back_first / CREEP_SPEED_M_PER_S).tanh();
-                force[0] += back * opening[0];
-                force[1] += back * opening[1];
-            }
+            law.opening = [sa, -ca];
+            law.back_n = pressure * input.width_m * BACK_BEARING_LENGTH_M;
         }
         let boulder = self.boulder_force(world, input);
-        force[0] += boulder.fx_n;
-        force[1] += boulder.fz_n;
+        law.held = [boulder.fx_n, boulder.fz_n];
         // 3. Capacity, spill and dump.
         self.spill(world, input, dt_s);
         // 4. Ground the cuts left steeper than its angle of repose slumps (benches that declare it),
@@ -912,11 +999,7 @@ impl SoilContact {
         if !self.in_contact {
             world.advance_slopes(dt_s);
         }
-        TipForce {
-            fx_n: force[0],
-            fz_n: force[1],
-            my_nm: 0.0,
-        }
+        law
     }
 
     /// Boulders: a stiff obstacle the edge cannot cut (penalty force along the outward normal).
