@@ -771,7 +771,7 @@ const BOULDER_DAMPING: f64 = 2.0e5;
 
 /// The soil's force on the bucket as a function of the tip velocity, for the geometry of one contact
 /// step: the FEE failure force (Eq. 18) and the bearing of the edge and of the back, each mobilised
-/// from rest over [`CREEP_SPEED_M_PER_S`], plus a force that does not depend on the velocity (the
+/// from rest over the creep speed (1 cm/s), plus a force that does not depend on the velocity (the
 /// boulders). The plant evaluates it at every physics step with the current velocity and takes its
 /// velocity gradient implicitly: the mobilisation is a steep damper (force / creep speed, ~1e7 N s/m)
 /// that, held explicitly over a 5 ms contact step against the oil column, drove the stick into a
