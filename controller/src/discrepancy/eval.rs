@@ -113,6 +113,23 @@ fn signals_of(c: Candidate) -> Vec<&'static str> {
         .collect()
 }
 
+/// Whether `session` holds a finished `demo` session to reuse: `demo` writes `summary.json` after it
+/// has closed the trace, so a session without it was interrupted (its trace may be cut short, e.g. a
+/// run killed by a closed pipe) and is removed, to be generated again.
+///
+/// # Errors
+/// Removing an interrupted session.
+fn session_complete(session: &std::path::Path) -> anyhow::Result<bool> {
+    if session.join("summary.json").exists() {
+        return Ok(true);
+    }
+    if session.exists() {
+        std::fs::remove_dir_all(session)
+            .with_context(|| format!("removing the interrupted session {}", session.display()))?;
+    }
+    Ok(false)
+}
+
 fn run_case(
     out: &std::path::Path,
     hidden: Option<(Candidate, f64)>,
@@ -131,7 +148,7 @@ fn run_case(
     if let Some((c, v)) = hidden {
         demo.effects = vec![format!("{}={v}", c.name())];
     }
-    if !session.join("trace.log").exists() {
+    if !session_complete(&session)? {
         run_session(&demo, &AtomicBool::new(false))
             .with_context(|| format!("generating session {case}"))?;
     }
@@ -424,7 +441,7 @@ pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
 /// Generating or analysing the session.
 pub fn run_bench(args: &BenchArgs) -> anyhow::Result<()> {
     let session = args.out.join("session");
-    if !session.join("trace.log").exists() {
+    if !session_complete(&session)? {
         let mut demo = DemoArgs::new(session.clone());
         demo.digs = args.digs;
         demo.seed = Some(5);
@@ -495,4 +512,27 @@ fn process_cpu_s() -> Option<f64> {
     let utime: f64 = fields.get(11)?.parse().ok()?;
     let stime: f64 = fields.get(12)?.parse().ok()?;
     Some((utime + stime) / 100.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `eval` killed while generating (a closed pipe) left sessions with a trace cut short, which the
+    /// next `eval` reused and could not analyse ("no ControllerStatus frames"): a session without
+    /// `summary.json` is generated again; a finished one is kept.
+    #[test]
+    fn an_interrupted_session_is_generated_again() {
+        let dir = tempfile::tempdir().unwrap();
+        let session = dir.path().join("none_s200");
+        std::fs::create_dir_all(session.join("scans")).unwrap();
+        std::fs::write(session.join("trace.log"), "(0.000000) vcan0 0CFF0101#").unwrap();
+        assert!(!session_complete(&session).unwrap());
+        assert!(!session.exists(), "the interrupted session is removed");
+        std::fs::create_dir_all(&session).unwrap();
+        std::fs::write(session.join("trace.log"), "").unwrap();
+        std::fs::write(session.join("summary.json"), "{}").unwrap();
+        assert!(session_complete(&session).unwrap());
+        assert!(session.join("trace.log").exists(), "a finished session is kept");
+    }
 }
