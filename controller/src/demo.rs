@@ -46,7 +46,7 @@ use vcan_sim::sensors::ScanRequest;
 use planner::kinematics::{JointAngles, MachinePose};
 use planner::plan::{ActionChoice, HardnessRegression, PlannerConfig, TerrainMapper};
 use planner::terrain::TerrainGrid;
-use vcan_sim::scenario::Scenario;
+use vcan_sim::scenario::{Scenario, SoilContactIntegration};
 
 use crate::cycle::{Action, ActionKind, Phase, StartPose};
 use crate::node::{ControllerConfig, ControllerNode};
@@ -125,6 +125,10 @@ pub struct DemoArgs {
     /// A hidden effect of the simulator, NAME=VALUE (repeatable; `excavator-sim --list-effects`).
     #[arg(long = "effect", value_name = "NAME=VALUE")]
     pub effects: Vec<String>,
+    /// How the simulator integrates the soil's force (default: the bench file's `soil_contact`,
+    /// `held` when absent; docs/simulator.md, "Soil contact integration").
+    #[arg(long, value_enum, value_name = "HOW")]
+    pub soil_contact: Option<SoilContact>,
     /// Output folder.
     #[arg(long, default_value = "out/demo", value_name = "DIR")]
     pub out: PathBuf,
@@ -174,6 +178,7 @@ impl DemoArgs {
             machine: None,
             bench: None,
             effects: Vec::new(),
+            soil_contact: None,
             out,
             config: None,
             maps: None,
@@ -237,6 +242,24 @@ pub struct TipPoint {
     pub x_m: f64,
     /// Height above the ground plane, m.
     pub z_m: f64,
+}
+
+/// `--soil-contact`: [`vcan_sim::scenario::SoilContactIntegration`] on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SoilContact {
+    /// The force of each 5 ms contact update held until the next (the default plant).
+    Held,
+    /// The force as a function of the tip velocity at every 1 ms step, taken implicitly.
+    Implicit,
+}
+
+impl From<SoilContact> for SoilContactIntegration {
+    fn from(c: SoilContact) -> Self {
+        match c {
+            SoilContact::Held => SoilContactIntegration::Held,
+            SoilContact::Implicit => SoilContactIntegration::Implicit,
+        }
+    }
 }
 
 /// One dig (or cleanup) of the session, as written to `summary.json`.
@@ -559,6 +582,9 @@ pub fn setup(args: &DemoArgs) -> anyhow::Result<(SimConfig, ControllerConfig, Au
         if let Some(seed) = args.seed {
             sim.scenario.seed = seed;
         }
+    }
+    if let Some(c) = args.soil_contact {
+        sim.scenario.soil_contact = c.into();
     }
     let mut config = match &args.config {
         Some(p) => {

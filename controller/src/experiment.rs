@@ -21,6 +21,8 @@ use planner::autodig::AutodigMaps;
 use vcan_sim::SimConfig;
 use vcan_sim::embedded::EmbeddedMachine;
 use vcan_sim::scenario::SoilContactIntegration;
+
+pub use crate::demo::SoilContact;
 use vcan_sim::sensors::ScanRequest;
 
 use crate::cycle::{Action, Phase, StartPose};
@@ -80,24 +82,6 @@ pub struct ExperimentArgs {
     /// calibrated plant, or `implicit`, without the contact chatter; docs/simulator.md).
     #[arg(long, value_enum, default_value_t = SoilContact::Held)]
     pub soil_contact: SoilContact,
-}
-
-/// `--soil-contact`: [`vcan_sim::scenario::SoilContactIntegration`] on the command line.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum SoilContact {
-    /// The force of each 5 ms contact update held until the next (the default plant).
-    Held,
-    /// The force as a function of the tip velocity at every 1 ms step, taken implicitly.
-    Implicit,
-}
-
-impl From<SoilContact> for SoilContactIntegration {
-    fn from(c: SoilContact) -> Self {
-        match c {
-            SoilContact::Held => SoilContactIntegration::Held,
-            SoilContact::Implicit => SoilContactIntegration::Implicit,
-        }
-    }
 }
 
 /// How Table 2's force factor is applied in the simulator.

@@ -98,6 +98,7 @@ fn quick_confusion_table() {
         digs: None,
         only: Vec::new(),
         out: tmp.path().to_path_buf(),
+        soil_contact: None,
     };
     controller::discrepancy::eval::run_eval(&args).unwrap();
     let results: Vec<serde_json::Value> =

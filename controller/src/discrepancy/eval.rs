@@ -15,7 +15,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::{AnalyseArgs, load_machine, load_model, prepare_sessions, run_analysis};
-use crate::demo::{DemoArgs, run_session};
+use crate::demo::{DemoArgs, SoilContact, run_session};
 
 /// Arguments of `discrepancy eval`.
 #[derive(Debug, Clone, Args)]
@@ -39,6 +39,11 @@ pub struct EvalArgs {
     /// Output folder (sessions/, reports/, eval.json, eval.md).
     #[arg(long, default_value = "out/discrepancy-eval", value_name = "DIR")]
     pub out: PathBuf,
+    /// Generate the sessions on the simulator with this soil-contact integration (default `held`,
+    /// the plant the nominal model is calibrated on; `implicit`: a plant without the contact
+    /// chatter, which the nominal model has never seen; docs/simulator.md).
+    #[arg(long, value_enum, value_name = "HOW")]
+    pub soil_contact: Option<SoilContact>,
 }
 
 /// Arguments of `discrepancy bench`.
@@ -135,16 +140,22 @@ fn run_case(
     hidden: Option<(Candidate, f64)>,
     seed: u64,
     digs: u32,
+    soil_contact: Option<SoilContact>,
 ) -> anyhow::Result<CaseResult> {
-    let case = match hidden {
+    let mut case = match hidden {
         Some((c, v)) => format!("{}_{v}_s{seed}", c.name()),
         None => format!("none_s{seed}"),
     };
+    // Sessions of another plant must not be reused for this one.
+    if soil_contact == Some(SoilContact::Implicit) {
+        case.push_str("_implicit");
+    }
     let session = out.join("sessions").join(&case);
     let mut demo = DemoArgs::new(session.clone());
     demo.digs = digs;
     demo.seed = Some(seed);
     demo.quiet = true;
+    demo.soil_contact = soil_contact;
     if let Some((c, v)) = hidden {
         demo.effects = vec![format!("{}={v}", c.name())];
     }
@@ -389,32 +400,33 @@ pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
         bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
     }
     let t = Instant::now();
-    let results: Vec<CaseResult> = list
-        .par_iter()
-        .map(|(hidden, seed)| {
-            // A session that cannot be analysed (e.g. the hidden effect stopped the work cycle
-            // after one dig) counts as a miss, named `error`, and the evaluation goes on.
-            let r = run_case(&args.out, *hidden, *seed, digs).unwrap_or_else(|e| CaseResult {
-                case: format!(
-                    "{}_s{seed} ({e:#})",
-                    hidden.map_or("none", |(c, _)| c.name())
-                ),
-                hidden: hidden.map_or("none".into(), |(c, _)| c.name().to_string()),
-                hidden_magnitude: hidden.map_or(0.0, |(_, v)| v),
-                seed: *seed,
-                digs: 0,
-                named: "error".into(),
-                named_all: Vec::new(),
-                magnitude_error_percent: None,
-                best_rms_change_percent: None,
-                best_signal: None,
-                best_acted_rms_change_percent: None,
-                analysis_s: 0.0,
-            });
-            bar.inc(1);
-            r
-        })
-        .collect();
+    let results: Vec<CaseResult> =
+        list.par_iter()
+            .map(|(hidden, seed)| {
+                // A session that cannot be analysed (e.g. the hidden effect stopped the work cycle
+                // after one dig) counts as a miss, named `error`, and the evaluation goes on.
+                let r = run_case(&args.out, *hidden, *seed, digs, args.soil_contact)
+                    .unwrap_or_else(|e| CaseResult {
+                        case: format!(
+                            "{}_s{seed} ({e:#})",
+                            hidden.map_or("none", |(c, _)| c.name())
+                        ),
+                        hidden: hidden.map_or("none".into(), |(c, _)| c.name().to_string()),
+                        hidden_magnitude: hidden.map_or(0.0, |(_, v)| v),
+                        seed: *seed,
+                        digs: 0,
+                        named: "error".into(),
+                        named_all: Vec::new(),
+                        magnitude_error_percent: None,
+                        best_rms_change_percent: None,
+                        best_signal: None,
+                        best_acted_rms_change_percent: None,
+                        analysis_s: 0.0,
+                    });
+                bar.inc(1);
+                r
+            })
+            .collect();
     bar.finish_and_clear();
     let text = confusion_text(&results);
     print!("{text}");
@@ -533,6 +545,9 @@ mod tests {
         std::fs::write(session.join("trace.log"), "").unwrap();
         std::fs::write(session.join("summary.json"), "{}").unwrap();
         assert!(session_complete(&session).unwrap());
-        assert!(session.join("trace.log").exists(), "a finished session is kept");
+        assert!(
+            session.join("trace.log").exists(),
+            "a finished session is kept"
+        );
     }
 }
