@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
 use firmware_bridge::messages::{Activity, AutodigStageCode, GatewayMode, Message};
-use firmware_bridge::trace::{ReadMode, TraceReader};
+use firmware_bridge::trace::{ReadMode, TraceError, TraceReader};
 use planner::discrepancy::{DigRecord, LoadTag, Sample, StageTag};
 use planner::machine::MachineConfig;
 use planner::terrain::SectionProfile;
@@ -124,7 +124,21 @@ pub fn read_trace(path: &Path) -> anyhow::Result<Vec<(u16, Sample)>> {
             }
         };
     for record in reader {
-        let record = record.with_context(|| format!("reading {}", path.display()))?;
+        let record = match record {
+            Ok(r) => r,
+            // A recording cut short (logger stopped, power lost, a killed `demo`) ends mid-line:
+            // what precedes the cut is whole, so it is analysed and the cut is said.
+            Err(TraceError::Truncated { line, kind }) => {
+                tracing::warn!(
+                    "{}: the trace ends in a truncated line {line} ({kind}): the recording was cut; \
+                     analysing the {} samples before it",
+                    path.display(),
+                    out.len()
+                );
+                break;
+            }
+            Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
+        };
         let Ok(decoded) = Message::decode(&record.frame) else {
             continue;
         };
@@ -530,6 +544,41 @@ mod tests {
             times.len() - 99
         );
         assert!(times.iter().filter(|t| **t > settled).count() > 100);
+    }
+
+    /// A recording cut mid-line (the logger stopped, a killed `demo`) was an error that lost the
+    /// whole session; what precedes the cut is analysed.
+    #[test]
+    fn a_trace_cut_mid_line_keeps_what_precedes_the_cut() {
+        use firmware_bridge::messages::{ControllerStatus, JointAngles};
+        use firmware_bridge::trace::Recorder;
+
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("trace.log");
+        let rec = Recorder::create(&path, "vcan0").expect("recorder");
+        let put = |t_s: f64, m: Message| record(&rec, t_s, &m);
+        put(
+            0.0,
+            Message::ControllerStatus(ControllerStatus {
+                activity: Activity::Dig,
+                dig_index: 1,
+                ..Default::default()
+            }),
+        );
+        for k in 1..=50 {
+            put(
+                0.01 * f64::from(k),
+                Message::JointAngles(JointAngles::default()),
+            );
+        }
+        rec.close().expect("close");
+        let whole = read_trace(&path).expect("whole trace").len();
+        assert!(whole >= 49, "{whole} samples");
+        let mut text = std::fs::read_to_string(&path).expect("read back");
+        text.push_str("(0.510000) vcan0 0CFE32");
+        std::fs::write(&path, text).expect("cut");
+        let cut = read_trace(&path).expect("a cut trace is read up to the cut");
+        assert_eq!(cut.len(), whole);
     }
 
     /// The work cycle's Weigh shows as `Idle` between a dig and its swing to the dump: those samples
