@@ -25,7 +25,7 @@ use firmware_bridge::messages::{
     ControllerStatus, Cylinder, JointAngles as JointAnglesMsg, JointRates, Message, PumpPressures,
     RequestedMode, Valve, ValveState,
 };
-use firmware_bridge::trace::{Direction, ReadMode, TraceReader, TraceWriter};
+use firmware_bridge::trace::{Direction, ReadMode, TraceError, TraceReader, TraceWriter};
 use planner::actuator::{ActuatorDig, ActuatorModel, ActuatorSample, FreeRunLoss, TrainConfig};
 use planner::autodig::{Autodig, AutodigInputs, AutodigMaps, EndReason, Stage};
 use planner::dig_model::{DigModel, DigModelConfig, DigPrediction, DigSite, DigStart};
@@ -1206,7 +1206,19 @@ pub fn read_training_digs(
         }
     };
     for record in reader {
-        let record = record.with_context(|| format!("reading {}", path.display()))?;
+        let record = match record {
+            Ok(r) => r,
+            // A recording cut mid-line: train on what precedes the cut (as the discrepancy reader).
+            Err(TraceError::Truncated { line, kind }) => {
+                tracing::warn!(
+                    "{}: the trace ends in a truncated line {line} ({kind}): the recording was cut; \
+                     using what precedes it",
+                    path.display()
+                );
+                break;
+            }
+            Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
+        };
         let Ok(decoded) = Message::decode(&record.frame) else {
             continue;
         };
@@ -2499,6 +2511,35 @@ mod tests {
         json.as_object_mut().unwrap().remove("soil_force_factor");
         let old: DigSetup = serde_json::from_value(json).unwrap();
         assert_eq!(old.soil_force_factor, 1.0);
+    }
+
+    /// A training trace cut mid-line (a logger stopped on the machine) was an error that lost the
+    /// whole file; the digs before the cut are read.
+    #[test]
+    fn a_training_trace_cut_mid_line_keeps_what_precedes_the_cut() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("dig_000.log");
+        let setup = random_setups(1, 3, false).unwrap().remove(0);
+        let mut w = TraceWriter::new(BufWriter::new(File::create(&path).unwrap()), "vcan0", true);
+        run_sim_dig(&setup, Some(&mut w)).unwrap();
+        w.flush().unwrap();
+        drop(w);
+        let machine = planner::machine::MachineConfig::default_machine().unwrap();
+        let kin = Kinematics::new(&machine).unwrap();
+        let c = &machine.cylinders;
+        let areas = [&c.boom, &c.stick, &c.bucket].map(|c| (c.head_area_m2(), c.rod_area_m2()));
+        let count = |digs: &[TraceDig]| digs.iter().map(|d| d.samples.len()).sum::<usize>();
+        let whole = count(&read_training_digs(&path, &kin, areas).unwrap());
+        assert!(whole > 100, "{whole} samples");
+        let text = std::fs::read_to_string(&path).unwrap();
+        // Cut two thirds in, inside a line.
+        let mut cut_at = text.len() * 2 / 3;
+        while text.as_bytes()[cut_at - 1] == b'\n' {
+            cut_at += 1;
+        }
+        std::fs::write(&path, &text[..cut_at]).unwrap();
+        let cut = count(&read_training_digs(&path, &kin, areas).unwrap());
+        assert!(cut > 0 && cut < whole, "{cut} of {whole} samples");
     }
 
     fn tagged_at(t: f64, angles_rad: [f64; 3]) -> Tagged {
