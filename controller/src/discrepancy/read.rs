@@ -226,10 +226,12 @@ pub fn read_trace(path: &Path) -> anyhow::Result<Vec<(u16, Sample)>> {
     Ok(out)
 }
 
-/// Reads every `scans/scan_*.json` of a session folder, in name order.
+/// Reads every `scans/scan_*.json` of a session folder, in name order. A file that does not parse
+/// (cut short when the recording stopped, corrupted) is skipped with a warning: the digs after it
+/// take their terrain from the scan before it.
 ///
 /// # Errors
-/// Reading or parsing a scan file.
+/// Listing the folder or reading a scan file.
 pub fn read_scans(dir: &Path) -> anyhow::Result<Vec<ScanFile>> {
     let scans_dir = dir.join("scans");
     if !scans_dir.is_dir() {
@@ -241,14 +243,19 @@ pub fn read_scans(dir: &Path) -> anyhow::Result<Vec<ScanFile>> {
         .filter(|p| p.extension().is_some_and(|e| e == "json"))
         .collect();
     names.sort();
-    names
-        .iter()
-        .map(|p| {
-            let text =
-                std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
-            serde_json::from_str(&text).with_context(|| format!("parsing {}", p.display()))
-        })
-        .collect()
+    let mut scans = Vec::with_capacity(names.len());
+    for p in &names {
+        let text =
+            std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+        match serde_json::from_str(&text) {
+            Ok(scan) => scans.push(scan),
+            Err(e) => tracing::warn!(
+                "{}: not a readable scan ({e}): skipped; the digs after it use the scan before it",
+                p.display()
+            ),
+        }
+    }
+    Ok(scans)
 }
 
 /// Half width of the band of scan points around the digging plane that makes its section, m. The
@@ -544,6 +551,21 @@ mod tests {
             times.len() - 99
         );
         assert!(times.iter().filter(|t| **t > settled).count() > 100);
+    }
+
+    /// A corrupt scan file failed the whole session; it is skipped and the others are read.
+    #[test]
+    fn a_corrupt_scan_is_skipped() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let scans = dir.path().join("scans");
+        std::fs::create_dir_all(&scans).expect("scans dir");
+        let scan = r#"{"time_s":1.5,"sensor":{"x_m":0.87,"y_m":0.5,"z_m":3.1,"heading_rad":0.0},"points":[[2.0,0.0,0.1]]}"#;
+        std::fs::write(scans.join("scan_0000.json"), scan).expect("scan 0");
+        std::fs::write(scans.join("scan_0001.json"), &scan[..40]).expect("scan 1");
+        std::fs::write(scans.join("scan_0002.json"), scan.replace("1.5", "9.5")).expect("scan 2");
+        let read = read_scans(dir.path()).expect("scans");
+        let times: Vec<f64> = read.iter().map(|s| s.time_s).collect();
+        assert_eq!(times, vec![1.5, 9.5]);
     }
 
     /// A recording cut mid-line (the logger stopped, a killed `demo`) was an error that lost the
