@@ -142,3 +142,40 @@ fn quick_confusion_table() {
         effect_free.len()
     );
 }
+
+/// One unreadable folder among the measured sessions (here one without a trace) lost the whole
+/// analysis; it is left out, said in `report.json` and `report.md`, and the others are analysed.
+/// Alone, it is still the error it was.
+#[test]
+fn an_unreadable_session_among_others_is_left_out_and_reported() {
+    let tmp = tempfile::tempdir().unwrap();
+    let good = tmp.path().join("good");
+    session(&good, None, 12);
+    let bad = tmp.path().join("bad");
+    std::fs::create_dir_all(&bad).unwrap();
+    let out = tmp.path().join("report");
+    let args = |measured: Vec<std::path::PathBuf>| AnalyseArgs {
+        measured,
+        model: None,
+        machine: None,
+        out: out.clone(),
+        quiet: true,
+        replay_csv: false,
+    };
+    let a = run_analysis(&args(vec![good.clone(), bad.clone()])).expect("analysis");
+    assert!(!a.records.is_empty());
+    assert_eq!(a.skipped_sessions.len(), 1);
+    assert_eq!(a.skipped_sessions[0].0, bad);
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(
+        json["skipped_sessions"][0]["session"],
+        bad.display().to_string()
+    );
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.contains("Session left out"), "{md}");
+    let Err(e) = run_analysis(&args(vec![bad.clone()])) else {
+        panic!("a lone unreadable session must be an error");
+    };
+    assert!(format!("{e:#}").contains("reading session"), "{e:#}");
+}

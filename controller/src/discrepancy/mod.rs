@@ -93,6 +93,9 @@ pub struct Analysis {
     pub model: AugmentedModel,
     /// The prepared records.
     pub records: Vec<PreparedRecord>,
+    /// Sessions left out because they could not be read, with the reason (only when other
+    /// sessions could be).
+    pub skipped_sessions: Vec<(PathBuf, String)>,
 }
 
 /// Loads the machine file or the built-in one.
@@ -131,16 +134,46 @@ pub fn prepare_sessions(
     machine: &MachineConfig,
     model: &AugmentedModel,
 ) -> anyhow::Result<Vec<PreparedRecord>> {
+    let (records, skipped) = prepare_readable_sessions(dirs, machine, model)?;
+    match skipped.into_iter().next() {
+        Some((dir, why)) => Err(anyhow::anyhow!("reading session {}: {why}", dir.display())),
+        None => Ok(records),
+    }
+}
+
+/// As [`prepare_sessions`], but a session that cannot be read (a trace without the controller's
+/// status, a folder without a trace) is left out with a warning and returned with its reason, so
+/// one bad folder among many does not lose the others.
+///
+/// # Errors
+/// No session readable (the first one's reason); a record the model cannot prepare.
+pub fn prepare_readable_sessions(
+    dirs: &[PathBuf],
+    machine: &MachineConfig,
+    model: &AugmentedModel,
+) -> anyhow::Result<(Vec<PreparedRecord>, Vec<(PathBuf, String)>)> {
     let mut records = Vec::new();
+    let mut skipped = Vec::new();
     for dir in dirs {
-        let digs = read::read_session(dir, machine)
-            .with_context(|| format!("reading session {}", dir.display()))?;
+        let digs = match read::read_session(dir, machine) {
+            Ok(digs) => digs,
+            Err(e) => {
+                tracing::warn!("session {} left out: {e:#}", dir.display());
+                skipped.push((dir.clone(), format!("{e:#}")));
+                continue;
+            }
+        };
         for mut d in digs {
             d.index = records.len() as u32;
             records.push(PreparedRecord::new(&d, machine, &model.params)?);
         }
     }
-    Ok(records)
+    if records.is_empty()
+        && let Some((dir, why)) = skipped.first()
+    {
+        anyhow::bail!("reading session {}: {why}", dir.display());
+    }
+    Ok((records, skipped))
 }
 
 /// Reads the sessions, runs the analysis and writes the outputs to `args.out`.
@@ -150,7 +183,7 @@ pub fn prepare_sessions(
 pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
     let machine = load_machine(args.machine.as_deref())?;
     let model = load_model(args.model.as_deref())?;
-    let records = prepare_sessions(&args.measured, &machine, &model)?;
+    let (records, skipped_sessions) = prepare_readable_sessions(&args.measured, &machine, &model)?;
     let config = AnalysisConfig {
         base: model.augmentation()?,
         ..AnalysisConfig::default()
@@ -178,6 +211,7 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
         result,
         model,
         records,
+        skipped_sessions,
     };
     report::write_outputs(&args.out, &analysis, &args.measured, args.replay_csv)?;
     Ok(analysis)
