@@ -95,8 +95,11 @@ pub struct Analysis {
     pub records: Vec<PreparedRecord>,
     /// Sessions left out because they could not be read, with the reason (only when other
     /// sessions could be).
-    pub skipped_sessions: Vec<(PathBuf, String)>,
+    pub skipped_sessions: Vec<SkippedSession>,
 }
+
+/// A session folder left out of an analysis and why (the error's whole cause chain).
+pub type SkippedSession = (PathBuf, String);
 
 /// Loads the machine file or the built-in one.
 ///
@@ -151,7 +154,7 @@ pub fn prepare_readable_sessions(
     dirs: &[PathBuf],
     machine: &MachineConfig,
     model: &AugmentedModel,
-) -> anyhow::Result<(Vec<PreparedRecord>, Vec<(PathBuf, String)>)> {
+) -> anyhow::Result<(Vec<PreparedRecord>, Vec<SkippedSession>)> {
     let mut records = Vec::new();
     let mut skipped = Vec::new();
     for dir in dirs {
