@@ -67,7 +67,7 @@ pub struct RunArgs {
     #[arg(long, value_name = "FILE")]
     pub trace: Option<PathBuf>,
     /// Stop after this many digs (then swing home, neutral, disarm).
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
     pub digs: Option<u32>,
     /// Range-scan service address (host:port) for the perception enhancements.
     #[arg(long, value_name = "ADDR")]
@@ -121,5 +121,26 @@ mod tests {
         assert!(o.listen_only);
         assert_eq!(o.digs, Some(3));
         assert!(Cli::try_parse_from(["excavator-ctl", "run"]).is_err());
+    }
+
+    /// A count of zero ran an empty demo, printed Table 2 from no runs and generated 54 sessions the
+    /// discrepancy evaluation could not analyse; it is refused at parse time.
+    #[test]
+    fn zero_counts_are_refused() {
+        for args in [
+            &["excavator-ctl", "demo", "--digs", "0"][..],
+            &["excavator-ctl", "experiment", "table2", "--runs", "0"],
+            &["excavator-ctl", "experiment", "extended", "--digs", "0"],
+            &["excavator-ctl", "discrepancy", "eval", "--digs", "1"],
+            &["excavator-ctl", "discrepancy", "eval", "--seeds", "0"],
+            &["excavator-ctl", "discrepancy", "bench", "--digs", "0"],
+            &["excavator-ctl", "run", "--iface", "vcan0", "--digs", "0"],
+        ] {
+            assert!(Cli::try_parse_from(args).is_err(), "{args:?} parsed");
+        }
+        assert!(Cli::try_parse_from(["excavator-ctl", "demo", "--digs", "1"]).is_ok());
+        assert!(
+            Cli::try_parse_from(["excavator-ctl", "discrepancy", "eval", "--digs", "2"]).is_ok()
+        );
     }
 }

@@ -110,7 +110,7 @@ const SIM_BUDGET_PER_DIG_S: f64 = 120.0;
 #[derive(Debug, Clone, Args)]
 pub struct DemoArgs {
     /// Number of digs (dig and cleanup actions) in the session.
-    #[arg(long, default_value_t = 10, value_name = "N")]
+    #[arg(long, default_value_t = 10, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
     pub digs: u32,
     /// Seed of the simulator (sensor noise, random boulders); default: the bench file's.
     #[arg(long, value_name = "N")]

@@ -56,10 +56,10 @@ pub struct ExperimentArgs {
     #[arg(value_enum)]
     pub which: Which,
     /// Digs per configuration (seeds 1..=N).
-    #[arg(long, default_value_t = 5, value_name = "N")]
+    #[arg(long, default_value_t = 5, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     pub runs: u64,
     /// `extended`: digs per strategy.
-    #[arg(long, default_value_t = 100, value_name = "N")]
+    #[arg(long, default_value_t = 100, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
     pub digs: u32,
     /// Output folder: `extended` and `hardness-fit` write their sessions and figures there,
     /// `table1`, `table2` and `fig52` their trajectory plot (`table1.svg`, `fig39.svg`, `fig52.svg`).

@@ -25,13 +25,13 @@ pub struct EvalArgs {
     #[arg(long)]
     pub quick: bool,
     /// Seeds per effect and magnitude (full run).
-    #[arg(long, default_value_t = 2, value_name = "N")]
+    #[arg(long, default_value_t = 2, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     pub seeds: u64,
     /// Effect-free sessions (full run).
     #[arg(long, default_value_t = 6, value_name = "N")]
     pub nominal_sessions: u64,
-    /// Digs per session.
-    #[arg(long, value_name = "N")]
+    /// Digs per session (at least 2: the analysis holds some out).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(2..))]
     pub digs: Option<u32>,
     /// Only these effects (names; default all).
     #[arg(long = "only", value_name = "NAME")]
@@ -50,7 +50,7 @@ pub struct EvalArgs {
 #[derive(Debug, Clone, Args)]
 pub struct BenchArgs {
     /// Digs to analyse.
-    #[arg(long, default_value_t = 30, value_name = "N")]
+    #[arg(long, default_value_t = 30, value_name = "N", value_parser = clap::value_parser!(u32).range(2..))]
     pub digs: u32,
     /// Output folder for the generated session.
     #[arg(long, default_value = "out/discrepancy-bench", value_name = "DIR")]
