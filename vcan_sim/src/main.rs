@@ -107,6 +107,12 @@ fn timed(mut run: impl FnMut()) -> Timing {
 }
 
 fn bench(config: &SimConfig, seconds: f64, case: Option<&str>, repeat: u32) -> Result<()> {
+    if !(seconds.is_finite() && seconds >= 0.01) {
+        bail!("--seconds must be at least 0.01 simulated seconds, got {seconds}");
+    }
+    if repeat == 0 {
+        bail!("--repeat must be at least 1");
+    }
     let selected = |name: &str| case.is_none_or(|c| name.contains(c));
     let steps = (seconds / PHYSICS_DT_S).round().max(1.0) as u64;
     let scenarios: [(&str, Option<[f64; 6]>); 4] = [
