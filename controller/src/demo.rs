@@ -244,6 +244,10 @@ pub struct TipPoint {
     pub z_m: f64,
 }
 
+fn held_name() -> String {
+    "held".to_owned()
+}
+
 /// `--soil-contact`: [`vcan_sim::scenario::SoilContactIntegration`] on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum SoilContact {
@@ -523,6 +527,10 @@ pub struct DemoSummary {
     pub predefined_start_deg: Option<[f64; 3]>,
     /// The simulator's seed.
     pub seed: u64,
+    /// The simulator's soil-contact integration, `held` or `implicit` (docs/simulator.md; `held` in
+    /// summaries written before it was recorded).
+    #[serde(default = "held_name")]
+    pub soil_contact: String,
     /// The hidden effects given on the command line.
     pub effects: Vec<String>,
     /// Per dig.
@@ -1301,6 +1309,11 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
             ]
         }),
         seed: sim.scenario.seed,
+        soil_contact: match sim.scenario.soil_contact {
+            SoilContactIntegration::Held => "held",
+            SoilContactIntegration::Implicit => "implicit",
+        }
+        .to_owned(),
         effects: args.effects.clone(),
         digs: records,
         totals,
