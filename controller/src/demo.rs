@@ -244,10 +244,6 @@ pub struct TipPoint {
     pub z_m: f64,
 }
 
-fn held_name() -> String {
-    "held".to_owned()
-}
-
 /// `--soil-contact`: [`vcan_sim::scenario::SoilContactIntegration`] on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum SoilContact {
@@ -529,8 +525,8 @@ pub struct DemoSummary {
     pub seed: u64,
     /// The simulator's soil-contact integration, `held` or `implicit` (docs/simulator.md; `held` in
     /// summaries written before it was recorded).
-    #[serde(default = "held_name")]
-    pub soil_contact: String,
+    #[serde(default)]
+    pub soil_contact: SoilContactIntegration,
     /// The hidden effects given on the command line.
     pub effects: Vec<String>,
     /// Per dig.
@@ -1309,11 +1305,7 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
             ]
         }),
         seed: sim.scenario.seed,
-        soil_contact: match sim.scenario.soil_contact {
-            SoilContactIntegration::Held => "held",
-            SoilContactIntegration::Implicit => "implicit",
-        }
-        .to_owned(),
+        soil_contact: sim.scenario.soil_contact,
         effects: args.effects.clone(),
         digs: records,
         totals,

@@ -25,7 +25,7 @@ use firmware_bridge::messages::{
     ControllerStatus, Cylinder, JointAngles as JointAnglesMsg, JointRates, Message, PumpPressures,
     RequestedMode, Valve, ValveState,
 };
-use firmware_bridge::trace::{Direction, ReadMode, TraceError, TraceReader, TraceWriter};
+use firmware_bridge::trace::{Direction, ReadMode, TraceReader, TraceWriter};
 use planner::actuator::{ActuatorDig, ActuatorModel, ActuatorSample, FreeRunLoss, TrainConfig};
 use planner::autodig::{Autodig, AutodigInputs, AutodigMaps, EndReason, Stage};
 use planner::dig_model::{DigModel, DigModelConfig, DigPrediction, DigSite, DigStart};
@@ -1205,20 +1205,8 @@ pub fn read_training_digs(
             }
         }
     };
-    for record in reader {
-        let record = match record {
-            Ok(r) => r,
-            // A recording cut mid-line: train on what precedes the cut (as the discrepancy reader).
-            Err(TraceError::Truncated { line, kind }) => {
-                tracing::warn!(
-                    "{}: the trace ends in a truncated line {line} ({kind}): the recording was cut; \
-                     using what precedes it",
-                    path.display()
-                );
-                break;
-            }
-            Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
-        };
+    for record in crate::trace_tool::input::records_until_cut(path, reader) {
+        let record = record.with_context(|| format!("reading {}", path.display()))?;
         let Ok(decoded) = Message::decode(&record.frame) else {
             continue;
         };

@@ -165,7 +165,7 @@ fn an_unreadable_session_among_others_is_left_out_and_reported() {
     let a = run_analysis(&args(vec![good.clone(), bad.clone()])).expect("analysis");
     assert!(!a.records.is_empty());
     assert_eq!(a.skipped_sessions.len(), 1);
-    assert_eq!(a.skipped_sessions[0].0, bad);
+    assert_eq!(a.skipped_sessions[0].session, bad);
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     assert_eq!(

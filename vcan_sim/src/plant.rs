@@ -26,9 +26,10 @@ use crate::soil_contact::{ContactInput, ContactLaw, MassLedger, SoilContact, Soi
 /// Physics step (s): 1 kHz.
 pub const PHYSICS_DT_S: f64 = 1.0e-3;
 /// Soil contact (cutting, fill, the geometry of the FEE force) and the linkage loads run every this
-/// many physics steps (5 ms, 200 Hz) and are held in between; the hydraulics and the soil force's
-/// velocity dependence ([`ContactLaw`]) run every step. The bucket edge moves ~1-3 mm in 5 ms, far
-/// below a terrain cell.
+/// many physics steps (5 ms, 200 Hz) and are held in between; the hydraulics run every step, and so
+/// does the soil force's velocity dependence ([`ContactLaw`]) with
+/// [`SoilContactIntegration::Implicit`]. The bucket edge moves ~1-3 mm in 5 ms, far below a terrain
+/// cell.
 pub const SOIL_SUBSTEPS: u64 = 5;
 /// Track speed time constant (s).
 const TRACK_TIME_CONSTANT_S: f64 = 0.3;
@@ -180,8 +181,8 @@ pub struct Plant {
     sensors: Sensors,
     time_s: f64,
     steps: u64,
-    /// The loads without the soil's force (gravity, payload, reflected masses) at the last contact
-    /// update.
+    /// The loads at the last contact update (gravity, payload, reflected masses; the soil's force
+    /// too with [`SoilContactIntegration::Held`], see [`Self::loads`]).
     cached_loads: [ActuatorLoad; N_ACTUATORS],
     /// Gravity on or off (off for no-load hydraulic tests).
     pub gravity: bool,
@@ -451,13 +452,17 @@ impl Plant {
         self.contact_law = self.contact.step_law(&mut self.world, &input, dt, &soil_fx);
         if self.contact_integration == SoilContactIntegration::Held {
             // The force at this update's velocity, held for the next SOIL_SUBSTEPS steps.
-            let f = self.contact_law.force(tip_v);
-            let k = self.soil_force_factor;
-            self.soil_force = TipForce {
-                fx_n: k * f.fx_n,
-                fz_n: k * f.fz_n,
-                my_nm: k * f.my_nm,
-            };
+            self.soil_force = self.scaled(self.contact_law.force(tip_v));
+        }
+    }
+
+    /// `f` times [`Scenario::soil_force_factor`] (Table 2).
+    fn scaled(&self, f: TipForce) -> TipForce {
+        let k = self.soil_force_factor;
+        TipForce {
+            fx_n: k * f.fx_n,
+            fz_n: k * f.fz_n,
+            my_nm: k * f.my_nm,
         }
     }
 
@@ -478,13 +483,8 @@ impl Plant {
             v_tip[0] += j[0] * v;
             v_tip[1] += j[1] * v;
         }
-        let f = law.force(v_tip);
         let g = law.gradient(v_tip);
-        self.soil_force = TipForce {
-            fx_n: k * f.fx_n,
-            fz_n: k * f.fz_n,
-            my_nm: k * f.my_nm,
-        };
+        self.soil_force = self.scaled(law.force(v_tip));
         for (i, load) in loads.iter_mut().take(3).enumerate() {
             let a = self.load_per_tip_force[i];
             load.force += a[0] * self.soil_force.fx_n + a[1] * self.soil_force.fz_n;

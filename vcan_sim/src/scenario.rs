@@ -308,7 +308,7 @@ pub struct Scenario {
 
 /// How the plant integrates the soil's force on the bucket (docs/simulator.md, "Soil contact
 /// integration").
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SoilContactIntegration {
     /// The force at the tip velocity of each 5 ms contact update, held until the next: the plant the

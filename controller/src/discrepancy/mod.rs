@@ -98,8 +98,14 @@ pub struct Analysis {
     pub skipped_sessions: Vec<SkippedSession>,
 }
 
-/// A session folder left out of an analysis and why (the error's whole cause chain).
-pub type SkippedSession = (PathBuf, String);
+/// A session folder left out of an analysis (`report.json`'s `skipped_sessions`).
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct SkippedSession {
+    /// The folder.
+    pub session: PathBuf,
+    /// Why it could not be read (the error's whole cause chain).
+    pub reason: String,
+}
 
 /// Loads the machine file or the built-in one.
 ///
@@ -139,14 +145,18 @@ pub fn prepare_sessions(
 ) -> anyhow::Result<Vec<PreparedRecord>> {
     let (records, skipped) = prepare_readable_sessions(dirs, machine, model)?;
     match skipped.into_iter().next() {
-        Some((dir, why)) => Err(anyhow::anyhow!("reading session {}: {why}", dir.display())),
+        Some(s) => Err(anyhow::anyhow!(
+            "reading session {}: {}",
+            s.session.display(),
+            s.reason
+        )),
         None => Ok(records),
     }
 }
 
 /// As [`prepare_sessions`], but a session that cannot be read (a trace without the controller's
-/// status, a folder without a trace) is left out with a warning and returned with its reason, so
-/// one bad folder among many does not lose the others.
+/// status, a folder without a trace) is left out and returned with its reason, so one bad folder
+/// among many does not lose the others.
 ///
 /// # Errors
 /// No session readable (the first one's reason); a record the model cannot prepare.
@@ -161,8 +171,10 @@ pub fn prepare_readable_sessions(
         let digs = match read::read_session(dir, machine) {
             Ok(digs) => digs,
             Err(e) => {
-                tracing::warn!("session {} left out: {e:#}", dir.display());
-                skipped.push((dir.clone(), format!("{e:#}")));
+                skipped.push(SkippedSession {
+                    session: dir.clone(),
+                    reason: format!("{e:#}"),
+                });
                 continue;
             }
         };
@@ -172,9 +184,9 @@ pub fn prepare_readable_sessions(
         }
     }
     if records.is_empty()
-        && let Some((dir, why)) = skipped.first()
+        && let Some(s) = skipped.first()
     {
-        anyhow::bail!("reading session {}: {why}", dir.display());
+        anyhow::bail!("reading session {}: {}", s.session.display(), s.reason);
     }
     Ok((records, skipped))
 }
@@ -187,6 +199,9 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
     let machine = load_machine(args.machine.as_deref())?;
     let model = load_model(args.model.as_deref())?;
     let (records, skipped_sessions) = prepare_readable_sessions(&args.measured, &machine, &model)?;
+    for s in &skipped_sessions {
+        tracing::warn!("session {} left out: {}", s.session.display(), s.reason);
+    }
     let config = AnalysisConfig {
         base: model.augmentation()?,
         ..AnalysisConfig::default()

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
 use firmware_bridge::messages::{Activity, AutodigStageCode, GatewayMode, Message};
-use firmware_bridge::trace::{ReadMode, TraceError, TraceReader};
+use firmware_bridge::trace::{ReadMode, TraceReader};
 use planner::discrepancy::{DigRecord, LoadTag, Sample, StageTag};
 use planner::machine::MachineConfig;
 use planner::terrain::SectionProfile;
@@ -123,22 +123,8 @@ pub fn read_trace(path: &Path) -> anyhow::Result<Vec<(u16, Sample)>> {
                 out.push((st.dig_index, s));
             }
         };
-    for record in reader {
-        let record = match record {
-            Ok(r) => r,
-            // A recording cut short (logger stopped, power lost, a killed `demo`) ends mid-line:
-            // what precedes the cut is whole, so it is analysed and the cut is said.
-            Err(TraceError::Truncated { line, kind }) => {
-                tracing::warn!(
-                    "{}: the trace ends in a truncated line {line} ({kind}): the recording was cut; \
-                     analysing the {} samples before it",
-                    path.display(),
-                    out.len()
-                );
-                break;
-            }
-            Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
-        };
+    for record in crate::trace_tool::input::records_until_cut(path, reader) {
+        let record = record.with_context(|| format!("reading {}", path.display()))?;
         let Ok(decoded) = Message::decode(&record.frame) else {
             continue;
         };

@@ -20,19 +20,12 @@ fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
     anyhow::anyhow!("plot: {e}")
 }
 
-/// A session left out of the analysis (`report.json`).
-#[derive(Debug, Serialize)]
-struct SkippedSession {
-    session: String,
-    reason: String,
-}
-
 /// `report.json`.
 #[derive(Debug, Serialize)]
 struct ReportJson<'a> {
     measured: Vec<String>,
     /// Sessions that could not be read and were left out (the others were analysed).
-    skipped_sessions: Vec<SkippedSession>,
+    skipped_sessions: &'a [super::SkippedSession],
     model_in: &'a str,
     model_out: &'static str,
     digs: usize,
@@ -104,8 +97,13 @@ fn markdown(a: &Analysis, measured: &[PathBuf], figures: &[String]) -> String {
         r.test_digs,
         a.model.provenance
     );
-    for (dir, why) in &a.skipped_sessions {
-        let _ = writeln!(s, "**Session left out**: {}: {why}.\n", dir.display());
+    for skipped in &a.skipped_sessions {
+        let _ = writeln!(
+            s,
+            "**Session left out**: {}: {}.\n",
+            skipped.session.display(),
+            skipped.reason
+        );
     }
     let _ = writeln!(s, "## Named effects\n");
     if r.named_effects.is_empty() {
@@ -301,14 +299,7 @@ pub fn write_outputs(
     figures.push("residual_rms.svg".into());
     let json = ReportJson {
         measured: measured.iter().map(|p| p.display().to_string()).collect(),
-        skipped_sessions: a
-            .skipped_sessions
-            .iter()
-            .map(|(p, why)| SkippedSession {
-                session: p.display().to_string(),
-                reason: why.clone(),
-            })
-            .collect(),
+        skipped_sessions: &a.skipped_sessions,
         model_in: &a.model.provenance,
         model_out: "model.json",
         digs: a.records.len(),

@@ -33,6 +33,27 @@ pub fn open(path: &Path) -> anyhow::Result<Box<dyn BufRead + Send>> {
     Ok(Box::new(BufReader::with_capacity(READ_BUFFER_BYTES, file)))
 }
 
+/// The records of `path` through `reader`, ending at a truncated last line (the recording was cut:
+/// logger stopped, power lost, a killed `demo`) with a warning naming the line, so what precedes the
+/// cut is used instead of the whole file being lost. Other errors pass through.
+pub fn records_until_cut<R: BufRead>(
+    path: &Path,
+    reader: TraceReader<R>,
+) -> impl Iterator<Item = Result<TraceRecord, TraceError>> {
+    let path = path.to_owned();
+    reader.map_while(move |record| match record {
+        Err(TraceError::Truncated { line, kind }) => {
+            tracing::warn!(
+                "{}: the trace ends in a truncated line {line} ({kind}): the recording was cut; \
+                 using what precedes it",
+                path.display()
+            );
+            None
+        }
+        other => Some(other),
+    })
+}
+
 /// True when `path` means stdin.
 pub fn is_stdin(path: &Path) -> bool {
     path.as_os_str() == "-"
