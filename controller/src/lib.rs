@@ -33,6 +33,7 @@ pub mod discrepancy;
 pub mod estimate;
 pub mod experiment;
 pub mod model_cmd;
+pub mod model_fig52;
 pub mod node;
 pub mod planned;
 pub mod plots;

@@ -10,6 +10,7 @@
 //! - `compare`: the simulator and the dig model from the same starts over the same sections (thesis
 //!   Figs. 34-41): trajectory, time, energy and swept volume errors, and an SVG of the trajectories.
 //! - `table2`: thesis Table 2 with the dig model (force factor 1, 2, 3).
+//! - `fig52`: thesis Fig. 52 with the dig model ([`crate::model_fig52`]).
 //!
 //! The simulation harness ([`DigSetup`], [`run_sim_dig`], [`compare_dig`]) is public so the
 //! integration tests and the discrepancy workflow can reuse it.
@@ -68,6 +69,8 @@ pub enum ModelCommand {
     Compare(CompareArgs),
     /// Thesis Table 2 with the dig model: force factor 1, 2, 3.
     Table2(Table2Args),
+    /// Thesis Fig. 52 with the dig model: hardness index 1 and 5 in a soft and a hard soil.
+    Fig52(crate::model_fig52::Fig52Args),
     /// Cross-validate the soil models (thesis 4.3.5) on a `demo` session's `soil_samples.json`.
     SoilCv(crate::soil_cv::SoilCvArgs),
 }
@@ -313,6 +316,7 @@ pub fn run(cmd: ModelCommand) -> anyhow::Result<()> {
         ModelCommand::GenerateData(a) => generate(&a),
         ModelCommand::Compare(a) => compare(&a),
         ModelCommand::Table2(a) => table2(&a),
+        ModelCommand::Fig52(a) => crate::model_fig52::run(&a),
         ModelCommand::SoilCv(a) => crate::soil_cv::run(&a),
     }
 }
@@ -1832,7 +1836,7 @@ fn train(a: &TrainArgs) -> anyhow::Result<()> {
 // compare
 // ---------------------------------------------------------------------------------------------------
 
-fn load_model(path: Option<&Path>) -> anyhow::Result<DigModel> {
+pub(crate) fn load_model(path: Option<&Path>) -> anyhow::Result<DigModel> {
     let nominal = DigModel::nominal()?;
     match path {
         None => Ok(nominal),
@@ -2323,6 +2327,24 @@ pub fn default_site() -> anyhow::Result<DigSite> {
     )?)
 }
 
+/// A dig start with the tip `start_depth_m` under the surface of `site` at `start_r` m from the swing
+/// axis and the bucket at `start_bucket_deg` to the horizontal (Table 2's and Fig. 52's start).
+///
+/// # Errors
+/// `start_r` outside the site's section.
+pub(crate) fn tip_start(
+    site: &DigSite,
+    start_r: f64,
+    start_depth_m: f64,
+    start_bucket_deg: f64,
+) -> anyhow::Result<DigStart> {
+    Ok(DigStart::Pose(BucketPose {
+        x_m: start_r,
+        z_m: site.profile().height_at(start_r)? - start_depth_m,
+        bucket_abs_rad: start_bucket_deg.to_radians(),
+    }))
+}
+
 /// Table 2 with `model` from the tip at `start_r` on the default bench.
 ///
 /// # Errors
@@ -2349,11 +2371,7 @@ fn table2_predictions(
     start_bucket_deg: f64,
 ) -> anyhow::Result<Vec<(Table2Row, planner::dig_model::DigPrediction)>> {
     let site = default_site()?;
-    let start = DigStart::Pose(BucketPose {
-        x_m: start_r,
-        z_m: site.profile().height_at(start_r)? - start_depth_m,
-        bucket_abs_rad: start_bucket_deg.to_radians(),
-    });
+    let start = tip_start(&site, start_r, start_depth_m, start_bucket_deg)?;
     let mut rows = Vec::new();
     for factor in [1.0, 2.0, 3.0] {
         let mut m = model.clone();
@@ -2374,7 +2392,7 @@ fn table2_predictions(
 }
 
 /// The section of the default bench as [`TipPoint`]s (every 0.05 m from 1 to 12 m).
-fn default_section() -> anyhow::Result<Vec<crate::demo::TipPoint>> {
+pub(crate) fn default_section() -> anyhow::Result<Vec<crate::demo::TipPoint>> {
     let site = default_site()?;
     Ok((0..=220)
         .filter_map(|k| {
