@@ -284,9 +284,9 @@ pub struct CompareArgs {
     pub verbose: bool,
 }
 
-/// Arguments of `model table2`.
-#[derive(Debug, Args)]
-pub struct Table2Args {
+/// The dig model and its start on the default bench (`model table2` and `model fig52`).
+#[derive(Debug, Clone, Args)]
+pub struct ModelStartArgs {
     /// Actuator model (default: the shipped config/nominal_actuator.json).
     #[arg(long, value_name = "FILE")]
     pub model: Option<PathBuf>,
@@ -299,6 +299,53 @@ pub struct Table2Args {
     /// Start depth of the tip below the surface, m.
     #[arg(long, default_value_t = 0.02)]
     pub start_depth: f64,
+}
+
+impl Default for ModelStartArgs {
+    /// The command-line defaults.
+    fn default() -> Self {
+        Self {
+            model: None,
+            start_r: 7.8,
+            start_bucket_deg: -55.0,
+            start_depth: 0.02,
+        }
+    }
+}
+
+impl ModelStartArgs {
+    /// The dig model (the shipped one or `--model`'s actuator networks).
+    ///
+    /// # Errors
+    /// Reading or parsing `--model`.
+    pub fn load_model(&self) -> anyhow::Result<DigModel> {
+        load_model(self.model.as_deref())
+    }
+
+    /// The start on `site`.
+    ///
+    /// # Errors
+    /// `start_r` outside the site's section.
+    pub fn start(&self, site: &DigSite) -> anyhow::Result<DigStart> {
+        tip_start(site, self.start_r, self.start_depth, self.start_bucket_deg)
+    }
+
+    /// "tip D m deep at r = R m on the default bench, bucket B deg", for report headers.
+    #[must_use]
+    pub fn describe(&self) -> String {
+        format!(
+            "tip {:.2} m deep at r = {:.2} m on the default bench, bucket {:.0} deg",
+            self.start_depth, self.start_r, self.start_bucket_deg
+        )
+    }
+}
+
+/// Arguments of `model table2`.
+#[derive(Debug, Args)]
+pub struct Table2Args {
+    /// The model and its start.
+    #[command(flatten)]
+    pub start: ModelStartArgs,
     /// Also write the three predicted tip paths over the bench section (thesis Fig. 39) to
     /// `DIR/fig39_model.svg`.
     #[arg(long, value_name = "DIR")]
@@ -1836,7 +1883,7 @@ fn train(a: &TrainArgs) -> anyhow::Result<()> {
 // compare
 // ---------------------------------------------------------------------------------------------------
 
-pub(crate) fn load_model(path: Option<&Path>) -> anyhow::Result<DigModel> {
+fn load_model(path: Option<&Path>) -> anyhow::Result<DigModel> {
     let nominal = DigModel::nominal()?;
     match path {
         None => Ok(nominal),
@@ -2332,7 +2379,7 @@ pub fn default_site() -> anyhow::Result<DigSite> {
 ///
 /// # Errors
 /// `start_r` outside the site's section.
-pub(crate) fn tip_start(
+fn tip_start(
     site: &DigSite,
     start_r: f64,
     start_depth_m: f64,
@@ -2391,6 +2438,26 @@ fn table2_predictions(
     Ok(rows)
 }
 
+/// The tip path of a predicted dig, for the tip-path plots.
+pub(crate) fn predicted_tip_path(p: &DigPrediction) -> Vec<crate::demo::TipPoint> {
+    p.samples
+        .iter()
+        .map(|s| crate::demo::TipPoint {
+            x_m: s.tip_x_m,
+            z_m: s.tip_z_m,
+        })
+        .collect()
+}
+
+/// How a reproduction's check reads: "as in the thesis" or "differs from the thesis".
+pub(crate) fn thesis_verdict(ok: bool) -> &'static str {
+    if ok {
+        "as in the thesis"
+    } else {
+        "differs from the thesis"
+    }
+}
+
 /// The section of the default bench as [`TipPoint`]s (every 0.05 m from 1 to 12 m).
 pub(crate) fn default_section() -> anyhow::Result<Vec<crate::demo::TipPoint>> {
     let site = default_site()?;
@@ -2406,13 +2473,15 @@ pub(crate) fn default_section() -> anyhow::Result<Vec<crate::demo::TipPoint>> {
 }
 
 fn table2(a: &Table2Args) -> anyhow::Result<()> {
-    let model = load_model(a.model.as_deref())?;
-    let predicted = table2_predictions(&model, a.start_r, a.start_depth, a.start_bucket_deg)?;
+    let model = a.start.load_model()?;
+    let predicted = table2_predictions(
+        &model,
+        a.start.start_r,
+        a.start.start_depth,
+        a.start.start_bucket_deg,
+    )?;
     let rows: Vec<Table2Row> = predicted.iter().map(|(r, _)| *r).collect();
-    println!(
-        "Table 2 with the dig model (tip {:.2} m deep at r = {:.2} m on the default bench, bucket {:.0} deg)",
-        a.start_depth, a.start_r, a.start_bucket_deg
-    );
+    println!("Table 2 with the dig model ({})", a.start.describe());
     println!(
         "  force factor  time [s]  volume [m^3]  energy [kJ]   | thesis: time  volume  energy"
     );
@@ -2422,16 +2491,7 @@ fn table2(a: &Table2Args) -> anyhow::Result<()> {
             r.force_factor, r.time_s, r.volume_m3, r.energy_kj, t.1, t.2, t.3
         );
     }
-    let check = |name: &str, ok: bool| {
-        println!(
-            "  {name}: {}",
-            if ok {
-                "as in the thesis"
-            } else {
-                "differs from the thesis"
-            }
-        )
-    };
+    let check = |name: &str, ok: bool| println!("  {name}: {}", thesis_verdict(ok));
     check("time rises 1 -> 2", rows[1].time_s > rows[0].time_s);
     check("time falls 2 -> 3", rows[2].time_s < rows[1].time_s);
     check("volume rises 1 -> 2", rows[1].volume_m3 > rows[0].volume_m3);
@@ -2449,14 +2509,7 @@ fn table2(a: &Table2Args) -> anyhow::Result<()> {
                     "force factor {:.0}: {:.2} m^3, {:?}",
                     r.force_factor, r.volume_m3, p.summary.end
                 ),
-                path: p
-                    .samples
-                    .iter()
-                    .map(|s| crate::demo::TipPoint {
-                        x_m: s.tip_x_m,
-                        z_m: s.tip_z_m,
-                    })
-                    .collect(),
+                path: predicted_tip_path(p),
                 section: section.clone(),
             })
             .collect();
@@ -2486,10 +2539,7 @@ mod tests {
     fn table2_writes_the_three_predicted_paths() {
         let dir = tempfile::tempdir().unwrap();
         table2(&Table2Args {
-            model: None,
-            start_r: 7.8,
-            start_bucket_deg: -55.0,
-            start_depth: 0.02,
+            start: ModelStartArgs::default(),
             out: Some(dir.path().to_path_buf()),
         })
         .unwrap();

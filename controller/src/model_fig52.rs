@@ -20,7 +20,9 @@ use clap::Args;
 use planner::dig_model::{DigEnd, DigModel, DigPrediction, DigSite, DigStart, SoilModel};
 use serde::Serialize;
 
-use crate::model_cmd::{default_section, default_site, load_model, tip_start};
+use crate::model_cmd::{
+    ModelStartArgs, default_section, default_site, predicted_tip_path, thesis_verdict,
+};
 
 /// The cohesions of the printed sweep, Pa (the default bench's soil is 8 kPa).
 pub const SWEEP_COHESION_PA: [f64; 7] = [4e3, 6e3, 8e3, 12e3, 16e3, 24e3, 32e3];
@@ -36,18 +38,9 @@ pub const THESIS_SOFT_COST: (f64, f64) = (0.60, 0.75);
 /// Arguments of `model fig52`.
 #[derive(Debug, Args)]
 pub struct Fig52Args {
-    /// Actuator model (default: the shipped config/nominal_actuator.json).
-    #[arg(long, value_name = "FILE")]
-    pub model: Option<PathBuf>,
-    /// Start distance of the tip from the swing axis, m.
-    #[arg(long, default_value_t = 7.8)]
-    pub start_r: f64,
-    /// Start bucket angle to the horizontal, degrees.
-    #[arg(long, default_value_t = -55.0)]
-    pub start_bucket_deg: f64,
-    /// Start depth of the tip below the surface, m.
-    #[arg(long, default_value_t = 0.02)]
-    pub start_depth: f64,
+    /// The model and its start (Table 2's by default).
+    #[command(flatten)]
+    pub start: ModelStartArgs,
     /// Cohesion of the soft soil, kPa.
     #[arg(long, default_value_t = 6.0)]
     pub soft_cohesion_kpa: f64,
@@ -256,15 +249,14 @@ pub fn run(a: &Fig52Args) -> anyhow::Result<()> {
 /// As [`run`].
 pub fn report(a: &Fig52Args) -> anyhow::Result<String> {
     use std::fmt::Write as _;
-    let model = load_model(a.model.as_deref())?;
+    let model = a.start.load_model()?;
     let site = default_site()?;
-    let start = tip_start(&site, a.start_r, a.start_depth, a.start_bucket_deg)?;
+    let start = a.start.start(&site)?;
     let mut out = String::new();
     writeln!(
         out,
-        "Fig. 52 with the dig model (tip {:.2} m deep at r = {:.2} m on the default bench, bucket {:.0} deg; \
-         soils differ in cohesion only)\n",
-        a.start_depth, a.start_r, a.start_bucket_deg
+        "Fig. 52 with the dig model ({}; soils differ in cohesion only)\n",
+        a.start.describe()
     )?;
     writeln!(
         out,
@@ -347,37 +339,31 @@ pub fn report(a: &Fig52Args) -> anyhow::Result<String> {
         pct(h[1].fill)
     )?;
     let checks = Fig52Checks::of(&s, &h);
-    let verdict = |ok: bool| {
-        if ok {
-            "as in the thesis"
-        } else {
-            "differs from the thesis"
-        }
-    };
-    writeln!(
-        out,
-        "\n  soft soil, both indices fill (>= {}): {}",
-        pct(FULL_FILL),
-        verdict(checks.soft_both_full)
-    )?;
-    writeln!(
-        out,
-        "  soft soil, index 5 costs time and energy: {}",
-        verdict(checks.soft_high_index_costs)
-    )?;
-    writeln!(
-        out,
-        "  hard soil, index 1 fills about half ({}-{}): {}",
-        pct(HALF_FILL.0),
-        pct(HALF_FILL.1),
-        verdict(checks.hard_low_index_half)
-    )?;
-    writeln!(
-        out,
-        "  hard soil, index 5 fills (>= {}): {}",
-        pct(FULL_FILL),
-        verdict(checks.hard_high_index_full)
-    )?;
+    writeln!(out)?;
+    for (statement, ok) in [
+        (
+            format!("soft soil, both indices fill (>= {})", pct(FULL_FILL)),
+            checks.soft_both_full,
+        ),
+        (
+            "soft soil, index 5 costs time and energy".to_owned(),
+            checks.soft_high_index_costs,
+        ),
+        (
+            format!(
+                "hard soil, index 1 fills about half ({}-{})",
+                pct(HALF_FILL.0),
+                pct(HALF_FILL.1)
+            ),
+            checks.hard_low_index_half,
+        ),
+        (
+            format!("hard soil, index 5 fills (>= {})", pct(FULL_FILL)),
+            checks.hard_high_index_full,
+        ),
+    ] {
+        writeln!(out, "  {statement}: {}", thesis_verdict(ok))?;
+    }
     if let Some(dir) = &a.out {
         let section = default_section()?;
         let curves = |digs: &[(Fig52Dig, DigPrediction); 2]| {
@@ -390,14 +376,7 @@ pub fn report(a: &Fig52Args) -> anyhow::Result<String> {
                         d.time_s,
                         d.energy_kj
                     ),
-                    path: p
-                        .samples
-                        .iter()
-                        .map(|s| crate::demo::TipPoint {
-                            x_m: s.tip_x_m,
-                            z_m: s.tip_z_m,
-                        })
-                        .collect(),
+                    path: predicted_tip_path(p),
                     section: section.clone(),
                 })
                 .collect::<Vec<_>>()
@@ -433,10 +412,7 @@ mod tests {
 
     fn args(out: Option<PathBuf>) -> Fig52Args {
         Fig52Args {
-            model: None,
-            start_r: 7.8,
-            start_bucket_deg: -55.0,
-            start_depth: 0.02,
+            start: ModelStartArgs::default(),
             soft_cohesion_kpa: 6.0,
             hard_cohesion_kpa: 12.0,
             out,
@@ -449,9 +425,9 @@ mod tests {
     #[test]
     fn the_shipped_dig_model_shows_fig52s_pattern() {
         let a = args(None);
-        let model = load_model(None).unwrap();
+        let model = a.start.load_model().unwrap();
         let site = default_site().unwrap();
-        let start = tip_start(&site, a.start_r, a.start_depth, a.start_bucket_deg).unwrap();
+        let start = a.start.start(&site).unwrap();
         let soft = pair(&model, a.soft_cohesion_kpa * 1e3, &start, &site).unwrap();
         let hard = pair(&model, a.hard_cohesion_kpa * 1e3, &start, &site).unwrap();
         let checks = Fig52Checks::of(&[soft[0].0, soft[1].0], &[hard[0].0, hard[1].0]);
