@@ -1,7 +1,8 @@
 //! `excavator-ctl experiment table1|table2|fig52`: the thesis's Autodig results reproduced in closed
 //! loop against the simulator (in-process, virtual time), each printed next to the thesis's numbers.
 //!
-//! - **Table 1** (3.2): initial stick angles -87, -70, -50 degrees (absolute), plain Autodig (fixed
+//! - **Table 1** (3.2): initial stick angles -87, -70, -50 degrees (the stick's joint angle by
+//!   default, or to the horizontal: [`StickAngleReading`]), plain Autodig (fixed
 //!   beta, gamma) against Autodig with the perception enhancements (swept volume ends Dig, the terrain
 //!   ends Capture), `--runs` digs each with different simulator seeds.
 //! - **Table 2** (4.4): the soil force scaled by 1, 2 and 3. The simulator has no force multiplier; its
@@ -82,6 +83,24 @@ pub struct ExperimentArgs {
     /// calibrated plant, or `implicit`, without the contact chatter; docs/simulator.md).
     #[arg(long, value_enum, default_value_t = SoilContact::Held)]
     pub soil_contact: SoilContact,
+    /// `table1`: how the thesis's initial stick angles (-87, -70, -50 deg) are read.
+    #[arg(long, value_enum, default_value_t = StickAngleReading::Joint)]
+    pub stick_angle: StickAngleReading,
+}
+
+/// How Table 1's initial stick angles are read.
+///
+/// The thesis does not say. `joint` is the default: the stick's joint angle relative to the boom, as
+/// its resolver reads it and as Appendix A writes the joint angles (q3 in `S23`). Read to the
+/// horizontal, -87 deg is already at the near-vertical beta at which plain Autodig ends its Dig, yet the
+/// thesis's plain dig from there took 6.58 s and brought 1880 kg. docs/autodig.md, "Table 1", gives the
+/// figures of both readings.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum StickAngleReading {
+    /// Relative to the boom (the joint angle): the tip 7.6, 8.3 and 8.9 m out.
+    Joint,
+    /// To the horizontal: the tip 6.4, 7.3 and 8.4 m out.
+    Absolute,
 }
 
 /// How Table 2's force factor is applied in the simulator.
@@ -179,6 +198,35 @@ pub fn start_with_stick_angle_over(stick_abs_deg: f64, top_z_m: f64) -> StartPos
         boom_rad: boom,
         stick_rad: stick - boom,
         bucket_rad: bucket - stick,
+    }
+}
+
+/// A dig start with the stick's joint angle (relative to the boom) at `stick_rel_deg`, the bucket
+/// opened to -55 deg to the horizontal and the tip 0.25 m above a terrain top at `top_z_m` (world z;
+/// the machine stands on z = 0).
+///
+/// The boom angle b solves the tip height (Eq. A3's forward kinematics of the default machine):
+/// `5.7 sin b + 2.9 sin(b + q3) = C` is `R sin(b + phi) = C` with `R cos phi = 5.7 + 2.9 cos q3`,
+/// `R sin phi = 2.9 sin q3`; of its two solutions the one with the boom lower (the tip out in front).
+pub fn start_with_stick_joint_angle_over(stick_rel_deg: f64, top_z_m: f64) -> StartPose {
+    // Default machine: boom foot (0.2, 2.0) m, boom 5.7 m, stick 2.9 m, bucket 1.5 m.
+    let (q3, bucket) = (stick_rel_deg.to_radians(), (-55.0_f64).to_radians());
+    let c = top_z_m + 0.25 - 2.0 - 1.5 * bucket.sin();
+    let (a, b) = (5.7 + 2.9 * q3.cos(), 2.9 * q3.sin());
+    let boom = (c / a.hypot(b)).clamp(-1.0, 1.0).asin() - b.atan2(a);
+    StartPose::Joints {
+        boom_rad: boom,
+        stick_rad: q3,
+        bucket_rad: bucket - boom - q3,
+    }
+}
+
+/// Table 1's start for `stick_deg` read as `reading`, over level material at the tracks' level.
+#[must_use]
+pub fn table1_start(stick_deg: f64, reading: StickAngleReading) -> StartPose {
+    match reading {
+        StickAngleReading::Joint => start_with_stick_joint_angle_over(stick_deg, 0.0),
+        StickAngleReading::Absolute => start_with_stick_angle_over(stick_deg, 0.0),
     }
 }
 
@@ -362,11 +410,12 @@ pub const TABLE1_CREST_X_M: f64 = 11.0;
 ///
 /// # Errors
 /// As [`run_dig`].
-pub fn table1(seeds: u64) -> anyhow::Result<Vec<(f64, Mean, Mean)>> {
+pub fn table1(seeds: u64, reading: StickAngleReading) -> anyhow::Result<Vec<(f64, Mean, Mean)>> {
     table1_with(
         seeds,
         &AutodigMaps::builtin()?,
         SoilContactIntegration::Held,
+        reading,
     )
 }
 
@@ -375,9 +424,10 @@ pub fn table1(seeds: u64) -> anyhow::Result<Vec<(f64, Mean, Mean)>> {
 /// The terrain: the thesis does not say where Table 1's 30 digs were dug, only that every perception
 /// dig filled the bucket. Its machine worked standing on the material (ch. 6, Fig. 1); on our default
 /// bench (a 2 m bench in front of the machine, top at the boom foot's height) the -87 degree start
-/// needs the boom 50 degrees up, which leaves the stick 19 degrees of stroke before its cylinder limit
+/// (read to the horizontal) needs the boom 50 degrees up, which leaves the stick 19 degrees of stroke before its cylinder limit
 /// (1165 kg with perception, 0.74 m^3 swept). So the digs start over level material at the tracks'
-/// level ([`TABLE1_CREST_X_M`]); the -87, -70, -50 degree starts put the tip at 6.4, 7.3 and 8.4 m.
+/// level ([`TABLE1_CREST_X_M`]); the -87, -70, -50 degree starts put the tip at 7.6, 8.3 and 8.9 m
+/// read as joint angles, 6.4, 7.3 and 8.4 m read to the horizontal ([`StickAngleReading`]).
 /// The machine is placed at the start pose (no move to the dig): Table 1 compares Autodig alone.
 ///
 /// # Errors
@@ -386,6 +436,7 @@ pub fn table1_with(
     seeds: u64,
     maps: &AutodigMaps,
     contact: SoilContactIntegration,
+    reading: StickAngleReading,
 ) -> anyhow::Result<Vec<(f64, Mean, Mean)>> {
     let mut sim = SimConfig::load::<&str>(None, None, None, &[])?;
     sim.scenario = vcan_sim::scenario::Scenario::from_toml_str_named(
@@ -396,7 +447,7 @@ pub fn table1_with(
     sim.scenario.soil_contact = contact;
     let mut rows = Vec::new();
     for stick in [-87.0, -70.0, -50.0] {
-        let start = start_with_stick_angle_over(stick, 0.0);
+        let start = table1_start(stick, reading);
         if let StartPose::Joints {
             boom_rad,
             stick_rad,
@@ -580,8 +631,12 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
             let _ = writeln!(
                 s,
                 "Table 1: Autodig with and without the perception enhancements ({} digs each; payload kg, \
-                 time s; thesis lbs converted to kg)\n",
-                args.runs
+                 time s; thesis lbs converted to kg; stick angle {})\n",
+                args.runs,
+                match args.stick_angle {
+                    StickAngleReading::Joint => "relative to the boom (joint angle)",
+                    StickAngleReading::Absolute => "to the horizontal",
+                }
             );
             let _ = writeln!(
                 s,
@@ -589,7 +644,12 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
                  thesis plain: time, payload | thesis perception: time, payload |"
             );
             let _ = writeln!(s, "|---|---|---|---|---|---|---|");
-            let rows = table1_with(args.runs, &args.autodig_maps()?, args.soil_contact.into())?;
+            let rows = table1_with(
+                args.runs,
+                &args.autodig_maps()?,
+                args.soil_contact.into(),
+                args.stick_angle,
+            )?;
             for ((stick, plain, with), t) in rows.iter().zip(thesis) {
                 let _ = writeln!(
                     s,
