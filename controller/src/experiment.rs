@@ -751,7 +751,8 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
             let _ = writeln!(
                 s,
                 "\nThesis: soft soil, both indices fill the bucket; the higher index digs too deep, +60 % time \
-                 and +75 % energy. Hard soil: the low index fills about 50 %, the high index fully."
+                 and +75 % energy. Hard soil: the low index fills about 50 %, the high index fully. \
+                 The thesis made the figure with its dig model: `excavator-ctl model fig52`."
             );
             let panels: Vec<_> = FIG52_SOILS
                 .iter()
