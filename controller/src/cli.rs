@@ -33,7 +33,7 @@ pub enum Command {
         cmd: crate::trace_tool::TraceCommand,
     },
     /// The planner's dig model: train the actuator networks, generate simulator data, compare with
-    /// the simulator, thesis Table 2 (docs/models.md).
+    /// the simulator, thesis Table 2 and Fig. 52 (docs/models.md).
     Model {
         /// The model command.
         #[command(subcommand)]
