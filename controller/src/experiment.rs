@@ -83,6 +83,12 @@ pub struct ExperimentArgs {
     /// calibrated plant, or `implicit`, without the contact chatter; docs/simulator.md).
     #[arg(long, value_enum, default_value_t = SoilContact::Held)]
     pub soil_contact: SoilContact,
+    /// `fig52`: cohesion of the soft soil, kPa (default: [`FIG52_SOILS`]'s).
+    #[arg(long, value_name = "KPA", default_value_t = FIG52_SOILS[0].1 / 1e3)]
+    pub soft_cohesion_kpa: f64,
+    /// `fig52`: cohesion of the hard soil, kPa (default: [`FIG52_SOILS`]'s).
+    #[arg(long, value_name = "KPA", default_value_t = FIG52_SOILS[1].1 / 1e3)]
+    pub hard_cohesion_kpa: f64,
     /// `table1`: how the thesis's initial stick angles (-87, -70, -50 deg) are read.
     #[arg(long, value_enum, default_value_t = StickAngleReading::Joint)]
     pub stick_angle: StickAngleReading,
@@ -565,22 +571,28 @@ pub fn fig52(seeds: u64) -> anyhow::Result<Vec<(&'static str, f64, Mean)>> {
         seeds,
         &AutodigMaps::builtin()?,
         SoilContactIntegration::Held,
+        FIG52_SOILS,
     )
 }
 
-/// [`fig52`] with the given maps.
+/// [`fig52`] with the given maps, plant and `(name, cohesion Pa)` soils.
 ///
 /// # Errors
-/// As [`run_dig`].
+/// A cohesion that is not finite and >= 0; as [`run_dig`].
 pub fn fig52_with(
     seeds: u64,
     maps: &AutodigMaps,
     contact: SoilContactIntegration,
+    soils: [(&'static str, f64); 2],
 ) -> anyhow::Result<Vec<(&'static str, f64, Mean)>> {
     let base = SimConfig::load::<&str>(None, None, None, &[])?;
     let start = default_start();
     let mut rows = Vec::new();
-    for (name, cohesion) in FIG52_SOILS {
+    for (name, cohesion) in soils {
+        anyhow::ensure!(
+            cohesion.is_finite() && cohesion >= 0.0,
+            "Fig. 52's {name} soil: cohesion {cohesion} Pa must be finite and >= 0"
+        );
         let mut sim = base.clone();
         sim.scenario.soil.cohesion_pa = cohesion;
         sim.scenario.soil_contact = contact;
@@ -729,15 +741,24 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
         Which::HardnessFit => s.push_str(&hardness_fit_report(args)?),
         Which::ExtendedDigCheck => s.push_str(&extended_dig_check_report()?),
         Which::Fig52 => {
+            let soils = [
+                ("soft", args.soft_cohesion_kpa * 1e3),
+                ("hard", args.hard_cohesion_kpa * 1e3),
+            ];
             let _ = writeln!(
                 s,
-                "Fig. 52: hardness index 1 and 5 in soft (c = 8 kPa) and hard (c = 16 kPa) soil ({} digs each; \
+                "Fig. 52: hardness index 1 and 5 in soft (c = {} kPa) and hard (c = {} kPa) soil ({} digs each; \
                  fill = payload / 2550 kg)\n",
-                args.runs
+                args.soft_cohesion_kpa, args.hard_cohesion_kpa, args.runs
             );
             let _ = writeln!(s, "| soil | index | fill | time | energy | swept volume |");
             let _ = writeln!(s, "|---|---|---|---|---|---|");
-            let rows = fig52_with(args.runs, &args.autodig_maps()?, args.soil_contact.into())?;
+            let rows = fig52_with(
+                args.runs,
+                &args.autodig_maps()?,
+                args.soil_contact.into(),
+                soils,
+            )?;
             for (soil, index, m) in &rows {
                 let _ = writeln!(
                     s,
@@ -754,7 +775,7 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
                  and +75 % energy. Hard soil: the low index fills about 50 %, the high index fully. \
                  The thesis made the figure with its dig model: `excavator-ctl model fig52`."
             );
-            let panels: Vec<_> = FIG52_SOILS
+            let panels: Vec<_> = soils
                 .iter()
                 .map(|(soil, cohesion)| {
                     let curves = rows

@@ -111,6 +111,8 @@ fn fig52_report_prints_the_thesis_comparison() {
         scaling: controller::experiment::Table2Scaling::Soil,
         soil_contact: controller::experiment::SoilContact::Held,
         stick_angle: StickAngleReading::Joint,
+        soft_cohesion_kpa: 8.0,
+        hard_cohesion_kpa: 16.0,
     })
     .unwrap();
     assert!(
