@@ -408,6 +408,42 @@ fn runs(
     Ok(mean(&outcomes))
 }
 
+/// The thesis's statements about Table 1 (3.2) on its rows `(stick angle, plain, with perception)`,
+/// ordered by reach: each statement and whether it holds.
+#[must_use]
+pub fn table1_checks(rows: &[(f64, Mean, Mean)]) -> [(&'static str, bool); 4] {
+    let rising = |f: fn(&Mean) -> f64, strict: bool| {
+        rows.windows(2).all(|w| {
+            let (a, b) = (f(&w[0].1), f(&w[1].1));
+            // Not falling: within 1 % (payloads at the bucket's capacity differ by rounding).
+            if strict { b > a } else { b >= 0.99 * a }
+        }) && rows.len() > 1
+            && f(&rows[rows.len() - 1].1) > f(&rows[0].1)
+    };
+    let (lo, hi) = rows.iter().fold((f64::INFINITY, 0.0_f64), |(lo, hi), r| {
+        (lo.min(r.2.payload_kg), hi.max(r.2.payload_kg))
+    });
+    let alike: Vec<_> = rows
+        .iter()
+        .filter(|r| (r.2.payload_kg - r.1.payload_kg).abs() <= 0.05 * r.1.payload_kg)
+        .collect();
+    [
+        (
+            "plain: payload grows with reach (fixed beta)",
+            rising(|m| m.payload_kg, false),
+        ),
+        ("plain: time rises with reach", rising(|m| m.time_s, true)),
+        (
+            "perception: payload consistent across the starts (spread < 10 %)",
+            !rows.is_empty() && hi - lo < 0.1 * hi,
+        ),
+        (
+            "perception: faster where the payloads are alike (within 5 %)",
+            !alike.is_empty() && alike.iter().all(|r| r.2.time_s < r.1.time_s),
+        ),
+    ]
+}
+
 /// Table 1's terrain: the extended-operation bench (machine on the material it digs, bench top at the
 /// tracks' level, z = 0) with the crest of its cut moved out to this x, m, beyond the starts' reach.
 pub const TABLE1_CREST_X_M: f64 = 11.0;
@@ -674,6 +710,10 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
                     t.4 * LB_TO_KG
                 );
             }
+            let _ = writeln!(s);
+            for (statement, ok) in table1_checks(&rows) {
+                let _ = writeln!(s, "  {statement}: {}", crate::model_cmd::thesis_verdict(ok));
+            }
             let panel = |name: &str, pick: fn(&(f64, Mean, Mean)) -> &Mean| {
                 let curves = rows
                     .iter()
@@ -692,11 +732,7 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
             )?);
         }
         Which::Table2 => {
-            let thesis = [
-                (1.0, 5.5, 2.2, 113.0),
-                (2.0, 8.1, 2.5, 234.0),
-                (3.0, 7.8, 2.1, 253.0),
-            ];
+            let thesis = crate::model_cmd::THESIS_TABLE2;
             let _ = writeln!(
                 s,
                 "Table 2: soil force x1, x2, x3 ({}, base soil scaled by {}; {} digs each)\n",
@@ -725,6 +761,15 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
                     "| {k:.1} | {:.2} s | {:.2} m^3 | {:.0} kJ | {:.0} kg | {} s, {} m^3, {} kJ |",
                     m.time_s, m.swept_volume_m3, m.energy_kj, m.payload_kg, t.1, t.2, t.3
                 );
+            }
+            let figures = |m: &Mean| (m.time_s, m.swept_volume_m3, m.energy_kj);
+            if let [(_, a), (_, b), (_, c)] = rows.as_slice() {
+                let _ = writeln!(s);
+                for (statement, ok) in
+                    crate::model_cmd::table2_checks([figures(a), figures(b), figures(c)])
+                {
+                    let _ = writeln!(s, "  {statement}: {}", crate::model_cmd::thesis_verdict(ok));
+                }
             }
             let curves = rows
                 .iter()
@@ -775,6 +820,20 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
                  and +75 % energy. Hard soil: the low index fills about 50 %, the high index fully. \
                  The thesis made the figure with its dig model: `excavator-ctl model fig52`."
             );
+            let figures = |soil: &str, index: f64| {
+                rows.iter()
+                    .find(|r| r.0 == soil && r.1 == index)
+                    .map_or((0.0, 0.0, 0.0), |(_, _, m)| {
+                        (m.payload_kg / 2550.0, m.time_s, m.energy_kj)
+                    })
+            };
+            let checks = crate::model_fig52::Fig52Checks::from_figures(
+                [figures("soft", 1.0), figures("soft", 5.0)],
+                [figures("hard", 1.0), figures("hard", 5.0)],
+            );
+            for (statement, ok) in checks.statements() {
+                let _ = writeln!(s, "  {statement}: {}", crate::model_cmd::thesis_verdict(ok));
+            }
             let panels: Vec<_> = soils
                 .iter()
                 .map(|(soil, cohesion)| {
@@ -1318,4 +1377,59 @@ fn extended_dig_check_report() -> anyhow::Result<String> {
         }
     }
     Ok(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn m(payload_kg: f64, time_s: f64) -> Mean {
+        Mean {
+            payload_kg,
+            time_s,
+            energy_kj: 200.0,
+            swept_volume_m3: 1.5,
+            completed: 1,
+            first: None,
+        }
+    }
+
+    /// The thesis's own Table 1 (lbs to kg) passes every check; ours read to the horizontal fails the
+    /// perception consistency only (2111 against 2550 kg).
+    #[test]
+    fn table1_checks_hold_for_the_thesis_and_tell_an_inconsistent_payload() {
+        let thesis = [
+            (-87.0, m(1880.0, 6.58), m(2418.0, 7.13)),
+            (-70.0, m(2346.0, 10.35), m(2417.0, 7.47)),
+            (-50.0, m(2960.0, 13.83), m(2421.0, 8.77)),
+        ];
+        assert!(table1_checks(&thesis).iter().all(|c| c.1));
+        let horizontal = [
+            (-87.0, m(1560.0, 4.21), m(2111.0, 4.28)),
+            (-70.0, m(2550.0, 4.37), m(2550.0, 4.34)),
+            (-50.0, m(2550.0, 5.46), m(2550.0, 3.92)),
+        ];
+        let c = table1_checks(&horizontal);
+        assert_eq!(c.map(|c| c.1), [true, true, false, true], "{c:?}");
+        // A perception dig slower than plain with the same payload fails the last check.
+        let slow = [
+            (-87.0, m(2000.0, 4.0), m(2500.0, 4.0)),
+            (-70.0, m(2500.0, 5.0), m(2500.0, 5.5)),
+        ];
+        assert!(!table1_checks(&slow)[3].1);
+    }
+
+    /// The thesis's Table 2 passes every check; a volume that falls from x1 fails that one.
+    #[test]
+    fn table2_checks_hold_for_the_thesis() {
+        let thesis = crate::model_cmd::THESIS_TABLE2.map(|t| (t.1, t.2, t.3));
+        assert!(crate::model_cmd::table2_checks(thesis).iter().all(|c| c.1));
+        let ours = [
+            (3.92, 2.69, 226.0),
+            (4.57, 1.10, 294.0),
+            (3.94, 0.84, 276.0),
+        ];
+        let c = crate::model_cmd::table2_checks(ours);
+        assert_eq!(c.map(|c| c.1), [true, true, false, true, false], "{c:?}");
+    }
 }

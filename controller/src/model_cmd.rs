@@ -2449,8 +2449,24 @@ pub(crate) fn predicted_tip_path(p: &DigPrediction) -> Vec<crate::demo::TipPoint
         .collect()
 }
 
+/// The thesis's statements about Table 2 (4.4) on `(time s, swept volume m^3, energy kJ)` at force
+/// factor 1, 2 and 3: each statement and whether it holds.
+#[must_use]
+pub fn table2_checks(r: [(f64, f64, f64); 3]) -> [(&'static str, bool); 5] {
+    [
+        ("time rises 1 -> 2", r[1].0 > r[0].0),
+        ("time falls 2 -> 3", r[2].0 < r[1].0),
+        ("volume rises 1 -> 2", r[1].1 > r[0].1),
+        ("volume falls 2 -> 3", r[2].1 < r[1].1),
+        (
+            "energy rises throughout",
+            r[1].2 > r[0].2 && r[2].2 > r[1].2,
+        ),
+    ]
+}
+
 /// How a reproduction's check reads: "as in the thesis" or "differs from the thesis".
-pub(crate) fn thesis_verdict(ok: bool) -> &'static str {
+pub fn thesis_verdict(ok: bool) -> &'static str {
     if ok {
         "as in the thesis"
     } else {
@@ -2491,15 +2507,11 @@ fn table2(a: &Table2Args) -> anyhow::Result<()> {
             r.force_factor, r.time_s, r.volume_m3, r.energy_kj, t.1, t.2, t.3
         );
     }
-    let check = |name: &str, ok: bool| println!("  {name}: {}", thesis_verdict(ok));
-    check("time rises 1 -> 2", rows[1].time_s > rows[0].time_s);
-    check("time falls 2 -> 3", rows[2].time_s < rows[1].time_s);
-    check("volume rises 1 -> 2", rows[1].volume_m3 > rows[0].volume_m3);
-    check("volume falls 2 -> 3", rows[2].volume_m3 < rows[1].volume_m3);
-    check(
-        "energy rises throughout",
-        rows[1].energy_kj > rows[0].energy_kj && rows[2].energy_kj > rows[1].energy_kj,
-    );
+    let figures = |r: &Table2Row| (r.time_s, r.volume_m3, r.energy_kj);
+    for (statement, ok) in table2_checks([figures(&rows[0]), figures(&rows[1]), figures(&rows[2])])
+    {
+        println!("  {statement}: {}", thesis_verdict(ok));
+    }
     if let Some(dir) = &a.out {
         let section = default_section()?;
         let curves = predicted

@@ -90,13 +90,50 @@ impl Fig52Checks {
     /// The checks on `[index 1, index 5]` of the soft and of the hard soil.
     #[must_use]
     pub fn of(soft: &[Fig52Dig; 2], hard: &[Fig52Dig; 2]) -> Self {
+        let figures = |d: &Fig52Dig| (d.fill, d.time_s, d.energy_kj);
+        Self::from_figures(
+            [figures(&soft[0]), figures(&soft[1])],
+            [figures(&hard[0]), figures(&hard[1])],
+        )
+    }
+
+    /// The checks on `(fill, time s, energy kJ)` of index 1 and index 5 in the soft and in the hard
+    /// soil (fill: the share of the bucket's capacity).
+    #[must_use]
+    pub fn from_figures(soft: [(f64, f64, f64); 2], hard: [(f64, f64, f64); 2]) -> Self {
         Self {
-            soft_both_full: soft.iter().all(|d| d.fill >= FULL_FILL),
-            soft_high_index_costs: soft[1].time_s > soft[0].time_s
-                && soft[1].energy_kj > soft[0].energy_kj,
-            hard_low_index_half: (HALF_FILL.0..=HALF_FILL.1).contains(&hard[0].fill),
-            hard_high_index_full: hard[1].fill >= FULL_FILL,
+            soft_both_full: soft.iter().all(|d| d.0 >= FULL_FILL),
+            soft_high_index_costs: soft[1].1 > soft[0].1 && soft[1].2 > soft[0].2,
+            hard_low_index_half: (HALF_FILL.0..=HALF_FILL.1).contains(&hard[0].0),
+            hard_high_index_full: hard[1].0 >= FULL_FILL,
         }
+    }
+
+    /// Each statement, worded, and whether it holds.
+    #[must_use]
+    pub fn statements(&self) -> [(String, bool); 4] {
+        [
+            (
+                format!("soft soil, both indices fill (>= {})", pct(FULL_FILL)),
+                self.soft_both_full,
+            ),
+            (
+                "soft soil, index 5 costs time and energy".to_owned(),
+                self.soft_high_index_costs,
+            ),
+            (
+                format!(
+                    "hard soil, index 1 fills about half ({}-{})",
+                    pct(HALF_FILL.0),
+                    pct(HALF_FILL.1)
+                ),
+                self.hard_low_index_half,
+            ),
+            (
+                format!("hard soil, index 5 fills (>= {})", pct(FULL_FILL)),
+                self.hard_high_index_full,
+            ),
+        ]
     }
 
     /// All four hold.
@@ -340,28 +377,7 @@ pub fn report(a: &Fig52Args) -> anyhow::Result<String> {
     )?;
     let checks = Fig52Checks::of(&s, &h);
     writeln!(out)?;
-    for (statement, ok) in [
-        (
-            format!("soft soil, both indices fill (>= {})", pct(FULL_FILL)),
-            checks.soft_both_full,
-        ),
-        (
-            "soft soil, index 5 costs time and energy".to_owned(),
-            checks.soft_high_index_costs,
-        ),
-        (
-            format!(
-                "hard soil, index 1 fills about half ({}-{})",
-                pct(HALF_FILL.0),
-                pct(HALF_FILL.1)
-            ),
-            checks.hard_low_index_half,
-        ),
-        (
-            format!("hard soil, index 5 fills (>= {})", pct(FULL_FILL)),
-            checks.hard_high_index_full,
-        ),
-    ] {
+    for (statement, ok) in checks.statements() {
         writeln!(out, "  {statement}: {}", thesis_verdict(ok))?;
     }
     if let Some(dir) = &a.out {

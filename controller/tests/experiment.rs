@@ -49,6 +49,13 @@ fn table1_perception_is_consistent_and_faster() {
         hi - lo
     };
     assert!(time_spread(&with) < 0.5 * time_spread(&plain), "{rows:?}");
+    // The report's checks say the same.
+    assert!(
+        controller::experiment::table1_checks(&rows)
+            .iter()
+            .all(|c| c.1),
+        "{rows:?}"
+    );
 }
 
 /// Table 1 with the stick angles read to the horizontal: every start digs; without the enhancements
