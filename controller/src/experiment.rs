@@ -643,6 +643,16 @@ pub fn fig52_with(
 
 const LB_TO_KG: f64 = 0.453_592;
 
+/// Appends a blank line, then a line per statement: whether it holds as in the thesis.
+fn write_checks<S: std::fmt::Display>(s: &mut String, checks: impl IntoIterator<Item = (S, bool)>) {
+    use std::fmt::Write as _;
+    // Writing into a String cannot fail.
+    let _ = writeln!(s);
+    for (statement, ok) in checks {
+        let _ = writeln!(s, "  {statement}: {}", crate::model_cmd::thesis_verdict(ok));
+    }
+}
+
 /// Runs the chosen reproduction and prints its table next to the thesis's numbers.
 ///
 /// # Errors
@@ -710,10 +720,7 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
                     t.4 * LB_TO_KG
                 );
             }
-            let _ = writeln!(s);
-            for (statement, ok) in table1_checks(&rows) {
-                let _ = writeln!(s, "  {statement}: {}", crate::model_cmd::thesis_verdict(ok));
-            }
+            write_checks(&mut s, table1_checks(&rows));
             let panel = |name: &str, pick: fn(&(f64, Mean, Mean)) -> &Mean| {
                 let curves = rows
                     .iter()
@@ -764,12 +771,10 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
             }
             let figures = |m: &Mean| (m.time_s, m.swept_volume_m3, m.energy_kj);
             if let [(_, a), (_, b), (_, c)] = rows.as_slice() {
-                let _ = writeln!(s);
-                for (statement, ok) in
-                    crate::model_cmd::table2_checks([figures(a), figures(b), figures(c)])
-                {
-                    let _ = writeln!(s, "  {statement}: {}", crate::model_cmd::thesis_verdict(ok));
-                }
+                write_checks(
+                    &mut s,
+                    crate::model_cmd::table2_checks([figures(a), figures(b), figures(c)]),
+                );
             }
             let curves = rows
                 .iter()
@@ -831,9 +836,7 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
                 [figures("soft", 1.0), figures("soft", 5.0)],
                 [figures("hard", 1.0), figures("hard", 5.0)],
             );
-            for (statement, ok) in checks.statements() {
-                let _ = writeln!(s, "  {statement}: {}", crate::model_cmd::thesis_verdict(ok));
-            }
+            write_checks(&mut s, checks.statements());
             let panels: Vec<_> = soils
                 .iter()
                 .map(|(soil, cohesion)| {
