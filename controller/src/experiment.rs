@@ -48,6 +48,9 @@ pub enum Which {
     /// Issue #7: the simulator and the dig model from the same starts on the extended bench (tip
     /// depth, swept volume, soil force), with and without Boom-Down in the simulator.
     ExtendedDigCheck,
+    /// Every statement of the thesis about Table 1, Table 2 and Fig. 52, in the simulator and the dig
+    /// model, and whether it holds here: one table (`--out DIR`: `scoreboard.md`).
+    Scoreboard,
 }
 
 /// Arguments of `excavator-ctl experiment`.
@@ -63,7 +66,8 @@ pub struct ExperimentArgs {
     #[arg(long, default_value_t = 100, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
     pub digs: u32,
     /// Output folder: `extended` and `hardness-fit` write their sessions and figures there,
-    /// `table1`, `table2` and `fig52` their trajectory plot (`table1.svg`, `fig39.svg`, `fig52.svg`).
+    /// `table1`, `table2` and `fig52` their trajectory plot (`table1.svg`, `fig39.svg`, `fig52.svg`),
+    /// `scoreboard` its table (`scoreboard.md`).
     #[arg(long, default_value = "out/experiment", value_name = "DIR")]
     pub out: std::path::PathBuf,
     /// `extended`: planner settings (default: the built-in config/planner.toml).
@@ -641,6 +645,127 @@ pub fn fig52_with(
     Ok(rows)
 }
 
+/// The thesis's statements about Fig. 52 on the simulator's rows (fill: payload over the full
+/// bucket's 2550 kg).
+#[must_use]
+pub fn fig52_checks(rows: &[(&'static str, f64, Mean)]) -> crate::model_fig52::Fig52Checks {
+    let figures = |soil: &str, index: f64| {
+        rows.iter()
+            .find(|r| r.0 == soil && r.1 == index)
+            .map_or((0.0, 0.0, 0.0), |(_, _, m)| {
+                (m.payload_kg / 2550.0, m.time_s, m.energy_kj)
+            })
+    };
+    crate::model_fig52::Fig52Checks::from_figures(
+        [figures("soft", 1.0), figures("soft", 5.0)],
+        [figures("hard", 1.0), figures("hard", 5.0)],
+    )
+}
+
+/// One line of the scoreboard: the result, one of the thesis's statements about it, and whether it
+/// holds here.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Score {
+    /// The thesis result and where it was reproduced, e.g. "Table 2 (dig model)".
+    pub result: String,
+    /// The statement.
+    pub statement: String,
+    /// Whether it holds.
+    pub holds: bool,
+}
+
+/// Every statement of the thesis about Table 1, Table 2 and Fig. 52, checked in the simulator (with
+/// `args`' runs, maps, plant, Table 1 reading, Table 2 scaling and Fig. 52 soils) and in the dig model
+/// (the shipped model and maps from Table 2's start; Fig. 52's soils of `model fig52`).
+///
+/// # Errors
+/// As the reproductions.
+pub fn scoreboard(args: &ExperimentArgs) -> anyhow::Result<Vec<Score>> {
+    let maps = args.autodig_maps()?;
+    let contact = args.soil_contact.into();
+    let mut scores = Vec::new();
+    let mut add = |result: &str, checks: Vec<(String, bool)>| {
+        scores.extend(checks.into_iter().map(|(statement, holds)| Score {
+            result: result.to_owned(),
+            statement,
+            holds,
+        }));
+    };
+    let owned = |c: &[(&str, bool)]| c.iter().map(|(s, b)| ((*s).to_owned(), *b)).collect();
+    let t1 = table1_with(args.runs, &maps, contact, args.stick_angle)?;
+    add("Table 1 (simulator)", owned(&table1_checks(&t1)));
+    let t2 = table2_with(args.runs, &maps, args.base_scale, args.scaling, contact)?;
+    let figures = |m: &Mean| (m.time_s, m.swept_volume_m3, m.energy_kj);
+    if let [(_, a), (_, b), (_, c)] = t2.as_slice() {
+        add(
+            "Table 2 (simulator)",
+            owned(&crate::model_cmd::table2_checks([
+                figures(a),
+                figures(b),
+                figures(c),
+            ])),
+        );
+    }
+    let soils = [
+        ("soft", args.soft_cohesion_kpa * 1e3),
+        ("hard", args.hard_cohesion_kpa * 1e3),
+    ];
+    let f52 = fig52_with(args.runs, &maps, contact, soils)?;
+    add(
+        "Fig. 52 (simulator)",
+        fig52_checks(&f52).statements().to_vec(),
+    );
+    let start = crate::model_cmd::ModelStartArgs::default();
+    let model = start.load_model()?;
+    let site = crate::model_cmd::default_site()?;
+    let dig_start = start.start(&site)?;
+    let rows = crate::model_cmd::table2_rows(
+        &model,
+        start.start_r,
+        start.start_depth,
+        start.start_bucket_deg,
+    )?;
+    let figures = |r: &crate::model_cmd::Table2Row| (r.time_s, r.volume_m3, r.energy_kj);
+    if let [a, b, c] = rows.as_slice() {
+        add(
+            "Table 2 (dig model)",
+            owned(&crate::model_cmd::table2_checks([
+                figures(a),
+                figures(b),
+                figures(c),
+            ])),
+        );
+    }
+    let f52_model =
+        crate::model_fig52::checks(&model, crate::model_fig52::SOIL_PAIR_KPA, &dig_start, &site)?;
+    add("Fig. 52 (dig model)", f52_model.statements().to_vec());
+    Ok(scores)
+}
+
+/// The scoreboard as a Markdown table with the count of statements that hold.
+#[must_use]
+pub fn scoreboard_markdown(scores: &[Score]) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::from("| result | the thesis's statement | here |\n|---|---|---|\n");
+    for sc in scores {
+        // Writing into a String cannot fail.
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} |",
+            sc.result,
+            sc.statement,
+            crate::model_cmd::thesis_verdict(sc.holds)
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\n{} of {} statements hold.",
+        scores.iter().filter(|sc| sc.holds).count(),
+        scores.len()
+    );
+    s
+}
+
 const LB_TO_KG: f64 = 0.453_592;
 
 /// Appends a blank line, then a line per statement: whether it holds as in the thesis.
@@ -790,6 +915,20 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
         Which::Extended => s.push_str(&extended_report(args)?),
         Which::HardnessFit => s.push_str(&hardness_fit_report(args)?),
         Which::ExtendedDigCheck => s.push_str(&extended_dig_check_report()?),
+        Which::Scoreboard => {
+            let table = scoreboard_markdown(&scoreboard(args)?);
+            std::fs::create_dir_all(&args.out)
+                .with_context(|| format!("creating {}", args.out.display()))?;
+            let path = args.out.join("scoreboard.md");
+            std::fs::write(&path, &table).with_context(|| format!("writing {}", path.display()))?;
+            let _ = writeln!(
+                s,
+                "The thesis's statements about Table 1, Table 2 and Fig. 52 ({} runs each in the \
+                 simulator; the dig model from Table 2's start)\n\n{table}\nWritten to {}",
+                args.runs,
+                path.display()
+            );
+        }
         Which::Fig52 => {
             let soils = [
                 ("soft", args.soft_cohesion_kpa * 1e3),
@@ -825,18 +964,7 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
                  and +75 % energy. Hard soil: the low index fills about 50 %, the high index fully. \
                  The thesis made the figure with its dig model: `excavator-ctl model fig52`."
             );
-            let figures = |soil: &str, index: f64| {
-                rows.iter()
-                    .find(|r| r.0 == soil && r.1 == index)
-                    .map_or((0.0, 0.0, 0.0), |(_, _, m)| {
-                        (m.payload_kg / 2550.0, m.time_s, m.energy_kj)
-                    })
-            };
-            let checks = crate::model_fig52::Fig52Checks::from_figures(
-                [figures("soft", 1.0), figures("soft", 5.0)],
-                [figures("hard", 1.0), figures("hard", 5.0)],
-            );
-            write_checks(&mut s, checks.statements());
+            write_checks(&mut s, fig52_checks(&rows).statements());
             let panels: Vec<_> = soils
                 .iter()
                 .map(|(soil, cohesion)| {
@@ -1420,6 +1548,23 @@ mod tests {
             (-70.0, m(2500.0, 5.0), m(2500.0, 5.5)),
         ];
         assert!(!table1_checks(&slow)[3].1);
+    }
+
+    /// The scoreboard lists every statement with its verdict and counts those that hold.
+    #[test]
+    fn scoreboard_markdown_counts_what_holds() {
+        let score = |statement: &str, holds| Score {
+            result: "Table 2 (dig model)".to_owned(),
+            statement: statement.to_owned(),
+            holds,
+        };
+        let md = scoreboard_markdown(&[score("time rises 1 -> 2", true), score("volume", false)]);
+        assert!(
+            md.contains("| Table 2 (dig model) | time rises 1 -> 2 | as in the thesis |"),
+            "{md}"
+        );
+        assert!(md.contains("| volume | differs from the thesis |"), "{md}");
+        assert!(md.contains("1 of 2 statements hold."), "{md}");
     }
 
     /// The thesis's Table 2 passes every check; a volume that falls from x1 fails that one.

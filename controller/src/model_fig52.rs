@@ -32,6 +32,8 @@ pub const INDICES: [f64; 2] = [1.0, 5.0];
 pub const FULL_FILL: f64 = 0.85;
 /// "About half" full: this range of the capacity.
 pub const HALF_FILL: (f64, f64) = (0.35, 0.65);
+/// The default soft and hard soils' cohesion, kPa (read off the sweep; see the module docs).
+pub const SOIL_PAIR_KPA: (f64, f64) = (6.0, 12.0);
 /// The thesis's soft-soil cost of the higher index: time, energy (fractions).
 pub const THESIS_SOFT_COST: (f64, f64) = (0.60, 0.75);
 
@@ -42,10 +44,10 @@ pub struct Fig52Args {
     #[command(flatten)]
     pub start: ModelStartArgs,
     /// Cohesion of the soft soil, kPa.
-    #[arg(long, default_value_t = 6.0)]
+    #[arg(long, default_value_t = SOIL_PAIR_KPA.0)]
     pub soft_cohesion_kpa: f64,
     /// Cohesion of the hard soil, kPa.
-    #[arg(long, default_value_t = 12.0)]
+    #[arg(long, default_value_t = SOIL_PAIR_KPA.1)]
     pub hard_cohesion_kpa: f64,
     /// Also write the four predicted tip paths (soft and hard, index 1 and 5) to `DIR/fig52_model.svg`.
     #[arg(long, value_name = "DIR")]
@@ -269,6 +271,24 @@ fn pct(x: f64) -> String {
 
 fn change(from: f64, to: f64) -> String {
     format!("{:+.0} %", 100.0 * (to / from - 1.0))
+}
+
+/// The four checks on the soft and hard soils of `soils_kpa` (cohesion) from `start`.
+///
+/// # Errors
+/// As [`predict`].
+pub fn checks(
+    model: &DigModel,
+    soils_kpa: (f64, f64),
+    start: &DigStart,
+    site: &DigSite,
+) -> anyhow::Result<Fig52Checks> {
+    let soft = pair(model, soils_kpa.0 * 1e3, start, site)?;
+    let hard = pair(model, soils_kpa.1 * 1e3, start, site)?;
+    Ok(Fig52Checks::of(
+        &[soft[0].0, soft[1].0],
+        &[hard[0].0, hard[1].0],
+    ))
 }
 
 /// Runs `model fig52`: the sweep, the pair, the checks and optionally the plot.
