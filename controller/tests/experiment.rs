@@ -10,6 +10,24 @@ use controller::experiment::{
     ExperimentArgs, Mean, StickAngleReading, Which, report, table1, table2,
 };
 
+/// The command line's defaults, one run each, writing into `out`.
+fn args(which: Which, out: &std::path::Path) -> ExperimentArgs {
+    ExperimentArgs {
+        which,
+        runs: 1,
+        digs: 100,
+        out: out.to_path_buf(),
+        planner: None,
+        maps: None,
+        base_scale: controller::experiment::TABLE2_BASE_SCALE,
+        scaling: controller::experiment::Table2Scaling::Soil,
+        soil_contact: controller::experiment::SoilContact::Held,
+        stick_angle: StickAngleReading::Joint,
+        soft_cohesion_kpa: 8.0,
+        hard_cohesion_kpa: 16.0,
+    }
+}
+
 fn payload_spread_kg(m: &[Mean]) -> f64 {
     let (lo, hi) = m.iter().fold((f64::INFINITY, 0.0_f64), |(lo, hi), x| {
         (lo.min(x.payload_kg), hi.max(x.payload_kg))
@@ -107,21 +125,7 @@ fn energy_rises_from_the_nominal_soil_force() {
 #[test]
 fn fig52_report_prints_the_thesis_comparison() {
     let out = tempfile::tempdir().unwrap();
-    let text = report(&ExperimentArgs {
-        which: Which::Fig52,
-        runs: 1,
-        digs: 100,
-        out: out.path().to_path_buf(),
-        planner: None,
-        maps: None,
-        base_scale: controller::experiment::TABLE2_BASE_SCALE,
-        scaling: controller::experiment::Table2Scaling::Soil,
-        soil_contact: controller::experiment::SoilContact::Held,
-        stick_angle: StickAngleReading::Joint,
-        soft_cohesion_kpa: 8.0,
-        hard_cohesion_kpa: 16.0,
-    })
-    .unwrap();
+    let text = report(&args(Which::Fig52, out.path())).unwrap();
     assert!(
         text.contains("| soft | 1 |") && text.contains("| hard | 5 |"),
         "{text}"
@@ -169,20 +173,7 @@ fn fig52_high_index_does_better_in_hard_soil() {
 #[test]
 fn scoreboard_shows_table1_and_the_dig_model_fig52_reproduced() {
     let out = tempfile::tempdir().unwrap();
-    let args = ExperimentArgs {
-        which: Which::Scoreboard,
-        runs: 1,
-        digs: 100,
-        out: out.path().to_path_buf(),
-        planner: None,
-        maps: None,
-        base_scale: controller::experiment::TABLE2_BASE_SCALE,
-        scaling: controller::experiment::Table2Scaling::Soil,
-        soil_contact: controller::experiment::SoilContact::Held,
-        stick_angle: StickAngleReading::Joint,
-        soft_cohesion_kpa: 8.0,
-        hard_cohesion_kpa: 16.0,
-    };
+    let args = args(Which::Scoreboard, out.path());
     let scores = controller::experiment::scoreboard(&args).unwrap();
     assert_eq!(scores.len(), 22, "{scores:?}");
     for result in ["Table 1 (simulator)", "Fig. 52 (dig model)"] {
