@@ -502,6 +502,34 @@ mod tests {
         assert!(!Fig52Checks::of(&cheap, &hard).soft_high_index_costs);
     }
 
+    /// Bad input is a clear error, never a panic: a cohesion that is negative or not a number, a start
+    /// outside the bench's section or out of the machine's reach.
+    #[test]
+    fn bad_soils_and_starts_are_errors() {
+        let start = ModelStartArgs::default();
+        let model = start.load_model().unwrap();
+        let site = default_site().unwrap();
+        let dig_start = start.start(&site).unwrap();
+        for c in [-1e3, f64::NAN, f64::INFINITY] {
+            let e = predict(&model, c, 1.0, &dig_start, &site).unwrap_err();
+            assert!(format!("{e:#}").contains("cohesion"), "{e:#}");
+        }
+        assert!(predict(&model, 6e3, f64::NAN, &dig_start, &site).is_err());
+        for r in [30.0, 2.0] {
+            let a = ModelStartArgs {
+                start_r: r,
+                ..ModelStartArgs::default()
+            };
+            let e = report(&Fig52Args {
+                start: a,
+                soft_cohesion_kpa: 6.0,
+                hard_cohesion_kpa: 12.0,
+                out: None,
+            });
+            assert!(e.is_err(), "start r = {r} m");
+        }
+    }
+
     #[test]
     fn ranges_join_neighbouring_grid_points() {
         assert_eq!(ranges_kpa(&[]), "none");
