@@ -1,4 +1,4 @@
-//! `controller`: the excavator controller behind `excavator-ctl`.
+//! `controller`: the real-time excavator controller behind `excavator-ctl run`.
 //!
 //! # Layout
 //!
@@ -15,7 +15,6 @@
 //!   predefined excavation sequence of 6.2.
 //! - [`run`]: the real-time loop over SocketCAN (tokio drives a 10 ms interval around the node).
 //! - [`scan_client`]: the range-scan client of the real-time loop (JSON lines over TCP).
-//! - [`cli`]: the command line of `excavator-ctl`.
 //!
 //! # Data flow (one 10 ms step)
 //!
@@ -26,22 +25,13 @@
 //!        Safety::tick (handshake, faults) --> frames: valve commands or a setpoint, then the heartbeat
 //! ```
 
-pub mod cli;
 pub mod cycle;
-pub mod demo;
-pub mod discrepancy;
 pub mod estimate;
-pub mod experiment;
-pub mod model_cmd;
-pub mod model_fig52;
 pub mod node;
 pub mod planned;
-pub mod plots;
 pub mod run;
 pub mod safety;
 pub mod scan_client;
-pub mod soil_cv;
-pub mod trace_tool;
 
 pub use cycle::{Action, CycleConfig, DigStats, WorkCycle};
 pub use estimate::{Estimator, MachineState};

@@ -96,7 +96,7 @@ pub enum SessionError {
 pub type Result<T> = std::result::Result<T, SessionError>;
 
 /// Which action source drives the cycle (`demo --strategy planned|predefined`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Strategy {
     /// The perception-based dig planner (5.1).

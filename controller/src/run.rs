@@ -300,7 +300,7 @@ pub fn scan_client_config(node: &ControllerNode, addr: &str) -> ScanClientConfig
     ScanClientConfig {
         addr: addr.to_owned(),
         timeout: Duration::from_secs_f64(cycle.scan_timeout_s.clamp(0.01, 3600.0)),
-        request: vcan_sim::sensors::ScanRequest::default(),
+        request: firmware_bridge::scan::ScanRequest::default(),
         grid: cycle.scan_grid,
     }
 }

@@ -22,7 +22,7 @@ use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
 use tokio::net::TcpStream;
 use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
 use tokio::sync::mpsc;
-use vcan_sim::sensors::{Scan, ScanRequest};
+use firmware_bridge::scan::{Scan, ScanRequest};
 
 use crate::cycle::ScanGrid;
 

@@ -12,6 +12,10 @@
 //! available" and the one below it for "error indicator". Anything else outside the range is
 //! "out of range".
 
+/// The DBC text (`excavator.dbc`), embedded so the binaries need no data files: the same file
+/// `build.rs` generates the descriptors from.
+pub const DBC_TEXT: &str = include_str!("../excavator.dbc");
+
 /// Description of one signal, generated from the DBC.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SignalDesc {

@@ -18,6 +18,7 @@
 //! - [`trace`]: `candump -L` log lines (writer and streaming reader) and the [`trace::Recorder`] that
 //!   nodes use to log everything they send and receive.
 //! - [`busload`]: exact stuffed bit counts per frame and the bus load of a message schedule.
+//! - [`scan`]: the range-scan request and result that travel beside the CAN bus (JSON lines).
 //!
 //! # Data flow
 //!
@@ -36,6 +37,7 @@ pub mod frame;
 pub mod gateway;
 pub mod id;
 pub mod messages;
+pub mod scan;
 pub mod trace;
 pub mod transport;
 

@@ -16,8 +16,6 @@
 //! - [`cleanup`]: floor-cleanup waypoints and the hand-over to Autodig (thesis 3.3, Fig. 13).
 //! - [`dig_model`]: the combined forward dig model (thesis 4.1, Fig. 14): actuator model + soil model +
 //!   the shared Autodig step, predicting a dig's trajectory, time, energy and swept volume.
-//! - [`discrepancy`]: the model-discrepancy workflow (issue 8): grey-box replay of measured traces,
-//!   residual localisation, candidate effects fitted and scored by held-out BIC, the augmented model.
 //! - [`plan`]: the dig planner (thesis ch. 5): terrain mapping from scans, coarse and refined dig
 //!   location, dig quality, cleanup and tracking plans, action selection, soil hardness index.
 
@@ -25,7 +23,6 @@ pub mod actuator;
 pub mod autodig;
 pub mod cleanup;
 pub mod dig_model;
-pub mod discrepancy;
 pub mod estimate;
 mod input_check;
 pub mod kinematics;

@@ -326,6 +326,9 @@ pub enum SoilContactIntegration {
 /// The bundled default scenario (`config/bench.toml`).
 pub const DEFAULT_BENCH_TOML: &str = include_str!("../../config/bench.toml");
 
+/// The bundled extended-operation bench (`config/bench_extended.toml`, thesis ch. 6).
+pub const EXTENDED_BENCH_TOML: &str = include_str!("../../config/bench_extended.toml");
+
 fn line_of_offset(text: &str, offset: usize) -> usize {
     text.get(..offset.min(text.len()))
         .map_or(0, |s| s.bytes().filter(|&b| b == b'\n').count())

@@ -1553,7 +1553,7 @@ mod tests {
     /// The extended-operation bench (`config/bench_extended.toml`: floor at -2 m, face from x 4 to
     /// 6 m, the floor beyond) with its native ground, without it, or with the layer boundary moved.
     fn extended_world(native: bool, floor_m: f64) -> World {
-        let text = include_str!("../../config/bench_extended.toml");
+        let text = crate::scenario::EXTENDED_BENCH_TOML;
         let mut s = Scenario::from_toml_str_named(text, "bench_extended.toml").unwrap();
         assert!(
             s.native_soil.is_some(),
@@ -1570,7 +1570,7 @@ mod tests {
 
     /// The extended bench with its `[terrain]` as declared, or as given.
     fn extended_world_with(terrain: Option<crate::scenario::TerrainSpec>) -> (Scenario, World) {
-        let text = include_str!("../../config/bench_extended.toml");
+        let text = crate::scenario::EXTENDED_BENCH_TOML;
         let mut s = Scenario::from_toml_str_named(text, "bench_extended.toml").unwrap();
         if let Some(t) = terrain {
             s.terrain = t;

@@ -1,0 +1,661 @@
+//! Reading a measured session (the folder `excavator-ctl demo` writes, or the same files from a real
+//! machine): `trace.log` (candump) and `scans/scan_NNNN.json` (docs/scan-protocol.md), into the
+//! discrepancy workflow's 100 Hz records. Only the bus traffic and the scans are read; nothing else
+//! in the folder (in particular not `summary.json`, whose `effects` field would reveal the answer).
+
+use std::fs::File;
+use std::io::BufReader;
+use std::path::{Path, PathBuf};
+
+use anyhow::Context as _;
+use firmware_bridge::messages::{Activity, AutodigStageCode, GatewayMode, Message};
+use firmware_bridge::trace::{ReadMode, TraceReader};
+use crate::{DigRecord, LoadTag, Sample, StageTag};
+use planner::machine::MachineConfig;
+use planner::terrain::SectionProfile;
+use serde::Deserialize;
+
+/// A scan in the reply format of docs/scan-protocol.md.
+#[derive(Debug, Clone, Deserialize)]
+pub struct ScanFile {
+    /// Time of the scan, s.
+    pub time_s: f64,
+    /// Sensor pose: position (world) and the heading of the digging plane.
+    pub sensor: ScanSensor,
+    /// Hits, world frame `[x, y, z]`.
+    pub points: Vec<[f64; 3]>,
+}
+
+/// The sensor pose of a scan.
+#[derive(Debug, Clone, Copy, Deserialize)]
+pub struct ScanSensor {
+    /// World x, m.
+    pub x_m: f64,
+    /// World y, m.
+    pub y_m: f64,
+    /// Height, m.
+    pub z_m: f64,
+    /// Azimuth of the digging plane the scan was turned to, rad.
+    pub heading_rad: f64,
+}
+
+/// Status of the controller at a sample.
+#[derive(Debug, Clone, Copy, Default)]
+struct Status {
+    activity: Activity,
+    stage: AutodigStageCode,
+    dig_index: u16,
+    swept_volume_m3: f64,
+    /// In the work cycle's Weigh: the controller reports `Idle` between the end of a dig (Autodig
+    /// or cleanup) and the swing to the dump of the same dig index.
+    weighing: bool,
+}
+
+fn stage_tag(code: AutodigStageCode) -> StageTag {
+    match code {
+        AutodigStageCode::BoomDown => StageTag::BoomDown,
+        AutodigStageCode::PreDig => StageTag::PreDig,
+        AutodigStageCode::Dig => StageTag::Dig,
+        AutodigStageCode::Capture => StageTag::Capture,
+        _ => StageTag::Outside,
+    }
+}
+
+fn load_tag(status: &Status) -> LoadTag {
+    if status.weighing {
+        return LoadTag::Weighing;
+    }
+    let stage = stage_tag(status.stage);
+    if stage.in_soil() || status.activity == Activity::Cleanup {
+        return LoadTag::InSoil;
+    }
+    match status.activity {
+        Activity::Idle
+        | Activity::Scan
+        | Activity::SwingToDig
+        | Activity::Return
+        | Activity::Track => LoadTag::EmptyFreeAir,
+        Activity::Dig if stage == StageTag::BoomDown => LoadTag::EmptyFreeAir,
+        _ => LoadTag::Loaded,
+    }
+}
+
+/// Time after the gateway leaves its closed-loop position mode during which the spools still stand
+/// where its position control left them, s: the replay starts every record's spool state at rest and
+/// leaves out its first 0.5 s for the same reason (`crate::greybox`).
+pub const POSITION_MODE_SETTLE_S: f64 = 0.5;
+
+/// Reads `trace.log` into samples tagged with the dig index, one per `JointAngles` frame, with the
+/// latest readings and the commands the controller sent in answer to them (in force until the next
+/// sample).
+///
+/// Samples while the gateway runs its closed-loop position mode (`GatewayStatus` mode
+/// `ArmedPosition`, the controller sending `PositionSetpoint`s: the cleanup) and for
+/// [`POSITION_MODE_SETTLE_S`] after it are left out: the gateway's own position control sets the
+/// spools then, and the bus carries no valve command, so the replay would drive the valves with the
+/// last `AuxValveCommand` (neutral) while the machine moves and the pumps stand at 15-20 MPa
+/// (session soil_cohesion_10000: pump 1 residual 4.4 MPa RMS on those samples against 0.11 MPa on
+/// the rest, docs/discrepancy.md, 2026-11-25).
+///
+/// # Errors
+/// Opening or reading the file; a trace without controller status frames.
+pub fn read_trace(path: &Path) -> anyhow::Result<Vec<(u16, Sample)>> {
+    let file = File::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let reader = TraceReader::new(BufReader::new(file), ReadMode::Skip);
+    let mut out: Vec<(u16, Sample)> = Vec::new();
+    let mut pending: Option<Sample> = None;
+    let mut current = Sample::default();
+    let mut status: Option<Status> = None;
+    // Time the gateway was last seen in position mode.
+    let mut position_mode_at = f64::NEG_INFINITY;
+    let push =
+        |pending: &mut Option<Sample>, out: &mut Vec<(u16, Sample)>, cmd: &Sample, st: &Status| {
+            if let Some(mut s) = pending.take() {
+                s.command = cmd.command;
+                s.swing_command = cmd.swing_command;
+                s.stage = stage_tag(st.stage);
+                s.load = load_tag(st);
+                s.swept_volume_m3 = if s.stage == StageTag::Outside {
+                    0.0
+                } else {
+                    st.swept_volume_m3
+                };
+                out.push((st.dig_index, s));
+            }
+        };
+    for record in trace_tools::input::records_until_cut(path, reader) {
+        let record = record.with_context(|| format!("reading {}", path.display()))?;
+        let Ok(decoded) = Message::decode(&record.frame) else {
+            continue;
+        };
+        let t = record.timestamp_ns as f64 * 1e-9;
+        match decoded.message {
+            Message::JointAngles(a) => {
+                if let Some(st) = status {
+                    push(&mut pending, &mut out, &current, &st);
+                }
+                if t - position_mode_at <= POSITION_MODE_SETTLE_S {
+                    pending = None;
+                    continue;
+                }
+                current.time_s = t;
+                current.angles_rad = [a.boom_rad, a.stick_rad, a.bucket_rad];
+                current.swing_rad = a.swing_rad;
+                pending = Some(current);
+            }
+            Message::JointRates(r) => {
+                let rates = [r.boom_rad_per_s, r.stick_rad_per_s, r.bucket_rad_per_s];
+                current.rates_rad_per_s = rates;
+                current.swing_rate_rad_per_s = r.swing_rad_per_s;
+                if let Some(p) = pending.as_mut() {
+                    p.rates_rad_per_s = rates;
+                    p.swing_rate_rad_per_s = r.swing_rad_per_s;
+                }
+            }
+            Message::AuxValveMeasured(m) => {
+                let i = usize::from(m.cylinder.number());
+                if i < 3 {
+                    current.head_pa[i] = m.head_pressure_pa;
+                    current.rod_pa[i] = m.rod_pressure_pa;
+                    if let Some(p) = pending.as_mut() {
+                        p.head_pa[i] = m.head_pressure_pa;
+                        p.rod_pa[i] = m.rod_pressure_pa;
+                    }
+                }
+            }
+            Message::PumpPressures(p) => {
+                current.pump_pa = [p.pump1_pa, p.pump2_pa];
+                if let Some(s) = pending.as_mut() {
+                    s.pump_pa = current.pump_pa;
+                }
+            }
+            Message::AuxValveCommand(c) => {
+                let i = usize::from(c.valve.number());
+                match i {
+                    0..=2 => current.command[i] = c.to_fraction(),
+                    3 => current.swing_command = c.to_fraction(),
+                    _ => {}
+                }
+            }
+            Message::PositionSetpoint(_) => position_mode_at = t,
+            Message::GatewayStatus(g) if g.mode == GatewayMode::ArmedPosition => {
+                position_mode_at = t;
+            }
+            Message::ControllerStatus(s) => {
+                // Weigh follows the dig (Autodig, or a cleanup ending in Autodig) of the same index
+                // and shows as Idle until the swing to the dump.
+                let weighing = s.activity == Activity::Idle
+                    && status.is_some_and(|p| {
+                        p.dig_index == s.dig_index
+                            && (p.weighing
+                                || matches!(p.activity, Activity::Dig | Activity::Cleanup))
+                    });
+                status = Some(Status {
+                    activity: s.activity,
+                    stage: s.stage,
+                    dig_index: s.dig_index,
+                    swept_volume_m3: s.swept_volume_m3,
+                    weighing,
+                });
+            }
+            _ => {}
+        }
+    }
+    if let Some(st) = status {
+        push(&mut pending, &mut out, &current, &st);
+    } else {
+        anyhow::bail!(
+            "{}: no ControllerStatus frames: the workflow segments digs by the controller's status",
+            path.display()
+        );
+    }
+    Ok(out)
+}
+
+/// Reads every `scans/scan_*.json` of a session folder, in name order. A file that does not parse
+/// (cut short when the recording stopped, corrupted) is skipped with a warning: the digs after it
+/// take their terrain from the scan before it.
+///
+/// # Errors
+/// Listing the folder or reading a scan file.
+pub fn read_scans(dir: &Path) -> anyhow::Result<Vec<ScanFile>> {
+    let scans_dir = dir.join("scans");
+    if !scans_dir.is_dir() {
+        return Ok(Vec::new());
+    }
+    let mut names: Vec<PathBuf> = std::fs::read_dir(&scans_dir)
+        .with_context(|| format!("listing {}", scans_dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "json"))
+        .collect();
+    names.sort();
+    let mut scans = Vec::with_capacity(names.len());
+    for p in &names {
+        let text =
+            std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+        match serde_json::from_str(&text) {
+            Ok(scan) => scans.push(scan),
+            Err(e) => tracing::warn!(
+                "{}: not a readable scan ({e}): skipped; the digs after it use the scan before it",
+                p.display()
+            ),
+        }
+    }
+    Ok(scans)
+}
+
+/// Half width of the band of scan points around the digging plane that makes its section, m. The
+/// digs of a session lie 10-20 degrees apart, so at the 5-7 m where the bucket cuts the trench of the
+/// neighbouring dig (1.3 m wide) comes within 0.4-0.55 m of the plane; with 1-2 points per 0.1 m bin
+/// a 0.5 m band took the trench floor for the ground ahead of the edge (effect-free session
+/// none_s200, digs beside an earlier one: the section 0.13-0.17 m below the simulator's true surface
+/// ahead of the edge; docs/discrepancy.md, 2026-11-22 soil effects).
+pub const SECTION_HALF_WIDTH_M: f64 = 0.25;
+
+/// The terrain section of a scan along the digging plane at world azimuth `plane_azimuth_rad`, in the
+/// base frame (x from the swing axis, z up): points within [`SECTION_HALF_WIDTH_M`] of the plane,
+/// median height per 0.1 m bin, gaps interpolated. The machine position follows from the sensor pose
+/// (its heading is the azimuth the cab faced during the scan) and the machine file's `[sensor]` mount.
+pub fn scan_section(
+    scan: &ScanFile,
+    machine: &MachineConfig,
+    plane_azimuth_rad: f64,
+) -> Option<SectionProfile> {
+    scan_section_beside(scan, machine, plane_azimuth_rad, 0.0, SECTION_HALF_WIDTH_M)
+}
+
+/// Lanes beside the digging plane (each side): lateral offset and the half width of the band of
+/// scan points each is made of, m. Across the bucket width every 0.25 m: the ground the edge cuts is
+/// not the section's all across (the trench of a neighbouring or earlier dig, an earlier dig's spill
+/// pile along its own plane), and taking the section across the width cut 0.1-0.5 m^3 more per dig
+/// than the simulator did (effect-free session none_s200, docs/discrepancy.md, 2026-11-22 soil
+/// effects). Beyond it, out to the reach of a full bucket's spill
+/// (crate::soil_replay::SPILL_REACH_M), every 0.5 m.
+pub const LANES_M: [(f64, f64); 7] = [
+    (0.25, 0.125),
+    (0.5, 0.125),
+    (0.75, 0.125),
+    (1.0, 0.25),
+    (1.5, 0.25),
+    (2.0, 0.25),
+    (2.5, 0.25),
+];
+
+/// As [`scan_section`], for the points within `half_width_m` of the line parallel to the digging
+/// plane at `lateral_m` (left positive).
+pub fn scan_section_beside(
+    scan: &ScanFile,
+    machine: &MachineConfig,
+    plane_azimuth_rad: f64,
+    lateral_m: f64,
+    half_width_m: f64,
+) -> Option<SectionProfile> {
+    let mount = scan.sensor.heading_rad + machine.sensor.bearing_rad;
+    let h = plane_azimuth_rad;
+    let origin = [
+        scan.sensor.x_m - machine.sensor.radial_offset_m * mount.cos(),
+        scan.sensor.y_m - machine.sensor.radial_offset_m * mount.sin(),
+    ];
+    const STEP_M: f64 = 0.1;
+    const R0_M: f64 = 1.0;
+    const BINS: usize = 130;
+    let mut bins: Vec<Vec<f64>> = vec![Vec::new(); BINS];
+    for p in &scan.points {
+        let (dx, dy) = (p[0] - origin[0], p[1] - origin[1]);
+        let along = dx * h.cos() + dy * h.sin();
+        let lateral = -dx * h.sin() + dy * h.cos();
+        if (lateral - lateral_m).abs() > half_width_m || !p[2].is_finite() {
+            continue;
+        }
+        let b = ((along - R0_M) / STEP_M).round();
+        if b >= 0.0 && (b as usize) < BINS {
+            bins[b as usize].push(p[2]);
+        }
+    }
+    let mut heights: Vec<Option<f64>> = bins
+        .iter_mut()
+        .map(|v| {
+            if v.is_empty() {
+                None
+            } else {
+                v.sort_by(f64::total_cmp);
+                Some(v[v.len() / 2])
+            }
+        })
+        .collect();
+    let first = heights.iter().position(Option::is_some)?;
+    let last = heights.iter().rposition(Option::is_some)?;
+    if last <= first {
+        return None;
+    }
+    let mut k = first;
+    while k < last {
+        let next = (k + 1..=last).find(|j| heights[*j].is_some())?;
+        let (a, b) = (heights[k]?, heights[next]?);
+        for (j, h) in heights.iter_mut().enumerate().take(next).skip(k + 1) {
+            let t = (j - k) as f64 / (next - k) as f64;
+            *h = Some(a + t * (b - a));
+        }
+        k = next;
+    }
+    let values: Vec<f64> = heights[first..=last]
+        .iter()
+        .map(|h| h.unwrap_or(0.0))
+        .collect();
+    SectionProfile::new(R0_M + first as f64 * STEP_M, STEP_M, values).ok()
+}
+
+/// Swing angle at time `t_s`: the sample nearest in time (samples in time order).
+fn swing_at(samples: &[(u16, Sample)], t_s: f64) -> Option<f64> {
+    let k = samples.partition_point(|(_, s)| s.time_s < t_s);
+    let near = |j: usize| {
+        samples
+            .get(j)
+            .map(|(_, s)| ((s.time_s - t_s).abs(), s.swing_rad))
+    };
+    let best = match (k.checked_sub(1).and_then(near), near(k)) {
+        (Some(a), Some(b)) => Some(if a.0 <= b.0 { a } else { b }),
+        (a, b) => a.or(b),
+    }?;
+    (best.0 < 0.5).then_some(best.1)
+}
+
+/// Reads a session folder into one record per dig index (every sample of that work cycle), each with
+/// the section of the last scan before its Autodig started, cut along the dig's own digging plane:
+/// the machine heading at the scan (the scan's heading less the swing angle then) plus the swing
+/// angle when the dig starts (the cab usually faces the dump, not the dig, while it scans).
+///
+/// # Errors
+/// Reading the trace or the scans.
+pub fn read_session(dir: &Path, machine: &MachineConfig) -> anyhow::Result<Vec<DigRecord>> {
+    let samples = read_trace(&dir.join("trace.log"))?;
+    let scans = read_scans(dir)?;
+    let scan_swing: Vec<Option<f64>> = scans.iter().map(|s| swing_at(&samples, s.time_s)).collect();
+    let mut records: Vec<DigRecord> = Vec::new();
+    for (index, s) in samples {
+        match records.last_mut() {
+            Some(r) if r.index == u32::from(index) => r.samples.push(s),
+            _ => records.push(DigRecord {
+                index: u32::from(index),
+                samples: vec![s],
+                section: None,
+                lanes: Vec::new(),
+            }),
+        }
+    }
+    for r in &mut records {
+        let dig_start = r
+            .samples
+            .iter()
+            .find(|s| s.stage != StageTag::Outside || s.load == LoadTag::InSoil)
+            .map(|s| (s.time_s, s.swing_rad));
+        if let Some((t0, dig_swing)) = dig_start {
+            let scan = scans
+                .iter()
+                .zip(&scan_swing)
+                .rev()
+                .find(|(s, _)| s.time_s <= t0 + 1e-9);
+            if let Some((s, swing)) = scan {
+                // Without the swing angle at the scan, the scan's own heading is the best guess.
+                let base_heading = s.sensor.heading_rad - swing.unwrap_or(dig_swing);
+                let azimuth = base_heading + dig_swing;
+                r.section = scan_section(s, machine, azimuth);
+                r.lanes = LANES_M
+                    .iter()
+                    .flat_map(|&(o, w)| [(o, w), (-o, w)])
+                    .filter_map(|(o, w)| {
+                        scan_section_beside(s, machine, azimuth, o, w).map(|l| (o, l))
+                    })
+                    .collect();
+            }
+        }
+    }
+    records.retain(|r| r.samples.len() >= 200 && r.validate().is_ok());
+    Ok(records)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A bench top at 2 m with the trench of a neighbouring dig (floor 1 m) from 0.3 m beside the
+    /// plane, scanned sparsely: per 0.1 m along the plane two points on the ground at the plane and
+    /// three in the trench within 0.5 m of it. The section is the ground on the plane.
+    #[test]
+    fn a_neighbouring_trench_beside_the_plane_does_not_lower_the_section() {
+        let machine = MachineConfig::default_machine().expect("machine");
+        let sensor = ScanSensor {
+            x_m: 0.0,
+            y_m: 0.0,
+            z_m: 3.0,
+            heading_rad: 0.0,
+        };
+        let mount = sensor.heading_rad + machine.sensor.bearing_rad;
+        let origin = [
+            sensor.x_m - machine.sensor.radial_offset_m * mount.cos(),
+            sensor.y_m - machine.sensor.radial_offset_m * mount.sin(),
+        ];
+        let mut points = Vec::new();
+        for k in 0..40 {
+            let along = 5.0 + 0.1 * f64::from(k);
+            for lateral in [-0.2, 0.0, 0.35, 0.42, 0.48] {
+                let z = if lateral > 0.3 { 1.0 } else { 2.0 };
+                points.push([origin[0] + along, origin[1] + lateral, z]);
+            }
+        }
+        let scan = ScanFile {
+            time_s: 0.0,
+            sensor,
+            points,
+        };
+        let section = scan_section(&scan, &machine, 0.0).expect("section");
+        for r in [5.5, 6.0, 7.0, 8.5] {
+            let h = section.height_at(r).expect("on the section");
+            assert!((h - 2.0).abs() < 1e-9, "ground at r = {r}: {h}");
+        }
+        // The trench itself, as a lane beside the plane.
+        let lane = scan_section_beside(&scan, &machine, 0.0, 0.42, 0.1).expect("lane");
+        assert!((lane.height_at(6.0).expect("on") - 1.0).abs() < 1e-9);
+    }
+
+    /// Writes `m` into the trace as received at `t_s`.
+    fn record(rec: &firmware_bridge::trace::Recorder, t_s: f64, m: &Message) {
+        let frame = m.encode().expect("encode");
+        rec.record(
+            (t_s * 1e9).round() as u64,
+            firmware_bridge::trace::Direction::Receive,
+            &frame,
+        );
+    }
+
+    /// A cleanup's position-mode phase (gateway `ArmedPosition`, `PositionSetpoint`s, no valve
+    /// commands) from 1.0 to 2.0 s in a 4 s trace: its samples and those of the settling time after
+    /// it are left out, the others kept with their dig index.
+    #[test]
+    fn samples_under_the_gateways_position_mode_are_left_out() {
+        use firmware_bridge::messages::{
+            ControllerStatus, GatewayFaults, GatewayStatus, JointAngles, PositionSetpoint,
+        };
+        use firmware_bridge::trace::Recorder;
+
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("trace.log");
+        let rec = Recorder::create(&path, "vcan0").expect("recorder");
+        let put = |t_s: f64, m: Message| record(&rec, t_s, &m);
+        let position = |t_s: f64| (1.0..2.0).contains(&t_s);
+        put(
+            0.0,
+            Message::ControllerStatus(ControllerStatus {
+                activity: Activity::Cleanup,
+                dig_index: 3,
+                ..Default::default()
+            }),
+        );
+        for k in 1..400 {
+            let t = 0.01 * f64::from(k);
+            if k % 5 == 0 {
+                put(
+                    t,
+                    Message::GatewayStatus(GatewayStatus {
+                        mode: if position(t) {
+                            GatewayMode::ArmedPosition
+                        } else {
+                            GatewayMode::ArmedValve
+                        },
+                        faults: GatewayFaults(0),
+                        alive_counter: (k / 5 % 256) as u8,
+                        unexpected_frames: 0,
+                        rejected_frames: 0,
+                    }),
+                );
+            }
+            if position(t) {
+                put(t, Message::PositionSetpoint(PositionSetpoint::default()));
+            }
+            put(
+                t + 0.001,
+                Message::JointAngles(JointAngles {
+                    boom_rad: 0.1,
+                    ..Default::default()
+                }),
+            );
+        }
+        rec.close().expect("close");
+
+        let samples = read_trace(&path).expect("read");
+        let times: Vec<f64> = samples.iter().map(|(_, s)| s.time_s).collect();
+        assert!(samples.iter().all(|(d, _)| *d == 3));
+        // Before the position mode: every angle frame (0.011 .. 0.991 s).
+        assert_eq!(times.iter().filter(|t| **t < 1.0).count(), 99);
+        // Under it and for the settling time after its last status (1.95 s) and setpoint (1.99 s):
+        // nothing.
+        let settled = 1.99 + POSITION_MODE_SETTLE_S;
+        assert!(times.iter().all(|t| *t < 1.0 || *t > settled), "{times:?}");
+        // After it: the rest.
+        assert_eq!(
+            times.iter().filter(|t| **t > settled).count(),
+            times.len() - 99
+        );
+        assert!(times.iter().filter(|t| **t > settled).count() > 100);
+    }
+
+    /// A corrupt scan file failed the whole session; it is skipped and the others are read.
+    #[test]
+    fn a_corrupt_scan_is_skipped() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let scans = dir.path().join("scans");
+        std::fs::create_dir_all(&scans).expect("scans dir");
+        let scan = r#"{"time_s":1.5,"sensor":{"x_m":0.87,"y_m":0.5,"z_m":3.1,"heading_rad":0.0},"points":[[2.0,0.0,0.1]]}"#;
+        std::fs::write(scans.join("scan_0000.json"), scan).expect("scan 0");
+        std::fs::write(scans.join("scan_0001.json"), &scan[..40]).expect("scan 1");
+        std::fs::write(scans.join("scan_0002.json"), scan.replace("1.5", "9.5")).expect("scan 2");
+        let read = read_scans(dir.path()).expect("scans");
+        let times: Vec<f64> = read.iter().map(|s| s.time_s).collect();
+        assert_eq!(times, vec![1.5, 9.5]);
+    }
+
+    /// A recording cut mid-line (the logger stopped, a killed `demo`) was an error that lost the
+    /// whole session; what precedes the cut is analysed.
+    #[test]
+    fn a_trace_cut_mid_line_keeps_what_precedes_the_cut() {
+        use firmware_bridge::messages::{ControllerStatus, JointAngles};
+        use firmware_bridge::trace::Recorder;
+
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("trace.log");
+        let rec = Recorder::create(&path, "vcan0").expect("recorder");
+        let put = |t_s: f64, m: Message| record(&rec, t_s, &m);
+        put(
+            0.0,
+            Message::ControllerStatus(ControllerStatus {
+                activity: Activity::Dig,
+                dig_index: 1,
+                ..Default::default()
+            }),
+        );
+        for k in 1..=50 {
+            put(
+                0.01 * f64::from(k),
+                Message::JointAngles(JointAngles::default()),
+            );
+        }
+        rec.close().expect("close");
+        let whole = read_trace(&path).expect("whole trace").len();
+        assert!(whole >= 49, "{whole} samples");
+        let mut text = std::fs::read_to_string(&path).expect("read back");
+        text.push_str("(0.510000) vcan0 0CFE32");
+        std::fs::write(&path, text).expect("cut");
+        let cut = read_trace(&path).expect("a cut trace is read up to the cut");
+        assert_eq!(cut.len(), whole);
+    }
+
+    /// The work cycle's Weigh shows as `Idle` between a dig and its swing to the dump: those samples
+    /// are tagged `Weighing`; an `Idle` that follows anything else (the start of a session, a swing)
+    /// or comes with the next dig index is not.
+    #[test]
+    fn idle_after_a_dig_of_the_same_index_is_the_weighing() {
+        use firmware_bridge::messages::{ControllerStatus, JointAngles};
+        use firmware_bridge::trace::Recorder;
+
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("trace.log");
+        let rec = Recorder::create(&path, "vcan0").expect("recorder");
+        let put = |t_s: f64, m: Message| record(&rec, t_s, &m);
+        // (from, activity, dig index)
+        let phases = [
+            (0.0, Activity::Idle, 0),
+            (1.0, Activity::Dig, 1),
+            (2.0, Activity::Idle, 1),
+            (3.0, Activity::SwingToDump, 1),
+            (4.0, Activity::Idle, 1),
+            (5.0, Activity::Cleanup, 2),
+            (6.0, Activity::Idle, 2),
+            (7.0, Activity::Idle, 3),
+        ];
+        for k in 0..800 {
+            let t = 0.01 * f64::from(k);
+            if k % 10 == 0 {
+                let (_, activity, dig_index) = phases
+                    .iter()
+                    .rev()
+                    .find(|(from, _, _)| *from <= t + 1e-9)
+                    .copied()
+                    .expect("phase");
+                put(
+                    t,
+                    Message::ControllerStatus(ControllerStatus {
+                        activity,
+                        dig_index,
+                        ..Default::default()
+                    }),
+                );
+            }
+            put(t + 0.001, Message::JointAngles(JointAngles::default()));
+        }
+        rec.close().expect("close");
+
+        let samples = read_trace(&path).expect("read");
+        // A sample takes the status in force when its successor arrives (the controller's answer
+        // to it): the last sample before a status change is tagged with the new one.
+        for (d, s) in samples
+            .iter()
+            .filter(|(_, s)| (s.time_s - s.time_s.round()).abs() > 0.02)
+        {
+            let weighing = (2.0..3.0).contains(&s.time_s) || (6.0..7.0).contains(&s.time_s);
+            assert_eq!(
+                s.load == LoadTag::Weighing,
+                weighing,
+                "t = {:.3} s, dig {d}: {:?}",
+                s.time_s,
+                s.load
+            );
+        }
+        assert!(
+            samples
+                .iter()
+                .filter(|(_, s)| s.load == LoadTag::Weighing)
+                .count()
+                > 150
+        );
+    }
+}

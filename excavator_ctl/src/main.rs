@@ -1,0 +1,44 @@
+//! `excavator-ctl`: one command line over the controller (`run`), the lab (`demo`, `experiment`,
+//! `model`), the trace tools (`trace`) and the discrepancy workflow (`discrepancy`). It parses
+//! arguments and dispatches; the work is in those crates.
+
+use clap::Parser;
+mod cli;
+
+use cli::{Cli, Command};
+
+fn main() -> std::process::ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    let runtime = match tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+    {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("error: starting the runtime: {e:#}");
+            return std::process::ExitCode::FAILURE;
+        }
+    };
+    let result = match cli.command {
+        Command::Run(args) => runtime.block_on(controller::run::run(args.into())),
+        Command::Demo(args) => runtime.block_on(lab::demo::run(args)),
+        Command::Experiment(args) => lab::experiment::run(&args),
+        Command::Trace { cmd } => runtime.block_on(trace_tools::run(cmd)),
+        Command::Model { cmd } => lab::model_cmd::run(cmd),
+        Command::Discrepancy(args) => discrepancy::command::run(args),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,114 @@
+//! `excavator-ctl demo` writes all its outputs with the documented fields (docs/demo-output.md).
+
+#![allow(clippy::unwrap_used)]
+
+use std::sync::atomic::AtomicBool;
+
+use lab::demo::{DemoArgs, run_session};
+
+#[test]
+fn demo_writes_all_outputs_with_the_documented_fields_for_two_digs() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut args = DemoArgs::new(dir.path().join("demo"));
+    args.digs = 2;
+    let summary = run_session(&args, &AtomicBool::new(false)).unwrap();
+    assert!(summary.totals.finished, "{:?}", summary.totals);
+    assert_eq!(summary.digs.len(), 2);
+    let out = dir.path().join("demo");
+    for f in [
+        "trace.log",
+        "summary.json",
+        "summary.md",
+        "plan.json",
+        "trajectories.svg",
+        "terrain_before.svg",
+        "terrain_after.svg",
+        "dig_stats.svg",
+        "scans/scan_0000.json",
+    ] {
+        let p = out.join(f);
+        assert!(p.metadata().map(|m| m.len() > 0).unwrap_or(false), "{f}");
+    }
+    // summary.json has the documented fields.
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    let digs = json["digs"].as_array().unwrap();
+    assert_eq!(digs.len(), 2);
+    assert_eq!(json["soil_contact"], "held", "the plant the session ran on");
+    for d in digs {
+        for k in [
+            "index",
+            "action",
+            "swing_deg",
+            "start_pose",
+            "weight_n",
+            "time_s",
+            "energy_kj",
+            "swept_volume_m3",
+            "end_reason",
+        ] {
+            assert!(d.get(k).is_some(), "dig field {k}: {d}");
+        }
+        assert!(d["time_s"].as_f64().unwrap() > 0.0);
+        assert!(d["energy_kj"].as_f64().unwrap() > 0.0);
+    }
+    // The first dig fills the bucket from the default start (> 80 % of 2550 kg).
+    assert!(
+        digs[0]["true_payload_kg"].as_f64().unwrap() > 0.8 * 2550.0,
+        "{}",
+        digs[0]
+    );
+    assert!(digs[0]["swept_volume_m3"].as_f64().unwrap() > 0.0);
+    for k in [
+        "digs",
+        "weight_n",
+        "mean_time_s",
+        "energy_kj",
+        "sim_time_s",
+        "trace_frames",
+    ] {
+        assert!(json["totals"].get(k).is_some(), "totals field {k}");
+    }
+    assert_eq!(json["totals"]["trace_dropped"].as_u64(), Some(0));
+    // The scans are in the scan-protocol reply format.
+    let scan: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("scans/scan_0000.json")).unwrap()).unwrap();
+    assert!(scan["time_s"].is_number() && scan["sensor"]["heading_rad"].is_number());
+    assert!(!scan["points"].as_array().unwrap().is_empty());
+    // The trace is candump -L text with both directions, closed (the last line is complete).
+    let trace = std::fs::read_to_string(out.join("trace.log")).unwrap();
+    assert!(trace.ends_with('\n'));
+    let first = trace.lines().find(|l| l.starts_with('(')).unwrap();
+    assert!(first.contains(" vcan0 "), "{first}");
+    assert!(
+        trace.contains("#27") || trace.contains("27#"),
+        "controller frames"
+    );
+    assert!(trace.lines().count() as u64 >= json["totals"]["trace_frames"].as_u64().unwrap());
+    // The soil estimator's samples of the planned session, for `model soil-cv`.
+    let soil: lab::soil_cv::SoilSamplesFile =
+        serde_json::from_slice(&std::fs::read(out.join("soil_samples.json")).unwrap()).unwrap();
+    assert!(soil.digs.iter().all(|d| d.index < 2));
+    assert!(soil.digs.iter().flat_map(|d| &d.samples).all(|s| {
+        s.geometry.depth_m > 0.0 && s.force.fx_n.is_finite() && s.force.fz_n.is_finite()
+    }));
+}
+
+#[test]
+fn demo_rejects_unknown_effects() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut args = DemoArgs::new(dir.path().join("demo"));
+    args.effects = vec!["no_such_effect=1".to_owned()];
+    let err = run_session(&args, &AtomicBool::new(false)).unwrap_err();
+    assert!(format!("{err:#}").contains("no_such_effect"), "{err:#}");
+}
+
+#[test]
+fn demo_stops_cleanly_when_asked() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = DemoArgs::new(dir.path().join("demo"));
+    let summary = run_session(&args, &AtomicBool::new(true)).unwrap();
+    assert!(!summary.totals.finished);
+    assert!(dir.path().join("demo/trace.log").exists());
+    assert!(dir.path().join("demo/summary.json").exists());
+}

@@ -1,0 +1,193 @@
+//! The thesis reproductions (`excavator-ctl experiment`) in a reduced run: the trends that hold today.
+//! Those that do not (Table 1 read to the horizontal: the perception payload from the closest start is
+//! 17 % short of full, the boom's lift at the stick's relief takes the edge out of the ground; Table
+//! 2's swept volume and x3 energy; Fig. 52's soft-soil energy and its hard-soil half in the simulator)
+//! are listed in docs/autodig.md and not asserted.
+
+#![allow(clippy::unwrap_used)]
+
+use lab::experiment::{
+    ExperimentArgs, Mean, StickAngleReading, Which, report, table1, table2,
+};
+
+/// The command line's defaults, one run each, writing into `out`.
+fn args(which: Which, out: &std::path::Path) -> ExperimentArgs {
+    ExperimentArgs {
+        which,
+        runs: 1,
+        digs: 100,
+        out: out.to_path_buf(),
+        planner: None,
+        maps: None,
+        base_scale: lab::experiment::TABLE2_BASE_SCALE,
+        scaling: lab::experiment::Table2Scaling::Soil,
+        soil_contact: lab::experiment::SoilContact::Held,
+        stick_angle: StickAngleReading::Joint,
+        soft_cohesion_kpa: 8.0,
+        hard_cohesion_kpa: 16.0,
+    }
+}
+
+fn payload_spread_kg(m: &[Mean]) -> f64 {
+    let (lo, hi) = m.iter().fold((f64::INFINITY, 0.0_f64), |(lo, hi), x| {
+        (lo.min(x.payload_kg), hi.max(x.payload_kg))
+    });
+    hi - lo
+}
+
+/// Table 1 (thesis 3.2) with the stick angles read as joint angles (the default): every start digs;
+/// without the enhancements the fixed beta gives a longer dig and no less material the farther out
+/// the dig starts; with them the payload is within 10 % across the starts (thesis 2418-2421 kg), the
+/// time varies less than half as much as without them, and every perception dig is faster than the
+/// plain one from the same start (thesis: "even when the payloads were similar, the perception
+/// enhancements reduced the cycle time").
+#[test]
+fn table1_perception_is_consistent_and_faster() {
+    let rows = table1(1, StickAngleReading::Joint).unwrap();
+    assert_eq!(rows.len(), 3);
+    for (stick, plain, with) in &rows {
+        assert!(
+            plain.completed == 1 && with.completed == 1,
+            "{stick}: {rows:?}"
+        );
+        assert!(with.time_s < plain.time_s, "{stick}: {rows:?}");
+    }
+    let (plain, with): (Vec<_>, Vec<_>) =
+        rows.iter().map(|(_, p, w)| (p.clone(), w.clone())).unzip();
+    assert!(plain[0].time_s < plain[1].time_s, "{rows:?}");
+    assert!(plain[1].time_s < plain[2].time_s, "{rows:?}");
+    assert!(plain[0].payload_kg <= plain[1].payload_kg, "{rows:?}");
+    assert!(plain[1].payload_kg <= plain[2].payload_kg, "{rows:?}");
+    let top = with.iter().map(|m| m.payload_kg).fold(0.0, f64::max);
+    assert!(payload_spread_kg(&with) < 0.1 * top, "{rows:?}");
+    let time_spread = |m: &[Mean]| {
+        let (lo, hi) = m.iter().fold((f64::INFINITY, 0.0_f64), |(lo, hi), x| {
+            (lo.min(x.time_s), hi.max(x.time_s))
+        });
+        hi - lo
+    };
+    assert!(time_spread(&with) < 0.5 * time_spread(&plain), "{rows:?}");
+    // The report's checks say the same.
+    assert!(
+        lab::experiment::table1_checks(&rows)
+            .iter()
+            .all(|c| c.1),
+        "{rows:?}"
+    );
+}
+
+/// Table 1 with the stick angles read to the horizontal: every start digs; without the enhancements
+/// the fixed beta gives more material and a longer dig the farther out the dig starts; with them the
+/// payload is more consistent across the starts than without, the closest start brings more than
+/// without them (thesis: 2418 against 1880 kg), and where the payloads are alike (the far start, both
+/// full) the dig is faster.
+#[test]
+fn table1_read_to_the_horizontal_perception_is_more_consistent() {
+    let rows = table1(1, StickAngleReading::Absolute).unwrap();
+    assert_eq!(rows.len(), 3);
+    for (stick, plain, with) in &rows {
+        assert!(
+            plain.completed == 1 && with.completed == 1,
+            "{stick}: {rows:?}"
+        );
+    }
+    let (plain, with): (Vec<_>, Vec<_>) =
+        rows.iter().map(|(_, p, w)| (p.clone(), w.clone())).unzip();
+    assert!(plain[0].payload_kg < plain[1].payload_kg, "{rows:?}");
+    assert!(plain[1].payload_kg <= plain[2].payload_kg, "{rows:?}");
+    assert!(plain[0].time_s < plain[1].time_s, "{rows:?}");
+    assert!(plain[1].time_s < plain[2].time_s, "{rows:?}");
+    assert!(
+        payload_spread_kg(&with) < 0.7 * payload_spread_kg(&plain),
+        "{rows:?}"
+    );
+    assert!(with[0].payload_kg > 1.2 * plain[0].payload_kg, "{rows:?}");
+    assert!(
+        (with[2].payload_kg - plain[2].payload_kg).abs() < 0.05 * plain[2].payload_kg,
+        "{rows:?}"
+    );
+    assert!(with[2].time_s < plain[2].time_s - 0.5, "{rows:?}");
+}
+
+#[test]
+fn energy_rises_from_the_nominal_soil_force() {
+    let rows = table2(1).unwrap();
+    assert_eq!(rows.len(), 3);
+    assert!(rows.iter().all(|(_, m)| m.completed == 1), "{rows:?}");
+    assert!(rows[0].1.payload_kg > 0.8 * 2550.0, "{rows:?}");
+    assert!(rows[1].1.energy_kj > rows[0].1.energy_kj, "{rows:?}");
+    // Autodig slows the bucket in the harder soil (thesis 4.4): the dig takes longer at x2.
+    assert!(rows[1].1.time_s > rows[0].1.time_s, "{rows:?}");
+    // x3 is not asserted: its energy is within the seed spread of x2's (docs/autodig.md, "Retuning
+    // the Dig maps": not reproduced).
+}
+
+#[test]
+fn fig52_report_prints_the_thesis_comparison() {
+    let out = tempfile::tempdir().unwrap();
+    let text = report(&args(Which::Fig52, out.path())).unwrap();
+    assert!(
+        text.contains("| soft | 1 |") && text.contains("| hard | 5 |"),
+        "{text}"
+    );
+    assert!(text.contains("Thesis"), "{text}");
+    // The trajectory plot: both soils' panels, both indices' curves, each a drawn path.
+    let svg = std::fs::read_to_string(out.path().join("fig52.svg")).unwrap();
+    assert!(
+        svg.contains("hard soil") && svg.contains("soft soil"),
+        "{svg}"
+    );
+    assert_eq!(svg.matches("index 5: fill").count(), 2, "{svg}");
+    assert!(svg.matches("<polyline").count() >= 8, "{svg}");
+}
+
+/// Fig. 52's effect of the hardness index: in the hard soil the high index fills the bucket and the low
+/// one only partly (thesis: about half; here about 80 %), and the high index spends less energy per
+/// kilogram; in the soft soil both fill and the low index is faster.
+#[test]
+fn fig52_high_index_does_better_in_hard_soil() {
+    let rows = lab::experiment::fig52(1).unwrap();
+    let get = |soil: &str, index: f64| {
+        rows.iter()
+            .find(|(s, i, _)| *s == soil && *i == index)
+            .map(|r| r.2.clone())
+            .unwrap()
+    };
+    let (soft1, soft5) = (get("soft", 1.0), get("soft", 5.0));
+    let (hard1, hard5) = (get("hard", 1.0), get("hard", 5.0));
+    assert!(rows.iter().all(|(_, _, m)| m.completed == 1), "{rows:?}");
+    assert!(hard5.payload_kg > 1.2 * hard1.payload_kg, "{rows:?}");
+    assert!(hard5.payload_kg > 0.95 * 2550.0, "{rows:?}");
+    assert!(hard1.payload_kg < 0.9 * 2550.0, "{rows:?}");
+    assert!(
+        hard5.energy_kj / hard5.payload_kg < hard1.energy_kj / hard1.payload_kg,
+        "{rows:?}"
+    );
+    assert!(soft1.time_s < soft5.time_s, "{rows:?}");
+    // In the soft soil the low index fills the bucket too (Fig. 52, top).
+    assert!(soft1.payload_kg > 0.95 * 2550.0, "{rows:?}");
+}
+
+/// The scoreboard covers all 22 statements; what this project claims reproduced holds in it: Table 1
+/// in the simulator (joint reading) and Fig. 52 in the dig model, all four statements each.
+#[test]
+fn scoreboard_shows_table1_and_the_dig_model_fig52_reproduced() {
+    let out = tempfile::tempdir().unwrap();
+    // One run of the reproductions: the report writes the table it prints to scoreboard.md.
+    let text = report(&args(Which::Scoreboard, out.path())).unwrap();
+    let table = std::fs::read_to_string(out.path().join("scoreboard.md")).unwrap();
+    assert!(text.contains(&table), "{text}");
+    let rows: Vec<&str> = table
+        .lines()
+        .filter(|l| l.starts_with("| ") && !l.starts_with("| result"))
+        .collect();
+    assert_eq!(rows.len(), 22, "{table}");
+    for result in ["| Table 1 (simulator) |", "| Fig. 52 (dig model) |"] {
+        let of: Vec<_> = rows.iter().filter(|l| l.starts_with(result)).collect();
+        assert_eq!(of.len(), 4, "{table}");
+        assert!(
+            of.iter().all(|l| l.ends_with("| as in the thesis |")),
+            "{table}"
+        );
+    }
+}

@@ -1,0 +1,169 @@
+//! `trace replay` timing without a CAN bus: the replay loop drives a recording [`Bus`] under tokio's
+//! paused clock, so the send times are exact and the test takes no wall time.
+
+#![allow(clippy::unwrap_used)] // helpers outside #[test] functions fail loudly on purpose
+
+use std::sync::Mutex;
+
+use trace_tools::replay::{self, ReplayClock};
+use trace_tools::synth::{self, SynthConfig};
+use firmware_bridge::frame::CanFrame;
+use firmware_bridge::transport::{Bus, Result, TimestampedFrame};
+use tokio::time::{Duration, Instant};
+
+/// A bus that remembers when each frame was sent (tokio clock) and never receives.
+struct RecordingBus {
+    start: Instant,
+    sent: Mutex<Vec<(Duration, CanFrame)>>,
+}
+
+impl RecordingBus {
+    fn new() -> Self {
+        Self {
+            start: Instant::now(),
+            sent: Mutex::new(Vec::new()),
+        }
+    }
+
+    fn sent(&self) -> Vec<(Duration, CanFrame)> {
+        self.sent.lock().unwrap().clone()
+    }
+}
+
+impl Bus for RecordingBus {
+    async fn send(&self, frame: CanFrame) -> Result<()> {
+        let at = Instant::now() - self.start;
+        self.sent.lock().unwrap().push((at, frame));
+        Ok(())
+    }
+
+    async fn recv(&self) -> Result<TimestampedFrame> {
+        std::future::pending().await
+    }
+
+    fn now_ns(&self) -> u64 {
+        (Instant::now() - self.start).as_nanos() as u64
+    }
+
+    fn interface(&self) -> &str {
+        "recording"
+    }
+}
+
+fn fixture(dir: &std::path::Path, frames: u64) -> (std::path::PathBuf, Vec<(u64, CanFrame)>) {
+    let cfg = SynthConfig {
+        frames,
+        ..SynthConfig::default()
+    };
+    let path = dir.join("dig.log");
+    let mut f = std::fs::File::create(&path).unwrap();
+    synth::write_candump(&mut f, &cfg).unwrap();
+    (path, synth::SyntheticTrace::new(cfg).collect())
+}
+
+#[tokio::test(start_paused = true)]
+async fn replay_keeps_the_recorded_spacing() {
+    let dir = tempfile::tempdir().unwrap();
+    let (path, frames) = fixture(dir.path(), 1160);
+    let bus = RecordingBus::new();
+    let summary = replay::replay_to(&bus, &path, 1.0, &[], false, false, std::future::pending())
+        .await
+        .unwrap();
+    assert_eq!(summary.sent, 1160);
+    let sent = bus.sent();
+    let t0 = frames[0].0;
+    for ((at, frame), (t, original)) in sent.iter().zip(&frames) {
+        assert_eq!(frame, original);
+        // Candump keeps microseconds; the paused clock is exact to the millisecond granularity of
+        // tokio's timer wheel.
+        let want = Duration::from_nanos(t - t0);
+        let err = at.abs_diff(want);
+        assert!(err <= Duration::from_millis(1), "{at:?} vs {want:?}");
+    }
+    // The whole second of traffic took one (virtual) second.
+    let last = sent.last().unwrap().0;
+    assert!(
+        last > Duration::from_millis(985) && last < Duration::from_millis(1001),
+        "{last:?}"
+    );
+}
+
+#[tokio::test(start_paused = true)]
+async fn replay_speed_and_id_filter() {
+    let dir = tempfile::tempdir().unwrap();
+    let (path, frames) = fixture(dir.path(), 1160);
+    let bus = RecordingBus::new();
+    let summary = replay::replay_to(
+        &bus,
+        &path,
+        4.0,
+        &[0x0CFF_5080, 0x0CFF_6127],
+        false,
+        false,
+        std::future::pending(),
+    )
+    .await
+    .unwrap();
+    // One second: 100 JointAngles and 20 heartbeats.
+    assert_eq!(summary.sent, 120);
+    assert_eq!(summary.filtered, 1040);
+    let sent = bus.sent();
+    let t0 = frames[0].0;
+    let last_angles = frames
+        .iter()
+        .rev()
+        .find(|(_, f)| f.id().raw() == 0x0CFF_5080)
+        .unwrap();
+    let want = Duration::from_nanos((last_angles.0 - t0) / 4);
+    let got = sent
+        .iter()
+        .rev()
+        .find(|(_, f)| f.id().raw() == 0x0CFF_5080)
+        .unwrap()
+        .0;
+    assert!(
+        got.abs_diff(want) <= Duration::from_millis(1),
+        "{got:?} vs {want:?}"
+    );
+}
+
+#[tokio::test(start_paused = true)]
+async fn replay_loops_until_stopped() {
+    let dir = tempfile::tempdir().unwrap();
+    let (path, _) = fixture(dir.path(), 116);
+    let bus = RecordingBus::new();
+    // 116 frames span about 0.1 s; stop after 1.05 s: about ten passes.
+    let summary = replay::replay_to(
+        &bus,
+        &path,
+        1.0,
+        &[],
+        true,
+        false,
+        tokio::time::sleep(Duration::from_millis(1050)),
+    )
+    .await
+    .unwrap();
+    assert!((9..=11).contains(&summary.passes), "{summary:?}");
+    assert!(bus.sent().len() as u64 >= summary.passes * 116);
+}
+
+#[test]
+fn schedule_is_relative_scaled_and_monotonic() {
+    let mut clock = ReplayClock::new(0.5).unwrap();
+    let t0 = 1_700_000_000_000_000_000u64;
+    let offsets: Vec<Duration> = [
+        t0,
+        t0 + 1_000_000,
+        t0 + 3_000_000,
+        t0 + 2_000_000,
+        t0 + 10_000_000,
+    ]
+    .into_iter()
+    .map(|t| clock.offset(t))
+    .collect();
+    assert_eq!(
+        offsets,
+        [0, 2, 6, 6, 20].map(Duration::from_millis).to_vec()
+    );
+}
