@@ -13,6 +13,9 @@
 //!   frames in, frames out, no I/O.
 //! - [`planned`]: the dig planner as the work cycle's action source (thesis 5.3, Fig. 42), and the
 //!   predefined excavation sequence of 6.2.
+//! - [`session`]: the session driver: after every control step it answers scan requests, asks the
+//!   planner for the next action when the cycle waits for one, and feeds each dig's outcome back
+//!   (the loop `demo` and `run` share).
 //! - [`run`]: the real-time loop over SocketCAN (tokio drives a 10 ms interval around the node).
 //! - [`scan_client`]: the range-scan client of the real-time loop (JSON lines over TCP).
 //!
@@ -32,6 +35,7 @@ pub mod planned;
 pub mod run;
 pub mod safety;
 pub mod scan_client;
+pub mod session;
 
 pub use cycle::{Action, CycleConfig, DigStats, WorkCycle};
 pub use estimate::{Estimator, MachineState};

@@ -35,22 +35,24 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use anyhow::Context as _;
 use clap::Args;
 use firmware_bridge::trace::{Direction, Recorder};
-use firmware_bridge::transport::{InProcessBus, VirtualClock};
 use planner::autodig::AutodigMaps;
 use planner::cleanup::CleanupPlan;
 use serde::{Deserialize, Serialize};
 use vcan_sim::SimConfig;
 use vcan_sim::embedded::EmbeddedMachine;
-use vcan_sim::sensors::ScanRequest;
 
 use planner::kinematics::{JointAngles, MachinePose};
-use planner::plan::{ActionChoice, HardnessRegression, PlannerConfig, TerrainMapper};
+use planner::plan::{HardnessRegression, PlannerConfig, TerrainMapper};
 use planner::terrain::TerrainGrid;
 use vcan_sim::scenario::{Scenario, SoilContactIntegration};
 
-use controller::cycle::{Action, ActionKind, Phase, StartPose};
+use controller::cycle::{Action, ActionKind, DigStats, Phase, StartPose};
 use controller::node::{ControllerConfig, ControllerNode};
-use controller::planned::{PlannedSession, PredefinedSequence, SoilMonitor, Strategy, median_joints};
+use controller::planned::{PlannedSession, Strategy, median_joints};
+use controller::session::{PlannedDig, SessionDriver, SessionEvent};
+
+pub use crate::harness::PERIOD_S;
+use crate::harness::{Harness, SimScans};
 
 /// The extended-operation bench (thesis ch. 6), the default bench of the planned and predefined
 /// strategies.
@@ -98,8 +100,6 @@ impl DemoStrategy {
     }
 }
 
-/// The control period of the session, s.
-pub const PERIOD_S: f64 = 0.01;
 /// Flush the trace every this many control steps (5 s of virtual time), so the recorder's queue never
 /// fills however fast virtual time runs.
 const FLUSH_EVERY_STEPS: u64 = 500;
@@ -747,22 +747,6 @@ pub fn dig_starts(digs: &[DigRecord]) -> Vec<JointAngles> {
         .collect()
 }
 
-/// The scan for the next dig: the default fan, turned toward the action's digging plane (the scan is
-/// requested where the last dump left the machine; the sensor turns with the swing).
-pub fn scan_request(node: &ControllerNode) -> ScanRequest {
-    let mut request = ScanRequest::default();
-    let target = match node.action() {
-        Some(Action::Dig { swing_rad, .. } | Action::Cleanup { swing_rad, .. }) => *swing_rad,
-        _ => return request,
-    };
-    let offset = planner::kinematics::wrap_angle(target - node.state().swing_rad);
-    if offset.is_finite() {
-        request.azimuth_min_rad += offset;
-        request.azimuth_max_rad += offset;
-    }
-    request
-}
-
 /// The true terrain along the digging plane (base frame `(r, z)`, r from 1 to 12 m).
 pub(crate) fn true_section(machine: &EmbeddedMachine, swing_rad: f64) -> Vec<TipPoint> {
     let plant = machine.plant();
@@ -781,15 +765,110 @@ pub(crate) fn true_section(machine: &EmbeddedMachine, swing_rad: f64) -> Vec<Tip
         .collect()
 }
 
-/// What the planner said about an action it pushed (for the dig's record).
-#[derive(Debug, Clone, Copy, Default)]
-struct PlannedInfo {
-    quality: Option<f64>,
-    volume_m3: Option<f64>,
-    time_s: Option<f64>,
-    energy_kj: Option<f64>,
-    min_tip_z_m: Option<f64>,
-    start: Option<[f64; 3]>,
+/// A dig's record as it begins: the action, the planner's prediction, and the simulator's truth (the
+/// terrain along the digging plane, the map's error against it).
+fn begin_record(
+    node: &ControllerNode,
+    machine: &EmbeddedMachine,
+    session: Option<&PlannedSession>,
+    info: &PlannedDig,
+    pose: MachinePose,
+    done: usize,
+) -> DigRecord {
+    let action = node.action().copied();
+    let swing_rad = node.state().swing_rad;
+    let truth = true_section(machine, swing_rad);
+    let map_error_m = session.and_then(|s| {
+        let errs: Vec<f64> = truth
+            .iter()
+            .filter(|p| (3.0..=10.0).contains(&p.x_m))
+            .filter_map(|p| {
+                let [x, y, _] = pose.world_from_base(swing_rad, p.x_m, 0.0);
+                s.terrain()
+                    .height_at(x, y)
+                    .ok()
+                    .map(|h| (h - p.z_m).powi(2))
+            })
+            .collect();
+        (!errs.is_empty()).then(|| (errs.iter().sum::<f64>() / errs.len() as f64).sqrt())
+    });
+    let map_bias_at_start_m = match (session, info.start) {
+        (Some(s), Some([r_start, ..])) => {
+            let errs: Vec<f64> = truth
+                .iter()
+                .filter(|p| (r_start - 1.5..=r_start + 0.2).contains(&p.x_m))
+                .filter_map(|p| {
+                    let [x, y, _] = pose.world_from_base(swing_rad, p.x_m, 0.0);
+                    s.terrain().height_at(x, y).ok().map(|h| h - p.z_m)
+                })
+                .collect();
+            (!errs.is_empty()).then(|| errs.iter().sum::<f64>() / errs.len() as f64)
+        }
+        _ => None,
+    };
+    DigRecord {
+        index: u32::try_from(done).unwrap_or(u32::MAX),
+        action: action.map_or(ActionKind::Dig, |a| a.kind()),
+        swing_deg: swing_rad.to_degrees(),
+        start_pose: match action {
+            Some(Action::Dig { start, .. } | Action::Cleanup { start, .. }) => Some(start),
+            _ => None,
+        },
+        weight_n: None,
+        true_payload_kg: 0.0,
+        time_s: 0.0,
+        ground_contact_time_s: 0.0,
+        energy_kj: 0.0,
+        swept_volume_m3: 0.0,
+        end_reason: None,
+        perception: false,
+        quality: info.quality,
+        predicted_volume_m3: info.volume_m3,
+        predicted_time_s: info.time_s,
+        predicted_energy_kj: info.energy_kj,
+        predicted_min_tip_z_m: info.min_tip_z_m,
+        contact_start: None,
+        min_tip_z_m: None,
+        hardness_index: Some(node.cycle().hardness_index()),
+        pose: Some([pose.x_m, pose.y_m, pose.heading_rad]),
+        planned_start: info.start,
+        map_error_m,
+        map_bias_at_start_m,
+        trajectory: Vec::new(),
+        section: truth,
+    }
+}
+
+/// A dig's record at its end: the controller's statistics and the tip path.
+fn finish_record(c: &mut DigRecord, d: &DigStats, tip_path: &[(f64, f64)]) {
+    c.trajectory = tip_path
+        .iter()
+        .map(|&(x_m, z_m)| TipPoint { x_m, z_m })
+        .collect();
+    c.index = d.index;
+    c.action = d.action;
+    c.swing_deg = d.swing_rad.to_degrees();
+    c.weight_n = d.weight_n;
+    c.time_s = d.time_s;
+    c.ground_contact_time_s = d.ground_contact_time_s;
+    c.energy_kj = d.energy_kj();
+    c.swept_volume_m3 = d.swept_volume_m3;
+    c.end_reason = d.end_reason.map(|r| format!("{r:?}"));
+    c.perception = d.perception;
+    c.min_tip_z_m = c
+        .trajectory
+        .iter()
+        .map(|p| p.z_m)
+        .filter(|z| z.is_finite())
+        .reduce(f64::min);
+    c.contact_start = c.trajectory.iter().find_map(|p| {
+        let below = c
+            .section
+            .iter()
+            .min_by(|a, b| (a.x_m - p.x_m).abs().total_cmp(&(b.x_m - p.x_m).abs()))
+            .is_some_and(|s| (s.x_m - p.x_m).abs() < 0.05 && p.z_m < s.z_m - 0.02);
+        below.then_some([p.x_m, p.z_m])
+    });
 }
 
 /// The true terrain after some digs (Fig. 55), with the machine's pose then.
@@ -805,23 +884,10 @@ pub struct BenchSnapshot {
     pub pose: [f64; 3],
 }
 
-/// The sensor's world position of a scan.
-fn scan_origin(scan: &vcan_sim::sensors::Scan) -> [f64; 3] {
-    [scan.sensor.x_m, scan.sensor.y_m, scan.sensor.z_m]
-}
-
-/// A scan request turned from the current swing to the digging plane at `target_swing_rad`.
-fn scan_toward(node: &ControllerNode, target_swing_rad: f64) -> ScanRequest {
-    let mut request = ScanRequest::default();
-    let offset = planner::kinematics::wrap_angle(target_swing_rad - node.state().swing_rad);
-    if offset.is_finite() {
-        request.azimuth_min_rad += offset;
-        request.azimuth_max_rad += offset;
-    }
-    request
-}
-
 /// Runs one session and writes its outputs into `args.out`. Stops early when `stop` is set.
+///
+/// The virtual-time harness steps the machine and the controller; the controller's session driver
+/// plans and follows the digs; this loop adds the simulator's truth to each dig's record.
 ///
 /// # Errors
 /// As [`setup`]; I/O errors creating the folder or writing the outputs; bus errors.
@@ -832,7 +898,7 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
     let scans_dir = out.join("scans");
     std::fs::create_dir_all(&scans_dir)
         .with_context(|| format!("creating {}", scans_dir.display()))?;
-    let mut session = match args.strategy.session() {
+    let session = match args.strategy.session() {
         Some(st) => Some(build_session(args, &sim, st)?),
         None => None,
     };
@@ -846,383 +912,136 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
     let full_bucket_n = sim.machine.bucket.capacity_m3
         * sim.scenario.soil.density_kg_per_m3
         * planner::machine::GRAVITY_M_PER_S2;
-    let clock = VirtualClock::new();
-    let bus = InProcessBus::with_virtual_clock("vcan0", clock.clone());
-    let ctl = bus.attach();
-    let mut machine = EmbeddedMachine::new(
-        sim.build().context("building the simulator")?,
-        bus.attach(),
-        Some(clock.clone()),
-    );
-    let mut node = ControllerNode::new(&sim.machine, maps, config).context("controller")?;
-    if session.is_some() {
-        node.set_external_plan(true);
-    }
+    let mut h = Harness::new(&sim, maps, config).context("controller")?;
+    let mut driver = match h.node_mut() {
+        Some(node) => SessionDriver::new(session, predefined_joints, node),
+        None => anyhow::bail!("no controller"),
+    };
     let trace_path = out.join("trace.log");
     let recorder = Recorder::create(&trace_path, "vcan0")
         .with_context(|| format!("creating {}", trace_path.display()))?;
-    let terrain_before = machine.plant().world.terrain.clone();
+    let terrain_before = h.machine.plant().world.terrain.clone();
 
     let progress = progress_bar(args);
     let mut records: Vec<DigRecord> = Vec::new();
     let mut current: Option<DigRecord> = None;
     let mut scans = 0usize;
-    let mut track_backs = 0usize;
-    let mut backups_done = 0usize;
-    let mut last_phase = node.cycle().phase();
-    let mut inbox = Vec::new();
-    let mut steps: u64 = 0;
     let budget_s = SIM_BUDGET_PER_DIG_S * f64::from(args.digs.max(1));
     let mut result: anyhow::Result<()> = Ok(());
-    let mut soil = SoilMonitor::default();
     // Every dig's soil samples (4.3.5), for `soil_samples.json` and `model soil-cv`.
     let mut soil_samples = crate::soil_cv::SoilSamplesFile::default();
-    let mut dig_soil_samples: Vec<planner::estimate::SoilSample> = Vec::new();
-    let mut planned_info: Vec<PlannedInfo> = Vec::new();
-    let mut session_over: Option<String> = None;
-    let mut plan_ms: Vec<f64> = Vec::new();
     let mut snapshots: Vec<BenchSnapshot> = Vec::new();
-    let write_scan = |scan: &vcan_sim::sensors::Scan, scans: &mut usize| -> anyhow::Result<()> {
-        let path = scans_dir.join(format!("scan_{:04}.json", *scans));
-        std::fs::write(&path, serde_json::to_vec(scan)?)
-            .with_context(|| format!("writing {}", path.display()))?;
-        *scans += 1;
-        Ok(())
-    };
-    while !node.finished() && clock.now_s() < budget_s && !stop.load(Ordering::Relaxed) {
-        machine.advance(PERIOD_S);
-        inbox.clear();
-        while let Some(f) = ctl.try_recv() {
+    let finished = |h: &Harness| h.node().is_none_or(ControllerNode::finished);
+    while !finished(&h) && h.time_s() < budget_s && !stop.load(Ordering::Relaxed) {
+        let frames = match h.step() {
+            Ok(frames) => frames,
+            Err(e) => {
+                result = Err(anyhow::Error::new(e));
+                break;
+            }
+        };
+        for f in h.inbox() {
             recorder.record(f.timestamp_ns, Direction::Receive, &f.frame);
-            inbox.push(f);
         }
-        let now = clock.now_s();
-        let frames = node.step(now, &inbox);
         for f in &frames {
-            recorder.record(clock.now_ns(), Direction::Transmit, f);
-            if let Err(e) = ctl.send(*f) {
-                result = Err(anyhow::anyhow!("in-process bus: {e}"));
-            }
+            recorder.record(h.clock.now_ns(), Direction::Transmit, f);
         }
-        if result.is_err() {
+        let time_s = h.time_s();
+        let Some((node, machine)) = h.parts_mut() else {
             break;
-        }
-        if node.take_scan_request() {
-            let scan = machine.scan(&scan_request(&node));
-            write_scan(&scan, &mut scans)?;
-            match &mut session {
-                // The session's map fuses every scan; the cycle digs with it (3.2).
-                Some(s) => match s.observe_scan_from(scan_origin(&scan), &scan.points) {
-                    Ok(_) => node.provide_terrain(s.terrain().clone()),
-                    Err(e) => tracing::warn!(error = %e, "scan not usable"),
-                },
-                None => match node.cycle().config().scan_grid.terrain(&scan.points) {
-                    Ok(grid) => node.provide_terrain(grid),
-                    Err(e) => tracing::warn!(error = %e, "scan not usable"),
-                },
-            }
-        }
-        if let Some(s) = &mut session
-            && session_over.is_none()
-            && node.cycle().needs_action()
-        {
-            // The map must show the last dig: scan the workspace (swing 0 +- the fan) first.
-            let scan = machine.scan(&scan_toward(&node, 0.0));
-            write_scan(&scan, &mut scans)?;
-            if let Err(e) = s.observe_scan_from(scan_origin(&scan), &scan.points) {
-                tracing::warn!(error = %e, "workspace scan not usable");
-            }
-            let pose = node.estimator().state().pose;
-            if s.strategy() == Strategy::Predefined && s.predefined().is_none() {
-                let start = match predefined_joints {
-                    Some(q) => Some(q),
-                    None => s.virtual_expert_start(&pose)?,
-                };
-                let Some(start) = start else {
-                    anyhow::bail!("predefined sequence: no start joints (no valid dig on the map)");
-                };
-                // The median start is a planned tip APPROACH_HEIGHT_M (0.8 m) up: Boom-Down starts
-                // above the face everywhere (with 0.4 m, and no second raise, the move to a start on
-                // the face pressed the bucket into it and timed out).
-                predefined_joints = Some(start);
-                let seq = PredefinedSequence::from_planner(s.planner(), s.terrain(), &pose, start)?;
-                s.set_predefined(seq);
-            }
-            let t0 = std::time::Instant::now();
-            match s.next_action(&pose) {
-                Ok(Some(a)) => {
-                    plan_ms.push(t0.elapsed().as_secs_f64() * 1e3);
-                    let info = match s.steps().last().and_then(|st| st.plan.as_ref()) {
-                        Some(plan) => match &plan.action {
-                            ActionChoice::Dig(d) => PlannedInfo {
-                                quality: Some(d.quality.quality),
-                                volume_m3: Some(d.summary.swept_volume_m3),
-                                time_s: Some(d.summary.time_s),
-                                energy_kj: Some(d.summary.energy_kj()),
-                                min_tip_z_m: Some(d.summary.min_tip_z_m),
-                                start: Some([
-                                    d.pose.x_m,
-                                    d.pose.z_m,
-                                    d.pose.bucket_abs_rad.to_degrees(),
-                                ]),
-                            },
-                            _ => PlannedInfo::default(),
-                        },
-                        None => PlannedInfo::default(),
-                    };
-                    // The cycle appends: the action's index is the current plan length.
-                    let index = node.cycle().config().actions.len();
-                    if planned_info.len() <= index {
-                        planned_info.resize(index + 1, PlannedInfo::default());
+        };
+        let events = driver.after_step(node, &mut SimScans(machine))?.to_vec();
+        for event in events {
+            match event {
+                SessionEvent::Scanned(scan) => {
+                    let path = scans_dir.join(format!("scan_{scans:04}.json"));
+                    std::fs::write(&path, serde_json::to_vec(&scan)?)
+                        .with_context(|| format!("writing {}", path.display()))?;
+                    scans += 1;
+                }
+                SessionEvent::PhaseChanged { from, to } => {
+                    let st = node.state();
+                    tracing::debug!(
+                        time_s,
+                        from = ?from,
+                        to = ?to,
+                        joints_deg = ?[
+                            st.joints.boom_rad.to_degrees(),
+                            st.joints.stick_rad.to_degrees(),
+                            st.joints.bucket_rad.to_degrees(),
+                        ],
+                        tip = ?(st.tip.x_m, st.tip.z_m),
+                        action = ?node.action(),
+                        "demo phase"
+                    );
+                    if to == Phase::Weigh
+                        && let Some(c) = &mut current
+                    {
+                        c.true_payload_kg = machine.plant().true_state().payload_kg;
                     }
-                    planned_info[index] = info;
-                    node.push_action(a)?;
                 }
-                Ok(None) => {
-                    session_over = Some(s.end_reason().unwrap_or("nothing left to do").to_owned());
-                    node.set_external_plan(false);
-                }
-                Err(e) => {
-                    tracing::warn!(error = %e, "planning failed: session ends");
-                    session_over = Some(format!("planning failed: {e}"));
-                    node.set_external_plan(false);
-                }
-            }
-        }
-        let phase = node.cycle().phase();
-        if phase != last_phase {
-            let st = node.state();
-            tracing::debug!(
-                time_s = clock.now_s(),
-                from = ?last_phase,
-                to = ?phase,
-                joints_deg = ?[
-                    st.joints.boom_rad.to_degrees(),
-                    st.joints.stick_rad.to_degrees(),
-                    st.joints.bucket_rad.to_degrees(),
-                ],
-                tip = ?(st.tip.x_m, st.tip.z_m),
-                action = ?node.action(),
-                "demo phase"
-            );
-        }
-        if phase != last_phase {
-            if matches!(phase, Phase::Autodig | Phase::Cleanup) && current.is_none() {
-                let action = node.action().copied();
-                let swing_rad = node.state().swing_rad;
-                let info = planned_info
-                    .get(node.cycle().action_index())
-                    .copied()
-                    .unwrap_or_default();
-                let pose = node.estimator().state().pose;
-                let truth = true_section(&machine, swing_rad);
-                let map_error_m = session.as_ref().and_then(|s| {
-                    let errs: Vec<f64> = truth
-                        .iter()
-                        .filter(|p| (3.0..=10.0).contains(&p.x_m))
-                        .filter_map(|p| {
-                            let [x, y, _] = pose.world_from_base(swing_rad, p.x_m, 0.0);
-                            s.terrain()
-                                .height_at(x, y)
-                                .ok()
-                                .map(|h| (h - p.z_m).powi(2))
-                        })
-                        .collect();
-                    (!errs.is_empty())
-                        .then(|| (errs.iter().sum::<f64>() / errs.len() as f64).sqrt())
-                });
-                let map_bias_at_start_m = match (&session, info.start) {
-                    (Some(s), Some([r_start, ..])) => {
-                        let errs: Vec<f64> = truth
-                            .iter()
-                            .filter(|p| (r_start - 1.5..=r_start + 0.2).contains(&p.x_m))
-                            .filter_map(|p| {
-                                let [x, y, _] = pose.world_from_base(swing_rad, p.x_m, 0.0);
-                                s.terrain().height_at(x, y).ok().map(|h| h - p.z_m)
-                            })
-                            .collect();
-                        (!errs.is_empty()).then(|| errs.iter().sum::<f64>() / errs.len() as f64)
-                    }
-                    _ => None,
-                };
-                dig_soil_samples.clear();
-                if let Some(s) = &session {
-                    soil.begin(controller::planned::plane_section(
-                        s.terrain(),
-                        &pose,
-                        swing_rad,
-                        1.0,
-                        12.0,
-                        0.05,
+                SessionEvent::DigStarted { planned, pose } => {
+                    current = Some(begin_record(
+                        node,
+                        machine,
+                        driver.session(),
+                        &planned,
+                        pose,
+                        records.len(),
                     ));
                 }
-                current = Some(DigRecord {
-                    index: u32::try_from(records.len()).unwrap_or(u32::MAX),
-                    action: action.map_or(ActionKind::Dig, |a| a.kind()),
-                    swing_deg: swing_rad.to_degrees(),
-                    start_pose: match action {
-                        Some(Action::Dig { start, .. } | Action::Cleanup { start, .. }) => {
-                            Some(start)
-                        }
-                        _ => None,
-                    },
-                    weight_n: None,
-                    true_payload_kg: 0.0,
-                    time_s: 0.0,
-                    ground_contact_time_s: 0.0,
-                    energy_kj: 0.0,
-                    swept_volume_m3: 0.0,
-                    end_reason: None,
-                    perception: false,
-                    quality: info.quality,
-                    predicted_volume_m3: info.volume_m3,
-                    predicted_time_s: info.time_s,
-                    predicted_energy_kj: info.energy_kj,
-                    predicted_min_tip_z_m: info.min_tip_z_m,
-                    contact_start: None,
-                    min_tip_z_m: None,
-                    hardness_index: Some(node.cycle().hardness_index()),
-                    pose: Some([pose.x_m, pose.y_m, pose.heading_rad]),
-                    planned_start: info.start,
-                    map_error_m,
-                    map_bias_at_start_m,
-                    trajectory: Vec::new(),
-                    section: truth,
-                });
-            }
-            if phase == Phase::Weigh
-                && let Some(c) = &mut current
-            {
-                c.true_payload_kg = machine.plant().true_state().payload_kg;
-            }
-            if phase == Phase::TrackBack {
-                track_backs += 1;
-            }
-            if last_phase == Phase::TrackBack {
-                backups_done += 1;
-            }
-            last_phase = phase;
-        }
-        if matches!(phase, Phase::Autodig | Phase::Cleanup)
-            && let Some(c) = &mut current
-        {
-            let st = node.state();
-            c.trajectory.push(TipPoint {
-                x_m: st.tip.x_m,
-                z_m: st.tip.z_m,
-            });
-            if phase == Phase::Autodig
-                && steps.is_multiple_of(2)
-                && let Some(sample) = soil.sample(
-                    &st.tip,
-                    st.tip_force,
-                    node.cycle().swept_volume_m3().unwrap_or(0.0),
-                )
-            {
-                dig_soil_samples.push(sample);
-            }
-        }
-        let stats = node.statistics();
-        if stats.len() > records.len()
-            && let Some(mut c) = current.take()
-            && let Some(d) = stats.get(records.len())
-        {
-            c.index = d.index;
-            c.action = d.action;
-            c.swing_deg = d.swing_rad.to_degrees();
-            c.weight_n = d.weight_n;
-            c.time_s = d.time_s;
-            c.ground_contact_time_s = d.ground_contact_time_s;
-            c.energy_kj = d.energy_kj();
-            c.swept_volume_m3 = d.swept_volume_m3;
-            c.end_reason = d.end_reason.map(|r| format!("{r:?}"));
-            c.perception = d.perception;
-            c.min_tip_z_m = c
-                .trajectory
-                .iter()
-                .map(|p| p.z_m)
-                .filter(|z| z.is_finite())
-                .reduce(f64::min);
-            c.contact_start = c.trajectory.iter().find_map(|p| {
-                let below = c
-                    .section
-                    .iter()
-                    .min_by(|a, b| (a.x_m - p.x_m).abs().total_cmp(&(b.x_m - p.x_m).abs()))
-                    .is_some_and(|s| (s.x_m - p.x_m).abs() < 0.05 && p.z_m < s.z_m - 0.02);
-                below.then_some([p.x_m, p.z_m])
-            });
-            // The map's dead reckoning of the pass: no material above the tip's path (the toe of
-            // the face is out of the sensor's sight behind the crest).
-            if let (Some(s), Some([x_m, y_m, heading_rad])) = (&mut session, c.pose) {
-                let path: Vec<(f64, f64)> = c.trajectory.iter().map(|p| (p.x_m, p.z_m)).collect();
-                let pose = planner::kinematics::MachinePose {
-                    x_m,
-                    y_m,
-                    heading_rad,
-                };
-                let carved = s.observe_bucket_pass(&pose, d.swing_rad, &path);
-                tracing::debug!(carved, "bucket pass carved into the map");
-                if c.action == ActionKind::Dig
-                    && let (Some([r_m, z_m, _]), Some(predicted_m3)) =
-                        (c.planned_start, c.predicted_volume_m3)
-                    && s.observe_dig_outcome(
-                        pose.world_from_base(d.swing_rad, r_m, z_m),
-                        c.swept_volume_m3,
-                        predicted_m3,
-                    )
-                {
-                    tracing::info!(
-                        dig = c.index,
-                        swept_m3 = c.swept_volume_m3,
-                        predicted_m3,
-                        "barren dig: its start is not planned again until a track back"
-                    );
-                }
-                node.provide_terrain(s.terrain().clone());
-            }
-            if !dig_soil_samples.is_empty() {
-                soil_samples.digs.push(crate::soil_cv::SoilDigSamples {
-                    index: c.index,
-                    samples: std::mem::take(&mut dig_soil_samples),
-                });
-            }
-            records.push(c);
-            // 5.2 online: the soil estimate of the recent digs sets the next digs' index.
-            if let Some(s) = &mut session
-                && let Some(model) = soil.end()
-            {
-                match s.set_soil_estimate(model) {
-                    Ok(index) => node.set_hardness_index(index),
-                    Err(e) => tracing::warn!(error = %e, "soil estimate rejected"),
+                SessionEvent::DigFinished {
+                    index,
+                    tip_path,
+                    soil_samples: samples,
+                } => {
+                    let (Some(mut c), Some(d)) = (current.take(), node.statistics().get(index))
+                    else {
+                        continue;
+                    };
+                    finish_record(&mut c, d, &tip_path);
+                    if !samples.is_empty() {
+                        soil_samples.digs.push(crate::soil_cv::SoilDigSamples {
+                            index: c.index,
+                            samples,
+                        });
+                    }
+                    records.push(c);
+                    if driver.session().is_some()
+                        && args.bench_after.contains(&(records.len() as u32))
+                    {
+                        let t = machine.plant().true_state();
+                        snapshots.push(BenchSnapshot {
+                            digs: records.len(),
+                            backups: driver.backups(),
+                            terrain: machine.plant().world.terrain.clone(),
+                            pose: t.pose,
+                        });
+                    }
+                    if let Some(p) = &progress {
+                        p.set_position(records.len() as u64);
+                        p.set_message(format!("{} backups", driver.backups()));
+                    }
                 }
             }
-            if session.is_some() && args.bench_after.contains(&(records.len() as u32)) {
-                let t = machine.plant().true_state();
-                snapshots.push(BenchSnapshot {
-                    digs: records.len(),
-                    backups: backups_done,
-                    terrain: machine.plant().world.terrain.clone(),
-                    pose: t.pose,
-                });
-            }
-            if let Some(p) = &progress {
-                p.set_position(records.len() as u64);
-                p.set_message(format!("{backups_done} backups"));
-            }
         }
-        steps += 1;
-        if steps.is_multiple_of(FLUSH_EVERY_STEPS)
+        if h.steps().is_multiple_of(FLUSH_EVERY_STEPS)
             && let Err(e) = recorder.flush()
         {
             result = Err(anyhow::anyhow!("writing the trace: {e}"));
             break;
         }
     }
+    let session_over = driver.end_reason().map(str::to_owned);
+    let track_backs = driver.track_backs();
+    let backups_done = driver.backups();
+    let plan_ms = driver.planning_ms().to_vec();
+    let clock = h.clock.clone();
     let end = if stop.load(Ordering::Relaxed) {
         "stopped".to_owned()
     } else if let Some(why) = &session_over {
         why.clone()
-    } else if node.finished() {
+    } else if finished(&h) {
         "dig count reached".to_owned()
     } else if clock.now_s() >= budget_s {
         "time budget".to_owned()
@@ -1231,12 +1050,13 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
     };
     // Whatever stopped the loop: neutral valves and a Disarm heartbeat, then let the gateway act.
     let now = clock.now_s();
-    for f in &node.shutdown(now) {
+    let shutdown = h.node_mut().map(|n| n.shutdown(now));
+    for f in shutdown.iter().flat_map(|o| o.iter()) {
         recorder.record(clock.now_ns(), Direction::Transmit, f);
-        let _ = ctl.send(*f);
+        let _ = h.send_from_controller(std::slice::from_ref(f));
     }
-    machine.advance(2.0 * PERIOD_S);
-    while let Some(f) = ctl.try_recv() {
+    h.machine.advance(2.0 * PERIOD_S);
+    for f in h.drain_controller_inbox() {
         recorder.record(f.timestamp_ns, Direction::Receive, &f.frame);
     }
     let trace = recorder.close();
@@ -1245,6 +1065,10 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
     }
     result?;
     let trace = trace.with_context(|| format!("closing {}", trace_path.display()))?;
+    let Some((node, machine)) = h.parts_mut() else {
+        anyhow::bail!("the controller is gone");
+    };
+    let session = driver.session();
 
     let n = records.len();
     let mean = |f: &dyn Fn(&DigRecord) -> f64| {

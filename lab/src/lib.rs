@@ -4,6 +4,8 @@
 //!
 //! - [`demo`]: `excavator-ctl demo`, a whole autonomous session against the embedded simulator in
 //!   virtual time, and the session folder it writes (trace, scans, summary, plots).
+//! - [`harness`]: the virtual-time harness: the simulated machine and the controller node on one
+//!   in-process bus, stepped in lockstep (used by every in-process run and test).
 //! - [`experiment`]: the thesis's reproductions in closed loop (Tables 1-5, Figs. 52, 53, 60).
 //! - [`model_cmd`]: the dig model's commands: train and evaluate the actuator networks, generate
 //!   simulator data, compare the dig model with the simulator, Table 2 with the dig model.
@@ -21,6 +23,7 @@
 
 pub mod demo;
 pub mod experiment;
+pub mod harness;
 pub mod model_cmd;
 pub mod model_fig52;
 pub mod plots;

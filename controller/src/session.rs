@@ -1,0 +1,436 @@
+//! The session driver: the loop around the controller node that asks the dig planner for the next
+//! action and runs it (thesis 5.3, Fig. 42), the one that `demo`, the experiments and `run` share.
+//!
+//! Called once after every control step ([`SessionDriver::after_step`]), it
+//! - answers the work cycle's scan requests with range scans from a [`ScanSource`] (the embedded
+//!   simulator in-process, the scan service on a machine) and hands the terrain to the cycle;
+//! - when the cycle waits for an action, scans the workspace, lets the [`PlannedSession`] plan the next
+//!   dig, cleanup or track back at the dead-reckoned pose and pushes it (or replays the predefined
+//!   sequence of 6.2);
+//! - follows each dig: its tip path, the soil samples for the online soil estimate (5.2), and at its
+//!   end carves the bucket's pass into the map, marks barren starts, and sets the hardness index of
+//!   the next digs from the soil estimate.
+//!
+//! It reports what happened as [`SessionEvent`]s so that a caller can keep its own records (the lab
+//! adds the simulator's truth to each dig) without a second copy of this logic.
+
+use firmware_bridge::scan::{Scan, ScanRequest};
+use planner::estimate::SoilSample;
+use planner::kinematics::{JointAngles, MachinePose, wrap_angle};
+use planner::plan::ActionChoice;
+
+use crate::cycle::{Action, Phase};
+use crate::node::ControllerNode;
+use crate::planned::{PlannedSession, PredefinedSequence, SoilMonitor, Strategy, plane_section};
+
+/// Where range scans come from.
+pub trait ScanSource {
+    /// One scan for `request`.
+    ///
+    /// # Errors
+    /// When no scan can be had (the caller's error, boxed).
+    fn scan(&mut self, request: &ScanRequest) -> Result<Scan, BoxError>;
+}
+
+/// A boxed error of a [`ScanSource`].
+pub type BoxError = Box<dyn std::error::Error + Send + Sync + 'static>;
+
+/// Errors that end a session.
+#[derive(Debug, thiserror::Error)]
+pub enum DriverError {
+    /// The scan source failed.
+    #[error("range scan: {0}")]
+    Scan(#[source] BoxError),
+    /// The planned session failed outside planning (predefined start, the cycle refused an action).
+    #[error(transparent)]
+    Session(#[from] crate::planned::SessionError),
+    /// The controller refused an action.
+    #[error(transparent)]
+    Controller(#[from] crate::ControllerError),
+    /// The predefined sequence has no start.
+    #[error("predefined sequence: no start joints (no valid dig on the map)")]
+    NoPredefinedStart,
+}
+
+/// What the planner predicted for an action it pushed (for the dig's record).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PlannedDig {
+    /// Dig quality (Eq. 26 terms weighted).
+    pub quality: Option<f64>,
+    /// Predicted swept volume, m^3.
+    pub volume_m3: Option<f64>,
+    /// Predicted time, s.
+    pub time_s: Option<f64>,
+    /// Predicted energy, kJ.
+    pub energy_kj: Option<f64>,
+    /// Predicted lowest tip height, m.
+    pub min_tip_z_m: Option<f64>,
+    /// Planned start `[r_m, z_m, bucket_deg]` in the base frame.
+    pub start: Option<[f64; 3]>,
+}
+
+/// What happened in one call of [`SessionDriver::after_step`], in order.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SessionEvent {
+    /// A scan was taken (the work cycle's or the planner's workspace scan).
+    Scanned(Scan),
+    /// The work cycle changed phase.
+    PhaseChanged {
+        /// Before.
+        from: Phase,
+        /// Now.
+        to: Phase,
+    },
+    /// A dig or cleanup began (Autodig or cleanup entered).
+    DigStarted {
+        /// What the planner predicted for it (default for the fixed plan).
+        planned: PlannedDig,
+        /// The machine pose the controller dead-reckons at its start.
+        pose: MachinePose,
+    },
+    /// A dig or cleanup ended: its statistics are `node.statistics()[index]`.
+    DigFinished {
+        /// Index into the node's statistics.
+        index: usize,
+        /// The bucket tip path `(r, z)` in the base frame, m.
+        tip_path: Vec<(f64, f64)>,
+        /// The soil samples of the dig (4.3.5).
+        soil_samples: Vec<SoilSample>,
+    },
+}
+
+/// The dig in progress.
+#[derive(Debug)]
+struct DigInProgress {
+    planned: PlannedDig,
+    pose: MachinePose,
+    tip_path: Vec<(f64, f64)>,
+}
+
+/// The session driver (module docs).
+#[derive(Debug)]
+pub struct SessionDriver {
+    session: Option<PlannedSession>,
+    predefined_joints: Option<JointAngles>,
+    planned: Vec<PlannedDig>,
+    over: Option<String>,
+    plan_ms: Vec<f64>,
+    soil: SoilMonitor,
+    soil_samples: Vec<SoilSample>,
+    dig: Option<DigInProgress>,
+    digs_done: usize,
+    last_phase: Phase,
+    track_backs: usize,
+    backups: usize,
+    steps: u64,
+    events: Vec<SessionEvent>,
+}
+
+impl SessionDriver {
+    /// A driver for `node`: with a planned session the planner supplies every action (the node is
+    /// switched to an external plan); without one the node runs its own action list. For the
+    /// predefined strategy `predefined_joints` is the sequence's start (else the virtual expert's).
+    pub fn new(
+        session: Option<PlannedSession>,
+        predefined_joints: Option<JointAngles>,
+        node: &mut ControllerNode,
+    ) -> Self {
+        if session.is_some() {
+            node.set_external_plan(true);
+        }
+        Self {
+            session,
+            predefined_joints,
+            planned: Vec::new(),
+            over: None,
+            plan_ms: Vec::new(),
+            soil: SoilMonitor::default(),
+            soil_samples: Vec::new(),
+            dig: None,
+            digs_done: 0,
+            last_phase: node.cycle().phase(),
+            track_backs: 0,
+            backups: 0,
+            steps: 0,
+            events: Vec::new(),
+        }
+    }
+
+    /// The planned session, if the planner drives.
+    pub fn session(&self) -> Option<&PlannedSession> {
+        self.session.as_ref()
+    }
+
+    /// Why the planner ended the session, once it has.
+    pub fn end_reason(&self) -> Option<&str> {
+        self.over.as_deref()
+    }
+
+    /// Wall time of each planning cycle, ms.
+    pub fn planning_ms(&self) -> &[f64] {
+        &self.plan_ms
+    }
+
+    /// Track backs begun.
+    pub fn track_backs(&self) -> usize {
+        self.track_backs
+    }
+
+    /// Track backs completed.
+    pub fn backups(&self) -> usize {
+        self.backups
+    }
+
+    /// Digs and cleanups completed.
+    pub fn digs_done(&self) -> usize {
+        self.digs_done
+    }
+
+    /// One call after every control step of `node`: scans, planning, dig bookkeeping (module docs).
+    /// Returns what happened.
+    ///
+    /// # Errors
+    /// [`DriverError`]: the scan source failed, the predefined sequence has no start, or the cycle
+    /// refused an action. A planning failure is not an error: it ends the session
+    /// ([`Self::end_reason`]) and the node finishes its cycle.
+    pub fn after_step(
+        &mut self,
+        node: &mut ControllerNode,
+        scans: &mut dyn ScanSource,
+    ) -> Result<&[SessionEvent], DriverError> {
+        self.events.clear();
+        if node.take_scan_request() {
+            let scan = scans
+                .scan(&scan_request(node))
+                .map_err(DriverError::Scan)?;
+            match &mut self.session {
+                // The session's map fuses every scan; the cycle digs with it (3.2).
+                Some(s) => match s.observe_scan_from(scan_origin(&scan), &scan.points) {
+                    Ok(_) => node.provide_terrain(s.terrain().clone()),
+                    Err(e) => tracing::warn!(error = %e, "scan not usable"),
+                },
+                None => match node.cycle().config().scan_grid.terrain(&scan.points) {
+                    Ok(grid) => node.provide_terrain(grid),
+                    Err(e) => tracing::warn!(error = %e, "scan not usable"),
+                },
+            }
+            self.events.push(SessionEvent::Scanned(scan));
+        }
+        self.plan(node, scans)?;
+        self.follow_dig(node);
+        self.steps += 1;
+        Ok(&self.events)
+    }
+
+    /// When the cycle waits for an action: scan the workspace, plan, push.
+    fn plan(
+        &mut self,
+        node: &mut ControllerNode,
+        scans: &mut dyn ScanSource,
+    ) -> Result<(), DriverError> {
+        let Some(s) = &mut self.session else {
+            return Ok(());
+        };
+        if self.over.is_some() || !node.cycle().needs_action() {
+            return Ok(());
+        }
+        // The map must show the last dig: scan the workspace (swing 0 +- the fan) first.
+        let scan = scans
+            .scan(&scan_toward(node, 0.0))
+            .map_err(DriverError::Scan)?;
+        if let Err(e) = s.observe_scan_from(scan_origin(&scan), &scan.points) {
+            tracing::warn!(error = %e, "workspace scan not usable");
+        }
+        self.events.push(SessionEvent::Scanned(scan));
+        let pose = node.estimator().state().pose;
+        if s.strategy() == Strategy::Predefined && s.predefined().is_none() {
+            let start = match self.predefined_joints {
+                Some(q) => Some(q),
+                None => s.virtual_expert_start(&pose)?,
+            };
+            let Some(start) = start else {
+                return Err(DriverError::NoPredefinedStart);
+            };
+            // The median start is a planned tip APPROACH_HEIGHT_M (0.8 m) up: Boom-Down starts above
+            // the face everywhere (with 0.4 m, and no second raise, the move to a start on the face
+            // pressed the bucket into it and timed out).
+            self.predefined_joints = Some(start);
+            let seq = PredefinedSequence::from_planner(s.planner(), s.terrain(), &pose, start)?;
+            s.set_predefined(seq);
+        }
+        let t0 = std::time::Instant::now();
+        match s.next_action(&pose) {
+            Ok(Some(a)) => {
+                self.plan_ms.push(t0.elapsed().as_secs_f64() * 1e3);
+                let planned = match s.steps().last().and_then(|st| st.plan.as_ref()) {
+                    Some(plan) => match &plan.action {
+                        ActionChoice::Dig(d) => PlannedDig {
+                            quality: Some(d.quality.quality),
+                            volume_m3: Some(d.summary.swept_volume_m3),
+                            time_s: Some(d.summary.time_s),
+                            energy_kj: Some(d.summary.energy_kj()),
+                            min_tip_z_m: Some(d.summary.min_tip_z_m),
+                            start: Some([
+                                d.pose.x_m,
+                                d.pose.z_m,
+                                d.pose.bucket_abs_rad.to_degrees(),
+                            ]),
+                        },
+                        _ => PlannedDig::default(),
+                    },
+                    None => PlannedDig::default(),
+                };
+                // The cycle appends: the action's index is the current plan length.
+                let index = node.cycle().config().actions.len();
+                if self.planned.len() <= index {
+                    self.planned.resize(index + 1, PlannedDig::default());
+                }
+                self.planned[index] = planned;
+                node.push_action(a)?;
+            }
+            Ok(None) => {
+                self.over = Some(s.end_reason().unwrap_or("nothing left to do").to_owned());
+                node.set_external_plan(false);
+            }
+            Err(e) => {
+                tracing::warn!(error = %e, "planning failed: session ends");
+                self.over = Some(format!("planning failed: {e}"));
+                node.set_external_plan(false);
+            }
+        }
+        Ok(())
+    }
+
+    /// Phase changes, the dig's tip path and soil samples, and the planner's updates at its end.
+    fn follow_dig(&mut self, node: &mut ControllerNode) {
+        let phase = node.cycle().phase();
+        if phase != self.last_phase {
+            self.events.push(SessionEvent::PhaseChanged {
+                from: self.last_phase,
+                to: phase,
+            });
+            if matches!(phase, Phase::Autodig | Phase::Cleanup) && self.dig.is_none() {
+                let planned = self
+                    .planned
+                    .get(node.cycle().action_index())
+                    .copied()
+                    .unwrap_or_default();
+                let pose = node.estimator().state().pose;
+                self.soil_samples.clear();
+                if let Some(s) = &self.session {
+                    let swing_rad = node.state().swing_rad;
+                    self.soil
+                        .begin(plane_section(s.terrain(), &pose, swing_rad, 1.0, 12.0, 0.05));
+                }
+                self.dig = Some(DigInProgress {
+                    planned,
+                    pose,
+                    tip_path: Vec::new(),
+                });
+                self.events
+                    .push(SessionEvent::DigStarted { planned, pose });
+            }
+            if phase == Phase::TrackBack {
+                self.track_backs += 1;
+            }
+            if self.last_phase == Phase::TrackBack {
+                self.backups += 1;
+            }
+            self.last_phase = phase;
+        }
+        if matches!(phase, Phase::Autodig | Phase::Cleanup)
+            && let Some(dig) = &mut self.dig
+        {
+            let st = node.state();
+            dig.tip_path.push((st.tip.x_m, st.tip.z_m));
+            if phase == Phase::Autodig
+                && self.steps.is_multiple_of(2)
+                && let Some(sample) = self.soil.sample(
+                    &st.tip,
+                    st.tip_force,
+                    node.cycle().swept_volume_m3().unwrap_or(0.0),
+                )
+            {
+                self.soil_samples.push(sample);
+            }
+        }
+        if node.statistics().len() > self.digs_done
+            && let Some(dig) = self.dig.take()
+        {
+            self.finish_dig(node, dig);
+        }
+    }
+
+    /// The end of a dig: the planner learns what it did (the map, barren starts, the soil).
+    fn finish_dig(&mut self, node: &mut ControllerNode, dig: DigInProgress) {
+        let index = self.digs_done;
+        let Some(d) = node.statistics().get(index).copied() else {
+            return;
+        };
+        // The map's dead reckoning of the pass: no material above the tip's path (the toe of the
+        // face is out of the sensor's sight behind the crest).
+        if let Some(s) = &mut self.session {
+            let carved = s.observe_bucket_pass(&dig.pose, d.swing_rad, &dig.tip_path);
+            tracing::debug!(carved, "bucket pass carved into the map");
+            if d.action == crate::cycle::ActionKind::Dig
+                && let (Some([r_m, z_m, _]), Some(predicted_m3)) =
+                    (dig.planned.start, dig.planned.volume_m3)
+                && s.observe_dig_outcome(
+                    dig.pose.world_from_base(d.swing_rad, r_m, z_m),
+                    d.swept_volume_m3,
+                    predicted_m3,
+                )
+            {
+                tracing::info!(
+                    dig = d.index,
+                    swept_m3 = d.swept_volume_m3,
+                    predicted_m3,
+                    "barren dig: its start is not planned again until a track back"
+                );
+            }
+            node.provide_terrain(s.terrain().clone());
+        }
+        self.digs_done += 1;
+        self.events.push(SessionEvent::DigFinished {
+            index,
+            tip_path: dig.tip_path,
+            soil_samples: std::mem::take(&mut self.soil_samples),
+        });
+        // 5.2 online: the soil estimate of the recent digs sets the next digs' index.
+        if let Some(s) = &mut self.session
+            && let Some(model) = self.soil.end()
+        {
+            match s.set_soil_estimate(model) {
+                Ok(index) => node.set_hardness_index(index),
+                Err(e) => tracing::warn!(error = %e, "soil estimate rejected"),
+            }
+        }
+    }
+}
+
+/// The sensor's world position of a scan.
+fn scan_origin(scan: &Scan) -> [f64; 3] {
+    [scan.sensor.x_m, scan.sensor.y_m, scan.sensor.z_m]
+}
+
+/// The scan for the next dig: the default fan, turned toward the action's digging plane (the scan is
+/// requested where the last dump left the machine; the sensor turns with the swing).
+pub fn scan_request(node: &ControllerNode) -> ScanRequest {
+    match node.action() {
+        Some(Action::Dig { swing_rad, .. } | Action::Cleanup { swing_rad, .. }) => {
+            scan_toward(node, *swing_rad)
+        }
+        _ => ScanRequest::default(),
+    }
+}
+
+/// A scan request turned from the current swing to the digging plane at `target_swing_rad`.
+fn scan_toward(node: &ControllerNode, target_swing_rad: f64) -> ScanRequest {
+    let mut request = ScanRequest::default();
+    let offset = wrap_angle(target_swing_rad - node.state().swing_rad);
+    if offset.is_finite() {
+        request.azimuth_min_rad += offset;
+        request.azimuth_max_rad += offset;
+    }
+    request
+}

@@ -1,0 +1,243 @@
+//! The virtual-time harness: the simulated machine (`vcan_sim::embedded`) and the controller node on
+//! one in-process bus, stepped in lockstep. Every in-process user (the demo, the experiments, the
+//! lab's and the HIL crate's in-process tests, the control-step bench) runs this one loop.
+//!
+//! One control period ([`Harness::step`]): the machine advances 10 ms (ten 1 ms physics steps; its
+//! gateway sees the frames sent since the last period and sends its sensor frames), then the node steps
+//! once at the bus's virtual time with the frames it received, and its frames go on the bus.
+
+use firmware_bridge::CanFrame;
+use firmware_bridge::scan::{Scan, ScanRequest};
+use firmware_bridge::transport::{InProcessBus, InProcessNode, TimestampedFrame, VirtualClock};
+use planner::autodig::AutodigMaps;
+use vcan_sim::SimConfig;
+use vcan_sim::embedded::EmbeddedMachine;
+
+use controller::node::{ControllerConfig, ControllerNode, Outbox};
+use controller::session::{BoxError, ScanSource};
+
+/// The control period, s.
+pub const PERIOD_S: f64 = 0.01;
+
+/// Bus options of a harness.
+#[derive(Debug, Clone)]
+pub struct HarnessOptions {
+    /// The in-process bus's name.
+    pub bus_name: String,
+    /// Receive queue of the controller's bus node, frames (the bus's default when `None`).
+    pub controller_queue: Option<usize>,
+    /// Receive queue of the machine's bus node, frames (the bus's default when `None`).
+    pub machine_queue: Option<usize>,
+}
+
+impl Default for HarnessOptions {
+    fn default() -> Self {
+        Self {
+            bus_name: "vcan0".to_owned(),
+            controller_queue: None,
+            machine_queue: None,
+        }
+    }
+}
+
+/// Errors of the harness.
+#[derive(Debug, thiserror::Error)]
+pub enum HarnessError {
+    /// The simulator could not be built.
+    #[error("building the simulator: {0}")]
+    Simulator(#[from] vcan_sim::SimError),
+    /// The controller could not be built.
+    #[error("controller: {0}")]
+    Controller(#[from] controller::ControllerError),
+    /// The bus refused a frame of the controller.
+    #[error("in-process bus: {0}")]
+    Bus(#[from] firmware_bridge::transport::Error),
+    /// A frame could not be built.
+    #[error("frame: {0}")]
+    Frame(#[from] firmware_bridge::frame::FrameError),
+}
+
+/// The machine and the controller on one in-process bus in virtual time (module docs).
+#[derive(Debug)]
+pub struct Harness {
+    /// The virtual clock (simulation time).
+    pub clock: VirtualClock,
+    /// The bus (attach more nodes to watch or inject).
+    pub bus: InProcessBus,
+    ctl: InProcessNode,
+    /// The simulated machine.
+    pub machine: EmbeddedMachine,
+    node: Option<ControllerNode>,
+    inbox: Vec<TimestampedFrame>,
+    empty: Outbox,
+    steps: u64,
+}
+
+impl Harness {
+    /// The machine of `sim` and a controller with `maps` and `config`, on the default bus.
+    ///
+    /// # Errors
+    /// [`HarnessError`] when the simulator or the controller cannot be built.
+    pub fn new(
+        sim: &SimConfig,
+        maps: AutodigMaps,
+        config: ControllerConfig,
+    ) -> Result<Self, HarnessError> {
+        Self::with_options(sim, maps, config, &HarnessOptions::default())
+    }
+
+    /// As [`Self::new`] with bus options.
+    ///
+    /// # Errors
+    /// As [`Self::new`].
+    pub fn with_options(
+        sim: &SimConfig,
+        maps: AutodigMaps,
+        config: ControllerConfig,
+        options: &HarnessOptions,
+    ) -> Result<Self, HarnessError> {
+        let clock = VirtualClock::new();
+        let bus = InProcessBus::with_virtual_clock(&options.bus_name, clock.clone());
+        let attach = |queue: Option<usize>| match queue {
+            Some(q) => bus.attach_with_queue(q),
+            None => bus.attach(),
+        };
+        let ctl = attach(options.controller_queue);
+        let machine =
+            EmbeddedMachine::new(sim.build()?, attach(options.machine_queue), Some(clock.clone()));
+        let node = ControllerNode::new(&sim.machine, maps, config)?;
+        Ok(Self {
+            clock,
+            bus,
+            ctl,
+            machine,
+            node: Some(node),
+            inbox: Vec::new(),
+            empty: Outbox::new()?,
+            steps: 0,
+        })
+    }
+
+    /// Simulation time, s.
+    pub fn time_s(&self) -> f64 {
+        self.clock.now_s()
+    }
+
+    /// Control periods stepped.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// The controller, `None` once killed.
+    pub fn node(&self) -> Option<&ControllerNode> {
+        self.node.as_ref()
+    }
+
+    /// The controller, mutably.
+    pub fn node_mut(&mut self) -> Option<&mut ControllerNode> {
+        self.node.as_mut()
+    }
+
+    /// The controller and the machine together (both mutably), `None` once the controller is killed.
+    pub fn parts_mut(&mut self) -> Option<(&mut ControllerNode, &mut EmbeddedMachine)> {
+        self.node.as_mut().map(|n| (n, &mut self.machine))
+    }
+
+    /// Stops the controller without its shutdown frames, as SIGKILL does; the machine runs on.
+    pub fn kill_controller(&mut self) {
+        self.node = None;
+    }
+
+    /// The frames the controller received in the last period (after any edit by
+    /// [`Self::step_with`]).
+    pub fn inbox(&self) -> &[TimestampedFrame] {
+        &self.inbox
+    }
+
+    /// One control period (module docs). Returns the controller's frames (empty once killed).
+    ///
+    /// # Errors
+    /// [`HarnessError::Bus`] when the bus refuses a frame of the controller.
+    pub fn step(&mut self) -> Result<Outbox, HarnessError> {
+        self.step_with(|_| {})
+    }
+
+    /// One control period with the controller's received frames edited by `edit` first (drop them
+    /// for a sensor dropout, add frames of another node).
+    ///
+    /// # Errors
+    /// As [`Self::step`].
+    pub fn step_with(
+        &mut self,
+        edit: impl FnOnce(&mut Vec<TimestampedFrame>),
+    ) -> Result<Outbox, HarnessError> {
+        self.machine.advance(PERIOD_S);
+        self.inbox.clear();
+        while let Some(f) = self.ctl.try_recv() {
+            self.inbox.push(f);
+        }
+        edit(&mut self.inbox);
+        self.steps += 1;
+        let Some(node) = self.node.as_mut() else {
+            return Ok(self.empty);
+        };
+        let out = node.step(self.clock.now_s(), &self.inbox);
+        for f in &out {
+            self.ctl.send(*f)?;
+        }
+        Ok(out)
+    }
+
+    /// Sends frames from the controller's bus node (its shutdown frames, say).
+    ///
+    /// # Errors
+    /// [`HarnessError::Bus`] when the bus refuses one.
+    pub fn send_from_controller(&self, frames: &[CanFrame]) -> Result<(), HarnessError> {
+        for f in frames {
+            self.ctl.send(*f)?;
+        }
+        Ok(())
+    }
+
+    /// Frames waiting for the controller (received after the last step).
+    pub fn drain_controller_inbox(&mut self) -> Vec<TimestampedFrame> {
+        let mut out = Vec::new();
+        while let Some(f) = self.ctl.try_recv() {
+            out.push(f);
+        }
+        out
+    }
+
+    /// Answers a pending scan request of the controller's work cycle with the default scan gridded by
+    /// the cycle itself (the fixed plan's perception); returns whether one was answered.
+    pub fn answer_scan_request(&mut self) -> bool {
+        let Some(node) = self.node.as_mut() else {
+            return false;
+        };
+        if !node.take_scan_request() {
+            return false;
+        }
+        let scan = self.machine.scan(&ScanRequest::default());
+        match node.cycle().config().scan_grid.terrain(&scan.points) {
+            Ok(grid) => {
+                node.provide_terrain(grid);
+                true
+            }
+            Err(e) => {
+                tracing::warn!(error = %e, "scan not usable");
+                false
+            }
+        }
+    }
+}
+
+/// The embedded machine as the session driver's scan source (the in-process form of the scan
+/// interface, docs/scan-protocol.md).
+#[derive(Debug)]
+pub struct SimScans<'a>(pub &'a mut EmbeddedMachine);
+
+impl ScanSource for SimScans<'_> {
+    fn scan(&mut self, request: &ScanRequest) -> Result<Scan, BoxError> {
+        Ok(self.0.scan(request))
+    }
+}
