@@ -17,12 +17,12 @@
 
 use std::time::Duration;
 
+use firmware_bridge::scan::{Scan, ScanRequest};
 use planner::terrain::TerrainGrid;
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
 use tokio::net::TcpStream;
 use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
 use tokio::sync::mpsc;
-use firmware_bridge::scan::{Scan, ScanRequest};
 
 use crate::cycle::ScanGrid;
 

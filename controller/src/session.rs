@@ -23,13 +23,27 @@ use crate::cycle::{Action, Phase};
 use crate::node::ControllerNode;
 use crate::planned::{PlannedSession, PredefinedSequence, SoilMonitor, Strategy, plane_section};
 
-/// Where range scans come from.
+/// Where range scans come from. A scan is requested, then taken when it is there: the in-process
+/// simulator answers at once, a scan service over the network some control periods later, and the
+/// control loop never waits for it.
 pub trait ScanSource {
-    /// One scan for `request`.
+    /// Starts a scan for `request` (a source that answers at once keeps the scan for [`Self::take`]).
+    fn request(&mut self, request: &ScanRequest);
+
+    /// The requested scan once it is there: `None` while it is on its way.
     ///
     /// # Errors
-    /// When no scan can be had (the caller's error, boxed).
-    fn scan(&mut self, request: &ScanRequest) -> Result<Scan, BoxError>;
+    /// When no scan can be had (the source's error, boxed).
+    fn take(&mut self) -> Option<Result<Scan, BoxError>>;
+}
+
+/// What a pending scan is for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ScanPurpose {
+    /// The work cycle asked for it (the dig's perception, 3.2).
+    Cycle,
+    /// The planner's view of the workspace before it plans.
+    Workspace,
 }
 
 /// A boxed error of a [`ScanSource`].
@@ -123,6 +137,8 @@ pub struct SessionDriver {
     track_backs: usize,
     backups: usize,
     steps: u64,
+    pending_scan: Option<ScanPurpose>,
+    cycle_scan_wanted: bool,
     events: Vec<SessionEvent>,
 }
 
@@ -152,6 +168,8 @@ impl SessionDriver {
             track_backs: 0,
             backups: 0,
             steps: 0,
+            pending_scan: None,
+            cycle_scan_wanted: false,
             events: Vec::new(),
         }
     }
@@ -200,9 +218,18 @@ impl SessionDriver {
     ) -> Result<&[SessionEvent], DriverError> {
         self.events.clear();
         if node.take_scan_request() {
-            let scan = scans
-                .scan(&scan_request(node))
-                .map_err(DriverError::Scan)?;
+            self.cycle_scan_wanted = true;
+        }
+        if self.cycle_scan_wanted && self.pending_scan.is_none() {
+            scans.request(&scan_request(node));
+            self.pending_scan = Some(ScanPurpose::Cycle);
+            self.cycle_scan_wanted = false;
+        }
+        if self.pending_scan == Some(ScanPurpose::Cycle)
+            && let Some(result) = scans.take()
+        {
+            self.pending_scan = None;
+            let scan = result.map_err(DriverError::Scan)?;
             match &mut self.session {
                 // The session's map fuses every scan; the cycle digs with it (3.2).
                 Some(s) => match s.observe_scan_from(scan_origin(&scan), &scan.points) {
@@ -222,7 +249,7 @@ impl SessionDriver {
         Ok(&self.events)
     }
 
-    /// When the cycle waits for an action: scan the workspace, plan, push.
+    /// When the cycle waits for an action: scan the workspace, then plan and push.
     fn plan(
         &mut self,
         node: &mut ControllerNode,
@@ -235,9 +262,18 @@ impl SessionDriver {
             return Ok(());
         }
         // The map must show the last dig: scan the workspace (swing 0 +- the fan) first.
-        let scan = scans
-            .scan(&scan_toward(node, 0.0))
-            .map_err(DriverError::Scan)?;
+        if self.pending_scan.is_none() {
+            scans.request(&scan_toward(node, 0.0));
+            self.pending_scan = Some(ScanPurpose::Workspace);
+        }
+        if self.pending_scan != Some(ScanPurpose::Workspace) {
+            return Ok(());
+        }
+        let Some(result) = scans.take() else {
+            return Ok(());
+        };
+        self.pending_scan = None;
+        let scan = result.map_err(DriverError::Scan)?;
         if let Err(e) = s.observe_scan_from(scan_origin(&scan), &scan.points) {
             tracing::warn!(error = %e, "workspace scan not usable");
         }
@@ -319,16 +355,21 @@ impl SessionDriver {
                 self.soil_samples.clear();
                 if let Some(s) = &self.session {
                     let swing_rad = node.state().swing_rad;
-                    self.soil
-                        .begin(plane_section(s.terrain(), &pose, swing_rad, 1.0, 12.0, 0.05));
+                    self.soil.begin(plane_section(
+                        s.terrain(),
+                        &pose,
+                        swing_rad,
+                        1.0,
+                        12.0,
+                        0.05,
+                    ));
                 }
                 self.dig = Some(DigInProgress {
                     planned,
                     pose,
                     tip_path: Vec::new(),
                 });
-                self.events
-                    .push(SessionEvent::DigStarted { planned, pose });
+                self.events.push(SessionEvent::DigStarted { planned, pose });
             }
             if phase == Phase::TrackBack {
                 self.track_backs += 1;

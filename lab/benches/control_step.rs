@@ -1,25 +1,22 @@
 //! Control-step cost and receive-to-command latency (prints figures, asserts nothing).
 //!
 //! 1. Step cost: the controller closes the loop with the embedded simulator in virtual time over the
-//!    default bench; only `ControllerNode::step` is timed (target: under 20 us per 100 Hz step, 0.2 %
+//!    default bench (the lab's harness); only `ControllerNode::step` is timed (target: under 20 us per 100 Hz step, 0.2 %
 //!    of the period).
 //! 2. Latency over the in-process bus (wall clock): a sensor frame is sent by a "gateway" node, the
 //!    controller receives it, steps and sends its commands; the time from the sensor frame's send to
 //!    the first command's arrival at the gateway node, bus timestamps.
 //!
-//! Run: `cargo bench -p controller --bench control_step`.
+//! Run: `cargo bench -p lab --bench control_step`.
 
 #![allow(clippy::unwrap_used)]
 
-use std::time::Instant;
-
 use controller::node::{ControllerConfig, ControllerNode};
 use firmware_bridge::messages::{JointAngles, Message};
-use firmware_bridge::transport::{InProcessBus, VirtualClock};
+use firmware_bridge::transport::InProcessBus;
+use lab::harness::{Harness, HarnessOptions};
 use planner::autodig::AutodigMaps;
 use vcan_sim::SimConfig;
-use vcan_sim::embedded::EmbeddedMachine;
-use vcan_sim::sensors::ScanRequest;
 
 fn percentile(sorted: &[f64], p: f64) -> f64 {
     let i = ((sorted.len() as f64 - 1.0) * p).round() as usize;
@@ -28,38 +25,23 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
 
 fn step_cost() {
     let sim = SimConfig::load::<&str>(None, None, Some(1), &[]).unwrap();
-    let clock = VirtualClock::new();
-    let bus = InProcessBus::with_virtual_clock("bench0", clock.clone());
-    let ctl = bus.attach();
-    let mut machine = EmbeddedMachine::new(sim.build().unwrap(), bus.attach(), Some(clock.clone()));
-    let mut node = ControllerNode::new(
-        &sim.machine,
+    let mut h = Harness::with_options(
+        &sim,
         AutodigMaps::builtin().unwrap(),
         ControllerConfig::default(),
+        &HarnessOptions {
+            bus_name: "bench0".to_owned(),
+            ..HarnessOptions::default()
+        },
     )
     .unwrap();
-    let mut inbox = Vec::with_capacity(64);
     let mut costs_us = Vec::with_capacity(6000);
     for _ in 0..6000 {
-        machine.advance(0.01);
-        inbox.clear();
-        while let Some(f) = ctl.try_recv() {
-            inbox.push(f);
-        }
-        let now = clock.now_s();
-        let t0 = Instant::now();
-        let out = node.step(now, &inbox);
-        costs_us.push(t0.elapsed().as_secs_f64() * 1e6);
-        for f in &out {
-            ctl.send(*f).unwrap();
-        }
-        if node.take_scan_request() {
-            let scan = machine.scan(&ScanRequest::default());
-            if let Ok(g) = node.cycle().config().scan_grid.terrain(&scan.points) {
-                node.provide_terrain(g);
-            }
-        }
+        h.step().unwrap();
+        costs_us.push(h.node_step_wall().as_secs_f64() * 1e6);
+        h.answer_scan_request();
     }
+    let node = h.node().unwrap();
     let mean = costs_us.iter().sum::<f64>() / costs_us.len() as f64;
     costs_us.sort_by(f64::total_cmp);
     println!(

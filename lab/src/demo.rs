@@ -950,7 +950,9 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
         let Some((node, machine)) = h.parts_mut() else {
             break;
         };
-        let events = driver.after_step(node, &mut SimScans(machine))?.to_vec();
+        let events = driver
+            .after_step(node, &mut SimScans::new(machine))?
+            .to_vec();
         for event in events {
             match event {
                 SessionEvent::Scanned(scan) => {

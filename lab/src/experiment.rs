@@ -17,18 +17,17 @@
 
 use anyhow::Context as _;
 use clap::{Args, ValueEnum};
-use firmware_bridge::transport::{InProcessBus, VirtualClock};
 use planner::autodig::AutodigMaps;
 use vcan_sim::SimConfig;
-use vcan_sim::embedded::EmbeddedMachine;
 use vcan_sim::scenario::SoilContactIntegration;
 
 pub use crate::demo::SoilContact;
-use vcan_sim::sensors::ScanRequest;
 
-use controller::cycle::{Action, Phase, StartPose};
 use crate::demo::TipPoint;
-use controller::node::{ControllerConfig, ControllerNode};
+use controller::cycle::{Action, Phase, StartPose};
+use controller::node::ControllerConfig;
+
+use crate::harness::Harness;
 
 /// Which reproduction.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -256,31 +255,21 @@ pub fn run_dig(
     }];
     config.cycle.repeat = false;
     config.cycle.max_digs = Some(1);
-    let clock = VirtualClock::new();
-    let bus = InProcessBus::with_virtual_clock("vcan0", clock.clone());
-    let ctl = bus.attach();
-    let mut machine = EmbeddedMachine::new(sim.build()?, bus.attach(), Some(clock.clone()));
-    let mut node = ControllerNode::new(&sim.machine, maps, config)?;
-    let mut inbox = Vec::new();
+    let mut h = Harness::new(sim, maps, config)?;
     let mut payload_kg = 0.0;
     let mut weighed = false;
-    let section = crate::demo::true_section(&machine, 0.0);
+    let section = crate::demo::true_section(&h.machine, 0.0);
     let mut path = Vec::new();
-    while clock.now_s() < 90.0 && node.statistics().is_empty() && !node.finished() {
-        machine.advance(crate::demo::PERIOD_S);
-        inbox.clear();
-        while let Some(f) = ctl.try_recv() {
-            inbox.push(f);
-        }
-        for f in &node.step(clock.now_s(), &inbox) {
-            ctl.send(*f)?;
-        }
-        if node.take_scan_request() {
-            let scan = machine.scan(&ScanRequest::default());
-            if let Ok(grid) = node.cycle().config().scan_grid.terrain(&scan.points) {
-                node.provide_terrain(grid);
-            }
-        }
+    let running = |h: &Harness| {
+        h.node()
+            .is_some_and(|n| n.statistics().is_empty() && !n.finished())
+    };
+    while h.time_s() < 90.0 && running(&h) {
+        h.step()?;
+        h.answer_scan_request();
+        let Some((node, machine)) = h.parts_mut() else {
+            break;
+        };
         if node.cycle().phase() == Phase::Autodig {
             let tip = node.state().tip;
             path.push(TipPoint {
@@ -293,6 +282,9 @@ pub fn run_dig(
             payload_kg = machine.plant().true_state().payload_kg;
         }
     }
+    let Some(node) = h.node() else {
+        anyhow::bail!("the controller is gone");
+    };
     if node.statistics().is_empty() {
         tracing::warn!(
             phase = ?node.cycle().phase(),
@@ -1347,7 +1339,11 @@ pub fn extended_dig_check(boom_down: bool) -> anyhow::Result<Vec<DigCheck>> {
                     continue;
                 };
                 let q_sim = if boom_down {
-                    controller::planned::approach_joints(&kin, q, controller::planned::APPROACH_HEIGHT_M)
+                    controller::planned::approach_joints(
+                        &kin,
+                        q,
+                        controller::planned::APPROACH_HEIGHT_M,
+                    )
                 } else {
                     q
                 };

@@ -71,6 +71,7 @@ pub struct Harness {
     inbox: Vec<TimestampedFrame>,
     empty: Outbox,
     steps: u64,
+    node_step_wall: std::time::Duration,
 }
 
 impl Harness {
@@ -103,8 +104,11 @@ impl Harness {
             None => bus.attach(),
         };
         let ctl = attach(options.controller_queue);
-        let machine =
-            EmbeddedMachine::new(sim.build()?, attach(options.machine_queue), Some(clock.clone()));
+        let machine = EmbeddedMachine::new(
+            sim.build()?,
+            attach(options.machine_queue),
+            Some(clock.clone()),
+        );
         let node = ControllerNode::new(&sim.machine, maps, config)?;
         Ok(Self {
             clock,
@@ -115,6 +119,7 @@ impl Harness {
             inbox: Vec::new(),
             empty: Outbox::new()?,
             steps: 0,
+            node_step_wall: std::time::Duration::ZERO,
         })
     }
 
@@ -126,6 +131,11 @@ impl Harness {
     /// Control periods stepped.
     pub fn steps(&self) -> u64 {
         self.steps
+    }
+
+    /// Wall time the controller's last step took (what the control-step bench measures).
+    pub fn node_step_wall(&self) -> std::time::Duration {
+        self.node_step_wall
     }
 
     /// The controller, `None` once killed.
@@ -181,7 +191,10 @@ impl Harness {
         let Some(node) = self.node.as_mut() else {
             return Ok(self.empty);
         };
-        let out = node.step(self.clock.now_s(), &self.inbox);
+        let now_s = self.clock.now_s();
+        let t0 = std::time::Instant::now();
+        let out = node.step(now_s, &self.inbox);
+        self.node_step_wall = t0.elapsed();
         for f in &out {
             self.ctl.send(*f)?;
         }
@@ -232,12 +245,29 @@ impl Harness {
 }
 
 /// The embedded machine as the session driver's scan source (the in-process form of the scan
-/// interface, docs/scan-protocol.md).
+/// interface, docs/scan-protocol.md): it scans at once, in virtual time.
 #[derive(Debug)]
-pub struct SimScans<'a>(pub &'a mut EmbeddedMachine);
+pub struct SimScans<'a> {
+    machine: &'a mut EmbeddedMachine,
+    ready: Option<Scan>,
+}
+
+impl<'a> SimScans<'a> {
+    /// Scans of `machine`.
+    pub fn new(machine: &'a mut EmbeddedMachine) -> Self {
+        Self {
+            machine,
+            ready: None,
+        }
+    }
+}
 
 impl ScanSource for SimScans<'_> {
-    fn scan(&mut self, request: &ScanRequest) -> Result<Scan, BoxError> {
-        Ok(self.0.scan(request))
+    fn request(&mut self, request: &ScanRequest) {
+        self.ready = Some(self.machine.scan(request));
+    }
+
+    fn take(&mut self) -> Option<Result<Scan, BoxError>> {
+        self.ready.take().map(Ok)
     }
 }

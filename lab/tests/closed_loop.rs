@@ -34,13 +34,13 @@ fn one_dig() -> ControllerConfig {
 }
 
 fn run_to_stage(l: &mut Loop, stage: Stage, max_s: f64) {
-    let reached = l.run_until(max_s, |l| l.node.stage() == Some(stage));
+    let reached = l.run_until(max_s, |l| l.node().stage() == Some(stage));
     assert!(
         reached,
         "no {stage:?} within {max_s} s: phase {:?}, fault {:?}, last {:?}",
         l.phase(),
-        l.node.fault(),
-        l.node.last_fault()
+        l.node().fault(),
+        l.node().last_fault()
     );
 }
 
@@ -50,19 +50,19 @@ fn autodig_fills_the_bucket_from_a_reachable_start() {
     let capacity_kg = sim.machine.bucket.capacity_m3 * sim.scenario.soil.density_kg_per_m3;
     let mut l = Loop::new(sim, one_dig());
     let reached = l.run_until(120.0, |l| l.phase() == Phase::Weigh);
-    let t = l.machine.plant().true_state();
+    let t = l.machine().plant().true_state();
     eprintln!(
         "weigh at {:.2} s: payload {:.0} kg of {:.0} kg, last fault {:?}",
         l.time_s(),
         t.payload_kg,
         capacity_kg,
-        l.node.last_fault()
+        l.node().last_fault()
     );
     assert!(
         reached,
         "phase {:?} fault {:?}",
         l.phase(),
-        l.node.last_fault()
+        l.node().last_fault()
     );
     assert!(
         t.payload_kg > FILL_FRACTION * capacity_kg,
@@ -70,8 +70,12 @@ fn autodig_fills_the_bucket_from_a_reachable_start() {
         t.payload_kg
     );
     // Finish the cycle: weigh, dump, return.
-    assert!(l.run_until(120.0, |l| l.node.finished()), "{:?}", l.phase());
-    let stats = l.node.statistics();
+    assert!(
+        l.run_until(120.0, |l| l.node().finished()),
+        "{:?}",
+        l.phase()
+    );
+    let stats = l.node().statistics();
     assert_eq!(stats.len(), 1);
     let d = stats[0];
     eprintln!("{d:?}");
@@ -89,7 +93,7 @@ fn autodig_fills_the_bucket_from_a_reachable_start() {
     );
     // After the plan the gateway is disarmed.
     l.run_until(1.0, |_| false);
-    assert_eq!(l.machine.node().gateway().mode(), GatewayMode::Disarmed);
+    assert_eq!(l.machine().node().gateway().mode(), GatewayMode::Disarmed);
 }
 
 fn cleanup_setup() -> (vcan_sim::SimConfig, ControllerConfig) {
@@ -127,15 +131,15 @@ fn cleanup_setup() -> (vcan_sim::SimConfig, ControllerConfig) {
 fn cleanup_leaves_the_floor_within_tolerance() {
     let (sim, config) = cleanup_setup();
     let mut l = Loop::new(sim, config);
-    let done = l.run_until(240.0, |l| l.node.finished());
+    let done = l.run_until(240.0, |l| l.node().finished());
     eprintln!(
         "cleanup: {:?} stats {:?} last fault {:?}",
         l.phase(),
-        l.node.statistics(),
-        l.node.last_fault()
+        l.node().statistics(),
+        l.node().last_fault()
     );
     assert!(done);
-    let d = l.node.statistics()[0];
+    let d = l.node().statistics()[0];
     let floor = d.floor_z_m.unwrap();
     assert!(
         floor.abs() < FLOOR_DETECTION_TOLERANCE_M,
@@ -149,7 +153,7 @@ fn cleanup_leaves_the_floor_within_tolerance() {
 
 /// Lowest and highest terrain along the cleaned strip (x 4..6.2 m, y -0.4..0.4 m).
 fn floor_extremes(l: &Loop) -> (f64, f64) {
-    let terrain = &l.machine.plant().world.terrain;
+    let terrain = &l.machine().plant().world.terrain;
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     let mut x = 4.0;
     while x <= 6.2 {
@@ -169,7 +173,7 @@ fn floor_extremes(l: &Loop) -> (f64, f64) {
 fn cleanup_removes_the_residual_layer() {
     let (sim, config) = cleanup_setup();
     let mut l = Loop::new(sim, config);
-    assert!(l.run_until(240.0, |l| l.node.finished()));
+    assert!(l.run_until(240.0, |l| l.node().finished()));
     let (lowest, highest) = floor_extremes(&l);
     eprintln!("floor along the path: lowest {lowest:.3} m, highest {highest:.3} m");
     assert!(highest <= FLOOR_TOLERANCE_M, "residual {highest} m");
@@ -181,7 +185,7 @@ fn sensor_dropout_mid_dig_neutralises_within_one_period_of_the_age_limit() {
     let mut l = Loop::new(default_sim(), one_dig());
     run_to_stage(&mut l, Stage::PreDig, 120.0);
     assert!(has_motion(&l.last_out));
-    let max_age = l.node.safety().config().sensor_max_age_s;
+    let max_age = l.node().safety().config().sensor_max_age_s;
     let last_data_s = l.time_s();
     l.forward = false;
     let mut neutral_at = None;
@@ -201,10 +205,10 @@ fn sensor_dropout_mid_dig_neutralises_within_one_period_of_the_age_limit() {
         at - last_data_s
     );
     assert!(at - last_data_s <= max_age + PERIOD_S + 1e-9);
-    assert!(matches!(l.node.fault(), Some(Fault::StaleSensor { .. })));
+    assert!(matches!(l.node().fault(), Some(Fault::StaleSensor { .. })));
     // The machine stops: the gateway is disarmed and drives nothing.
     l.step();
-    assert_eq!(l.machine.node().valve_commands(), [0.0; 6]);
+    assert_eq!(l.machine().node().valve_commands(), [0.0; 6]);
     // Data back: the controller re-arms after the hold time and the dig goes on.
     l.forward = true;
     assert!(l.run_until(5.0, |l| has_motion(&l.last_out)));
@@ -223,16 +227,16 @@ fn garbage_frames_mid_dig_neutralise_in_the_same_period() {
     ];
     for g in garbage {
         let tf = TimestampedFrame {
-            timestamp_ns: l.clock.now_ns(),
+            timestamp_ns: l.h.clock.now_ns(),
             frame: g,
         };
         let out = l.step_with(&[tf]);
         assert!(!has_motion(&out));
         assert!(has_all_neutral(&out));
         assert_eq!(heartbeat_mode(&out), Some(RequestedMode::Disarm));
-        assert!(matches!(l.node.fault(), Some(Fault::Decode { .. })));
+        assert!(matches!(l.node().fault(), Some(Fault::Decode { .. })));
         l.step();
-        assert_eq!(l.machine.node().valve_commands(), [0.0; 6]);
+        assert_eq!(l.machine().node().valve_commands(), [0.0; 6]);
         // Recovers and re-arms.
         assert!(l.run_until(5.0, |l| has_motion(&l.last_out)));
     }
@@ -242,17 +246,16 @@ fn garbage_frames_mid_dig_neutralise_in_the_same_period() {
 fn shutdown_ends_with_neutral_valves_and_a_disarm() {
     let mut l = Loop::new(default_sim(), one_dig());
     run_to_stage(&mut l, Stage::PreDig, 120.0);
-    let out = l.node.shutdown(l.time_s());
+    let now = l.time_s();
+    let out = l.node_mut().shutdown(now);
     assert!(has_all_neutral(&out));
     assert_eq!(
         heartbeat_mode(&out[out.len() - 1..]),
         Some(RequestedMode::Disarm)
     );
-    for f in &out {
-        l.ctl.send(*f).unwrap();
-    }
-    l.machine.advance(0.002);
-    assert_eq!(l.machine.node().gateway().mode(), GatewayMode::Disarmed);
+    l.h.send_from_controller(&out).unwrap();
+    l.h.machine.advance(0.002);
+    assert_eq!(l.machine().node().gateway().mode(), GatewayMode::Disarmed);
 }
 
 #[test]
@@ -265,7 +268,7 @@ fn trace_first_dig() {
         Loop::new(default_sim(), one_dig())
     };
     for j in planner::kinematics::Joint::ALL {
-        let k = l.node.estimator().kinematics();
+        let k = l.node().estimator().kinematics();
         eprintln!(
             "{j}: limits {:?} stroke range {:?}",
             k.joint_limits(j),
@@ -276,12 +279,12 @@ fn trace_first_dig() {
     l.run_until(60.0, |l| {
         if l.time_s() >= next {
             next += 0.5;
-            let s = l.node.state();
+            let s = l.node().state();
             eprintln!(
                 "{:6.2} {:?} {:?} q=[{:.3} {:.3} {:.3} sw {:.3}] rates={:.3?} tip=({:.2},{:.2}) cmd={:?} safety={:?}",
                 l.time_s(),
                 l.phase(),
-                l.node.stage(),
+                l.node().stage(),
                 s.joints.boom_rad,
                 s.joints.stick_rad,
                 s.joints.bucket_rad,
@@ -289,11 +292,11 @@ fn trace_first_dig() {
                 s.rates_rad_per_s,
                 s.tip.x_m,
                 s.tip.z_m,
-                l.node.last_command(),
-                l.node.safety().state()
+                l.node().last_command(),
+                l.node().safety().state()
             );
         }
-        l.node.finished()
+        l.node().finished()
     });
 }
 
@@ -321,13 +324,13 @@ fn explore_autodig_parameters() {
         }];
         let mut l = Loop::new(default_sim(), c);
         let ok = l.run_until(60.0, |l| l.phase() == Phase::Weigh);
-        let t = l.machine.plant().true_state();
+        let t = l.machine().plant().true_state();
         eprintln!(
             "rho2 {rho2} h {hardness} start ({x},{z}): weigh {ok} at {:.2}, payload {:.0} kg, swept {:?}, fault {:?}",
             l.time_s(),
             t.payload_kg,
-            l.node.cycle().swept_volume_m3(),
-            l.node.last_fault()
+            l.node().cycle().swept_volume_m3(),
+            l.node().last_fault()
         );
     }
 }
@@ -423,8 +426,7 @@ fn log_one_dig() {
         Err(_) => planner::autodig::AutodigMaps::builtin().unwrap(),
     };
     let quiet = std::env::var("DIG_QUIET").is_ok();
-    let mut l = Loop::new(sim, c.clone());
-    l.node = controller::node::ControllerNode::new(&l.sim.machine, maps, c).unwrap();
+    let mut l = Loop::with_maps(sim, c, maps);
     let mut next = 0.0;
     l.run_until(60.0, |l| {
         let in_dig = matches!(l.phase(), Phase::Autodig | Phase::Weigh)
@@ -435,20 +437,20 @@ fn log_one_dig() {
                 eprintln!(
                     "phase {:?} swing {:.1} deg target action {:?}",
                     l.phase(),
-                    l.node.state().swing_rad.to_degrees(),
-                    l.node.action().map(|a| a.kind())
+                    l.node().state().swing_rad.to_degrees(),
+                    l.node().action().map(|a| a.kind())
                 );
             }
-            let s = l.node.state();
-            let t = l.machine.plant().true_state();
+            let s = l.node().state();
+            let t = l.machine().plant().true_state();
             let q = s.joints;
             let d = |r: f64| r.to_degrees();
-            let ground = l.machine.plant().world.height(t.tip_world[0], t.tip_world[1]);
+            let ground = l.machine().plant().world.height(t.tip_world[0], t.tip_world[1]);
             eprintln!(
                 "{:6.2} {:>9} q=[{:6.1} {:6.1} {:6.1}] abs st {:6.1} bk {:6.1} tip=({:5.2},{:5.2}) gnd {:5.2} \
                  head=[{:4.1} {:4.1} {:4.1}] rod=[{:4.1} {:4.1} {:4.1}] ext=[{:.2} {:.2} {:.2}] cmd={:?} F=({:7.0},{:7.0}) pay {:5.0} est {:5.0} sw {:?}",
                 l.time_s(),
-                format!("{:?}", l.node.stage().map_or("-".into(), |s| format!("{s:?}"))),
+                format!("{:?}", l.node().stage().map_or("-".into(), |s| format!("{s:?}"))),
                 d(q.boom_rad),
                 d(q.stick_rad),
                 d(q.bucket_rad),
@@ -466,7 +468,7 @@ fn log_one_dig() {
                 s.extension_fraction[0],
                 s.extension_fraction[1],
                 s.extension_fraction[2],
-                match l.node.last_command() {
+                match l.node().last_command() {
                     controller::cycle::CycleCommand::Valves(v) =>
                         format!("[{:.2} {:.2} {:.2}]", v[0], v[1], v[2]),
                     c => format!("{c:?}"),
@@ -474,34 +476,34 @@ fn log_one_dig() {
                 t.soil_force_n[0],
                 t.soil_force_n[1],
                 t.payload_kg,
-                l.node.estimator().payload_estimate_kg().unwrap_or(f64::NAN),
-                l.node.cycle().swept_volume_m3(),
+                l.node().estimator().payload_estimate_kg().unwrap_or(f64::NAN),
+                l.node().cycle().swept_volume_m3(),
             );
         }
         if std::env::var("DIG_SECOND").is_ok() {
-            return l.node.statistics().len() >= 2 || l.node.finished();
+            return l.node().statistics().len() >= 2 || l.node().finished();
         }
         l.phase() == Phase::SwingToDump
     });
-    let t = l.machine.plant().true_state();
-    l.run_until(60.0, |l| !l.node.statistics().is_empty());
+    let t = l.machine().plant().true_state();
+    l.run_until(60.0, |l| !l.node().statistics().is_empty());
     eprintln!(
         "payload {:.0} kg, phase {:?}, last fault {:?}, stats {:?}",
         t.payload_kg,
         l.phase(),
-        l.node.last_fault(),
-        l.node.statistics()
+        l.node().last_fault(),
+        l.node().statistics()
     );
     if std::env::var("DIG_CLEANUP").is_ok() {
-        l.run_until(120.0, |l| l.node.finished());
+        l.run_until(120.0, |l| l.node().finished());
         let (lowest, highest) = floor_extremes(&l);
         eprintln!(
             "CLEANUP hand_over {:?} floor {:?} lowest {lowest:.3} highest {highest:.3}",
-            l.node.statistics().first().and_then(|d| d.hand_over),
-            l.node.statistics().first().and_then(|d| d.floor_z_m),
+            l.node().statistics().first().and_then(|d| d.hand_over),
+            l.node().statistics().first().and_then(|d| d.floor_z_m),
         );
     }
-    let d = l.node.statistics().first().copied();
+    let d = l.node().statistics().first().copied();
     if let Some(d) = d {
         eprintln!(
             "SUMMARY payload_kg {:.0} time_s {:.2} energy_kj {:.0} swept {:.2} end {:?}",

@@ -6,9 +6,7 @@
 
 #![allow(clippy::unwrap_used)]
 
-use lab::experiment::{
-    ExperimentArgs, Mean, StickAngleReading, Which, report, table1, table2,
-};
+use lab::experiment::{ExperimentArgs, Mean, StickAngleReading, Which, report, table1, table2};
 
 /// The command line's defaults, one run each, writing into `out`.
 fn args(which: Which, out: &std::path::Path) -> ExperimentArgs {
@@ -69,9 +67,7 @@ fn table1_perception_is_consistent_and_faster() {
     assert!(time_spread(&with) < 0.5 * time_spread(&plain), "{rows:?}");
     // The report's checks say the same.
     assert!(
-        lab::experiment::table1_checks(&rows)
-            .iter()
-            .all(|c| c.1),
+        lab::experiment::table1_checks(&rows).iter().all(|c| c.1),
         "{rows:?}"
     );
 }

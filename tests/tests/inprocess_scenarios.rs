@@ -74,7 +74,7 @@ fn three_dig_cycles_and_a_cleanup_complete() {
     assert!(s.scans >= 4, "each dig asked for a scan");
     // After the plan the gateway is disarmed.
     s.run_until(1.0, |_| false);
-    assert_eq!(s.machine.node().gateway().mode(), GatewayMode::Disarmed);
+    assert_eq!(s.machine().node().gateway().mode(), GatewayMode::Disarmed);
 }
 
 #[test]
@@ -108,7 +108,11 @@ fn killed_controller_gateway_neutralises_within_100_ms() {
     // Let it dig a little so the valves are open.
     s.run_until(0.3, |_| false);
     assert!(
-        s.machine.node().valve_commands().iter().any(|u| *u != 0.0),
+        s.machine()
+            .node()
+            .valve_commands()
+            .iter()
+            .any(|u| *u != 0.0),
         "the gateway drives nothing mid-dig"
     );
     s.kill_controller();
@@ -116,7 +120,13 @@ fn killed_controller_gateway_neutralises_within_100_ms() {
     let mut neutral_at = None;
     while s.time_s() < last_hb + 0.5 {
         s.advance_machine(0.001);
-        if neutral_at.is_none() && s.machine.node().valve_commands().iter().all(|u| *u == 0.0) {
+        if neutral_at.is_none()
+            && s.machine()
+                .node()
+                .valve_commands()
+                .iter()
+                .all(|u| *u == 0.0)
+        {
             neutral_at = Some(s.time_s());
         }
     }
@@ -127,7 +137,7 @@ fn killed_controller_gateway_neutralises_within_100_ms() {
         delay * 1e3
     );
     assert!(delay <= WATCHDOG_S, "{delay} s");
-    let gw = s.machine.node().gateway();
+    let gw = s.machine().node().gateway();
     assert_eq!(gw.mode(), GatewayMode::Faulted);
     assert!(gw.faults().contains(GatewayFaults::WATCHDOG_TIMEOUT));
     // The status frames say so, and the machine comes to rest.
@@ -137,9 +147,9 @@ fn killed_controller_gateway_neutralises_within_100_ms() {
     // rates are not used: at rest in the soil the simulator reports a creep rate while the angles
     // stay put.)
     s.advance_machine(1.0);
-    let a0 = s.machine.plant().true_state().angles_rad;
+    let a0 = s.machine().plant().true_state().angles_rad;
     s.advance_machine(1.0);
-    let a1 = s.machine.plant().true_state().angles_rad;
+    let a1 = s.machine().plant().true_state().angles_rad;
     let moved = (0..4).map(|j| (a1[j] - a0[j]).abs()).fold(0.0, f64::max);
     assert!(moved < REST_MOTION_RAD, "still moving: {a0:?} -> {a1:?}");
 }
@@ -179,7 +189,7 @@ fn malformed_and_spoofed_frames_are_counted_rejected_and_safe() {
     for _ in 0..20 {
         s.step();
         assert_ne!(
-            s.machine.node().valve_commands()[0],
+            s.machine().node().valve_commands()[0],
             1.0,
             "foreign command applied"
         );

@@ -5,11 +5,11 @@
 
 use std::sync::Mutex;
 
-use trace_tools::replay::{self, ReplayClock};
-use trace_tools::synth::{self, SynthConfig};
 use firmware_bridge::frame::CanFrame;
 use firmware_bridge::transport::{Bus, Result, TimestampedFrame};
 use tokio::time::{Duration, Instant};
+use trace_tools::replay::{self, ReplayClock};
+use trace_tools::synth::{self, SynthConfig};
 
 /// A bus that remembers when each frame was sent (tokio clock) and never receives.
 struct RecordingBus {

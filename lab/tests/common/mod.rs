@@ -1,82 +1,78 @@
-//! Closed-loop harness: the controller node and the simulator (`vcan_sim::embedded`) on one
-//! in-process bus in virtual time; the machine advances 10 ms (10 physics steps), then the node steps
-//! once with the frames it received, and its frames go back on the bus.
+//! The closed-loop tests' knobs over the lab's virtual-time harness (`lab::harness`): a sensor
+//! dropout switch, extra frames for the node, the fixed plan's scans answered.
 
 #![allow(dead_code, clippy::unwrap_used)]
 
 use controller::cycle::Phase;
 use controller::node::{ControllerConfig, ControllerNode, Outbox};
 use firmware_bridge::messages::{AuxValveCommand, Message, RequestedMode, Valve};
-use firmware_bridge::transport::{InProcessBus, InProcessNode, TimestampedFrame, VirtualClock};
+use firmware_bridge::transport::TimestampedFrame;
+use lab::harness::{Harness, HarnessOptions};
 use planner::autodig::AutodigMaps;
 use vcan_sim::SimConfig;
 use vcan_sim::embedded::EmbeddedMachine;
-use vcan_sim::sensors::ScanRequest;
 
-/// The control period.
-pub const PERIOD_S: f64 = 0.01;
+pub use lab::harness::PERIOD_S;
 
+/// The harness with the knobs the closed-loop tests turn.
 pub struct Loop {
-    pub clock: VirtualClock,
-    pub bus: InProcessBus,
-    pub ctl: InProcessNode,
-    pub machine: EmbeddedMachine,
-    pub node: ControllerNode,
+    pub h: Harness,
     pub sim: SimConfig,
-    pub inbox: Vec<TimestampedFrame>,
     /// Forward the machine's frames to the node (false: sensor dropout).
     pub forward: bool,
     pub last_out: Outbox,
-    pub steps: u64,
 }
 
 impl Loop {
     pub fn new(sim: SimConfig, config: ControllerConfig) -> Self {
-        let clock = VirtualClock::new();
-        let bus = InProcessBus::with_virtual_clock("sim0", clock.clone());
-        let ctl = bus.attach();
-        let machine = EmbeddedMachine::new(sim.build().unwrap(), bus.attach(), Some(clock.clone()));
-        let node =
-            ControllerNode::new(&sim.machine, AutodigMaps::builtin().unwrap(), config).unwrap();
-        let last_out = Outbox::new().unwrap();
+        Self::with_maps(sim, config, AutodigMaps::builtin().unwrap())
+    }
+
+    pub fn with_maps(sim: SimConfig, config: ControllerConfig, maps: AutodigMaps) -> Self {
+        let h = Harness::with_options(
+            &sim,
+            maps,
+            config,
+            &HarnessOptions {
+                bus_name: "sim0".to_owned(),
+                ..HarnessOptions::default()
+            },
+        )
+        .unwrap();
         Self {
-            clock,
-            bus,
-            ctl,
-            machine,
-            node,
+            h,
             sim,
-            inbox: Vec::new(),
             forward: true,
-            last_out,
-            steps: 0,
+            last_out: Outbox::new().unwrap(),
         }
+    }
+
+    pub fn node(&self) -> &ControllerNode {
+        self.h.node().unwrap()
+    }
+
+    pub fn node_mut(&mut self) -> &mut ControllerNode {
+        self.h.node_mut().unwrap()
+    }
+
+    pub fn machine(&self) -> &EmbeddedMachine {
+        &self.h.machine
     }
 
     /// One control period; extra frames are delivered to the node after the machine's.
     pub fn step_with(&mut self, extra: &[TimestampedFrame]) -> Outbox {
-        self.machine.advance(PERIOD_S);
-        self.inbox.clear();
-        while let Some(f) = self.ctl.try_recv() {
-            if self.forward {
-                self.inbox.push(f);
-            }
-        }
-        self.inbox.extend_from_slice(extra);
-        let now = self.clock.now_s();
-        let out = self.node.step(now, &self.inbox);
-        for f in &out {
-            self.ctl.send(*f).unwrap();
-        }
-        if self.node.take_scan_request() {
-            let scan = self.machine.scan(&ScanRequest::default());
-            match self.node.cycle().config().scan_grid.terrain(&scan.points) {
-                Ok(grid) => self.node.provide_terrain(grid),
-                Err(e) => eprintln!("scan: {e}"),
-            }
-        }
+        let forward = self.forward;
+        let out = self
+            .h
+            .step_with(|inbox| {
+                if !forward {
+                    inbox.clear();
+                }
+                inbox.extend_from_slice(extra);
+            })
+            .unwrap();
+        self.h.answer_scan_request();
         self.last_out = out;
-        self.steps += 1;
         out
     }
 
@@ -85,7 +81,7 @@ impl Loop {
     }
 
     pub fn time_s(&self) -> f64 {
-        self.clock.now_s()
+        self.h.time_s()
     }
 
     /// Steps until `done` or `max_s` of simulated time; returns whether `done` held.
@@ -101,7 +97,7 @@ impl Loop {
     }
 
     pub fn phase(&self) -> Phase {
-        self.node.cycle().phase()
+        self.node().cycle().phase()
     }
 }
 
