@@ -37,7 +37,7 @@ pub enum Command {
     Model {
         /// The model command.
         #[command(subcommand)]
-        cmd: lab::model_cmd::ModelCommand,
+        cmd: lab::model::ModelCommand,
     },
     /// Model-discrepancy workflow: where the model and measured sessions disagree, the missing effect
     /// named and added (`--measured DIR... --out DIR`), `eval` (hidden-effect confusion table), `bench`

@@ -22,7 +22,7 @@
 //! - `trajectories.svg`, `terrain_before.svg`, `terrain_after.svg`, `dig_stats.svg` ([`crate::plots`]);
 //! - planned and predefined: `bench_after_NNN.svg` (Fig. 55), `dig_sequence.svg` (Fig. 56), and
 //!   `soil_samples.json`: per dig the soil estimator's samples (`Gamma` and the tip force from the
-//!   pressures, 4.3.4) for `excavator-ctl model soil-cv` ([`crate::soil_cv`]).
+//!   pressures, 4.3.4) for `excavator-ctl model soil-cv` ([`crate::model::soil_cv`]).
 //!
 //! One thread alternates the simulator (10 ms, ten 1 kHz physics steps) and the controller step, as in
 //! the closed-loop tests; the run is deterministic for a seed.
@@ -876,7 +876,7 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
     let mut result: anyhow::Result<()> = Ok(());
     let mut soil = SoilMonitor::default();
     // Every dig's soil samples (4.3.5), for `soil_samples.json` and `model soil-cv`.
-    let mut soil_samples = crate::soil_cv::SoilSamplesFile::default();
+    let mut soil_samples = crate::model::soil_cv::SoilSamplesFile::default();
     let mut dig_soil_samples: Vec<planner::estimate::SoilSample> = Vec::new();
     let mut planned_info: Vec<PlannedInfo> = Vec::new();
     let mut session_over: Option<String> = None;
@@ -1181,7 +1181,7 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
                 node.provide_terrain(s.terrain().clone());
             }
             if !dig_soil_samples.is_empty() {
-                soil_samples.digs.push(crate::soil_cv::SoilDigSamples {
+                soil_samples.digs.push(crate::model::soil_cv::SoilDigSamples {
                     index: c.index,
                     samples: std::mem::take(&mut dig_soil_samples),
                 });

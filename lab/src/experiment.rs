@@ -648,7 +648,7 @@ pub fn fig52_with(
 /// The thesis's statements about Fig. 52 on the simulator's rows (fill: payload over the full
 /// bucket's 2550 kg).
 #[must_use]
-pub fn fig52_checks(rows: &[(&'static str, f64, Mean)]) -> crate::model_fig52::Fig52Checks {
+pub fn fig52_checks(rows: &[(&'static str, f64, Mean)]) -> crate::model::fig52::Fig52Checks {
     let figures = |soil: &str, index: f64| {
         rows.iter()
             .find(|r| r.0 == soil && r.1 == index)
@@ -656,7 +656,7 @@ pub fn fig52_checks(rows: &[(&'static str, f64, Mean)]) -> crate::model_fig52::F
                 (m.payload_kg / 2550.0, m.time_s, m.energy_kj)
             })
     };
-    crate::model_fig52::Fig52Checks::from_figures(
+    crate::model::fig52::Fig52Checks::from_figures(
         [figures("soft", 1.0), figures("soft", 5.0)],
         [figures("hard", 1.0), figures("hard", 5.0)],
     )
@@ -699,7 +699,7 @@ pub fn scoreboard(args: &ExperimentArgs) -> anyhow::Result<Vec<Score>> {
     if let [(_, a), (_, b), (_, c)] = t2.as_slice() {
         add(
             "Table 2 (simulator)",
-            owned(&crate::model_cmd::table2_checks([
+            owned(&crate::model::table2::table2_checks([
                 figures(a),
                 figures(b),
                 figures(c),
@@ -715,21 +715,21 @@ pub fn scoreboard(args: &ExperimentArgs) -> anyhow::Result<Vec<Score>> {
         "Fig. 52 (simulator)",
         fig52_checks(&f52).statements().to_vec(),
     );
-    let start = crate::model_cmd::ModelStartArgs::default();
+    let start = crate::model::start::ModelStartArgs::default();
     let model = start.load_model()?;
-    let site = crate::model_cmd::default_site()?;
+    let site = crate::model::start::default_site()?;
     let dig_start = start.start(&site)?;
-    let rows = crate::model_cmd::table2_rows(
+    let rows = crate::model::table2::table2_rows(
         &model,
         start.start_r,
         start.start_depth,
         start.start_bucket_deg,
     )?;
-    let figures = |r: &crate::model_cmd::Table2Row| (r.time_s, r.volume_m3, r.energy_kj);
+    let figures = |r: &crate::model::table2::Table2Row| (r.time_s, r.volume_m3, r.energy_kj);
     if let [a, b, c] = rows.as_slice() {
         add(
             "Table 2 (dig model)",
-            owned(&crate::model_cmd::table2_checks([
+            owned(&crate::model::table2::table2_checks([
                 figures(a),
                 figures(b),
                 figures(c),
@@ -737,7 +737,7 @@ pub fn scoreboard(args: &ExperimentArgs) -> anyhow::Result<Vec<Score>> {
         );
     }
     let f52_model =
-        crate::model_fig52::checks(&model, crate::model_fig52::SOIL_PAIR_KPA, &dig_start, &site)?;
+        crate::model::fig52::checks(&model, crate::model::fig52::SOIL_PAIR_KPA, &dig_start, &site)?;
     add("Fig. 52 (dig model)", f52_model.statements().to_vec());
     Ok(scores)
 }
@@ -754,7 +754,7 @@ pub fn scoreboard_markdown(scores: &[Score]) -> String {
             "| {} | {} | {} |",
             sc.result,
             sc.statement,
-            crate::model_cmd::thesis_verdict(sc.holds)
+            crate::model::table2::thesis_verdict(sc.holds)
         );
     }
     let _ = writeln!(
@@ -774,7 +774,7 @@ fn write_checks<S: std::fmt::Display>(s: &mut String, checks: impl IntoIterator<
     // Writing into a String cannot fail.
     let _ = writeln!(s);
     for (statement, ok) in checks {
-        let _ = writeln!(s, "  {statement}: {}", crate::model_cmd::thesis_verdict(ok));
+        let _ = writeln!(s, "  {statement}: {}", crate::model::table2::thesis_verdict(ok));
     }
 }
 
@@ -864,7 +864,7 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
             )?);
         }
         Which::Table2 => {
-            let thesis = crate::model_cmd::THESIS_TABLE2;
+            let thesis = crate::model::table2::THESIS_TABLE2;
             let _ = writeln!(
                 s,
                 "Table 2: soil force x1, x2, x3 ({}, base soil scaled by {}; {} digs each)\n",
@@ -898,7 +898,7 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
             if let [(_, a), (_, b), (_, c)] = rows.as_slice() {
                 write_checks(
                     &mut s,
-                    crate::model_cmd::table2_checks([figures(a), figures(b), figures(c)]),
+                    crate::model::table2::table2_checks([figures(a), figures(b), figures(c)]),
                 );
             }
             let curves = rows
@@ -1570,14 +1570,14 @@ mod tests {
     /// The thesis's Table 2 passes every check; a volume that falls from x1 fails that one.
     #[test]
     fn table2_checks_hold_for_the_thesis() {
-        let thesis = crate::model_cmd::THESIS_TABLE2.map(|t| (t.1, t.2, t.3));
-        assert!(crate::model_cmd::table2_checks(thesis).iter().all(|c| c.1));
+        let thesis = crate::model::table2::THESIS_TABLE2.map(|t| (t.1, t.2, t.3));
+        assert!(crate::model::table2::table2_checks(thesis).iter().all(|c| c.1));
         let ours = [
             (3.92, 2.69, 226.0),
             (4.57, 1.10, 294.0),
             (3.94, 0.84, 276.0),
         ];
-        let c = crate::model_cmd::table2_checks(ours);
+        let c = crate::model::table2::table2_checks(ours);
         assert_eq!(c.map(|c| c.1), [true, true, false, true, false], "{c:?}");
     }
 }

@@ -5,10 +5,9 @@
 //! - [`demo`]: `excavator-ctl demo`, a whole autonomous session against the embedded simulator in
 //!   virtual time, and the session folder it writes (trace, scans, summary, plots).
 //! - [`experiment`]: the thesis's reproductions in closed loop (Tables 1-5, Figs. 52, 53, 60).
-//! - [`model_cmd`]: the dig model's commands: train and evaluate the actuator networks, generate
-//!   simulator data, compare the dig model with the simulator, Table 2 with the dig model.
-//! - [`model_fig52`]: thesis Fig. 52 with the dig model.
-//! - [`soil_cv`]: cross-validation of the soil models on a session's soil samples (4.3.5).
+//! - [`model`]: the dig model's commands: train and evaluate the actuator networks, generate
+//!   simulator data, compare the dig model with the simulator, Table 2 and Fig. 52 with the dig
+//!   model, cross-validation of the soil models on a session's soil samples (4.3.5).
 //! - [`plots`]: the SVG figures of sessions and experiments.
 //!
 //! # Data flow
@@ -21,7 +20,5 @@
 
 pub mod demo;
 pub mod experiment;
-pub mod model_cmd;
-pub mod model_fig52;
+pub mod model;
 pub mod plots;
-pub mod soil_cv;

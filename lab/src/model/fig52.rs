@@ -20,9 +20,8 @@ use clap::Args;
 use planner::dig_model::{DigEnd, DigModel, DigPrediction, DigSite, DigStart, SoilModel};
 use serde::Serialize;
 
-use crate::model_cmd::{
-    ModelStartArgs, default_section, default_site, predicted_tip_path, thesis_verdict,
-};
+use super::start::{ModelStartArgs, default_section, default_site, predicted_tip_path};
+use super::table2::thesis_verdict;
 
 /// The cohesions of the printed sweep, Pa (the default bench's soil is 8 kPa).
 pub const SWEEP_COHESION_PA: [f64; 7] = [4e3, 6e3, 8e3, 12e3, 16e3, 24e3, 32e3];
