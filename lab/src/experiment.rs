@@ -27,7 +27,7 @@ pub use crate::demo::SoilContact;
 use vcan_sim::sensors::ScanRequest;
 
 use controller::cycle::{Action, Phase, StartPose};
-use crate::demo::TipPoint;
+use crate::session::TipPoint;
 use controller::node::{ControllerConfig, ControllerNode};
 
 /// Which reproduction.
@@ -648,7 +648,7 @@ pub fn fig52_with(
 /// The thesis's statements about Fig. 52 on the simulator's rows (fill: payload over the full
 /// bucket's 2550 kg).
 #[must_use]
-pub fn fig52_checks(rows: &[(&'static str, f64, Mean)]) -> crate::model::fig52::Fig52Checks {
+pub fn fig52_checks(rows: &[(&'static str, f64, Mean)]) -> crate::thesis::Fig52Checks {
     let figures = |soil: &str, index: f64| {
         rows.iter()
             .find(|r| r.0 == soil && r.1 == index)
@@ -656,7 +656,7 @@ pub fn fig52_checks(rows: &[(&'static str, f64, Mean)]) -> crate::model::fig52::
                 (m.payload_kg / 2550.0, m.time_s, m.energy_kj)
             })
     };
-    crate::model::fig52::Fig52Checks::from_figures(
+    crate::thesis::Fig52Checks::from_figures(
         [figures("soft", 1.0), figures("soft", 5.0)],
         [figures("hard", 1.0), figures("hard", 5.0)],
     )
@@ -699,7 +699,7 @@ pub fn scoreboard(args: &ExperimentArgs) -> anyhow::Result<Vec<Score>> {
     if let [(_, a), (_, b), (_, c)] = t2.as_slice() {
         add(
             "Table 2 (simulator)",
-            owned(&crate::model::table2::table2_checks([
+            owned(&crate::thesis::table2_checks([
                 figures(a),
                 figures(b),
                 figures(c),
@@ -729,7 +729,7 @@ pub fn scoreboard(args: &ExperimentArgs) -> anyhow::Result<Vec<Score>> {
     if let [a, b, c] = rows.as_slice() {
         add(
             "Table 2 (dig model)",
-            owned(&crate::model::table2::table2_checks([
+            owned(&crate::thesis::table2_checks([
                 figures(a),
                 figures(b),
                 figures(c),
@@ -754,7 +754,7 @@ pub fn scoreboard_markdown(scores: &[Score]) -> String {
             "| {} | {} | {} |",
             sc.result,
             sc.statement,
-            crate::model::table2::thesis_verdict(sc.holds)
+            crate::thesis::thesis_verdict(sc.holds)
         );
     }
     let _ = writeln!(
@@ -766,15 +766,13 @@ pub fn scoreboard_markdown(scores: &[Score]) -> String {
     s
 }
 
-const LB_TO_KG: f64 = 0.453_592;
-
 /// Appends a blank line, then a line per statement: whether it holds as in the thesis.
 fn write_checks<S: std::fmt::Display>(s: &mut String, checks: impl IntoIterator<Item = (S, bool)>) {
     use std::fmt::Write as _;
     // Writing into a String cannot fail.
     let _ = writeln!(s);
     for (statement, ok) in checks {
-        let _ = writeln!(s, "  {statement}: {}", crate::model::table2::thesis_verdict(ok));
+        let _ = writeln!(s, "  {statement}: {}", crate::thesis::thesis_verdict(ok));
     }
 }
 
@@ -806,11 +804,7 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
     }
     match args.which {
         Which::Table1 => {
-            let thesis = [
-                (-87.0, 6.58, 4145.0, 7.13, 5331.0),
-                (-70.0, 10.35, 5172.0, 7.47, 5329.0),
-                (-50.0, 13.83, 6526.0, 8.77, 5338.0),
-            ];
+            let thesis = crate::thesis::THESIS_TABLE1;
             let _ = writeln!(
                 s,
                 "Table 1: Autodig with and without the perception enhancements ({} digs each; payload kg, \
@@ -840,9 +834,9 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
                     time_payload_cells(plain, args.runs),
                     time_payload_cells(with, args.runs),
                     t.1,
-                    t.2 * LB_TO_KG,
+                    t.2 * crate::thesis::LB_TO_KG,
                     t.3,
-                    t.4 * LB_TO_KG
+                    t.4 * crate::thesis::LB_TO_KG
                 );
             }
             write_checks(&mut s, table1_checks(&rows));
@@ -864,7 +858,7 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
             )?);
         }
         Which::Table2 => {
-            let thesis = crate::model::table2::THESIS_TABLE2;
+            let thesis = crate::thesis::THESIS_TABLE2;
             let _ = writeln!(
                 s,
                 "Table 2: soil force x1, x2, x3 ({}, base soil scaled by {}; {} digs each)\n",
@@ -898,7 +892,7 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
             if let [(_, a), (_, b), (_, c)] = rows.as_slice() {
                 write_checks(
                     &mut s,
-                    crate::model::table2::table2_checks([figures(a), figures(b), figures(c)]),
+                    crate::thesis::table2_checks([figures(a), figures(b), figures(c)]),
                 );
             }
             let curves = rows
@@ -1570,14 +1564,14 @@ mod tests {
     /// The thesis's Table 2 passes every check; a volume that falls from x1 fails that one.
     #[test]
     fn table2_checks_hold_for_the_thesis() {
-        let thesis = crate::model::table2::THESIS_TABLE2.map(|t| (t.1, t.2, t.3));
-        assert!(crate::model::table2::table2_checks(thesis).iter().all(|c| c.1));
+        let thesis = crate::thesis::THESIS_TABLE2.map(|t| (t.1, t.2, t.3));
+        assert!(crate::thesis::table2_checks(thesis).iter().all(|c| c.1));
         let ours = [
             (3.92, 2.69, 226.0),
             (4.57, 1.10, 294.0),
             (3.94, 0.84, 276.0),
         ];
-        let c = crate::model::table2::table2_checks(ours);
+        let c = crate::thesis::table2_checks(ours);
         assert_eq!(c.map(|c| c.1), [true, true, false, true, false], "{c:?}");
     }
 }

@@ -1,13 +1,14 @@
 //! SVG plots of a demo session (plotters): tip trajectories per dig over the terrain section, terrain
 //! elevation maps before and after, and per-dig weight, time and energy. Each function returns the SVG
-//! text; [`crate::demo`] writes it.
+//! text; `demo` and the experiments write it. It draws the session records ([`crate::session`]) and
+//! nothing else of the lab.
 
 use planner::terrain::TerrainGrid;
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
-use crate::demo::{DigRecord, TipPoint};
+use crate::session::{DigRecord, TipPoint};
 
 pub(crate) use trace_tools::plot::err;
 

@@ -86,7 +86,7 @@ fn demo_writes_all_outputs_with_the_documented_fields_for_two_digs() {
     );
     assert!(trace.lines().count() as u64 >= json["totals"]["trace_frames"].as_u64().unwrap());
     // The soil estimator's samples of the planned session, for `model soil-cv`.
-    let soil: lab::model::soil_cv::SoilSamplesFile =
+    let soil: lab::session::SoilSamplesFile =
         serde_json::from_slice(&std::fs::read(out.join("soil_samples.json")).unwrap()).unwrap();
     assert!(soil.digs.iter().all(|d| d.index < 2));
     assert!(soil.digs.iter().flat_map(|d| &d.samples).all(|s| {

@@ -21,20 +21,14 @@ use planner::dig_model::{DigEnd, DigModel, DigPrediction, DigSite, DigStart, Soi
 use serde::Serialize;
 
 use super::start::{ModelStartArgs, default_section, default_site, predicted_tip_path};
-use super::table2::thesis_verdict;
+use crate::thesis::{FULL_FILL, Fig52Checks, HALF_FILL, THESIS_SOFT_COST, pct, thesis_verdict};
 
 /// The cohesions of the printed sweep, Pa (the default bench's soil is 8 kPa).
 pub const SWEEP_COHESION_PA: [f64; 7] = [4e3, 6e3, 8e3, 12e3, 16e3, 24e3, 32e3];
 /// The two Autodig soil hardness indices compared (the ends of the maps' range).
 pub const INDICES: [f64; 2] = [1.0, 5.0];
-/// A bucket counts as full from this share of its capacity.
-pub const FULL_FILL: f64 = 0.85;
-/// "About half" full: this range of the capacity.
-pub const HALF_FILL: (f64, f64) = (0.35, 0.65);
 /// The default soft and hard soils' cohesion, kPa (read off the sweep; see the module docs).
 pub const SOIL_PAIR_KPA: (f64, f64) = (6.0, 12.0);
-/// The thesis's soft-soil cost of the higher index: time, energy (fractions).
-pub const THESIS_SOFT_COST: (f64, f64) = (0.60, 0.75);
 
 /// Arguments of `model fig52`.
 #[derive(Debug, Args)]
@@ -74,77 +68,14 @@ pub struct Fig52Dig {
     pub end: DigEnd,
 }
 
-/// The thesis's statements about Fig. 52, checked on a soft and a hard soil's pair of digs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-pub struct Fig52Checks {
-    /// Soft soil: both indices fill the bucket (at least [`FULL_FILL`]).
-    pub soft_both_full: bool,
-    /// Soft soil: the higher index takes more time and more energy.
-    pub soft_high_index_costs: bool,
-    /// Hard soil: the lower index fills the bucket about half ([`HALF_FILL`]).
-    pub hard_low_index_half: bool,
-    /// Hard soil: the higher index fills the bucket (at least [`FULL_FILL`]).
-    pub hard_high_index_full: bool,
-}
-
-impl Fig52Checks {
-    /// The checks on `[index 1, index 5]` of the soft and of the hard soil.
-    #[must_use]
-    pub fn of(soft: &[Fig52Dig; 2], hard: &[Fig52Dig; 2]) -> Self {
-        let figures = |d: &Fig52Dig| (d.fill, d.time_s, d.energy_kj);
-        Self::from_figures(
-            [figures(&soft[0]), figures(&soft[1])],
-            [figures(&hard[0]), figures(&hard[1])],
-        )
-    }
-
-    /// The checks on `(fill, time s, energy kJ)` of index 1 and index 5 in the soft and in the hard
-    /// soil (fill: the share of the bucket's capacity).
-    #[must_use]
-    pub fn from_figures(soft: [(f64, f64, f64); 2], hard: [(f64, f64, f64); 2]) -> Self {
-        Self {
-            soft_both_full: soft.iter().all(|d| d.0 >= FULL_FILL),
-            soft_high_index_costs: soft[1].1 > soft[0].1 && soft[1].2 > soft[0].2,
-            hard_low_index_half: (HALF_FILL.0..=HALF_FILL.1).contains(&hard[0].0),
-            hard_high_index_full: hard[1].0 >= FULL_FILL,
-        }
-    }
-
-    /// Each statement, worded, and whether it holds.
-    #[must_use]
-    pub fn statements(&self) -> [(String, bool); 4] {
-        [
-            (
-                format!("soft soil, both indices fill (>= {})", pct(FULL_FILL)),
-                self.soft_both_full,
-            ),
-            (
-                "soft soil, index 5 costs time and energy".to_owned(),
-                self.soft_high_index_costs,
-            ),
-            (
-                format!(
-                    "hard soil, index 1 fills about half ({}-{})",
-                    pct(HALF_FILL.0),
-                    pct(HALF_FILL.1)
-                ),
-                self.hard_low_index_half,
-            ),
-            (
-                format!("hard soil, index 5 fills (>= {})", pct(FULL_FILL)),
-                self.hard_high_index_full,
-            ),
-        ]
-    }
-
-    /// All four hold.
-    #[must_use]
-    pub fn all(&self) -> bool {
-        self.soft_both_full
-            && self.soft_high_index_costs
-            && self.hard_low_index_half
-            && self.hard_high_index_full
-    }
+/// The thesis's statements about Fig. 52 on `[index 1, index 5]` of the soft and of the hard soil.
+#[must_use]
+pub fn pair_checks(soft: &[Fig52Dig; 2], hard: &[Fig52Dig; 2]) -> Fig52Checks {
+    let figures = |d: &Fig52Dig| (d.fill, d.time_s, d.energy_kj);
+    Fig52Checks::from_figures(
+        [figures(&soft[0]), figures(&soft[1])],
+        [figures(&hard[0]), figures(&hard[1])],
+    )
 }
 
 /// The dig model's dig from `start` over `site` in a soil of `cohesion_pa` (the model's analytical soil
@@ -227,7 +158,7 @@ pub fn bands(
     for k in 0..=n {
         let c = from + step * f64::from(k);
         let [(lo, _), (hi, _)] = pair(model, c, start, site)?;
-        let checks = Fig52Checks::of(&[lo, hi], &[lo, hi]);
+        let checks = pair_checks(&[lo, hi], &[lo, hi]);
         if checks.soft_both_full && checks.soft_high_index_costs {
             soft.push(c);
         }
@@ -264,10 +195,6 @@ fn ranges_kpa(cohesions_pa: &[f64]) -> String {
         .join(", ")
 }
 
-fn pct(x: f64) -> String {
-    format!("{:.0} %", 100.0 * x)
-}
-
 fn change(from: f64, to: f64) -> String {
     format!("{:+.0} %", 100.0 * (to / from - 1.0))
 }
@@ -284,7 +211,7 @@ pub fn checks(
 ) -> anyhow::Result<Fig52Checks> {
     let soft = pair(model, soils_kpa.0 * 1e3, start, site)?;
     let hard = pair(model, soils_kpa.1 * 1e3, start, site)?;
-    Ok(Fig52Checks::of(
+    Ok(pair_checks(
         &[soft[0].0, soft[1].0],
         &[hard[0].0, hard[1].0],
     ))
@@ -394,7 +321,7 @@ pub fn report(a: &Fig52Args) -> anyhow::Result<String> {
         pct(h[0].fill),
         pct(h[1].fill)
     )?;
-    let checks = Fig52Checks::of(&s, &h);
+    let checks = pair_checks(&s, &h);
     writeln!(out)?;
     for (statement, ok) in checks.statements() {
         writeln!(out, "  {statement}: {}", thesis_verdict(ok))?;
@@ -465,7 +392,7 @@ mod tests {
         let start = a.start.start(&site).unwrap();
         let soft = pair(&model, a.soft_cohesion_kpa * 1e3, &start, &site).unwrap();
         let hard = pair(&model, a.hard_cohesion_kpa * 1e3, &start, &site).unwrap();
-        let checks = Fig52Checks::of(&[soft[0].0, soft[1].0], &[hard[0].0, hard[1].0]);
+        let checks = pair_checks(&[soft[0].0, soft[1].0], &[hard[0].0, hard[1].0]);
         assert!(
             checks.all(),
             "{checks:?}: soft {:?} / {:?}, hard {:?} / {:?}",
@@ -491,14 +418,14 @@ mod tests {
         };
         let soft = [dig(1.3, 3.0, 200.0), dig(1.9, 4.5, 230.0)];
         let hard = [dig(0.5, 3.0, 200.0), dig(0.9, 4.0, 300.0)];
-        assert!(Fig52Checks::of(&soft, &hard).all());
-        let c = Fig52Checks::of(&soft, &soft);
+        assert!(pair_checks(&soft, &hard).all());
+        let c = pair_checks(&soft, &soft);
         assert!(!c.hard_low_index_half && c.hard_high_index_full && !c.all());
-        let c = Fig52Checks::of(&hard, &hard);
+        let c = pair_checks(&hard, &hard);
         assert!(!c.soft_both_full && c.soft_high_index_costs);
         // A cheaper index 5 in the soft soil is not the thesis's figure.
         let cheap = [dig(1.3, 3.0, 200.0), dig(1.9, 2.5, 230.0)];
-        assert!(!Fig52Checks::of(&cheap, &hard).soft_high_index_costs);
+        assert!(!pair_checks(&cheap, &hard).soft_high_index_costs);
     }
 
     /// Bad input is a clear error, never a panic: a cohesion that is negative or not a number, a start

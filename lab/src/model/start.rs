@@ -131,10 +131,10 @@ pub(super) fn tip_start(
 }
 
 /// The tip path of a predicted dig, for the tip-path plots.
-pub(super) fn predicted_tip_path(p: &DigPrediction) -> Vec<crate::demo::TipPoint> {
+pub(super) fn predicted_tip_path(p: &DigPrediction) -> Vec<crate::session::TipPoint> {
     p.samples
         .iter()
-        .map(|s| crate::demo::TipPoint {
+        .map(|s| crate::session::TipPoint {
             x_m: s.tip_x_m,
             z_m: s.tip_z_m,
         })
@@ -142,7 +142,7 @@ pub(super) fn predicted_tip_path(p: &DigPrediction) -> Vec<crate::demo::TipPoint
 }
 
 /// The section of the default bench as [`TipPoint`]s (every 0.05 m from 1 to 12 m).
-pub(super) fn default_section() -> anyhow::Result<Vec<crate::demo::TipPoint>> {
+pub(super) fn default_section() -> anyhow::Result<Vec<crate::session::TipPoint>> {
     let site = default_site()?;
     Ok((0..=220)
         .filter_map(|k| {
@@ -150,7 +150,7 @@ pub(super) fn default_section() -> anyhow::Result<Vec<crate::demo::TipPoint>> {
             site.profile()
                 .height_at(r)
                 .ok()
-                .map(|z| crate::demo::TipPoint { x_m: r, z_m: z })
+                .map(|z| crate::session::TipPoint { x_m: r, z_m: z })
         })
         .collect())
 }

@@ -9,14 +9,9 @@ use clap::Args;
 use planner::dig_model::DigModel;
 use serde::{Deserialize, Serialize};
 
-use super::start::{ModelStartArgs, default_section, default_site, predicted_tip_path, tip_start};
+use crate::thesis::{THESIS_TABLE2, table2_checks, thesis_verdict};
 
-/// The thesis's Table 2: force factor, time (s), volume (m^3), energy (kJ).
-pub const THESIS_TABLE2: [(f64, f64, f64, f64); 3] = [
-    (1.0, 5.5, 2.2, 113.0),
-    (2.0, 8.1, 2.5, 234.0),
-    (3.0, 7.8, 2.1, 253.0),
-];
+use super::start::{ModelStartArgs, default_section, default_site, predicted_tip_path, tip_start};
 
 /// Arguments of `model table2`.
 #[derive(Debug, Args)]
@@ -87,31 +82,6 @@ fn table2_predictions(
         ));
     }
     Ok(rows)
-}
-
-/// The thesis's statements about Table 2 (4.4) on `(time s, swept volume m^3, energy kJ)` at force
-/// factor 1, 2 and 3: each statement and whether it holds.
-#[must_use]
-pub fn table2_checks(r: [(f64, f64, f64); 3]) -> [(&'static str, bool); 5] {
-    [
-        ("time rises 1 -> 2", r[1].0 > r[0].0),
-        ("time falls 2 -> 3", r[2].0 < r[1].0),
-        ("volume rises 1 -> 2", r[1].1 > r[0].1),
-        ("volume falls 2 -> 3", r[2].1 < r[1].1),
-        (
-            "energy rises throughout",
-            r[1].2 > r[0].2 && r[2].2 > r[1].2,
-        ),
-    ]
-}
-
-/// How a reproduction's check reads: "as in the thesis" or "differs from the thesis".
-pub fn thesis_verdict(ok: bool) -> &'static str {
-    if ok {
-        "as in the thesis"
-    } else {
-        "differs from the thesis"
-    }
 }
 
 /// Runs `model table2`.
