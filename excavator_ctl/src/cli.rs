@@ -24,7 +24,8 @@ pub enum Command {
     /// The embedded default: the simulator in-process in virtual time and a full autonomous session;
     /// writes the trace, scans, summary and plots into --out (docs/demo-output.md).
     Demo(lab::demo::DemoArgs),
-    /// The thesis's Autodig results in closed loop against the simulator: table1, table2, fig52.
+    /// The thesis's results reproduced in the simulator and the dig model: Tables 1-5, Figs. 52, 53
+    /// and 60, and the scoreboard of its statements.
     Experiment(lab::experiment::ExperimentArgs),
     /// candump trace tools: decode, stats, plot, convert (csv, mcap), replay, diff (docs/trace-tools.md).
     Trace {
@@ -33,7 +34,7 @@ pub enum Command {
         cmd: trace_tools::TraceCommand,
     },
     /// The planner's dig model: train the actuator networks, generate simulator data, compare with
-    /// the simulator, thesis Table 2 and Fig. 52 (docs/models.md).
+    /// the simulator, cross-validate the soil models (docs/models.md).
     Model {
         /// The model command.
         #[command(subcommand)]
@@ -143,4 +144,42 @@ mod tests {
             Cli::try_parse_from(["excavator-ctl", "discrepancy", "eval", "--digs", "2"]).is_ok()
         );
     }
+
+    /// Table 2 and Fig. 52 are `experiment` commands that print the simulator's and the dig model's
+    /// results; `model table2|fig52` are gone, and each command takes only its own options.
+    #[test]
+    fn table2_and_fig52_are_experiments_with_both_sections_options() {
+        for args in [
+            &[
+                "excavator-ctl",
+                "experiment",
+                "table2",
+                "--runs",
+                "2",
+                "--start-r",
+                "7.4",
+            ][..],
+            &[
+                "excavator-ctl",
+                "experiment",
+                "fig52",
+                "--soft-cohesion-kpa",
+                "5",
+                "--model-soft-cohesion-kpa",
+                "6",
+                "--model",
+                "a.json",
+            ],
+        ] {
+            assert!(Cli::try_parse_from(args).is_ok(), "{args:?} refused");
+        }
+        for args in [
+            &["excavator-ctl", "model", "table2"][..],
+            &["excavator-ctl", "model", "fig52"],
+            &["excavator-ctl", "experiment", "table1", "--base-scale", "2"],
+        ] {
+            assert!(Cli::try_parse_from(args).is_err(), "{args:?} parsed");
+        }
+    }
+
 }

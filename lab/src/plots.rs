@@ -3,6 +3,9 @@
 //! text; `demo` and the experiments write it. It draws the session records ([`crate::session`]) and
 //! nothing else of the lab.
 
+use std::path::{Path, PathBuf};
+
+use anyhow::Context as _;
 use planner::terrain::TerrainGrid;
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
@@ -175,6 +178,23 @@ pub fn tip_paths_svg(title: &str, panels: &[(String, Vec<TipCurve>)]) -> anyhow:
 }
 
 /// The chart type of the tip-path plots: base-frame `x` and `z`, m.
+/// Writes [`tip_paths_svg`] of `panels` as `dir/name` (creating `dir`) and returns its path.
+///
+/// # Errors
+/// Drawing, creating the folder or writing the file.
+pub fn write_tip_paths(
+    dir: &Path,
+    name: &str,
+    title: &str,
+    panels: &[(String, Vec<TipCurve>)],
+) -> anyhow::Result<PathBuf> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let path = dir.join(name);
+    std::fs::write(&path, tip_paths_svg(title, panels)?)
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(path)
+}
+
 type TipChart<'a, 'b> =
     ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 

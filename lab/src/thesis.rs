@@ -119,6 +119,19 @@ pub fn thesis_verdict(ok: bool) -> &'static str {
     }
 }
 
+/// Appends a blank line, then a line per statement: whether it holds as in the thesis.
+pub fn write_checks<S: std::fmt::Display>(
+    s: &mut String,
+    checks: impl IntoIterator<Item = (S, bool)>,
+) {
+    use std::fmt::Write as _;
+    // Writing into a String cannot fail.
+    let _ = writeln!(s);
+    for (statement, ok) in checks {
+        let _ = writeln!(s, "  {statement}: {}", thesis_verdict(ok));
+    }
+}
+
 /// `x` as a whole percentage, e.g. "85 %".
 #[must_use]
 pub fn pct(x: f64) -> String {

@@ -97,7 +97,7 @@ fn predefined_sequence_runs_from_fixed_joints() {
 #[ignore = "100 digs per strategy: minutes of wall time; see excavator-ctl experiment extended"]
 fn extended_operation_100_digs_compared_with_the_predefined_sequence() {
     let dir = tempfile::tempdir().unwrap();
-    let runs = lab::experiment::extended(100, dir.path(), None).unwrap();
+    let runs = lab::experiment::extended(100, None, dir.path(), None).unwrap();
     println!("{}", lab::experiment::extended_markdown(&runs));
     assert!(runs.planned.totals.digs >= 100);
     assert!(runs.planned.backups >= 3);

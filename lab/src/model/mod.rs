@@ -11,7 +11,8 @@
 //!   (thesis Figs. 34-41), the `compare` command and its plots.
 //! - [`start`]: the dig model, the machine file and the start on the default bench that the commands
 //!   share.
-//! - [`table2`], [`fig52`]: thesis Table 2 and Fig. 52 with the dig model.
+//! - [`table2`], [`fig52`]: thesis Table 2 and Fig. 52 with the dig model (printed by `experiment
+//!   table2|fig52` next to the simulator's).
 //! - [`soil_cv`]: cross-validation of the soil models on a session's soil samples (4.3.5).
 //!
 //! The simulation harness ([`sim_dig::DigSetup`], [`sim_dig::run_sim_dig`],
@@ -43,10 +44,6 @@ pub enum ModelCommand {
     GenerateData(generate::GenerateArgs),
     /// Compare the dig model with the simulator from the same starts (thesis Figs. 34-41).
     Compare(compare::CompareArgs),
-    /// Thesis Table 2 with the dig model: force factor 1, 2, 3.
-    Table2(table2::Table2Args),
-    /// Thesis Fig. 52 with the dig model: hardness index 1 and 5 in a soft and a hard soil.
-    Fig52(fig52::Fig52Args),
     /// Cross-validate the soil models (thesis 4.3.5) on a `demo` session's `soil_samples.json`.
     SoilCv(soil_cv::SoilCvArgs),
 }
@@ -61,8 +58,6 @@ pub fn run(cmd: ModelCommand) -> anyhow::Result<()> {
         ModelCommand::Evaluate(a) => evaluate::run(&a),
         ModelCommand::GenerateData(a) => generate::run(&a),
         ModelCommand::Compare(a) => compare::run(&a),
-        ModelCommand::Table2(a) => table2::run(&a),
-        ModelCommand::Fig52(a) => fig52::run(&a),
         ModelCommand::SoilCv(a) => soil_cv::run(&a),
     }
 }

@@ -14,19 +14,19 @@ use vcan_sim::soil_contact::World;
 
 use super::sim_dig::section_of;
 
-/// The dig model and its start on the default bench (`model table2` and `model fig52`).
+/// The dig model and its start on the default bench (Table 2's and Fig. 52's with the dig model).
 #[derive(Debug, Clone, Args)]
 pub struct ModelStartArgs {
-    /// Actuator model (default: the shipped config/nominal_actuator.json).
+    /// Dig model: actuator networks (default: the shipped config/nominal_actuator.json).
     #[arg(long, value_name = "FILE")]
     pub model: Option<PathBuf>,
-    /// Start distance of the tip from the swing axis, m.
+    /// Dig model: start distance of the tip from the swing axis, m.
     #[arg(long, default_value_t = 7.8)]
     pub start_r: f64,
-    /// Start bucket angle to the horizontal, degrees.
+    /// Dig model: start bucket angle to the horizontal, degrees.
     #[arg(long, default_value_t = -55.0)]
     pub start_bucket_deg: f64,
-    /// Start depth of the tip below the surface, m.
+    /// Dig model: start depth of the tip below the surface, m.
     #[arg(long, default_value_t = 0.02)]
     pub start_depth: f64,
 }

@@ -1,29 +1,15 @@
-//! `excavator-ctl model table2`: thesis Table 2 (4.4) with the dig model, the way the thesis made it:
-//! one start, the soil force times 1, 2 and 3.
+//! Thesis Table 2 (4.4) with the dig model, the way the thesis made it: one start, the soil force
+//! times 1, 2 and 3 (the dig model's part of `excavator-ctl experiment table2`).
 
-use std::io::Write as _;
-use std::path::PathBuf;
+use std::path::Path;
 
-use anyhow::Context as _;
-use clap::Args;
 use planner::dig_model::DigModel;
 use serde::{Deserialize, Serialize};
 
-use crate::thesis::{THESIS_TABLE2, table2_checks, thesis_verdict};
+use crate::plots::{TipCurve, write_tip_paths};
+use crate::thesis::{THESIS_TABLE2, table2_checks, write_checks};
 
 use super::start::{ModelStartArgs, default_section, default_site, predicted_tip_path, tip_start};
-
-/// Arguments of `model table2`.
-#[derive(Debug, Args)]
-pub struct Table2Args {
-    /// The model and its start.
-    #[command(flatten)]
-    pub start: ModelStartArgs,
-    /// Also write the three predicted tip paths over the bench section (thesis Fig. 39) to
-    /// `DIR/fig39_model.svg`.
-    #[arg(long, value_name = "DIR")]
-    pub out: Option<PathBuf>,
-}
 
 /// One row of Table 2 as the dig model predicts it.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -84,39 +70,45 @@ fn table2_predictions(
     Ok(rows)
 }
 
-/// Runs `model table2`.
+/// Table 2 with the dig model from `start`: the table next to the thesis's, whether each of the
+/// thesis's statements holds and, with `out`, the three predicted tip paths over the bench section
+/// (thesis Fig. 39) in `out/fig39_model.svg`.
 ///
 /// # Errors
 /// Reading the model, the dig model's errors, writing the plot.
-pub fn run(a: &Table2Args) -> anyhow::Result<()> {
-    let model = a.start.load_model()?;
+pub fn report(start: &ModelStartArgs, out: Option<&Path>) -> anyhow::Result<String> {
+    use std::fmt::Write as _;
+    let model = start.load_model()?;
     let predicted = table2_predictions(
         &model,
-        a.start.start_r,
-        a.start.start_depth,
-        a.start.start_bucket_deg,
+        start.start_r,
+        start.start_depth,
+        start.start_bucket_deg,
     )?;
     let rows: Vec<Table2Row> = predicted.iter().map(|(r, _)| *r).collect();
-    println!("Table 2 with the dig model ({})", a.start.describe());
-    println!(
-        "  force factor  time [s]  volume [m^3]  energy [kJ]   | thesis: time  volume  energy"
+    let mut s = String::new();
+    // Writing into a String cannot fail.
+    let _ = writeln!(s, "Table 2 with the dig model ({})\n", start.describe());
+    let _ = writeln!(
+        s,
+        "| factor | time | swept volume | energy | thesis: time, volume, energy |\n|---|---|---|---|---|"
     );
     for (r, t) in rows.iter().zip(THESIS_TABLE2) {
-        println!(
-            "  {:>12.1}  {:>8.2}  {:>12.2}  {:>11.1}   |        {:>5.1}  {:>6.1}  {:>6.0}",
+        let _ = writeln!(
+            s,
+            "| {:.1} | {:.2} s | {:.2} m^3 | {:.1} kJ | {:.1} s, {:.1} m^3, {:.0} kJ |",
             r.force_factor, r.time_s, r.volume_m3, r.energy_kj, t.1, t.2, t.3
         );
     }
     let figures = |r: &Table2Row| (r.time_s, r.volume_m3, r.energy_kj);
-    for (statement, ok) in table2_checks([figures(&rows[0]), figures(&rows[1]), figures(&rows[2])])
-    {
-        println!("  {statement}: {}", thesis_verdict(ok));
+    if let [a, b, c] = rows.as_slice() {
+        write_checks(&mut s, table2_checks([figures(a), figures(b), figures(c)]));
     }
-    if let Some(dir) = &a.out {
+    if let Some(dir) = out {
         let section = default_section()?;
         let curves = predicted
             .iter()
-            .map(|(r, p)| crate::plots::TipCurve {
+            .map(|(r, p)| TipCurve {
                 label: format!(
                     "force factor {:.0}: {:.2} m^3, {:?}",
                     r.force_factor, r.volume_m3, p.summary.end
@@ -125,36 +117,31 @@ pub fn run(a: &Table2Args) -> anyhow::Result<()> {
                 section: section.clone(),
             })
             .collect();
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        let path = dir.join("fig39_model.svg");
-        std::fs::write(
-            &path,
-            crate::plots::tip_paths_svg(
-                "Fig. 39 with the dig model: the same start at three soil force levels",
-                &[(String::new(), curves)],
-            )?,
-        )
-        .with_context(|| format!("writing {}", path.display()))?;
-        println!("  trajectories: {}", path.display());
+        let path = write_tip_paths(
+            dir,
+            "fig39_model.svg",
+            "Fig. 39 with the dig model: the same start at three soil force levels",
+            &[(String::new(), curves)],
+        )?;
+        let _ = writeln!(
+            s,
+            "\nTrajectories (the predicted tip over the bench section): {}",
+            path.display()
+        );
     }
-    let mut out = std::io::stdout().lock();
-    out.flush()?;
-    Ok(())
+    Ok(s)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// `model table2 --out DIR` draws the three predicted digs, each over the bench section.
+    /// `experiment table2` draws the three predicted digs, each over the bench section.
     #[test]
     fn table2_writes_the_three_predicted_paths() {
         let dir = tempfile::tempdir().unwrap();
-        run(&Table2Args {
-            start: ModelStartArgs::default(),
-            out: Some(dir.path().to_path_buf()),
-        })
-        .unwrap();
+        let text = report(&ModelStartArgs::default(), Some(dir.path())).unwrap();
+        assert_eq!(text.matches("\n| ").count(), 4, "{text}");
         let svg = std::fs::read_to_string(dir.path().join("fig39_model.svg")).unwrap();
         for k in 1..=3 {
             assert!(svg.contains(&format!("force factor {k}:")), "{svg}");
