@@ -182,4 +182,46 @@ mod tests {
         }
     }
 
+    /// clap shows doc comments as help: no issue numbers and no rustdoc link markup (`[`Foo`]` shows
+    /// literally) anywhere in the command line's help.
+    #[test]
+    fn help_texts_carry_no_issue_numbers_or_doc_links() {
+        fn texts(cmd: &clap::Command, path: &str, out: &mut Vec<(String, String)>) {
+            let mut add = |what: String, text: Option<&clap::builder::StyledStr>| {
+                if let Some(t) = text {
+                    out.push((what, t.to_string()));
+                }
+            };
+            add(format!("{path}: about"), cmd.get_about());
+            add(format!("{path}: long about"), cmd.get_long_about());
+            for arg in cmd.get_arguments() {
+                let name = format!("{path} --{}", arg.get_id());
+                add(name.clone(), arg.get_help());
+                add(name.clone(), arg.get_long_help());
+                for v in arg.get_possible_values() {
+                    add(format!("{name} {}", v.get_name()), v.get_help());
+                }
+            }
+            for sub in cmd.get_subcommands() {
+                texts(sub, &format!("{path} {}", sub.get_name()), out);
+            }
+        }
+        let mut found = Vec::new();
+        texts(&Cli::command(), "excavator-ctl", &mut found);
+        let numbered = |text: &str| {
+            let lower = text.to_lowercase();
+            text.split('#')
+                .skip(1)
+                .any(|t| t.starts_with(|c: char| c.is_ascii_digit()))
+                || lower
+                    .split("issue ")
+                    .skip(1)
+                    .any(|t| t.starts_with(|c: char| c.is_ascii_digit()))
+        };
+        let bad: Vec<_> = found
+            .iter()
+            .filter(|(_, text)| text.contains("[`") || numbered(text))
+            .collect();
+        assert!(bad.is_empty(), "{bad:#?}");
+    }
 }

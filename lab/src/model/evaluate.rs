@@ -47,10 +47,10 @@ pub struct EvaluateArgs {
     /// (with `--forces statics`: the networks as the dig model runs them).
     #[arg(long)]
     pub zero_rate: bool,
-    /// The target velocity signal (see [`VelocitySource`]).
+    /// The target velocity signal.
     #[arg(long, value_enum, default_value_t = VelocitySource::Rates)]
     pub velocity: VelocitySource,
-    /// The force inputs (see [`ForceSource`]).
+    /// The force inputs.
     #[arg(long, value_enum, default_value_t = ForceSource::Measured)]
     pub forces: ForceSource,
     /// Also split the error by samples where the rate and the resolver angles disagree (the

@@ -74,10 +74,10 @@ pub struct TrainArgs {
     /// valves and loads (the boom's crossover flow comes from the stick's pump).
     #[arg(long, conflicts_with_all = ["thesis_inputs", "orifice_inputs"])]
     pub third_inputs: bool,
-    /// The target velocity signal (see [`VelocitySource`]).
+    /// The target velocity signal.
     #[arg(long, value_enum, default_value_t = VelocitySource::Rates)]
     pub velocity: VelocitySource,
-    /// The force inputs (see [`ForceSource`]).
+    /// The force inputs.
     #[arg(long, value_enum, default_value_t = ForceSource::Measured)]
     pub forces: ForceSource,
     /// Learning-rate schedule: the step size of both phases falls along a half cosine to this
