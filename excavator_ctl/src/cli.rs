@@ -25,7 +25,7 @@ pub enum Command {
     /// writes the trace, scans, summary and plots into --out (docs/demo-output.md).
     Demo(lab::demo::DemoArgs),
     /// The thesis's results reproduced in the simulator and the dig model: Tables 1-5, Figs. 52, 53
-    /// and 60, and the scoreboard of its statements.
+    /// and 60, the scoreboard of its statements and the results page (docs/results.md).
     Experiment(lab::experiment::ExperimentArgs),
     /// candump trace tools: decode, stats, plot, convert (csv, mcap), replay, diff (docs/trace-tools.md).
     Trace {
@@ -132,6 +132,7 @@ mod tests {
             &["excavator-ctl", "demo", "--digs", "0"][..],
             &["excavator-ctl", "experiment", "table2", "--runs", "0"],
             &["excavator-ctl", "experiment", "extended", "--digs", "0"],
+            &["excavator-ctl", "experiment", "results", "--seeds", "0"],
             &["excavator-ctl", "discrepancy", "eval", "--digs", "1"],
             &["excavator-ctl", "discrepancy", "eval", "--seeds", "0"],
             &["excavator-ctl", "discrepancy", "bench", "--digs", "0"],
@@ -169,6 +170,15 @@ mod tests {
                 "6",
                 "--model",
                 "a.json",
+            ],
+            &[
+                "excavator-ctl",
+                "experiment",
+                "results",
+                "--runs",
+                "3",
+                "--out",
+                "r.md",
             ],
         ] {
             assert!(Cli::try_parse_from(args).is_ok(), "{args:?} refused");

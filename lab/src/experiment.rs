@@ -18,7 +18,8 @@
 //! material at the tracks' level (see [`table1_with`]). Each run is one dig action.
 //!
 //! Also: `extended` (6.1-6.2, Tables 3-5, Fig. 60), `hardness-fit` (Fig. 53), `extended-dig-check`,
-//! and `scoreboard` (every statement of the thesis about Tables 1, 2 and Fig. 52, with its verdict).
+//! `scoreboard` (every statement of the thesis about Tables 1, 2 and Fig. 52, with its verdict) and
+//! `results` (the generated page docs/results.md, laid out by [`crate::results`]).
 
 use std::path::PathBuf;
 
@@ -74,6 +75,9 @@ pub enum Which {
     /// Every statement of the thesis about Table 1, Table 2 and Fig. 52, in the simulator and the dig
     /// model, and whether it holds here: one table (`scoreboard.md` in the output folder).
     Scoreboard(ScoreboardArgs),
+    /// The results page: the scoreboard, Tables 1 and 2, Fig. 52, the extended run over several seeds
+    /// and the dig model's speed, each with the command that made it (docs/results.md).
+    Results(ResultsArgs),
 }
 
 /// The output folder of a reproduction.
@@ -233,6 +237,26 @@ pub struct ExtendedArgs {
     /// The output folder (`extended/`: both sessions, `fig60.svg`, `comparison.md`).
     #[command(flatten)]
     pub out: OutArgs,
+}
+
+/// Arguments of `experiment results`.
+#[derive(Debug, Clone, Args)]
+pub struct ResultsArgs {
+    /// The page to write.
+    #[arg(long, default_value = "docs/results.md", value_name = "FILE")]
+    pub out: PathBuf,
+    /// Digs per configuration of Tables 1, 2 and Fig. 52 in the simulator (seeds 1..=N).
+    #[arg(long, default_value_t = 3, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    pub runs: u64,
+    /// Digs per strategy of the extended run.
+    #[arg(long, default_value_t = 30, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    pub digs: u32,
+    /// Seeds of the extended run (1..=N), of which the page gives each, the median and the worst.
+    #[arg(long, default_value_t = 3, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    pub seeds: u64,
+    /// Where the extended run's sessions are written.
+    #[arg(long, default_value = "out/experiment/results", value_name = "DIR")]
+    pub sessions: PathBuf,
 }
 
 /// How Table 1's initial stick angles are read.
@@ -964,6 +988,7 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
         Which::HardnessFit(a) => hardness_fit_report(&a.out),
         Which::ExtendedDigCheck => extended_dig_check_report(),
         Which::Scoreboard(a) => scoreboard_report(a),
+        Which::Results(a) => results_report(a),
     }
 }
 
@@ -1381,6 +1406,221 @@ fn extended_report(args: &ExtendedArgs) -> anyhow::Result<String> {
     Ok(format!(
         "{text}\nOutputs: {} (planned/, predefined/, fig60.svg, comparison.md)\n",
         out.display()
+    ))
+}
+
+/// The extended run's headline figures over several seeds (`experiment results`).
+#[must_use]
+pub fn extended_seed_rows(runs: &[ExtendedRuns]) -> Vec<crate::results::SeedRow> {
+    use crate::results::{Better, SeedRow};
+    let row = |name: &str, better, decimals, f: &dyn Fn(&ExtendedRuns) -> f64| SeedRow {
+        name: name.to_owned(),
+        values: runs.iter().map(f).collect(),
+        better,
+        decimals,
+    };
+    let gain = |p: f64, d: f64| {
+        if d > 0.0 {
+            100.0 * (p / d - 1.0)
+        } else {
+            f64::NAN
+        }
+    };
+    vec![
+        row("planned: actions (digs and cleanups)", Better::Higher, 0, &|r| {
+            r.planned.totals.digs as f64
+        }),
+        row("planned: backups", Better::Higher, 0, &|r| {
+            r.planned.backups as f64
+        }),
+        row("planned: cleanups", Better::Neither, 0, &|r| {
+            r.planned.cleanups as f64
+        }),
+        row(
+            "planned: buckets over half full, % (target >= 94; thesis test 3: 94)",
+            Better::Higher,
+            0,
+            &|r| 100.0 * r.planned.stats.over_half_full,
+        ),
+        row(
+            "payload per normal dig, planner over predefined, % (target >= +30; thesis +42)",
+            Better::Higher,
+            0,
+            &|r| {
+                gain(
+                    r.planned.stats.dig_mean_weight_n,
+                    r.predefined.stats.dig_mean_weight_n,
+                )
+            },
+        ),
+        row(
+            "weight per cycle, planner over predefined, %",
+            Better::Higher,
+            0,
+            &|r| gain(r.planned.totals.mean_weight_n, r.predefined.totals.mean_weight_n),
+        ),
+        row(
+            "planned: productivity, Eq. 26, N/s",
+            Better::Higher,
+            0,
+            &|r| r.planned.stats.productivity_n_per_s,
+        ),
+        row(
+            "predefined: productivity, Eq. 26, N/s",
+            Better::Neither,
+            0,
+            &|r| r.predefined.stats.productivity_n_per_s,
+        ),
+        row(
+            "planned: energy per weight, Eq. 27, J/N",
+            Better::Lower,
+            2,
+            &|r| 1e3 * r.planned.stats.energy_per_weight_kj_per_n,
+        ),
+        row(
+            "planned: trend of the normal digs' weight (Fig. 60), N per dig",
+            Better::Higher,
+            0,
+            &|r| r.planned.stats.dig_weight_slope_n_per_dig,
+        ),
+    ]
+}
+
+/// The results page: the scoreboard, Tables 1 and 2 and Fig. 52 in the simulator and the dig model,
+/// the extended run over `args.seeds` seeds and the dig model's speed, each with the command that
+/// prints it.
+///
+/// # Errors
+/// As the reproductions and [`extended`].
+pub fn results_page(args: &ResultsArgs) -> anyhow::Result<String> {
+    use crate::results::{Page, Provenance, seeds_table};
+    let runs = args.runs;
+    let board = ScoreboardArgs {
+        sim: SimArgs {
+            runs,
+            maps: None,
+            soil_contact: SoilContact::Held,
+        },
+        table1: Table1Options {
+            stick_angle: StickAngleReading::Joint,
+        },
+        table2: Table2Options {
+            base_scale: TABLE2_BASE_SCALE,
+            scaling: Table2Scaling::Soil,
+        },
+        soils: Fig52Soils {
+            soft_cohesion_kpa: FIG52_SOILS[0].1 / 1e3,
+            hard_cohesion_kpa: FIG52_SOILS[1].1 / 1e3,
+        },
+        model: ModelStartArgs::default(),
+        model_soils: ModelSoils::default(),
+        out: OutArgs {
+            out: args.sessions.clone(),
+        },
+    };
+    let rows = sim_rows(&board)?;
+    let full_kg = full_bucket_kg()?;
+    let mut page = Page::new(
+        Provenance::now(),
+        &format!(
+            "The simulator runs in-process in virtual time on the default machine and benches \
+             (`config/`), seeds 1..={runs}; the dig model is the shipped one \
+             (`config/nominal_actuator.json`). Each section names the command that prints its \
+             figures ({} build).",
+            if cfg!(debug_assertions) {
+                "debug"
+            } else {
+                "release"
+            }
+        ),
+    );
+    let command = |which: &str| format!("excavator-ctl experiment {which} --runs {runs}");
+    page.section(
+        "The thesis's statements about Table 1, Table 2 and Fig. 52",
+        &[command("scoreboard")],
+        &scoreboard_markdown(&scoreboard_of(&rows, &board.model, &board.model_soils)?),
+    );
+    page.section(
+        "Table 1 (thesis 3.2): the perception enhancements",
+        &[command("table1")],
+        &table1_markdown(&rows.table1, runs, board.table1.stick_angle),
+    );
+    page.section(
+        "Table 2 (thesis 4.4): soil force x1, x2, x3",
+        &[command("table2")],
+        &format!(
+            "### Simulator\n\n{}\n### Dig model\n\n{}",
+            table2_markdown(&rows.table2, runs, &board.table2),
+            crate::model::table2::report(&board.model, None)?
+        ),
+    );
+    page.section(
+        "Fig. 52 (thesis 5.2): the soil hardness index",
+        &[command("fig52")],
+        &format!(
+            "### Simulator\n\n{}\n### Dig model\n\n{}",
+            fig52_markdown(&rows.fig52, runs, &board.soils, full_kg),
+            crate::model::fig52::report(&board.model, &board.model_soils, None)?
+        ),
+    );
+    let seeds: Vec<u64> = (1..=args.seeds).collect();
+    let mut extended_runs = Vec::new();
+    for &seed in &seeds {
+        let out = args.sessions.join(format!("extended-seed-{seed}"));
+        extended_runs.push(
+            extended(args.digs, Some(seed), &out, None)
+                .with_context(|| format!("extended run, seed {seed}"))?,
+        );
+    }
+    page.section(
+        &format!(
+            "Extended operation (thesis 6.1-6.2, Tables 3-5, Fig. 60): {} digs per strategy",
+            args.digs
+        ),
+        &seeds
+            .iter()
+            .map(|seed| format!("excavator-ctl experiment extended --digs {} --seed {seed}", args.digs))
+            .collect::<Vec<_>>(),
+        &format!(
+            "The planned session and the predefined sequence (started at the median of the planned \
+             starts) on the extended-operation bench; each command prints its seed's Tables 3-5.\n\n{}",
+            seeds_table(&seeds, &extended_seed_rows(&extended_runs))
+        ),
+    );
+    let speed = crate::model::speed::measure(&board.model, 300)?;
+    page.section(
+        "Dig model speed (thesis 4.1)",
+        &["excavator-ctl experiment results".to_owned()],
+        &format!(
+            "Table 2's x1 dig predicted {} times in this process; the fastest run is one the scheduler \
+             did not interrupt (`cargo bench -p planner --bench dig_model` profiles the step).\n\n\
+             | figure | value | target |\n|---|---|---|\n\
+             | one {:.2} s dig ({} steps), fastest | {:.3} ms = {:.0}x real time | >= 10,000x |\n\
+             | same, median run | {:.3} ms = {:.0}x | |\n",
+            speed.runs,
+            speed.dig_time_s,
+            speed.steps,
+            speed.fastest_s * 1e3,
+            speed.real_time_factor(),
+            speed.median_s * 1e3,
+            speed.dig_time_s / speed.median_s
+        ),
+    );
+    Ok(page.finish())
+}
+
+fn results_report(args: &ResultsArgs) -> anyhow::Result<String> {
+    let t0 = std::time::Instant::now();
+    let page = results_page(args)?;
+    if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    std::fs::write(&args.out, &page).with_context(|| format!("writing {}", args.out.display()))?;
+    Ok(format!(
+        "Wrote {} in {:.0} s (sessions in {})\n",
+        args.out.display(),
+        t0.elapsed().as_secs_f64(),
+        args.sessions.display()
     ))
 }
 

@@ -9,6 +9,7 @@
 //!   simulator data, compare the dig model with the simulator, Table 2 and Fig. 52 with the dig
 //!   model, cross-validation of the soil models on a session's soil samples (4.3.5).
 //! - [`plots`]: the SVG figures of sessions and experiments.
+//! - [`results`]: the layout of the generated results page (docs/results.md).
 //! - [`session`]: the records of a session folder (per-dig records, tip paths, soil samples).
 //! - [`thesis`]: the thesis's figures and statements the reproductions are checked against.
 //!
@@ -24,5 +25,6 @@ pub mod demo;
 pub mod experiment;
 pub mod model;
 pub mod plots;
+pub mod results;
 pub mod session;
 pub mod thesis;

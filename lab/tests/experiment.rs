@@ -8,7 +8,8 @@
 
 use clap::Parser as _;
 use lab::experiment::{
-    ExperimentArgs, Mean, StickAngleReading, full_bucket_kg, report, table1, table2,
+    ExperimentArgs, Mean, ResultsArgs, StickAngleReading, full_bucket_kg, report, results_page,
+    table1, table2,
 };
 
 /// `excavator-ctl experiment ARGS...` as the command line parses it.
@@ -195,3 +196,43 @@ fn scoreboard_shows_table1_and_the_dig_model_fig52_reproduced() {
     }
 }
 
+/// `experiment results` on a tiny run: the header, then each section with the command that made it,
+/// its date and commit, and its table.
+#[test]
+fn results_page_names_the_command_date_and_commit_of_every_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let page = results_page(&ResultsArgs {
+        out: dir.path().join("results.md"),
+        runs: 1,
+        digs: 2,
+        seeds: 1,
+        sessions: dir.path().to_path_buf(),
+    })
+    .unwrap();
+    assert_eq!(page.lines().next(), Some(lab::results::HEADER), "{page}");
+    let sections: Vec<&str> = page.split("\n## ").skip(1).collect();
+    let titles: Vec<&str> = sections.iter().map(|s| s.lines().next().unwrap()).collect();
+    for (title, command) in [
+        ("The thesis's statements", "scoreboard --runs 1"),
+        ("Table 1", "table1 --runs 1"),
+        ("Table 2", "table2 --runs 1"),
+        ("Fig. 52", "fig52 --runs 1"),
+        ("Extended operation", "extended --digs 2 --seed 1"),
+        ("Dig model speed", "results"),
+    ] {
+        let section = sections
+            .iter()
+            .find(|s| s.starts_with(title))
+            .unwrap_or_else(|| panic!("no section {title}: {titles:?}"));
+        let made = section.lines().nth(2).unwrap();
+        assert!(
+            made.starts_with(&format!("`excavator-ctl experiment {command}` ("))
+                && made.contains(", commit "),
+            "{title}: {made}"
+        );
+        assert!(section.contains("\n|---|"), "{title}: no table\n{section}");
+    }
+    assert_eq!(sections.len(), 6, "{titles:?}");
+    assert!(page.contains("statements hold."), "{page}");
+    assert!(page.contains("| figure | seed 1 | median | worst |"), "{page}");
+}

@@ -13,6 +13,7 @@
 //!   share.
 //! - [`table2`], [`fig52`]: thesis Table 2 and Fig. 52 with the dig model (printed by `experiment
 //!   table2|fig52` next to the simulator's).
+//! - [`speed`]: the dig model's real-time factor.
 //! - [`soil_cv`]: cross-validation of the soil models on a session's soil samples (4.3.5).
 //!
 //! The simulation harness ([`sim_dig::DigSetup`], [`sim_dig::run_sim_dig`],
@@ -28,6 +29,7 @@ pub mod generate;
 pub mod plots;
 pub mod sim_dig;
 pub mod soil_cv;
+pub mod speed;
 pub mod start;
 pub mod table2;
 pub mod train;
