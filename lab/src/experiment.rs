@@ -34,8 +34,8 @@ use vcan_sim::scenario::SoilContactIntegration;
 pub use crate::demo::SoilContact;
 use vcan_sim::sensors::ScanRequest;
 
-use controller::cycle::{Action, Phase, StartPose};
 use crate::session::TipPoint;
+use controller::cycle::{Action, Phase, StartPose};
 use controller::node::{ControllerConfig, ControllerNode};
 
 use crate::model::fig52::ModelSoils;
@@ -196,30 +196,19 @@ pub struct Fig52Args {
     pub out: OutArgs,
 }
 
-/// Arguments of `experiment scoreboard`: those of Table 1, Table 2 and Fig. 52.
+/// Arguments of `experiment scoreboard`: those of Fig. 52 (the simulator's runs, both soils, the dig
+/// model and its start; the output folder for `scoreboard.md`) and Table 1's and Table 2's options.
 #[derive(Debug, Clone, Args)]
 pub struct ScoreboardArgs {
-    /// The simulator's runs.
+    /// Fig. 52's arguments.
     #[command(flatten)]
-    pub sim: SimArgs,
+    pub fig52: Fig52Args,
     /// Table 1's options.
     #[command(flatten)]
     pub table1: Table1Options,
     /// Table 2's options in the simulator.
     #[command(flatten)]
     pub table2: Table2Options,
-    /// The simulator's Fig. 52 soils.
-    #[command(flatten)]
-    pub soils: Fig52Soils,
-    /// The dig model and its start.
-    #[command(flatten)]
-    pub model: ModelStartArgs,
-    /// The dig model's Fig. 52 soils.
-    #[command(flatten)]
-    pub model_soils: ModelSoils,
-    /// The output folder (`scoreboard.md`).
-    #[command(flatten)]
-    pub out: OutArgs,
 }
 
 /// Arguments of `experiment extended`.
@@ -857,9 +846,10 @@ pub struct SimRows {
 /// # Errors
 /// As the reproductions.
 pub fn sim_rows(args: &ScoreboardArgs) -> anyhow::Result<SimRows> {
-    let maps = args.sim.autodig_maps()?;
-    let contact = args.sim.soil_contact.into();
-    let runs = args.sim.runs;
+    let f52 = &args.fig52;
+    let maps = f52.sim.autodig_maps()?;
+    let contact = f52.sim.soil_contact.into();
+    let runs = f52.sim.runs;
     Ok(SimRows {
         table1: table1_with(runs, &maps, contact, args.table1.stick_angle)?,
         table2: table2_with(
@@ -869,7 +859,7 @@ pub fn sim_rows(args: &ScoreboardArgs) -> anyhow::Result<SimRows> {
             args.table2.scaling,
             contact,
         )?,
-        fig52: fig52_with(runs, &maps, contact, args.soils.pa())?,
+        fig52: fig52_with(runs, &maps, contact, f52.soils.pa())?,
     })
 }
 
@@ -881,7 +871,8 @@ pub fn sim_rows(args: &ScoreboardArgs) -> anyhow::Result<SimRows> {
 /// # Errors
 /// As the reproductions.
 pub fn scoreboard(args: &ScoreboardArgs) -> anyhow::Result<Vec<Score>> {
-    scoreboard_of(&sim_rows(args)?, &args.model, &args.model_soils)
+    let f52 = &args.fig52;
+    scoreboard_of(&sim_rows(args)?, &f52.model, &f52.model_soils)
 }
 
 /// The scoreboard of the simulator's `rows` and the dig model from `model` in `model_soils`.
@@ -1225,14 +1216,14 @@ fn fig52_report(a: &Fig52Args) -> anyhow::Result<String> {
 
 fn scoreboard_report(a: &ScoreboardArgs) -> anyhow::Result<String> {
     let table = scoreboard_markdown(&scoreboard(a)?);
-    let out = &a.out.out;
+    let out = &a.fig52.out.out;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let path = out.join("scoreboard.md");
     std::fs::write(&path, &table).with_context(|| format!("writing {}", path.display()))?;
     Ok(format!(
         "The thesis's statements about Table 1, Table 2 and Fig. 52 ({} runs each in the \
          simulator; the dig model from Table 2's start)\n\n{table}\nWritten to {}\n",
-        a.sim.runs,
+        a.fig52.sim.runs,
         path.display()
     ))
 }
@@ -1427,9 +1418,12 @@ pub fn extended_seed_rows(runs: &[ExtendedRuns]) -> Vec<crate::results::SeedRow>
         }
     };
     vec![
-        row("planned: actions (digs and cleanups)", Better::Higher, 0, &|r| {
-            r.planned.totals.digs as f64
-        }),
+        row(
+            "planned: actions (digs and cleanups)",
+            Better::Higher,
+            0,
+            &|r| r.planned.totals.digs as f64,
+        ),
         row("planned: backups", Better::Higher, 0, &|r| {
             r.planned.backups as f64
         }),
@@ -1457,7 +1451,12 @@ pub fn extended_seed_rows(runs: &[ExtendedRuns]) -> Vec<crate::results::SeedRow>
             "weight per cycle, planner over predefined, %",
             Better::Higher,
             0,
-            &|r| gain(r.planned.totals.mean_weight_n, r.predefined.totals.mean_weight_n),
+            &|r| {
+                gain(
+                    r.planned.totals.mean_weight_n,
+                    r.predefined.totals.mean_weight_n,
+                )
+            },
         ),
         row(
             "planned: productivity, Eq. 26, N/s",
@@ -1496,10 +1495,21 @@ pub fn results_page(args: &ResultsArgs) -> anyhow::Result<String> {
     use crate::results::{Page, Provenance, seeds_table};
     let runs = args.runs;
     let board = ScoreboardArgs {
-        sim: SimArgs {
-            runs,
-            maps: None,
-            soil_contact: SoilContact::Held,
+        fig52: Fig52Args {
+            sim: SimArgs {
+                runs,
+                maps: None,
+                soil_contact: SoilContact::Held,
+            },
+            soils: Fig52Soils {
+                soft_cohesion_kpa: FIG52_SOILS[0].1 / 1e3,
+                hard_cohesion_kpa: FIG52_SOILS[1].1 / 1e3,
+            },
+            model: ModelStartArgs::default(),
+            model_soils: ModelSoils::default(),
+            out: OutArgs {
+                out: args.sessions.clone(),
+            },
         },
         table1: Table1Options {
             stick_angle: StickAngleReading::Joint,
@@ -1508,16 +1518,8 @@ pub fn results_page(args: &ResultsArgs) -> anyhow::Result<String> {
             base_scale: TABLE2_BASE_SCALE,
             scaling: Table2Scaling::Soil,
         },
-        soils: Fig52Soils {
-            soft_cohesion_kpa: FIG52_SOILS[0].1 / 1e3,
-            hard_cohesion_kpa: FIG52_SOILS[1].1 / 1e3,
-        },
-        model: ModelStartArgs::default(),
-        model_soils: ModelSoils::default(),
-        out: OutArgs {
-            out: args.sessions.clone(),
-        },
     };
+    let (model, model_soils) = (&board.fig52.model, &board.fig52.model_soils);
     let rows = sim_rows(&board)?;
     let full_kg = full_bucket_kg()?;
     let mut page = Page::new(
@@ -1538,7 +1540,7 @@ pub fn results_page(args: &ResultsArgs) -> anyhow::Result<String> {
     page.section(
         "The thesis's statements about Table 1, Table 2 and Fig. 52",
         &[command("scoreboard")],
-        &scoreboard_markdown(&scoreboard_of(&rows, &board.model, &board.model_soils)?),
+        &scoreboard_markdown(&scoreboard_of(&rows, model, model_soils)?),
     );
     page.section(
         "Table 1 (thesis 3.2): the perception enhancements",
@@ -1551,7 +1553,7 @@ pub fn results_page(args: &ResultsArgs) -> anyhow::Result<String> {
         &format!(
             "### Simulator\n\n{}\n### Dig model\n\n{}",
             table2_markdown(&rows.table2, runs, &board.table2),
-            crate::model::table2::report(&board.model, None)?
+            crate::model::table2::report(model, None)?
         ),
     );
     page.section(
@@ -1559,8 +1561,8 @@ pub fn results_page(args: &ResultsArgs) -> anyhow::Result<String> {
         &[command("fig52")],
         &format!(
             "### Simulator\n\n{}\n### Dig model\n\n{}",
-            fig52_markdown(&rows.fig52, runs, &board.soils, full_kg),
-            crate::model::fig52::report(&board.model, &board.model_soils, None)?
+            fig52_markdown(&rows.fig52, runs, &board.fig52.soils, full_kg),
+            crate::model::fig52::report(model, model_soils, None)?
         ),
     );
     let seeds: Vec<u64> = (1..=args.seeds).collect();
@@ -1587,7 +1589,7 @@ pub fn results_page(args: &ResultsArgs) -> anyhow::Result<String> {
             seeds_table(&seeds, &extended_seed_rows(&extended_runs))
         ),
     );
-    let speed = crate::model::speed::measure(&board.model, 300)?;
+    let speed = crate::model::speed::measure(model, 300)?;
     page.section(
         "Dig model speed (thesis 4.1)",
         &["excavator-ctl experiment results".to_owned()],
