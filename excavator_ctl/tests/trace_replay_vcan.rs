@@ -10,9 +10,9 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
+use firmware_bridge::trace::parse_line;
 use trace_tools::decode::{self, DecodeFilter};
 use trace_tools::synth::{self, SynthConfig};
-use firmware_bridge::trace::parse_line;
 
 /// The guest of the vcan VM runs under TCG on a shared host: `docs/hil.md` measured 100 Hz gaps of
 /// 11.5 ms mean and 30 ms max, and a loaded host stalls the guest for tens of ms. Replay keeps an

@@ -67,9 +67,7 @@ fn table1_perception_is_consistent_and_faster() {
     assert!(time_spread(&with) < 0.5 * time_spread(&plain), "{rows:?}");
     // The report's checks say the same.
     assert!(
-        lab::experiment::table1_checks(&rows)
-            .iter()
-            .all(|c| c.1),
+        lab::experiment::table1_checks(&rows).iter().all(|c| c.1),
         "{rows:?}"
     );
 }
@@ -112,7 +110,10 @@ fn energy_rises_from_the_nominal_soil_force() {
     let rows = table2(1).unwrap();
     assert_eq!(rows.len(), 3);
     assert!(rows.iter().all(|(_, m)| m.completed == 1), "{rows:?}");
-    assert!(rows[0].1.payload_kg > 0.8 * full_bucket_kg().unwrap(), "{rows:?}");
+    assert!(
+        rows[0].1.payload_kg > 0.8 * full_bucket_kg().unwrap(),
+        "{rows:?}"
+    );
     assert!(rows[1].1.energy_kj > rows[0].1.energy_kj, "{rows:?}");
     // Autodig slows the bucket in the harder soil (thesis 4.4): the dig takes longer at x2.
     assert!(rows[1].1.time_s > rows[0].1.time_s, "{rows:?}");
@@ -140,7 +141,10 @@ fn fig52_report_prints_the_thesis_comparison() {
     // The dig model's section follows the simulator's, with its own figure.
     let model = text.find("## Dig model").unwrap();
     assert!(text.find("## Simulator").unwrap() < model, "{text}");
-    assert!(text[model..].contains("Fig. 52 with the dig model"), "{text}");
+    assert!(
+        text[model..].contains("Fig. 52 with the dig model"),
+        "{text}"
+    );
     assert!(out.path().join("fig52_model.svg").exists());
 }
 
@@ -234,5 +238,8 @@ fn results_page_names_the_command_date_and_commit_of_every_table() {
     }
     assert_eq!(sections.len(), 6, "{titles:?}");
     assert!(page.contains("statements hold."), "{page}");
-    assert!(page.contains("| figure | seed 1 | median | worst |"), "{page}");
+    assert!(
+        page.contains("| figure | seed 1 | median | worst |"),
+        "{page}"
+    );
 }
