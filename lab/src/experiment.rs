@@ -1404,85 +1404,42 @@ fn extended_report(args: &ExtendedArgs) -> anyhow::Result<String> {
 #[must_use]
 pub fn extended_seed_rows(runs: &[ExtendedRuns]) -> Vec<crate::results::SeedRow> {
     use crate::results::{Better, SeedRow};
-    let row = |name: &str, better, decimals, f: &dyn Fn(&ExtendedRuns) -> f64| SeedRow {
-        name: name.to_owned(),
-        values: runs.iter().map(f).collect(),
-        better,
-        decimals,
-    };
-    let gain = |p: f64, d: f64| {
-        if d > 0.0 {
-            100.0 * (p / d - 1.0)
+    /// The planner's gain over the predefined sequence, %.
+    fn gain(planned: f64, predefined: f64) -> f64 {
+        if predefined > 0.0 {
+            100.0 * (planned / predefined - 1.0)
         } else {
             f64::NAN
         }
-    };
-    vec![
-        row(
-            "planned: actions (digs and cleanups)",
-            Better::Higher,
-            0,
-            &|r| r.planned.totals.digs as f64,
-        ),
-        row("planned: backups", Better::Higher, 0, &|r| {
-            r.planned.backups as f64
-        }),
-        row("planned: cleanups", Better::Neither, 0, &|r| {
-            r.planned.cleanups as f64
-        }),
-        row(
-            "planned: buckets over half full, % (target >= 94; thesis test 3: 94)",
-            Better::Higher,
-            0,
-            &|r| 100.0 * r.planned.stats.over_half_full,
-        ),
-        row(
-            "payload per normal dig, planner over predefined, % (target >= +30; thesis +42)",
-            Better::Higher,
-            0,
-            &|r| {
-                gain(
-                    r.planned.stats.dig_mean_weight_n,
-                    r.predefined.stats.dig_mean_weight_n,
-                )
-            },
-        ),
-        row(
-            "weight per cycle, planner over predefined, %",
-            Better::Higher,
-            0,
-            &|r| {
-                gain(
-                    r.planned.totals.mean_weight_n,
-                    r.predefined.totals.mean_weight_n,
-                )
-            },
-        ),
-        row(
-            "planned: productivity, Eq. 26, N/s",
-            Better::Higher,
-            0,
-            &|r| r.planned.stats.productivity_n_per_s,
-        ),
-        row(
-            "predefined: productivity, Eq. 26, N/s",
-            Better::Neither,
-            0,
-            &|r| r.predefined.stats.productivity_n_per_s,
-        ),
-        row(
-            "planned: energy per weight, Eq. 27, J/N",
-            Better::Lower,
-            2,
-            &|r| 1e3 * r.planned.stats.energy_per_weight_kj_per_n,
-        ),
-        row(
-            "planned: trend of the normal digs' weight (Fig. 60), N per dig",
-            Better::Higher,
-            0,
-            &|r| r.planned.stats.dig_weight_slope_n_per_dig,
-        ),
-    ]
+    }
+    type Figure = (&'static str, Better, usize, fn(&ExtendedRuns) -> f64);
+    #[rustfmt::skip] // A table: one figure a line.
+    let figures: [Figure; 10] = [
+        ("planned: actions (digs and cleanups)", Better::Higher, 0, |r| r.planned.totals.digs as f64),
+        ("planned: backups", Better::Higher, 0, |r| r.planned.backups as f64),
+        ("planned: cleanups", Better::Neither, 0, |r| r.planned.cleanups as f64),
+        ("planned: buckets over half full, % (target >= 94; thesis test 3: 94)", Better::Higher, 0,
+            |r| 100.0 * r.planned.stats.over_half_full),
+        ("payload per normal dig, planner over predefined, % (target >= +30; thesis +42)", Better::Higher, 0,
+            |r| gain(r.planned.stats.dig_mean_weight_n, r.predefined.stats.dig_mean_weight_n)),
+        ("weight per cycle, planner over predefined, %", Better::Higher, 0,
+            |r| gain(r.planned.totals.mean_weight_n, r.predefined.totals.mean_weight_n)),
+        ("planned: productivity, Eq. 26, N/s", Better::Higher, 0, |r| r.planned.stats.productivity_n_per_s),
+        ("predefined: productivity, Eq. 26, N/s", Better::Neither, 0, |r| r.predefined.stats.productivity_n_per_s),
+        ("planned: energy per weight, Eq. 27, J/N", Better::Lower, 2,
+            |r| 1e3 * r.planned.stats.energy_per_weight_kj_per_n),
+        ("planned: trend of the normal digs' weight (Fig. 60), N per dig", Better::Higher, 0,
+            |r| r.planned.stats.dig_weight_slope_n_per_dig),
+    ];
+    figures
+        .iter()
+        .map(|(name, better, decimals, f)| SeedRow {
+            name: (*name).to_owned(),
+            values: runs.iter().map(f).collect(),
+            better: *better,
+            decimals: *decimals,
+        })
+        .collect()
 }
 
 /// The results page: the scoreboard, Tables 1 and 2 and Fig. 52 in the simulator and the dig model,
