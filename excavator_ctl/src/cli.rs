@@ -24,7 +24,8 @@ pub enum Command {
     /// The embedded default: the simulator in-process in virtual time and a full autonomous session;
     /// writes the trace, scans, summary and plots into --out (docs/demo-output.md).
     Demo(lab::demo::DemoArgs),
-    /// The thesis's Autodig results in closed loop against the simulator: table1, table2, fig52.
+    /// The thesis's results reproduced in the simulator and the dig model: Tables 1-5, Figs. 52, 53
+    /// and 60, the scoreboard of its statements and the results page (docs/results.md).
     Experiment(lab::experiment::ExperimentArgs),
     /// candump trace tools: decode, stats, plot, convert (csv, mcap), replay, diff (docs/trace-tools.md).
     Trace {
@@ -33,11 +34,11 @@ pub enum Command {
         cmd: trace_tools::TraceCommand,
     },
     /// The planner's dig model: train the actuator networks, generate simulator data, compare with
-    /// the simulator, thesis Table 2 and Fig. 52 (docs/models.md).
+    /// the simulator, cross-validate the soil models (docs/models.md).
     Model {
         /// The model command.
         #[command(subcommand)]
-        cmd: lab::model_cmd::ModelCommand,
+        cmd: lab::model::ModelCommand,
     },
     /// Model-discrepancy workflow: where the model and measured sessions disagree, the missing effect
     /// named and added (`--measured DIR... --out DIR`), `eval` (hidden-effect confusion table), `bench`
@@ -131,6 +132,7 @@ mod tests {
             &["excavator-ctl", "demo", "--digs", "0"][..],
             &["excavator-ctl", "experiment", "table2", "--runs", "0"],
             &["excavator-ctl", "experiment", "extended", "--digs", "0"],
+            &["excavator-ctl", "experiment", "results", "--seeds", "0"],
             &["excavator-ctl", "discrepancy", "eval", "--digs", "1"],
             &["excavator-ctl", "discrepancy", "eval", "--seeds", "0"],
             &["excavator-ctl", "discrepancy", "bench", "--digs", "0"],
@@ -142,5 +144,94 @@ mod tests {
         assert!(
             Cli::try_parse_from(["excavator-ctl", "discrepancy", "eval", "--digs", "2"]).is_ok()
         );
+    }
+
+    /// Table 2 and Fig. 52 are `experiment` commands that print the simulator's and the dig model's
+    /// results; `model table2|fig52` are gone, and each command takes only its own options.
+    #[test]
+    fn table2_and_fig52_are_experiments_with_both_sections_options() {
+        for args in [
+            &[
+                "excavator-ctl",
+                "experiment",
+                "table2",
+                "--runs",
+                "2",
+                "--start-r",
+                "7.4",
+            ][..],
+            &[
+                "excavator-ctl",
+                "experiment",
+                "fig52",
+                "--soft-cohesion-kpa",
+                "5",
+                "--model-soft-cohesion-kpa",
+                "6",
+                "--model",
+                "a.json",
+            ],
+            &[
+                "excavator-ctl",
+                "experiment",
+                "results",
+                "--runs",
+                "3",
+                "--out",
+                "r.md",
+            ],
+        ] {
+            assert!(Cli::try_parse_from(args).is_ok(), "{args:?} refused");
+        }
+        for args in [
+            &["excavator-ctl", "model", "table2"][..],
+            &["excavator-ctl", "model", "fig52"],
+            &["excavator-ctl", "experiment", "table1", "--base-scale", "2"],
+        ] {
+            assert!(Cli::try_parse_from(args).is_err(), "{args:?} parsed");
+        }
+    }
+
+    /// clap shows doc comments as help: no issue numbers and no rustdoc link markup (`[`Foo`]` shows
+    /// literally) anywhere in the command line's help.
+    #[test]
+    fn help_texts_carry_no_issue_numbers_or_doc_links() {
+        fn texts(cmd: &clap::Command, path: &str, out: &mut Vec<(String, String)>) {
+            let mut add = |what: String, text: Option<&clap::builder::StyledStr>| {
+                if let Some(t) = text {
+                    out.push((what, t.to_string()));
+                }
+            };
+            add(format!("{path}: about"), cmd.get_about());
+            add(format!("{path}: long about"), cmd.get_long_about());
+            for arg in cmd.get_arguments() {
+                let name = format!("{path} --{}", arg.get_id());
+                add(name.clone(), arg.get_help());
+                add(name.clone(), arg.get_long_help());
+                for v in arg.get_possible_values() {
+                    add(format!("{name} {}", v.get_name()), v.get_help());
+                }
+            }
+            for sub in cmd.get_subcommands() {
+                texts(sub, &format!("{path} {}", sub.get_name()), out);
+            }
+        }
+        let mut found = Vec::new();
+        texts(&Cli::command(), "excavator-ctl", &mut found);
+        let numbered = |text: &str| {
+            let lower = text.to_lowercase();
+            text.split('#')
+                .skip(1)
+                .any(|t| t.starts_with(|c: char| c.is_ascii_digit()))
+                || lower
+                    .split("issue ")
+                    .skip(1)
+                    .any(|t| t.starts_with(|c: char| c.is_ascii_digit()))
+        };
+        let bad: Vec<_> = found
+            .iter()
+            .filter(|(_, text)| text.contains("[`") || numbered(text))
+            .collect();
+        assert!(bad.is_empty(), "{bad:#?}");
     }
 }

@@ -31,7 +31,7 @@ fn main() -> std::process::ExitCode {
         Command::Demo(args) => runtime.block_on(lab::demo::run(args)),
         Command::Experiment(args) => lab::experiment::run(&args),
         Command::Trace { cmd } => runtime.block_on(trace_tools::run(cmd)),
-        Command::Model { cmd } => lab::model_cmd::run(cmd),
+        Command::Model { cmd } => lab::model::run(cmd),
         Command::Discrepancy(args) => discrepancy::command::run(args),
     };
     match result {

@@ -22,7 +22,7 @@
 //! - `trajectories.svg`, `terrain_before.svg`, `terrain_after.svg`, `dig_stats.svg` ([`crate::plots`]);
 //! - planned and predefined: `bench_after_NNN.svg` (Fig. 55), `dig_sequence.svg` (Fig. 56), and
 //!   `soil_samples.json`: per dig the soil estimator's samples (`Gamma` and the tip force from the
-//!   pressures, 4.3.4) for `excavator-ctl model soil-cv` ([`crate::soil_cv`]).
+//!   pressures, 4.3.4) for `excavator-ctl model soil-cv` ([`crate::session::SoilSamplesFile`]).
 //!
 //! One thread alternates the simulator (10 ms, ten 1 kHz physics steps) and the controller step, as in
 //! the closed-loop tests; the run is deterministic for a seed.
@@ -235,14 +235,7 @@ pub fn demo_plan() -> Vec<Action> {
     ]
 }
 
-/// A point of a tip trajectory in the digging plane (base frame), m.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct TipPoint {
-    /// Distance from the swing axis, m.
-    pub x_m: f64,
-    /// Height above the ground plane, m.
-    pub z_m: f64,
-}
+pub use crate::session::TipPoint;
 
 /// `--soil-contact`: [`vcan_sim::scenario::SoilContactIntegration`] on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -262,81 +255,7 @@ impl From<SoilContact> for SoilContactIntegration {
     }
 }
 
-/// One dig (or cleanup) of the session, as written to `summary.json`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct DigRecord {
-    /// Dig number, from 0.
-    pub index: u32,
-    /// `dig` or `cleanup`.
-    pub action: ActionKind,
-    /// Swing angle of the digging plane, degrees.
-    pub swing_deg: f64,
-    /// The start pose of the action (tip pose or joints; degrees).
-    pub start_pose: Option<StartPose>,
-    /// Weight of the material from the static estimate after Capture, N (thesis 6.1).
-    pub weight_n: Option<f64>,
-    /// The simulator's true payload at the end of the dig, kg (for comparison with `weight_n`).
-    pub true_payload_kg: f64,
-    /// From the start of Boom-Down (or of the cleanup) to the end of Capture, s.
-    pub time_s: f64,
-    /// Time the tip was below the pre-dig terrain, s.
-    pub ground_contact_time_s: f64,
-    /// Integral of |cylinder force x displacement|, kJ (thesis 6.1).
-    pub energy_kj: f64,
-    /// Volume swept over the cutting edge (3.2), m^3.
-    pub swept_volume_m3: f64,
-    /// Why Autodig ended (`Debug` of the planner's end reason).
-    pub end_reason: Option<String>,
-    /// Whether the perception enhancements were active.
-    pub perception: bool,
-    /// The planner's predicted Fig. 46 quality of the chosen dig (planned digs only).
-    #[serde(default)]
-    pub quality: Option<f64>,
-    /// The planner's predicted swept volume of the chosen dig, m^3 (planned digs only).
-    #[serde(default)]
-    pub predicted_volume_m3: Option<f64>,
-    /// The planner's predicted dig time, s (planned digs only).
-    #[serde(default)]
-    pub predicted_time_s: Option<f64>,
-    /// The planner's predicted dig energy, kJ (planned digs only).
-    #[serde(default)]
-    pub predicted_energy_kj: Option<f64>,
-    /// The lowest tip height the dig model predicted, base frame, m (planned digs only).
-    #[serde(default)]
-    pub predicted_min_tip_z_m: Option<f64>,
-    /// Where the bucket met the terrain: the first tip point of the action below the true pre-dig
-    /// surface, `(r, z)` in the base frame, m.
-    #[serde(default)]
-    pub contact_start: Option<[f64; 2]>,
-    /// The lowest tip height of the executed action, base frame, m.
-    #[serde(default)]
-    pub min_tip_z_m: Option<f64>,
-    /// Autodig's soil hardness index for this dig.
-    #[serde(default)]
-    pub hardness_index: Option<f64>,
-    /// The machine's dead-reckoned world pose `[x, y, heading]` (m, m, rad) during the dig.
-    #[serde(default)]
-    pub pose: Option<[f64; 3]>,
-    /// The planner's start tip `[r, z, bucket_abs_deg]` in the base frame (planned digs; the
-    /// bucket is brought above it and Boom-Down lowers it there).
-    #[serde(default)]
-    pub planned_start: Option<[f64; 3]>,
-    /// RMS difference between the planner's terrain map and the true terrain along the digging plane
-    /// (r 3 to 10 m) at the start of the dig, m (planned and predefined strategies).
-    #[serde(default)]
-    pub map_error_m: Option<f64>,
-    /// Mean of (planner's map - true terrain) along the digging plane over the stretch the bucket
-    /// sweeps, from 1.5 m inside the planned start to 0.2 m beyond it, m (planned digs; positive:
-    /// the map shows material that is not there).
-    #[serde(default)]
-    pub map_bias_at_start_m: Option<f64>,
-    /// The tip trajectory during the dig, base frame.
-    #[serde(skip)]
-    pub trajectory: Vec<TipPoint>,
-    /// The true terrain along the digging plane before the dig, `(r, z)` in the base frame.
-    #[serde(skip)]
-    pub section: Vec<TipPoint>,
-}
+pub use crate::session::DigRecord;
 
 /// Totals of the session.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -929,7 +848,7 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
     let budget_s = SIM_BUDGET_PER_DIG_S * f64::from(args.digs.max(1));
     let mut result: anyhow::Result<()> = Ok(());
     // Every dig's soil samples (4.3.5), for `soil_samples.json` and `model soil-cv`.
-    let mut soil_samples = crate::soil_cv::SoilSamplesFile::default();
+    let mut soil_samples = crate::session::SoilSamplesFile::default();
     let mut snapshots: Vec<BenchSnapshot> = Vec::new();
     let finished = |h: &Harness| h.node().is_none_or(ControllerNode::finished);
     while !finished(&h) && h.time_s() < budget_s && !stop.load(Ordering::Relaxed) {
@@ -1003,7 +922,7 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
                     };
                     finish_record(&mut c, d, &tip_path);
                     if !samples.is_empty() {
-                        soil_samples.digs.push(crate::soil_cv::SoilDigSamples {
+                        soil_samples.digs.push(crate::session::SoilDigSamples {
                             index: c.index,
                             samples,
                         });

@@ -1,5 +1,7 @@
-//! `excavator-ctl experiment table1|table2|fig52`: the thesis's Autodig results reproduced in closed
-//! loop against the simulator (in-process, virtual time), each printed next to the thesis's numbers.
+//! `excavator-ctl experiment`: the thesis's results reproduced in closed loop against the simulator
+//! (in-process, virtual time), each printed next to the thesis's numbers and checked against its
+//! statements ([`crate::thesis`]). Table 2 and Fig. 52 also print the dig model's results
+//! ([`crate::model::table2`], [`crate::model::fig52`]), since the thesis made both with its dig model.
 //!
 //! - **Table 1** (3.2): initial stick angles -87, -70, -50 degrees (the stick's joint angle by
 //!   default, or to the horizontal: [`StickAngleReading`]), plain Autodig (fixed
@@ -14,87 +16,235 @@
 //!
 //! Table 2 and Fig. 52 start every dig from the same pose on the default bench; Table 1 starts on level
 //! material at the tracks' level (see [`table1_with`]). Each run is one dig action.
+//!
+//! Also: `extended` (6.1-6.2, Tables 3-5, Fig. 60), `hardness-fit` (Fig. 53), `extended-dig-check`,
+//! `scoreboard` (every statement of the thesis about Tables 1, 2 and Fig. 52, with its verdict) and
+//! `results` (the generated page docs/results.md, laid out by [`crate::results`]).
+
+use std::path::PathBuf;
 
 use anyhow::Context as _;
-use clap::{Args, ValueEnum};
+use clap::{Args, Subcommand};
 use planner::autodig::AutodigMaps;
 use vcan_sim::SimConfig;
 use vcan_sim::scenario::SoilContactIntegration;
 
 pub use crate::demo::SoilContact;
 
-use crate::demo::TipPoint;
+use crate::session::TipPoint;
 use controller::cycle::{Action, Phase, StartPose};
 use controller::node::ControllerConfig;
 
 use crate::harness::Harness;
 
-/// Which reproduction.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum Which {
-    /// Thesis Table 1: perception enhancements across initial stick angles.
-    Table1,
-    /// Thesis Table 2: soil force x1, x2, x3.
-    Table2,
-    /// Thesis Fig. 52: hardness index in soft and hard soil.
-    Fig52,
-    /// Thesis 6.1-6.2, Tables 3-5, Fig. 60: a planned session and the predefined sequence on the
-    /// extended-operation bench, compared (`--digs`, `--out`).
-    Extended,
-    /// Thesis 5.2, Fig. 53: the hardness regression fitted by simulation over many soils and
-    /// terrains with the dig model (`--out`).
-    HardnessFit,
-    /// Issue #7: the simulator and the dig model from the same starts on the extended bench (tip
-    /// depth, swept volume, soil force), with and without Boom-Down in the simulator.
-    ExtendedDigCheck,
-    /// Every statement of the thesis about Table 1, Table 2 and Fig. 52, in the simulator and the dig
-    /// model, and whether it holds here: one table (`--out DIR`: `scoreboard.md`).
-    Scoreboard,
-}
+use crate::model::fig52::ModelSoils;
+use crate::model::start::ModelStartArgs;
+use crate::thesis::{
+    Fig52Checks, LB_TO_KG, THESIS_TABLE1, THESIS_TABLE2, table2_checks, thesis_verdict,
+    write_checks,
+};
 
 /// Arguments of `excavator-ctl experiment`.
 #[derive(Debug, Clone, Args)]
 pub struct ExperimentArgs {
     /// The reproduction to run.
-    #[arg(value_enum)]
+    #[command(subcommand)]
     pub which: Which,
+}
+
+/// Which reproduction.
+#[derive(Debug, Clone, Subcommand)]
+pub enum Which {
+    /// Thesis Table 1: perception enhancements across initial stick angles, in the simulator.
+    Table1(Table1Args),
+    /// Thesis Table 2: soil force x1, x2, x3, in the simulator and in the dig model.
+    Table2(Table2Args),
+    /// Thesis Fig. 52: hardness index 1 and 5 in soft and hard soil, in the simulator and in the dig
+    /// model.
+    Fig52(Fig52Args),
+    /// Thesis 6.1-6.2, Tables 3-5, Fig. 60: a planned session and the predefined sequence on the
+    /// extended-operation bench, compared.
+    Extended(ExtendedArgs),
+    /// Thesis 5.2, Fig. 53: the hardness regression fitted by simulation over many soils and
+    /// terrains with the dig model.
+    HardnessFit(OutArgs),
+    /// The simulator and the dig model from the same starts on the extended bench (tip depth, swept
+    /// volume, soil force), with and without Boom-Down in the simulator.
+    ExtendedDigCheck,
+    /// Every statement of the thesis about Table 1, Table 2 and Fig. 52, in the simulator and the dig
+    /// model, and whether it holds here: one table (`scoreboard.md` in the output folder).
+    Scoreboard(ScoreboardArgs),
+    /// The results page: the scoreboard, Tables 1 and 2, Fig. 52, the extended run over several seeds
+    /// and the dig model's speed, each with the command that made it (docs/results.md).
+    Results(ResultsArgs),
+}
+
+/// The output folder of a reproduction.
+#[derive(Debug, Clone, Args)]
+pub struct OutArgs {
+    /// Output folder for the figures, sessions and tables.
+    #[arg(long, default_value = "out/experiment", value_name = "DIR")]
+    pub out: PathBuf,
+}
+
+/// The simulator's runs of Table 1, Table 2 and Fig. 52.
+#[derive(Debug, Clone, Args)]
+pub struct SimArgs {
     /// Digs per configuration (seeds 1..=N).
     #[arg(long, default_value_t = 5, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     pub runs: u64,
-    /// `extended`: digs per strategy.
-    #[arg(long, default_value_t = 100, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
-    pub digs: u32,
-    /// Output folder: `extended` and `hardness-fit` write their sessions and figures there,
-    /// `table1`, `table2` and `fig52` their trajectory plot (`table1.svg`, `fig39.svg`, `fig52.svg`),
-    /// `scoreboard` its table (`scoreboard.md`).
-    #[arg(long, default_value = "out/experiment", value_name = "DIR")]
-    pub out: std::path::PathBuf,
-    /// `extended`: planner settings (default: the built-in config/planner.toml).
+    /// Autodig maps (default: the built-in config/autodig_maps.toml).
     #[arg(long, value_name = "FILE")]
-    pub planner: Option<std::path::PathBuf>,
-    /// `table1`, `table2`, `fig52`: Autodig maps (default: the built-in config/autodig_maps.toml).
-    #[arg(long, value_name = "FILE")]
-    pub maps: Option<std::path::PathBuf>,
-    /// `table2`: the soil of force factor 1 is the default bench's soil with cohesion and density
-    /// scaled by this (see [`TABLE2_BASE_SCALE`]).
-    #[arg(long, default_value_t = TABLE2_BASE_SCALE, value_name = "F")]
-    pub base_scale: f64,
-    /// `table2`: how the factor makes the soil harder.
-    #[arg(long, value_enum, default_value_t = Table2Scaling::Soil)]
-    pub scaling: Table2Scaling,
-    /// `table1`, `table2`, `fig52`: how the simulator integrates the soil's force (`held`, the
-    /// calibrated plant, or `implicit`, without the contact chatter; docs/simulator.md).
+    pub maps: Option<PathBuf>,
+    /// How the simulator integrates the soil's force (`held`, the calibrated plant, or `implicit`,
+    /// without the contact chatter; docs/simulator.md).
     #[arg(long, value_enum, default_value_t = SoilContact::Held)]
     pub soil_contact: SoilContact,
-    /// `fig52`: cohesion of the soft soil, kPa (default: [`FIG52_SOILS`]'s).
-    #[arg(long, value_name = "KPA", default_value_t = FIG52_SOILS[0].1 / 1e3)]
-    pub soft_cohesion_kpa: f64,
-    /// `fig52`: cohesion of the hard soil, kPa (default: [`FIG52_SOILS`]'s).
-    #[arg(long, value_name = "KPA", default_value_t = FIG52_SOILS[1].1 / 1e3)]
-    pub hard_cohesion_kpa: f64,
-    /// `table1`: how the thesis's initial stick angles (-87, -70, -50 deg) are read.
+}
+
+/// Table 1's options.
+#[derive(Debug, Clone, Copy, Args)]
+pub struct Table1Options {
+    /// How the thesis's initial stick angles (-87, -70, -50 deg) are read.
     #[arg(long, value_enum, default_value_t = StickAngleReading::Joint)]
     pub stick_angle: StickAngleReading,
+}
+
+/// Table 2's options in the simulator.
+#[derive(Debug, Clone, Copy, Args)]
+pub struct Table2Options {
+    /// The soil of force factor 1 is the default bench's soil with cohesion and density scaled by
+    /// this.
+    #[arg(long, default_value_t = TABLE2_BASE_SCALE, value_name = "F")]
+    pub base_scale: f64,
+    /// How the factor makes the soil harder.
+    #[arg(long, value_enum, default_value_t = Table2Scaling::Soil)]
+    pub scaling: Table2Scaling,
+}
+
+/// Fig. 52's soils in the simulator.
+#[derive(Debug, Clone, Copy, Args)]
+pub struct Fig52Soils {
+    /// Cohesion of the soft soil in the simulator, kPa.
+    #[arg(long, value_name = "KPA", default_value_t = FIG52_SOILS[0].1 / 1e3)]
+    pub soft_cohesion_kpa: f64,
+    /// Cohesion of the hard soil in the simulator, kPa.
+    #[arg(long, value_name = "KPA", default_value_t = FIG52_SOILS[1].1 / 1e3)]
+    pub hard_cohesion_kpa: f64,
+}
+
+impl Fig52Soils {
+    /// `(name, cohesion Pa)` of the soft and the hard soil, as [`fig52_with`] takes them.
+    #[must_use]
+    pub fn pa(&self) -> [(&'static str, f64); 2] {
+        [
+            ("soft", self.soft_cohesion_kpa * 1e3),
+            ("hard", self.hard_cohesion_kpa * 1e3),
+        ]
+    }
+}
+
+/// Arguments of `experiment table1`.
+#[derive(Debug, Clone, Args)]
+pub struct Table1Args {
+    /// The simulator's runs.
+    #[command(flatten)]
+    pub sim: SimArgs,
+    /// Table 1's options.
+    #[command(flatten)]
+    pub table1: Table1Options,
+    /// The output folder (`table1.svg`).
+    #[command(flatten)]
+    pub out: OutArgs,
+}
+
+/// Arguments of `experiment table2`.
+#[derive(Debug, Clone, Args)]
+pub struct Table2Args {
+    /// The simulator's runs.
+    #[command(flatten)]
+    pub sim: SimArgs,
+    /// Table 2's options in the simulator.
+    #[command(flatten)]
+    pub table2: Table2Options,
+    /// The dig model and its start.
+    #[command(flatten)]
+    pub model: ModelStartArgs,
+    /// The output folder (`fig39.svg`, `fig39_model.svg`).
+    #[command(flatten)]
+    pub out: OutArgs,
+}
+
+/// Arguments of `experiment fig52`.
+#[derive(Debug, Clone, Args)]
+pub struct Fig52Args {
+    /// The simulator's runs.
+    #[command(flatten)]
+    pub sim: SimArgs,
+    /// The simulator's soils.
+    #[command(flatten)]
+    pub soils: Fig52Soils,
+    /// The dig model and its start.
+    #[command(flatten)]
+    pub model: ModelStartArgs,
+    /// The dig model's soils.
+    #[command(flatten)]
+    pub model_soils: ModelSoils,
+    /// The output folder (`fig52.svg`, `fig52_model.svg`).
+    #[command(flatten)]
+    pub out: OutArgs,
+}
+
+/// Arguments of `experiment scoreboard`: those of Fig. 52 (the simulator's runs, both soils, the dig
+/// model and its start; the output folder for `scoreboard.md`) and Table 1's and Table 2's options.
+#[derive(Debug, Clone, Args)]
+pub struct ScoreboardArgs {
+    /// Fig. 52's arguments.
+    #[command(flatten)]
+    pub fig52: Fig52Args,
+    /// Table 1's options.
+    #[command(flatten)]
+    pub table1: Table1Options,
+    /// Table 2's options in the simulator.
+    #[command(flatten)]
+    pub table2: Table2Options,
+}
+
+/// Arguments of `experiment extended`.
+#[derive(Debug, Clone, Args)]
+pub struct ExtendedArgs {
+    /// Digs per strategy.
+    #[arg(long, default_value_t = 100, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    pub digs: u32,
+    /// The simulator's seed (default: the bench file's).
+    #[arg(long, value_name = "N")]
+    pub seed: Option<u64>,
+    /// Planner settings (default: the built-in config/planner.toml).
+    #[arg(long, value_name = "FILE")]
+    pub planner: Option<PathBuf>,
+    /// The output folder (`extended/`: both sessions, `fig60.svg`, `comparison.md`).
+    #[command(flatten)]
+    pub out: OutArgs,
+}
+
+/// Arguments of `experiment results`.
+#[derive(Debug, Clone, Args)]
+pub struct ResultsArgs {
+    /// The page to write.
+    #[arg(long, default_value = "docs/results.md", value_name = "FILE")]
+    pub out: PathBuf,
+    /// Digs per configuration of Tables 1, 2 and Fig. 52 in the simulator (seeds 1..=N).
+    #[arg(long, default_value_t = 3, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    pub runs: u64,
+    /// Digs per strategy of the extended run.
+    #[arg(long, default_value_t = 30, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    pub digs: u32,
+    /// Seeds of the extended run (1..=N), of which the page gives each, the median and the worst.
+    #[arg(long, default_value_t = 3, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    pub seeds: u64,
+    /// Where the extended run's sessions are written.
+    #[arg(long, default_value = "out/experiment/results", value_name = "DIR")]
+    pub sessions: PathBuf,
 }
 
 /// How Table 1's initial stick angles are read.
@@ -129,7 +279,7 @@ pub enum Table2Scaling {
     Soil,
 }
 
-impl ExperimentArgs {
+impl SimArgs {
     /// The Autodig maps of `--maps`, or the built-in ones.
     ///
     /// # Errors
@@ -367,10 +517,7 @@ fn write_figure(
     title: &str,
     panels: &[(String, Vec<crate::plots::TipCurve>)],
 ) -> anyhow::Result<String> {
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let path = out.join(name);
-    std::fs::write(&path, crate::plots::tip_paths_svg(title, panels)?)
-        .with_context(|| format!("writing {}", path.display()))?;
+    let path = crate::plots::write_tip_paths(out, name, title, panels)?;
     Ok(format!(
         "\nTrajectories (seed 1, the tip from the sensed angles over the true pre-dig section): {}\n",
         path.display()
@@ -637,18 +784,26 @@ pub fn fig52_with(
     Ok(rows)
 }
 
+/// The full bucket's payload of the default machine at its rated density, kg (Fig. 52's fill).
+///
+/// # Errors
+/// Loading the built-in machine file.
+pub fn full_bucket_kg() -> anyhow::Result<f64> {
+    Ok(planner::machine::MachineConfig::default_machine()?.rated_payload_kg())
+}
+
 /// The thesis's statements about Fig. 52 on the simulator's rows (fill: payload over the full
-/// bucket's 2550 kg).
+/// bucket's `full_kg`).
 #[must_use]
-pub fn fig52_checks(rows: &[(&'static str, f64, Mean)]) -> crate::model_fig52::Fig52Checks {
+pub fn fig52_checks(rows: &[(&'static str, f64, Mean)], full_kg: f64) -> Fig52Checks {
     let figures = |soil: &str, index: f64| {
         rows.iter()
             .find(|r| r.0 == soil && r.1 == index)
             .map_or((0.0, 0.0, 0.0), |(_, _, m)| {
-                (m.payload_kg / 2550.0, m.time_s, m.energy_kj)
+                (m.payload_kg / full_kg, m.time_s, m.energy_kj)
             })
     };
-    crate::model_fig52::Fig52Checks::from_figures(
+    Fig52Checks::from_figures(
         [figures("soft", 1.0), figures("soft", 5.0)],
         [figures("hard", 1.0), figures("hard", 5.0)],
     )
@@ -666,15 +821,61 @@ pub struct Score {
     pub holds: bool,
 }
 
-/// Every statement of the thesis about Table 1, Table 2 and Fig. 52, checked in the simulator (with
-/// `args`' runs, maps, plant, Table 1 reading, Table 2 scaling and Fig. 52 soils) and in the dig model
-/// (the shipped model and maps from Table 2's start; Fig. 52's soils of `model fig52`).
+/// The simulator's rows of Table 1, Table 2 and Fig. 52.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimRows {
+    /// Table 1: `(stick angle, plain, with perception)`.
+    pub table1: Vec<(f64, Mean, Mean)>,
+    /// Table 2: `(force factor, mean)`.
+    pub table2: Vec<(f64, Mean)>,
+    /// Fig. 52: `(soil, hardness index, mean)`.
+    pub fig52: Vec<(&'static str, f64, Mean)>,
+}
+
+/// Table 1, Table 2 and Fig. 52 in the simulator with `args`' runs, maps, plant, Table 1 reading,
+/// Table 2 scaling and Fig. 52 soils.
 ///
 /// # Errors
 /// As the reproductions.
-pub fn scoreboard(args: &ExperimentArgs) -> anyhow::Result<Vec<Score>> {
-    let maps = args.autodig_maps()?;
-    let contact = args.soil_contact.into();
+pub fn sim_rows(args: &ScoreboardArgs) -> anyhow::Result<SimRows> {
+    let f52 = &args.fig52;
+    let maps = f52.sim.autodig_maps()?;
+    let contact = f52.sim.soil_contact.into();
+    let runs = f52.sim.runs;
+    Ok(SimRows {
+        table1: table1_with(runs, &maps, contact, args.table1.stick_angle)?,
+        table2: table2_with(
+            runs,
+            &maps,
+            args.table2.base_scale,
+            args.table2.scaling,
+            contact,
+        )?,
+        fig52: fig52_with(runs, &maps, contact, f52.soils.pa())?,
+    })
+}
+
+/// Every statement of the thesis about Table 1, Table 2 and Fig. 52, checked in the simulator (with
+/// `args`' runs, maps, plant, Table 1 reading, Table 2 scaling and Fig. 52 soils) and in the dig model
+/// (`args`' model and start, by default the shipped model from Table 2's start, and its Fig. 52
+/// soils).
+///
+/// # Errors
+/// As the reproductions.
+pub fn scoreboard(args: &ScoreboardArgs) -> anyhow::Result<Vec<Score>> {
+    let f52 = &args.fig52;
+    scoreboard_of(&sim_rows(args)?, &f52.model, &f52.model_soils)
+}
+
+/// The scoreboard of the simulator's `rows` and the dig model from `model` in `model_soils`.
+///
+/// # Errors
+/// The dig model's errors.
+pub fn scoreboard_of(
+    rows: &SimRows,
+    model: &ModelStartArgs,
+    model_soils: &ModelSoils,
+) -> anyhow::Result<Vec<Score>> {
     let mut scores = Vec::new();
     let mut add = |result: &str, checks: Vec<(String, bool)>| {
         scores.extend(checks.into_iter().map(|(statement, holds)| Score {
@@ -684,52 +885,42 @@ pub fn scoreboard(args: &ExperimentArgs) -> anyhow::Result<Vec<Score>> {
         }));
     };
     let owned = |c: &[(&str, bool)]| c.iter().map(|(s, b)| ((*s).to_owned(), *b)).collect();
-    let t1 = table1_with(args.runs, &maps, contact, args.stick_angle)?;
-    add("Table 1 (simulator)", owned(&table1_checks(&t1)));
-    let t2 = table2_with(args.runs, &maps, args.base_scale, args.scaling, contact)?;
+    add("Table 1 (simulator)", owned(&table1_checks(&rows.table1)));
     let figures = |m: &Mean| (m.time_s, m.swept_volume_m3, m.energy_kj);
-    if let [(_, a), (_, b), (_, c)] = t2.as_slice() {
+    if let [(_, a), (_, b), (_, c)] = rows.table2.as_slice() {
         add(
             "Table 2 (simulator)",
-            owned(&crate::model_cmd::table2_checks([
-                figures(a),
-                figures(b),
-                figures(c),
-            ])),
+            owned(&table2_checks([figures(a), figures(b), figures(c)])),
         );
     }
-    let soils = [
-        ("soft", args.soft_cohesion_kpa * 1e3),
-        ("hard", args.hard_cohesion_kpa * 1e3),
-    ];
-    let f52 = fig52_with(args.runs, &maps, contact, soils)?;
     add(
         "Fig. 52 (simulator)",
-        fig52_checks(&f52).statements().to_vec(),
+        fig52_checks(&rows.fig52, full_bucket_kg()?)
+            .statements()
+            .to_vec(),
     );
-    let start = crate::model_cmd::ModelStartArgs::default();
-    let model = start.load_model()?;
-    let site = crate::model_cmd::default_site()?;
-    let dig_start = start.start(&site)?;
-    let rows = crate::model_cmd::table2_rows(
-        &model,
-        start.start_r,
-        start.start_depth,
-        start.start_bucket_deg,
+    let dig_model = model.load_model()?;
+    let site = crate::model::start::default_site()?;
+    let dig_start = model.start(&site)?;
+    let model_rows = crate::model::table2::table2_rows(
+        &dig_model,
+        model.start_r,
+        model.start_depth,
+        model.start_bucket_deg,
     )?;
-    let figures = |r: &crate::model_cmd::Table2Row| (r.time_s, r.volume_m3, r.energy_kj);
-    if let [a, b, c] = rows.as_slice() {
+    let figures = |r: &crate::model::table2::Table2Row| (r.time_s, r.volume_m3, r.energy_kj);
+    if let [a, b, c] = model_rows.as_slice() {
         add(
             "Table 2 (dig model)",
-            owned(&crate::model_cmd::table2_checks([
-                figures(a),
-                figures(b),
-                figures(c),
-            ])),
+            owned(&table2_checks([figures(a), figures(b), figures(c)])),
         );
     }
-    let f52_model =
-        crate::model_fig52::checks(&model, crate::model_fig52::SOIL_PAIR_KPA, &dig_start, &site)?;
+    let f52_model = crate::model::fig52::checks(
+        &dig_model,
+        (model_soils.soft_cohesion_kpa, model_soils.hard_cohesion_kpa),
+        &dig_start,
+        &site,
+    )?;
     add("Fig. 52 (dig model)", f52_model.statements().to_vec());
     Ok(scores)
 }
@@ -746,7 +937,7 @@ pub fn scoreboard_markdown(scores: &[Score]) -> String {
             "| {} | {} | {} |",
             sc.result,
             sc.statement,
-            crate::model_cmd::thesis_verdict(sc.holds)
+            thesis_verdict(sc.holds)
         );
     }
     let _ = writeln!(
@@ -758,18 +949,6 @@ pub fn scoreboard_markdown(scores: &[Score]) -> String {
     s
 }
 
-const LB_TO_KG: f64 = 0.453_592;
-
-/// Appends a blank line, then a line per statement: whether it holds as in the thesis.
-fn write_checks<S: std::fmt::Display>(s: &mut String, checks: impl IntoIterator<Item = (S, bool)>) {
-    use std::fmt::Write as _;
-    // Writing into a String cannot fail.
-    let _ = writeln!(s);
-    for (statement, ok) in checks {
-        let _ = writeln!(s, "  {statement}: {}", crate::model_cmd::thesis_verdict(ok));
-    }
-}
-
 /// Runs the chosen reproduction and prints its table next to the thesis's numbers.
 ///
 /// # Errors
@@ -779,215 +958,266 @@ pub fn run(args: &ExperimentArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The printed table of a reproduction.
+/// The printed report of a reproduction (and the figures, sessions and tables it writes).
 ///
 /// # Errors
 /// As [`run_dig`].
 pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
+    match &args.which {
+        Which::Table1(a) => table1_report(a),
+        Which::Table2(a) => table2_report(a),
+        Which::Fig52(a) => fig52_report(a),
+        Which::Extended(a) => extended_report(a),
+        Which::HardnessFit(a) => hardness_fit_report(&a.out),
+        Which::ExtendedDigCheck => extended_dig_check_report(),
+        Which::Scoreboard(a) => scoreboard_report(a),
+        Which::Results(a) => results_report(a),
+    }
+}
+
+/// The line that says the simulator runs without its contact chatter, if it does.
+fn contact_note(sim: &SimArgs) -> &'static str {
+    if sim.soil_contact == SoilContact::Implicit {
+        "Simulator soil contact: implicit (no contact chatter; the maps and soils are calibrated on \
+         the held plant)\n\n"
+    } else {
+        ""
+    }
+}
+
+/// Table 1 in the simulator: the table next to the thesis's and the checks.
+#[must_use]
+pub fn table1_markdown(
+    rows: &[(f64, Mean, Mean)],
+    runs: u64,
+    reading: StickAngleReading,
+) -> String {
     use std::fmt::Write as _;
     let mut s = String::new();
     // Writing into a String cannot fail.
-    if args.soil_contact == SoilContact::Implicit
-        && matches!(args.which, Which::Table1 | Which::Table2 | Which::Fig52)
-    {
+    let _ = writeln!(
+        s,
+        "Table 1: Autodig with and without the perception enhancements ({runs} digs each; payload kg, \
+         time s; thesis lbs converted to kg; stick angle {})\n",
+        match reading {
+            StickAngleReading::Joint => "relative to the boom (joint angle)",
+            StickAngleReading::Absolute => "to the horizontal",
+        }
+    );
+    let _ = writeln!(
+        s,
+        "| stick angle | plain: time | plain: payload | perception: time | perception: payload | \
+         thesis plain: time, payload | thesis perception: time, payload |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|");
+    for ((stick, plain, with), t) in rows.iter().zip(THESIS_TABLE1) {
         let _ = writeln!(
             s,
-            "Simulator soil contact: implicit (no contact chatter; the maps and soils are calibrated on \
-             the held plant)\n"
+            "| {stick:.0} deg | {} | {} | {:.2} s, {:.0} kg | {:.2} s, {:.0} kg |",
+            time_payload_cells(plain, runs),
+            time_payload_cells(with, runs),
+            t.1,
+            t.2 * LB_TO_KG,
+            t.3,
+            t.4 * LB_TO_KG
         );
     }
-    match args.which {
-        Which::Table1 => {
-            let thesis = [
-                (-87.0, 6.58, 4145.0, 7.13, 5331.0),
-                (-70.0, 10.35, 5172.0, 7.47, 5329.0),
-                (-50.0, 13.83, 6526.0, 8.77, 5338.0),
-            ];
-            let _ = writeln!(
-                s,
-                "Table 1: Autodig with and without the perception enhancements ({} digs each; payload kg, \
-                 time s; thesis lbs converted to kg; stick angle {})\n",
-                args.runs,
-                match args.stick_angle {
-                    StickAngleReading::Joint => "relative to the boom (joint angle)",
-                    StickAngleReading::Absolute => "to the horizontal",
-                }
-            );
-            let _ = writeln!(
-                s,
-                "| stick angle | plain: time | plain: payload | perception: time | perception: payload | \
-                 thesis plain: time, payload | thesis perception: time, payload |"
-            );
-            let _ = writeln!(s, "|---|---|---|---|---|---|---|");
-            let rows = table1_with(
-                args.runs,
-                &args.autodig_maps()?,
-                args.soil_contact.into(),
-                args.stick_angle,
-            )?;
-            for ((stick, plain, with), t) in rows.iter().zip(thesis) {
-                let _ = writeln!(
-                    s,
-                    "| {stick:.0} deg | {} | {} | {:.2} s, {:.0} kg | {:.2} s, {:.0} kg |",
-                    time_payload_cells(plain, args.runs),
-                    time_payload_cells(with, args.runs),
-                    t.1,
-                    t.2 * LB_TO_KG,
-                    t.3,
-                    t.4 * LB_TO_KG
-                );
-            }
-            write_checks(&mut s, table1_checks(&rows));
-            let panel = |name: &str, pick: fn(&(f64, Mean, Mean)) -> &Mean| {
-                let curves = rows
-                    .iter()
-                    .map(|r| curve(format!("stick {:.0} deg", r.0), pick(r)))
-                    .collect();
-                (name.to_string(), curves)
-            };
-            s.push_str(&write_figure(
-                &args.out,
-                "table1.svg",
-                "Table 1: Autodig from three stick angles",
-                &[
-                    panel("plain (fixed beta, gamma)", |r| &r.1),
-                    panel("with the perception enhancements", |r| &r.2),
-                ],
-            )?);
-        }
-        Which::Table2 => {
-            let thesis = crate::model_cmd::THESIS_TABLE2;
-            let _ = writeln!(
-                s,
-                "Table 2: soil force x1, x2, x3 ({}, base soil scaled by {}; {} digs each)\n",
-                match args.scaling {
-                    Table2Scaling::Force => "the soil's force on the bucket times the factor",
-                    Table2Scaling::Soil => "cohesion and density times the factor",
-                },
-                args.base_scale,
-                args.runs
-            );
-            let _ = writeln!(
-                s,
-                "| factor | time | swept volume | energy | payload | thesis: time, volume, energy |"
-            );
-            let _ = writeln!(s, "|---|---|---|---|---|---|");
-            let rows = table2_with(
-                args.runs,
-                &args.autodig_maps()?,
-                args.base_scale,
-                args.scaling,
-                args.soil_contact.into(),
-            )?;
-            for ((k, m), t) in rows.iter().zip(thesis) {
-                let _ = writeln!(
-                    s,
-                    "| {k:.1} | {:.2} s | {:.2} m^3 | {:.0} kJ | {:.0} kg | {} s, {} m^3, {} kJ |",
-                    m.time_s, m.swept_volume_m3, m.energy_kj, m.payload_kg, t.1, t.2, t.3
-                );
-            }
-            let figures = |m: &Mean| (m.time_s, m.swept_volume_m3, m.energy_kj);
-            if let [(_, a), (_, b), (_, c)] = rows.as_slice() {
-                write_checks(
-                    &mut s,
-                    crate::model_cmd::table2_checks([figures(a), figures(b), figures(c)]),
-                );
-            }
+    write_checks(&mut s, table1_checks(rows));
+    s
+}
+
+fn table1_report(a: &Table1Args) -> anyhow::Result<String> {
+    let rows = table1_with(
+        a.sim.runs,
+        &a.sim.autodig_maps()?,
+        a.sim.soil_contact.into(),
+        a.table1.stick_angle,
+    )?;
+    let mut s = contact_note(&a.sim).to_owned();
+    s.push_str(&table1_markdown(&rows, a.sim.runs, a.table1.stick_angle));
+    let panel = |name: &str, pick: fn(&(f64, Mean, Mean)) -> &Mean| {
+        let curves = rows
+            .iter()
+            .map(|r| curve(format!("stick {:.0} deg", r.0), pick(r)))
+            .collect();
+        (name.to_string(), curves)
+    };
+    s.push_str(&write_figure(
+        &a.out.out,
+        "table1.svg",
+        "Table 1: Autodig from three stick angles",
+        &[
+            panel("plain (fixed beta, gamma)", |r| &r.1),
+            panel("with the perception enhancements", |r| &r.2),
+        ],
+    )?);
+    Ok(s)
+}
+
+/// Table 2 in the simulator: the table next to the thesis's and the checks.
+#[must_use]
+pub fn table2_markdown(rows: &[(f64, Mean)], runs: u64, options: &Table2Options) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    // Writing into a String cannot fail.
+    let _ = writeln!(
+        s,
+        "Table 2: soil force x1, x2, x3 ({}, base soil scaled by {}; {runs} digs each)\n",
+        match options.scaling {
+            Table2Scaling::Force => "the soil's force on the bucket times the factor",
+            Table2Scaling::Soil => "cohesion and density times the factor",
+        },
+        options.base_scale,
+    );
+    let _ = writeln!(
+        s,
+        "| factor | time | swept volume | energy | payload | thesis: time, volume, energy |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|");
+    for ((k, m), t) in rows.iter().zip(THESIS_TABLE2) {
+        let _ = writeln!(
+            s,
+            "| {k:.1} | {:.2} s | {:.2} m^3 | {:.0} kJ | {:.0} kg | {} s, {} m^3, {} kJ |",
+            m.time_s, m.swept_volume_m3, m.energy_kj, m.payload_kg, t.1, t.2, t.3
+        );
+    }
+    let figures = |m: &Mean| (m.time_s, m.swept_volume_m3, m.energy_kj);
+    if let [(_, a), (_, b), (_, c)] = rows {
+        write_checks(&mut s, table2_checks([figures(a), figures(b), figures(c)]));
+    }
+    s
+}
+
+/// The heading of the simulator's section of a report that has the dig model's too.
+const SIM_SECTION: &str = "## Simulator (closed loop, in-process, virtual time)\n\n";
+/// The heading of the dig model's section.
+const MODEL_SECTION: &str = "\n## Dig model (the planner's, as the thesis made it)\n\n";
+
+fn table2_report(a: &Table2Args) -> anyhow::Result<String> {
+    let rows = table2_with(
+        a.sim.runs,
+        &a.sim.autodig_maps()?,
+        a.table2.base_scale,
+        a.table2.scaling,
+        a.sim.soil_contact.into(),
+    )?;
+    let mut s = format!("{SIM_SECTION}{}", contact_note(&a.sim));
+    s.push_str(&table2_markdown(&rows, a.sim.runs, &a.table2));
+    let curves = rows
+        .iter()
+        .map(|(k, m)| curve(format!("force factor {k:.0}"), m))
+        .collect();
+    s.push_str(&write_figure(
+        &a.out.out,
+        "fig39.svg",
+        "Fig. 39 / Table 2: the same dig at three soil force levels",
+        &[(String::new(), curves)],
+    )?);
+    s.push_str(MODEL_SECTION);
+    s.push_str(&crate::model::table2::report(&a.model, Some(&a.out.out))?);
+    Ok(s)
+}
+
+/// Fig. 52 in the simulator: the table, the thesis's figure in words and the checks (fill: payload
+/// over `full_kg`).
+#[must_use]
+pub fn fig52_markdown(
+    rows: &[(&'static str, f64, Mean)],
+    runs: u64,
+    soils: &Fig52Soils,
+    full_kg: f64,
+) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    // Writing into a String cannot fail.
+    let _ = writeln!(
+        s,
+        "Fig. 52: hardness index 1 and 5 in soft (c = {} kPa) and hard (c = {} kPa) soil ({runs} digs each; \
+         fill = payload / {full_kg:.0} kg)\n",
+        soils.soft_cohesion_kpa, soils.hard_cohesion_kpa
+    );
+    let _ = writeln!(s, "| soil | index | fill | time | energy | swept volume |");
+    let _ = writeln!(s, "|---|---|---|---|---|---|");
+    for (soil, index, m) in rows {
+        let _ = writeln!(
+            s,
+            "| {soil} | {index:.0} | {:.0} % | {:.2} s | {:.0} kJ | {:.2} m^3 |",
+            100.0 * m.payload_kg / full_kg,
+            m.time_s,
+            m.energy_kj,
+            m.swept_volume_m3
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\nThesis: soft soil, both indices fill the bucket; the higher index digs too deep, +60 % time \
+         and +75 % energy. Hard soil: the low index fills about 50 %, the high index fully. \
+         The thesis made the figure with its dig model (the dig model's section)."
+    );
+    write_checks(&mut s, fig52_checks(rows, full_kg).statements());
+    s
+}
+
+fn fig52_report(a: &Fig52Args) -> anyhow::Result<String> {
+    let soils = a.soils.pa();
+    let rows = fig52_with(
+        a.sim.runs,
+        &a.sim.autodig_maps()?,
+        a.sim.soil_contact.into(),
+        soils,
+    )?;
+    let full_kg = full_bucket_kg()?;
+    let mut s = format!("{SIM_SECTION}{}", contact_note(&a.sim));
+    s.push_str(&fig52_markdown(&rows, a.sim.runs, &a.soils, full_kg));
+    let panels: Vec<_> = soils
+        .iter()
+        .map(|(soil, cohesion)| {
             let curves = rows
                 .iter()
-                .map(|(k, m)| curve(format!("force factor {k:.0}"), m))
-                .collect();
-            s.push_str(&write_figure(
-                &args.out,
-                "fig39.svg",
-                "Fig. 39 / Table 2: the same dig at three soil force levels",
-                &[(String::new(), curves)],
-            )?);
-        }
-        Which::Extended => s.push_str(&extended_report(args)?),
-        Which::HardnessFit => s.push_str(&hardness_fit_report(args)?),
-        Which::ExtendedDigCheck => s.push_str(&extended_dig_check_report()?),
-        Which::Scoreboard => {
-            let table = scoreboard_markdown(&scoreboard(args)?);
-            std::fs::create_dir_all(&args.out)
-                .with_context(|| format!("creating {}", args.out.display()))?;
-            let path = args.out.join("scoreboard.md");
-            std::fs::write(&path, &table).with_context(|| format!("writing {}", path.display()))?;
-            let _ = writeln!(
-                s,
-                "The thesis's statements about Table 1, Table 2 and Fig. 52 ({} runs each in the \
-                 simulator; the dig model from Table 2's start)\n\n{table}\nWritten to {}",
-                args.runs,
-                path.display()
-            );
-        }
-        Which::Fig52 => {
-            let soils = [
-                ("soft", args.soft_cohesion_kpa * 1e3),
-                ("hard", args.hard_cohesion_kpa * 1e3),
-            ];
-            let _ = writeln!(
-                s,
-                "Fig. 52: hardness index 1 and 5 in soft (c = {} kPa) and hard (c = {} kPa) soil ({} digs each; \
-                 fill = payload / 2550 kg)\n",
-                args.soft_cohesion_kpa, args.hard_cohesion_kpa, args.runs
-            );
-            let _ = writeln!(s, "| soil | index | fill | time | energy | swept volume |");
-            let _ = writeln!(s, "|---|---|---|---|---|---|");
-            let rows = fig52_with(
-                args.runs,
-                &args.autodig_maps()?,
-                args.soil_contact.into(),
-                soils,
-            )?;
-            for (soil, index, m) in &rows {
-                let _ = writeln!(
-                    s,
-                    "| {soil} | {index:.0} | {:.0} % | {:.2} s | {:.0} kJ | {:.2} m^3 |",
-                    100.0 * m.payload_kg / 2550.0,
-                    m.time_s,
-                    m.energy_kj,
-                    m.swept_volume_m3
-                );
-            }
-            let _ = writeln!(
-                s,
-                "\nThesis: soft soil, both indices fill the bucket; the higher index digs too deep, +60 % time \
-                 and +75 % energy. Hard soil: the low index fills about 50 %, the high index fully. \
-                 The thesis made the figure with its dig model: `excavator-ctl model fig52`."
-            );
-            write_checks(&mut s, fig52_checks(&rows).statements());
-            let panels: Vec<_> = soils
-                .iter()
-                .map(|(soil, cohesion)| {
-                    let curves = rows
-                        .iter()
-                        .filter(|r| r.0 == *soil)
-                        .map(|(_, index, m)| {
-                            curve(
-                                format!(
-                                    "index {index:.0}: fill {:.0} %",
-                                    100.0 * m.payload_kg / 2550.0
-                                ),
-                                m,
-                            )
-                        })
-                        .collect();
-                    (
-                        format!("{soil} soil (c = {:.0} kPa)", cohesion / 1000.0),
-                        curves,
+                .filter(|r| r.0 == *soil)
+                .map(|(_, index, m)| {
+                    curve(
+                        format!(
+                            "index {index:.0}: fill {:.0} %",
+                            100.0 * m.payload_kg / full_kg
+                        ),
+                        m,
                     )
                 })
                 .collect();
-            s.push_str(&write_figure(
-                &args.out,
-                "fig52.svg",
-                "Fig. 52: Autodig's soil hardness index 1 and 5",
-                &panels,
-            )?);
-        }
-    }
+            (
+                format!("{soil} soil (c = {:.0} kPa)", cohesion / 1000.0),
+                curves,
+            )
+        })
+        .collect();
+    s.push_str(&write_figure(
+        &a.out.out,
+        "fig52.svg",
+        "Fig. 52: Autodig's soil hardness index 1 and 5",
+        &panels,
+    )?);
+    s.push_str(MODEL_SECTION);
+    s.push_str(&crate::model::fig52::report(
+        &a.model,
+        &a.model_soils,
+        Some(&a.out.out),
+    )?);
     Ok(s)
+}
+
+fn scoreboard_report(a: &ScoreboardArgs) -> anyhow::Result<String> {
+    let table = scoreboard_markdown(&scoreboard(a)?);
+    let out = &a.fig52.out.out;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let path = out.join("scoreboard.md");
+    std::fs::write(&path, &table).with_context(|| format!("writing {}", path.display()))?;
+    Ok(format!(
+        "The thesis's statements about Table 1, Table 2 and Fig. 52 ({} runs each in the \
+         simulator; the dig model from Table 2's start)\n\n{table}\nWritten to {}\n",
+        a.fig52.sim.runs,
+        path.display()
+    ))
 }
 
 /// The two sessions of the extended-operation comparison (6.2).
@@ -1001,12 +1231,14 @@ pub struct ExtendedRuns {
 
 /// Runs a planned session of `digs` on the extended-operation bench, then the predefined sequence
 /// with the median of the planner's dig starts (6.2's "virtual expert"), each written to its folder
-/// under `out` (docs/demo-output.md), and the Fig. 60 plot (`out/fig60.svg`).
+/// under `out` (docs/demo-output.md), and the Fig. 60 plot (`out/fig60.svg`). Both sessions run with
+/// the simulator seed `seed` (`None`: the bench file's).
 ///
 /// # Errors
 /// As [`crate::demo::run_session`]; no planned dig to take the median of.
 pub fn extended(
     digs: u32,
+    seed: Option<u64>,
     out: &std::path::Path,
     planner: Option<&std::path::Path>,
 ) -> anyhow::Result<ExtendedRuns> {
@@ -1015,6 +1247,7 @@ pub fn extended(
     let stop = std::sync::atomic::AtomicBool::new(false);
     let mut args = DemoArgs::planned(out.join("planned"));
     args.digs = digs;
+    args.seed = seed;
     args.planner = planner.map(std::path::Path::to_path_buf);
     args.bench_after = vec![12, digs / 2];
     let planned = run_session(&args, &stop).context("planned session")?;
@@ -1023,6 +1256,7 @@ pub fn extended(
     let mut args = DemoArgs::planned(out.join("predefined"));
     args.strategy = DemoStrategy::Predefined;
     args.digs = digs;
+    args.seed = seed;
     args.planner = planner.map(std::path::Path::to_path_buf);
     args.bench_after = vec![12, digs / 2];
     args.predefined_joints = Some(median);
@@ -1146,15 +1380,198 @@ pub fn extended_markdown(runs: &ExtendedRuns) -> String {
     s
 }
 
-fn extended_report(args: &ExperimentArgs) -> anyhow::Result<String> {
-    let out = args.out.join("extended");
-    let runs = extended(args.digs, &out, args.planner.as_deref())?;
+fn extended_report(args: &ExtendedArgs) -> anyhow::Result<String> {
+    let out = args.out.out.join("extended");
+    let runs = extended(args.digs, args.seed, &out, args.planner.as_deref())?;
     let text = extended_markdown(&runs);
     let path = out.join("comparison.md");
     std::fs::write(&path, &text).map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))?;
     Ok(format!(
         "{text}\nOutputs: {} (planned/, predefined/, fig60.svg, comparison.md)\n",
         out.display()
+    ))
+}
+
+/// The extended run's headline figures over several seeds (`experiment results`).
+#[must_use]
+pub fn extended_seed_rows(runs: &[ExtendedRuns]) -> Vec<crate::results::SeedRow> {
+    use crate::results::{Better, SeedRow};
+    /// The planner's gain over the predefined sequence, %.
+    fn gain(planned: f64, predefined: f64) -> f64 {
+        if predefined > 0.0 {
+            100.0 * (planned / predefined - 1.0)
+        } else {
+            f64::NAN
+        }
+    }
+    type Figure = (&'static str, Better, usize, fn(&ExtendedRuns) -> f64);
+    #[rustfmt::skip] // A table: one figure a line.
+    let figures: [Figure; 10] = [
+        ("planned: actions (digs and cleanups)", Better::Higher, 0, |r| r.planned.totals.digs as f64),
+        ("planned: backups", Better::Higher, 0, |r| r.planned.backups as f64),
+        ("planned: cleanups", Better::Neither, 0, |r| r.planned.cleanups as f64),
+        ("planned: buckets over half full, % (target >= 94; thesis test 3: 94)", Better::Higher, 0,
+            |r| 100.0 * r.planned.stats.over_half_full),
+        ("payload per normal dig, planner over predefined, % (target >= +30; thesis +42)", Better::Higher, 0,
+            |r| gain(r.planned.stats.dig_mean_weight_n, r.predefined.stats.dig_mean_weight_n)),
+        ("weight per cycle, planner over predefined, %", Better::Higher, 0,
+            |r| gain(r.planned.totals.mean_weight_n, r.predefined.totals.mean_weight_n)),
+        ("planned: productivity, Eq. 26, N/s", Better::Higher, 0, |r| r.planned.stats.productivity_n_per_s),
+        ("predefined: productivity, Eq. 26, N/s", Better::Neither, 0, |r| r.predefined.stats.productivity_n_per_s),
+        ("planned: energy per weight, Eq. 27, J/N", Better::Lower, 2,
+            |r| 1e3 * r.planned.stats.energy_per_weight_kj_per_n),
+        ("planned: trend of the normal digs' weight (Fig. 60), N per dig", Better::Higher, 0,
+            |r| r.planned.stats.dig_weight_slope_n_per_dig),
+    ];
+    figures
+        .iter()
+        .map(|(name, better, decimals, f)| SeedRow {
+            name: (*name).to_owned(),
+            values: runs.iter().map(f).collect(),
+            better: *better,
+            decimals: *decimals,
+        })
+        .collect()
+}
+
+/// The results page: the scoreboard, Tables 1 and 2 and Fig. 52 in the simulator and the dig model,
+/// the extended run over `args.seeds` seeds and the dig model's speed, each with the command that
+/// prints it.
+///
+/// # Errors
+/// As the reproductions and [`extended`].
+pub fn results_page(args: &ResultsArgs) -> anyhow::Result<String> {
+    use crate::results::{Page, Provenance, seeds_table};
+    let runs = args.runs;
+    let board = ScoreboardArgs {
+        fig52: Fig52Args {
+            sim: SimArgs {
+                runs,
+                maps: None,
+                soil_contact: SoilContact::Held,
+            },
+            soils: Fig52Soils {
+                soft_cohesion_kpa: FIG52_SOILS[0].1 / 1e3,
+                hard_cohesion_kpa: FIG52_SOILS[1].1 / 1e3,
+            },
+            model: ModelStartArgs::default(),
+            model_soils: ModelSoils::default(),
+            out: OutArgs {
+                out: args.sessions.clone(),
+            },
+        },
+        table1: Table1Options {
+            stick_angle: StickAngleReading::Joint,
+        },
+        table2: Table2Options {
+            base_scale: TABLE2_BASE_SCALE,
+            scaling: Table2Scaling::Soil,
+        },
+    };
+    let (model, model_soils) = (&board.fig52.model, &board.fig52.model_soils);
+    let rows = sim_rows(&board)?;
+    let full_kg = full_bucket_kg()?;
+    let mut page = Page::new(
+        Provenance::now(),
+        &format!(
+            "The simulator runs in-process in virtual time on the default machine and benches \
+             (`config/`), seeds 1..={runs}; the dig model is the shipped one \
+             (`config/nominal_actuator.json`). Each section names the command that prints its \
+             figures ({} build).",
+            if cfg!(debug_assertions) {
+                "debug"
+            } else {
+                "release"
+            }
+        ),
+    );
+    let command = |which: &str| format!("excavator-ctl experiment {which} --runs {runs}");
+    page.section(
+        "The thesis's statements about Table 1, Table 2 and Fig. 52",
+        &[command("scoreboard")],
+        &scoreboard_markdown(&scoreboard_of(&rows, model, model_soils)?),
+    );
+    page.section(
+        "Table 1 (thesis 3.2): the perception enhancements",
+        &[command("table1")],
+        &table1_markdown(&rows.table1, runs, board.table1.stick_angle),
+    );
+    page.section(
+        "Table 2 (thesis 4.4): soil force x1, x2, x3",
+        &[command("table2")],
+        &format!(
+            "### Simulator\n\n{}\n### Dig model\n\n{}",
+            table2_markdown(&rows.table2, runs, &board.table2),
+            crate::model::table2::report(model, None)?
+        ),
+    );
+    page.section(
+        "Fig. 52 (thesis 5.2): the soil hardness index",
+        &[command("fig52")],
+        &format!(
+            "### Simulator\n\n{}\n### Dig model\n\n{}",
+            fig52_markdown(&rows.fig52, runs, &board.fig52.soils, full_kg),
+            crate::model::fig52::report(model, model_soils, None)?
+        ),
+    );
+    let seeds: Vec<u64> = (1..=args.seeds).collect();
+    let mut extended_runs = Vec::new();
+    for &seed in &seeds {
+        let out = args.sessions.join(format!("extended-seed-{seed}"));
+        extended_runs.push(
+            extended(args.digs, Some(seed), &out, None)
+                .with_context(|| format!("extended run, seed {seed}"))?,
+        );
+    }
+    page.section(
+        &format!(
+            "Extended operation (thesis 6.1-6.2, Tables 3-5, Fig. 60): {} digs per strategy",
+            args.digs
+        ),
+        &seeds
+            .iter()
+            .map(|seed| format!("excavator-ctl experiment extended --digs {} --seed {seed}", args.digs))
+            .collect::<Vec<_>>(),
+        &format!(
+            "The planned session and the predefined sequence (started at the median of the planned \
+             starts) on the extended-operation bench; each command prints its seed's Tables 3-5.\n\n{}",
+            seeds_table(&seeds, &extended_seed_rows(&extended_runs))
+        ),
+    );
+    let speed = crate::model::speed::measure(model, 300)?;
+    page.section(
+        "Dig model speed (thesis 4.1)",
+        &["excavator-ctl experiment results".to_owned()],
+        &format!(
+            "Table 2's x1 dig predicted {} times in this process; the fastest run is one the scheduler \
+             did not interrupt (`cargo bench -p planner --bench dig_model` profiles the step).\n\n\
+             | figure | value | target |\n|---|---|---|\n\
+             | one {:.2} s dig ({} steps), fastest | {:.3} ms = {:.0}x real time | >= 10,000x |\n\
+             | same, median run | {:.3} ms = {:.0}x | |\n",
+            speed.runs,
+            speed.dig_time_s,
+            speed.steps,
+            speed.fastest_s * 1e3,
+            speed.real_time_factor(),
+            speed.median_s * 1e3,
+            speed.dig_time_s / speed.median_s
+        ),
+    );
+    Ok(page.finish())
+}
+
+fn results_report(args: &ResultsArgs) -> anyhow::Result<String> {
+    let t0 = std::time::Instant::now();
+    let page = results_page(args)?;
+    if let Some(dir) = args.out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    std::fs::write(&args.out, &page).with_context(|| format!("writing {}", args.out.display()))?;
+    Ok(format!(
+        "Wrote {} in {:.0} s (sessions in {})\n",
+        args.out.display(),
+        t0.elapsed().as_secs_f64(),
+        args.sessions.display()
     ))
 }
 
@@ -1206,9 +1623,9 @@ pub fn hardness_fit(out: &std::path::Path) -> anyhow::Result<planner::plan::hard
     Ok(fit)
 }
 
-fn hardness_fit_report(args: &ExperimentArgs) -> anyhow::Result<String> {
+fn hardness_fit_report(out: &std::path::Path) -> anyhow::Result<String> {
     use std::fmt::Write as _;
-    let out = args.out.join("hardness");
+    let out = out.join("hardness");
     let t0 = std::time::Instant::now();
     let fit = hardness_fit(&out)?;
     let mut s = String::new();
@@ -1566,14 +1983,14 @@ mod tests {
     /// The thesis's Table 2 passes every check; a volume that falls from x1 fails that one.
     #[test]
     fn table2_checks_hold_for_the_thesis() {
-        let thesis = crate::model_cmd::THESIS_TABLE2.map(|t| (t.1, t.2, t.3));
-        assert!(crate::model_cmd::table2_checks(thesis).iter().all(|c| c.1));
+        let thesis = THESIS_TABLE2.map(|t| (t.1, t.2, t.3));
+        assert!(table2_checks(thesis).iter().all(|c| c.1));
         let ours = [
             (3.92, 2.69, 226.0),
             (4.57, 1.10, 294.0),
             (3.94, 0.84, 276.0),
         ];
-        let c = crate::model_cmd::table2_checks(ours);
+        let c = table2_checks(ours);
         assert_eq!(c.map(|c| c.1), [true, true, false, true, false], "{c:?}");
     }
 }

@@ -7,11 +7,13 @@
 //! - [`harness`]: the virtual-time harness: the simulated machine and the controller node on one
 //!   in-process bus, stepped in lockstep (used by every in-process run and test).
 //! - [`experiment`]: the thesis's reproductions in closed loop (Tables 1-5, Figs. 52, 53, 60).
-//! - [`model_cmd`]: the dig model's commands: train and evaluate the actuator networks, generate
-//!   simulator data, compare the dig model with the simulator, Table 2 with the dig model.
-//! - [`model_fig52`]: thesis Fig. 52 with the dig model.
-//! - [`soil_cv`]: cross-validation of the soil models on a session's soil samples (4.3.5).
+//! - [`model`]: the dig model's commands: train and evaluate the actuator networks, generate
+//!   simulator data, compare the dig model with the simulator, Table 2 and Fig. 52 with the dig
+//!   model, cross-validation of the soil models on a session's soil samples (4.3.5).
 //! - [`plots`]: the SVG figures of sessions and experiments.
+//! - [`results`]: the layout of the generated results page (docs/results.md).
+//! - [`session`]: the records of a session folder (per-dig records, tip paths, soil samples).
+//! - [`thesis`]: the thesis's figures and statements the reproductions are checked against.
 //!
 //! # Data flow
 //!
@@ -24,7 +26,8 @@
 pub mod demo;
 pub mod experiment;
 pub mod harness;
-pub mod model_cmd;
-pub mod model_fig52;
+pub mod model;
 pub mod plots;
-pub mod soil_cv;
+pub mod results;
+pub mod session;
+pub mod thesis;

@@ -1,13 +1,17 @@
 //! SVG plots of a demo session (plotters): tip trajectories per dig over the terrain section, terrain
 //! elevation maps before and after, and per-dig weight, time and energy. Each function returns the SVG
-//! text; [`crate::demo`] writes it.
+//! text; `demo` and the experiments write it. It draws the session records ([`crate::session`]) and
+//! nothing else of the lab.
 
+use std::path::{Path, PathBuf};
+
+use anyhow::Context as _;
 use planner::terrain::TerrainGrid;
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
-use crate::demo::{DigRecord, TipPoint};
+use crate::session::{DigRecord, TipPoint};
 
 pub(crate) use trace_tools::plot::err;
 
@@ -174,6 +178,23 @@ pub fn tip_paths_svg(title: &str, panels: &[(String, Vec<TipCurve>)]) -> anyhow:
 }
 
 /// The chart type of the tip-path plots: base-frame `x` and `z`, m.
+/// Writes [`tip_paths_svg`] of `panels` as `dir/name` (creating `dir`) and returns its path.
+///
+/// # Errors
+/// Drawing, creating the folder or writing the file.
+pub fn write_tip_paths(
+    dir: &Path,
+    name: &str,
+    title: &str,
+    panels: &[(String, Vec<TipCurve>)],
+) -> anyhow::Result<PathBuf> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let path = dir.join(name);
+    std::fs::write(&path, tip_paths_svg(title, panels)?)
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(path)
+}
+
 type TipChart<'a, 'b> =
     ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 

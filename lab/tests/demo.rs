@@ -52,9 +52,12 @@ fn demo_writes_all_outputs_with_the_documented_fields_for_two_digs() {
         assert!(d["time_s"].as_f64().unwrap() > 0.0);
         assert!(d["energy_kj"].as_f64().unwrap() > 0.0);
     }
-    // The first dig fills the bucket from the default start (> 80 % of 2550 kg).
+    // The first dig fills the bucket from the default start (> 80 % of the rated 2550 kg).
+    let full_kg = planner::machine::MachineConfig::default_machine()
+        .unwrap()
+        .rated_payload_kg();
     assert!(
-        digs[0]["true_payload_kg"].as_f64().unwrap() > 0.8 * 2550.0,
+        digs[0]["true_payload_kg"].as_f64().unwrap() > 0.8 * full_kg,
         "{}",
         digs[0]
     );
@@ -86,7 +89,7 @@ fn demo_writes_all_outputs_with_the_documented_fields_for_two_digs() {
     );
     assert!(trace.lines().count() as u64 >= json["totals"]["trace_frames"].as_u64().unwrap());
     // The soil estimator's samples of the planned session, for `model soil-cv`.
-    let soil: lab::soil_cv::SoilSamplesFile =
+    let soil: lab::session::SoilSamplesFile =
         serde_json::from_slice(&std::fs::read(out.join("soil_samples.json")).unwrap()).unwrap();
     assert!(soil.digs.iter().all(|d| d.index < 2));
     assert!(soil.digs.iter().flat_map(|d| &d.samples).all(|s| {

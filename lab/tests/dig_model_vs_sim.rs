@@ -4,7 +4,8 @@
 
 #![allow(clippy::unwrap_used)]
 
-use lab::model_cmd::{compare_dig, mean_errors, random_setups, run_sim_dig};
+use lab::model::comparison::{compare_dig, mean_errors};
+use lab::model::sim_dig::{random_setups, run_sim_dig};
 use planner::dig_model::DigModel;
 
 /// Digs compared.

@@ -6,24 +6,24 @@
 
 #![allow(clippy::unwrap_used)]
 
-use lab::experiment::{ExperimentArgs, Mean, StickAngleReading, Which, report, table1, table2};
+use clap::Parser as _;
+use lab::experiment::{
+    ExperimentArgs, Mean, ResultsArgs, StickAngleReading, full_bucket_kg, report, results_page,
+    table1, table2,
+};
 
-/// The command line's defaults, one run each, writing into `out`.
-fn args(which: Which, out: &std::path::Path) -> ExperimentArgs {
-    ExperimentArgs {
-        which,
-        runs: 1,
-        digs: 100,
-        out: out.to_path_buf(),
-        planner: None,
-        maps: None,
-        base_scale: lab::experiment::TABLE2_BASE_SCALE,
-        scaling: lab::experiment::Table2Scaling::Soil,
-        soil_contact: lab::experiment::SoilContact::Held,
-        stick_angle: StickAngleReading::Joint,
-        soft_cohesion_kpa: 8.0,
-        hard_cohesion_kpa: 16.0,
-    }
+/// `excavator-ctl experiment ARGS...` as the command line parses it.
+#[derive(clap::Parser)]
+struct Cli {
+    #[command(flatten)]
+    args: ExperimentArgs,
+}
+
+/// The command line's `experiment` arguments `args`, one run each, writing into `out`.
+fn args(args: &[&str], out: &std::path::Path) -> ExperimentArgs {
+    let tail = ["--runs", "1", "--out", out.to_str().unwrap()];
+    let line = ["experiment"].iter().chain(args).chain(&tail);
+    Cli::try_parse_from(line).unwrap().args
 }
 
 fn payload_spread_kg(m: &[Mean]) -> f64 {
@@ -110,7 +110,10 @@ fn energy_rises_from_the_nominal_soil_force() {
     let rows = table2(1).unwrap();
     assert_eq!(rows.len(), 3);
     assert!(rows.iter().all(|(_, m)| m.completed == 1), "{rows:?}");
-    assert!(rows[0].1.payload_kg > 0.8 * 2550.0, "{rows:?}");
+    assert!(
+        rows[0].1.payload_kg > 0.8 * full_bucket_kg().unwrap(),
+        "{rows:?}"
+    );
     assert!(rows[1].1.energy_kj > rows[0].1.energy_kj, "{rows:?}");
     // Autodig slows the bucket in the harder soil (thesis 4.4): the dig takes longer at x2.
     assert!(rows[1].1.time_s > rows[0].1.time_s, "{rows:?}");
@@ -121,7 +124,7 @@ fn energy_rises_from_the_nominal_soil_force() {
 #[test]
 fn fig52_report_prints_the_thesis_comparison() {
     let out = tempfile::tempdir().unwrap();
-    let text = report(&args(Which::Fig52, out.path())).unwrap();
+    let text = report(&args(&["fig52"], out.path())).unwrap();
     assert!(
         text.contains("| soft | 1 |") && text.contains("| hard | 5 |"),
         "{text}"
@@ -135,6 +138,14 @@ fn fig52_report_prints_the_thesis_comparison() {
     );
     assert_eq!(svg.matches("index 5: fill").count(), 2, "{svg}");
     assert!(svg.matches("<polyline").count() >= 8, "{svg}");
+    // The dig model's section follows the simulator's, with its own figure.
+    let model = text.find("## Dig model").unwrap();
+    assert!(text.find("## Simulator").unwrap() < model, "{text}");
+    assert!(
+        text[model..].contains("Fig. 52 with the dig model"),
+        "{text}"
+    );
+    assert!(out.path().join("fig52_model.svg").exists());
 }
 
 /// Fig. 52's effect of the hardness index: in the hard soil the high index fills the bucket and the low
@@ -143,6 +154,7 @@ fn fig52_report_prints_the_thesis_comparison() {
 #[test]
 fn fig52_high_index_does_better_in_hard_soil() {
     let rows = lab::experiment::fig52(1).unwrap();
+    let full_kg = full_bucket_kg().unwrap();
     let get = |soil: &str, index: f64| {
         rows.iter()
             .find(|(s, i, _)| *s == soil && *i == index)
@@ -153,15 +165,15 @@ fn fig52_high_index_does_better_in_hard_soil() {
     let (hard1, hard5) = (get("hard", 1.0), get("hard", 5.0));
     assert!(rows.iter().all(|(_, _, m)| m.completed == 1), "{rows:?}");
     assert!(hard5.payload_kg > 1.2 * hard1.payload_kg, "{rows:?}");
-    assert!(hard5.payload_kg > 0.95 * 2550.0, "{rows:?}");
-    assert!(hard1.payload_kg < 0.9 * 2550.0, "{rows:?}");
+    assert!(hard5.payload_kg > 0.95 * full_kg, "{rows:?}");
+    assert!(hard1.payload_kg < 0.9 * full_kg, "{rows:?}");
     assert!(
         hard5.energy_kj / hard5.payload_kg < hard1.energy_kj / hard1.payload_kg,
         "{rows:?}"
     );
     assert!(soft1.time_s < soft5.time_s, "{rows:?}");
     // In the soft soil the low index fills the bucket too (Fig. 52, top).
-    assert!(soft1.payload_kg > 0.95 * 2550.0, "{rows:?}");
+    assert!(soft1.payload_kg > 0.95 * full_kg, "{rows:?}");
 }
 
 /// The scoreboard covers all 22 statements; what this project claims reproduced holds in it: Table 1
@@ -170,7 +182,7 @@ fn fig52_high_index_does_better_in_hard_soil() {
 fn scoreboard_shows_table1_and_the_dig_model_fig52_reproduced() {
     let out = tempfile::tempdir().unwrap();
     // One run of the reproductions: the report writes the table it prints to scoreboard.md.
-    let text = report(&args(Which::Scoreboard, out.path())).unwrap();
+    let text = report(&args(&["scoreboard"], out.path())).unwrap();
     let table = std::fs::read_to_string(out.path().join("scoreboard.md")).unwrap();
     assert!(text.contains(&table), "{text}");
     let rows: Vec<&str> = table
@@ -186,4 +198,48 @@ fn scoreboard_shows_table1_and_the_dig_model_fig52_reproduced() {
             "{table}"
         );
     }
+}
+
+/// `experiment results` on a tiny run: the header, then each section with the command that made it,
+/// its date and commit, and its table.
+#[test]
+fn results_page_names_the_command_date_and_commit_of_every_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let page = results_page(&ResultsArgs {
+        out: dir.path().join("results.md"),
+        runs: 1,
+        digs: 2,
+        seeds: 1,
+        sessions: dir.path().to_path_buf(),
+    })
+    .unwrap();
+    assert_eq!(page.lines().next(), Some(lab::results::HEADER), "{page}");
+    let sections: Vec<&str> = page.split("\n## ").skip(1).collect();
+    let titles: Vec<&str> = sections.iter().map(|s| s.lines().next().unwrap()).collect();
+    for (title, command) in [
+        ("The thesis's statements", "scoreboard --runs 1"),
+        ("Table 1", "table1 --runs 1"),
+        ("Table 2", "table2 --runs 1"),
+        ("Fig. 52", "fig52 --runs 1"),
+        ("Extended operation", "extended --digs 2 --seed 1"),
+        ("Dig model speed", "results"),
+    ] {
+        let section = sections
+            .iter()
+            .find(|s| s.starts_with(title))
+            .unwrap_or_else(|| panic!("no section {title}: {titles:?}"));
+        let made = section.lines().nth(2).unwrap();
+        assert!(
+            made.starts_with(&format!("`excavator-ctl experiment {command}` ("))
+                && made.contains(", commit "),
+            "{title}: {made}"
+        );
+        assert!(section.contains("\n|---|"), "{title}: no table\n{section}");
+    }
+    assert_eq!(sections.len(), 6, "{titles:?}");
+    assert!(page.contains("statements hold."), "{page}");
+    assert!(
+        page.contains("| figure | seed 1 | median | worst |"),
+        "{page}"
+    );
 }

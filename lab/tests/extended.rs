@@ -13,8 +13,8 @@ use lab::demo::{DemoArgs, DemoStrategy, run_session};
 /// minimum and tracking is blocked by material near the tracks; since each bucket pass is carved
 /// into the map and starts are approached 0.8 m up, the digs leave none: 0 cleanups in 25 digs here
 /// and in 100 on the 2 m bench. The choice is tested in `planner::plan::{action, cleanup_track}`,
-/// the cleanup itself in `closed_loop.rs`; the predefined sequence cleans up 47 times in the ignored
-/// 100-dig comparison below.)
+/// the cleanup itself in `closed_loop.rs`; the predefined sequence cleans up 47 times in the 100-dig
+/// comparison, `excavator-ctl experiment extended --digs 100`.)
 #[test]
 fn planned_session_digs_and_backs_up() {
     let dir = tempfile::tempdir().unwrap();
@@ -88,17 +88,4 @@ fn predefined_sequence_runs_from_fixed_joints() {
     assert!(s.predefined_start_deg.is_some());
     let swings: Vec<f64> = s.digs.iter().map(|d| d.swing_deg).collect();
     assert!(swings.windows(2).all(|w| w[1] > w[0]), "{swings:?}");
-}
-
-/// The full target run: 100 digs with both strategies. Ignored in CI: about 3 minutes of
-/// wall time in release and several times that at the test profile's opt-level 1; run it with
-/// `cargo test -p controller --release --test extended -- --ignored --nocapture`.
-#[test]
-#[ignore = "100 digs per strategy: minutes of wall time; see excavator-ctl experiment extended"]
-fn extended_operation_100_digs_compared_with_the_predefined_sequence() {
-    let dir = tempfile::tempdir().unwrap();
-    let runs = lab::experiment::extended(100, dir.path(), None).unwrap();
-    println!("{}", lab::experiment::extended_markdown(&runs));
-    assert!(runs.planned.totals.digs >= 100);
-    assert!(runs.planned.backups >= 3);
 }

@@ -3,15 +3,17 @@
 
 #![allow(dead_code, clippy::unwrap_used)]
 
-use controller::cycle::Phase;
+use controller::cycle::{Action, Phase, StartPose};
 use controller::node::{ControllerConfig, ControllerNode, Outbox};
 use firmware_bridge::messages::{AuxValveCommand, Message, RequestedMode, Valve};
 use firmware_bridge::transport::TimestampedFrame;
 use lab::harness::{Harness, HarnessOptions};
 use planner::autodig::AutodigMaps;
+use planner::cleanup::CleanupPlan;
 use vcan_sim::SimConfig;
 use vcan_sim::embedded::EmbeddedMachine;
 
+#[allow(unused_imports)]
 pub use lab::harness::PERIOD_S;
 
 /// The harness with the knobs the closed-loop tests turn.
@@ -136,4 +138,61 @@ pub fn has_motion(out: &[firmware_bridge::CanFrame]) -> bool {
 /// The default simulator (default machine and bench, seed 1).
 pub fn default_sim() -> SimConfig {
     SimConfig::load::<&str>(None, None, Some(1), &[]).unwrap()
+}
+
+/// The default plan cut to its first dig, once.
+pub fn one_dig() -> ControllerConfig {
+    let mut c = ControllerConfig::default();
+    c.cycle.actions.truncate(1);
+    c.cycle.repeat = false;
+    c.cycle.max_digs = Some(1);
+    c
+}
+
+/// A cleanup of a 0.2 m layer left on the floor with the floor-levelling settings.
+pub fn cleanup_setup() -> (vcan_sim::SimConfig, ControllerConfig) {
+    let mut sim = default_sim();
+    // A thin layer left on the floor: 0.2 m from x = 4 to 5.8, bare floor beyond.
+    sim.scenario.bench.height_m = 0.2;
+    sim.scenario.bench.face_x_m = 4.0;
+    sim.scenario.bench.length_m = 1.8;
+    let mut config = ControllerConfig::default();
+    config.cycle.actions = vec![Action::Cleanup {
+        swing_rad: 0.0,
+        start: StartPose::Tip {
+            x_m: 6.3,
+            z_m: 0.8,
+            bucket_abs_rad: planner::cleanup::CleanupConfig::levelling().bucket_abs_rad,
+        },
+        plan: CleanupPlan {
+            start_radius_m: 6.3,
+            min_radius_m: 3.2,
+        },
+    }];
+    config.cycle.repeat = false;
+    config.cycle.max_digs = Some(1);
+    // The floor-levelling settings (docs/autodig.md, Floor cleanup) over the controller's probe settings.
+    let levelling = planner::cleanup::CleanupConfig::levelling();
+    config.cleanup.bucket_abs_rad = levelling.bucket_abs_rad;
+    config.cleanup.pressure_threshold_pct = levelling.pressure_threshold_pct;
+    config.cleanup.pressure_hold_s = levelling.pressure_hold_s;
+    config.cleanup.follow_settle_s = levelling.follow_settle_s;
+    config.cleanup.follow_clearance_m = levelling.follow_clearance_m;
+    (sim, config)
+}
+
+/// Lowest and highest terrain along the cleaned strip (x 4..6.2 m, y -0.4..0.4 m).
+pub fn floor_extremes(l: &Loop) -> (f64, f64) {
+    let terrain = &l.machine().plant().world.terrain;
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    let mut x = 4.0;
+    while x <= 6.2 {
+        for y in [-0.4, 0.0, 0.4] {
+            let h = terrain.height_at(x, y).unwrap();
+            lo = lo.min(h);
+            hi = hi.max(h);
+        }
+        x += 0.1;
+    }
+    (lo, hi)
 }

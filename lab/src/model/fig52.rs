@@ -1,4 +1,5 @@
-//! `excavator-ctl model fig52`: thesis Fig. 52 (5.2) with the dig model, the way the thesis made it.
+//! Thesis Fig. 52 (5.2) with the dig model, the way the thesis made it (the dig model's part of
+//! `excavator-ctl experiment fig52`).
 //!
 //! "The model of the digging process was used to generate a trajectory of the bucket through the
 //! ground for two separate settings" of Autodig's soil hardness index, in a soft and in a much harder
@@ -8,50 +9,48 @@
 //!
 //! Here: the planner's dig model ([`planner::dig_model`]: actuator networks, modified FEE soil of Eqs.
 //! 14-18 with bearing, the same Autodig code), Table 2's start on the default bench, hardness index 1
-//! and 5, soils that differ in cohesion only. The thesis does not give its two soils, so the command
+//! and 5, soils that differ in cohesion only. The thesis does not give its two soils, so the report
 //! prints the whole cohesion sweep ([`SWEEP_COHESION_PA`]) before the chosen pair; the default pair
-//! (6 and 12 kPa, the same 1:2 ratio as `experiment fig52`'s) was read off that sweep
+//! (6 and 12 kPa, the same 1:2 ratio as the simulator's) was read off that sweep
 //! (docs/models.md, "Fig. 52").
 
-use std::path::PathBuf;
+use std::path::Path;
 
-use anyhow::{Context, bail};
+use anyhow::{Context as _, bail};
 use clap::Args;
 use planner::dig_model::{DigEnd, DigModel, DigPrediction, DigSite, DigStart, SoilModel};
 use serde::Serialize;
 
-use crate::model_cmd::{
-    ModelStartArgs, default_section, default_site, predicted_tip_path, thesis_verdict,
-};
+use super::start::{ModelStartArgs, default_section, default_site, predicted_tip_path};
+use crate::plots::{TipCurve, write_tip_paths};
+use crate::thesis::{FULL_FILL, Fig52Checks, HALF_FILL, THESIS_SOFT_COST, pct, write_checks};
 
 /// The cohesions of the printed sweep, Pa (the default bench's soil is 8 kPa).
 pub const SWEEP_COHESION_PA: [f64; 7] = [4e3, 6e3, 8e3, 12e3, 16e3, 24e3, 32e3];
 /// The two Autodig soil hardness indices compared (the ends of the maps' range).
 pub const INDICES: [f64; 2] = [1.0, 5.0];
-/// A bucket counts as full from this share of its capacity.
-pub const FULL_FILL: f64 = 0.85;
-/// "About half" full: this range of the capacity.
-pub const HALF_FILL: (f64, f64) = (0.35, 0.65);
 /// The default soft and hard soils' cohesion, kPa (read off the sweep; see the module docs).
 pub const SOIL_PAIR_KPA: (f64, f64) = (6.0, 12.0);
-/// The thesis's soft-soil cost of the higher index: time, energy (fractions).
-pub const THESIS_SOFT_COST: (f64, f64) = (0.60, 0.75);
 
-/// Arguments of `model fig52`.
-#[derive(Debug, Args)]
-pub struct Fig52Args {
-    /// The model and its start (Table 2's by default).
-    #[command(flatten)]
-    pub start: ModelStartArgs,
-    /// Cohesion of the soft soil, kPa.
-    #[arg(long, default_value_t = SOIL_PAIR_KPA.0)]
+/// The soft and the hard soil of Fig. 52 with the dig model.
+#[derive(Debug, Clone, Copy, PartialEq, Args)]
+pub struct ModelSoils {
+    /// Dig model: cohesion of the soft soil, kPa.
+    #[arg(id = "model_soft_cohesion_kpa", long = "model-soft-cohesion-kpa", value_name = "KPA", default_value_t = SOIL_PAIR_KPA.0)]
     pub soft_cohesion_kpa: f64,
-    /// Cohesion of the hard soil, kPa.
-    #[arg(long, default_value_t = SOIL_PAIR_KPA.1)]
+    /// Dig model: cohesion of the hard soil, kPa.
+    #[arg(id = "model_hard_cohesion_kpa", long = "model-hard-cohesion-kpa", value_name = "KPA", default_value_t = SOIL_PAIR_KPA.1)]
     pub hard_cohesion_kpa: f64,
-    /// Also write the four predicted tip paths (soft and hard, index 1 and 5) to `DIR/fig52_model.svg`.
-    #[arg(long, value_name = "DIR")]
-    pub out: Option<PathBuf>,
+}
+
+impl Default for ModelSoils {
+    /// The command-line defaults ([`SOIL_PAIR_KPA`]).
+    fn default() -> Self {
+        Self {
+            soft_cohesion_kpa: SOIL_PAIR_KPA.0,
+            hard_cohesion_kpa: SOIL_PAIR_KPA.1,
+        }
+    }
 }
 
 /// One predicted dig of the figure.
@@ -75,77 +74,14 @@ pub struct Fig52Dig {
     pub end: DigEnd,
 }
 
-/// The thesis's statements about Fig. 52, checked on a soft and a hard soil's pair of digs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-pub struct Fig52Checks {
-    /// Soft soil: both indices fill the bucket (at least [`FULL_FILL`]).
-    pub soft_both_full: bool,
-    /// Soft soil: the higher index takes more time and more energy.
-    pub soft_high_index_costs: bool,
-    /// Hard soil: the lower index fills the bucket about half ([`HALF_FILL`]).
-    pub hard_low_index_half: bool,
-    /// Hard soil: the higher index fills the bucket (at least [`FULL_FILL`]).
-    pub hard_high_index_full: bool,
-}
-
-impl Fig52Checks {
-    /// The checks on `[index 1, index 5]` of the soft and of the hard soil.
-    #[must_use]
-    pub fn of(soft: &[Fig52Dig; 2], hard: &[Fig52Dig; 2]) -> Self {
-        let figures = |d: &Fig52Dig| (d.fill, d.time_s, d.energy_kj);
-        Self::from_figures(
-            [figures(&soft[0]), figures(&soft[1])],
-            [figures(&hard[0]), figures(&hard[1])],
-        )
-    }
-
-    /// The checks on `(fill, time s, energy kJ)` of index 1 and index 5 in the soft and in the hard
-    /// soil (fill: the share of the bucket's capacity).
-    #[must_use]
-    pub fn from_figures(soft: [(f64, f64, f64); 2], hard: [(f64, f64, f64); 2]) -> Self {
-        Self {
-            soft_both_full: soft.iter().all(|d| d.0 >= FULL_FILL),
-            soft_high_index_costs: soft[1].1 > soft[0].1 && soft[1].2 > soft[0].2,
-            hard_low_index_half: (HALF_FILL.0..=HALF_FILL.1).contains(&hard[0].0),
-            hard_high_index_full: hard[1].0 >= FULL_FILL,
-        }
-    }
-
-    /// Each statement, worded, and whether it holds.
-    #[must_use]
-    pub fn statements(&self) -> [(String, bool); 4] {
-        [
-            (
-                format!("soft soil, both indices fill (>= {})", pct(FULL_FILL)),
-                self.soft_both_full,
-            ),
-            (
-                "soft soil, index 5 costs time and energy".to_owned(),
-                self.soft_high_index_costs,
-            ),
-            (
-                format!(
-                    "hard soil, index 1 fills about half ({}-{})",
-                    pct(HALF_FILL.0),
-                    pct(HALF_FILL.1)
-                ),
-                self.hard_low_index_half,
-            ),
-            (
-                format!("hard soil, index 5 fills (>= {})", pct(FULL_FILL)),
-                self.hard_high_index_full,
-            ),
-        ]
-    }
-
-    /// All four hold.
-    #[must_use]
-    pub fn all(&self) -> bool {
-        self.soft_both_full
-            && self.soft_high_index_costs
-            && self.hard_low_index_half
-            && self.hard_high_index_full
-    }
+/// The thesis's statements about Fig. 52 on `[index 1, index 5]` of the soft and of the hard soil.
+#[must_use]
+pub fn pair_checks(soft: &[Fig52Dig; 2], hard: &[Fig52Dig; 2]) -> Fig52Checks {
+    let figures = |d: &Fig52Dig| (d.fill, d.time_s, d.energy_kj);
+    Fig52Checks::from_figures(
+        [figures(&soft[0]), figures(&soft[1])],
+        [figures(&hard[0]), figures(&hard[1])],
+    )
 }
 
 /// The dig model's dig from `start` over `site` in a soil of `cohesion_pa` (the model's analytical soil
@@ -228,7 +164,7 @@ pub fn bands(
     for k in 0..=n {
         let c = from + step * f64::from(k);
         let [(lo, _), (hi, _)] = pair(model, c, start, site)?;
-        let checks = Fig52Checks::of(&[lo, hi], &[lo, hi]);
+        let checks = pair_checks(&[lo, hi], &[lo, hi]);
         if checks.soft_both_full && checks.soft_high_index_costs {
             soft.push(c);
         }
@@ -265,10 +201,6 @@ fn ranges_kpa(cohesions_pa: &[f64]) -> String {
         .join(", ")
 }
 
-fn pct(x: f64) -> String {
-    format!("{:.0} %", 100.0 * x)
-}
-
 fn change(from: f64, to: f64) -> String {
     format!("{:+.0} %", 100.0 * (to / from - 1.0))
 }
@@ -285,35 +217,32 @@ pub fn checks(
 ) -> anyhow::Result<Fig52Checks> {
     let soft = pair(model, soils_kpa.0 * 1e3, start, site)?;
     let hard = pair(model, soils_kpa.1 * 1e3, start, site)?;
-    Ok(Fig52Checks::of(
+    Ok(pair_checks(
         &[soft[0].0, soft[1].0],
         &[hard[0].0, hard[1].0],
     ))
 }
 
-/// Runs `model fig52`: the sweep, the pair, the checks and optionally the plot.
+/// Fig. 52 with the dig model from `start` (the dig model's part of `experiment fig52`): the cohesion
+/// sweep, the bands where each half of the figure holds, the pair `soils` next to the thesis, the
+/// checks and, with `out`, the four predicted tip paths in `out/fig52_model.svg`.
 ///
 /// # Errors
 /// As [`predict`]; writing the plot.
-pub fn run(a: &Fig52Args) -> anyhow::Result<()> {
-    print!("{}", report(a)?);
-    Ok(())
-}
-
-/// The printed report of `model fig52` (and the plot if `--out`).
-///
-/// # Errors
-/// As [`run`].
-pub fn report(a: &Fig52Args) -> anyhow::Result<String> {
+pub fn report(
+    start_args: &ModelStartArgs,
+    soils: &ModelSoils,
+    out_dir: Option<&Path>,
+) -> anyhow::Result<String> {
     use std::fmt::Write as _;
-    let model = a.start.load_model()?;
+    let model = start_args.load_model()?;
     let site = default_site()?;
-    let start = a.start.start(&site)?;
+    let start = start_args.start(&site)?;
     let mut out = String::new();
     writeln!(
         out,
         "Fig. 52 with the dig model ({}; soils differ in cohesion only)\n",
-        a.start.describe()
+        start_args.describe()
     )?;
     writeln!(
         out,
@@ -359,14 +288,14 @@ pub fn report(a: &Fig52Args) -> anyhow::Result<String> {
         pct(FULL_FILL),
         ranges_kpa(&hard_band)
     )?;
-    let soft = pair(&model, a.soft_cohesion_kpa * 1e3, &start, &site)?;
-    let hard = pair(&model, a.hard_cohesion_kpa * 1e3, &start, &site)?;
+    let soft = pair(&model, soils.soft_cohesion_kpa * 1e3, &start, &site)?;
+    let hard = pair(&model, soils.hard_cohesion_kpa * 1e3, &start, &site)?;
     let s = [soft[0].0, soft[1].0];
     let h = [hard[0].0, hard[1].0];
     writeln!(
         out,
         "\nFig. 52: soft soil {:.1} kPa, hard soil {:.1} kPa\n",
-        a.soft_cohesion_kpa, a.hard_cohesion_kpa
+        soils.soft_cohesion_kpa, soils.hard_cohesion_kpa
     )?;
     writeln!(out, "| | dig model | thesis |")?;
     writeln!(out, "|---|---|---|")?;
@@ -395,16 +324,13 @@ pub fn report(a: &Fig52Args) -> anyhow::Result<String> {
         pct(h[0].fill),
         pct(h[1].fill)
     )?;
-    let checks = Fig52Checks::of(&s, &h);
-    writeln!(out)?;
-    for (statement, ok) in checks.statements() {
-        writeln!(out, "  {statement}: {}", thesis_verdict(ok))?;
-    }
-    if let Some(dir) = &a.out {
+    let checks = pair_checks(&s, &h);
+    write_checks(&mut out, checks.statements());
+    if let Some(dir) = out_dir {
         let section = default_section()?;
         let curves = |digs: &[(Fig52Dig, DigPrediction); 2]| {
             digs.iter()
-                .map(|(d, p)| crate::plots::TipCurve {
+                .map(|(d, p)| TipCurve {
                     label: format!(
                         "index {:.0}: {} full, {:.2} s, {:.0} kJ",
                         d.hardness_index,
@@ -419,25 +345,25 @@ pub fn report(a: &Fig52Args) -> anyhow::Result<String> {
         };
         let panels = [
             (
-                format!("soft soil, cohesion {:.1} kPa", a.soft_cohesion_kpa),
+                format!("soft soil, cohesion {:.1} kPa", soils.soft_cohesion_kpa),
                 curves(&soft),
             ),
             (
-                format!("hard soil, cohesion {:.1} kPa", a.hard_cohesion_kpa),
+                format!("hard soil, cohesion {:.1} kPa", soils.hard_cohesion_kpa),
                 curves(&hard),
             ),
         ];
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        let path = dir.join("fig52_model.svg");
-        std::fs::write(
-            &path,
-            crate::plots::tip_paths_svg(
-                "Fig. 52 with the dig model: hardness index 1 and 5 in a soft and a hard soil",
-                &panels,
-            )?,
-        )
-        .with_context(|| format!("writing {}", path.display()))?;
-        writeln!(out, "\n  trajectories: {}", path.display())?;
+        let path = write_tip_paths(
+            dir,
+            "fig52_model.svg",
+            "Fig. 52 with the dig model: hardness index 1 and 5 in a soft and a hard soil",
+            &panels,
+        )?;
+        writeln!(
+            out,
+            "\nTrajectories (the predicted tip over the bench section): {}",
+            path.display()
+        )?;
     }
     Ok(out)
 }
@@ -446,27 +372,18 @@ pub fn report(a: &Fig52Args) -> anyhow::Result<String> {
 mod tests {
     use super::*;
 
-    fn args(out: Option<PathBuf>) -> Fig52Args {
-        Fig52Args {
-            start: ModelStartArgs::default(),
-            soft_cohesion_kpa: 6.0,
-            hard_cohesion_kpa: 12.0,
-            out,
-        }
-    }
-
     /// The shipped dig model at the command's defaults shows the thesis's Fig. 52: in the soft soil
     /// both indices fill and index 5 costs time and energy; in the hard soil index 1 fills about half
     /// and index 5 fills.
     #[test]
     fn the_shipped_dig_model_shows_fig52s_pattern() {
-        let a = args(None);
-        let model = a.start.load_model().unwrap();
+        let (a, soils) = (ModelStartArgs::default(), ModelSoils::default());
+        let model = a.load_model().unwrap();
         let site = default_site().unwrap();
-        let start = a.start.start(&site).unwrap();
-        let soft = pair(&model, a.soft_cohesion_kpa * 1e3, &start, &site).unwrap();
-        let hard = pair(&model, a.hard_cohesion_kpa * 1e3, &start, &site).unwrap();
-        let checks = Fig52Checks::of(&[soft[0].0, soft[1].0], &[hard[0].0, hard[1].0]);
+        let start = a.start(&site).unwrap();
+        let soft = pair(&model, soils.soft_cohesion_kpa * 1e3, &start, &site).unwrap();
+        let hard = pair(&model, soils.hard_cohesion_kpa * 1e3, &start, &site).unwrap();
+        let checks = pair_checks(&[soft[0].0, soft[1].0], &[hard[0].0, hard[1].0]);
         assert!(
             checks.all(),
             "{checks:?}: soft {:?} / {:?}, hard {:?} / {:?}",
@@ -492,14 +409,14 @@ mod tests {
         };
         let soft = [dig(1.3, 3.0, 200.0), dig(1.9, 4.5, 230.0)];
         let hard = [dig(0.5, 3.0, 200.0), dig(0.9, 4.0, 300.0)];
-        assert!(Fig52Checks::of(&soft, &hard).all());
-        let c = Fig52Checks::of(&soft, &soft);
+        assert!(pair_checks(&soft, &hard).all());
+        let c = pair_checks(&soft, &soft);
         assert!(!c.hard_low_index_half && c.hard_high_index_full && !c.all());
-        let c = Fig52Checks::of(&hard, &hard);
+        let c = pair_checks(&hard, &hard);
         assert!(!c.soft_both_full && c.soft_high_index_costs);
         // A cheaper index 5 in the soft soil is not the thesis's figure.
         let cheap = [dig(1.3, 3.0, 200.0), dig(1.9, 2.5, 230.0)];
-        assert!(!Fig52Checks::of(&cheap, &hard).soft_high_index_costs);
+        assert!(!pair_checks(&cheap, &hard).soft_high_index_costs);
     }
 
     /// Bad input is a clear error, never a panic: a cohesion that is negative or not a number, a start
@@ -520,12 +437,7 @@ mod tests {
                 start_r: r,
                 ..ModelStartArgs::default()
             };
-            let e = report(&Fig52Args {
-                start: a,
-                soft_cohesion_kpa: 6.0,
-                hard_cohesion_kpa: 12.0,
-                out: None,
-            });
+            let e = report(&a, &ModelSoils::default(), None);
             assert!(e.is_err(), "start r = {r} m");
         }
     }
@@ -539,11 +451,16 @@ mod tests {
         );
     }
 
-    /// `--out DIR` writes the figure with both soils' panels, and the report names every check.
+    /// With an output folder the report writes the figure with both soils' panels, and the report names every check.
     #[test]
     fn fig52_writes_the_figure_and_the_checks() {
         let dir = tempfile::tempdir().unwrap();
-        let text = report(&args(Some(dir.path().to_path_buf()))).unwrap();
+        let text = report(
+            &ModelStartArgs::default(),
+            &ModelSoils::default(),
+            Some(dir.path()),
+        )
+        .unwrap();
         for c in SWEEP_COHESION_PA {
             assert!(text.contains(&format!("| {:.0} kPa |", c / 1e3)), "{text}");
         }

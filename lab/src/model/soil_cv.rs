@@ -10,50 +10,16 @@
 //! simulated annealing and Powell's method, Eq. 24) and reports the mean absolute force error as a
 //! percentage of the peak force (thesis: about 10 % for both on the real machine).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::Context as _;
 use clap::Args;
 use planner::estimate::{
     AnalyticalFitConfig, CrossValidationReport, DEFAULT_WINDOW_SAMPLES, SoilModelKind, SoilSample,
     cross_validate,
 };
-use serde::{Deserialize, Serialize};
 
-/// The soil samples of one dig (an element of `soil_samples.json`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct SoilDigSamples {
-    /// The dig's index in `summary.json`'s `digs`.
-    pub index: u32,
-    /// Its samples in time order: `Gamma` and the measured tip force (base frame).
-    pub samples: Vec<SoilSample>,
-}
-
-/// `soil_samples.json` as `demo` writes it.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct SoilSamplesFile {
-    /// Per dig with samples, in dig order.
-    pub digs: Vec<SoilDigSamples>,
-}
-
-impl SoilSamplesFile {
-    /// Reads and checks a `soil_samples.json`.
-    ///
-    /// # Errors
-    /// The file cannot be read, is not a samples file, or holds no dig with samples.
-    pub fn read(path: &Path) -> anyhow::Result<Self> {
-        let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-        let file: Self = serde_json::from_slice(&bytes)
-            .with_context(|| format!("{}: not a soil_samples.json", path.display()))?;
-        anyhow::ensure!(
-            file.digs.iter().any(|d| !d.samples.is_empty()),
-            "{}: no dig with soil samples (a `demo --strategy planned|predefined` session writes them)",
-            path.display()
-        );
-        Ok(file)
-    }
-}
+use crate::session::SoilSamplesFile;
 
 /// `excavator-ctl model soil-cv`
 #[derive(Debug, Args)]
@@ -170,7 +136,7 @@ pub fn report(cv: &SoilCv, window: usize) -> String {
 /// As [`SoilSamplesFile::read`] and [`soil_cv`]; an unreadable machine file.
 pub fn run(args: &SoilCvArgs) -> anyhow::Result<()> {
     let file = SoilSamplesFile::read(&args.samples)?;
-    let machine = crate::model_cmd::load_machine(args.machine.as_deref())?;
+    let machine = super::start::load_machine(args.machine.as_deref())?;
     let mut digs: Vec<Vec<SoilSample>> = file
         .digs
         .into_iter()
