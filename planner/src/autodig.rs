@@ -19,6 +19,7 @@
 //! lifting), which the head port carries. See docs/autodig.md.
 
 use crate::input_check::{InputError, check, check_port_pressures};
+use crate::kinematics::Joint;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 use std::fmt::Write as _;
@@ -35,28 +36,6 @@ const MAX_ANGLE_RAD: f64 = 4.0 * PI;
 const EXTENSION_SLACK: f64 = 0.1;
 /// Plausible magnitude of the perception inputs (m^3, m).
 const MAX_PERCEPTION: f64 = 100.0;
-
-/// One implement joint (and its cylinder), in the `[boom, stick, bucket]` order of the arrays.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-pub enum Joint {
-    /// Boom (array index 0).
-    Boom,
-    /// Stick (array index 1).
-    Stick,
-    /// Bucket (array index 2).
-    Bucket,
-}
-
-impl Joint {
-    /// Index of the joint in `[boom, stick, bucket]` arrays.
-    pub const fn index(self) -> usize {
-        match self {
-            Joint::Boom => 0,
-            Joint::Stick => 1,
-            Joint::Bucket => 2,
-        }
-    }
-}
 
 /// Autodig stages (Fig. 9).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]

@@ -38,7 +38,7 @@ impl Joint {
 
     /// Index in `[boom, stick, bucket]` arrays.
     #[must_use]
-    pub fn index(self) -> usize {
+    pub const fn index(self) -> usize {
         match self {
             Joint::Boom => 0,
             Joint::Stick => 1,
