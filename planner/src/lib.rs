@@ -1,6 +1,8 @@
 //! planner: excavator physics and planning after Cannon (CMU 1999).
 //!
 //! Layout (data flows top to bottom):
+//! - `linkage` (private): the implement linkage in plain numbers, cylinder triangles and the bucket
+//!   four-bar (Eqs. A5-A19), below both the machine description's geometric checks and the kinematics.
 //! - [`machine`]: the machine description (`config/machine.toml`): geometry, cylinders, masses, hydraulics.
 //! - [`kinematics`]: joint angles <-> cylinder lengths, forward/inverse kinematics, Jacobian, gravity and
 //!   tip forces <-> cylinder forces (Appendix, Eqs. A1-A23).
@@ -26,6 +28,7 @@ pub mod dig_model;
 pub mod estimate;
 mod input_check;
 pub mod kinematics;
+mod linkage;
 pub mod machine;
 pub mod plan;
 pub mod soil;
