@@ -1549,13 +1549,6 @@ fn load_digs(
     Ok(digs)
 }
 
-pub(crate) fn load_machine(path: Option<&Path>) -> anyhow::Result<planner::machine::MachineConfig> {
-    Ok(match path {
-        Some(p) => planner::machine::MachineConfig::from_toml_file(p)?,
-        None => planner::machine::MachineConfig::default_machine()?,
-    })
-}
-
 fn print_errors(report: &planner::actuator::EvaluationReport) {
     println!("  cylinder  MAE [m/s]  peak [m/s]  MAE % of peak");
     for e in &report.cylinders {
@@ -1640,7 +1633,7 @@ fn print_breakdown(model: &ActuatorModel, digs: &[TraceDig]) -> anyhow::Result<(
 }
 
 fn evaluate(a: &EvaluateArgs) -> anyhow::Result<()> {
-    let machine = load_machine(a.machine.as_deref())?;
+    let machine = planner::machine::MachineConfig::load_or_default(a.machine.as_deref())?;
     let trace_digs = load_trace_digs(&a.trace, &machine, a.forces)?;
     let text = match &a.model {
         Some(p) => {
@@ -1784,7 +1777,7 @@ fn print_force_gap(
 }
 
 fn train(a: &TrainArgs) -> anyhow::Result<()> {
-    let machine = load_machine(a.machine.as_deref())?;
+    let machine = planner::machine::MachineConfig::load_or_default(a.machine.as_deref())?;
     let digs = load_digs(&a.trace, &machine, a.velocity, a.forces)?;
     let config = TrainConfig {
         seed: a.seed,

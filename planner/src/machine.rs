@@ -387,6 +387,19 @@ impl MachineConfig {
         Self::from_toml_str_named(DEFAULT_MACHINE_TOML, "config/machine.toml")
     }
 
+    /// The machine file at `path`, or without one the built-in machine (`config/machine.toml`): what a
+    /// command's `--machine` option means.
+    ///
+    /// # Errors
+    /// As [`Self::from_toml_file`]; every error names the file (`config/machine.toml` for the built-in
+    /// one), and the line and field where it can.
+    pub fn load_or_default(path: Option<&Path>) -> Result<Self, ConfigError> {
+        match path {
+            Some(p) => Self::from_toml_file(p),
+            None => Self::default_machine(),
+        }
+    }
+
     /// Parses and validates a machine from TOML text.
     ///
     /// # Errors
