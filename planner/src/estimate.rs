@@ -24,7 +24,6 @@ use crate::soil::{DigGeometry, EmpiricalSoilModel, SoilError, SoilProperties, fe
 use nalgebra::{DMatrix, Matrix3x4};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
@@ -956,8 +955,8 @@ pub struct CrossValidationReport {
 /// The thesis's cross-validation (4.3.5): for each dig, estimates the soil properties on the
 /// `window_samples` samples just before it (wrapping round to the last digs for the first ones, never
 /// including the dig itself), predicts the dig, and reports the mean absolute error of the force magnitude
-/// `|(F_x, F_z)|` as a percentage of the peak measured force. Digs run in parallel; the result is
-/// deterministic.
+/// `|(F_x, F_z)|` as a percentage of the peak measured force. Digs run in parallel with the crate's
+/// `parallel` feature; the result is deterministic either way.
 ///
 /// # Errors
 /// [`EstimateError::NotEnoughDigs`] (fewer than two), [`EstimateError::InvalidConfig`] for a zero
@@ -990,9 +989,8 @@ pub fn cross_validate(
         })?;
     }
     let total_samples = digs.iter().map(Vec::len).sum::<usize>();
-    let per_dig: Vec<(DigError, Vec<f64>)> = (0..digs.len())
-        .into_par_iter()
-        .map(|i| -> Result<(DigError, Vec<f64>)> {
+    let per_dig: Vec<(DigError, Vec<f64>)> =
+        crate::par::map_indices(digs.len(), |i| -> Result<(DigError, Vec<f64>)> {
             // Walk back from dig i - 1, wrapping, until the window is full; oldest first.
             let mut window: Vec<SoilSample> = Vec::with_capacity(window_samples.min(total_samples));
             for back in 1..digs.len() {
@@ -1034,6 +1032,7 @@ pub fn cross_validate(
                 errors,
             ))
         })
+        .into_iter()
         .collect::<Result<Vec<_>>>()?;
     let all: Vec<f64> = per_dig
         .iter()

@@ -30,6 +30,7 @@ mod input_check;
 pub mod kinematics;
 mod linkage;
 pub mod machine;
+mod par;
 pub mod plan;
 pub mod soil;
 pub mod terrain;

@@ -5,9 +5,10 @@
 //! angle of the bucket (pin -> tip line) from the inward normal of the local terrain profile (5 degree
 //! steps), with the tip on the surface. Each candidate is checked against the **kinematic reachability
 //! constraint** (inverse kinematics, joint limits, cylinder strokes); the reachable ones are run through
-//! the forward dig model ([`crate::dig_model::DigModel::evaluate_many`], in parallel) and those whose
-//! predicted dig goes below the desired floor violate the **geometric shape constraint**. The others are
-//! scored by the dig quality and the planner picks the best (an exhaustive search).
+//! the forward dig model ([`crate::dig_model::DigModel::evaluate_many`], in parallel with the crate's
+//! `parallel` feature) and those whose predicted dig goes below the desired floor violate the
+//! **geometric shape constraint**. The others are scored by the dig quality and the planner picks the
+//! best (an exhaustive search).
 //!
 //! Dig quality (Fig. 46): `Quality = w_v xi(V) + w_t psi(T) + w_e zeta(E)` with `w_v = 3`, `w_t = 2`,
 //! `w_e = 1`, and zero when any factor is zero (the veto of the thesis's footnote). The piecewise-linear
@@ -473,7 +474,8 @@ pub fn refine<A: ActuatorDynamics>(
             });
         }
     }
-    // The expensive part: the forward dig model on every reachable candidate, in parallel.
+    // The expensive part: the forward dig model on every reachable candidate (in parallel with the
+    // `parallel` feature).
     let results = model.evaluate_many(&starts, &site);
     for (k, res) in start_of.iter().zip(results) {
         let Some(c) = candidates.get_mut(*k) else {
