@@ -2,6 +2,7 @@
 //!
 //! # Layout
 //!
+//! - [`autodig_maps_svg`]: the Autodig map figures of docs/autodig.md (Figs. 10-11).
 //! - [`demo`]: `excavator-ctl demo`, a whole autonomous session against the embedded simulator in
 //!   virtual time, and the session folder it writes (trace, scans, summary, plots).
 //! - [`experiment`]: the thesis's reproductions in closed loop (Tables 1-5, Figs. 52, 53, 60).
@@ -19,6 +20,7 @@
 //!        +----------------------> session records, summaries, plots <+
 //! ```
 
+pub mod autodig_maps_svg;
 pub mod demo;
 pub mod experiment;
 pub mod model_cmd;
