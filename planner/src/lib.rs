@@ -20,6 +20,9 @@
 //!   the shared Autodig step, predicting a dig's trajectory, time, energy and swept volume.
 //! - [`plan`]: the dig planner (thesis ch. 5): terrain mapping from scans, coarse and refined dig
 //!   location, dig quality, cleanup and tracking plans, action selection, soil hardness index.
+//! - `synthetic` (tests and the `synthetic` feature): synthetic actuator and FEE soil digs with a known
+//!   truth, for the tests and the examples (`cargo run -p planner --release --features synthetic
+//!   --example actuator_training` or `--example soil_cross_validation`).
 
 pub mod actuator;
 pub mod autodig;
@@ -33,4 +36,6 @@ pub mod machine;
 mod par;
 pub mod plan;
 pub mod soil;
+#[cfg(any(test, feature = "synthetic"))]
+pub mod synthetic;
 pub mod terrain;

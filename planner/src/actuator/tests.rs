@@ -5,92 +5,16 @@ use super::dig::*;
 use super::network::*;
 use super::train::*;
 use super::*;
-use rand::{RngExt, SeedableRng};
+use crate::synthetic::{
+    ACTUATOR_DELAY_STEPS as PLANT_DELAY, ACTUATOR_DT_S as DT_S, ACTUATOR_V_MAX_M_PER_S as V_MAX,
+    actuator_digs as synthetic_digs, smooth_signal,
+};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-
-/// Sample period of the synthetic digs, s.
-const DT_S: f64 = 0.02;
-/// Fixed delay of the synthetic plant, steps.
-const PLANT_DELAY: usize = 2;
-/// Maximum cylinder speed of the synthetic plant, m/s.
-const V_MAX: f64 = 0.25;
-/// Relief-level force of the synthetic plant, N.
-const F_RELIEF: f64 = 3.0e5;
-/// First-order lag of the synthetic plant, s.
-const TAU_S: f64 = 0.15;
-
-/// A smooth random signal in `[-amplitude, amplitude]`: a low-passed random staircase.
-fn smooth_signal(
-    rng: &mut ChaCha8Rng,
-    steps: usize,
-    amplitude: f64,
-    hold_steps: usize,
-) -> Vec<f64> {
-    let mut out = Vec::with_capacity(steps);
-    let (mut level, mut value) = (0.0, 0.0);
-    for k in 0..steps {
-        if k % hold_steps == 0 {
-            level = rng.random_range(-amplitude..amplitude);
-        }
-        value += 0.2 * (level - value);
-        out.push(value);
-    }
-    out
-}
-
-/// Synthetic hydraulics: delay, first-order lag, force-dependent orifice flow (Eq. 1), and the bucket
-/// taking flow from the boom (shared pump, 4.2.1).
-fn synthetic_digs(count: usize, steps: usize, seed: u64) -> Vec<ActuatorDig> {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    (0..count)
-        .map(|_| {
-            let u: Vec<Vec<f64>> = (0..3)
-                .map(|_| smooth_signal(&mut rng, steps, 1.0, 25))
-                .collect();
-            let f: Vec<Vec<f64>> = (0..3)
-                .map(|_| {
-                    smooth_signal(&mut rng, steps, 1.5e5, 40)
-                        .iter()
-                        .map(|x| x + 5.0e4)
-                        .collect()
-                })
-                .collect();
-            let mut v = [0.0_f64; 3];
-            let mut samples = Vec::with_capacity(steps);
-            for k in 0..steps {
-                let command = [u[0][k], u[1][k], u[2][k]];
-                let force_n = [f[0][k], f[1][k], f[2][k]];
-                samples.push(ActuatorSample {
-                    time_s: k as f64 * DT_S,
-                    command,
-                    force_n,
-                    velocity_m_per_s: v,
-                });
-                let d = k.saturating_sub(PLANT_DELAY);
-                for j in 0..3 {
-                    let ud = u[j][d];
-                    // Force against the motion lowers the pressure margin across the valve.
-                    let against = (-ud.signum() * f[j][k]).max(-F_RELIEF);
-                    let margin = (1.0 - against / F_RELIEF).clamp(0.0, 2.0);
-                    let mut target = V_MAX * ud * margin.sqrt() / 2f64.sqrt();
-                    if j == 0 {
-                        target *= 1.0 - 0.3 * u[2][d].abs();
-                    }
-                    v[j] += DT_S / TAU_S * (target - v[j]);
-                }
-            }
-            ActuatorDig { samples }
-        })
-        .collect()
-}
 
 /// `text` (the JSON of `model`) reads back into a model that scores the same on `digs` (JSON
 /// floats round-trip to within an ulp or so); returns it.
-fn assert_round_trips(
-    model: &ActuatorModel,
-    text: &str,
-    digs: &[ActuatorDig],
-) -> ActuatorModel {
+fn assert_round_trips(model: &ActuatorModel, text: &str, digs: &[ActuatorDig]) -> ActuatorModel {
     let back = ActuatorModel::from_json(text).unwrap();
     let (a, b) = (back.evaluate(digs).unwrap(), model.evaluate(digs).unwrap());
     for (x, y) in a.cylinders.iter().zip(&b.cylinders) {
@@ -666,30 +590,6 @@ fn bad_training_data_gives_typed_errors() {
         train(&digs, &bad, |_| {}),
         Err(ActuatorError::InvalidConfig { .. })
     ));
-}
-
-/// Training experiment: `cargo test -p planner --release actuator_experiment -- --ignored --nocapture`.
-#[test]
-#[ignore = "experiment, prints figures"]
-fn actuator_experiment() {
-    let digs = synthetic_digs(30, 250, 11);
-    for (tf, fr, hidden) in [(300, 0, 5), (300, 400, 5), (1000, 1000, 5), (300, 400, 8)] {
-        let config = TrainConfig {
-            teacher_forcing_epochs: tf,
-            free_run_epochs: fr,
-            hidden_units: hidden,
-            ..test_config()
-        };
-        let start = std::time::Instant::now();
-        let (_, report) = train(&digs, &config, |_| {}).unwrap();
-        let pct = report.test.cylinders.map(|c| c.mae_percent_of_peak);
-        eprintln!(
-            "tf {tf} fr {fr} hidden {hidden}: test {pct:.2?} % epochs {:?} val {:.4?} in {:.2?}",
-            report.free_run_epochs,
-            report.validation_loss,
-            start.elapsed()
-        );
-    }
 }
 
 #[test]
