@@ -481,14 +481,19 @@ fn clip(grad: &mut [f64], max_norm: f64) {
     }
 }
 
+/// The predicted steps in `data` (a sequence's first sample only starts it), at least one: the
+/// losses are means over them.
+fn step_count(data: &[&NetSequence]) -> f64 {
+    data.iter()
+        .map(|s| s.target.len().saturating_sub(1))
+        .sum::<usize>()
+        .max(1) as f64
+}
+
 /// Teacher-forced loss and gradient: every step sees the measured previous velocity.
 fn teacher_forced(net: &Network, params: &[f64], data: &[&NetSequence], grad: &mut [f64]) -> f64 {
     grad.iter_mut().for_each(|g| *g = 0.0);
-    let count = data
-        .iter()
-        .map(|s| s.target.len().saturating_sub(1))
-        .sum::<usize>()
-        .max(1) as f64;
+    let count = step_count(data);
     let mut hidden = [0.0; MAX_HIDDEN];
     let mut loss = 0.0;
     for seq in data {
@@ -515,11 +520,7 @@ fn free_run(
     if let Some(g) = grad.as_deref_mut() {
         g.iter_mut().for_each(|g| *g = 0.0);
     }
-    let count = data
-        .iter()
-        .map(|s| s.target.len().saturating_sub(1))
-        .sum::<usize>()
-        .max(1) as f64;
+    let count = step_count(data);
     let mut loss = 0.0;
     let mut xs: Vec<[f64; MAX_INPUTS]> = Vec::new();
     let mut hs: Vec<[f64; MAX_HIDDEN]> = Vec::new();
