@@ -607,7 +607,8 @@ impl PlannedSession {
 }
 
 /// The terrain section along the digging plane at `swing_rad` from `r0_m` to `r1_m` (every `step_m`),
-/// unknown samples filled from their known neighbours; `None` when nothing along it is known.
+/// unknown samples filled from their known neighbours (the last known height carried forward,
+/// [`planner::terrain::GapFill::HoldLast`]); `None` when nothing along it is known.
 #[must_use]
 pub fn plane_section(
     grid: &TerrainGrid,
@@ -617,31 +618,9 @@ pub fn plane_section(
     r1_m: f64,
     step_m: f64,
 ) -> Option<SectionProfile> {
-    if !(r0_m.is_finite() && r1_m > r0_m && step_m > 0.0) {
-        return None;
-    }
-    // Bounded: radii of metres, steps of centimetres.
-    let n = (((r1_m - r0_m) / step_m).floor() as usize + 1).min(10_000);
-    let raw: Vec<Option<f64>> = (0..n)
-        .map(|k| {
-            let [x, y, _] = pose.world_from_base(swing_rad, r0_m + k as f64 * step_m, 0.0);
-            grid.height_at(x, y).ok().filter(|h| h.is_finite())
-        })
-        .collect();
-    let first = raw.iter().position(Option::is_some)?;
-    let mut heights = Vec::with_capacity(n);
-    let mut last = raw[first].unwrap_or(0.0);
-    for h in &raw {
-        if let Some(v) = h {
-            last = *v;
-        }
-        heights.push(h.unwrap_or(last));
-    }
-    // Before the first known sample: its height.
-    for h in heights.iter_mut().take(first) {
-        *h = raw[first].unwrap_or(0.0);
-    }
-    SectionProfile::new(r0_m, step_m, heights).ok()
+    use planner::terrain::GapFill;
+    grid.plane_section(pose, swing_rad, r0_m, r1_m, step_m, GapFill::HoldLast)
+        .ok()
 }
 
 /// The soil estimator of the planned session (thesis 5.3's Soil Estimator, 4.3.4-4.3.5): during each

@@ -232,11 +232,8 @@ impl LoopMonitor {
 /// # Errors
 /// Unreadable or invalid files, or an inconsistent configuration.
 pub fn build_node(opts: &RunOptions) -> anyhow::Result<ControllerNode> {
-    let machine = match &opts.machine {
-        Some(p) => MachineConfig::from_toml_file(p)
-            .with_context(|| format!("machine file {}", p.display()))?,
-        None => MachineConfig::default_machine().context("built-in machine")?,
-    };
+    let machine =
+        MachineConfig::load_or_default(opts.machine.as_deref()).context("machine file")?;
     let maps = match &opts.maps {
         Some(p) => {
             let text = std::fs::read_to_string(p)

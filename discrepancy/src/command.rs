@@ -104,17 +104,6 @@ pub struct SkippedSession {
     pub reason: String,
 }
 
-/// Loads the machine file or the built-in one.
-///
-/// # Errors
-/// Reading or parsing the file.
-pub fn load_machine(path: Option<&Path>) -> anyhow::Result<MachineConfig> {
-    Ok(match path {
-        Some(p) => MachineConfig::from_toml_file(p)?,
-        None => MachineConfig::default_machine()?,
-    })
-}
-
 /// Loads a model file or the shipped nominal model.
 ///
 /// # Errors
@@ -193,7 +182,7 @@ pub fn prepare_readable_sessions(
 /// # Errors
 /// As [`prepare_sessions`], [`analyse`] and writing the outputs.
 pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
-    let machine = load_machine(args.machine.as_deref())?;
+    let machine = MachineConfig::load_or_default(args.machine.as_deref())?;
     let model = load_model(args.model.as_deref())?;
     let (records, skipped_sessions) = prepare_readable_sessions(&args.measured, &machine, &model)?;
     for s in &skipped_sessions {

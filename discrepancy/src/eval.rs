@@ -14,7 +14,7 @@ use clap::Args;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::command::{AnalyseArgs, load_machine, load_model, prepare_sessions, run_analysis};
+use crate::command::{AnalyseArgs, load_model, prepare_sessions, run_analysis};
 use lab::demo::{DemoArgs, SoilContact, run_session};
 
 /// Arguments of `discrepancy eval`.
@@ -461,7 +461,7 @@ pub fn run_bench(args: &BenchArgs) -> anyhow::Result<()> {
         demo.effects = vec!["valve_deadband=0.1".into()];
         run_session(&demo, &AtomicBool::new(false)).context("generating the bench session")?;
     }
-    let machine = load_machine(None)?;
+    let machine = planner::machine::MachineConfig::default_machine()?;
     let model = load_model(None)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(1)

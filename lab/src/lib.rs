@@ -2,6 +2,7 @@
 //!
 //! # Layout
 //!
+//! - [`autodig_maps_svg`]: the Autodig map figures of docs/autodig.md (Figs. 10-11).
 //! - [`demo`]: `excavator-ctl demo`, a whole autonomous session against the embedded simulator in
 //!   virtual time, and the session folder it writes (trace, scans, summary, plots).
 //! - [`harness`]: the virtual-time harness: the simulated machine and the controller node on one
@@ -23,6 +24,7 @@
 //!        +----------------------> session records, summaries, plots <+
 //! ```
 
+pub mod autodig_maps_svg;
 pub mod demo;
 pub mod experiment;
 pub mod harness;

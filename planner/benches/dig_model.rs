@@ -7,7 +7,7 @@
 //! `/proc/thread-self/schedstat`, nanoseconds on the CPU, which waiting for a core does not inflate),
 //! the best of several batches, and the load average.
 //!
-//! `cargo bench -p planner --bench dig_model`
+//! `cargo bench -p planner --features parallel --bench dig_model`
 
 #![allow(clippy::unwrap_used)]
 

@@ -2,7 +2,7 @@
 //! (about 300 candidates through the dig model), cleanup and tracking plans and Fig. 42's selection,
 //! on the default bench (config/bench.toml), with rayon pools of 1 and 2 threads.
 //!
-//! `cargo bench -p planner --bench plan` (release). Prints the time per cycle on one core and the
+//! `cargo bench -p planner --features parallel --bench plan` (release). Prints the time per cycle on one core and the
 //! speed-up with two. Target: under 100 ms on one core.
 
 use planner::dig_model::DigModel;

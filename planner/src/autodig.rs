@@ -19,9 +19,9 @@
 //! lifting), which the head port carries. See docs/autodig.md.
 
 use crate::input_check::{InputError, check, check_port_pressures};
+use crate::kinematics::Joint;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
-use std::fmt::Write as _;
 
 /// Neutral implement command `[boom, stick, bucket]`: what to send on any error.
 pub const NEUTRAL: [f64; 3] = [0.0; 3];
@@ -35,28 +35,6 @@ const MAX_ANGLE_RAD: f64 = 4.0 * PI;
 const EXTENSION_SLACK: f64 = 0.1;
 /// Plausible magnitude of the perception inputs (m^3, m).
 const MAX_PERCEPTION: f64 = 100.0;
-
-/// One implement joint (and its cylinder), in the `[boom, stick, bucket]` order of the arrays.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-pub enum Joint {
-    /// Boom (array index 0).
-    Boom,
-    /// Stick (array index 1).
-    Stick,
-    /// Bucket (array index 2).
-    Bucket,
-}
-
-impl Joint {
-    /// Index of the joint in `[boom, stick, bucket]` arrays.
-    pub const fn index(self) -> usize {
-        match self {
-            Joint::Boom => 0,
-            Joint::Stick => 1,
-            Joint::Bucket => 2,
-        }
-    }
-}
 
 /// Autodig stages (Fig. 9).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -316,7 +294,7 @@ pub struct CurveSet {
     pub dig_bucket: Curve,
 }
 
-/// Which map to evaluate (for [`AutodigMaps::eval`] and the plots).
+/// Which map to evaluate (for [`AutodigMaps::eval`] and the plots of the lab).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum MapKind {
     /// Pre-Dig stick command from stick pressure (one curve for all indices).
@@ -457,119 +435,6 @@ impl AutodigMaps {
             }
         }
         self.sets.last().map_or(0.0, pick)
-    }
-
-    /// An SVG plot (std only) of map `kind` for every hardness index: x = percent of relief pressure,
-    /// y = percent command. Used for the plots in docs/autodig.md.
-    pub fn to_svg(&self, kind: MapKind) -> String {
-        const W: f64 = 520.0;
-        const H: f64 = 300.0;
-        const L: f64 = 60.0; // left margin
-        const T: f64 = 30.0; // top margin
-        const PW: f64 = 360.0;
-        const PH: f64 = 220.0;
-        const COLORS: [&str; 6] = [
-            "#1b9e77", "#d95f02", "#7570b3", "#e7298a", "#66a61e", "#e6ab02",
-        ];
-        let px = |x: f64| L + PW * x / 100.0;
-        // y spans 0..100 unless some curve commands retraction, then -100..100.
-        let any_negative = self
-            .predig_stick
-            .points()
-            .iter()
-            .chain(self.sets.iter().flat_map(|set| {
-                [&set.predig_boom, &set.dig_boom, &set.dig_bucket]
-                    .into_iter()
-                    .flat_map(|c| c.points())
-            }))
-            .any(|p| p[1] < 0.0);
-        let y_lo = if any_negative { -100.0 } else { 0.0 };
-        let py = |y: f64| T + PH * (100.0 - y) / (100.0 - y_lo);
-        let mut s = String::new();
-        // Writing into a String cannot fail, so the fmt::Results below are ignored.
-        let _ = write!(
-            s,
-            "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{W}\" height=\"{H}\" font-family=\"sans-serif\" font-size=\"11\">\n\
-             <rect width=\"{W}\" height=\"{H}\" fill=\"white\"/>\n\
-             <text x=\"{L}\" y=\"18\" font-size=\"12\">{}</text>\n",
-            kind.title()
-        );
-        for v in [0.0, 25.0, 50.0, 75.0, 100.0] {
-            let _ = writeln!(
-                s,
-                "<line x1=\"{0:.1}\" y1=\"{1:.1}\" x2=\"{0:.1}\" y2=\"{2:.1}\" stroke=\"#ddd\"/>\
-                 <text x=\"{0:.1}\" y=\"{3:.1}\" text-anchor=\"middle\">{v}</text>",
-                px(v),
-                T,
-                T + PH,
-                T + PH + 14.0
-            );
-        }
-        let y_ticks = if any_negative {
-            [-100.0, -50.0, 0.0, 50.0, 100.0]
-        } else {
-            [0.0, 25.0, 50.0, 75.0, 100.0]
-        };
-        for v in y_ticks {
-            let _ = writeln!(
-                s,
-                "<line x1=\"{0:.1}\" y1=\"{1:.1}\" x2=\"{2:.1}\" y2=\"{1:.1}\" stroke=\"#ddd\"/>\
-                 <text x=\"{3:.1}\" y=\"{4:.1}\" text-anchor=\"end\">{v}</text>",
-                L,
-                py(v),
-                L + PW,
-                L - 6.0,
-                py(v) + 4.0
-            );
-        }
-        let _ = writeln!(
-            s,
-            "<rect x=\"{L}\" y=\"{T}\" width=\"{PW}\" height=\"{PH}\" fill=\"none\" stroke=\"black\"/>\n\
-             <text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">pressure, % of relief (head port)</text>\n\
-             <text x=\"14\" y=\"{:.1}\" transform=\"rotate(-90 14 {:.1})\" text-anchor=\"middle\">command, % of max velocity</text>",
-            L + PW / 2.0,
-            H - 8.0,
-            T + PH / 2.0,
-            T + PH / 2.0
-        );
-        let curves: Vec<(String, &Curve)> = match kind {
-            MapKind::PreDigStick => vec![("all indices".to_owned(), &self.predig_stick)],
-            _ => self
-                .sets
-                .iter()
-                .map(|set| {
-                    let c = match kind {
-                        MapKind::PreDigBoom => &set.predig_boom,
-                        MapKind::DigBoom => &set.dig_boom,
-                        _ => &set.dig_bucket,
-                    };
-                    (format!("index {}", set.index), c)
-                })
-                .collect(),
-        };
-        for (i, (label, c)) in curves.iter().enumerate() {
-            let color = COLORS[i % COLORS.len()];
-            let pts: Vec<String> = c
-                .points()
-                .iter()
-                .map(|&[x, y]| format!("{:.1},{:.1}", px(x), py(y)))
-                .collect();
-            let _ = writeln!(
-                s,
-                "<polyline points=\"{}\" fill=\"none\" stroke=\"{color}\" stroke-width=\"2\"/>\n\
-                 <line x1=\"{2:.1}\" y1=\"{3:.1}\" x2=\"{4:.1}\" y2=\"{3:.1}\" stroke=\"{color}\" stroke-width=\"2\"/>\
-                 <text x=\"{5:.1}\" y=\"{6:.1}\">{1}</text>",
-                pts.join(" "),
-                label,
-                L + PW + 12.0,
-                T + 10.0 + 16.0 * i as f64,
-                L + PW + 30.0,
-                L + PW + 34.0,
-                T + 14.0 + 16.0 * i as f64
-            );
-        }
-        s.push_str("</svg>\n");
-        s
     }
 }
 
@@ -1731,27 +1596,6 @@ mod tests {
         assert_eq!(cfg.rho1_rad, AutodigConfig::default().rho1_rad);
         assert!(AutodigConfig::from_toml_str("hardness_index = nan").is_err());
         assert!(AutodigConfig::from_toml_str("boom_down_command = 0.5").is_err());
-    }
-
-    /// Writes the map plots for docs/autodig.md when `AUTODIG_SVG_DIR` is set:
-    /// `AUTODIG_SVG_DIR=docs cargo test -p planner autodig::tests::map_plots` (from the workspace root,
-    /// paths are relative to `planner/`, so use an absolute path).
-    #[test]
-    fn map_plots() {
-        let m = maps();
-        for kind in MapKind::ALL {
-            let svg = m.to_svg(kind);
-            assert!(svg.starts_with("<svg") && svg.ends_with("</svg>\n"));
-            if let Some(dir) = std::env::var_os("AUTODIG_SVG_DIR") {
-                let name = match kind {
-                    MapKind::PreDigBoom => "autodig_predig_boom.svg",
-                    MapKind::PreDigStick => "autodig_predig_stick.svg",
-                    MapKind::DigBoom => "autodig_dig_boom.svg",
-                    MapKind::DigBucket => "autodig_dig_bucket.svg",
-                };
-                std::fs::write(std::path::Path::new(&dir).join(name), svg).expect("write svg");
-            }
-        }
     }
 
     fn arb_f64() -> impl Strategy<Value = f64> {

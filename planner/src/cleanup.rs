@@ -24,8 +24,8 @@
 //! track ground at `z = 0`), m, rad, Pa, s. Absolute angles are `stick_abs = boom + stick` and
 //! `bucket_abs = boom + stick + bucket`.
 
-use crate::autodig::Joint;
 use crate::input_check::{InputError, check, check_port_pressures};
+use crate::kinematics::Joint;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 

@@ -49,8 +49,8 @@
 //! [`DigModel::predict_into`] fills a caller-provided [`DigTrace`] (preallocated, never grown in the
 //! loop) and returns a [`DigSummary`]: time, energy `sum_i |F_i dL_i|` (the controller's dig statistic,
 //! thesis 6.1), swept volume, floor-penetration flag and end reason. [`DigModel::evaluate`] skips the
-//! trace; [`DigModel::evaluate_many`] evaluates candidate starts in parallel (rayon). A prediction is
-//! deterministic; the model is immutable and `Send + Sync`. The only allocations are per dig (a copy
+//! trace; [`DigModel::evaluate_many`] evaluates candidate starts in parallel (rayon, with the crate's
+//! `parallel` feature). A prediction is deterministic; the model is immutable and `Send + Sync`. The only allocations are per dig (a copy
 //! of the section for the swept-volume integrator and of Autodig's maps), none per step. Bad input gives
 //! a [`DigModelError`], never NaN or a panic.
 
@@ -66,7 +66,6 @@ use crate::soil::{
     SoilProperties, dig_geometry, fee_tip_force,
 };
 use crate::terrain::{SectionProfile, SweptVolume, TerrainError, TerrainGrid};
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// The shipped dig-model settings (`config/dig_model.toml`): soil Psi, force factor, limits.
@@ -1020,9 +1019,10 @@ impl<A: ActuatorDynamics> DigModel<A> {
         self.predict_into(start, site, None)
     }
 
-    /// Evaluates candidate starts over one site in parallel (rayon), in the order given.
+    /// Evaluates candidate starts over one site, the results in the order given: in parallel (rayon)
+    /// with the crate's `parallel` feature, one after the other without it.
     pub fn evaluate_many(&self, starts: &[DigStart], site: &DigSite) -> Vec<Result<DigSummary>> {
-        starts.par_iter().map(|s| self.evaluate(s, site)).collect()
+        crate::par::map_indices(starts.len(), |i| self.evaluate(&starts[i], site))
     }
 
     /// Runs the model from `start` over `site` until Autodig ends or the time limit (thesis 4.1),

@@ -24,7 +24,6 @@ use crate::soil::{DigGeometry, EmpiricalSoilModel, SoilError, SoilProperties, fe
 use nalgebra::{DMatrix, Matrix3x4};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
@@ -956,8 +955,8 @@ pub struct CrossValidationReport {
 /// The thesis's cross-validation (4.3.5): for each dig, estimates the soil properties on the
 /// `window_samples` samples just before it (wrapping round to the last digs for the first ones, never
 /// including the dig itself), predicts the dig, and reports the mean absolute error of the force magnitude
-/// `|(F_x, F_z)|` as a percentage of the peak measured force. Digs run in parallel; the result is
-/// deterministic.
+/// `|(F_x, F_z)|` as a percentage of the peak measured force. Digs run in parallel with the crate's
+/// `parallel` feature; the result is deterministic either way.
 ///
 /// # Errors
 /// [`EstimateError::NotEnoughDigs`] (fewer than two), [`EstimateError::InvalidConfig`] for a zero
@@ -990,9 +989,8 @@ pub fn cross_validate(
         })?;
     }
     let total_samples = digs.iter().map(Vec::len).sum::<usize>();
-    let per_dig: Vec<(DigError, Vec<f64>)> = (0..digs.len())
-        .into_par_iter()
-        .map(|i| -> Result<(DigError, Vec<f64>)> {
+    let per_dig: Vec<(DigError, Vec<f64>)> =
+        crate::par::map_indices(digs.len(), |i| -> Result<(DigError, Vec<f64>)> {
             // Walk back from dig i - 1, wrapping, until the window is full; oldest first.
             let mut window: Vec<SoilSample> = Vec::with_capacity(window_samples.min(total_samples));
             for back in 1..digs.len() {
@@ -1034,6 +1032,7 @@ pub fn cross_validate(
                 errors,
             ))
         })
+        .into_iter()
         .collect::<Result<Vec<_>>>()?;
     let all: Vec<f64> = per_dig
         .iter()
@@ -1065,70 +1064,10 @@ mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
 
-    /// Bucket width of the fixtures, m.
-    const WIDTH_M: f64 = 1.5;
-    /// Samples per synthetic dig (5 s at 10 Hz, as in 4.3.5).
-    const DIG_SAMPLES: usize = 50;
-
-    fn psi_true() -> SoilProperties {
-        SoilProperties {
-            density_kg_per_m3: 1800.0,
-            failure_angle_rad: 35f64.to_radians(),
-            friction_angle_rad: 30f64.to_radians(),
-            tool_friction_angle_rad: 18f64.to_radians(),
-            cohesion_pa: 25e3,
-        }
-    }
-
-    /// Geometry of a dig: depth rises then falls, the bucket curls (rake from -60 to -20 degrees), the
-    /// swept volume accumulates; the slope differs per dig.
-    fn dig_geometries(rng: &mut ChaCha8Rng) -> Vec<DigGeometry> {
-        let slope = rng.random_range(5f64.to_radians()..35f64.to_radians());
-        let depth_max = rng.random_range(0.3..0.8);
-        let mut vs = 0.0;
-        (0..DIG_SAMPLES)
-            .map(|k| {
-                let s = k as f64 / (DIG_SAMPLES - 1) as f64;
-                let depth = depth_max * (std::f64::consts::PI * s).sin() + 0.02;
-                vs += depth * 0.04;
-                DigGeometry {
-                    depth_m: depth,
-                    slope_rad: slope + rng.random_range(-0.05..0.05),
-                    rake_rad: (-60.0 + 40.0 * s + rng.random_range(-3.0..3.0)).to_radians(),
-                    swept_volume_m3: vs,
-                }
-            })
-            .collect()
-    }
-
-    fn with_noise(force: TipForce, rng: &mut ChaCha8Rng, noise_n: f64) -> TipForce {
-        if noise_n <= 0.0 {
-            return force;
-        }
-        TipForce {
-            fx_n: force.fx_n + rng.random_range(-noise_n..noise_n),
-            fz_n: force.fz_n + rng.random_range(-noise_n..noise_n),
-            my_nm: force.my_nm + rng.random_range(-noise_n..noise_n),
-        }
-    }
-
-    fn fee_digs(count: usize, noise_n: f64, seed: u64) -> Vec<Vec<SoilSample>> {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        (0..count)
-            .map(|_| {
-                dig_geometries(&mut rng)
-                    .into_iter()
-                    .map(|geometry| {
-                        let f = fee_tip_force(&psi_true(), &geometry, WIDTH_M, 0.4).unwrap();
-                        SoilSample {
-                            geometry,
-                            force: with_noise(f, &mut rng, noise_n),
-                        }
-                    })
-                    .collect()
-            })
-            .collect()
-    }
+    use crate::synthetic::{
+        FEE_BUCKET_WIDTH_M as WIDTH_M, FEE_DIG_SAMPLES as DIG_SAMPLES, dig_geometries, fee_digs,
+        fee_soil as psi_true, with_noise,
+    };
 
     const EMPIRICAL_TRUE: EmpiricalSoilModel = EmpiricalSoilModel {
         fx: [40e3, 15e3, 20e3, 30e3],
@@ -1405,32 +1344,5 @@ mod tests {
                 .iter()
                 .all(|d| d.window_samples == 2 * DIG_SAMPLES)
         );
-    }
-
-    /// The thesis's 23-dig test on synthetic FEE digs:
-    /// `cargo test -p planner --release estimate_experiment -- --ignored --nocapture`.
-    #[test]
-    #[ignore = "experiment, prints figures"]
-    fn estimate_experiment() {
-        let digs = fee_digs(23, 1000.0, 23);
-        let config = AnalyticalFitConfig {
-            bucket_width_m: WIDTH_M,
-            ..Default::default()
-        };
-        for (name, kind) in [
-            ("empirical", SoilModelKind::Empirical),
-            ("analytical", SoilModelKind::Analytical(config)),
-        ] {
-            let start = std::time::Instant::now();
-            let r = cross_validate(&digs, DEFAULT_WINDOW_SAMPLES, &kind).unwrap();
-            eprintln!(
-                "{name}: MAE {:.0} N (std {:.0} N) = {:.2} % of peak {:.0} N, in {:.2?}",
-                r.mae_n,
-                r.std_n,
-                r.mae_percent_of_peak,
-                r.peak_force_n,
-                start.elapsed()
-            );
-        }
     }
 }

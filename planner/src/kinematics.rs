@@ -16,6 +16,10 @@
 //! soil (Eq. 18), i.e. `-f`; so here `tau = G - J^T f` (Eq. A2) and `f = J^-T (G - tau)` (Eq. A23).
 //! `G` is the holding torque the actuators must supply against gravity.
 
+pub use crate::linkage::BucketLinkageState;
+use crate::linkage::{
+    FourBar, LinkageError, Mount, add, dir, law_of_cosines_angle, norm, scale, sub,
+};
 use crate::machine::{GRAVITY_M_PER_S2, MachineConfig};
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
@@ -38,7 +42,7 @@ impl Joint {
 
     /// Index in `[boom, stick, bucket]` arrays.
     #[must_use]
-    pub fn index(self) -> usize {
+    pub const fn index(self) -> usize {
         match self {
             Joint::Boom => 0,
             Joint::Stick => 1,
@@ -122,6 +126,18 @@ pub enum KinematicsError {
         /// Why.
         reason: String,
     },
+}
+
+impl From<LinkageError> for KinematicsError {
+    fn from(e: LinkageError) -> Self {
+        match e {
+            LinkageError::Singular { what } => KinematicsError::Singular { what },
+            LinkageError::Infeasible { bucket_rad } => {
+                KinematicsError::LinkageInfeasible { bucket_rad }
+            }
+            LinkageError::Config { field, reason } => KinematicsError::Config { field, reason },
+        }
+    }
 }
 
 /// Result alias for this module.
@@ -290,176 +306,6 @@ impl MachinePose {
     }
 }
 
-/// Intermediate quantities of the bucket four-bar at one bucket angle (Eqs. A8-A14, Fig. A2).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct BucketLinkageState {
-    /// Side-link pivot to the bucket's H-link pin, m (Eq. A8).
-    pub k1_m: f64,
-    /// Angle at the rod-end joint between side link and H-link, rad (Eq. A9).
-    pub theta1_rad: f64,
-    /// Angle at the rod-end joint between cylinder and side link, rad (Eq. A14).
-    pub theta2_rad: f64,
-    /// Angle at the bucket's H-link pin between `e1` and the H-link, rad (Eq. A10).
-    pub theta3_rad: f64,
-    /// Bucket pin to the rod-end joint, m (Eq. A11).
-    pub k2_m: f64,
-    /// Angle at the bucket pin between the cylinder base and the rod-end joint, rad (Eq. A12).
-    pub alpha_rad: f64,
-    /// Bucket cylinder length, m (Eq. A13).
-    pub cylinder_length_m: f64,
-    /// Signed moment arm `dL4/dtheta4`, m/rad (Eqs. A15-A19; negative: extension curls).
-    pub moment_arm_m: f64,
-}
-
-#[derive(Debug, Clone, Copy)]
-struct Mount {
-    a: f64,
-    b: f64,
-    offset: f64,
-    /// +1: gamma = theta + offset (boom); -1: gamma = offset - theta (stick).
-    sense: f64,
-}
-
-impl Mount {
-    fn gamma(&self, theta: f64) -> f64 {
-        if self.sense > 0.0 {
-            theta + self.offset
-        } else {
-            self.offset - theta
-        }
-    }
-
-    fn theta(&self, gamma: f64) -> f64 {
-        if self.sense > 0.0 {
-            gamma - self.offset
-        } else {
-            self.offset - gamma
-        }
-    }
-
-    fn length(&self, theta: f64) -> f64 {
-        let g = self.gamma(theta);
-        (self.a * self.a + self.b * self.b - 2.0 * self.a * self.b * g.cos())
-            .max(0.0)
-            .sqrt() // Eq. A5
-    }
-
-    /// Signed `dL/dtheta`: `a sin(alpha)` (Eqs. A6-A7) with the joint's sense.
-    fn moment_arm(&self, theta: f64) -> f64 {
-        let l = self.length(theta);
-        if l <= 0.0 {
-            return 0.0;
-        }
-        let c = (self.b * self.b - l * l - self.a * self.a) / (2.0 * l * self.a);
-        let sin_alpha = (1.0 - c * c).max(0.0).sqrt(); // Eq. A6
-        // The sqrt of Eq. A6 loses the sign; it is that of sin(gamma) for a mount in (0, pi).
-        let sign = if self.gamma(theta).sin() >= 0.0 {
-            1.0
-        } else {
-            -1.0
-        };
-        self.sense * sign * self.a * sin_alpha // Eq. A7's moment arm
-    }
-}
-
-#[derive(Debug, Clone, Copy)]
-struct FourBar {
-    e1: f64,
-    e2: f64,
-    e3: f64,
-    e1_angle: f64,
-    /// Side-link pivot in the stick frame.
-    s: [f64; 2],
-    /// Cylinder base in the stick frame.
-    c: [f64; 2],
-}
-
-fn dir(a: f64) -> [f64; 2] {
-    [a.cos(), a.sin()]
-}
-fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
-    [a[0] - b[0], a[1] - b[1]]
-}
-fn add(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
-    [a[0] + b[0], a[1] + b[1]]
-}
-fn scale(a: [f64; 2], k: f64) -> [f64; 2] {
-    [a[0] * k, a[1] * k]
-}
-fn dot(a: [f64; 2], b: [f64; 2]) -> f64 {
-    a[0] * b[0] + a[1] * b[1]
-}
-fn norm(a: [f64; 2]) -> f64 {
-    a[0].hypot(a[1])
-}
-fn perp(a: [f64; 2]) -> [f64; 2] {
-    [-a[1], a[0]]
-}
-/// Unsigned angle between two vectors, rad.
-fn angle_between(a: [f64; 2], b: [f64; 2]) -> f64 {
-    (a[0] * b[1] - a[1] * b[0]).abs().atan2(dot(a, b))
-}
-fn law_of_cosines_angle(adj1: f64, adj2: f64, opposite: f64) -> f64 {
-    ((adj1 * adj1 + adj2 * adj2 - opposite * opposite) / (2.0 * adj1 * adj2))
-        .clamp(-1.0, 1.0)
-        .acos()
-}
-
-impl FourBar {
-    /// The four-bar at bucket angle `theta4` (relative to the stick line).
-    ///
-    /// Positions are solved with vectors in the stick frame (origin at the bucket pin, x along the stick
-    /// line) so the configuration's orientation is never lost; the named quantities are those of the
-    /// thesis's successive law-of-cosines chain (Eqs. A8-A14), which the bucket range can leave (the angle
-    /// gamma_4 passes 180 degrees near full curl, where Eq. A10's sum of two acos no longer holds).
-    fn state(&self, theta4: f64) -> Result<BucketLinkageState> {
-        let h = scale(dir(theta4 + self.e1_angle), self.e1); // bucket's H-link pin
-        let d = sub(h, self.s);
-        let k1 = norm(d); // Eq. A8: k1^2 = e4^2 + e1^2 - 2 e4 e1 cos(gamma4)
-        if k1 < 1e-9 {
-            return Err(KinematicsError::LinkageInfeasible { bucket_rad: theta4 });
-        }
-        let cos_psi = (self.e3 * self.e3 + k1 * k1 - self.e2 * self.e2) / (2.0 * self.e3 * k1);
-        if !(-1.0..=1.0).contains(&cos_psi) {
-            return Err(KinematicsError::LinkageInfeasible { bucket_rad: theta4 });
-        }
-        let psi = cos_psi.acos();
-        let dn = scale(d, 1.0 / k1);
-        let (sp, cp) = psi.sin_cos();
-        let side_dir = [dn[0] * cp - dn[1] * sp, dn[0] * sp + dn[1] * cp];
-        let r = add(self.s, scale(side_dir, self.e3)); // rod-end joint
-        let theta1 = law_of_cosines_angle(self.e3, self.e2, k1); // Eq. A9
-        let theta3 = angle_between(scale(h, -1.0), sub(r, h)); // Eq. A10
-        let k2 = norm(r); // Eq. A11
-        let alpha = angle_between(self.c, r); // Eq. A12: acos(...) - beta
-        let cyl = sub(r, self.c);
-        let l4 = norm(cyl); // Eq. A13
-        let theta2 = angle_between(scale(cyl, -1.0), sub(self.s, r)); // Eq. A14
-        // Eqs. A15-A19 by virtual work: the H-pin moves with perp(h) per unit bucket rate, the rod-end
-        // joint turns about the side-link pivot, and the H-link's length is constant.
-        let rh = sub(r, h);
-        let den = dot(perp(sub(r, self.s)), rh);
-        if den.abs() < 1e-12 || l4 < 1e-9 {
-            return Err(KinematicsError::Singular {
-                what: "bucket four-bar at toggle",
-            });
-        }
-        let omega3 = dot(perp(h), rh) / den;
-        let v_r = scale(perp(sub(r, self.s)), omega3);
-        let moment_arm = dot(cyl, v_r) / l4;
-        Ok(BucketLinkageState {
-            k1_m: k1,
-            theta1_rad: theta1,
-            theta2_rad: theta2,
-            theta3_rad: theta3,
-            k2_m: k2,
-            alpha_rad: alpha,
-            cylinder_length_m: l4,
-            moment_arm_m: moment_arm,
-        })
-    }
-}
-
 /// Kinematics and statics of one machine, precomputed from its [`MachineConfig`].
 #[derive(Debug, Clone)]
 pub struct Kinematics {
@@ -483,12 +329,6 @@ pub struct Kinematics {
     rod_area: [f64; 3],
 }
 
-const LIMIT_NAMES: [(&str, &str); 3] = [
-    ("limits.boom_min_deg", "limits.boom_max_deg"),
-    ("limits.stick_min_deg", "limits.stick_max_deg"),
-    ("limits.bucket_min_deg", "limits.bucket_max_deg"),
-];
-
 impl Kinematics {
     /// Precomputes the machine's kinematics and checks its geometry: the boom and stick mounts keep the
     /// included angle in (0, pi) over the stroke, the four-bar assembles and is monotonic over the bucket
@@ -498,47 +338,19 @@ impl Kinematics {
     /// [`KinematicsError::Config`] naming the offending field.
     pub fn new(cfg: &MachineConfig) -> Result<Self> {
         let cyl = &cfg.cylinders;
-        let bl = &cfg.bucket_linkage;
-        let lim = &cfg.limits;
-        let mut k = Self {
+        let linkage = cfg.linkage();
+        let stroke_range = linkage.stroke_ranges()?;
+        Ok(Self {
             foot: [cfg.base.boom_foot_x_m, cfg.base.boom_foot_z_m],
             l2: cfg.links.boom_m,
             l3: cfg.links.stick_m,
             l4: cfg.links.bucket_m,
-            boom: Mount {
-                a: cfg.boom_mount.a_m,
-                b: cfg.boom_mount.b_m,
-                offset: cfg.boom_mount.gamma_offset_rad,
-                sense: 1.0,
-            },
-            stick: Mount {
-                a: cfg.stick_mount.a_m,
-                b: cfg.stick_mount.b_m,
-                offset: cfg.stick_mount.gamma_offset_rad,
-                sense: -1.0,
-            },
-            four_bar: FourBar {
-                e1: bl.e1_m,
-                e2: bl.e2_m,
-                e3: bl.e3_m,
-                e1_angle: bl.e1_angle_rad,
-                s: scale(dir(bl.e4_angle_rad), bl.e4_m),
-                c: scale(dir(bl.p_angle_rad), bl.p_m),
-            },
-            stroke: [
-                (cyl.boom.retracted_length_m, cyl.boom.extended_length_m()),
-                (cyl.stick.retracted_length_m, cyl.stick.extended_length_m()),
-                (
-                    cyl.bucket.retracted_length_m,
-                    cyl.bucket.extended_length_m(),
-                ),
-            ],
-            limits: [
-                (lim.boom_min_rad, lim.boom_max_rad),
-                (lim.stick_min_rad, lim.stick_max_rad),
-                (lim.bucket_min_rad, lim.bucket_max_rad),
-            ],
-            stroke_range: [(0.0, 0.0); 3],
+            boom: linkage.boom,
+            stick: linkage.stick,
+            four_bar: linkage.four_bar,
+            stroke: linkage.stroke,
+            limits: linkage.limits,
+            stroke_range,
             masses: [
                 (
                     cfg.masses.boom.mass_kg,
@@ -570,135 +382,7 @@ impl Kinematics {
                 cyl.stick.rod_area_m2(),
                 cyl.bucket.rod_area_m2(),
             ],
-        };
-        for (i, (mount, name)) in [(k.boom, "boom"), (k.stick, "stick")]
-            .into_iter()
-            .enumerate()
-        {
-            let (lo, hi) = k.stroke[i];
-            let reach = (mount.a - mount.b).abs()..=(mount.a + mount.b);
-            if !reach.contains(&lo) || !reach.contains(&hi) {
-                return Err(KinematicsError::Config {
-                    field: format!("{name}_mount.a_m"),
-                    reason: format!(
-                        "the {name} cylinder stroke {lo:.3}..{hi:.3} m cannot span a triangle with a and b"
-                    ),
-                });
-            }
-            let t_lo = mount.theta(law_of_cosines_angle(mount.a, mount.b, lo));
-            let t_hi = mount.theta(law_of_cosines_angle(mount.a, mount.b, hi));
-            k.stroke_range[i] = (t_lo.min(t_hi), t_lo.max(t_hi));
-        }
-        k.stroke_range[2] = k.bucket_stroke_range()?;
-        for (i, (lo_name, hi_name)) in LIMIT_NAMES.iter().enumerate() {
-            let (lo, hi) = k.limits[i];
-            let (slo, shi) = k.stroke_range[i];
-            if lo < slo - 1e-9 {
-                return Err(KinematicsError::Config {
-                    field: (*lo_name).into(),
-                    reason: format!(
-                        "{:.2} deg is beyond what the cylinder stroke reaches ({:.2} deg)",
-                        lo.to_degrees(),
-                        slo.to_degrees()
-                    ),
-                });
-            }
-            if hi > shi + 1e-9 {
-                return Err(KinematicsError::Config {
-                    field: (*hi_name).into(),
-                    reason: format!(
-                        "{:.2} deg is beyond what the cylinder stroke reaches ({:.2} deg)",
-                        hi.to_degrees(),
-                        shi.to_degrees()
-                    ),
-                });
-            }
-        }
-        // The stick must not stretch straight (Jacobian singular at sin(stick) = 0, Eq. A23).
-        let (slo, shi) = k.limits[1];
-        if slo.sin() * shi.sin() <= 0.0 || slo.sin().abs() < 0.05 || shi.sin().abs() < 0.05 {
-            return Err(KinematicsError::Config {
-                field: "limits.stick_max_deg".into(),
-                reason: "the stick range must stay clear of 0 and 180 degrees (singular Jacobian)"
-                    .into(),
-            });
-        }
-        Ok(k)
-    }
-
-    /// Finds the bucket angles at the two stroke ends on the monotonic branch containing the limits.
-    fn bucket_stroke_range(&self) -> Result<(f64, f64)> {
-        let bad = |reason: String| KinematicsError::Config {
-            field: "bucket_linkage.e1_angle_deg".into(),
-            reason,
-        };
-        let (lmin, lmax) = self.stroke[2];
-        let (qlo, qhi) = self.limits[2];
-        let step = 0.25_f64.to_radians();
-        // Walk from the middle of the limits outward while the linkage assembles and L falls as the
-        // bucket opens (extension curls, so dL/dtheta < 0).
-        let mid = 0.5 * (qlo + qhi);
-        let arm_ok = |t: f64| {
-            self.four_bar
-                .state(t)
-                .ok()
-                .filter(|s| s.moment_arm_m < -1e-4)
-        };
-        let Some(s_mid) = arm_ok(mid) else {
-            return Err(bad(
-                "the bucket four-bar does not assemble (or curls the wrong way) mid-range".into(),
-            ));
-        };
-        let _ = s_mid;
-        // Toward curl (theta falls, L grows) until L >= lmax.
-        let mut t = mid;
-        let mut curl_end = None;
-        for _ in 0..2000 {
-            let tn = t - step;
-            match arm_ok(tn) {
-                Some(s) if s.cylinder_length_m >= lmax => {
-                    curl_end = Some((tn, t));
-                    break;
-                }
-                Some(_) => t = tn,
-                None => break,
-            }
-        }
-        let mut t = mid;
-        let mut open_end = None;
-        for _ in 0..2000 {
-            let tn = t + step;
-            match arm_ok(tn) {
-                Some(s) if s.cylinder_length_m <= lmin => {
-                    open_end = Some((t, tn));
-                    break;
-                }
-                Some(_) => t = tn,
-                None => break,
-            }
-        }
-        let (Some(curl), Some(open)) = (curl_end, open_end) else {
-            return Err(bad(
-                "the bucket cylinder stroke is not reached on a monotonic branch of the four-bar"
-                    .into(),
-            ));
-        };
-        let lo = self.bisect_bucket(lmax, curl.0, curl.1)?;
-        let hi = self.bisect_bucket(lmin, open.0, open.1)?;
-        Ok((lo, hi))
-    }
-
-    /// Bisection for `L4(theta) = length` on a bracket where L4 is monotonic decreasing.
-    fn bisect_bucket(&self, length: f64, mut lo: f64, mut hi: f64) -> Result<f64> {
-        for _ in 0..60 {
-            let mid = 0.5 * (lo + hi);
-            if self.four_bar.state(mid)?.cylinder_length_m > length {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        Ok(0.5 * (lo + hi))
+        })
     }
 
     /// Configured joint limits `(min, max)`, rad.
@@ -759,7 +443,7 @@ impl Kinematics {
     /// [`KinematicsError::Singular`] at a toggle, [`KinematicsError::NonFinite`].
     pub fn bucket_linkage(&self, bucket_rad: f64) -> Result<BucketLinkageState> {
         ensure_finite(bucket_rad.is_finite(), "bucket angle")?;
-        self.four_bar.state(bucket_rad)
+        Ok(self.four_bar.state(bucket_rad)?)
     }
 
     /// Cylinder length for one joint angle, m (Eq. A5; bucket Eqs. A8-A13). Does not check the stroke.
@@ -1263,6 +947,21 @@ mod tests {
             boom_rad: l(Joint::Boom, u[0]),
             stick_rad: l(Joint::Stick, u[1]),
             bucket_rad: l(Joint::Bucket, u[2]),
+        }
+    }
+
+    #[test]
+    fn linkage_errors_keep_their_text_as_kinematics_errors() {
+        // The machine file's geometric check reports the linkage's text, Kinematics::new its own.
+        for e in [
+            LinkageError::Singular { what: "toggle" },
+            LinkageError::Infeasible { bucket_rad: 0.5 },
+            LinkageError::Config {
+                field: "limits.boom_max_deg".into(),
+                reason: "too far".into(),
+            },
+        ] {
+            assert_eq!(KinematicsError::from(e.clone()).to_string(), e.to_string());
         }
     }
 

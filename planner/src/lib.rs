@@ -1,6 +1,8 @@
 //! planner: excavator physics and planning after Cannon (CMU 1999).
 //!
 //! Layout (data flows top to bottom):
+//! - `linkage` (private): the implement linkage in plain numbers, cylinder triangles and the bucket
+//!   four-bar (Eqs. A5-A19), below both the machine description's geometric checks and the kinematics.
 //! - [`machine`]: the machine description (`config/machine.toml`): geometry, cylinders, masses, hydraulics.
 //! - [`kinematics`]: joint angles <-> cylinder lengths, forward/inverse kinematics, Jacobian, gravity and
 //!   tip forces <-> cylinder forces (Appendix, Eqs. A1-A23).
@@ -18,6 +20,9 @@
 //!   the shared Autodig step, predicting a dig's trajectory, time, energy and swept volume.
 //! - [`plan`]: the dig planner (thesis ch. 5): terrain mapping from scans, coarse and refined dig
 //!   location, dig quality, cleanup and tracking plans, action selection, soil hardness index.
+//! - `synthetic` (tests and the `synthetic` feature): synthetic actuator and FEE soil digs with a known
+//!   truth, for the tests and the examples (`cargo run -p planner --release --features synthetic
+//!   --example actuator_training` or `--example soil_cross_validation`).
 
 pub mod actuator;
 pub mod autodig;
@@ -26,7 +31,11 @@ pub mod dig_model;
 pub mod estimate;
 mod input_check;
 pub mod kinematics;
+mod linkage;
 pub mod machine;
+mod par;
 pub mod plan;
 pub mod soil;
+#[cfg(any(test, feature = "synthetic"))]
+pub mod synthetic;
 pub mod terrain;

@@ -6,8 +6,10 @@
 //!
 //! [`MachineConfig::from_toml_str`] parses and validates; a validation error names the field and, when the
 //! text is at hand, its line. The geometric checks (cylinder strokes map to the joint limits, the bucket
-//! four-bar is assemblable and monotonic) are done by building a [`crate::kinematics::Kinematics`].
+//! four-bar is assemblable and monotonic) are those of the linkage the kinematics is built on
+//! (`crate::linkage`), so a machine that loads is one the kinematics accepts.
 
+use crate::linkage::{FourBar, Linkage, LinkageError, Mount};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -385,6 +387,19 @@ impl MachineConfig {
         Self::from_toml_str_named(DEFAULT_MACHINE_TOML, "config/machine.toml")
     }
 
+    /// The machine file at `path`, or without one the built-in machine (`config/machine.toml`): what a
+    /// command's `--machine` option means.
+    ///
+    /// # Errors
+    /// As [`Self::from_toml_file`]; every error names the file (`config/machine.toml` for the built-in
+    /// one), and the line and field where it can.
+    pub fn load_or_default(path: Option<&Path>) -> Result<Self, ConfigError> {
+        match path {
+            Some(p) => Self::from_toml_file(p),
+            None => Self::default_machine(),
+        }
+    }
+
     /// Parses and validates a machine from TOML text.
     ///
     /// # Errors
@@ -681,11 +696,52 @@ impl MachineConfig {
             ));
         }
         // The geometry: the strokes must reach the joint limits, the four-bar must assemble.
-        crate::kinematics::Kinematics::new(self).map_err(|e| match e {
-            crate::kinematics::KinematicsError::Config { field, reason } => (field, reason),
+        self.linkage().stroke_ranges().map_err(|e| match e {
+            LinkageError::Config { field, reason } => (field, reason),
             other => ("limits".to_string(), other.to_string()),
         })?;
         Ok(())
+    }
+
+    /// The implement linkage of this machine in plain numbers: what the geometric checks of
+    /// [`Self::validate`] and the kinematics are computed on.
+    pub(crate) fn linkage(&self) -> Linkage {
+        let cyl = &self.cylinders;
+        let bl = &self.bucket_linkage;
+        let lim = &self.limits;
+        Linkage {
+            boom: Mount {
+                a: self.boom_mount.a_m,
+                b: self.boom_mount.b_m,
+                offset: self.boom_mount.gamma_offset_rad,
+                sense: 1.0,
+            },
+            stick: Mount {
+                a: self.stick_mount.a_m,
+                b: self.stick_mount.b_m,
+                offset: self.stick_mount.gamma_offset_rad,
+                sense: -1.0,
+            },
+            four_bar: FourBar::new(
+                [bl.e1_m, bl.e2_m, bl.e3_m],
+                bl.e1_angle_rad,
+                (bl.e4_m, bl.e4_angle_rad),
+                (bl.p_m, bl.p_angle_rad),
+            ),
+            stroke: [
+                (cyl.boom.retracted_length_m, cyl.boom.extended_length_m()),
+                (cyl.stick.retracted_length_m, cyl.stick.extended_length_m()),
+                (
+                    cyl.bucket.retracted_length_m,
+                    cyl.bucket.extended_length_m(),
+                ),
+            ],
+            limits: [
+                (lim.boom_min_rad, lim.boom_max_rad),
+                (lim.stick_min_rad, lim.stick_max_rad),
+                (lim.bucket_min_rad, lim.bucket_max_rad),
+            ],
+        }
     }
 
     /// Full-bucket payload at the rated density, kg.

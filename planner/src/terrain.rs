@@ -345,11 +345,102 @@ impl TerrainGrid {
                 what: "section has too many samples",
             });
         }
-        let mut heights = Vec::with_capacity(n);
-        for k in 0..n {
-            let r = r_start_m + k as f64 * step_m;
-            let [x, y, _] = pose.world_from_base(swing_rad, r, 0.0);
-            heights.push(self.height_at(x, y)?);
+        let heights = self
+            .plane_samples(pose, swing_rad, r_start_m, step_m, n)
+            .collect::<Result<Vec<_>>>()?;
+        SectionProfile::new(r_start_m, step_m, heights)
+    }
+
+    /// The heights at `n` horizontal distances `r_start_m + k step_m` from the swing axis along the
+    /// digging plane at `swing_rad`, as [`Self::height_at`] gives them.
+    fn plane_samples(
+        &self,
+        pose: &MachinePose,
+        swing_rad: f64,
+        r_start_m: f64,
+        step_m: f64,
+        n: usize,
+    ) -> impl Iterator<Item = Result<f64>> {
+        (0..n).map(move |k| {
+            let [x, y, _] = pose.world_from_base(swing_rad, r_start_m + k as f64 * step_m, 0.0);
+            self.height_at(x, y)
+        })
+    }
+
+    /// Heights along the digging plane at `swing_rad`, from `r_start_m` every `step_m` to `r_end_m`;
+    /// `None` where the map is unknown or ends, and no samples for a bad range.
+    #[must_use]
+    pub fn plane_heights(
+        &self,
+        pose: &MachinePose,
+        swing_rad: f64,
+        r_start_m: f64,
+        r_end_m: f64,
+        step_m: f64,
+    ) -> Vec<Option<f64>> {
+        if !(r_start_m.is_finite() && r_end_m.is_finite() && step_m > 0.0 && r_end_m >= r_start_m) {
+            return Vec::new();
+        }
+        // Bounded: the callers pass radii of a few metres and steps of centimetres.
+        let n = (((r_end_m - r_start_m) / step_m).floor() as usize + 1).min(100_000);
+        self.plane_samples(pose, swing_rad, r_start_m, step_m, n)
+            .map(Result::ok)
+            .collect()
+    }
+
+    /// The section along the digging plane at `swing_rad` (as [`Self::plane_heights`]) on a map that
+    /// may have unknown cells: the unknown samples are filled from their known neighbours by `fill`.
+    ///
+    /// # Errors
+    /// [`TerrainError::Unknown`] at the start of the range if no sample is known (or the range is bad),
+    /// those of [`SectionProfile::new`] (fewer than two samples).
+    pub fn plane_section(
+        &self,
+        pose: &MachinePose,
+        swing_rad: f64,
+        r_start_m: f64,
+        r_end_m: f64,
+        step_m: f64,
+        fill: GapFill,
+    ) -> Result<SectionProfile> {
+        let raw = self.plane_heights(pose, swing_rad, r_start_m, r_end_m, step_m);
+        let known: Vec<usize> = (0..raw.len()).filter(|&i| raw[i].is_some()).collect();
+        let (Some(&first), Some(&last)) = (known.first(), known.last()) else {
+            let [x_m, y_m, _] = pose.world_from_base(swing_rad, r_start_m, 0.0);
+            return Err(TerrainError::Unknown { x_m, y_m });
+        };
+        let mut heights = Vec::with_capacity(raw.len());
+        match fill {
+            GapFill::Linear => {
+                let mut prev = first;
+                for (i, h) in raw.iter().enumerate() {
+                    let v = match h {
+                        Some(v) => {
+                            prev = i;
+                            *v
+                        }
+                        None if i < first => raw[first].unwrap_or(0.0),
+                        None if i > last => raw[last].unwrap_or(0.0),
+                        None => {
+                            let next = known.iter().copied().find(|&k| k > i).unwrap_or(last);
+                            let (a, b) = (raw[prev].unwrap_or(0.0), raw[next].unwrap_or(0.0));
+                            let t = (i - prev) as f64 / (next - prev).max(1) as f64;
+                            a + t * (b - a)
+                        }
+                    };
+                    heights.push(v);
+                }
+            }
+            GapFill::HoldLast => {
+                // Before the first known sample: its height.
+                let mut held = raw[first].unwrap_or(0.0);
+                for h in &raw {
+                    if let Some(v) = h {
+                        held = *v;
+                    }
+                    heights.push(held);
+                }
+            }
         }
         SectionProfile::new(r_start_m, step_m, heights)
     }
@@ -639,6 +730,17 @@ fn bounded_gap(h: &[f64], at: usize, n: usize, index: impl Fn(usize) -> usize) -
     })
 }
 
+/// How [`TerrainGrid::plane_section`] fills the samples that fall on unknown cells.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GapFill {
+    /// Linear between the known neighbours; beyond the first and the last known sample, their heights
+    /// (the dig planners).
+    Linear,
+    /// The last known height carried forward; before the first known sample, its height (the planned
+    /// session's soil monitor).
+    HoldLast,
+}
+
 /// Terrain heights along the digging plane, sampled every `step_m` from `r_start_m` (horizontal distance
 /// from the swing axis, i.e. base-frame `x`).
 #[derive(Debug, Clone, PartialEq)]
@@ -922,6 +1024,50 @@ mod tests {
             g.section(&pose, std::f64::consts::FRAC_PI_2, 1.0, 8.0, 0.1)
                 .is_err()
         );
+    }
+
+    #[test]
+    fn plane_section_fills_unknown_samples_linearly_or_by_holding_the_last() {
+        // Heights = x, unknown below 1.5 m, from 3 to 5 m and beyond 8 m: along the x axis every
+        // metre from 1 to 9 m the samples at 1, 3, 4, 5, 8 and 9 m are unknown.
+        let unknown = |x: f64| x < 1.5 || (3.0..5.0).contains(&x) || x > 8.0;
+        let g = TerrainGrid::from_fn(0.0, -1.0, 0.1, 100, 20, |x, _| {
+            if unknown(x) { f64::NAN } else { x }
+        })
+        .expect("grid");
+        let pose = MachinePose::default();
+        let heights = |fill| {
+            let p = g
+                .plane_section(&pose, 0.0, 1.0, 9.0, 1.0, fill)
+                .expect("section");
+            (1..=9)
+                .map(|r| p.height_at(f64::from(r)).expect("h"))
+                .collect::<Vec<_>>()
+        };
+        let close = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-9);
+        let linear = heights(GapFill::Linear);
+        assert!(
+            close(&linear, &[2.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 7.0, 7.0]),
+            "{linear:?}"
+        );
+        let held = heights(GapFill::HoldLast);
+        assert!(
+            close(&held, &[2.0, 2.0, 2.0, 2.0, 2.0, 6.0, 7.0, 7.0, 7.0]),
+            "{held:?}"
+        );
+        // Swung 90 degrees the plane leaves the grid at 1 m: nothing known.
+        assert!(matches!(
+            g.plane_section(
+                &pose,
+                std::f64::consts::FRAC_PI_2,
+                1.0,
+                9.0,
+                1.0,
+                GapFill::HoldLast
+            ),
+            Err(TerrainError::Unknown { .. })
+        ));
+        assert!(g.plane_heights(&pose, 0.0, 2.0, 1.0, 1.0).is_empty());
     }
 
     #[test]

@@ -570,11 +570,8 @@ pub fn plot_trace<R: std::io::BufRead>(
         .map(|n| signals::resolve_signal(n).map_err(anyhow::Error::msg))
         .collect::<anyhow::Result<_>>()?;
     let kin = if opts.preset == Some(Preset::Dig) {
-        let machine = match &opts.machine {
-            Some(path) => MachineConfig::from_toml_file(path)
-                .with_context(|| format!("machine file {}", path.display()))?,
-            None => MachineConfig::default_machine().context("the bundled machine")?,
-        };
+        let machine =
+            MachineConfig::load_or_default(opts.machine.as_deref()).context("machine file")?;
         Some(Kinematics::new(&machine).context("machine kinematics")?)
     } else {
         None

@@ -11,7 +11,6 @@ use clap::Args;
 use planner::actuator::{ActuatorDig, ActuatorModel, TrainConfig};
 use planner::kinematics::Joint;
 
-use super::start::load_machine;
 use super::training_data::{ForceSource, TraceDig, VelocitySource, load_trace_digs};
 
 /// Which digs of `train`'s split `model evaluate` runs on.
@@ -155,7 +154,7 @@ fn print_breakdown(model: &ActuatorModel, digs: &[TraceDig]) -> anyhow::Result<(
 /// # Errors
 /// Reading the traces, the model or the machine file; the model's errors; writing the dump.
 pub fn run(a: &EvaluateArgs) -> anyhow::Result<()> {
-    let machine = load_machine(a.machine.as_deref())?;
+    let machine = planner::machine::MachineConfig::load_or_default(a.machine.as_deref())?;
     let trace_digs = load_trace_digs(&a.trace, &machine, a.forces)?;
     let text = match &a.model {
         Some(p) => {

@@ -136,7 +136,7 @@ pub fn report(cv: &SoilCv, window: usize) -> String {
 /// As [`SoilSamplesFile::read`] and [`soil_cv`]; an unreadable machine file.
 pub fn run(args: &SoilCvArgs) -> anyhow::Result<()> {
     let file = SoilSamplesFile::read(&args.samples)?;
-    let machine = super::start::load_machine(args.machine.as_deref())?;
+    let machine = planner::machine::MachineConfig::load_or_default(args.machine.as_deref())?;
     let mut digs: Vec<Vec<SoilSample>> = file
         .digs
         .into_iter()

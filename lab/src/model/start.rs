@@ -88,16 +88,6 @@ pub(super) fn load_model(path: Option<&Path>) -> anyhow::Result<DigModel> {
     }
 }
 
-/// The machine file at `path`, or the built-in one.
-///
-/// # Errors
-/// Reading or parsing `path`.
-pub(super) fn load_machine(path: Option<&Path>) -> anyhow::Result<planner::machine::MachineConfig> {
-    Ok(match path {
-        Some(p) => planner::machine::MachineConfig::from_toml_file(p)?,
-        None => planner::machine::MachineConfig::default_machine()?,
-    })
-}
 
 /// The default bench's site (config/bench.toml) as the machine at its start pose sees it.
 ///

@@ -8,7 +8,6 @@ use clap::Args;
 use planner::actuator::{FreeRunLoss, TrainConfig};
 
 use super::evaluate::print_errors;
-use super::start::load_machine;
 use super::training_data::{ForceSource, VelocitySource, load_digs};
 
 /// Arguments of `model train`.
@@ -101,7 +100,7 @@ pub struct TrainArgs {
 /// # Errors
 /// Reading the traces or the machine file, training errors, writing the model.
 pub fn run(a: &TrainArgs) -> anyhow::Result<()> {
-    let machine = load_machine(a.machine.as_deref())?;
+    let machine = planner::machine::MachineConfig::load_or_default(a.machine.as_deref())?;
     let digs = load_digs(&a.trace, &machine, a.velocity, a.forces)?;
     let config = TrainConfig {
         seed: a.seed,

@@ -15,6 +15,7 @@
 //!   [`super::PlannerState::region_pointer`] walks the regions in this order so the bench erodes evenly.
 
 use super::refined::{RefinedConfig, start_pose};
+use super::region::{DigRegion, FarLimit};
 use super::{PlanError, Result, non_negative, positive};
 use crate::kinematics::{Kinematics, MachinePose};
 use crate::terrain::TerrainGrid;
@@ -84,40 +85,6 @@ impl CoarseConfig {
     }
 }
 
-/// Which constraint set a region's far boundary (5.1.1.1).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub enum FarLimit {
-    /// The bench edge is nearer than the reach.
-    BenchEdge,
-    /// The kinematic reach is nearer (or the material runs on past it).
-    Reach,
-}
-
-/// One dig region: a strip one bucket wide along a swing angle.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct DigRegion {
-    /// Position in the dig order (0 = next to the spoil side).
-    pub index: usize,
-    /// Swing angle of the centre line, rad (counter-clockwise from the tracks, positive = left).
-    pub swing_rad: f64,
-    /// Half the angular width at the far boundary (strips are adjacent there), rad.
-    pub half_angle_rad: f64,
-    /// Strip width, m.
-    pub width_m: f64,
-    /// Near radial boundary, m.
-    pub near_r_m: f64,
-    /// Far radial boundary: the nearer of the bench edge and the reach, m.
-    pub far_r_m: f64,
-    /// Which one it is.
-    pub far_limit: FarLimit,
-    /// The bench edge along the centre line, if one lies within the searched range, m.
-    pub edge_r_m: Option<f64>,
-    /// The kinematic reach along the centre line, m.
-    pub reach_r_m: f64,
-    /// Whether any material (terrain over the threshold) lies between the near and far boundaries.
-    pub has_material: bool,
-}
-
 /// The coarse plan: regions in dig order.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CoarsePlan {
@@ -127,30 +94,6 @@ pub struct CoarsePlan {
     pub reference_reach_m: f64,
     /// Desired floor elevation, m (base frame).
     pub floor_z_m: f64,
-}
-
-/// Terrain height along the digging plane at `swing_rad`, from `r0_m` every `step_m` to `r1_m`;
-/// `None` where the map is unknown or ends.
-pub(crate) fn sample_line(
-    grid: &TerrainGrid,
-    pose: &MachinePose,
-    swing_rad: f64,
-    r0_m: f64,
-    r1_m: f64,
-    step_m: f64,
-) -> Vec<Option<f64>> {
-    if !(r0_m.is_finite() && r1_m.is_finite() && step_m > 0.0 && r1_m >= r0_m) {
-        return Vec::new();
-    }
-    // Bounded: the callers pass radii of a few metres and steps of centimetres.
-    let n = (((r1_m - r0_m) / step_m).floor() as usize + 1).min(100_000);
-    (0..n)
-        .map(|k| {
-            let r = r0_m + k as f64 * step_m;
-            let [x, y, _] = pose.world_from_base(swing_rad, r, 0.0);
-            grid.height_at(x, y).ok()
-        })
-        .collect()
 }
 
 /// The farthest radius at which the machine can put the bucket tip, with the given bucket angle to the
@@ -252,14 +195,7 @@ pub fn plan_regions(
             SpoilSide::Right => -cfg.angular_extent_rad + (k as f64 + 0.5) * spacing,
             SpoilSide::Left => cfg.angular_extent_rad - (k as f64 + 0.5) * spacing,
         };
-        let heights = sample_line(
-            grid,
-            pose,
-            swing,
-            cfg.near_radius_m,
-            max_r,
-            cfg.search_step_m,
-        );
+        let heights = grid.plane_heights(pose, swing, cfg.near_radius_m, max_r, cfg.search_step_m);
         let r_of = |i: usize| cfg.near_radius_m + i as f64 * cfg.search_step_m;
         let threshold = floor_z_m + cfg.edge_threshold_m;
         // Reach along the line: the farthest known sample where some candidate start is reachable.

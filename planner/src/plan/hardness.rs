@@ -19,8 +19,7 @@
 //! the optimal index rises with the average soil force.
 //!
 //! The shipped coefficients are in `config/hardness_regression.toml`; regenerate them with
-//! `HARDNESS_REGRESSION_WRITE=1 cargo test -p planner --release hardness_regression_experiment --
-//! --ignored --nocapture`.
+//! `excavator-ctl experiment hardness-fit` (which writes the file and the Fig. 53 plot).
 
 use super::refined::QualityConfig;
 use super::{PlanError, Result};
@@ -483,55 +482,6 @@ mod tests {
             assert!(c > a, "{a} {c}");
         }
         assert!(fit.regression.slope_per_kn > 0.0, "{:?}", fit.regression);
-    }
-
-    /// Regenerates `config/hardness_regression.toml` (5.2, Fig. 53) on the default sweep:
-    /// `HARDNESS_REGRESSION_WRITE=1 cargo test -p planner --release hardness_regression_experiment --
-    /// --ignored --nocapture`.
-    #[test]
-    #[ignore = "simulation sweep: run in release"]
-    fn hardness_regression_experiment() {
-        let model = DigModel::nominal().expect("model");
-        let sweep = default_sweep().expect("sweep");
-        let t0 = std::time::Instant::now();
-        let fit = fit_hardness_regression(&model, &sweep, &QualityConfig::default()).expect("fit");
-        let secs = t0.elapsed().as_secs_f64();
-        println!("average force (kN), optimal index, quality:");
-        for p in &fit.points {
-            println!(
-                "  soil {} terrain {}: {:8.1} kN  index {:.1}  quality {:.2}{}",
-                p.soil,
-                p.terrain,
-                p.average_force_n / 1e3,
-                p.best_index,
-                p.best_quality,
-                if p.analytical_fallback {
-                    " (analytical)"
-                } else {
-                    ""
-                }
-            );
-        }
-        println!("{:?} in {secs:.1} s", fit.regression);
-        let header = format!(
-            "Autodig soil hardness index from the average soil force (thesis 5.2, Eq. 25, Fig. 53):\n\
-             index = intercept + slope_per_kn x |F(Gamma_typical)| / 1 kN, clamped to [min_index, max_index].\n\
-             Fitted by planner::plan::hardness::fit_hardness_regression on default_sweep() ({} soils x {} terrains x\n\
-             {} indices, nominal dig model, quality of config/planner.toml defaults); regenerate with\n  \
-             HARDNESS_REGRESSION_WRITE=1 cargo test -p planner --release hardness_regression_experiment -- --ignored --nocapture",
-            sweep.soils.len(),
-            sweep.terrains.len(),
-            sweep.indices.len()
-        );
-        let text = fit.regression.to_toml(&header);
-        println!("{text}");
-        if std::env::var_os("HARDNESS_REGRESSION_WRITE").is_some() {
-            let path = concat!(
-                env!("CARGO_MANIFEST_DIR"),
-                "/../config/hardness_regression.toml"
-            );
-            std::fs::write(path, text).expect("write config/hardness_regression.toml");
-        }
     }
 
     #[test]

@@ -4,6 +4,8 @@
 //! # Layout (data flows top to bottom)
 //!
 //! - [`mapper`]: [`TerrainMapper`] keeps the terrain grid current from successive range scans (5.3).
+//! - [`region`]: a dig region, the strip of the workspace the coarse planner lays out and the refined
+//!   planner searches.
 //! - [`coarse`]: the coarse dig location planner (5.1.1.1, Fig. 44): the workspace between the machine
 //!   and the nearer of the bench edge and the kinematic reach, within +-30 degrees of the tracks, cut into
 //!   regions one bucket wide, ordered away from the spoil side, with a region pointer.
@@ -31,18 +33,20 @@ pub mod coarse;
 pub mod hardness;
 pub mod mapper;
 pub mod refined;
+pub mod region;
 
 pub use action::{ActionChoice, select_action};
 pub use cleanup_track::{
     CleanupCandidate, CleanupConfig, CleanupStatus, CleanupTrackPlan, MaterialBoundary,
     TrackingConfig, TrackingLimit, reach_track_distance_m, view_track_distance_m,
 };
-pub use coarse::{CoarseConfig, CoarsePlan, DigRegion, SpoilSide};
+pub use coarse::{CoarseConfig, CoarsePlan, SpoilSide};
 pub use hardness::{HardnessRegression, average_soil_force_n};
 pub use mapper::TerrainMapper;
 pub use refined::{
     Candidate, CandidateStatus, DigChoice, DigQuality, QualityConfig, RefinedConfig, RefinedPlan,
 };
+pub use region::DigRegion;
 
 use crate::dig_model::{ActuatorDynamics, DigModel, DigModelError};
 use crate::estimate::EstimateError;

@@ -5,9 +5,10 @@
 //! angle of the bucket (pin -> tip line) from the inward normal of the local terrain profile (5 degree
 //! steps), with the tip on the surface. Each candidate is checked against the **kinematic reachability
 //! constraint** (inverse kinematics, joint limits, cylinder strokes); the reachable ones are run through
-//! the forward dig model ([`crate::dig_model::DigModel::evaluate_many`], in parallel) and those whose
-//! predicted dig goes below the desired floor violate the **geometric shape constraint**. The others are
-//! scored by the dig quality and the planner picks the best (an exhaustive search).
+//! the forward dig model ([`crate::dig_model::DigModel::evaluate_many`], in parallel with the crate's
+//! `parallel` feature) and those whose predicted dig goes below the desired floor violate the
+//! **geometric shape constraint**. The others are scored by the dig quality and the planner picks the
+//! best (an exhaustive search).
 //!
 //! Dig quality (Fig. 46): `Quality = w_v xi(V) + w_t psi(T) + w_e zeta(E)` with `w_v = 3`, `w_t = 2`,
 //! `w_e = 1`, and zero when any factor is zero (the veto of the thesis's footnote). The piecewise-linear
@@ -18,11 +19,11 @@
 //!   range `[T_min, T_max)`, 0 outside it (a dig shorter than `T_min` ended abnormally);
 //! - `zeta(E)`: `zeta_max (1 - E / E_max)` below `E_max`, 0 above.
 
-use super::coarse::DigRegion;
+use super::region::DigRegion;
 use super::{PlanError, Result, non_negative, positive};
 use crate::dig_model::{ActuatorDynamics, DigModel, DigModelError, DigSite, DigStart, DigSummary};
 use crate::kinematics::{BucketPose, JointAngles, Kinematics, MachinePose};
-use crate::terrain::{SectionProfile, TerrainGrid};
+use crate::terrain::{GapFill, TerrainGrid};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::FRAC_PI_2;
 
@@ -387,50 +388,6 @@ pub fn start_pose(
     }
 }
 
-/// The section along the region's centre line for the dig model, with unknown samples filled from
-/// their known neighbours (linear between two, the nearest at the ends).
-///
-/// # Errors
-/// [`PlanError::Terrain`] if no sample is known.
-pub(crate) fn region_section(
-    grid: &TerrainGrid,
-    pose: &MachinePose,
-    swing_rad: f64,
-    r0_m: f64,
-    r1_m: f64,
-    step_m: f64,
-) -> Result<SectionProfile> {
-    let raw = super::coarse::sample_line(grid, pose, swing_rad, r0_m, r1_m, step_m);
-    let known: Vec<usize> = (0..raw.len()).filter(|&i| raw[i].is_some()).collect();
-    let (Some(&first), Some(&last)) = (known.first(), known.last()) else {
-        let [x_m, y_m, _] = pose.world_from_base(swing_rad, r0_m, 0.0);
-        return Err(PlanError::Terrain(crate::terrain::TerrainError::Unknown {
-            x_m,
-            y_m,
-        }));
-    };
-    let mut heights = Vec::with_capacity(raw.len());
-    let mut prev = first;
-    for (i, h) in raw.iter().enumerate() {
-        let v = match h {
-            Some(v) => {
-                prev = i;
-                *v
-            }
-            None if i < first => raw[first].unwrap_or(0.0),
-            None if i > last => raw[last].unwrap_or(0.0),
-            None => {
-                let next = known.iter().copied().find(|&k| k > i).unwrap_or(last);
-                let (a, b) = (raw[prev].unwrap_or(0.0), raw[next].unwrap_or(0.0));
-                let t = (i - prev) as f64 / (next - prev).max(1) as f64;
-                a + t * (b - a)
-            }
-        };
-        heights.push(v);
-    }
-    Ok(SectionProfile::new(r0_m, step_m, heights)?)
-}
-
 /// The refined plan over `region` (5.1.1.2): every candidate `(d, alpha)`, its status and quality, and
 /// the best dig.
 ///
@@ -469,7 +426,15 @@ pub fn refine<A: ActuatorDynamics>(
     }
     let r0 = cfg.section_start_m.min(region.near_r_m);
     let r1 = region.far_r_m + cfg.section_margin_m;
-    let profile = region_section(grid, pose, region.swing_rad, r0, r1, cfg.section_step_m)?;
+    // Unknown samples (occlusion shadows) filled linearly between their known neighbours.
+    let profile = grid.plane_section(
+        pose,
+        region.swing_rad,
+        r0,
+        r1,
+        cfg.section_step_m,
+        GapFill::Linear,
+    )?;
     let section: Vec<[f64; 2]> = (0..)
         .map(|k| r0 + f64::from(k) * cfg.section_step_m)
         .take_while(|&r| r <= profile.r_end_m() + 1e-9)
@@ -509,7 +474,8 @@ pub fn refine<A: ActuatorDynamics>(
             });
         }
     }
-    // The expensive part: the forward dig model on every reachable candidate, in parallel.
+    // The expensive part: the forward dig model on every reachable candidate (in parallel with the
+    // `parallel` feature).
     let results = model.evaluate_many(&starts, &site);
     for (k, res) in start_of.iter().zip(results) {
         let Some(c) = candidates.get_mut(*k) else {
