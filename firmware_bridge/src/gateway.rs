@@ -386,7 +386,7 @@ impl Gateway {
                 0.0
             }
         });
-        self.alive_counter = self.alive_counter.wrapping_add(1);
+        // The alive counter is not touched here: it counts status frames (`next_status`), not ticks.
         GatewayOutputs {
             valve_commands: out,
             status: self.status(),
@@ -418,7 +418,9 @@ impl Gateway {
         out
     }
 
-    /// The status for the next status frame: advances the 8-bit alive counter by one.
+    /// The status for the next status frame: advances the 8-bit alive counter by one. Call it exactly
+    /// once per `GatewayStatus` frame sent; nothing else advances the counter, so consecutive frames
+    /// carry consecutive counters (`messages::is_next_alive(prev, next, 8)`).
     pub fn next_status(&mut self) -> GatewayStatus {
         self.alive_counter = self.alive_counter.wrapping_add(1);
         self.status()
@@ -576,6 +578,33 @@ mod tests {
         assert_eq!(g.tick(0.01, None).status.rejected_frames, 1);
         let (a, b) = (g.next_status().alive_counter, g.next_status().alive_counter);
         assert_eq!(b, a.wrapping_add(1));
+    }
+
+    /// Regression (#20): the counter advanced once per 1 kHz tick as well as once per status frame, so
+    /// at 20 Hz consecutive status frames differed by 51.
+    #[test]
+    fn status_alive_counter_advances_once_per_status_frame_not_per_tick() {
+        let mut g = armed();
+        let mut prev = g.next_status().alive_counter;
+        let mut t = 0.0;
+        for frame in 0..600u32 {
+            // 100 ticks of 1 ms (a heartbeat every 10 ms) between two status frames.
+            for k in 0..100u32 {
+                t += 0.001;
+                if k % 10 == 0 {
+                    g.on_frame(
+                        &hb(RequestedMode::ArmValve, (frame * 10 + k / 10 + 1) as u8),
+                        t,
+                    );
+                }
+                let out = g.tick(t, None);
+                assert_eq!(out.status.alive_counter, prev, "a tick moved the counter");
+            }
+            let next = g.next_status().alive_counter;
+            assert!(is_next_alive(prev, next, 8), "{prev} -> {next}");
+            prev = next;
+        }
+        assert_eq!(g.mode(), GatewayMode::ArmedValve);
     }
 
     #[test]
