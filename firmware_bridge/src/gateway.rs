@@ -30,12 +30,19 @@
 //!
 //! # Frames it does not act on
 //!
+//! - **ignored** (expected, not counted on the bus): the controller's `ControllerStatus` (for traces,
+//!   the gateway has no use for it) and neutral valve commands (block, zero flow) outside ArmedValve.
+//!   Neutral is what every other mode outputs anyway, and the controller sends neutral commands on any
+//!   disarm or fault without knowing whether the gateway already left ArmedValve (`controller::safety`),
+//!   so they are not errors. [`Gateway::ignored_frames`] counts them for tests and logs.
+//!
 //! Counted and reported in the status frame, never acted on:
 //! - **unexpected**: ids it does not consume (unknown PGN, 11-bit ids, remote and FD frames, the
-//!   gateway's own messages from another node);
+//!   gateway's own messages from another node, a `ControllerStatus` from another address);
 //! - **rejected**: messages it consumes that fail a check (wrong source address, wrong DLC, signal out
 //!   of range or not available, bad checksum, replayed heartbeat, a setpoint with a repeated sequence
-//!   counter, a command of the wrong kind for the mode).
+//!   counter, a command of the wrong kind for the mode: a non-neutral valve command outside
+//!   ArmedValve, a setpoint outside ArmedPosition).
 //!
 //! # Position mode
 //!
@@ -126,6 +133,7 @@ pub struct Gateway {
     alive_counter: u8,
     unexpected: u16,
     rejected: u16,
+    ignored: u64,
 }
 
 impl Default for Gateway {
@@ -139,6 +147,8 @@ impl Default for Gateway {
 pub enum FrameVerdict {
     /// Consumed.
     Accepted,
+    /// Expected but not acted on (see the module docs): counted by [`Gateway::ignored_frames`] only.
+    Ignored,
     /// Counted as unexpected.
     Unexpected,
     /// Counted as rejected.
@@ -166,6 +176,7 @@ impl Gateway {
             alive_counter: 0,
             unexpected: 0,
             rejected: 0,
+            ignored: 0,
         }
     }
 
@@ -184,6 +195,12 @@ impl Gateway {
         (self.unexpected, self.rejected)
     }
 
+    /// Frames expected but not acted on (`ControllerStatus`, neutral valve commands outside
+    /// ArmedValve); not reported on the bus.
+    pub fn ignored_frames(&self) -> u64 {
+        self.ignored
+    }
+
     fn is_armed(&self) -> bool {
         matches!(
             self.mode,
@@ -194,6 +211,11 @@ impl Gateway {
     fn unexpected(&mut self) -> FrameVerdict {
         self.unexpected = self.unexpected.saturating_add(1);
         FrameVerdict::Unexpected
+    }
+
+    fn ignore(&mut self) -> FrameVerdict {
+        self.ignored = self.ignored.saturating_add(1);
+        FrameVerdict::Ignored
     }
 
     fn reject(&mut self) -> FrameVerdict {
@@ -266,7 +288,7 @@ impl Gateway {
                 FrameVerdict::Accepted
             }
             Message::AuxValveCommand(cmd) => {
-                if !from_controller || self.mode != GatewayMode::ArmedValve {
+                if !from_controller {
                     return self.reject();
                 }
                 let i = usize::from(cmd.valve.number());
@@ -276,6 +298,14 @@ impl Gateway {
                 let u = cmd.to_fraction();
                 if !u.is_finite() {
                     return self.reject();
+                }
+                if self.mode != GatewayMode::ArmedValve {
+                    // Neutral asks for what this mode already does: the controller's fail-safe.
+                    return if u == 0.0 {
+                        self.ignore()
+                    } else {
+                        self.reject()
+                    };
                 }
                 self.valve_cmd[i] = u.clamp(-1.0, 1.0);
                 self.valve_cmd_at_s[i] = Some(now_s);
@@ -302,7 +332,9 @@ impl Gateway {
                 self.setpoint_at_s = Some(now_s);
                 FrameVerdict::Accepted
             }
-            // The gateway's own messages coming from someone else.
+            // Sent for traces; the gateway is allowed to see it and has no use for it.
+            Message::ControllerStatus(_) if from_controller => self.ignore(),
+            // The gateway's own messages coming from someone else, or a stranger's controller status.
             _ => self.unexpected(),
         }
     }
@@ -443,7 +475,8 @@ mod tests {
     use super::*;
     use crate::id::GATEWAY_ADDRESS;
     use crate::messages::{
-        AuxValveCommand, ControllerHeartbeat, JointAngles, PositionSetpoint, Valve,
+        Activity, AutodigStageCode, AuxValveCommand, ControllerHeartbeat, ControllerStatus,
+        JointAngles, PositionSetpoint, Valve,
     };
     use proptest::prelude::*;
 
@@ -665,6 +698,61 @@ mod tests {
             (out.status.unexpected_frames, out.status.rejected_frames),
             (3, 2)
         );
+    }
+
+    /// Regression (#20): the controller's own 20 Hz `ControllerStatus` counted as unexpected, so the
+    /// counter rose by one per frame and saturated within an hour.
+    #[test]
+    fn controller_status_is_ignored_not_unexpected() {
+        let mut g = armed();
+        let status = Message::ControllerStatus(ControllerStatus {
+            activity: Activity::Dig,
+            stage: AutodigStageCode::Dig,
+            dig_index: 3,
+            hardness_index: 1.0,
+            swept_volume_m3: 0.5,
+            fault_reason: 0,
+            alive_counter: 1,
+        });
+        let own = status.encode().unwrap();
+        assert_eq!(g.on_frame(&own, 0.001), FrameVerdict::Ignored);
+        // The same message from a stranger is not expected.
+        let foreign = status.encode_from(0x33).unwrap();
+        assert_eq!(g.on_frame(&foreign, 0.002), FrameVerdict::Unexpected);
+        assert_eq!(g.frame_counts(), (1, 0));
+        assert_eq!(g.ignored_frames(), 1);
+        assert_eq!(g.mode(), GatewayMode::ArmedValve);
+    }
+
+    /// Regression (#20): after each planned disarm the controller's neutral valve commands (its neutral
+    /// hold, and the step that re-arms) counted as rejected, six per period, next to every re-arm.
+    #[test]
+    fn neutral_valve_commands_outside_valve_mode_are_ignored_others_rejected() {
+        let mut g = armed();
+        g.on_frame(&hb(RequestedMode::Disarm, 1), 0.01);
+        assert_eq!(g.mode(), GatewayMode::Disarmed);
+        for v in Valve::ALL {
+            assert_eq!(g.on_frame(&valve(v, 0.0), 0.02), FrameVerdict::Ignored);
+        }
+        assert_eq!(
+            g.on_frame(&valve(Valve::Boom, 0.3), 0.02),
+            FrameVerdict::Rejected,
+            "motion while disarmed is wrong"
+        );
+        // The same in position mode: neutral ignored, motion rejected, and nothing moves the valve.
+        g.on_frame(&hb(RequestedMode::ArmPosition, 2), 0.03);
+        assert_eq!(g.mode(), GatewayMode::ArmedPosition);
+        assert_eq!(
+            g.on_frame(&valve(Valve::Stick, 0.0), 0.031),
+            FrameVerdict::Ignored
+        );
+        assert_eq!(
+            g.on_frame(&valve(Valve::Stick, -1.0), 0.032),
+            FrameVerdict::Rejected
+        );
+        assert_eq!(g.tick(0.033, None).valve_commands, [0.0; VALVES]);
+        assert_eq!(g.frame_counts(), (0, 2));
+        assert_eq!(g.ignored_frames(), 7);
     }
 
     #[test]
