@@ -294,7 +294,10 @@ pub struct SafetyTick {
     /// Send neutral commands for all six valves this period (before the heartbeat).
     pub send_neutral: bool,
     /// Send a position setpoint holding the measured joints (arming position mode: the gateway faults
-    /// if no setpoint follows the arm request within its command timeout).
+    /// if no setpoint follows the arm request within its command timeout). Never in the period that
+    /// sends the `ArmPosition` request: the node sends the heartbeat last, so a setpoint in that period
+    /// would reach the gateway before it is in position mode and be rejected; the next period is well
+    /// inside the gateway's 100 ms grace after arming.
     pub hold_position: bool,
 }
 
@@ -675,7 +678,6 @@ impl Safety {
                     return SafetyTick {
                         heartbeat: Some(self.next_heartbeat(mode.request())),
                         send_neutral,
-                        hold_position: mode == ArmMode::Position,
                         ..quiet
                     };
                 }
@@ -694,7 +696,6 @@ impl Safety {
                     };
                     SafetyTick {
                         heartbeat: Some(self.next_heartbeat(w.request())),
-                        hold_position: w == ArmMode::Position,
                         ..quiet
                     }
                 }
@@ -717,7 +718,6 @@ impl Safety {
                     SafetyTick {
                         heartbeat: Some(self.next_heartbeat(w.request())),
                         send_neutral: mode == ArmMode::Valve,
-                        hold_position: w == ArmMode::Position,
                         ..quiet
                     }
                 }
@@ -1117,14 +1117,29 @@ mod tests {
         assert_eq!(tick.motion, Some(ArmMode::Valve));
     }
 
+    /// Regression (#20): the hold setpoint went out in the period of the `ArmPosition` request, ahead
+    /// of the heartbeat, and the gateway (not yet in position mode) rejected it at every switch.
     #[test]
-    fn position_mode_arming_holds_position() {
+    fn position_mode_arming_holds_position_from_the_period_after_the_request() {
         let mut rig = Rig::new(SafetyConfig::default());
         let tick = rig.period(0.0, Some(ArmMode::Position), false);
-        assert!(tick.hold_position);
+        assert!(!tick.hold_position, "a setpoint would precede the request");
         assert_eq!(tick.heartbeat.unwrap().mode, RequestedMode::ArmPosition);
-        let tick = rig.period(0.01, Some(ArmMode::Position), false);
+        // Until a status confirms (none arrives in this period): setpoints holding the joints.
+        let tick = rig.safety.tick(0.01, Some(ArmMode::Position));
+        assert!(tick.hold_position && tick.motion.is_none());
+        let tick = rig.period(0.02, Some(ArmMode::Position), false);
         assert_eq!(tick.motion, Some(ArmMode::Position));
+        // Switching from valve to position mode: the same.
+        let (mut rig, t) = Rig::armed(SafetyConfig::default());
+        let tick = rig.period(t, Some(ArmMode::Position), false);
+        assert_eq!(tick.heartbeat.unwrap().mode, RequestedMode::ArmPosition);
+        assert!(tick.send_neutral && !tick.hold_position);
+        assert!(
+            rig.safety
+                .tick(t + PERIOD_S, Some(ArmMode::Position))
+                .hold_position
+        );
     }
 
     #[test]
