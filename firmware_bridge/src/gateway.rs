@@ -20,7 +20,11 @@
 //!
 //! # Watchdog and checks (armed modes latch a fault; while Disarmed they only count)
 //!
-//! - No valid heartbeat for [`GatewayConfig::heartbeat_timeout_s`] (100 ms): `WATCHDOG_TIMEOUT`.
+//! - No valid heartbeat for [`GatewayConfig::heartbeat_timeout_s`] (100 ms): `WATCHDOG_TIMEOUT`. The
+//!   output of a tick holds until the next one, so the check keeps a margin of one tick period
+//!   ([`GatewayConfig::tick_period_s`]): a tick that finds the heartbeat older than
+//!   `heartbeat_timeout_s - tick_period_s` already goes neutral, and the valves are neutral within
+//!   `heartbeat_timeout_s` of the last heartbeat at any phase of the ticks.
 //! - A heartbeat with a bad checksum: `BAD_CHECKSUM`. A heartbeat whose 4-bit alive counter is neither
 //!   the previous one (a replay: rejected and ignored) nor its successor: `BAD_ALIVE_COUNTER`.
 //! - ArmedValve: a non-neutral valve command older than [`GatewayConfig::command_timeout_s`]:
@@ -62,11 +66,14 @@ pub const VALVES: usize = 6;
 /// Number of position-controlled joints: boom, stick, bucket, swing.
 pub const JOINTS: usize = 4;
 
-/// Gateway parameters.
+/// Gateway parameters (checked by [`GatewayConfig::validate`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GatewayConfig {
-    /// Heartbeat watchdog (s).
+    /// Heartbeat watchdog: the valves are neutral within this of the last valid heartbeat (s).
     pub heartbeat_timeout_s: f64,
+    /// The period the caller calls [`Gateway::tick`] at (s); the watchdog keeps this margin. Must be
+    /// below `heartbeat_timeout_s`. Default 0.001 (the simulator's physics step).
+    pub tick_period_s: f64,
     /// Age after which a non-neutral valve command or a setpoint is stale (s).
     pub command_timeout_s: f64,
     /// Position loop proportional gain (command per rad), per joint.
@@ -87,6 +94,7 @@ impl Default for GatewayConfig {
     fn default() -> Self {
         Self {
             heartbeat_timeout_s: 0.1,
+            tick_period_s: 0.001,
             command_timeout_s: 0.1,
             kp: [4.0, 3.0, 3.0, 3.0],
             ki: [0.5, 0.5, 0.5, 0.2],
@@ -100,6 +108,84 @@ impl Default for GatewayConfig {
                 (-std::f64::consts::PI, std::f64::consts::PI),
             ],
         }
+    }
+}
+
+/// A [`GatewayConfig`] value that cannot be used.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[error("gateway config: {field} = {value} {reason}")]
+pub struct GatewayConfigError {
+    /// The field.
+    pub field: &'static str,
+    /// Its value (the offending element for arrays).
+    pub value: f64,
+    /// What it must be.
+    pub reason: &'static str,
+}
+
+impl GatewayConfig {
+    /// Checks every parameter.
+    ///
+    /// # Errors
+    /// [`GatewayConfigError`] naming the first bad field: timeouts and the tick period must be finite
+    /// and positive with the tick period below the heartbeat timeout, gains finite and non-negative,
+    /// `max_command` in `(0, 1]`, the rate limit finite and positive, the joint signs +1 or -1, and
+    /// every setpoint range finite with `min < max`.
+    pub fn validate(&self) -> Result<(), GatewayConfigError> {
+        let err = |field, value, reason| {
+            Err(GatewayConfigError {
+                field,
+                value,
+                reason,
+            })
+        };
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        if !positive(self.heartbeat_timeout_s) {
+            return err(
+                "heartbeat_timeout_s",
+                self.heartbeat_timeout_s,
+                "must be finite and > 0",
+            );
+        }
+        if !positive(self.tick_period_s) || self.tick_period_s >= self.heartbeat_timeout_s {
+            return err(
+                "tick_period_s",
+                self.tick_period_s,
+                "must be finite, > 0 and below heartbeat_timeout_s",
+            );
+        }
+        if !positive(self.command_timeout_s) {
+            return err(
+                "command_timeout_s",
+                self.command_timeout_s,
+                "must be finite and > 0",
+            );
+        }
+        for (field, gains) in [("kp", self.kp), ("ki", self.ki)] {
+            if let Some(&g) = gains.iter().find(|g| !(g.is_finite() && **g >= 0.0)) {
+                return err(field, g, "must be finite and >= 0");
+            }
+        }
+        if !(self.max_command > 0.0 && self.max_command <= 1.0) {
+            return err("max_command", self.max_command, "must be in (0, 1]");
+        }
+        if !positive(self.rate_limit_per_s) {
+            return err(
+                "rate_limit_per_s",
+                self.rate_limit_per_s,
+                "must be finite and > 0",
+            );
+        }
+        if let Some(&s) = self.joint_sign.iter().find(|s| s.abs() != 1.0) {
+            return err("joint_sign", s, "must be +1 or -1");
+        }
+        for (lo, hi) in self.setpoint_range_rad {
+            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                let bad = if lo.is_finite() { hi } else { lo };
+                return err("setpoint_range_rad", bad, "must be finite with min < max");
+            }
+        }
+        Ok(())
     }
 }
 
@@ -138,7 +224,7 @@ pub struct Gateway {
 
 impl Default for Gateway {
     fn default() -> Self {
-        Self::new(GatewayConfig::default())
+        Self::with_valid_config(GatewayConfig::default())
     }
 }
 
@@ -157,7 +243,15 @@ pub enum FrameVerdict {
 
 impl Gateway {
     /// A gateway in Disarmed mode.
-    pub fn new(config: GatewayConfig) -> Self {
+    ///
+    /// # Errors
+    /// [`GatewayConfigError`] if `config` does not pass [`GatewayConfig::validate`].
+    pub fn new(config: GatewayConfig) -> Result<Self, GatewayConfigError> {
+        config.validate()?;
+        Ok(Self::with_valid_config(config))
+    }
+
+    fn with_valid_config(config: GatewayConfig) -> Self {
         Self {
             config,
             mode: GatewayMode::Disarmed,
@@ -373,8 +467,9 @@ impl Gateway {
         self.last_tick_s = Some(now_s);
         if self.is_armed() {
             let hb_age = self.last_heartbeat_s.map_or(f64::INFINITY, |t| now_s - t);
-            // Written so a NaN or infinite age counts as expired.
-            let alive = hb_age + 1e-9 < self.config.heartbeat_timeout_s;
+            // This output holds until the next tick, up to one tick period later: go neutral now if
+            // the deadline could pass before then. Written so a NaN or infinite age counts as expired.
+            let alive = hb_age + self.config.tick_period_s + 1e-9 < self.config.heartbeat_timeout_s;
             if !alive {
                 self.fault(GatewayFaults::WATCHDOG_TIMEOUT);
                 // A new heartbeat sequence may start at any counter after a timeout.
@@ -668,6 +763,53 @@ mod tests {
     }
 
     #[test]
+    fn invalid_configs_are_errors() {
+        assert!(GatewayConfig::default().validate().is_ok());
+        let bad = [
+            GatewayConfig {
+                heartbeat_timeout_s: f64::NAN,
+                ..GatewayConfig::default()
+            },
+            GatewayConfig {
+                tick_period_s: 0.1,
+                ..GatewayConfig::default()
+            },
+            GatewayConfig {
+                tick_period_s: 0.0,
+                ..GatewayConfig::default()
+            },
+            GatewayConfig {
+                command_timeout_s: -1.0,
+                ..GatewayConfig::default()
+            },
+            GatewayConfig {
+                kp: [4.0, f64::INFINITY, 3.0, 3.0],
+                ..GatewayConfig::default()
+            },
+            GatewayConfig {
+                max_command: 1.5,
+                ..GatewayConfig::default()
+            },
+            GatewayConfig {
+                rate_limit_per_s: 0.0,
+                ..GatewayConfig::default()
+            },
+            GatewayConfig {
+                joint_sign: [1.0, 0.0, -1.0, 1.0],
+                ..GatewayConfig::default()
+            },
+            GatewayConfig {
+                setpoint_range_rad: [(1.0, -1.0); JOINTS],
+                ..GatewayConfig::default()
+            },
+        ];
+        for config in bad {
+            let e = Gateway::new(config).unwrap_err();
+            assert!(!e.to_string().is_empty());
+        }
+    }
+
+    #[test]
     fn foreign_source_address_and_unknown_frames_are_counted_not_acted_on() {
         let mut g = armed();
         let foreign =
@@ -796,6 +938,63 @@ mod tests {
         g.on_frame(&setpoint([0.0, 0.0, 0.0, 0.0], 0), 0.0);
         g.on_frame(&setpoint([0.0, -1.0, 2.0, 0.0], 1), 0.0);
         assert!(g.faults().contains(GatewayFaults::SETPOINT_OUT_OF_RANGE));
+    }
+
+    /// Heartbeat period of the phase sweep (the tightest the controller may use), s.
+    const SWEEP_HEARTBEAT_PERIOD_S: f64 = 0.01;
+    /// The gateway's tick period in the simulator and on the reference gateway, s.
+    const SWEEP_TICK_S: f64 = 0.001;
+
+    /// Runs a gateway ticking every `SWEEP_TICK_S` from t = 0 with heartbeats (and a fresh boom command)
+    /// every `SWEEP_HEARTBEAT_PERIOD_S` from `phase_s`, the last one number `last`; boom commands go on
+    /// after it. Returns the last heartbeat's time and the time of the first tick with neutral output.
+    fn first_neutral_after_last_heartbeat(phase_s: f64, last: u32) -> (f64, f64) {
+        let mut g = Gateway::default();
+        let last_hb_s = phase_s + f64::from(last) * SWEEP_HEARTBEAT_PERIOD_S;
+        let mut n = 0u32;
+        let mut k = 0u32;
+        loop {
+            let t = f64::from(k) * SWEEP_TICK_S;
+            // Deliver the frames due by this tick, stamped with their own time.
+            loop {
+                let at = phase_s + f64::from(n) * SWEEP_HEARTBEAT_PERIOD_S;
+                if at > t {
+                    break;
+                }
+                if n <= last {
+                    let mode = RequestedMode::ArmValve;
+                    g.on_frame(&hb(mode, (n % 16) as u8), at);
+                }
+                g.on_frame(&valve(Valve::Boom, 1.0), at);
+                n += 1;
+            }
+            let out = g.tick(t, None);
+            if t >= last_hb_s && out.valve_commands == [0.0; VALVES] {
+                return (last_hb_s, t);
+            }
+            assert!(t < last_hb_s + 1.0, "never neutral");
+            k += 1;
+        }
+    }
+
+    #[test]
+    fn watchdog_neutralises_within_100_ms_at_every_heartbeat_phase() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0x57A7_C4D0);
+        let (mut best_s, mut worst_s) = (f64::INFINITY, 0.0_f64);
+        for _ in 0..1000 {
+            let phase_s = rng.random_range(0.0..SWEEP_HEARTBEAT_PERIOD_S);
+            let last = rng.random_range(5..40);
+            let (last_hb_s, neutral_s) = first_neutral_after_last_heartbeat(phase_s, last);
+            best_s = best_s.min(neutral_s - last_hb_s);
+            worst_s = worst_s.max(neutral_s - last_hb_s);
+        }
+        println!(
+            "watchdog: last heartbeat to neutral valves over 1000 phases: best {:.3} ms, worst {:.3} ms",
+            best_s * 1e3,
+            worst_s * 1e3
+        );
+        assert!(worst_s <= 0.1 + 1e-9, "{:.3} ms", worst_s * 1e3);
     }
 
     proptest! {

@@ -13,7 +13,7 @@
 //! Only sensor readings and the gateway status go out; nothing reveals the hidden effects.
 
 use firmware_bridge::CanFrame;
-use firmware_bridge::gateway::{Gateway, GatewayConfig};
+use firmware_bridge::gateway::{Gateway, GatewayConfig, GatewayConfigError};
 use firmware_bridge::messages::{
     AuxValveMeasured, Cylinder, JointAngles, JointRates, Message, PumpPressures, TrackOdometry,
     ValveState,
@@ -47,14 +47,21 @@ pub struct MachineNode {
 impl MachineNode {
     /// A node with the default gateway configuration.
     pub fn new(plant: Plant) -> Self {
-        Self::with_gateway(plant, GatewayConfig::default())
+        Self::with(plant, Gateway::default())
     }
 
     /// A node with a given gateway configuration.
-    pub fn with_gateway(plant: Plant, config: GatewayConfig) -> Self {
+    ///
+    /// # Errors
+    /// [`GatewayConfigError`] if the configuration does not validate.
+    pub fn with_gateway(plant: Plant, config: GatewayConfig) -> Result<Self, GatewayConfigError> {
+        Ok(Self::with(plant, Gateway::new(config)?))
+    }
+
+    fn with(plant: Plant, gateway: Gateway) -> Self {
         Self {
             plant,
-            gateway: Gateway::new(config),
+            gateway,
             readings: None,
             steps: 0,
             valve_commands: [0.0; 6],
