@@ -18,6 +18,15 @@
 //!   fault the controller must send at least one `Disarm` heartbeat, then an `Arm*` heartbeat.
 //! - `EStop` in a valid heartbeat latches the `E_STOP` fault in any mode.
 //!
+//! # Time
+//!
+//! The caller's clock is checked, not trusted: the time of every [`Gateway::on_frame`] and
+//! [`Gateway::tick`] call must be finite and never earlier than the latest time seen before (equal is
+//! fine). Otherwise the gateway latches `CLOCK_FAULT` in any mode (valves neutral; the watchdog and the
+//! staleness checks depend on the clock), rejects the frame, and takes the new time as its reference
+//! (a non-finite one is never taken), so the controller's `Disarm` in the new time base acknowledges
+//! the fault. Stamp frames with the same monotonic clock as the ticks, when they are handed over.
+//!
 //! # Watchdog and checks (armed modes latch a fault; while Disarmed they only count)
 //!
 //! - No valid heartbeat for [`GatewayConfig::heartbeat_timeout_s`] (100 ms): `WATCHDOG_TIMEOUT`. The
@@ -216,6 +225,8 @@ pub struct Gateway {
     integral: [f64; JOINTS],
     position_cmd: [f64; JOINTS],
     last_tick_s: Option<f64>,
+    /// The latest valid time seen (frames and ticks), the reference of the clock check.
+    clock_s: Option<f64>,
     alive_counter: u8,
     unexpected: u16,
     rejected: u16,
@@ -267,6 +278,7 @@ impl Gateway {
             integral: [0.0; JOINTS],
             position_cmd: [0.0; JOINTS],
             last_tick_s: None,
+            clock_s: None,
             alive_counter: 0,
             unexpected: 0,
             rejected: 0,
@@ -317,9 +329,15 @@ impl Gateway {
         FrameVerdict::Rejected
     }
 
-    /// Latches a fault: Faulted, valves neutral. Only in armed modes, except the e-stop.
+    /// Faults that latch in any mode, not only in the armed ones.
+    const LATCH_IN_ANY_MODE: u16 = GatewayFaults::E_STOP | GatewayFaults::CLOCK_FAULT;
+
+    /// Latches a fault: Faulted, valves neutral. Only in armed modes, except the e-stop and the clock.
     fn fault(&mut self, bits: u16) {
-        if self.is_armed() || bits == GatewayFaults::E_STOP || self.mode == GatewayMode::Faulted {
+        if self.is_armed()
+            || bits & Self::LATCH_IN_ANY_MODE != 0
+            || self.mode == GatewayMode::Faulted
+        {
             self.faults = self.faults.with(bits);
             self.mode = GatewayMode::Faulted;
             self.clear_commands();
@@ -335,8 +353,28 @@ impl Gateway {
         self.position_cmd = [0.0; JOINTS];
     }
 
-    /// Handles one received frame at time `now_s` (the bus's clock).
+    /// Checks a time input (see "Time" in the module docs). On a bad one: `CLOCK_FAULT`, and a finite
+    /// time becomes the new reference.
+    fn clock_ok(&mut self, now_s: f64) -> bool {
+        let ok = now_s.is_finite() && self.clock_s.is_none_or(|t| now_s >= t);
+        if !ok {
+            self.fault(GatewayFaults::CLOCK_FAULT);
+            // The tick-to-tick interval across the jump means nothing.
+            self.last_tick_s = None;
+        }
+        if now_s.is_finite() {
+            self.clock_s = Some(now_s);
+        }
+        ok
+    }
+
+    /// Handles one received frame at time `now_s` (the caller's monotonic clock, as for
+    /// [`Self::tick`]). A non-finite time or one earlier than the latest seen latches `CLOCK_FAULT`
+    /// and the frame is rejected.
     pub fn on_frame(&mut self, frame: &CanFrame, now_s: f64) -> FrameVerdict {
+        if !self.clock_ok(now_s) {
+            return self.reject();
+        }
         let decoded = match Message::decode(frame) {
             Ok(d) => d,
             Err(DecodeError::ErrorFrame(_)) => {
@@ -460,11 +498,19 @@ impl Gateway {
     /// Runs the watchdog and the position loop at `now_s` with the measured joint angles
     /// `[boom, stick, bucket, swing]` (None when the resolvers are unavailable: valves neutral in
     /// position mode), and returns the valve commands and the status.
+    ///
+    /// A non-finite `now_s` or one earlier than the latest time seen latches `CLOCK_FAULT` (valves
+    /// neutral from this tick on).
     pub fn tick(&mut self, now_s: f64, measured: Option<[f64; JOINTS]>) -> GatewayOutputs {
-        let dt = self
-            .last_tick_s
-            .map_or(0.0, |t| (now_s - t).clamp(0.0, 1.0));
-        self.last_tick_s = Some(now_s);
+        let dt = if self.clock_ok(now_s) {
+            let dt = self
+                .last_tick_s
+                .map_or(0.0, |t| (now_s - t).clamp(0.0, 1.0));
+            self.last_tick_s = Some(now_s);
+            dt
+        } else {
+            0.0
+        };
         if self.is_armed() {
             let hb_age = self.last_heartbeat_s.map_or(f64::INFINITY, |t| now_s - t);
             // This output holds until the next tick, up to one tick period later: go neutral now if
@@ -760,6 +806,94 @@ mod tests {
         g.on_frame(&hb(RequestedMode::EStop, 0), 0.0);
         assert_eq!(g.mode(), GatewayMode::Faulted);
         assert!(g.faults().contains(GatewayFaults::E_STOP));
+    }
+
+    /// Drives the boom at 100 % with heartbeats and commands every 10 ms and 1 ms ticks from `t0_s` for
+    /// 0.2 s; returns the time of the last tick.
+    fn drive_boom(g: &mut Gateway, t0_s: f64, alive: &mut u8) -> f64 {
+        let mut t = t0_s;
+        for k in 0..200 {
+            t = t0_s + f64::from(k) * 0.001;
+            if k % 10 == 0 {
+                *alive = alive.wrapping_add(1);
+                g.on_frame(&hb(RequestedMode::ArmValve, *alive), t);
+                g.on_frame(&valve(Valve::Boom, 1.0), t);
+            }
+            g.tick(t, None);
+        }
+        t
+    }
+
+    /// #23 finding 4: with the clock stepped back, the heartbeat and the commands looked 10 s younger
+    /// than they were, so a controller that died just then kept the boom driven for 10 s.
+    #[test]
+    fn clock_stepped_back_10_s_does_not_keep_valves_driven() {
+        let mut g = Gateway::default();
+        let mut alive = 0;
+        g.on_frame(&hb(RequestedMode::ArmValve, alive), 100.0);
+        let t = drive_boom(&mut g, 100.0, &mut alive);
+        assert_eq!(g.tick(t, None).valve_commands[0], 1.0);
+        // The clock steps back 10 s and the controller says nothing more.
+        let back = t - 10.0;
+        let out = g.tick(back, None);
+        assert_eq!(out.valve_commands, [0.0; VALVES]);
+        assert!(out.status.faults.contains(GatewayFaults::CLOCK_FAULT));
+        assert_eq!(out.status.mode, GatewayMode::Faulted);
+        for k in 1..=2000 {
+            let out = g.tick(back + f64::from(k) * 0.001, None);
+            assert_eq!(out.valve_commands, [0.0; VALVES]);
+        }
+        // In the new time base the controller's Disarm acknowledges and motion needs a fresh arm.
+        let t = back + 2.001;
+        alive += 1;
+        g.on_frame(&hb(RequestedMode::ArmValve, alive), t);
+        g.on_frame(&valve(Valve::Boom, 1.0), t);
+        assert_eq!(
+            g.tick(t, None).valve_commands,
+            [0.0; VALVES],
+            "still Faulted"
+        );
+        alive += 1;
+        g.on_frame(&hb(RequestedMode::Disarm, alive), t + 0.01);
+        assert_eq!(g.mode(), GatewayMode::Disarmed);
+        assert!(g.faults().is_empty());
+        let t = drive_boom(&mut g, t + 0.02, &mut alive);
+        assert_eq!(g.tick(t, None).valve_commands[0], 1.0);
+    }
+
+    #[test]
+    fn a_command_stamped_nan_does_not_drive_the_boom() {
+        let mut g = armed();
+        assert_eq!(
+            g.on_frame(&valve(Valve::Boom, 1.0), f64::NAN),
+            FrameVerdict::Rejected
+        );
+        assert!(g.faults().contains(GatewayFaults::CLOCK_FAULT));
+        // Heartbeats and ticks go on with good times: the boom stays put until Disarm, Arm.
+        for k in 1..=20u8 {
+            let t = f64::from(k) * 0.005;
+            g.on_frame(&hb(RequestedMode::ArmValve, k), t);
+            assert_eq!(g.tick(t, None).valve_commands, [0.0; VALVES]);
+        }
+        // A frame from before the latest time is a clock fault too, as is a NaN tick.
+        let mut g = armed();
+        g.tick(0.01, None);
+        assert_eq!(
+            g.on_frame(&valve(Valve::Boom, 1.0), 0.009),
+            FrameVerdict::Rejected
+        );
+        assert!(g.faults().contains(GatewayFaults::CLOCK_FAULT));
+        let mut g = armed();
+        g.on_frame(&valve(Valve::Boom, 1.0), 0.001);
+        assert_eq!(g.tick(0.002, None).valve_commands[0], 1.0);
+        let out = g.tick(f64::NAN, None);
+        assert_eq!(out.valve_commands, [0.0; VALVES]);
+        assert!(out.status.faults.contains(GatewayFaults::CLOCK_FAULT));
+        // Equal times are fine.
+        let mut g = armed();
+        g.on_frame(&valve(Valve::Boom, 1.0), 0.0);
+        assert_eq!(g.tick(0.0, None).valve_commands[0], 1.0);
+        assert!(g.faults().is_empty());
     }
 
     #[test]

@@ -191,6 +191,9 @@ impl GatewayFaults {
     pub const JOINT_LIMIT: u16 = 1 << 6;
     /// A position setpoint outside the joint range.
     pub const SETPOINT_OUT_OF_RANGE: u16 = 1 << 7;
+    /// The gateway's time input was not finite or went backwards: its watchdog and staleness checks
+    /// cannot be trusted, so it latched (in any mode).
+    pub const CLOCK_FAULT: u16 = 1 << 8;
 
     /// True if every bit of `bits` is set.
     pub const fn contains(self, bits: u16) -> bool {
