@@ -28,7 +28,10 @@
 //!   the wider of the machine file's software limits and the cylinder's stroke-limited range, because
 //!   Autodig ends stages at the stroke ends; a reading beyond the stroke is a sensor fault.
 //! - An e-stop request ([`Safety::request_estop`]): latched, the heartbeat requests `EStop` until
-//!   [`Safety::reset`].
+//!   [`Safety::reset`]. The gateway latches its own `E_STOP`, which only a `ResetEStop` request clears:
+//!   after the operator's reset the heartbeat requests `ResetEStop` until a gateway status received
+//!   after it shows `E_STOP` cleared, then `Disarm` (the gateway's acknowledgement), then the usual
+//!   arming handshake.
 //! - A gateway that reports a fault or leaves the armed mode on its own; an arm request the gateway does
 //!   not confirm within [`SafetyConfig::arm_timeout_s`].
 //! - CAN error frames: bus-off, error passive, no-ack, transmit timeout, controller overflow, protocol and
@@ -316,6 +319,9 @@ pub struct Safety {
     needs_reset: bool,
     acked: bool,
     estop: bool,
+    /// After the operator reset an e-stop: `Some(first ResetEStop heartbeat time)` until a gateway
+    /// status received after it shows `E_STOP` cleared (`Some(None)` before the first one).
+    estop_reset: Option<Option<f64>>,
     healthy: Result<(), Fault>,
     gateway_mode: Option<GatewayMode>,
     now_s: f64,
@@ -344,6 +350,7 @@ impl Safety {
             needs_reset: false,
             acked: false,
             estop: false,
+            estop_reset: None,
             healthy: Err(Fault::StaleSensor {
                 signal: Signal::JointAngles,
                 age_s: f64::INFINITY,
@@ -442,16 +449,22 @@ impl Safety {
     /// nothing moves until [`Self::reset`].
     pub fn request_estop(&mut self, now_s: f64) {
         self.estop = true;
+        self.estop_reset = None;
         self.report(now_s, Fault::EStop);
     }
 
-    /// Clears an e-stop and a latched fault (the operator's acknowledgement). Motion still needs the
-    /// cause to clear and a fresh arming handshake.
+    /// Clears an e-stop and a latched fault (the operator's acknowledgement). After an e-stop the
+    /// heartbeat then requests `ResetEStop` (the only request that clears the gateway's latched
+    /// `E_STOP`) until the gateway reports it cleared, then `Disarm`. Motion still needs the cause to
+    /// clear and a fresh arming handshake.
     pub fn reset(&mut self) {
         if self.state == SafetyState::Shutdown {
             return;
         }
         tracing::info!("safety reset by operator");
+        if self.estop {
+            self.estop_reset = Some(None);
+        }
         self.estop = false;
         self.needs_reset = false;
         self.acked = true;
@@ -477,6 +490,16 @@ impl Safety {
         self.healthy = self.check(now_s, est);
         let status = est.state().gateway;
         self.gateway_mode = status.map(|s| s.mode);
+        if let Some(Some(sent_s)) = self.estop_reset
+            && let Some(s) = status
+            && est
+                .last_received_s(Signal::GatewayStatus)
+                .is_some_and(|t| t > sent_s)
+            && !s.faults.contains(GatewayFaults::E_STOP)
+        {
+            tracing::info!("gateway e-stop reset confirmed");
+            self.estop_reset = None;
+        }
         let fresh_status = est.age_s(Signal::GatewayStatus, now_s) <= self.config.status_max_age_s;
         match self.state {
             SafetyState::Armed { mode, since_s } => {
@@ -632,10 +655,16 @@ impl Safety {
             },
             SafetyState::Faulted { fault, since_s } => {
                 let send_neutral = now_s <= self.neutral_until_s || self.gateway_armed();
-                let request = if self.estop {
-                    RequestedMode::EStop
-                } else {
-                    RequestedMode::Disarm
+                let request = match self.estop_reset {
+                    _ if self.estop => RequestedMode::EStop,
+                    Some(sent) => {
+                        if sent.is_none() {
+                            // The last finite time, so the confirmation can come after it.
+                            self.estop_reset = Some(Some(self.now_s));
+                        }
+                        RequestedMode::ResetEStop
+                    }
+                    None => RequestedMode::Disarm,
                 };
                 let cleared = self.healthy.is_ok()
                     && self.gateway_mode == Some(GatewayMode::Disarmed)
@@ -762,6 +791,7 @@ mod tests {
         safety: Safety,
         gateway_mode: GatewayMode,
         faults: u16,
+        status_alive: u8,
     }
 
     impl Rig {
@@ -774,6 +804,7 @@ mod tests {
                 safety: Safety::new(config, limits),
                 gateway_mode: GatewayMode::Disarmed,
                 faults: 0,
+                status_alive: 0,
             }
         }
 
@@ -803,10 +834,11 @@ mod tests {
         }
 
         fn feed_status(&mut self, now_s: f64) {
+            self.status_alive = self.status_alive.wrapping_add(1);
             let s = Message::GatewayStatus(GatewayStatus {
                 mode: self.gateway_mode,
                 faults: GatewayFaults(self.faults),
-                alive_counter: 0,
+                alive_counter: self.status_alive,
                 unexpected_frames: 0,
                 rejected_frames: 0,
             });
@@ -824,8 +856,18 @@ mod tests {
             self.safety.observe(now_s, &self.est);
             let t = self.safety.tick(now_s, want);
             if let Some(hb) = t.heartbeat {
+                let estop = self.faults & GatewayFaults::E_STOP != 0;
                 self.gateway_mode = match (hb.mode, self.gateway_mode) {
-                    (RequestedMode::EStop, _) => GatewayMode::Faulted,
+                    (RequestedMode::EStop, _) => {
+                        self.faults |= GatewayFaults::E_STOP;
+                        GatewayMode::Faulted
+                    }
+                    (RequestedMode::ResetEStop, GatewayMode::Faulted) => {
+                        self.faults &= !GatewayFaults::E_STOP;
+                        GatewayMode::Faulted
+                    }
+                    (RequestedMode::ResetEStop, _) => GatewayMode::Disarmed,
+                    (_, mode) if estop => mode,
                     (RequestedMode::Disarm, _) => {
                         self.faults = 0;
                         GatewayMode::Disarmed
@@ -1012,8 +1054,99 @@ mod tests {
         assert!(tick.motion.is_none());
         assert_eq!(rig.gateway_mode, GatewayMode::Faulted);
         rig.safety.reset();
-        let (tick, _) = rig.run(t2, 100, Some(ArmMode::Valve));
-        assert_eq!(tick.motion, Some(ArmMode::Valve));
+        // The requests after the reset: ResetEStop, then Disarm, then ArmValve (#23 finding 5).
+        let mut requests: Vec<RequestedMode> = Vec::new();
+        let mut t = t2;
+        let mut tick = None;
+        for _ in 0..100 {
+            let tk = rig.period(t, Some(ArmMode::Valve), false);
+            if let Some(hb) = tk.heartbeat
+                && requests.last() != Some(&hb.mode)
+            {
+                requests.push(hb.mode);
+            }
+            tick = Some(tk);
+            t += PERIOD_S;
+        }
+        assert_eq!(
+            requests,
+            [
+                RequestedMode::ResetEStop,
+                RequestedMode::Disarm,
+                RequestedMode::ArmValve
+            ]
+        );
+        assert_eq!(tick.unwrap().motion, Some(ArmMode::Valve));
+    }
+
+    /// #23 finding 5, both sides: the safety layer and the real gateway firmware, heartbeats as frames,
+    /// status at 10 Hz. Disarm does not clear the gateway's e-stop; the operator's reset does, through
+    /// ResetEStop, Disarm, Arm.
+    #[test]
+    fn estop_reset_with_the_gateway_firmware_goes_reset_disarm_arm() {
+        use firmware_bridge::gateway::{Gateway, VALVES};
+        use firmware_bridge::messages::{AuxValveCommand, Valve};
+        /// What the gateway saw and did: requested modes (each change once) and the boom output
+        /// of every 1 ms gateway tick.
+        #[derive(Default)]
+        struct Log {
+            requests: Vec<RequestedMode>,
+            boom: Vec<f64>,
+        }
+        fn run(rig: &mut Rig, gw: &mut Gateway, t: &mut f64, periods: u32, log: &mut Log) {
+            for k in 0..periods {
+                rig.feed_sensors(*t, Q);
+                if k % 10 == 0 {
+                    let status = Message::GatewayStatus(gw.next_status());
+                    rig.est.on_message(&status, *t);
+                }
+                rig.est.update();
+                rig.safety.observe(*t, &rig.est);
+                let tick = rig.safety.tick(*t, Some(ArmMode::Valve));
+                if tick.motion == Some(ArmMode::Valve) {
+                    let cmd = AuxValveCommand::from_fraction(Valve::Boom, 1.0).unwrap();
+                    gw.on_frame(&Message::AuxValveCommand(cmd).encode().unwrap(), *t);
+                }
+                if let Some(hb) = tick.heartbeat {
+                    gw.on_frame(&hb.to_frame().unwrap(), *t);
+                    if log.requests.last() != Some(&hb.mode) {
+                        log.requests.push(hb.mode);
+                    }
+                }
+                for ms in 0..10 {
+                    let out = gw.tick(*t + f64::from(ms) * 0.001, None);
+                    log.boom.push(out.valve_commands[0]);
+                    assert!(out.valve_commands[1..VALVES].iter().all(|u| *u == 0.0));
+                }
+                *t += PERIOD_S;
+            }
+        }
+        let mut rig = Rig::new(SafetyConfig::default());
+        let mut gw = Gateway::default();
+        let mut log = Log::default();
+        let mut t = 0.0;
+        run(&mut rig, &mut gw, &mut t, 100, &mut log);
+        assert_eq!(gw.mode(), GatewayMode::ArmedValve);
+        assert_eq!(log.boom.last(), Some(&1.0));
+        rig.safety.request_estop(t);
+        run(&mut rig, &mut gw, &mut t, 200, &mut log);
+        assert!(gw.faults().contains(GatewayFaults::E_STOP));
+        assert_eq!(gw.mode(), GatewayMode::Faulted);
+        assert_eq!(log.boom.last(), Some(&0.0));
+        log.requests.clear();
+        rig.safety.reset();
+        run(&mut rig, &mut gw, &mut t, 200, &mut log);
+        assert_eq!(
+            log.requests,
+            [
+                RequestedMode::ResetEStop,
+                RequestedMode::Disarm,
+                RequestedMode::ArmValve
+            ]
+        );
+        assert_eq!(gw.mode(), GatewayMode::ArmedValve);
+        assert!(gw.faults().is_empty());
+        assert_eq!(log.boom.last(), Some(&1.0));
     }
 
     #[test]

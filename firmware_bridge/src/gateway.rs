@@ -16,7 +16,11 @@
 //!   the controller requests, until a valid heartbeat requests `Disarm`; that acknowledges the fault,
 //!   clears the bits and returns to Disarmed. Motion then needs a fresh arm request. Hence after any
 //!   fault the controller must send at least one `Disarm` heartbeat, then an `Arm*` heartbeat.
-//! - `EStop` in a valid heartbeat latches the `E_STOP` fault in any mode.
+//! - `EStop` in a valid heartbeat latches the `E_STOP` fault in any mode. `Disarm` does **not** clear
+//!   it: only `ResetEStop` (sent on the operator's reset) does, and the gateway stays Faulted after it,
+//!   so the sequence back to motion is `ResetEStop`, `Disarm`, `Arm*`. Arm requests while `E_STOP` is
+//!   latched are ignored. `ResetEStop` in an armed mode disarms (it is not an arm request); while
+//!   Disarmed it does nothing.
 //!
 //! # Time
 //!
@@ -472,8 +476,20 @@ impl Gateway {
     }
 
     fn on_request(&mut self, requested: RequestedMode, now_s: f64) {
+        let estop = self.faults.contains(GatewayFaults::E_STOP);
         match (requested, self.mode) {
             (RequestedMode::EStop, _) => self.fault(GatewayFaults::E_STOP),
+            (RequestedMode::ResetEStop, GatewayMode::Faulted) => {
+                // Only the e-stop bit: a `Disarm` acknowledges the rest and leaves Faulted.
+                self.faults = GatewayFaults(self.faults.0 & !GatewayFaults::E_STOP);
+            }
+            (RequestedMode::ResetEStop, GatewayMode::ArmedValve | GatewayMode::ArmedPosition) => {
+                self.mode = GatewayMode::Disarmed;
+                self.clear_commands();
+            }
+            (RequestedMode::ResetEStop, GatewayMode::Disarmed) => {}
+            // A latched e-stop ignores Disarm and arm requests until the reset.
+            _ if estop => {}
             (RequestedMode::Disarm, _) => {
                 self.mode = GatewayMode::Disarmed;
                 self.faults = GatewayFaults(0);
@@ -806,6 +822,51 @@ mod tests {
         g.on_frame(&hb(RequestedMode::EStop, 0), 0.0);
         assert_eq!(g.mode(), GatewayMode::Faulted);
         assert!(g.faults().contains(GatewayFaults::E_STOP));
+    }
+
+    /// Regression (#23 finding 5): one valid `Disarm` cleared the e-stop, and e-stop, Disarm, ArmValve,
+    /// boom 100 % moved the boom 1 ms after the e-stop.
+    #[test]
+    fn e_stop_is_not_cleared_by_disarm_only_by_a_reset_then_disarm_then_arm() {
+        let mut g = armed();
+        g.on_frame(&valve(Valve::Boom, 0.5), 0.001);
+        g.on_frame(&hb(RequestedMode::EStop, 1), 0.002);
+        g.on_frame(&hb(RequestedMode::Disarm, 2), 0.0025);
+        g.on_frame(&hb(RequestedMode::ArmValve, 3), 0.0026);
+        g.on_frame(&valve(Valve::Boom, 1.0), 0.0027);
+        let out = g.tick(0.003, None);
+        assert_eq!(
+            out.valve_commands, [0.0; VALVES],
+            "the boom moved after the e-stop"
+        );
+        assert_eq!(g.mode(), GatewayMode::Faulted);
+        assert!(g.faults().contains(GatewayFaults::E_STOP));
+        // The reset clears the e-stop but not the Faulted mode: arm requests still do nothing.
+        g.on_frame(&hb(RequestedMode::ResetEStop, 4), 0.01);
+        assert!(!g.faults().contains(GatewayFaults::E_STOP));
+        assert_eq!(g.mode(), GatewayMode::Faulted);
+        g.on_frame(&hb(RequestedMode::ArmValve, 5), 0.02);
+        g.on_frame(&valve(Valve::Boom, 1.0), 0.02);
+        assert_eq!(g.tick(0.021, None).valve_commands, [0.0; VALVES]);
+        assert_eq!(g.mode(), GatewayMode::Faulted);
+        // Disarm acknowledges, then an arm request arms.
+        g.on_frame(&hb(RequestedMode::Disarm, 6), 0.03);
+        assert_eq!(g.mode(), GatewayMode::Disarmed);
+        assert!(g.faults().is_empty());
+        g.on_frame(&hb(RequestedMode::ArmValve, 7), 0.04);
+        g.on_frame(&valve(Valve::Boom, 1.0), 0.04);
+        assert_eq!(g.tick(0.041, None).valve_commands[0], 1.0);
+    }
+
+    #[test]
+    fn reset_request_without_an_e_stop_never_arms() {
+        let mut g = armed();
+        g.on_frame(&valve(Valve::Boom, 1.0), 0.001);
+        g.on_frame(&hb(RequestedMode::ResetEStop, 1), 0.002);
+        assert_eq!(g.mode(), GatewayMode::Disarmed);
+        assert_eq!(g.tick(0.003, None).valve_commands, [0.0; VALVES]);
+        g.on_frame(&hb(RequestedMode::ResetEStop, 2), 0.01);
+        assert_eq!(g.mode(), GatewayMode::Disarmed);
     }
 
     /// Drives the boom at 100 % with heartbeats and commands every 10 ms and 1 ms ticks from `t0_s` for

@@ -165,8 +165,11 @@ signal_enum! {
         ArmValve = 1,
         /// Arm and follow position setpoints.
         ArmPosition = 2,
-        /// Emergency stop: neutral valves and latch a fault.
+        /// Emergency stop: neutral valves and latch the `E_STOP` fault.
         EStop = 3,
+        /// The operator's reset of a latched e-stop: clears `E_STOP` (the gateway stays Faulted
+        /// until a `Disarm` acknowledges; then an arm request). Sent only on an operator reset.
+        ResetEStop = 4,
     }
 }
 
