@@ -22,6 +22,9 @@
 //! - Stale or missing sensor data: a control signal (angles, rates, the three cylinder pressures) older
 //!   than [`SafetyConfig::sensor_max_age_s`] (3 control periods by default), or the gateway status older
 //!   than [`SafetyConfig::status_max_age_s`], while arming or armed.
+//! - A frozen gateway: status frames keep coming but their alive counter has not changed for
+//!   [`SafetyConfig::status_max_age_s`] (3.5 status periods at 10 Hz): a repeated status is not a new
+//!   one, so a gateway whose firmware hangs while its CAN controller repeats the last frame is caught.
 //! - A decode error of a frame of the protocol, any frame from the gateway's address that the gateway
 //!   does not send, or a frame of the protocol from another address (the node reports these).
 //! - A joint beyond its limit by more than [`SafetyConfig::joint_limit_margin_rad`]. The node passes
@@ -157,6 +160,14 @@ pub enum Fault {
     /// The gateway did not confirm an arm request in time.
     #[error("gateway did not confirm {0:?} in time")]
     ArmTimeout(ArmMode),
+    /// The gateway status keeps arriving with the same alive counter: the gateway is not running.
+    #[error("gateway status frozen: alive counter {alive_counter} unchanged for {frozen_s:.3} s")]
+    GatewayFrozen {
+        /// The repeated counter.
+        alive_counter: u8,
+        /// How long it has not changed, s.
+        frozen_s: f64,
+    },
     /// A CAN error frame.
     #[error("CAN bus fault: {0:?}")]
     Bus(BusFault),
@@ -171,7 +182,7 @@ pub enum Fault {
 impl Fault {
     /// The fault code sent in `ControllerStatus.FaultReason` (0 is healthy): 1 stale sensor, 2 decode
     /// error, 3 unexpected frame, 4 joint limit, 5 e-stop, 6 gateway fault, 7 gateway mode, 8 arm
-    /// timeout, 9 bus fault, 10 control, 11 shutdown.
+    /// timeout, 9 bus fault, 10 control, 11 shutdown, 12 gateway frozen.
     pub const fn code(&self) -> u8 {
         match self {
             Fault::StaleSensor { .. } => 1,
@@ -185,6 +196,7 @@ impl Fault {
             Fault::Bus(_) => 9,
             Fault::Control(_) => 10,
             Fault::Shutdown => 11,
+            Fault::GatewayFrozen { .. } => 12,
         }
     }
 
@@ -213,7 +225,8 @@ pub struct SafetyConfig {
     pub listen_only: bool,
     /// Control signals older than this are stale, s. Default 0.03 (3 control periods).
     pub sensor_max_age_s: f64,
-    /// The gateway status (10 Hz) older than this is stale, s. Default 0.35.
+    /// The gateway status (10 Hz) older than this is stale, s; a status whose alive counter has not
+    /// changed for this long is frozen. Default 0.35.
     pub status_max_age_s: f64,
     /// The gateway must confirm an arm request within this, s. Default 1.0.
     pub arm_timeout_s: f64,
@@ -571,6 +584,18 @@ impl Safety {
                     f64::INFINITY
                 } else {
                     status_age
+                },
+            });
+        }
+        // Fresh by age but not moving on: written so NaN counts as frozen.
+        let frozen_s = est.gateway_alive_age_s(now_s);
+        if !(frozen_s <= self.config.status_max_age_s) {
+            return Err(Fault::GatewayFrozen {
+                alive_counter: est.gateway_alive_counter().unwrap_or(0),
+                frozen_s: if frozen_s.is_nan() {
+                    f64::INFINITY
+                } else {
+                    frozen_s
                 },
             });
         }
@@ -1147,6 +1172,53 @@ mod tests {
         assert_eq!(gw.mode(), GatewayMode::ArmedValve);
         assert!(gw.faults().is_empty());
         assert_eq!(log.boom.last(), Some(&1.0));
+    }
+
+    /// #20: a gateway whose status keeps coming with the same alive counter is not running.
+    #[test]
+    fn a_frozen_gateway_status_stops_motion_and_blocks_arming() {
+        let (mut rig, t) = Rig::armed(SafetyConfig::default());
+        let frozen = rig.status_alive;
+        let mut now = t;
+        let mut stopped_at = None;
+        for _ in 0..100 {
+            // The status goes on arriving every period, fresh by age, with the same counter.
+            rig.status_alive = frozen.wrapping_sub(1);
+            let tick = rig.period(now, Some(ArmMode::Valve), false);
+            if tick.motion.is_none() {
+                stopped_at = Some(now);
+                break;
+            }
+            now += PERIOD_S;
+        }
+        let stopped_at = stopped_at.expect("a frozen gateway went unnoticed");
+        let frozen_s = stopped_at - (t - PERIOD_S);
+        assert!(
+            frozen_s > SafetyConfig::default().status_max_age_s && frozen_s < 0.4,
+            "{frozen_s}"
+        );
+        assert!(matches!(
+            rig.safety.active_fault(),
+            Some(Fault::GatewayFrozen { alive_counter, .. }) if alive_counter == frozen
+        ));
+        // Still frozen: no re-arming.
+        let mut now = stopped_at;
+        for _ in 0..200 {
+            rig.status_alive = frozen.wrapping_sub(1);
+            assert!(
+                rig.period(now, Some(ArmMode::Valve), false)
+                    .motion
+                    .is_none()
+            );
+            now += PERIOD_S;
+        }
+        assert!(matches!(
+            rig.safety.health(),
+            Err(Fault::GatewayFrozen { .. })
+        ));
+        // Running again (the counter advances): it re-arms.
+        let (tick, _) = rig.run(now, 100, Some(ArmMode::Valve));
+        assert_eq!(tick.motion, Some(ArmMode::Valve));
     }
 
     #[test]
