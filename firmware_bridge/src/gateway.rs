@@ -958,6 +958,28 @@ mod tests {
     }
 
     #[test]
+    fn frame_counters_saturate_and_say_so() {
+        let mut g = Gateway::default();
+        let unknown = CanFrame::new_extended(0x18FE_EE00, &[1, 2, 3]).unwrap();
+        for k in 0..70_000u32 {
+            g.on_frame(&unknown, f64::from(k) * 1e-6);
+        }
+        let status = g.next_status();
+        assert_eq!(
+            status.unexpected_frames,
+            GatewayStatus::FRAME_COUNT_SATURATED
+        );
+        assert!(status.unexpected_frames_saturated());
+        assert!(!status.rejected_frames_saturated());
+        // The saturated value survives the wire.
+        let frame = Message::GatewayStatus(status).encode().unwrap();
+        let Message::GatewayStatus(back) = Message::decode(&frame).unwrap().message else {
+            panic!("not a status");
+        };
+        assert!(back.unexpected_frames_saturated());
+    }
+
+    #[test]
     fn invalid_configs_are_errors() {
         assert!(GatewayConfig::default().validate().is_ok());
         let bad = [

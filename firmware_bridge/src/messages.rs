@@ -350,10 +350,27 @@ pub struct GatewayStatus {
     pub faults: GatewayFaults,
     /// Alive counter, increments by one per status frame, wraps 255 -> 0.
     pub alive_counter: u8,
-    /// Frames with an unknown id or from an unexpected source (saturating).
+    /// Frames with an unknown id or from an unexpected source; saturating:
+    /// [`GatewayStatus::FRAME_COUNT_SATURATED`] means that many or more.
     pub unexpected_frames: u16,
-    /// Known frames rejected (bad DLC, range, checksum, counter) (saturating).
+    /// Known frames rejected (bad DLC, range, checksum, counter, wrong kind for the mode); saturating:
+    /// [`GatewayStatus::FRAME_COUNT_SATURATED`] means that many or more.
     pub rejected_frames: u16,
+}
+
+impl GatewayStatus {
+    /// The frame counters stop here: 65535 reads "65535 or more" (DBC value name `Saturated`).
+    pub const FRAME_COUNT_SATURATED: u16 = u16::MAX;
+
+    /// True if `unexpected_frames` has saturated (the true count is 65535 or more).
+    pub const fn unexpected_frames_saturated(&self) -> bool {
+        self.unexpected_frames == Self::FRAME_COUNT_SATURATED
+    }
+
+    /// True if `rejected_frames` has saturated (the true count is 65535 or more).
+    pub const fn rejected_frames_saturated(&self) -> bool {
+        self.rejected_frames == Self::FRAME_COUNT_SATURATED
+    }
 }
 
 /// Joint position setpoints for the gateway's closed-loop position mode (Proprietary B PGN 0xFF60),
