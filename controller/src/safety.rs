@@ -587,9 +587,9 @@ impl Safety {
                 },
             });
         }
-        // Fresh by age but not moving on: written so NaN counts as frozen.
+        // Fresh by age but not moving on; a NaN age counts as frozen.
         let frozen_s = est.gateway_alive_age_s(now_s);
-        if !(frozen_s <= self.config.status_max_age_s) {
+        if frozen_s.is_nan() || frozen_s > self.config.status_max_age_s {
             return Err(Fault::GatewayFrozen {
                 alive_counter: est.gateway_alive_counter().unwrap_or(0),
                 frozen_s: if frozen_s.is_nan() {
