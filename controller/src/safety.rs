@@ -23,7 +23,7 @@
 //!   than [`SafetyConfig::sensor_max_age_s`] (3 control periods by default), or the gateway status older
 //!   than [`SafetyConfig::status_max_age_s`], while arming or armed.
 //! - A frozen gateway: status frames keep coming but their alive counter has not changed for
-//!   [`SafetyConfig::status_max_age_s`] (3.5 status periods at 10 Hz): a repeated status is not a new
+//!   [`SafetyConfig::status_max_age_s`] (7 status periods at 20 Hz): a repeated status is not a new
 //!   one, so a gateway whose firmware hangs while its CAN controller repeats the last frame is caught.
 //! - A decode error of a frame of the protocol, any frame from the gateway's address that the gateway
 //!   does not send, or a frame of the protocol from another address (the node reports these).
@@ -225,7 +225,7 @@ pub struct SafetyConfig {
     pub listen_only: bool,
     /// Control signals older than this are stale, s. Default 0.03 (3 control periods).
     pub sensor_max_age_s: f64,
-    /// The gateway status (10 Hz) older than this is stale, s; a status whose alive counter has not
+    /// The gateway status (20 Hz) older than this is stale, s; a status whose alive counter has not
     /// changed for this long is frozen. Default 0.35.
     pub status_max_age_s: f64,
     /// The gateway must confirm an arm request within this, s. Default 1.0.
@@ -1105,7 +1105,7 @@ mod tests {
     }
 
     /// #23 finding 5, both sides: the safety layer and the real gateway firmware, heartbeats as frames,
-    /// status at 10 Hz. Disarm does not clear the gateway's e-stop; the operator's reset does, through
+    /// status at 20 Hz. Disarm does not clear the gateway's e-stop; the operator's reset does, through
     /// ResetEStop, Disarm, Arm.
     #[test]
     fn estop_reset_with_the_gateway_firmware_goes_reset_disarm_arm() {
@@ -1121,7 +1121,7 @@ mod tests {
         fn run(rig: &mut Rig, gw: &mut Gateway, t: &mut f64, periods: u32, log: &mut Log) {
             for k in 0..periods {
                 rig.feed_sensors(*t, Q);
-                if k % 10 == 0 {
+                if k % 5 == 0 {
                     let status = Message::GatewayStatus(gw.next_status());
                     rig.est.on_message(&status, *t);
                 }

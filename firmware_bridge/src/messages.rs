@@ -341,7 +341,7 @@ pub struct TrackOdometry {
     pub right_m: f64,
 }
 
-/// Gateway status (Proprietary B PGN 0xFF54), 10 Hz.
+/// Gateway status (Proprietary B PGN 0xFF54), 20 Hz.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GatewayStatus {
     /// Operating mode.
