@@ -15,9 +15,11 @@
 //!   linear in the payload mass `m`, solved by least squares over the three joints.
 //!
 //! Every signal keeps the time it was last received ([`Estimator::age_s`]) so the safety layer can
-//! detect stale or missing data. Nothing here allocates after construction or panics.
+//! detect stale or missing data. The gateway status also keeps when its 8-bit alive counter last
+//! changed ([`Estimator::gateway_alive_age_s`]): a gateway that repeats a frozen status keeps the
+//! status fresh by age, but not alive. Nothing here allocates after construction or panics.
 
-use firmware_bridge::messages::{Cylinder, GatewayStatus, Message};
+use firmware_bridge::messages::{Cylinder, GatewayStatus, Message, is_next_alive};
 use nalgebra::Vector3;
 use planner::kinematics::{BucketPose, Joint, JointAngles, Kinematics, MachinePose, TipForce};
 use planner::machine::GRAVITY_M_PER_S2;
@@ -197,6 +199,9 @@ pub struct Estimator {
     state: MachineState,
     received_s: [Option<f64>; Signal::ALL.len()],
     odometry_origin_m: Option<[f64; 2]>,
+    /// The last gateway status alive counter and when it last changed (bus time, s).
+    gateway_alive: Option<(u8, f64)>,
+    gateway_alive_errors: u64,
 }
 
 impl Estimator {
@@ -219,6 +224,8 @@ impl Estimator {
             state,
             received_s: [None; Signal::ALL.len()],
             odometry_origin_m: None,
+            gateway_alive: None,
+            gateway_alive_errors: 0,
         }
     }
 
@@ -240,6 +247,25 @@ impl Estimator {
     /// Age of `signal` at `now_s`, s; infinite if never received.
     pub fn age_s(&self, signal: Signal, now_s: f64) -> f64 {
         self.received_s[signal.slot()].map_or(f64::INFINITY, |t| now_s - t)
+    }
+
+    /// How long the gateway status alive counter has not changed at `now_s`, s: 0 right after a
+    /// status with a new counter, growing while the gateway repeats the same one; infinite if no status
+    /// ever arrived.
+    pub fn gateway_alive_age_s(&self, now_s: f64) -> f64 {
+        self.gateway_alive
+            .map_or(f64::INFINITY, |(_, changed_s)| now_s - changed_s)
+    }
+
+    /// The last gateway status alive counter.
+    pub fn gateway_alive_counter(&self) -> Option<u8> {
+        self.gateway_alive.map(|(counter, _)| counter)
+    }
+
+    /// Gateway status frames whose alive counter was not the successor of the previous one (repeated
+    /// or skipped): lost or duplicated status frames, for logs.
+    pub fn gateway_alive_errors(&self) -> u64 {
+        self.gateway_alive_errors
     }
 
     /// The oldest of the control signals ([`Signal::CONTROL`]) at `now_s` and its age.
@@ -338,6 +364,20 @@ impl Estimator {
             }
             Message::GatewayStatus(g) => {
                 s.gateway = Some(*g);
+                self.gateway_alive = match self.gateway_alive {
+                    // The same counter again: received, but the gateway did not move on.
+                    Some((prev, changed_s)) if prev == g.alive_counter => {
+                        self.gateway_alive_errors += 1;
+                        Some((prev, changed_s))
+                    }
+                    Some((prev, _)) => {
+                        if !is_next_alive(prev, g.alive_counter, 8) {
+                            self.gateway_alive_errors += 1;
+                        }
+                        Some((g.alive_counter, time_s))
+                    }
+                    None => Some((g.alive_counter, time_s)),
+                };
                 Signal::GatewayStatus
             }
             Message::AuxValveCommand(_)
@@ -631,6 +671,39 @@ mod tests {
         e.on_message(&odo(8.5, 8.5), 1.0);
         let p = e.state().pose;
         assert!((p.x_m + 1.5).abs() < 1e-12 && p.y_m.abs() < 1e-12);
+    }
+
+    fn status(alive_counter: u8) -> Message {
+        Message::GatewayStatus(GatewayStatus {
+            mode: firmware_bridge::messages::GatewayMode::ArmedValve,
+            faults: firmware_bridge::messages::GatewayFaults(0),
+            alive_counter,
+            unexpected_frames: 0,
+            rejected_frames: 0,
+        })
+    }
+
+    #[test]
+    fn gateway_alive_age_grows_while_the_status_repeats_its_counter() {
+        let mut e = estimator();
+        assert!(e.gateway_alive_age_s(0.0).is_infinite());
+        e.on_message(&status(254), 0.0);
+        e.on_message(&status(255), 0.1);
+        e.on_message(&status(0), 0.2);
+        assert_eq!(e.gateway_alive_age_s(0.25), 0.25 - 0.2);
+        assert_eq!(e.gateway_alive_errors(), 0);
+        // Frozen: the status keeps arriving (fresh by age) with the same counter.
+        for k in 3..10 {
+            e.on_message(&status(0), f64::from(k) * 0.1);
+        }
+        assert!(e.age_s(Signal::GatewayStatus, 0.9) < 1e-9);
+        assert!((e.gateway_alive_age_s(0.9) - 0.7).abs() < 1e-9);
+        assert_eq!(e.gateway_alive_counter(), Some(0));
+        assert_eq!(e.gateway_alive_errors(), 7);
+        // A skip (lost frames) is counted but is a change: alive again.
+        e.on_message(&status(5), 1.0);
+        assert_eq!(e.gateway_alive_age_s(1.0), 0.0);
+        assert_eq!(e.gateway_alive_errors(), 8);
     }
 
     #[test]

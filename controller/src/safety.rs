@@ -22,13 +22,19 @@
 //! - Stale or missing sensor data: a control signal (angles, rates, the three cylinder pressures) older
 //!   than [`SafetyConfig::sensor_max_age_s`] (3 control periods by default), or the gateway status older
 //!   than [`SafetyConfig::status_max_age_s`], while arming or armed.
+//! - A frozen gateway: status frames keep coming but their alive counter has not changed for
+//!   [`SafetyConfig::status_max_age_s`] (7 status periods at 20 Hz): a repeated status is not a new
+//!   one, so a gateway whose firmware hangs while its CAN controller repeats the last frame is caught.
 //! - A decode error of a frame of the protocol, any frame from the gateway's address that the gateway
 //!   does not send, or a frame of the protocol from another address (the node reports these).
 //! - A joint beyond its limit by more than [`SafetyConfig::joint_limit_margin_rad`]. The node passes
 //!   the wider of the machine file's software limits and the cylinder's stroke-limited range, because
 //!   Autodig ends stages at the stroke ends; a reading beyond the stroke is a sensor fault.
 //! - An e-stop request ([`Safety::request_estop`]): latched, the heartbeat requests `EStop` until
-//!   [`Safety::reset`].
+//!   [`Safety::reset`]. The gateway latches its own `E_STOP`, which only a `ResetEStop` request clears:
+//!   after the operator's reset the heartbeat requests `ResetEStop` until a gateway status received
+//!   after it shows `E_STOP` cleared, then `Disarm` (the gateway's acknowledgement), then the usual
+//!   arming handshake.
 //! - A gateway that reports a fault or leaves the armed mode on its own; an arm request the gateway does
 //!   not confirm within [`SafetyConfig::arm_timeout_s`].
 //! - CAN error frames: bus-off, error passive, no-ack, transmit timeout, controller overflow, protocol and
@@ -154,6 +160,14 @@ pub enum Fault {
     /// The gateway did not confirm an arm request in time.
     #[error("gateway did not confirm {0:?} in time")]
     ArmTimeout(ArmMode),
+    /// The gateway status keeps arriving with the same alive counter: the gateway is not running.
+    #[error("gateway status frozen: alive counter {alive_counter} unchanged for {frozen_s:.3} s")]
+    GatewayFrozen {
+        /// The repeated counter.
+        alive_counter: u8,
+        /// How long it has not changed, s.
+        frozen_s: f64,
+    },
     /// A CAN error frame.
     #[error("CAN bus fault: {0:?}")]
     Bus(BusFault),
@@ -168,7 +182,7 @@ pub enum Fault {
 impl Fault {
     /// The fault code sent in `ControllerStatus.FaultReason` (0 is healthy): 1 stale sensor, 2 decode
     /// error, 3 unexpected frame, 4 joint limit, 5 e-stop, 6 gateway fault, 7 gateway mode, 8 arm
-    /// timeout, 9 bus fault, 10 control, 11 shutdown.
+    /// timeout, 9 bus fault, 10 control, 11 shutdown, 12 gateway frozen.
     pub const fn code(&self) -> u8 {
         match self {
             Fault::StaleSensor { .. } => 1,
@@ -182,6 +196,7 @@ impl Fault {
             Fault::Bus(_) => 9,
             Fault::Control(_) => 10,
             Fault::Shutdown => 11,
+            Fault::GatewayFrozen { .. } => 12,
         }
     }
 
@@ -210,7 +225,8 @@ pub struct SafetyConfig {
     pub listen_only: bool,
     /// Control signals older than this are stale, s. Default 0.03 (3 control periods).
     pub sensor_max_age_s: f64,
-    /// The gateway status (10 Hz) older than this is stale, s. Default 0.35.
+    /// The gateway status (20 Hz) older than this is stale, s; a status whose alive counter has not
+    /// changed for this long is frozen. Default 0.35.
     pub status_max_age_s: f64,
     /// The gateway must confirm an arm request within this, s. Default 1.0.
     pub arm_timeout_s: f64,
@@ -294,7 +310,10 @@ pub struct SafetyTick {
     /// Send neutral commands for all six valves this period (before the heartbeat).
     pub send_neutral: bool,
     /// Send a position setpoint holding the measured joints (arming position mode: the gateway faults
-    /// if no setpoint follows the arm request within its command timeout).
+    /// if no setpoint follows the arm request within its command timeout). Never in the period that
+    /// sends the `ArmPosition` request: the node sends the heartbeat last, so a setpoint in that period
+    /// would reach the gateway before it is in position mode and be rejected; the next period is well
+    /// inside the gateway's 100 ms grace after arming.
     pub hold_position: bool,
 }
 
@@ -313,6 +332,9 @@ pub struct Safety {
     needs_reset: bool,
     acked: bool,
     estop: bool,
+    /// After the operator reset an e-stop: `Some(first ResetEStop heartbeat time)` until a gateway
+    /// status received after it shows `E_STOP` cleared (`Some(None)` before the first one).
+    estop_reset: Option<Option<f64>>,
     healthy: Result<(), Fault>,
     gateway_mode: Option<GatewayMode>,
     now_s: f64,
@@ -341,6 +363,7 @@ impl Safety {
             needs_reset: false,
             acked: false,
             estop: false,
+            estop_reset: None,
             healthy: Err(Fault::StaleSensor {
                 signal: Signal::JointAngles,
                 age_s: f64::INFINITY,
@@ -439,16 +462,22 @@ impl Safety {
     /// nothing moves until [`Self::reset`].
     pub fn request_estop(&mut self, now_s: f64) {
         self.estop = true;
+        self.estop_reset = None;
         self.report(now_s, Fault::EStop);
     }
 
-    /// Clears an e-stop and a latched fault (the operator's acknowledgement). Motion still needs the
-    /// cause to clear and a fresh arming handshake.
+    /// Clears an e-stop and a latched fault (the operator's acknowledgement). After an e-stop the
+    /// heartbeat then requests `ResetEStop` (the only request that clears the gateway's latched
+    /// `E_STOP`) until the gateway reports it cleared, then `Disarm`. Motion still needs the cause to
+    /// clear and a fresh arming handshake.
     pub fn reset(&mut self) {
         if self.state == SafetyState::Shutdown {
             return;
         }
         tracing::info!("safety reset by operator");
+        if self.estop {
+            self.estop_reset = Some(None);
+        }
         self.estop = false;
         self.needs_reset = false;
         self.acked = true;
@@ -474,6 +503,16 @@ impl Safety {
         self.healthy = self.check(now_s, est);
         let status = est.state().gateway;
         self.gateway_mode = status.map(|s| s.mode);
+        if let Some(Some(sent_s)) = self.estop_reset
+            && let Some(s) = status
+            && est
+                .last_received_s(Signal::GatewayStatus)
+                .is_some_and(|t| t > sent_s)
+            && !s.faults.contains(GatewayFaults::E_STOP)
+        {
+            tracing::info!("gateway e-stop reset confirmed");
+            self.estop_reset = None;
+        }
         let fresh_status = est.age_s(Signal::GatewayStatus, now_s) <= self.config.status_max_age_s;
         match self.state {
             SafetyState::Armed { mode, since_s } => {
@@ -545,6 +584,18 @@ impl Safety {
                     f64::INFINITY
                 } else {
                     status_age
+                },
+            });
+        }
+        // Fresh by age but not moving on; a NaN age counts as frozen.
+        let frozen_s = est.gateway_alive_age_s(now_s);
+        if frozen_s.is_nan() || frozen_s > self.config.status_max_age_s {
+            return Err(Fault::GatewayFrozen {
+                alive_counter: est.gateway_alive_counter().unwrap_or(0),
+                frozen_s: if frozen_s.is_nan() {
+                    f64::INFINITY
+                } else {
+                    frozen_s
                 },
             });
         }
@@ -629,10 +680,16 @@ impl Safety {
             },
             SafetyState::Faulted { fault, since_s } => {
                 let send_neutral = now_s <= self.neutral_until_s || self.gateway_armed();
-                let request = if self.estop {
-                    RequestedMode::EStop
-                } else {
-                    RequestedMode::Disarm
+                let request = match self.estop_reset {
+                    _ if self.estop => RequestedMode::EStop,
+                    Some(sent) => {
+                        if sent.is_none() {
+                            // The last finite time, so the confirmation can come after it.
+                            self.estop_reset = Some(Some(self.now_s));
+                        }
+                        RequestedMode::ResetEStop
+                    }
+                    None => RequestedMode::Disarm,
                 };
                 let cleared = self.healthy.is_ok()
                     && self.gateway_mode == Some(GatewayMode::Disarmed)
@@ -675,7 +732,6 @@ impl Safety {
                     return SafetyTick {
                         heartbeat: Some(self.next_heartbeat(mode.request())),
                         send_neutral,
-                        hold_position: mode == ArmMode::Position,
                         ..quiet
                     };
                 }
@@ -694,7 +750,6 @@ impl Safety {
                     };
                     SafetyTick {
                         heartbeat: Some(self.next_heartbeat(w.request())),
-                        hold_position: w == ArmMode::Position,
                         ..quiet
                     }
                 }
@@ -717,7 +772,6 @@ impl Safety {
                     SafetyTick {
                         heartbeat: Some(self.next_heartbeat(w.request())),
                         send_neutral: mode == ArmMode::Valve,
-                        hold_position: w == ArmMode::Position,
                         ..quiet
                     }
                 }
@@ -762,6 +816,7 @@ mod tests {
         safety: Safety,
         gateway_mode: GatewayMode,
         faults: u16,
+        status_alive: u8,
     }
 
     impl Rig {
@@ -774,6 +829,7 @@ mod tests {
                 safety: Safety::new(config, limits),
                 gateway_mode: GatewayMode::Disarmed,
                 faults: 0,
+                status_alive: 0,
             }
         }
 
@@ -803,10 +859,11 @@ mod tests {
         }
 
         fn feed_status(&mut self, now_s: f64) {
+            self.status_alive = self.status_alive.wrapping_add(1);
             let s = Message::GatewayStatus(GatewayStatus {
                 mode: self.gateway_mode,
                 faults: GatewayFaults(self.faults),
-                alive_counter: 0,
+                alive_counter: self.status_alive,
                 unexpected_frames: 0,
                 rejected_frames: 0,
             });
@@ -824,8 +881,18 @@ mod tests {
             self.safety.observe(now_s, &self.est);
             let t = self.safety.tick(now_s, want);
             if let Some(hb) = t.heartbeat {
+                let estop = self.faults & GatewayFaults::E_STOP != 0;
                 self.gateway_mode = match (hb.mode, self.gateway_mode) {
-                    (RequestedMode::EStop, _) => GatewayMode::Faulted,
+                    (RequestedMode::EStop, _) => {
+                        self.faults |= GatewayFaults::E_STOP;
+                        GatewayMode::Faulted
+                    }
+                    (RequestedMode::ResetEStop, GatewayMode::Faulted) => {
+                        self.faults &= !GatewayFaults::E_STOP;
+                        GatewayMode::Faulted
+                    }
+                    (RequestedMode::ResetEStop, _) => GatewayMode::Disarmed,
+                    (_, mode) if estop => mode,
                     (RequestedMode::Disarm, _) => {
                         self.faults = 0;
                         GatewayMode::Disarmed
@@ -1012,7 +1079,145 @@ mod tests {
         assert!(tick.motion.is_none());
         assert_eq!(rig.gateway_mode, GatewayMode::Faulted);
         rig.safety.reset();
-        let (tick, _) = rig.run(t2, 100, Some(ArmMode::Valve));
+        // The requests after the reset: ResetEStop, then Disarm, then ArmValve (#23 finding 5).
+        let mut requests: Vec<RequestedMode> = Vec::new();
+        let mut t = t2;
+        let mut tick = None;
+        for _ in 0..100 {
+            let tk = rig.period(t, Some(ArmMode::Valve), false);
+            if let Some(hb) = tk.heartbeat
+                && requests.last() != Some(&hb.mode)
+            {
+                requests.push(hb.mode);
+            }
+            tick = Some(tk);
+            t += PERIOD_S;
+        }
+        assert_eq!(
+            requests,
+            [
+                RequestedMode::ResetEStop,
+                RequestedMode::Disarm,
+                RequestedMode::ArmValve
+            ]
+        );
+        assert_eq!(tick.unwrap().motion, Some(ArmMode::Valve));
+    }
+
+    /// #23 finding 5, both sides: the safety layer and the real gateway firmware, heartbeats as frames,
+    /// status at 20 Hz. Disarm does not clear the gateway's e-stop; the operator's reset does, through
+    /// ResetEStop, Disarm, Arm.
+    #[test]
+    fn estop_reset_with_the_gateway_firmware_goes_reset_disarm_arm() {
+        use firmware_bridge::gateway::{Gateway, VALVES};
+        use firmware_bridge::messages::{AuxValveCommand, Valve};
+        /// What the gateway saw and did: requested modes (each change once) and the boom output
+        /// of every 1 ms gateway tick.
+        #[derive(Default)]
+        struct Log {
+            requests: Vec<RequestedMode>,
+            boom: Vec<f64>,
+        }
+        fn run(rig: &mut Rig, gw: &mut Gateway, t: &mut f64, periods: u32, log: &mut Log) {
+            for k in 0..periods {
+                rig.feed_sensors(*t, Q);
+                if k % 5 == 0 {
+                    let status = Message::GatewayStatus(gw.next_status());
+                    rig.est.on_message(&status, *t);
+                }
+                rig.est.update();
+                rig.safety.observe(*t, &rig.est);
+                let tick = rig.safety.tick(*t, Some(ArmMode::Valve));
+                if tick.motion == Some(ArmMode::Valve) {
+                    let cmd = AuxValveCommand::from_fraction(Valve::Boom, 1.0).unwrap();
+                    gw.on_frame(&Message::AuxValveCommand(cmd).encode().unwrap(), *t);
+                }
+                if let Some(hb) = tick.heartbeat {
+                    gw.on_frame(&hb.to_frame().unwrap(), *t);
+                    if log.requests.last() != Some(&hb.mode) {
+                        log.requests.push(hb.mode);
+                    }
+                }
+                for ms in 0..10 {
+                    let out = gw.tick(*t + f64::from(ms) * 0.001, None);
+                    log.boom.push(out.valve_commands[0]);
+                    assert!(out.valve_commands[1..VALVES].iter().all(|u| *u == 0.0));
+                }
+                *t += PERIOD_S;
+            }
+        }
+        let mut rig = Rig::new(SafetyConfig::default());
+        let mut gw = Gateway::default();
+        let mut log = Log::default();
+        let mut t = 0.0;
+        run(&mut rig, &mut gw, &mut t, 100, &mut log);
+        assert_eq!(gw.mode(), GatewayMode::ArmedValve);
+        assert_eq!(log.boom.last(), Some(&1.0));
+        rig.safety.request_estop(t);
+        run(&mut rig, &mut gw, &mut t, 200, &mut log);
+        assert!(gw.faults().contains(GatewayFaults::E_STOP));
+        assert_eq!(gw.mode(), GatewayMode::Faulted);
+        assert_eq!(log.boom.last(), Some(&0.0));
+        log.requests.clear();
+        rig.safety.reset();
+        run(&mut rig, &mut gw, &mut t, 200, &mut log);
+        assert_eq!(
+            log.requests,
+            [
+                RequestedMode::ResetEStop,
+                RequestedMode::Disarm,
+                RequestedMode::ArmValve
+            ]
+        );
+        assert_eq!(gw.mode(), GatewayMode::ArmedValve);
+        assert!(gw.faults().is_empty());
+        assert_eq!(log.boom.last(), Some(&1.0));
+    }
+
+    /// #20: a gateway whose status keeps coming with the same alive counter is not running.
+    #[test]
+    fn a_frozen_gateway_status_stops_motion_and_blocks_arming() {
+        let (mut rig, t) = Rig::armed(SafetyConfig::default());
+        let frozen = rig.status_alive;
+        let mut now = t;
+        let mut stopped_at = None;
+        for _ in 0..100 {
+            // The status goes on arriving every period, fresh by age, with the same counter.
+            rig.status_alive = frozen.wrapping_sub(1);
+            let tick = rig.period(now, Some(ArmMode::Valve), false);
+            if tick.motion.is_none() {
+                stopped_at = Some(now);
+                break;
+            }
+            now += PERIOD_S;
+        }
+        let stopped_at = stopped_at.expect("a frozen gateway went unnoticed");
+        let frozen_s = stopped_at - (t - PERIOD_S);
+        assert!(
+            frozen_s > SafetyConfig::default().status_max_age_s && frozen_s < 0.4,
+            "{frozen_s}"
+        );
+        assert!(matches!(
+            rig.safety.active_fault(),
+            Some(Fault::GatewayFrozen { alive_counter, .. }) if alive_counter == frozen
+        ));
+        // Still frozen: no re-arming.
+        let mut now = stopped_at;
+        for _ in 0..200 {
+            rig.status_alive = frozen.wrapping_sub(1);
+            assert!(
+                rig.period(now, Some(ArmMode::Valve), false)
+                    .motion
+                    .is_none()
+            );
+            now += PERIOD_S;
+        }
+        assert!(matches!(
+            rig.safety.health(),
+            Err(Fault::GatewayFrozen { .. })
+        ));
+        // Running again (the counter advances): it re-arms.
+        let (tick, _) = rig.run(now, 100, Some(ArmMode::Valve));
         assert_eq!(tick.motion, Some(ArmMode::Valve));
     }
 
@@ -1117,14 +1322,29 @@ mod tests {
         assert_eq!(tick.motion, Some(ArmMode::Valve));
     }
 
+    /// Regression (#20): the hold setpoint went out in the period of the `ArmPosition` request, ahead
+    /// of the heartbeat, and the gateway (not yet in position mode) rejected it at every switch.
     #[test]
-    fn position_mode_arming_holds_position() {
+    fn position_mode_arming_holds_position_from_the_period_after_the_request() {
         let mut rig = Rig::new(SafetyConfig::default());
         let tick = rig.period(0.0, Some(ArmMode::Position), false);
-        assert!(tick.hold_position);
+        assert!(!tick.hold_position, "a setpoint would precede the request");
         assert_eq!(tick.heartbeat.unwrap().mode, RequestedMode::ArmPosition);
-        let tick = rig.period(0.01, Some(ArmMode::Position), false);
+        // Until a status confirms (none arrives in this period): setpoints holding the joints.
+        let tick = rig.safety.tick(0.01, Some(ArmMode::Position));
+        assert!(tick.hold_position && tick.motion.is_none());
+        let tick = rig.period(0.02, Some(ArmMode::Position), false);
         assert_eq!(tick.motion, Some(ArmMode::Position));
+        // Switching from valve to position mode: the same.
+        let (mut rig, t) = Rig::armed(SafetyConfig::default());
+        let tick = rig.period(t, Some(ArmMode::Position), false);
+        assert_eq!(tick.heartbeat.unwrap().mode, RequestedMode::ArmPosition);
+        assert!(tick.send_neutral && !tick.hold_position);
+        assert!(
+            rig.safety
+                .tick(t + PERIOD_S, Some(ArmMode::Position))
+                .hold_position
+        );
     }
 
     #[test]

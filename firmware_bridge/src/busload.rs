@@ -183,7 +183,7 @@ pub const SCHEDULE: &[ScheduleEntry] = &[
     },
     ScheduleEntry {
         message: "GatewayStatus",
-        rate_hz: 10.0,
+        rate_hz: 20.0,
     },
     ScheduleEntry {
         message: "ControllerStatus",

@@ -165,8 +165,11 @@ signal_enum! {
         ArmValve = 1,
         /// Arm and follow position setpoints.
         ArmPosition = 2,
-        /// Emergency stop: neutral valves and latch a fault.
+        /// Emergency stop: neutral valves and latch the `E_STOP` fault.
         EStop = 3,
+        /// The operator's reset of a latched e-stop: clears `E_STOP` (the gateway stays Faulted
+        /// until a `Disarm` acknowledges; then an arm request). Sent only on an operator reset.
+        ResetEStop = 4,
     }
 }
 
@@ -191,6 +194,9 @@ impl GatewayFaults {
     pub const JOINT_LIMIT: u16 = 1 << 6;
     /// A position setpoint outside the joint range.
     pub const SETPOINT_OUT_OF_RANGE: u16 = 1 << 7;
+    /// The gateway's time input was not finite or went backwards: its watchdog and staleness checks
+    /// cannot be trusted, so it latched (in any mode).
+    pub const CLOCK_FAULT: u16 = 1 << 8;
 
     /// True if every bit of `bits` is set.
     pub const fn contains(self, bits: u16) -> bool {
@@ -335,7 +341,7 @@ pub struct TrackOdometry {
     pub right_m: f64,
 }
 
-/// Gateway status (Proprietary B PGN 0xFF54), 10 Hz.
+/// Gateway status (Proprietary B PGN 0xFF54), 20 Hz.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GatewayStatus {
     /// Operating mode.
@@ -344,10 +350,27 @@ pub struct GatewayStatus {
     pub faults: GatewayFaults,
     /// Alive counter, increments by one per status frame, wraps 255 -> 0.
     pub alive_counter: u8,
-    /// Frames with an unknown id or from an unexpected source (saturating).
+    /// Frames with an unknown id or from an unexpected source; saturating:
+    /// [`GatewayStatus::FRAME_COUNT_SATURATED`] means that many or more.
     pub unexpected_frames: u16,
-    /// Known frames rejected (bad DLC, range, checksum, counter) (saturating).
+    /// Known frames rejected (bad DLC, range, checksum, counter, wrong kind for the mode); saturating:
+    /// [`GatewayStatus::FRAME_COUNT_SATURATED`] means that many or more.
     pub rejected_frames: u16,
+}
+
+impl GatewayStatus {
+    /// The frame counters stop here: 65535 reads "65535 or more" (DBC value name `Saturated`).
+    pub const FRAME_COUNT_SATURATED: u16 = u16::MAX;
+
+    /// True if `unexpected_frames` has saturated (the true count is 65535 or more).
+    pub const fn unexpected_frames_saturated(&self) -> bool {
+        self.unexpected_frames == Self::FRAME_COUNT_SATURATED
+    }
+
+    /// True if `rejected_frames` has saturated (the true count is 65535 or more).
+    pub const fn rejected_frames_saturated(&self) -> bool {
+        self.rejected_frames == Self::FRAME_COUNT_SATURATED
+    }
 }
 
 /// Joint position setpoints for the gateway's closed-loop position mode (Proprietary B PGN 0xFF60),

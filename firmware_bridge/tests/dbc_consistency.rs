@@ -5,7 +5,7 @@ mod common;
 
 use std::collections::BTreeSet;
 
-use can_dbc::{Dbc, MessageId, NumericValue, ValueType};
+use can_dbc::{Dbc, MessageId, NumericValue, ValueDescription, ValueType};
 use firmware_bridge::dbc::MESSAGES;
 use firmware_bridge::{CanId, Message};
 
@@ -95,4 +95,53 @@ fn every_dbc_message_has_a_typed_counterpart_that_round_trips() {
         typed_ids, dbc_ids,
         "every DBC message must have a typed sample and vice versa"
     );
+}
+
+/// The `VAL_` table of `signal` (by name, first message that has one).
+fn value_table(dbc: &Dbc, signal: &str) -> Vec<(i64, String)> {
+    dbc.value_descriptions
+        .iter()
+        .find_map(|v| match v {
+            ValueDescription::Signal {
+                name,
+                value_descriptions,
+                ..
+            } if name == signal => Some(
+                value_descriptions
+                    .iter()
+                    .map(|d| (d.id, d.description.clone()))
+                    .collect(),
+            ),
+            _ => None,
+        })
+        .unwrap_or_default()
+}
+
+#[test]
+fn value_tables_name_the_typed_values() {
+    use firmware_bridge::messages::{GatewayStatus, RequestedMode};
+    let dbc = load_dbc();
+    let modes = [
+        (RequestedMode::Disarm, "Disarm"),
+        (RequestedMode::ArmValve, "ArmValve"),
+        (RequestedMode::ArmPosition, "ArmPosition"),
+        (RequestedMode::EStop, "EStop"),
+        (RequestedMode::ResetEStop, "ResetEStop"),
+    ];
+    let expected: Vec<(i64, String)> = modes
+        .iter()
+        .map(|(m, name)| (*m as i64, (*name).to_string()))
+        .collect();
+    assert_eq!(value_table(&dbc, "RequestedMode"), expected);
+    // A saturated frame counter is named, so trace tools show it (docs/protocol.md).
+    for signal in ["UnexpectedFrames", "RejectedFrames"] {
+        assert_eq!(
+            value_table(&dbc, signal),
+            [(
+                i64::from(GatewayStatus::FRAME_COUNT_SATURATED),
+                "Saturated".to_string()
+            )],
+            "{signal}"
+        );
+    }
 }

@@ -76,7 +76,8 @@ fn varied_messages() -> Vec<Message> {
                 RequestedMode::ArmValve,
                 RequestedMode::ArmPosition,
                 RequestedMode::EStop,
-            ][(i % 4) as usize],
+                RequestedMode::ResetEStop,
+            ][(i % 5) as usize],
             alive_counter: (i % 16) as u8,
         }));
         out.push(Message::GatewayStatus(GatewayStatus {

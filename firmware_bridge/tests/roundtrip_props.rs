@@ -123,13 +123,14 @@ fn message() -> impl Strategy<Value = Message> {
                 sequence: seq,
             })
         }),
-        (0u8..4, 0u8..16).prop_map(|(mode, alive)| {
+        (0u8..5, 0u8..16).prop_map(|(mode, alive)| {
             Message::ControllerHeartbeat(ControllerHeartbeat {
                 mode: [
                     RequestedMode::Disarm,
                     RequestedMode::ArmValve,
                     RequestedMode::ArmPosition,
                     RequestedMode::EStop,
+                    RequestedMode::ResetEStop,
                 ][usize::from(mode)],
                 alive_counter: alive,
             })

@@ -3,15 +3,16 @@
 //! 1 kHz physics step and returns the frames to transmit. Both the real-time loop and the in-process
 //! embedded machine drive this same code.
 //!
-//! Transmit schedule (gateway source address `0x80`):
-//! - every 10 ms (100 Hz): `JointAngles`, `JointRates`, `AuxValveMeasured` for boom, stick, bucket,
-//!   `PumpPressures`;
-//! - every 50 ms (20 Hz): `GatewayStatus`, `TrackOdometry`.
+//! Transmit schedule (gateway source address `0x80`), the rates of `docs/protocol.md` and
+//! [`firmware_bridge::busload::SCHEDULE`] (a test checks they agree):
+//! - every 10 ms (100 Hz): `JointAngles`, `JointRates`, `AuxValveMeasured` for boom, stick, bucket;
+//! - every 20 ms (50 Hz): `PumpPressures`;
+//! - every 50 ms (20 Hz): `TrackOdometry` and `GatewayStatus`.
 //!
 //! Only sensor readings and the gateway status go out; nothing reveals the hidden effects.
 
 use firmware_bridge::CanFrame;
-use firmware_bridge::gateway::{Gateway, GatewayConfig};
+use firmware_bridge::gateway::{Gateway, GatewayConfig, GatewayConfigError};
 use firmware_bridge::messages::{
     AuxValveMeasured, Cylinder, JointAngles, JointRates, Message, PumpPressures, TrackOdometry,
     ValveState,
@@ -22,7 +23,11 @@ use crate::sensors::{Scan, ScanRequest, SensorReadings};
 
 /// Steps between sensor frames (10 ms).
 pub const SENSOR_PERIOD_STEPS: u64 = 10;
-/// Steps between status and odometry frames (50 ms).
+/// Steps between pump pressure frames (20 ms).
+pub const PUMP_PERIOD_STEPS: u64 = 20;
+/// Steps between odometry frames (50 ms); the off-map check runs at this rate too.
+pub const ODOMETRY_PERIOD_STEPS: u64 = 50;
+/// Steps between gateway status frames (50 ms).
 pub const STATUS_PERIOD_STEPS: u64 = 50;
 
 /// The gateway and the plant behind it.
@@ -41,14 +46,21 @@ pub struct MachineNode {
 impl MachineNode {
     /// A node with the default gateway configuration.
     pub fn new(plant: Plant) -> Self {
-        Self::with_gateway(plant, GatewayConfig::default())
+        Self::with(plant, Gateway::default())
     }
 
     /// A node with a given gateway configuration.
-    pub fn with_gateway(plant: Plant, config: GatewayConfig) -> Self {
+    ///
+    /// # Errors
+    /// [`GatewayConfigError`] if the configuration does not validate.
+    pub fn with_gateway(plant: Plant, config: GatewayConfig) -> Result<Self, GatewayConfigError> {
+        Ok(Self::with(plant, Gateway::new(config)?))
+    }
+
+    fn with(plant: Plant, gateway: Gateway) -> Self {
         Self {
             plant,
-            gateway: Gateway::new(config),
+            gateway,
             readings: None,
             steps: 0,
             valve_commands: [0.0; 6],
@@ -119,8 +131,21 @@ impl MachineNode {
             && let Some(r) = self.readings
         {
             self.sensor_frames(&r, out);
+            if self.steps.is_multiple_of(PUMP_PERIOD_STEPS) {
+                self.push(
+                    Message::PumpPressures(PumpPressures {
+                        pump1_pa: r.pump_pa[0],
+                        pump2_pa: r.pump_pa[1],
+                    }),
+                    out,
+                );
+            }
         }
         if self.steps.is_multiple_of(STATUS_PERIOD_STEPS) {
+            let status = self.gateway.next_status();
+            self.push(Message::GatewayStatus(status), out);
+        }
+        if self.steps.is_multiple_of(ODOMETRY_PERIOD_STEPS) {
             let pose = self.plant.pose();
             let off_map = self
                 .plant
@@ -137,8 +162,6 @@ impl MachineNode {
                 );
             }
             self.off_map = off_map;
-            let status = self.gateway.next_status();
-            self.push(Message::GatewayStatus(status), out);
             let odo = |v: f64| v.clamp(-199_999.0, 199_999.0);
             self.push(
                 Message::TrackOdometry(TrackOdometry {
@@ -208,13 +231,6 @@ impl MachineNode {
             });
             self.push(msg, out);
         }
-        self.push(
-            Message::PumpPressures(PumpPressures {
-                pump1_pa: r.pump_pa[0],
-                pump2_pa: r.pump_pa[1],
-            }),
-            out,
-        );
     }
 }
 
@@ -232,19 +248,72 @@ mod tests {
     use super::*;
     use crate::SimConfig;
 
-    /// Steps one status period (when the map check runs) and reports whether the node is off its map.
-    fn off_map_after_one_status_period(start_x_m: f64) -> bool {
+    /// A node on the built-in configuration, its start moved to `start_x_m`.
+    fn node_at(start_x_m: f64) -> MachineNode {
         let mut cfg = SimConfig::load::<&str>(None, None, None, &[]).expect("built-in config");
         cfg.scenario.start.x_m = start_x_m;
-        let mut node = MachineNode::new(cfg.build().expect("plant"));
+        MachineNode::new(cfg.build().expect("plant"))
+    }
+
+    /// Steps one odometry period (when the map check runs) and reports whether the node is off its map.
+    fn off_map_after_one_odometry_period(start_x_m: f64) -> bool {
+        let mut node = node_at(start_x_m);
         let mut out = Vec::new();
-        node.run_steps(STATUS_PERIOD_STEPS, &mut out);
+        node.run_steps(ODOMETRY_PERIOD_STEPS, &mut out);
         node.off_map()
     }
 
     #[test]
     fn a_machine_outside_the_terrain_map_is_reported_off_map() {
-        assert!(!off_map_after_one_status_period(0.0));
-        assert!(off_map_after_one_status_period(-100.0));
+        assert!(!off_map_after_one_odometry_period(0.0));
+        assert!(off_map_after_one_odometry_period(-100.0));
+    }
+
+    /// Regression (#20): pump pressures went out at 100 Hz and the status at 20 Hz while
+    /// docs/protocol.md and the bus-load schedule said 50 and 10 Hz (the status stays at 20 Hz, now
+    /// documented: docs/protocol.md, "Rates and bus load").
+    #[test]
+    fn transmit_rates_are_the_documented_schedule() {
+        const SECONDS: u64 = 2;
+        let mut node = node_at(0.0);
+        let mut out = Vec::new();
+        node.run_steps(SECONDS * steps_in(1.0), &mut out);
+        for entry in firmware_bridge::busload::SCHEDULE {
+            let desc =
+                firmware_bridge::busload::descriptor(entry).expect("scheduled message in DBC");
+            if desc.transmitter != "Gateway" {
+                continue;
+            }
+            let sent = out
+                .iter()
+                .filter(|f| f.id().raw() & 0x1FFF_FFFF == desc.default_id)
+                .count();
+            let rate_hz = sent as f64 / SECONDS as f64;
+            assert_eq!(rate_hz, entry.rate_hz, "{}", entry.message);
+        }
+        assert_eq!(node.encode_errors(), 0);
+    }
+
+    /// Regression (#20): consecutive status frames must carry consecutive alive counters
+    /// (`excavator-ctl trace stats` counted 1554 errors in 1555 frames).
+    #[test]
+    fn status_frames_carry_consecutive_alive_counters() {
+        let mut node = node_at(0.0);
+        let mut out = Vec::new();
+        node.run_steps(60 * STATUS_PERIOD_STEPS, &mut out);
+        let counters: Vec<u8> = out
+            .iter()
+            .filter_map(|f| match Message::decode(f).map(|d| d.message) {
+                Ok(Message::GatewayStatus(s)) => Some(s.alive_counter),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(counters.len(), 60);
+        for w in counters.windows(2) {
+            assert!(
+                firmware_bridge::messages::is_next_alive(w[0], w[1], 8),
+                "{counters:?}"
+            );
+        }
     }
 }

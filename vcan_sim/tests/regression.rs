@@ -313,10 +313,12 @@ fn scripted_embedded_run_sends_the_recorded_frames() {
     assert!((s.angles_rad[1] - stick_end).abs() < 1e-6);
 }
 
+// Frame count and pump-pressure sum re-recorded when PumpPressures went to 50 Hz (the documented
+// schedule); the angles are unchanged.
 const EMBEDDED: (u64, f64, f64, f64, f64) = (
-    1920,
+    1770,
     223.45190000000002,
-    5542673000.0,
+    2774851000.0,
     0.3929410779031565,
     -1.3638111371424595,
 );
