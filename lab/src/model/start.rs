@@ -88,7 +88,6 @@ pub(super) fn load_model(path: Option<&Path>) -> anyhow::Result<DigModel> {
     }
 }
 
-
 /// The default bench's site (config/bench.toml) as the machine at its start pose sees it.
 ///
 /// # Errors
