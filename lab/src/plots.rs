@@ -14,6 +14,7 @@ use plotters::prelude::*;
 use crate::session::{DigRecord, TipPoint};
 
 pub(crate) use trace_tools::plot::err;
+use trace_tools::plot::color;
 
 /// Draws an SVG image of `size` pixels on a white background with `draw`, and returns its text.
 fn svg_image(
@@ -30,19 +31,6 @@ fn svg_image(
     Ok(svg)
 }
 
-fn color(i: usize) -> RGBColor {
-    const C: [RGBColor; 8] = [
-        RGBColor(31, 119, 180),
-        RGBColor(255, 127, 14),
-        RGBColor(44, 160, 44),
-        RGBColor(214, 39, 40),
-        RGBColor(148, 103, 189),
-        RGBColor(140, 86, 75),
-        RGBColor(227, 119, 194),
-        RGBColor(23, 190, 207),
-    ];
-    C[i % C.len()]
-}
 
 /// Tip trajectories of every dig in the digging plane (base frame, x forward of the swing axis, z up),
 /// each over the true terrain section along its plane before the dig (dashed, same colour).

@@ -165,7 +165,9 @@ const STAGES: [(AutodigStageCode, &str); 6] = [
     (AutodigStageCode::Done, "done"),
 ];
 
-const COLORS: [RGBColor; 8] = [
+/// The project's plot palette (matplotlib's tab10 order), used by every figure of the trace tools and
+/// the lab.
+pub const PALETTE: [RGBColor; 8] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),
@@ -176,8 +178,9 @@ const COLORS: [RGBColor; 8] = [
     RGBColor(127, 127, 127),
 ];
 
-fn color(i: usize) -> RGBColor {
-    COLORS[i % COLORS.len()]
+/// The `i`-th colour of [`PALETTE`], cycling.
+pub fn color(i: usize) -> RGBColor {
+    PALETTE[i % PALETTE.len()]
 }
 
 impl PlotData {
