@@ -264,7 +264,7 @@ proptest! {
     }
 }
 
-/// The frame proptest found (CI, 2026-11-26): a boom flow command with only the standard 0.4 %/bit
+/// A frame proptest found: a boom flow command with only the standard 0.4 %/bit
 /// byte (raw 3) and the fine field "not available" decoded to 1.2000000000000002 %, which re-encoded
 /// through the fine field decoded to 1.2 %. Decimal factors now decode correctly rounded.
 #[test]

@@ -1356,7 +1356,7 @@ pub fn extended_markdown(runs: &ExtendedRuns) -> String {
     let ok = |b: bool| if b { "met" } else { "NOT met" };
     let _ = writeln!(
         s,
-        "Targets (issue #7):\n\
+        "Targets of the extended run (thesis ch. 6):\n\
          - planned: {} digs (>= 100), {} backups (>= 3), no human input: {}\n\
          - buckets over half full: {:.0} % (>= 94 %; thesis test 3: 94 %): {}\n\
          - payload per normal dig, planner over predefined: {:+.0} % (>= +30 %; thesis +42 %): {}\n\
@@ -1694,7 +1694,7 @@ pub struct DigCheck {
 
 /// Digs from a grid of starts on the extended bench (machine at world x 0, -1.5, -3: crest at 4, 5.5,
 /// 7 m) in the simulator and in the nominal dig model from the same start over the simulator's true
-/// section: where their tip paths part (issue #7: the model predicted the tip 0.5-1.2 m deeper than
+/// section: where their tip paths part (the model once predicted the tip 0.5-1.2 m deeper than
 /// the simulator took it for starts high on the face). With `boom_down` the simulated dig starts
 /// [`controller::planned::APPROACH_HEIGHT_M`] above the start with Autodig's Boom-Down, as in a session;
 /// the model starts in Pre-Dig on the start as the refined planner evaluates it.

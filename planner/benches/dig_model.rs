@@ -1,4 +1,4 @@
-//! Dig-model benchmark (thesis 4.1, issue 6): time of one dig prediction on one core and its
+//! Dig-model benchmark (thesis 4.1): time of one dig prediction on one core and its
 //! x-real-time factor (target >= 10,000x: a 6 s dig in < 0.6 ms; the thesis's model took about 16 ms on
 //! 1999 hardware), a profile of the inner step's parts, and the parallel speed-up of `evaluate_many`
 //! over candidate starts (rayon).

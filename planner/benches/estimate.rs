@@ -1,6 +1,6 @@
 //! Benchmarks of soil estimation and the actuator step (prints figures, asserts nothing).
 //!
-//! `cargo bench -p planner --bench estimate`. Targets (issue 6): empirical fit under 50 us and analytical
+//! `cargo bench -p planner --bench estimate`. Targets: empirical fit under 50 us and analytical
 //! fit under 20 ms on 300 samples (thesis, SGI R10000: 8 ms and 3400 ms). If `python3` with SciPy is
 //! available, the same analytical fit is run with `benches/scipy_anneal.py` (SciPy `dual_annealing` +
 //! Powell) on the same samples and both times, the speed ratio and both RMS errors are printed.

@@ -243,7 +243,7 @@ pub struct PlannerState {
     /// World-frame tips `[x, y, z]` of dig starts the work cycle could not reach since the last track
     /// back (its move to the start timed out): the refined planner does not choose a start within
     /// [`ABANDONED_START_RADIUS_M`] of one again (the map is unchanged, so it would choose the same
-    /// start forever; issue #7: one start chosen 28 times in a row, 40 s each).
+    /// start forever: without this, one start was chosen 28 times in a row, 40 s each).
     #[serde(default)]
     pub abandoned_starts: Vec<[f64; 3]>,
     /// Track backs in a row that were made with no material in view (reset by a dig or a cleanup,
