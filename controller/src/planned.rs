@@ -467,7 +467,7 @@ impl PlannedSession {
     /// 14-18): the linear Eq. 21 fitted on the recent digs has no term for the bucket's direction of
     /// motion or for its back pushed into the soil and measures depth on the pre-dig surface, so for
     /// starts high on the face it let the predicted tip sink 0.5-1.2 m deeper than Autodig took it
-    /// (issue #7, docs/planner.md).
+    /// (docs/planner.md).
     ///
     /// # Errors
     /// [`SessionError::Plan`] for non-finite coefficients.

@@ -1,4 +1,4 @@
-//! Closed-loop tests against the simulator in virtual time (issue 4, "done when").
+//! Closed-loop tests against the simulator in virtual time.
 
 #![allow(clippy::unwrap_used)]
 

@@ -1,4 +1,4 @@
-//! Extended operation (thesis ch. 6, issue #7): the planned session on the extended-operation bench
+//! Extended operation (thesis ch. 6): the planned session on the extended-operation bench
 //! (`config/bench_extended.toml`) digs, cleans up and tracks back with no human input.
 
 #![allow(clippy::unwrap_used)]
