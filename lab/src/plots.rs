@@ -13,8 +13,8 @@ use plotters::prelude::*;
 
 use crate::session::{DigRecord, TipPoint};
 
-pub(crate) use trace_tools::plot::err;
 use trace_tools::plot::color;
+pub(crate) use trace_tools::plot::err;
 
 /// Draws an SVG image of `size` pixels on a white background with `draw`, and returns its text.
 fn svg_image(
@@ -30,7 +30,6 @@ fn svg_image(
     }
     Ok(svg)
 }
-
 
 /// Tip trajectories of every dig in the digging plane (base frame, x forward of the swing axis, z up),
 /// each over the true terrain section along its plane before the dig (dashed, same colour).
