@@ -26,7 +26,7 @@
 
 mod recorder;
 
-pub use recorder::{Recorder, RecorderError, RecorderStats};
+pub use recorder::{MAX_QUEUE_CAPACITY, Recorder, RecorderError, RecorderStats};
 
 use std::fmt::Write as _;
 use std::io::{self, BufRead, Write};

@@ -29,7 +29,7 @@ pub const DEFAULT_CAPACITY: usize = 65_536;
 
 /// Largest queue length [`Recorder::new`] accepts: the queue's slots are allocated up front
 /// (a frame is about 80 bytes, so this is about 80 MiB).
-pub const MAX_CAPACITY: usize = 1 << 20;
+pub const MAX_QUEUE_CAPACITY: usize = 1 << 20;
 
 /// Recorder errors.
 #[derive(Debug, thiserror::Error)]
@@ -43,8 +43,8 @@ pub enum RecorderError {
     /// The writer thread panicked.
     #[error("trace writer thread panicked")]
     WriterPanicked,
-    /// A queue length of 0 or above [`MAX_CAPACITY`].
-    #[error("trace queue capacity {requested} is not in 1..={MAX_CAPACITY}")]
+    /// A queue length of 0 or above [`MAX_QUEUE_CAPACITY`].
+    #[error("trace queue capacity {requested} is not in 1..={MAX_QUEUE_CAPACITY}")]
     Capacity {
         /// The capacity asked for.
         requested: usize,
@@ -169,7 +169,7 @@ impl Recorder {
     /// Records to any writer. `markers` adds ` R`/` T` to each line; `capacity` bounds the queue.
     ///
     /// # Errors
-    /// [`RecorderError::Capacity`] for a capacity of 0 or above [`MAX_CAPACITY`],
+    /// [`RecorderError::Capacity`] for a capacity of 0 or above [`MAX_QUEUE_CAPACITY`],
     /// [`RecorderError::Io`] if the writer thread cannot be started.
     pub fn new(
         out: Box<dyn Write + Send>,
@@ -177,7 +177,7 @@ impl Recorder {
         markers: bool,
         capacity: usize,
     ) -> Result<Self, RecorderError> {
-        if !(1..=MAX_CAPACITY).contains(&capacity) {
+        if !(1..=MAX_QUEUE_CAPACITY).contains(&capacity) {
             return Err(RecorderError::Capacity {
                 requested: capacity,
             });
@@ -400,7 +400,7 @@ mod tests {
 
     #[test]
     fn queue_capacity_is_bounded() {
-        for capacity in [0, MAX_CAPACITY + 1, usize::MAX] {
+        for capacity in [0, MAX_QUEUE_CAPACITY + 1, usize::MAX] {
             assert!(matches!(
                 Recorder::new(Box::new(io::sink()), "can0", false, capacity),
                 Err(RecorderError::Capacity { requested }) if requested == capacity
