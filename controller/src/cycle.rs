@@ -43,6 +43,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::ControllerError;
 use crate::estimate::Estimator;
+use crate::node::{Limits, ParamError, check, check_count, check_deg, toml_float};
 use crate::safety::{ArmMode, ControlFault};
 
 /// Valve direction per implement joint: +1 when cylinder extension raises the joint angle
@@ -438,79 +439,257 @@ impl Default for CycleConfig {
 }
 
 impl CycleConfig {
-    /// Checks ranges and finiteness.
+    /// Checks every parameter: finite, in range and consistent (a move's settle time inside its
+    /// timeout, the pre-dig section and the scan grid of bounded size, P-controllers whose smallest
+    /// command does not exceed their largest), and every action of the plan (angles, poses, cleanup
+    /// radii, tracking distances). Angles are checked in degrees, as the file writes them.
     ///
     /// # Errors
-    /// [`ControllerError::Config`] naming the field.
-    pub fn validate(&self) -> Result<(), ControllerError> {
-        let bad = |field: &'static str, reason: &str| {
-            Err(ControllerError::Config {
-                field,
-                reason: reason.to_string(),
-            })
-        };
-        let positive = [
-            ("dump_hold_s", self.dump_hold_s),
+    /// The first [`ParamError`] (section `cycle`).
+    pub fn validate(&self) -> Result<(), ParamError> {
+        const S: &str = "cycle";
+        for (i, action) in self.actions.iter().enumerate() {
+            action.validate(i)?;
+        }
+        if let Some(n) = self.max_digs {
+            check_count(S, "max_digs", u64::from(n), 1, 100_000, "")?;
+        }
+        check_count(S, "retries", u64::from(self.retries), 0, 100, "")?;
+        let swing = Limits::closed(-360.0, 360.0, "deg");
+        check_deg(S, "dump_swing_deg", self.dump_swing_rad, swing)?;
+        check_deg(S, "home_swing_deg", self.home_swing_rad, swing)?;
+        check_deg(
+            S,
+            "carry_boom_deg",
+            self.carry_boom_rad,
+            Limits::closed(-90.0, 90.0, "deg"),
+        )?;
+        check_deg(
+            S,
+            "dump_bucket_deg",
+            self.dump_bucket_rad,
+            Limits::closed(-180.0, 180.0, "deg"),
+        )?;
+        let height = Limits::closed(-20.0, 20.0, "m");
+        check(S, "carry_tip_z_m", self.carry_tip_z_m, height, "")?;
+        check(S, "floor_max_z_m", self.floor_max_z_m, height, "")?;
+        check(
+            S,
+            "move_timeout_s",
+            self.move_timeout_s,
+            Limits::above(0.0, 3600.0, "s"),
+            "",
+        )?;
+        for (key, v) in [
             ("settle_s", self.settle_s),
-            ("move_timeout_s", self.move_timeout_s),
-            ("scan_timeout_s", self.scan_timeout_s),
-            ("section_step_m", self.section_step_m),
-            ("weigh_window_s", self.weigh_window_s),
-        ];
-        for (field, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
-                return bad(field, "must be finite and > 0");
-            }
-        }
-        if !(self.weigh_settle_s.is_finite() && self.weigh_settle_s >= 0.0) {
-            return bad("weigh_settle_s", "must be finite and >= 0");
-        }
-        if !(self.section_r_max_m > self.section_r_min_m && self.section_r_min_m.is_finite()) {
-            return bad("section_r_max_m", "must exceed section_r_min_m");
-        }
-        for (field, g) in [
-            ("joint", self.joint),
-            ("swing", self.swing),
-            ("track", self.track),
+            ("dump_hold_s", self.dump_hold_s),
         ] {
-            if !(g.kp.is_finite()
-                && g.kp > 0.0
-                && g.max_command > 0.0
-                && g.max_command <= 1.0
-                && g.tolerance.is_finite()
-                && g.tolerance > 0.0)
-            {
-                return bad(field, "kp > 0, max_command in (0, 1], tolerance > 0");
-            }
+            check(
+                S,
+                key,
+                v,
+                Limits::open(0.0, self.move_timeout_s, "s"),
+                "positive and shorter than move_timeout_s",
+            )?;
         }
-        for (field, a) in [
-            ("dump_swing_deg", self.dump_swing_rad),
-            ("home_swing_deg", self.home_swing_rad),
-            ("carry_boom_deg", self.carry_boom_rad),
-            ("carry_tip_z_m", self.carry_tip_z_m),
-            ("floor_max_z_m", self.floor_max_z_m),
-            ("dump_bucket_deg", self.dump_bucket_rad),
+        check(
+            S,
+            "scan_timeout_s",
+            self.scan_timeout_s,
+            Limits::above(0.0, 600.0, "s"),
+            "",
+        )?;
+        check(
+            S,
+            "weigh_settle_s",
+            self.weigh_settle_s,
+            Limits::closed(0.0, 60.0, "s"),
+            "",
+        )?;
+        check(
+            S,
+            "weigh_window_s",
+            self.weigh_window_s,
+            Limits::above(0.0, 60.0, "s"),
+            "",
+        )?;
+        check(
+            S,
+            "section_r_min_m",
+            self.section_r_min_m,
+            Limits::closed(0.0, 50.0, "m"),
+            "",
+        )?;
+        check(
+            S,
+            "section_r_max_m",
+            self.section_r_max_m,
+            Limits::above(self.section_r_min_m, 50.0, "m"),
+            "beyond section_r_min_m",
+        )?;
+        check(
+            S,
+            "section_step_m",
+            self.section_step_m,
+            Limits::closed(0.005, 1.0, "m"),
+            "",
+        )?;
+        for (key, gain) in [
+            ("joint", &self.joint),
+            ("swing", &self.swing),
+            ("track", &self.track),
         ] {
-            if !a.is_finite() {
-                return bad(field, "must be finite");
+            gain.validate(key)?;
+        }
+        self.scan_grid.validate()
+    }
+}
+
+impl Action {
+    /// Checks the `i`-th action of a plan (`cycle.actions.i.*`).
+    fn validate(&self, i: usize) -> Result<(), ParamError> {
+        const S: &str = "cycle";
+        let key = |k: &str| format!("actions.{i}.{k}");
+        let (swing_rad, start) = match self {
+            Action::TrackBack { distance_m } => {
+                return check(
+                    S,
+                    &key("distance_m"),
+                    *distance_m,
+                    Limits::above(0.0, 100.0, "m"),
+                    "",
+                );
+            }
+            Action::Dig { swing_rad, start } => (*swing_rad, start),
+            Action::Cleanup {
+                swing_rad,
+                start,
+                plan,
+            } => {
+                let radius = Limits::above(0.0, 50.0, "m");
+                check(
+                    S,
+                    &key("plan.start_radius_m"),
+                    plan.start_radius_m,
+                    radius,
+                    "",
+                )?;
+                check(
+                    S,
+                    &key("plan.min_radius_m"),
+                    plan.min_radius_m,
+                    Limits::below(0.0, plan.start_radius_m, "m"),
+                    "below plan.start_radius_m",
+                )?;
+                (*swing_rad, start)
+            }
+        };
+        check_deg(
+            S,
+            &key("swing_deg"),
+            swing_rad,
+            Limits::closed(-360.0, 360.0, "deg"),
+        )?;
+        let angle = Limits::closed(-360.0, 360.0, "deg");
+        match *start {
+            StartPose::Joints {
+                boom_rad,
+                stick_rad,
+                bucket_rad,
+            } => {
+                check_deg(S, &key("start.boom_deg"), boom_rad, angle)?;
+                check_deg(S, &key("start.stick_deg"), stick_rad, angle)?;
+                check_deg(S, &key("start.bucket_deg"), bucket_rad, angle)
+            }
+            StartPose::Tip {
+                x_m,
+                z_m,
+                bucket_abs_rad,
+            } => {
+                let reach = Limits::closed(-50.0, 50.0, "m");
+                check(S, &key("start.x_m"), x_m, reach, "")?;
+                check(S, &key("start.z_m"), z_m, reach, "")?;
+                check_deg(
+                    S,
+                    &key("start.bucket_abs_deg"),
+                    bucket_abs_rad,
+                    Limits::closed(-720.0, 720.0, "deg"),
+                )
             }
         }
-        for a in &self.actions {
-            match a {
-                Action::TrackBack { distance_m }
-                    if !(distance_m.is_finite() && *distance_m > 0.0) =>
-                {
-                    return bad("actions.track_back.distance_m", "must be finite and > 0");
-                }
-                Action::Dig { swing_rad, .. } | Action::Cleanup { swing_rad, .. }
-                    if !swing_rad.is_finite() =>
-                {
-                    return bad("actions.swing_deg", "must be finite");
-                }
-                _ => {}
-            }
+    }
+}
+
+impl PGain {
+    /// Checks a controller `cycle.<name>`: gains finite, commands in `(0, 1]` with the smallest not
+    /// above the largest, a positive tolerance.
+    fn validate(&self, name: &str) -> Result<(), ParamError> {
+        const S: &str = "cycle";
+        let key = |k: &str| format!("{name}.{k}");
+        check(S, &key("kp"), self.kp, Limits::above(0.0, 100.0, ""), "")?;
+        check(S, &key("kd"), self.kd, Limits::closed(0.0, 100.0, ""), "")?;
+        check(
+            S,
+            &key("max_command"),
+            self.max_command,
+            Limits::above(0.0, 1.0, ""),
+            "",
+        )?;
+        check(
+            S,
+            &key("min_command"),
+            self.min_command,
+            Limits::closed(0.0, self.max_command, ""),
+            "at most max_command",
+        )?;
+        check(
+            S,
+            &key("tolerance"),
+            self.tolerance,
+            Limits::above(0.0, 1.0, "rad or m"),
+            "",
+        )
+    }
+}
+
+impl ScanGrid {
+    /// Checks `cycle.scan_grid`: finite edges, a cell size of 2 cm to 1 m, at most 4 million cells
+    /// (as the simulator's terrain grid).
+    ///
+    /// # Errors
+    /// The first [`ParamError`].
+    pub fn validate(&self) -> Result<(), ParamError> {
+        const S: &str = "cycle";
+        let edge = Limits::closed(-1.0e4, 1.0e4, "m");
+        check(S, "scan_grid.x_min_m", self.x_min_m, edge, "")?;
+        check(S, "scan_grid.y_min_m", self.y_min_m, edge, "")?;
+        check(
+            S,
+            "scan_grid.cell_m",
+            self.cell_m,
+            Limits::closed(0.02, 1.0, "m"),
+            "",
+        )?;
+        let size = Limits::above(0.0, 2.0e4, "m");
+        check(S, "scan_grid.size_x_m", self.size_x_m, size, "")?;
+        check(S, "scan_grid.size_y_m", self.size_y_m, size, "")?;
+        let cells = (self.size_x_m / self.cell_m) * (self.size_y_m / self.cell_m);
+        if cells > 4.0e6 {
+            return Err(ParamError::new(
+                S,
+                "scan_grid.cell_m",
+                Some(toml_float(self.cell_m)),
+                format!("gives {cells:.0} cells over the grid's size (at most 4e6)"),
+            ));
         }
-        Ok(())
+        check_count(
+            S,
+            "scan_grid.max_gap_cells",
+            u64::try_from(self.max_gap_cells).unwrap_or(u64::MAX),
+            0,
+            100_000,
+            "",
+        )
     }
 }
 
@@ -1971,7 +2150,7 @@ mod tests {
     /// An estimator that sees the machine at joint angles `q` (and swing) with `odo` travel.
     fn est_at(q: [f64; 4], odo: f64, t: f64) -> Estimator {
         let (k, m) = kin();
-        let mut e = Estimator::new(k, m.tracks.gauge_m, EstimatorConfig::default());
+        let mut e = Estimator::new(k, m.tracks.gauge_m, EstimatorConfig::default()).unwrap();
         feed(&mut e, q, odo, t);
         e
     }
@@ -2183,7 +2362,7 @@ mod tests {
 
     fn est_with_head(head_pa: f64) -> Estimator {
         let (k, m) = kin();
-        let mut e = Estimator::new(k, m.tracks.gauge_m, EstimatorConfig::default());
+        let mut e = Estimator::new(k, m.tracks.gauge_m, EstimatorConfig::default()).unwrap();
         feed_pressures(&mut e, [0.3, -1.6, -0.9, 0.0], 0.0, 0.0, head_pa, 1e6);
         e
     }
@@ -2403,7 +2582,8 @@ mod tests {
         assert!((a.x_m - b.x_m).hypot(a.z_m - b.z_m) > MOVE_CLOSE_ENOUGH_M);
         for (head_pa, blocked) in [(34.0e6, true), (8.0e6, false)] {
             let mut c = moving_to(boom, stick - 0.1, bucket);
-            let mut e = Estimator::new(k.clone(), m.tracks.gauge_m, EstimatorConfig::default());
+            let mut e =
+                Estimator::new(k.clone(), m.tracks.gauge_m, EstimatorConfig::default()).unwrap();
             let mut t = 0.0;
             let mut fault = None;
             while t < 5.0 && fault.is_none() {
@@ -2438,7 +2618,7 @@ mod tests {
     /// One Dump step with the bucket at `bucket_rad` and the bucket's rod at `rod_pa` (heads 8 MPa).
     fn dump_step(c: &mut WorkCycle, bucket_rad: f64, t: f64, rod_pa: f64) -> [f64; 6] {
         let (k, m) = kin();
-        let mut e = Estimator::new(k, m.tracks.gauge_m, EstimatorConfig::default());
+        let mut e = Estimator::new(k, m.tracks.gauge_m, EstimatorConfig::default()).unwrap();
         feed_pressures(&mut e, [0.5, -1.3, bucket_rad, 1.0], 0.0, t, 8e6, rod_pa);
         match c.step(t, &e, Some(ArmMode::Valve)).unwrap().command {
             CycleCommand::Valves(v) => v,
@@ -2517,6 +2697,8 @@ mod tests {
         let mut c = cycle(CycleConfig {
             scan: false,
             move_timeout_s: 1.0,
+            // The dump's hold must fit its timeout (`CycleConfig::validate`).
+            dump_hold_s: 0.5,
             ..CycleConfig::default()
         });
         c.start();

@@ -25,6 +25,9 @@ use planner::kinematics::{BucketPose, Joint, JointAngles, Kinematics, MachinePos
 use planner::machine::GRAVITY_M_PER_S2;
 use serde::{Deserialize, Serialize};
 
+use crate::ControllerError;
+use crate::node::{Limits, ParamError, check};
+
 /// A signal the estimator tracks, with its own receive timestamp.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum Signal {
@@ -108,6 +111,45 @@ pub struct EstimatorConfig {
     /// stroke end: the end stop then carries part of that joint's load (after Capture the bucket
     /// cylinder is typically at its end stop with relief pressure trapped in the head). Default 0.01.
     pub weigh_stroke_end_margin: f64,
+}
+
+impl EstimatorConfig {
+    /// Checks that every parameter is finite and in range.
+    ///
+    /// # Errors
+    /// The first [`ParamError`] (section `estimator`).
+    pub fn validate(&self) -> Result<(), ParamError> {
+        const S: &str = "estimator";
+        check(
+            S,
+            "rate_filter_time_constant_s",
+            self.rate_filter_time_constant_s,
+            Limits::closed(0.0, 1.0, "s"),
+            "",
+        )?;
+        // A negative margin counts every joint, end stops included (kept for experiments).
+        check(
+            S,
+            "weigh_stroke_end_margin",
+            self.weigh_stroke_end_margin,
+            Limits::below(-1.0, 0.5, ""),
+            "a fraction of the stroke",
+        )?;
+        let pose = &self.initial_pose;
+        for (key, v) in [
+            ("initial_pose.x_m", pose.x_m),
+            ("initial_pose.y_m", pose.y_m),
+        ] {
+            check(S, key, v, Limits::closed(-1.0e6, 1.0e6, "m"), "")?;
+        }
+        check(
+            S,
+            "initial_pose.heading_rad",
+            pose.heading_rad,
+            Limits::closed(-10.0, 10.0, "rad"),
+            "",
+        )
+    }
 }
 
 impl Default for EstimatorConfig {
@@ -207,13 +249,21 @@ pub struct Estimator {
 impl Estimator {
     /// An estimator for the machine described by `kin`; `gauge_m` is the track gauge (for the heading
     /// change of differential tracking).
-    pub fn new(kin: Kinematics, gauge_m: f64, config: EstimatorConfig) -> Self {
+    ///
+    /// # Errors
+    /// [`ControllerError::Config`] for a parameter [`EstimatorConfig::validate`] refuses.
+    pub fn new(
+        kin: Kinematics,
+        gauge_m: f64,
+        config: EstimatorConfig,
+    ) -> Result<Self, ControllerError> {
+        config.validate()?;
         let mut state = MachineState {
             pose: config.initial_pose,
             ..MachineState::default()
         };
         state.tip = kin.forward(&state.joints);
-        Self {
+        Ok(Self {
             kin,
             config,
             gauge_m: if gauge_m.is_finite() && gauge_m > 0.1 {
@@ -226,7 +276,7 @@ impl Estimator {
             odometry_origin_m: None,
             gateway_alive: None,
             gateway_alive_errors: 0,
-        }
+        })
     }
 
     /// The kinematics in use.
@@ -480,7 +530,7 @@ mod tests {
     fn estimator() -> Estimator {
         let m = MachineConfig::default_machine().expect("machine");
         let kin = Kinematics::new(&m).expect("kinematics");
-        Estimator::new(kin, m.tracks.gauge_m, EstimatorConfig::default())
+        Estimator::new(kin, m.tracks.gauge_m, EstimatorConfig::default()).expect("estimator")
     }
 
     fn angles(q: JointAngles, swing: f64) -> Message {
@@ -592,7 +642,8 @@ mod tests {
                 weigh_stroke_end_margin: -1.0,
                 ..EstimatorConfig::default()
             },
-        );
+        )
+        .expect("estimator");
         feed(&mut counting_all);
         let biased = counting_all.payload_estimate_kg().expect("payload");
         assert!((biased - payload_kg).abs() > 100.0, "{biased} kg");

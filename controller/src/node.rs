@@ -23,6 +23,15 @@
 //! Valve commands for boom, stick, bucket and swing go out every step while armed in valve mode; the
 //! track valves every [`ControllerConfig::track_every_steps`] steps (20 Hz, docs/protocol.md), and at
 //! once when they must become neutral.
+//!
+//! # Configuration
+//!
+//! [`ControllerConfig`] (the TOML of `excavator-ctl run --config`) and each of its parts has a
+//! `validate()` that checks every safety and timing parameter: finite, in range, consistent with the
+//! others and with the protocol's timing (sensor period, gateway watchdog). The constructors
+//! ([`ControllerNode::new`], [`Safety::new`], [`Estimator::new`], [`WorkCycle::new`]) call it, so a
+//! configuration built in code cannot skip it; [`ControllerConfig::from_toml_file`] adds the file and
+//! line: `plan.toml:12: safety.sensor_max_age_s = nan: must be finite and in (0.01, 0.1] s ...`.
 
 use firmware_bridge::messages::{
     Activity, AutodigStageCode, AuxValveCommand, ControllerStatus as StatusMessage, Message,
@@ -38,6 +47,8 @@ use planner::kinematics::{Joint, Kinematics};
 use planner::machine::MachineConfig;
 use planner::terrain::TerrainGrid;
 use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::path::Path;
 
 use crate::ControllerError;
 use crate::cycle::{Action, CycleCommand, CycleConfig, DigStats, Phase, WorkCycle};
@@ -136,7 +147,8 @@ pub struct ControllerConfig {
     pub autodig: AutodigConfig,
     /// Cleanup parameters (relief pressures from the machine file).
     pub cleanup: CleanupConfig,
-    /// Send the track valve commands every this many steps (5: 20 Hz at 100 Hz). Default 5.
+    /// Send the track valve commands (and the `ControllerStatus`) every this many steps (5: 20 Hz at
+    /// 100 Hz), 1 to [`MAX_TRACK_EVERY_STEPS`]. Default 5.
     pub track_every_steps: u32,
     /// Start the work cycle at the first step (otherwise call [`ControllerNode::start`]). Default true.
     pub autostart: bool,
@@ -165,17 +177,432 @@ impl Default for ControllerConfig {
     }
 }
 
+/// Most control steps between two track valve commands (and `ControllerStatus` messages): 50 ms at
+/// the 10 ms control period, half the gateway's 100 ms command timeout, so a moving track is never
+/// stopped by a stale command.
+pub const MAX_TRACK_EVERY_STEPS: u32 = 5;
+
 impl ControllerConfig {
-    /// Parses a TOML file's text; missing fields take their defaults.
+    /// Checks every part ([`SafetyConfig::validate`], [`EstimatorConfig::validate`],
+    /// [`CycleConfig::validate`], the Autodig and cleanup parameters) and `track_every_steps`.
     ///
     /// # Errors
-    /// [`ControllerError::Config`] with the parser's message.
+    /// The first [`ParamError`], naming the field as the TOML file spells it.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        self.safety.validate()?;
+        self.estimator.validate()?;
+        self.cycle.validate()?;
+        self.autodig.validate().map_err(|e| match e {
+            planner::autodig::AutodigError::InvalidConfig { field, reason } => {
+                ParamError::new("autodig", field, None, reason)
+            }
+            other => ParamError::new("autodig", "", None, other.to_string()),
+        })?;
+        self.cleanup.validate().map_err(|e| match e {
+            planner::cleanup::CleanupError::InvalidConfig { field, reason } => {
+                ParamError::new("cleanup", field, None, reason)
+            }
+            other => ParamError::new("cleanup", "", None, other.to_string()),
+        })?;
+        check_count(
+            "",
+            "track_every_steps",
+            u64::from(self.track_every_steps),
+            1,
+            u64::from(MAX_TRACK_EVERY_STEPS),
+            "track commands at least every 50 ms, half the gateway's 100 ms command timeout",
+        )
+    }
+
+    /// Parses and checks a TOML file's text; missing fields take their defaults.
+    ///
+    /// # Errors
+    /// [`ControllerError::Config`] naming the line and the field; [`Self::from_toml_file`] names the
+    /// file too.
     pub fn from_toml_str(text: &str) -> Result<Self, ControllerError> {
-        toml::from_str(text).map_err(|e| ControllerError::Config {
+        Self::from_toml_str_named(text, "").map_err(|e| ControllerError::Config {
             field: "controller config",
             reason: e.to_string(),
         })
     }
+
+    /// Reads, parses and checks a controller config file (`excavator-ctl run --config`).
+    ///
+    /// # Errors
+    /// [`ConfigFileError`] naming the file, the line and the field.
+    pub fn from_toml_file(path: &Path) -> Result<Self, ConfigFileError> {
+        let origin = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigFileError::Io {
+            origin: origin.clone(),
+            source,
+        })?;
+        Self::from_toml_str_named(&text, &origin)
+    }
+
+    /// Parses and checks TOML text, naming `origin` (a file name; empty: none) in errors.
+    ///
+    /// # Errors
+    /// [`ConfigFileError::Parse`] for bad TOML or a value of the wrong type,
+    /// [`ConfigFileError::Invalid`] for a value out of range or inconsistent.
+    pub fn from_toml_str_named(text: &str, origin: &str) -> Result<Self, ConfigFileError> {
+        let config: Self = toml::from_str(text).map_err(|e| {
+            let offset = e.span().map(|s| s.start);
+            let mut message = e.message().trim().to_owned();
+            if let Some(field) = offset.and_then(|o| field_at_offset(text, o))
+                && !message.contains(&field)
+            {
+                message = format!("{field}: {message}");
+            }
+            ConfigFileError::Parse {
+                origin: origin.to_owned(),
+                line: offset.map(|o| line_of_offset(text, o)),
+                message,
+            }
+        })?;
+        config
+            .validate()
+            .map_err(|error| ConfigFileError::Invalid {
+                origin: origin.to_owned(),
+                line: line_of_field(text, &error.path()),
+                error: Box::new(error),
+            })?;
+        Ok(config)
+    }
+}
+
+/// A configuration value that is not finite, out of range, or inconsistent with another.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{}{}: {rule}", self.path(), value_suffix(self.value.as_deref()))]
+pub struct ParamError {
+    /// The table of the controller config the value lives in (`safety`, `estimator`, `cycle`,
+    /// `autodig`, `cleanup`; empty for top-level keys).
+    pub section: &'static str,
+    /// The key inside it as the file spells it, dotted through nested tables and array entries
+    /// (`sensor_max_age_s`, `joint.kp`, `actions.2.swing_deg`).
+    pub key: String,
+    /// The value as the file states it (degrees for `_deg` keys), when known.
+    pub value: Option<String>,
+    /// The rule it breaks.
+    pub rule: String,
+}
+
+fn value_suffix(value: Option<&str>) -> String {
+    value.map(|v| format!(" = {v}")).unwrap_or_default()
+}
+
+impl ParamError {
+    /// An error for `key` in `section`.
+    pub fn new(
+        section: &'static str,
+        key: impl Into<String>,
+        value: Option<String>,
+        rule: impl Into<String>,
+    ) -> Self {
+        Self {
+            section,
+            key: key.into(),
+            value,
+            rule: rule.into(),
+        }
+    }
+
+    /// The dotted path of the field in the controller config (`safety.sensor_max_age_s`).
+    pub fn path(&self) -> String {
+        match (self.section.is_empty(), self.key.is_empty()) {
+            (true, _) => self.key.clone(),
+            (false, true) => self.section.to_owned(),
+            (false, false) => format!("{}.{}", self.section, self.key),
+        }
+    }
+}
+
+impl From<ParamError> for ControllerError {
+    fn from(e: ParamError) -> Self {
+        let (field, reason) = if e.section.is_empty() {
+            ("controller", e.to_string())
+        } else {
+            (
+                e.section,
+                format!("{}{}: {}", e.key, value_suffix(e.value.as_deref()), e.rule),
+            )
+        };
+        ControllerError::Config { field, reason }
+    }
+}
+
+/// A controller config file that cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigFileError {
+    /// The file cannot be read.
+    #[error("{origin}: cannot read: {source}")]
+    Io {
+        /// The file name.
+        origin: String,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// Not TOML, an unknown key, or a value of the wrong type (the message names the field).
+    #[error("{}: {message}", place(origin, *line))]
+    Parse {
+        /// The file name (empty: none).
+        origin: String,
+        /// 1-based line, when known.
+        line: Option<usize>,
+        /// The parser's message.
+        message: String,
+    },
+    /// A value out of range or inconsistent.
+    #[error("{}: {error}", place(origin, *line))]
+    Invalid {
+        /// The file name (empty: none).
+        origin: String,
+        /// 1-based line of the field (or of its table when the value is a default), when known.
+        line: Option<usize>,
+        /// The field and what is wrong with it (boxed: errors are rare, results common).
+        error: Box<ParamError>,
+    },
+}
+
+fn place(origin: &str, line: Option<usize>) -> String {
+    match (origin.is_empty(), line) {
+        (false, Some(l)) => format!("{origin}:{l}"),
+        (false, None) => origin.to_owned(),
+        (true, Some(l)) => format!("line {l}"),
+        (true, None) => "controller config".to_owned(),
+    }
+}
+
+/// An interval a parameter must lie in; only finite values lie in one.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Limits {
+    lo: f64,
+    lo_open: bool,
+    hi: f64,
+    hi_open: bool,
+    unit: &'static str,
+}
+
+impl Limits {
+    /// `[lo, hi]`.
+    pub(crate) const fn closed(lo: f64, hi: f64, unit: &'static str) -> Self {
+        Self {
+            lo,
+            lo_open: false,
+            hi,
+            hi_open: false,
+            unit,
+        }
+    }
+
+    /// `(lo, hi)`.
+    pub(crate) const fn open(lo: f64, hi: f64, unit: &'static str) -> Self {
+        Self {
+            lo,
+            lo_open: true,
+            hi,
+            hi_open: true,
+            unit,
+        }
+    }
+
+    /// `(lo, hi]`.
+    pub(crate) const fn above(lo: f64, hi: f64, unit: &'static str) -> Self {
+        Self {
+            lo,
+            lo_open: true,
+            hi,
+            hi_open: false,
+            unit,
+        }
+    }
+
+    /// `[lo, hi)`.
+    pub(crate) const fn below(lo: f64, hi: f64, unit: &'static str) -> Self {
+        Self {
+            lo,
+            lo_open: false,
+            hi,
+            hi_open: true,
+            unit,
+        }
+    }
+
+    fn contains(&self, v: f64) -> bool {
+        let above_lo = if self.lo_open {
+            v > self.lo
+        } else {
+            v >= self.lo
+        };
+        let below_hi = if self.hi_open {
+            v < self.hi
+        } else {
+            v <= self.hi
+        };
+        v.is_finite() && above_lo && below_hi
+    }
+}
+
+impl fmt::Display for Limits {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{}{}, {}{}",
+            if self.lo_open { '(' } else { '[' },
+            self.lo,
+            self.hi,
+            if self.hi_open { ')' } else { ']' }
+        )?;
+        if !self.unit.is_empty() {
+            write!(f, " {}", self.unit)?;
+        }
+        Ok(())
+    }
+}
+
+/// A value as TOML spells it (`nan`, `inf`, `1e308`, `0.25`).
+pub(crate) fn toml_float(v: f64) -> String {
+    if v.is_nan() {
+        "nan".to_owned()
+    } else if v.is_infinite() {
+        if v > 0.0 { "inf" } else { "-inf" }.to_owned()
+    } else {
+        format!("{v:?}")
+    }
+}
+
+/// `Ok` if `v` is finite and within `limits`; `why` (may be empty) explains the limits.
+pub(crate) fn check(
+    section: &'static str,
+    key: &str,
+    v: f64,
+    limits: Limits,
+    why: &str,
+) -> Result<(), ParamError> {
+    if limits.contains(v) {
+        return Ok(());
+    }
+    let why = if why.is_empty() {
+        String::new()
+    } else {
+        format!(" ({why})")
+    };
+    Err(ParamError::new(
+        section,
+        key,
+        Some(toml_float(v)),
+        format!("must be finite and in {limits}{why}"),
+    ))
+}
+
+/// [`check`] for an angle held in radians and written in degrees (a `_deg` key); `limits` in
+/// degrees.
+pub(crate) fn check_deg(
+    section: &'static str,
+    key: &str,
+    v_rad: f64,
+    limits_deg: Limits,
+) -> Result<(), ParamError> {
+    check(section, key, v_rad.to_degrees(), limits_deg, "")
+}
+
+/// `Ok` if the count `v` is within `[lo, hi]`; `why` (may be empty) explains the limits.
+pub(crate) fn check_count(
+    section: &'static str,
+    key: &str,
+    v: u64,
+    lo: u64,
+    hi: u64,
+    why: &str,
+) -> Result<(), ParamError> {
+    if (lo..=hi).contains(&v) {
+        return Ok(());
+    }
+    let why = if why.is_empty() {
+        String::new()
+    } else {
+        format!(" ({why})")
+    };
+    Err(ParamError::new(
+        section,
+        key,
+        Some(v.to_string()),
+        format!("must be in [{lo}, {hi}]{why}"),
+    ))
+}
+
+fn line_of_offset(text: &str, offset: usize) -> usize {
+    text.get(..offset.min(text.len()))
+        .map_or(0, |s| s.bytes().filter(|&b| b == b'\n').count())
+        + 1
+}
+
+/// The 1-based line of the dotted field `path` (`cycle.actions.2.start.x_m`, array entries by index)
+/// in TOML `text`: the line of its key, or, for a value the file leaves at its default, of the
+/// deepest table on the path that the file has.
+fn line_of_field(text: &str, path: &str) -> Option<usize> {
+    use toml::de::{DeTable, DeValue};
+    let doc = DeTable::parse(text).ok()?;
+    let mut table: &DeTable<'_> = doc.get_ref();
+    let mut value: Option<&DeValue<'_>> = None;
+    let mut found: Option<usize> = None;
+    for segment in path.split('.') {
+        let next = match value {
+            None => table
+                .iter()
+                .find(|(k, _)| k.get_ref().as_ref() == segment)
+                .map(|(k, v)| (k.span().start, v)),
+            Some(DeValue::Array(items)) => segment
+                .parse::<usize>()
+                .ok()
+                .and_then(|i| items.get(i))
+                .map(|v| (v.span().start, v)),
+            Some(_) => None,
+        };
+        let Some((offset, v)) = next else { break };
+        found = Some(offset);
+        match v.get_ref() {
+            DeValue::Table(t) => {
+                table = t;
+                value = None;
+            }
+            other => value = Some(other),
+        }
+    }
+    found.map(|o| line_of_offset(text, o))
+}
+
+/// The dotted field whose key or value covers byte `offset` of TOML `text` (the deepest one), for
+/// parse errors whose message does not name it.
+fn field_at_offset(text: &str, offset: usize) -> Option<String> {
+    use toml::de::{DeTable, DeValue};
+    fn walk(value: &DeValue<'_>, offset: usize, path: &mut Vec<String>) {
+        match value {
+            DeValue::Table(t) => {
+                for (k, v) in t.iter() {
+                    if k.span().contains(&offset) || v.span().contains(&offset) {
+                        path.push(k.get_ref().to_string());
+                        walk(v.get_ref(), offset, path);
+                        return;
+                    }
+                }
+            }
+            DeValue::Array(items) => {
+                for (i, v) in items.iter().enumerate() {
+                    if v.span().contains(&offset) {
+                        path.push(i.to_string());
+                        walk(v.get_ref(), offset, path);
+                        return;
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    // A document with a syntax error has no table to search; its message names the place.
+    let doc = DeTable::parse(text).ok()?;
+    let mut path = Vec::new();
+    walk(&DeValue::Table(doc.into_inner()), offset, &mut path);
+    (!path.is_empty()).then(|| path.join("."))
 }
 
 /// Counters of frames the node did not act on.
@@ -231,13 +658,14 @@ impl ControllerNode {
     /// A node for `machine` with Autodig `maps` and `config`.
     ///
     /// # Errors
-    /// [`ControllerError`] for an inconsistent machine, invalid Autodig, cleanup or cycle parameters,
-    /// or an unreachable start pose.
+    /// [`ControllerError`] for a configuration value that [`ControllerConfig::validate`] refuses, an
+    /// inconsistent machine, or an unreachable start pose.
     pub fn new(
         machine: &MachineConfig,
         maps: AutodigMaps,
         config: ControllerConfig,
     ) -> Result<Self, ControllerError> {
+        config.validate()?;
         let kin = Kinematics::new(machine)?;
         let relief = [machine.hydraulics.relief_pressure_pa; 3];
         let mut autodig = config.autodig;
@@ -268,10 +696,10 @@ impl ControllerNode {
             c
         };
         Ok(Self {
-            est: Estimator::new(kin, machine.tracks.gauge_m, config.estimator),
-            safety: Safety::new(config.safety, limits),
+            est: Estimator::new(kin, machine.tracks.gauge_m, config.estimator)?,
+            safety: Safety::new(config.safety, limits)?,
             cycle,
-            track_every_steps: config.track_every_steps.max(1),
+            track_every_steps: config.track_every_steps,
             steps: 0,
             setpoint_sequence: 15,
             tracks_moving: false,
@@ -681,5 +1109,352 @@ impl ControllerNode {
             self.push_message(Message::ControllerHeartbeat(hb));
         }
         self.out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::safety::{GATEWAY_STATUS_PERIOD_S, GATEWAY_WATCHDOG_S, SENSOR_PERIOD_S};
+
+    /// The four settings of issue #23 that gave a session that silently did nothing, or one that
+    /// drove the valves for 60 s with the sensor frames cut.
+    const ISSUE_23: [(&str, &str, usize); 4] = [
+        (
+            "[safety]\nsensor_max_age_s = nan\n",
+            "safety.sensor_max_age_s = nan",
+            2,
+        ),
+        (
+            "autostart = true\n\n[safety]\nstatus_max_age_s = -5\n",
+            "safety.status_max_age_s = -5.0",
+            4,
+        ),
+        (
+            "[safety]\nsensor_max_age_s = 1e308\n",
+            "safety.sensor_max_age_s = 1e308",
+            2,
+        ),
+        ("track_every_steps = 0\n", "track_every_steps = 0", 1),
+    ];
+
+    /// A float field of a config type, by its key in the file.
+    type Field<C> = (&'static str, fn(&mut C) -> &mut f64);
+
+    fn load(text: &str) -> Result<ControllerConfig, ConfigFileError> {
+        ControllerConfig::from_toml_str_named(text, "plan.toml")
+    }
+
+    fn machine() -> MachineConfig {
+        MachineConfig::default_machine().expect("default machine")
+    }
+
+    #[test]
+    fn issue_23_settings_are_refused_naming_file_line_and_field() {
+        for (text, field, line) in ISSUE_23 {
+            let err = load(text).expect_err(text);
+            let msg = err.to_string();
+            assert!(
+                msg.starts_with(&format!("plan.toml:{line}: {field}: must be")),
+                "{msg}"
+            );
+            assert!(
+                matches!(err, ConfigFileError::Invalid { line: Some(l), .. } if l == line),
+                "{err:?}"
+            );
+        }
+        let msg = load(ISSUE_23[0].0).unwrap_err().to_string();
+        assert_eq!(
+            msg,
+            "plan.toml:2: safety.sensor_max_age_s = nan: must be finite and in (0.01, 0.1] s \
+             (above the 10 ms sensor period, at most the gateway's 100 ms watchdog)"
+        );
+    }
+
+    #[test]
+    fn issue_23_settings_are_refused_in_process_too() {
+        for (text, field, _) in ISSUE_23 {
+            // Parsed without validation, as code building a config would.
+            let config: ControllerConfig = toml::from_str(text).expect("parses");
+            let key = field.split_once(" = ").map_or(field, |(k, _)| k);
+            let err = config.validate().expect_err(text);
+            assert_eq!(err.path(), key);
+            let err = ControllerNode::new(&machine(), AutodigMaps::builtin().unwrap(), config)
+                .expect_err(text);
+            let leaf = key.rsplit('.').next().unwrap_or(key);
+            assert!(err.to_string().contains(leaf), "{err}");
+        }
+    }
+
+    #[test]
+    fn defaults_are_valid() {
+        ControllerConfig::default().validate().unwrap();
+        let node = ControllerNode::new(
+            &machine(),
+            AutodigMaps::builtin().unwrap(),
+            ControllerConfig::default(),
+        );
+        assert!(node.is_ok());
+        assert!(load("").is_ok());
+    }
+
+    #[test]
+    fn protocol_constants_match_the_gateway_and_the_schedule() {
+        let gateway = firmware_bridge::gateway::GatewayConfig::default();
+        assert_eq!(gateway.heartbeat_timeout_s, GATEWAY_WATCHDOG_S);
+        assert_eq!(gateway.command_timeout_s, GATEWAY_WATCHDOG_S);
+        let rate = |name: &str| {
+            firmware_bridge::busload::SCHEDULE
+                .iter()
+                .find(|e| e.message == name)
+                .map(|e| e.rate_hz)
+        };
+        assert_eq!(rate("JointAngles"), Some(1.0 / SENSOR_PERIOD_S));
+        assert_eq!(rate("JointRates"), Some(1.0 / SENSOR_PERIOD_S));
+        assert_eq!(rate("GatewayStatus"), Some(1.0 / GATEWAY_STATUS_PERIOD_S));
+        // The track commands go out every `MAX_TRACK_EVERY_STEPS` steps at most: half the timeout.
+        let period = crate::run::CONTROL_PERIOD.as_secs_f64();
+        assert!(
+            f64::from(MAX_TRACK_EVERY_STEPS) * period <= gateway.command_timeout_s / 2.0 + 1e-12
+        );
+    }
+
+    /// Every float of `SafetyConfig` refuses NaN, infinities and negative values.
+    #[test]
+    fn safety_config_refuses_nan_negative_and_infinite_values() {
+        let fields: [Field<SafetyConfig>; 8] = [
+            ("sensor_max_age_s", |c| &mut c.sensor_max_age_s),
+            ("status_max_age_s", |c| &mut c.status_max_age_s),
+            ("arm_timeout_s", |c| &mut c.arm_timeout_s),
+            ("clear_hold_s", |c| &mut c.clear_hold_s),
+            ("neutral_hold_s", |c| &mut c.neutral_hold_s),
+            ("joint_limit_margin_rad", |c| &mut c.joint_limit_margin_rad),
+            ("rearm_reset_s", |c| &mut c.rearm_reset_s),
+            ("heartbeat_period_s", |c| &mut c.heartbeat_period_s),
+        ];
+        for (key, field) in fields {
+            for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, -1.0, 1e308] {
+                let mut c = SafetyConfig::default();
+                *field(&mut c) = bad;
+                let err = c.validate().expect_err(key);
+                assert_eq!(err.path(), format!("safety.{key}"), "{bad}");
+                assert_eq!(err.value, Some(toml_float(bad)));
+                let limits = [(0.0, 1.0); 3];
+                assert!(Safety::new(c, limits).is_err(), "{key} = {bad}");
+            }
+        }
+        let c = SafetyConfig {
+            max_auto_rearms: u32::MAX,
+            ..SafetyConfig::default()
+        };
+        assert_eq!(c.validate().unwrap_err().path(), "safety.max_auto_rearms");
+        // The silent fallback for long heartbeat periods is now an error.
+        let c = SafetyConfig {
+            heartbeat_period_s: 0.1,
+            ..SafetyConfig::default()
+        };
+        assert!(c.validate().is_err());
+        // Joint limits handed to the safety layer are checked too.
+        let nan_limits = [(0.0, 1.0), (f64::NAN, 1.0), (0.0, 1.0)];
+        assert!(Safety::new(SafetyConfig::default(), nan_limits).is_err());
+        let inverted = [(0.0, 1.0), (0.0, 1.0), (1.0, 0.0)];
+        assert!(Safety::new(SafetyConfig::default(), inverted).is_err());
+    }
+
+    #[test]
+    fn estimator_config_refuses_nan_negative_and_infinite_values() {
+        let fields: [Field<EstimatorConfig>; 5] = [
+            ("rate_filter_time_constant_s", |c| {
+                &mut c.rate_filter_time_constant_s
+            }),
+            ("weigh_stroke_end_margin", |c| {
+                &mut c.weigh_stroke_end_margin
+            }),
+            ("initial_pose.x_m", |c| &mut c.initial_pose.x_m),
+            ("initial_pose.y_m", |c| &mut c.initial_pose.y_m),
+            ("initial_pose.heading_rad", |c| {
+                &mut c.initial_pose.heading_rad
+            }),
+        ];
+        let kin = Kinematics::new(&machine()).unwrap();
+        for (key, field) in fields {
+            let negative = if key == "weigh_stroke_end_margin" {
+                -2.0
+            } else {
+                -1.0e7
+            };
+            for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, negative] {
+                let mut c = EstimatorConfig::default();
+                *field(&mut c) = bad;
+                let err = c.validate().expect_err(key);
+                assert_eq!(err.path(), format!("estimator.{key}"), "{bad}");
+                assert!(
+                    Estimator::new(kin.clone(), 2.0, c).is_err(),
+                    "{key} = {bad}"
+                );
+            }
+        }
+        // A negative margin counts every joint (documented); only nonsense is refused.
+        let counting_all = EstimatorConfig {
+            weigh_stroke_end_margin: -1.0,
+            ..EstimatorConfig::default()
+        };
+        assert!(counting_all.validate().is_ok());
+        let msg = load("[estimator]\nrate_filter_time_constant_s = -0.5\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.starts_with("plan.toml:2: estimator.rate_filter_time_constant_s = -0.5: "),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn cycle_config_refuses_nan_negative_and_infinite_values() {
+        let fields: [Field<CycleConfig>; 15] = [
+            ("dump_swing_deg", |c| &mut c.dump_swing_rad),
+            ("home_swing_deg", |c| &mut c.home_swing_rad),
+            ("carry_boom_deg", |c| &mut c.carry_boom_rad),
+            ("carry_tip_z_m", |c| &mut c.carry_tip_z_m),
+            ("dump_bucket_deg", |c| &mut c.dump_bucket_rad),
+            ("dump_hold_s", |c| &mut c.dump_hold_s),
+            ("settle_s", |c| &mut c.settle_s),
+            ("move_timeout_s", |c| &mut c.move_timeout_s),
+            ("scan_timeout_s", |c| &mut c.scan_timeout_s),
+            ("section_step_m", |c| &mut c.section_step_m),
+            ("weigh_settle_s", |c| &mut c.weigh_settle_s),
+            ("weigh_window_s", |c| &mut c.weigh_window_s),
+            ("joint.min_command", |c| &mut c.joint.min_command),
+            ("swing.kd", |c| &mut c.swing.kd),
+            ("scan_grid.cell_m", |c| &mut c.scan_grid.cell_m),
+        ];
+        for (key, field) in fields {
+            for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, -1.0e6] {
+                let mut c = CycleConfig::default();
+                *field(&mut c) = bad;
+                let err = c.validate().expect_err(key);
+                assert_eq!(err.path(), format!("cycle.{key}"), "{bad}: {err}");
+            }
+        }
+        // Counts and distances that make no sense.
+        let no_digs = CycleConfig {
+            max_digs: Some(0),
+            ..CycleConfig::default()
+        };
+        assert_eq!(no_digs.validate().unwrap_err().path(), "cycle.max_digs");
+        let far = CycleConfig {
+            actions: vec![Action::TrackBack { distance_m: 1e9 }],
+            ..CycleConfig::default()
+        };
+        assert_eq!(
+            far.validate().unwrap_err().path(),
+            "cycle.actions.0.distance_m"
+        );
+    }
+
+    #[test]
+    fn a_min_command_above_the_max_is_refused_not_a_panic() {
+        // `f64::clamp` panics on NaN or crossed bounds; the P-controller used to receive both.
+        let c = CycleConfig {
+            track: PGainFixture::crossed(),
+            ..CycleConfig::default()
+        };
+        let err = c.validate().unwrap_err();
+        assert_eq!(err.path(), "cycle.track.min_command");
+    }
+
+    struct PGainFixture;
+
+    impl PGainFixture {
+        fn crossed() -> crate::cycle::PGain {
+            crate::cycle::PGain {
+                kp: 1.0,
+                max_command: 0.3,
+                min_command: 0.5,
+                kd: 0.0,
+                tolerance: 0.05,
+            }
+        }
+    }
+
+    #[test]
+    fn errors_point_at_array_entries_and_at_the_table_of_defaults() {
+        let text = "\
+[cycle]
+repeat = true
+
+[[cycle.actions]]
+kind = \"dig\"
+swing_deg = 0.0
+start = { kind = \"tip\", x_m = 7.5, z_m = 2.4, bucket_abs_deg = -55.0 }
+
+[[cycle.actions]]
+kind = \"dig\"
+swing_deg = 7.0
+start = { kind = \"tip\", x_m = inf, z_m = 2.4, bucket_abs_deg = -55.0 }
+";
+        let msg = load(text).unwrap_err().to_string();
+        assert!(
+            msg.starts_with("plan.toml:12: cycle.actions.1.start.x_m = inf: "),
+            "{msg}"
+        );
+        // A timeout shorter than the default settle time: the settle time (left at its default) is
+        // inconsistent; the error points at the table.
+        let msg = load("\n[cycle]\nmove_timeout_s = 0.1\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.starts_with("plan.toml:2: cycle.settle_s = 0.2: must be finite and in (0, 0.1) s"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn type_errors_name_file_line_and_field() {
+        let msg = load("autostart = true\ntrack_every_steps = -1\n")
+            .unwrap_err()
+            .to_string();
+        assert!(msg.starts_with("plan.toml:2: track_every_steps: "), "{msg}");
+        let msg = load("[safety]\nsensor_max_age = 0.05\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.starts_with("plan.toml:2: ") && msg.contains("sensor_max_age"),
+            "{msg}"
+        );
+        // Without a file name the line is still given.
+        let err =
+            ControllerConfig::from_toml_str("[safety]\nsensor_max_age_s = nan\n").unwrap_err();
+        assert!(
+            err.to_string()
+                .contains("line 2: safety.sensor_max_age_s = nan"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn autodig_and_cleanup_parameters_are_checked_with_their_line() {
+        let msg = load("[autodig.contact]\ntimeout_s = nan\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.starts_with("plan.toml:2: autodig.contact.timeout_s: "),
+            "{msg}"
+        );
+        let msg = load("[cleanup]\nperiod_s = -1.0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(msg.starts_with("plan.toml:2: cleanup.period_s: "), "{msg}");
+    }
+
+    #[test]
+    fn a_missing_file_is_named() {
+        let err =
+            ControllerConfig::from_toml_file(Path::new("/nonexistent/plan.toml")).unwrap_err();
+        assert!(
+            err.to_string()
+                .starts_with("/nonexistent/plan.toml: cannot read"),
+            "{err}"
+        );
     }
 }

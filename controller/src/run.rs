@@ -243,13 +243,9 @@ pub fn build_node(opts: &RunOptions) -> anyhow::Result<ControllerNode> {
         }
         None => AutodigMaps::builtin().context("built-in Autodig maps")?,
     };
+    // Errors name the file, the line and the field.
     let mut config = match &opts.config {
-        Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("reading controller config {}", p.display()))?;
-            ControllerConfig::from_toml_str(&text)
-                .with_context(|| format!("controller config {}", p.display()))?
-        }
+        Some(p) => ControllerConfig::from_toml_file(p).context("controller config")?,
         None => ControllerConfig::default(),
     };
     config.safety.listen_only |= opts.listen_only;

@@ -58,7 +58,9 @@ use planner::cleanup::CleanupError;
 use planner::kinematics::Joint;
 use serde::{Deserialize, Serialize};
 
+use crate::ControllerError;
 use crate::estimate::{Estimator, Signal, joint_angle};
+use crate::node::{Limits, ParamError, check, check_count};
 
 /// The gateway mode the controller arms for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -245,9 +247,94 @@ pub struct SafetyConfig {
     pub rearm_reset_s: f64,
     /// Heartbeat period, s. Default 0.05 (20 Hz, the docs/protocol.md budget; the gateway's watchdog
     /// is 100 ms). A change of the requested mode (arm, disarm on a fault, e-stop) and every heartbeat
-    /// after a shutdown are sent at once, whatever the period; values of 0.1 s or more are treated as
-    /// 0.05 s so the watchdog cannot starve.
+    /// after a shutdown are sent at once, whatever the period. [`SafetyConfig::validate`] refuses
+    /// periods over half the watchdog.
     pub heartbeat_period_s: f64,
+}
+
+/// Period of the gateway's control signals (angles, rates, pressures), s: 100 Hz (docs/protocol.md).
+pub const SENSOR_PERIOD_S: f64 = 0.01;
+/// Period of the gateway status, s: 10 Hz (docs/protocol.md).
+pub const GATEWAY_STATUS_PERIOD_S: f64 = 0.1;
+/// The gateway's heartbeat watchdog and command timeout, s (`firmware_bridge::gateway::GatewayConfig`).
+pub const GATEWAY_WATCHDOG_S: f64 = 0.1;
+/// The controller's control period, s ([`crate::run::CONTROL_PERIOD`]).
+const CONTROL_PERIOD_S: f64 = crate::run::CONTROL_PERIOD.as_secs_f64();
+
+impl SafetyConfig {
+    /// Checks every parameter against the protocol's timing: stale-data ages between the period of
+    /// their signal and what the gateway tolerates, a heartbeat well inside the watchdog, finite
+    /// holds and timeouts, bounded counts.
+    ///
+    /// # Errors
+    /// The first [`ParamError`] (section `safety`).
+    pub fn validate(&self) -> Result<(), ParamError> {
+        const S: &str = "safety";
+        check(
+            S,
+            "sensor_max_age_s",
+            self.sensor_max_age_s,
+            Limits::above(SENSOR_PERIOD_S, GATEWAY_WATCHDOG_S, "s"),
+            "above the 10 ms sensor period, at most the gateway's 100 ms watchdog",
+        )?;
+        check(
+            S,
+            "status_max_age_s",
+            self.status_max_age_s,
+            Limits::above(GATEWAY_STATUS_PERIOD_S, 1.0, "s"),
+            "above the 100 ms gateway status period",
+        )?;
+        check(
+            S,
+            "arm_timeout_s",
+            self.arm_timeout_s,
+            Limits::above(GATEWAY_STATUS_PERIOD_S, 10.0, "s"),
+            "the confirmation comes with a gateway status",
+        )?;
+        check(
+            S,
+            "clear_hold_s",
+            self.clear_hold_s,
+            Limits::above(0.0, 60.0, "s"),
+            "",
+        )?;
+        check(
+            S,
+            "neutral_hold_s",
+            self.neutral_hold_s,
+            Limits::closed(CONTROL_PERIOD_S, 10.0, "s"),
+            "at least one control period of neutral commands",
+        )?;
+        check(
+            S,
+            "joint_limit_margin_rad",
+            self.joint_limit_margin_rad,
+            Limits::closed(0.0, 0.2, "rad"),
+            "",
+        )?;
+        check_count(
+            S,
+            "max_auto_rearms",
+            u64::from(self.max_auto_rearms),
+            0,
+            1000,
+            "",
+        )?;
+        check(
+            S,
+            "rearm_reset_s",
+            self.rearm_reset_s,
+            Limits::above(0.0, 3600.0, "s"),
+            "",
+        )?;
+        check(
+            S,
+            "heartbeat_period_s",
+            self.heartbeat_period_s,
+            Limits::closed(CONTROL_PERIOD_S, GATEWAY_WATCHDOG_S / 2.0, "s"),
+            "from one control period to half the gateway's 100 ms watchdog",
+        )
+    }
 }
 
 impl Default for SafetyConfig {
@@ -344,8 +431,23 @@ pub struct Safety {
 
 impl Safety {
     /// A safety layer for joints with `limits` `[(min, max); 3]` (rad, `[boom, stick, bucket]`).
-    pub fn new(config: SafetyConfig, limits: [(f64, f64); 3]) -> Self {
-        Self {
+    ///
+    /// # Errors
+    /// [`ControllerError::Config`] for a parameter [`SafetyConfig::validate`] refuses, or limits that
+    /// are not finite with min < max.
+    pub fn new(config: SafetyConfig, limits: [(f64, f64); 3]) -> Result<Self, ControllerError> {
+        config.validate()?;
+        for (joint, (lo, hi)) in Joint::ALL.into_iter().zip(limits) {
+            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                return Err(ControllerError::Config {
+                    field: "safety",
+                    reason: format!(
+                        "{joint} joint limits [{lo}, {hi}] rad must be finite with min < max"
+                    ),
+                });
+            }
+        }
+        Ok(Self {
             config,
             limits,
             state: if config.listen_only {
@@ -371,7 +473,7 @@ impl Safety {
             gateway_mode: None,
             now_s: f64::NEG_INFINITY,
             last_heartbeat: None,
-        }
+        })
     }
 
     /// The configuration.
@@ -825,8 +927,8 @@ mod tests {
             let kin = Kinematics::new(&m).unwrap();
             let limits = Joint::ALL.map(|j| kin.joint_limits(j));
             Self {
-                est: Estimator::new(kin, m.tracks.gauge_m, EstimatorConfig::default()),
-                safety: Safety::new(config, limits),
+                est: Estimator::new(kin, m.tracks.gauge_m, EstimatorConfig::default()).unwrap(),
+                safety: Safety::new(config, limits).unwrap(),
                 gateway_mode: GatewayMode::Disarmed,
                 faults: 0,
                 status_alive: 0,

@@ -136,6 +136,25 @@ fn effects_from_table(text: &str, origin: &str) -> Result<EffectSet> {
     Ok(set)
 }
 
+/// The machine file's `hydraulics.transport_delay_s` within [`plant::MAX_TRANSPORT_DELAY_S`], as a
+/// machine-file error with its line (the machine crate only requires it to be finite and >= 0).
+fn check_transport_delay(cfg: &MachineConfig, text: &str, origin: &str) -> Result<()> {
+    const FIELD: &str = "hydraulics.transport_delay_s";
+    let delay = cfg.hydraulics.transport_delay_s;
+    if (0.0..=plant::MAX_TRANSPORT_DELAY_S).contains(&delay) {
+        return Ok(());
+    }
+    Err(SimError::Machine(ConfigError::Invalid {
+        origin: origin.to_owned(),
+        line: planner::machine::locate_field(text, FIELD),
+        field: FIELD.to_owned(),
+        reason: format!(
+            "{delay} s: must be finite and in [0, {}] s",
+            plant::MAX_TRANSPORT_DELAY_S
+        ),
+    }))
+}
+
 impl SimConfig {
     /// Loads the machine (default `config/machine.toml`, compiled in) and the bench (default
     /// `config/bench.toml`, compiled in), overrides the seed, and applies `NAME=VALUE` effects.
@@ -157,6 +176,7 @@ impl SimConfig {
                 })?;
                 let (machine_text, effects_text) = split_effects(&text);
                 let cfg = MachineConfig::from_toml_str_named(&machine_text, &origin)?;
+                check_transport_delay(&cfg, &machine_text, &origin)?;
                 (cfg, effects_from_table(&effects_text, &origin)?)
             }
             None => (MachineConfig::default_machine()?, EffectSet::nominal()),
@@ -181,17 +201,28 @@ impl SimConfig {
                     source,
                 })?;
         }
-        Ok(Self {
+        let config = Self {
             machine,
             scenario,
             effects,
-        })
+        };
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// Checks what the plant's timing and memory depend on ([`plant::check_config`]): for a
+    /// configuration assembled in code; [`Self::load`] already did, naming the files.
+    ///
+    /// # Errors
+    /// [`SimError::Plant`] naming the field.
+    pub fn validate(&self) -> Result<()> {
+        Ok(plant::check_config(&self.machine, &self.scenario)?)
     }
 
     /// Builds the plant.
     ///
     /// # Errors
-    /// [`SimError::Plant`].
+    /// [`SimError::Plant`], a value [`Self::validate`] refuses included.
     pub fn build(&self) -> Result<Plant> {
         Ok(Plant::new(&self.machine, &self.scenario, self.effects)?)
     }
@@ -221,5 +252,40 @@ mod tests {
             cause.unwrap_or_default().contains("unknown effect"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn a_transport_delay_beyond_the_bound_is_refused_with_its_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("m.toml");
+        let text = planner::machine::DEFAULT_MACHINE_TOML
+            .replace("transport_delay_s = 0.06", "transport_delay_s = 1e9");
+        assert_ne!(text, planner::machine::DEFAULT_MACHINE_TOML);
+        std::fs::write(&path, &text).unwrap();
+        let err = SimConfig::load::<&str>(Some(&path), None, None, &[]).unwrap_err();
+        let line = text
+            .lines()
+            .position(|l| l.starts_with("transport_delay_s"))
+            .unwrap()
+            + 1;
+        let msg = err.to_string();
+        assert!(
+            msg.starts_with(&format!(
+                "{}:{line}: field `hydraulics.transport_delay_s`",
+                path.display()
+            )),
+            "{msg}"
+        );
+        // Built in code, the plant refuses it too (it would queue 1e12 commands).
+        let mut cfg = SimConfig::load::<&str>(None, None, None, &[]).unwrap();
+        cfg.machine.hydraulics.transport_delay_s = 1e9;
+        assert!(cfg.validate().is_err());
+        assert!(cfg.build().is_err());
+        let mut cfg = SimConfig::load::<&str>(None, None, None, &[]).unwrap();
+        cfg.scenario.grid.cell_m = f64::NAN;
+        assert!(matches!(
+            cfg.build(),
+            Err(SimError::Plant(PlantError::Config { .. }))
+        ));
     }
 }

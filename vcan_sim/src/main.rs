@@ -59,16 +59,38 @@ struct Cli {
 enum Command {
     /// Measures simulated seconds per wall second in-process on one core.
     Bench {
-        /// Simulated seconds per scenario.
-        #[arg(long, default_value_t = 60.0)]
+        /// Simulated seconds per scenario (0.01 to 3600).
+        #[arg(long, default_value_t = 60.0, value_parser = parse_bench_seconds)]
         seconds: f64,
         /// Run only the cases whose name contains this text (e.g. `idle`, `digging`, `node`).
         #[arg(long)]
         case: Option<String>,
-        /// Runs per case (the figures are printed as a range).
-        #[arg(long, default_value_t = 1)]
+        /// Runs per case, 1 to 100 (the figures are printed as a range).
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=MAX_BENCH_REPEAT))]
         repeat: u32,
     },
+}
+
+/// Longest `bench --seconds`: an hour of simulated time per case is minutes of CPU; more is a typo
+/// (`1e308` ran for ever).
+const MAX_BENCH_SECONDS: f64 = 3600.0;
+/// Most `bench --repeat` runs per case.
+const MAX_BENCH_REPEAT: i64 = 100;
+
+/// `--seconds`: a finite number of simulated seconds in `[0.01, MAX_BENCH_SECONDS]`.
+fn parse_bench_seconds(text: &str) -> std::result::Result<f64, String> {
+    let seconds: f64 = text
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{text}` is not a number"))?;
+    if seconds.is_finite() && (0.01..=MAX_BENCH_SECONDS).contains(&seconds) {
+        Ok(seconds)
+    } else {
+        Err(format!(
+            "{} simulated seconds: must be finite and in [0.01, {MAX_BENCH_SECONDS}]",
+            text.trim()
+        ))
+    }
 }
 
 /// CPU time this thread has run (ns), from `/proc/thread-self/schedstat` (Linux); `None` elsewhere.
@@ -107,11 +129,12 @@ fn timed(mut run: impl FnMut()) -> Timing {
 }
 
 fn bench(config: &SimConfig, seconds: f64, case: Option<&str>, repeat: u32) -> Result<()> {
-    if !(seconds.is_finite() && seconds >= 0.01) {
-        bail!("--seconds must be at least 0.01 simulated seconds, got {seconds}");
+    // Checked by the argument parser too; `bench` may be called otherwise in future.
+    if let Err(e) = parse_bench_seconds(&seconds.to_string()) {
+        bail!("--seconds: {e}");
     }
-    if repeat == 0 {
-        bail!("--repeat must be at least 1");
+    if !(1..=MAX_BENCH_REPEAT).contains(&i64::from(repeat)) {
+        bail!("--repeat must be in [1, {MAX_BENCH_REPEAT}], got {repeat}");
     }
     let selected = |name: &str| case.is_none_or(|c| name.contains(c));
     let steps = (seconds / PHYSICS_DT_S).round().max(1.0) as u64;
@@ -260,4 +283,42 @@ fn real_main() -> Result<()> {
         "stopped"
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bench_arguments_are_bounded() {
+        for bad in ["1e308", "inf", "nan", "-1", "0", "3601", "ten"] {
+            assert!(
+                Cli::try_parse_from(["excavator-sim", "bench", "--seconds", bad]).is_err(),
+                "--seconds {bad}"
+            );
+        }
+        for bad in ["0", "101", "4294967295"] {
+            assert!(
+                Cli::try_parse_from(["excavator-sim", "bench", "--repeat", bad]).is_err(),
+                "--repeat {bad}"
+            );
+        }
+        let cli = Cli::try_parse_from([
+            "excavator-sim",
+            "bench",
+            "--seconds",
+            "0.5",
+            "--repeat",
+            "3",
+        ])
+        .expect("valid arguments");
+        assert!(matches!(
+            cli.command,
+            Some(Command::Bench { seconds, repeat: 3, .. }) if seconds == 0.5
+        ));
+        let err = Cli::try_parse_from(["excavator-sim", "bench", "--seconds", "1e308"])
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("must be finite and in [0.01, 3600]"), "{err}");
+    }
 }

@@ -48,6 +48,38 @@ pub enum PlantError {
     /// The start pose is outside the cylinder strokes.
     #[error("start pose: {0}")]
     StartPose(String),
+    /// A machine or scenario value the plant cannot run with (not finite, out of range).
+    #[error("{field}: {reason}")]
+    Config {
+        /// Dotted field of the machine or scenario file.
+        field: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+}
+
+/// Longest command-to-motion delay of a machine file, s (`hydraulics.transport_delay_s`; the
+/// `transport_delay` effect adds at most 0.3 s). The plant holds one queued command per 1 ms step of
+/// it, so an unbounded delay would be an unbounded allocation.
+pub const MAX_TRANSPORT_DELAY_S: f64 = 0.5;
+
+/// Checks the machine and scenario values the plant's timing and memory depend on (the loaders check
+/// them too, with the file and line; this keeps plants built in code from skipping them).
+///
+/// # Errors
+/// [`PlantError::Config`] naming the field.
+pub fn check_config(cfg: &MachineConfig, scenario: &Scenario) -> Result<(), PlantError> {
+    let config = |(field, reason)| PlantError::Config { field, reason };
+    cfg.validate().map_err(config)?;
+    scenario.validate().map_err(config)?;
+    let delay = cfg.hydraulics.transport_delay_s;
+    if !(0.0..=MAX_TRANSPORT_DELAY_S).contains(&delay) {
+        return Err(PlantError::Config {
+            field: "hydraulics.transport_delay_s".into(),
+            reason: format!("{delay} s: must be finite and in [0, {MAX_TRANSPORT_DELAY_S}] s"),
+        });
+    }
+    Ok(())
 }
 
 impl HydraulicParams {
@@ -192,12 +224,14 @@ impl Plant {
     /// Builds the machine on a scenario with hidden effects.
     ///
     /// # Errors
-    /// [`PlantError`] for an inconsistent machine, a bad grid or an unreachable start pose.
+    /// [`PlantError`] for a machine or scenario value [`check_config`] refuses, an inconsistent
+    /// machine, a bad grid or an unreachable start pose.
     pub fn new(
         cfg: &MachineConfig,
         scenario: &Scenario,
         effects: EffectSet,
     ) -> Result<Self, PlantError> {
+        check_config(cfg, scenario)?;
         let linkage = Linkage::new(cfg)?;
         let kin = linkage.kinematics();
         let strokes = linkage.strokes_m();

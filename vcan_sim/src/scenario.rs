@@ -356,38 +356,41 @@ fn field_at_line(text: &str, line: usize) -> Option<String> {
     None
 }
 
-/// 1-based line of a dotted field in TOML text, also inside `[[array]]` tables (best effort).
+/// 1-based line of a dotted field (`soil_regions.1.x_min_m`, array entries by index) in TOML text:
+/// the line of its key, or, for a value left at its default, of the deepest table on the path that
+/// the file has; 0 when unknown.
 fn locate(text: &str, field: &str) -> usize {
-    let mut parts: Vec<&str> = field.split('.').collect();
-    let Some(key) = parts.pop() else {
+    use toml::de::{DeTable, DeValue};
+    let Ok(doc) = DeTable::parse(text) else {
         return 0;
     };
-    // Array indices (`soil_regions.1.x_min_m`) are dropped: the first table of that name is used.
-    let table: Vec<&str> = parts
-        .into_iter()
-        .filter(|p| p.parse::<usize>().is_err())
-        .collect();
-    let table = table.join(".");
-    let mut in_table = table.is_empty();
-    let mut header = 0;
-    for (i, raw) in text.lines().enumerate() {
-        let line = raw.trim();
-        if line.starts_with('[') {
-            let name = line.trim_matches(|c| c == '[' || c == ']').trim();
-            in_table = name == table;
-            if in_table && header == 0 {
-                header = i + 1;
+    let mut table: &DeTable<'_> = doc.get_ref();
+    let mut value: Option<&DeValue<'_>> = None;
+    let mut found = None;
+    for segment in field.split('.') {
+        let next = match value {
+            None => table
+                .iter()
+                .find(|(k, _)| k.get_ref().as_ref() == segment)
+                .map(|(k, v)| (k.span().start, v)),
+            Some(DeValue::Array(items)) => segment
+                .parse::<usize>()
+                .ok()
+                .and_then(|i| items.get(i))
+                .map(|v| (v.span().start, v)),
+            Some(_) => None,
+        };
+        let Some((offset, v)) = next else { break };
+        found = Some(offset);
+        match v.get_ref() {
+            DeValue::Table(t) => {
+                table = t;
+                value = None;
             }
-            continue;
-        }
-        if in_table
-            && let Some((k, _)) = line.split_once('=')
-            && k.trim() == key
-        {
-            return i + 1;
+            other => value = Some(other),
         }
     }
-    header
+    found.map_or(0, |o| line_of_offset(text, o))
 }
 
 impl Scenario {
@@ -511,15 +514,21 @@ impl Scenario {
                 80.0,
             )
         }
+        // Positions: finite and on a map of at most 10 km either way.
+        let position = |field: &str, v: f64| within(field, v, -1.0e4, 1.0e4);
         let b = &self.bench;
         within("bench.height_m", b.height_m, 0.0, 20.0)?;
         positive("bench.width_m", b.width_m)?;
         positive("bench.length_m", b.length_m)?;
+        within("bench.width_m", b.width_m, 0.0, 1.0e4)?;
+        within("bench.length_m", b.length_m, 0.0, 1.0e4)?;
         within("bench.face_slope_deg", b.face_slope_deg, 10.0, 90.0)?;
         within("bench.floor_elevation_m", b.floor_elevation_m, -5.0, 5.0)?;
         within("bench.face_x_m", b.face_x_m, -1.0e3, 1.0e3)?;
         within("bench.center_y_m", b.center_y_m, -1.0e3, 1.0e3)?;
         let g = &self.grid;
+        position("grid.x_min_m", g.x_min_m)?;
+        position("grid.y_min_m", g.y_min_m)?;
         within("grid.cell_m", g.cell_m, 0.02, 1.0)?;
         positive("grid.size_x_m", g.size_x_m)?;
         positive("grid.size_y_m", g.size_y_m)?;
@@ -535,6 +544,14 @@ impl Scenario {
             soil("native_soil", native)?;
         }
         for (i, r) in self.soil_regions.iter().enumerate() {
+            for (key, v) in [
+                ("x_min_m", r.x_min_m),
+                ("x_max_m", r.x_max_m),
+                ("y_min_m", r.y_min_m),
+                ("y_max_m", r.y_max_m),
+            ] {
+                position(&format!("soil_regions.{i}.{key}"), v)?;
+            }
             soil(&format!("soil_regions.{i}.soil"), &r.soil)?;
             if !(r.x_max_m > r.x_min_m && r.y_max_m > r.y_min_m) {
                 return Err((format!("soil_regions.{i}.x_max_m"), "empty region".into()));
@@ -556,6 +573,7 @@ impl Scenario {
         let bo = &self.boulders;
         if bo.random_count > 0 {
             positive("boulders.min_radius_m", bo.min_radius_m)?;
+            within("boulders.max_radius_m", bo.max_radius_m, 0.0, 5.0)?;
             if bo.max_radius_m < bo.min_radius_m {
                 return Err((
                     "boulders.max_radius_m".into(),
@@ -567,6 +585,13 @@ impl Scenario {
             return Err(("boulders.random_count".into(), "at most 1000".into()));
         }
         for (i, boulder) in bo.list.iter().enumerate() {
+            for (key, v) in [
+                ("x_m", boulder.x_m),
+                ("y_m", boulder.y_m),
+                ("z_m", boulder.z_m),
+            ] {
+                position(&format!("boulders.list.{i}.{key}"), v)?;
+            }
             within(
                 &format!("boulders.list.{i}.radius_m"),
                 boulder.radius_m,
@@ -575,7 +600,11 @@ impl Scenario {
             )?;
         }
         within("spoil.repose_deg", self.spoil.repose_deg, 10.0, 60.0)?;
+        position("spoil.x_m", self.spoil.x_m)?;
+        position("spoil.y_m", self.spoil.y_m)?;
         let s = &self.start;
+        position("start.x_m", s.x_m)?;
+        position("start.y_m", s.y_m)?;
         within("start.boom_deg", s.boom_deg, -90.0, 90.0)?;
         within("start.stick_deg", s.stick_deg, -180.0, 0.0)?;
         within("start.bucket_deg", s.bucket_deg, -180.0, 90.0)?;
@@ -710,5 +739,40 @@ mod tests {
         let s = Scenario::from_toml_str_named(text, "b.toml").unwrap();
         let set = s.effect_set().unwrap();
         assert_eq!(set.get(crate::effects::Effect::TransportDelay), 0.05);
+    }
+
+    /// Positions, radii and sizes that were only range-checked on some keys: NaN and infinities are
+    /// refused everywhere, with the line of the key (also inside an array of tables).
+    #[test]
+    fn non_finite_positions_are_refused_with_their_line() {
+        for (text, field, line) in [
+            ("[grid]\nx_min_m = nan\n", "grid.x_min_m", 2),
+            ("[spoil]\ny_m = inf\n", "spoil.y_m", 2),
+            ("[start]\nx_m = -inf\n", "start.x_m", 2),
+            ("[bench]\nwidth_m = 1e308\n", "bench.width_m", 2),
+            (
+                "[boulders]\nrandom_count = 2\nmin_radius_m = 0.1\nmax_radius_m = inf\n",
+                "boulders.max_radius_m",
+                4,
+            ),
+            (
+                "[[soil_regions]]\nx_min_m = 0.0\nx_max_m = 1.0\ny_min_m = 0.0\ny_max_m = 1.0\n\
+                 soil = {}\n[[soil_regions]]\nx_min_m = 0.0\nx_max_m = nan\ny_min_m = 0.0\n\
+                 y_max_m = 1.0\nsoil = {}\n",
+                "soil_regions.1.x_max_m",
+                9,
+            ),
+            (
+                "[boulders]\nlist = [{ x_m = 1.0, y_m = 1.0, z_m = nan, radius_m = 0.3 }]\n",
+                "boulders.list.0.z_m",
+                2,
+            ),
+        ] {
+            let err = Scenario::from_toml_str_named(text, "b.toml").unwrap_err();
+            assert!(
+                matches!(&err, ScenarioError::Invalid { field: f, line: l, .. } if f == field && *l == line),
+                "{text}: {err}"
+            );
+        }
     }
 }

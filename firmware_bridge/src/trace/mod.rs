@@ -12,10 +12,21 @@
 //! the reader accepts 6- and 9-digit fractions, `.` separators between data bytes and the optional
 //! ` R` (received) / ` T` (transmitted) marker of `candump -L -x`. Files written here are read by
 //! can-utils (`canplayer`, `log2asc`), python-can and `cantools decode` (see the interop tests).
+//!
+//! **CAN FD flags.** can-utils (`lib.c`: `sprint_canframe` prints `cf->flags & 0xF` as one hex digit,
+//! `parse_canframe` reads one hex digit) carries the flags as a single nibble: `CANFD_BRS` 0x01,
+//! `CANFD_ESI` 0x02, `CANFD_FDF` 0x04 and the spare 0x08. Every value 0x0-0xF round-trips exactly;
+//! a frame with flag bits above 0x0F has no candump form, and the writer refuses it
+//! ([`FormatError::FdFlags`]) instead of dropping the bits ([`Recorder`] counts such frames as
+//! rejected).
+//!
+//! **Bounded input.** The reader never holds more than [`MAX_LINE_BYTES`] of a line: a longer line
+//! is malformed ([`LineError::TooLong`]), counted, and skipped up to the next newline without being
+//! buffered, so a file without newlines (or `/dev/zero`) is read in constant memory.
 
 mod recorder;
 
-pub use recorder::{Recorder, RecorderError, RecorderStats};
+pub use recorder::{MAX_QUEUE_CAPACITY, Recorder, RecorderError, RecorderStats};
 
 use std::fmt::Write as _;
 use std::io::{self, BufRead, Write};
@@ -24,6 +35,12 @@ use crate::frame::{
     CAN_ERR_FLAG, CAN_ERR_MASK, CAN_MAX_LEN, CANFD_LENGTHS, CANFD_MAX_LEN, CanFrame, CanId,
     FrameKind,
 };
+
+/// The longest line the reader accepts, bytes before the newline (a CR of a CRLF counts). The
+/// longest line the writer
+/// produces (a 64-byte CAN FD frame with `.` separators, a 9-digit fraction, a 15-byte interface
+/// name and a marker) is under 250 bytes.
+pub const MAX_LINE_BYTES: usize = 4096;
 
 /// Whether a node sent or received a frame (the ` T` / ` R` marker).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -80,6 +97,34 @@ pub enum LineError {
     /// The fourth field is not `R` or `T`.
     #[error("bad direction marker (R or T expected)")]
     Marker,
+    /// The line is longer than [`MAX_LINE_BYTES`]; the reader skips it without buffering it.
+    #[error("line longer than {MAX_LINE_BYTES} bytes")]
+    TooLong,
+}
+
+/// Why a frame or line cannot be written in the candump format.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum FormatError {
+    /// CAN FD flag bits above the low nibble: candump carries the flags as one hex digit.
+    #[error("CAN FD flags {flags:#04x} do not fit the candump flags digit (0x0-0xF)")]
+    FdFlags {
+        /// The frame's flags.
+        flags: u8,
+    },
+    /// An interface name that is empty or contains whitespace would split the line's fields.
+    #[error("interface name is empty or contains whitespace")]
+    Interface,
+}
+
+/// Errors of [`TraceWriter::write`].
+#[derive(Debug, thiserror::Error)]
+pub enum WriteError {
+    /// The frame (or the interface name) has no candump form; nothing was written.
+    #[error("not written: {0}")]
+    Unrepresentable(#[from] FormatError),
+    /// The underlying writer failed.
+    #[error("trace write: {0}")]
+    Io(#[from] io::Error),
 }
 
 /// Trace errors.
@@ -254,7 +299,36 @@ pub fn parse_line(line: &str) -> std::result::Result<TraceRecord, LineError> {
     })
 }
 
+/// Checks that `frame` has a candump form (see the module docs on CAN FD flags).
+///
+/// # Errors
+/// [`FormatError::FdFlags`] for CAN FD flag bits above 0x0F.
+pub fn check_frame(frame: &CanFrame) -> std::result::Result<(), FormatError> {
+    match frame.kind() {
+        FrameKind::Fd { flags } if flags > 0x0F => Err(FormatError::FdFlags { flags }),
+        _ => Ok(()),
+    }
+}
+
+/// Appends the frame field of `frame` in candump format to `out`, or leaves `out` as it was if the
+/// frame has no candump form.
+///
+/// # Errors
+/// [`FormatError::FdFlags`] for CAN FD flag bits above 0x0F.
+pub fn try_format_frame(
+    frame: &CanFrame,
+    out: &mut String,
+) -> std::result::Result<(), FormatError> {
+    check_frame(frame)?;
+    format_frame(frame, out);
+    Ok(())
+}
+
 /// Appends the frame field of `frame` in candump format to `out`.
+///
+/// For display. A CAN FD frame keeps only the low nibble of its flags here, as `candump` prints
+/// it; writers of trace files use [`try_format_frame`] or [`TraceWriter`], which refuse such a
+/// frame instead.
 pub fn format_frame(frame: &CanFrame, out: &mut String) {
     // Writing to a String cannot fail; the results are ignored for that reason.
     match (frame.kind(), frame.id()) {
@@ -287,6 +361,8 @@ pub fn format_frame(frame: &CanFrame, out: &mut String) {
 }
 
 /// Formats one `candump -L` line (without newline), with a 6-digit (microsecond) fraction.
+///
+/// For display, like [`format_frame`]; [`try_format_line`] refuses what a trace file cannot carry.
 pub fn format_line(
     timestamp_ns: u64,
     interface: &str,
@@ -310,6 +386,25 @@ pub fn format_line(
     out
 }
 
+/// Formats one `candump -L` line that [`parse_line`] reads back to the same frame, interface and
+/// direction (and the timestamp to the microsecond).
+///
+/// # Errors
+/// [`FormatError::FdFlags`] for CAN FD flag bits above 0x0F, [`FormatError::Interface`] for an
+/// empty interface name or one with whitespace.
+pub fn try_format_line(
+    timestamp_ns: u64,
+    interface: &str,
+    frame: &CanFrame,
+    direction: Option<Direction>,
+) -> std::result::Result<String, FormatError> {
+    check_frame(frame)?;
+    if interface.is_empty() || interface.chars().any(char::is_whitespace) {
+        return Err(FormatError::Interface);
+    }
+    Ok(format_line(timestamp_ns, interface, frame, direction))
+}
+
 /// Writes `candump -L` lines.
 #[derive(Debug)]
 pub struct TraceWriter<W: Write> {
@@ -331,17 +426,19 @@ impl<W: Write> TraceWriter<W> {
     /// Writes one line.
     ///
     /// # Errors
-    /// I/O errors of the underlying writer.
+    /// [`WriteError::Unrepresentable`] for a frame without a candump form (nothing is written; see
+    /// [`try_format_line`]), [`WriteError::Io`] for errors of the underlying writer.
     pub fn write(
         &mut self,
         timestamp_ns: u64,
         frame: &CanFrame,
         direction: Direction,
-    ) -> io::Result<()> {
+    ) -> std::result::Result<(), WriteError> {
         let dir = if self.markers { Some(direction) } else { None };
-        let line = format_line(timestamp_ns, &self.interface, frame, dir);
+        let line = try_format_line(timestamp_ns, &self.interface, frame, dir)?;
         self.out.write_all(line.as_bytes())?;
-        self.out.write_all(b"\n")
+        self.out.write_all(b"\n")?;
+        Ok(())
     }
 
     /// Flushes the underlying writer.
@@ -372,15 +469,33 @@ pub enum ReadMode {
 }
 
 /// A streaming reader over a `candump -L` log: an iterator of records, with memory independent of the
-/// file's length. Empty lines are ignored.
+/// file's length and of its line lengths (at most [`MAX_LINE_BYTES`] of a line are held). Empty lines
+/// are ignored.
+///
+/// Counters saturate at `u64::MAX`. In [`ReadMode::Skip`] the reader logs how many lines it skipped
+/// when it reaches the end of the input.
 #[derive(Debug)]
 pub struct TraceReader<R: BufRead> {
     input: R,
     mode: ReadMode,
     line_no: u64,
     skipped: u64,
+    too_long: u64,
+    /// The current line without its newline; never longer than [`MAX_LINE_BYTES`].
     buf: Vec<u8>,
+    /// An over-long line was reported and the rest of it, up to its newline, is still to be skipped.
+    resync: bool,
     done: bool,
+}
+
+/// What [`TraceReader::read_line`] found.
+enum LineRead {
+    /// End of input before any byte.
+    Eof,
+    /// A line of at most [`MAX_LINE_BYTES`] in `buf`; `complete` if it ended in a newline.
+    Line { complete: bool },
+    /// A line longer than [`MAX_LINE_BYTES`]: `buf` is empty, the rest of the line is unread.
+    TooLong,
 }
 
 impl<R: BufRead> TraceReader<R> {
@@ -391,19 +506,140 @@ impl<R: BufRead> TraceReader<R> {
             mode,
             line_no: 0,
             skipped: 0,
-            buf: Vec::with_capacity(256),
+            too_long: 0,
+            buf: Vec::with_capacity(MAX_LINE_BYTES),
+            resync: false,
             done: false,
         }
     }
 
-    /// Malformed lines so far, a truncated last line included ([`ReadMode::Skip`], [`ReadMode::Report`]).
+    /// Malformed lines so far, over-long and truncated last lines included ([`ReadMode::Skip`],
+    /// [`ReadMode::Report`]).
     pub fn skipped(&self) -> u64 {
         self.skipped
+    }
+
+    /// Lines longer than [`MAX_LINE_BYTES`] so far (also counted in [`Self::skipped`]).
+    pub fn too_long(&self) -> u64 {
+        self.too_long
     }
 
     /// Lines read so far.
     pub fn lines_read(&self) -> u64 {
         self.line_no
+    }
+
+    /// Capacity of the line buffer, bytes: [`MAX_LINE_BYTES`] whatever the input (for memory tests
+    /// and diagnostics).
+    pub fn line_buffer_capacity(&self) -> usize {
+        self.buf.capacity()
+    }
+
+    /// Skips input up to and including the next newline without keeping it.
+    fn skip_rest_of_line(&mut self) -> io::Result<()> {
+        loop {
+            let available = match self.input.fill_buf() {
+                Ok(available) => available,
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+                Err(e) => return Err(e),
+            };
+            if available.is_empty() {
+                return Ok(());
+            }
+            match available.iter().position(|&b| b == b'\n') {
+                Some(i) => {
+                    self.input.consume(i + 1);
+                    return Ok(());
+                }
+                None => {
+                    let n = available.len();
+                    self.input.consume(n);
+                }
+            }
+        }
+    }
+
+    /// Reads the next line into `buf` (without its newline), keeping at most [`MAX_LINE_BYTES`].
+    fn read_line(&mut self) -> io::Result<LineRead> {
+        self.buf.clear();
+        let mut any = false;
+        loop {
+            let available = match self.input.fill_buf() {
+                Ok(available) => available,
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+                Err(e) => return Err(e),
+            };
+            if available.is_empty() {
+                return Ok(if any {
+                    LineRead::Line { complete: false }
+                } else {
+                    LineRead::Eof
+                });
+            }
+            any = true;
+            let newline = available.iter().position(|&b| b == b'\n');
+            let part = &available[..newline.unwrap_or(available.len())];
+            if self.buf.len() + part.len() > MAX_LINE_BYTES {
+                // Leave the rest unread: the caller reports the line and then skips it.
+                self.buf.clear();
+                return Ok(LineRead::TooLong);
+            }
+            self.buf.extend_from_slice(part);
+            match newline {
+                Some(i) => {
+                    self.input.consume(i + 1);
+                    return Ok(LineRead::Line { complete: true });
+                }
+                None => {
+                    let n = part.len();
+                    self.input.consume(n);
+                }
+            }
+        }
+    }
+
+    fn io_error(&mut self, source: io::Error) -> Option<Result<TraceRecord>> {
+        self.done = true;
+        Some(Err(TraceError::Io {
+            line: self.line_no,
+            source,
+        }))
+    }
+
+    fn finish(&mut self) -> Option<Result<TraceRecord>> {
+        self.done = true;
+        if self.mode == ReadMode::Skip && self.skipped > 0 {
+            tracing::warn!(
+                skipped = self.skipped,
+                too_long = self.too_long,
+                lines = self.line_no,
+                "trace reader skipped malformed lines"
+            );
+        }
+        None
+    }
+
+    /// A malformed line: stop, skip or report according to the mode.
+    fn malformed(&mut self, kind: LineError) -> Option<Result<TraceRecord>> {
+        let err = TraceError::Malformed {
+            line: self.line_no,
+            kind,
+        };
+        match self.mode {
+            ReadMode::Stop => {
+                self.done = true;
+                Some(Err(err))
+            }
+            ReadMode::Skip => {
+                self.skipped = self.skipped.saturating_add(1);
+                tracing::debug!(line = self.line_no, %kind, "skipping malformed trace line");
+                None
+            }
+            ReadMode::Report => {
+                self.skipped = self.skipped.saturating_add(1);
+                Some(Err(err))
+            }
+        }
     }
 }
 
@@ -412,26 +648,32 @@ impl<R: BufRead> Iterator for TraceReader<R> {
 
     fn next(&mut self) -> Option<Self::Item> {
         while !self.done {
-            self.buf.clear();
-            let n = match self.input.read_until(b'\n', &mut self.buf) {
-                Ok(n) => n,
-                Err(source) => {
-                    self.done = true;
-                    return Some(Err(TraceError::Io {
-                        line: self.line_no,
-                        source,
-                    }));
+            if self.resync {
+                self.resync = false;
+                if let Err(source) = self.skip_rest_of_line() {
+                    return self.io_error(source);
                 }
-            };
-            if n == 0 {
-                self.done = true;
-                return None;
             }
-            self.line_no += 1;
-            let complete = self.buf.last() == Some(&b'\n');
+            let complete = match self.read_line() {
+                Ok(LineRead::Eof) => return self.finish(),
+                Ok(LineRead::Line { complete }) => complete,
+                Ok(LineRead::TooLong) => {
+                    self.line_no = self.line_no.saturating_add(1);
+                    self.too_long = self.too_long.saturating_add(1);
+                    // Reported before the rest of the line is skipped, so a reader in Stop mode
+                    // ends at once even on an endless line.
+                    self.resync = true;
+                    match self.malformed(LineError::TooLong) {
+                        Some(item) => return Some(item),
+                        None => continue,
+                    }
+                }
+                Err(source) => return self.io_error(source),
+            };
+            self.line_no = self.line_no.saturating_add(1);
             let parsed = match std::str::from_utf8(&self.buf) {
                 Ok(text) => {
-                    let text = text.trim_end_matches(['\n', '\r']);
+                    let text = text.trim_end_matches('\r');
                     if text.trim().is_empty() {
                         continue;
                     }
@@ -442,33 +684,18 @@ impl<R: BufRead> Iterator for TraceReader<R> {
             match parsed {
                 Ok(rec) => return Some(Ok(rec)),
                 Err(kind) if !complete => {
-                    self.skipped += 1;
+                    self.skipped = self.skipped.saturating_add(1);
                     self.done = true;
                     return Some(Err(TraceError::Truncated {
                         line: self.line_no,
                         kind,
                     }));
                 }
-                Err(kind) => match self.mode {
-                    ReadMode::Stop => {
-                        self.done = true;
-                        return Some(Err(TraceError::Malformed {
-                            line: self.line_no,
-                            kind,
-                        }));
+                Err(kind) => {
+                    if let Some(item) = self.malformed(kind) {
+                        return Some(item);
                     }
-                    ReadMode::Skip => {
-                        self.skipped += 1;
-                        tracing::debug!(line = self.line_no, %kind, "skipping malformed trace line");
-                    }
-                    ReadMode::Report => {
-                        self.skipped += 1;
-                        return Some(Err(TraceError::Malformed {
-                            line: self.line_no,
-                            kind,
-                        }));
-                    }
-                },
+                }
             }
         }
         None
@@ -653,5 +880,152 @@ mod tests {
         // A complete last line without a newline is fine.
         let items: Vec<_> = TraceReader::new(BOOM_LINE.as_bytes(), ReadMode::Stop).collect();
         assert!(items.len() == 1 && items[0].is_ok());
+    }
+
+    /// Produces `len` bytes of `byte` on demand, never a newline unless `byte` is one, and counts
+    /// what was read.
+    struct Generated {
+        byte: u8,
+        len: u64,
+        read: u64,
+    }
+
+    impl io::Read for Generated {
+        fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+            let left = self.len - self.read;
+            let n = buf.len().min(usize::try_from(left).unwrap_or(usize::MAX));
+            buf[..n].fill(self.byte);
+            self.read += n as u64;
+            Ok(n)
+        }
+    }
+
+    #[test]
+    fn a_64_mib_line_is_one_malformed_line_read_in_bounded_memory() {
+        const LEN: u64 = 64 << 20;
+        let mut input = io::BufReader::new(Generated {
+            byte: b'A',
+            len: LEN,
+            read: 0,
+        });
+        let mut reader = TraceReader::new(&mut input, ReadMode::Report);
+        let mut items = Vec::new();
+        while let Some(item) = reader.next() {
+            assert!(reader.line_buffer_capacity() <= MAX_LINE_BYTES);
+            items.push(item);
+        }
+        assert_eq!(items.len(), 1, "{items:?}");
+        assert!(matches!(
+            items[0],
+            Err(TraceError::Malformed {
+                line: 1,
+                kind: LineError::TooLong
+            })
+        ));
+        assert_eq!((reader.skipped(), reader.too_long()), (1, 1));
+        assert_eq!(reader.lines_read(), 1);
+        assert!(reader.line_buffer_capacity() <= MAX_LINE_BYTES);
+        drop(reader);
+        // The whole stream was consumed (skipped), not just the first 4 KiB.
+        assert_eq!(input.get_ref().read, LEN);
+    }
+
+    #[test]
+    fn zeros_like_dev_zero_do_not_allocate_beyond_the_line_limit() {
+        // `/dev/zero` as a bounded stream: skipped as one malformed line.
+        let input = io::BufReader::new(io::Read::take(io::repeat(0), 16 << 20));
+        let mut reader = TraceReader::new(input, ReadMode::Skip);
+        assert!(reader.next().is_none());
+        assert_eq!(reader.skipped(), 1);
+        assert!(reader.line_buffer_capacity() <= MAX_LINE_BYTES);
+        // ... and endless: a reader that stops at the first bad line ends at once.
+        let mut reader = TraceReader::new(io::BufReader::new(io::repeat(0)), ReadMode::Stop);
+        assert!(matches!(
+            reader.next(),
+            Some(Err(TraceError::Malformed {
+                line: 1,
+                kind: LineError::TooLong
+            }))
+        ));
+        assert!(reader.next().is_none());
+        assert!(reader.line_buffer_capacity() <= MAX_LINE_BYTES);
+    }
+
+    #[test]
+    fn reader_resynchronises_after_an_over_long_line() {
+        let long = "(1.000000) vcan0 123#".to_owned() + &"0".repeat(2 * MAX_LINE_BYTES);
+        let text = format!("{BOOM_LINE}\n{long}\n{BOOM_LINE}\n");
+        // A small read buffer splits the lines across reads.
+        let input = io::BufReader::with_capacity(7, text.as_bytes());
+        let items: Vec<_> = TraceReader::new(input, ReadMode::Report).collect();
+        assert_eq!(items.len(), 3, "{items:?}");
+        assert!(items[0].is_ok() && items[2].is_ok());
+        assert!(matches!(
+            items[1],
+            Err(TraceError::Malformed {
+                line: 2,
+                kind: LineError::TooLong
+            })
+        ));
+        let mut skip = TraceReader::new(text.as_bytes(), ReadMode::Skip);
+        assert_eq!(skip.by_ref().filter(Result::is_ok).count(), 2);
+        assert_eq!(
+            (skip.skipped(), skip.too_long(), skip.lines_read()),
+            (1, 1, 3)
+        );
+    }
+
+    #[test]
+    fn line_limit_is_exact() {
+        // A line of MAX_LINE_BYTES before its newline (a CR counts) is read and judged on its
+        // content; one byte more is too long.
+        let at_limit = "x".repeat(MAX_LINE_BYTES) + "\n";
+        let crlf_at_limit = "x".repeat(MAX_LINE_BYTES - 1) + "\r\n";
+        let over = "x".repeat(MAX_LINE_BYTES + 1) + "\n";
+        let crlf_over = "x".repeat(MAX_LINE_BYTES) + "\r\n";
+        for (text, kind) in [
+            (at_limit, LineError::Fields),
+            (crlf_at_limit, LineError::Fields),
+            (over, LineError::TooLong),
+            (crlf_over, LineError::TooLong),
+        ] {
+            let input = io::BufReader::with_capacity(100, text.as_bytes());
+            let items: Vec<_> = TraceReader::new(input, ReadMode::Stop).collect();
+            assert!(
+                matches!(items[..], [Err(TraceError::Malformed { line: 1, kind: k })] if k == kind),
+                "{items:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn fd_flags_round_trip_for_every_nibble_and_wider_flags_are_refused() {
+        for flags in 0..=0x0F_u8 {
+            let fd = CanFrame::new_fd(CanId::Extended(0x0CFF_5080), &[0x5A; 48], flags).unwrap();
+            let line = try_format_line(7_000, "can0", &fd, Some(Direction::Receive)).unwrap();
+            assert_eq!(parse_line(&line).unwrap().frame, fd, "{line}");
+        }
+        for flags in [0x10_u8, 0x14, 0x80, 0xFF] {
+            let fd = CanFrame::new_fd(CanId::Standard(0x12), &[1, 2], flags).unwrap();
+            assert_eq!(check_frame(&fd), Err(FormatError::FdFlags { flags }));
+            let mut out = String::new();
+            assert!(try_format_frame(&fd, &mut out).is_err());
+            assert!(out.is_empty());
+            let mut writer = TraceWriter::new(Vec::new(), "can0", false);
+            assert!(matches!(
+                writer.write(0, &fd, Direction::Transmit),
+                Err(WriteError::Unrepresentable(FormatError::FdFlags { .. }))
+            ));
+            assert!(writer.into_inner().is_empty());
+        }
+        let data = CanFrame::new_standard(0x12, &[1]).unwrap();
+        assert_eq!(
+            try_format_line(0, "can 0", &data, None),
+            Err(FormatError::Interface)
+        );
+        assert_eq!(
+            try_format_line(0, "", &data, None),
+            Err(FormatError::Interface)
+        );
     }
 }

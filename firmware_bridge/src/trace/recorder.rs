@@ -2,8 +2,11 @@
 //! blocking the control path.
 //!
 //! Frames go into a bounded queue with [`Recorder::record`], which never blocks: if the queue is full
-//! the frame is counted as dropped ([`RecorderStats::dropped`]) instead. A writer thread formats and
-//! writes the lines through a buffered writer.
+//! the frame is counted as dropped ([`RecorderStats::dropped`]) instead. A frame the candump format
+//! cannot carry (CAN FD flag bits above 0x0F, see [`super`]) is not queued but counted as rejected
+//! ([`RecorderStats::rejected`]); the first one is logged. A writer thread formats and writes the
+//! lines through a buffered writer. The counters saturate at `u64::MAX`; [`Recorder::close`] logs
+//! them when frames were lost.
 //!
 //! **Shutdown:** call [`Recorder::close`] (or at least [`Recorder::flush`]) before the process ends,
 //! including on Ctrl-C: `select!` on `tokio::signal::ctrl_c()` in the main loop, send the neutral
@@ -18,11 +21,15 @@ use std::sync::mpsc::{self, SyncSender, TrySendError};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 
-use super::{Direction, TraceWriter};
+use super::{Direction, TraceWriter, WriteError, check_frame};
 use crate::frame::CanFrame;
 
 /// Default queue length: about a minute of the full 100 Hz schedule.
 pub const DEFAULT_CAPACITY: usize = 65_536;
+
+/// Largest queue length [`Recorder::new`] accepts: the queue's slots are allocated up front
+/// (a frame is about 80 bytes, so this is about 80 MiB).
+pub const MAX_QUEUE_CAPACITY: usize = 1 << 20;
 
 /// Recorder errors.
 #[derive(Debug, thiserror::Error)]
@@ -36,6 +43,12 @@ pub enum RecorderError {
     /// The writer thread panicked.
     #[error("trace writer thread panicked")]
     WriterPanicked,
+    /// A queue length of 0 or above [`MAX_QUEUE_CAPACITY`].
+    #[error("trace queue capacity {requested} is not in 1..={MAX_QUEUE_CAPACITY}")]
+    Capacity {
+        /// The capacity asked for.
+        requested: usize,
+    },
 }
 
 /// Counts of a recorder.
@@ -45,6 +58,26 @@ pub struct RecorderStats {
     pub recorded: u64,
     /// Frames not queued because the queue was full or the recorder closed.
     pub dropped: u64,
+    /// Frames not queued because the candump format cannot carry them (CAN FD flag bits above 0x0F).
+    pub rejected: u64,
+}
+
+impl RecorderStats {
+    /// Frames handed to the recorder that will not be in the file.
+    pub fn lost(&self) -> u64 {
+        self.dropped.saturating_add(self.rejected)
+    }
+}
+
+/// Adds one to `counter`, saturating at `u64::MAX` (a wrapped loss counter would read as no loss).
+fn bump(counter: &AtomicU64) -> u64 {
+    let previous = counter
+        .fetch_update(Ordering::Relaxed, Ordering::Relaxed, |n| {
+            Some(n.saturating_add(1))
+        })
+        // The closure always returns Some, so fetch_update cannot fail; both arms hold the old value.
+        .unwrap_or_else(|n| n);
+    previous.saturating_add(1)
 }
 
 enum Command {
@@ -62,6 +95,7 @@ struct Inner {
     thread: Mutex<Option<JoinHandle<io::Result<()>>>>,
     recorded: AtomicU64,
     dropped: AtomicU64,
+    rejected: AtomicU64,
 }
 
 impl Inner {
@@ -84,6 +118,7 @@ impl Inner {
         RecorderStats {
             recorded: self.recorded.load(Ordering::Relaxed),
             dropped: self.dropped.load(Ordering::Relaxed),
+            rejected: self.rejected.load(Ordering::Relaxed),
         }
     }
 }
@@ -91,13 +126,20 @@ impl Inner {
 impl Drop for Inner {
     fn drop(&mut self) {
         match self.close() {
-            Ok(stats) if stats.dropped > 0 => {
-                tracing::warn!(dropped = stats.dropped, "trace recorder dropped frames");
-            }
+            Ok(stats) if stats.lost() > 0 => log_losses(&stats),
             Ok(_) | Err(RecorderError::Closed) => {}
             Err(e) => tracing::warn!("closing trace recorder: {e}"),
         }
     }
+}
+
+fn log_losses(stats: &RecorderStats) {
+    tracing::warn!(
+        dropped = stats.dropped,
+        rejected = stats.rejected,
+        recorded = stats.recorded,
+        "trace recorder lost frames"
+    );
 }
 
 /// A handle to a trace recorder; clones share one file and queue.
@@ -127,6 +169,7 @@ impl Recorder {
     /// Records to any writer. `markers` adds ` R`/` T` to each line; `capacity` bounds the queue.
     ///
     /// # Errors
+    /// [`RecorderError::Capacity`] for a capacity of 0 or above [`MAX_QUEUE_CAPACITY`],
     /// [`RecorderError::Io`] if the writer thread cannot be started.
     pub fn new(
         out: Box<dyn Write + Send>,
@@ -134,7 +177,12 @@ impl Recorder {
         markers: bool,
         capacity: usize,
     ) -> Result<Self, RecorderError> {
-        let (tx, rx) = mpsc::sync_channel::<Command>(capacity.max(1));
+        if !(1..=MAX_QUEUE_CAPACITY).contains(&capacity) {
+            return Err(RecorderError::Capacity {
+                requested: capacity,
+            });
+        }
+        let (tx, rx) = mpsc::sync_channel::<Command>(capacity);
         let mut writer = TraceWriter::new(BufWriter::new(out), interface, markers);
         let thread = std::thread::Builder::new()
             .name("can-trace".into())
@@ -148,7 +196,14 @@ impl Recorder {
                             frame,
                         } => {
                             if result.is_ok() {
-                                result = writer.write(timestamp_ns, &frame, direction);
+                                match writer.write(timestamp_ns, &frame, direction) {
+                                    Ok(()) => {}
+                                    Err(WriteError::Io(e)) => result = Err(e),
+                                    // `record` refuses (and counts) these before they are queued.
+                                    Err(e @ WriteError::Unrepresentable(_)) => {
+                                        tracing::debug!(%e, "trace frame not written");
+                                    }
+                                }
                             }
                         }
                         Command::Flush(ack) => {
@@ -169,12 +224,20 @@ impl Recorder {
                 thread: Mutex::new(Some(thread)),
                 recorded: AtomicU64::new(0),
                 dropped: AtomicU64::new(0),
+                rejected: AtomicU64::new(0),
             }),
         })
     }
 
-    /// Queues a frame. Never blocks: a full queue (or a closed recorder) counts the frame as dropped.
+    /// Queues a frame. Never blocks: a full queue (or a closed recorder) counts the frame as dropped,
+    /// a frame without a candump form as rejected.
     pub fn record(&self, timestamp_ns: u64, direction: Direction, frame: &CanFrame) {
+        if let Err(e) = check_frame(frame) {
+            if bump(&self.inner.rejected) == 1 {
+                tracing::warn!(%e, ?frame, "trace recorder rejects a frame (further ones only counted)");
+            }
+            return;
+        }
         let cmd = Command::Frame {
             timestamp_ns,
             direction,
@@ -182,10 +245,10 @@ impl Recorder {
         };
         match self.inner.tx.try_send(cmd) {
             Ok(()) => {
-                self.inner.recorded.fetch_add(1, Ordering::Relaxed);
+                bump(&self.inner.recorded);
             }
             Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
-                self.inner.dropped.fetch_add(1, Ordering::Relaxed);
+                bump(&self.inner.dropped);
             }
         }
     }
@@ -211,8 +274,8 @@ impl Recorder {
     /// [`RecorderError::Io`] for a write error, [`RecorderError::Closed`] if already closed.
     pub fn close(&self) -> Result<RecorderStats, RecorderError> {
         let stats = self.inner.close()?;
-        if stats.dropped > 0 {
-            tracing::warn!(dropped = stats.dropped, "trace recorder dropped frames");
+        if stats.lost() > 0 {
+            log_losses(&stats);
         }
         Ok(stats)
     }
@@ -264,7 +327,8 @@ mod tests {
             stats,
             RecorderStats {
                 recorded: 100,
-                dropped: 0
+                dropped: 0,
+                rejected: 0,
             }
         );
         let file = std::io::BufReader::new(File::open(&path).unwrap());
@@ -303,5 +367,52 @@ mod tests {
             .lines()
             .count() as u64;
         assert_eq!(lines, closed.recorded);
+    }
+
+    #[test]
+    fn frames_without_a_candump_form_are_rejected_and_counted() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("fd.log");
+        let rec = Recorder::create(&path, "can0").unwrap();
+        let id = crate::frame::CanId::Standard(0x123);
+        let ok = CanFrame::new_fd(id, &[1; 12], 0x0F).unwrap();
+        let wide = CanFrame::new_fd(id, &[1; 12], 0x10).unwrap();
+        rec.record(1_000, Direction::Receive, &ok);
+        rec.record(2_000, Direction::Receive, &wide);
+        rec.record(3_000, Direction::Receive, &wide);
+        let stats = rec.close().unwrap();
+        assert_eq!(
+            stats,
+            RecorderStats {
+                recorded: 1,
+                dropped: 0,
+                rejected: 2,
+            }
+        );
+        assert_eq!(stats.lost(), 2);
+        let file = std::io::BufReader::new(File::open(&path).unwrap());
+        let recs: Vec<_> = TraceReader::new(file, ReadMode::Stop)
+            .map(|r| r.unwrap())
+            .collect();
+        assert_eq!(recs.len(), 1);
+        assert_eq!(recs[0].frame, ok);
+    }
+
+    #[test]
+    fn queue_capacity_is_bounded() {
+        for capacity in [0, MAX_QUEUE_CAPACITY + 1, usize::MAX] {
+            assert!(matches!(
+                Recorder::new(Box::new(io::sink()), "can0", false, capacity),
+                Err(RecorderError::Capacity { requested }) if requested == capacity
+            ));
+        }
+    }
+
+    #[test]
+    fn counters_saturate() {
+        let counter = AtomicU64::new(u64::MAX - 1);
+        assert_eq!(bump(&counter), u64::MAX);
+        assert_eq!(bump(&counter), u64::MAX);
+        assert_eq!(counter.load(Ordering::Relaxed), u64::MAX);
     }
 }
