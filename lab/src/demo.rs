@@ -510,12 +510,7 @@ pub fn setup(args: &DemoArgs) -> anyhow::Result<(SimConfig, ControllerConfig, Au
         sim.scenario.soil_contact = c.into();
     }
     let mut config = match &args.config {
-        Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("reading the controller config {}", p.display()))?;
-            ControllerConfig::from_toml_str(&text)
-                .with_context(|| format!("controller config {}", p.display()))?
-        }
+        Some(p) => ControllerConfig::from_toml_file(p).context("controller config")?,
         None => {
             let mut c = ControllerConfig::default();
             c.cycle.actions = demo_plan();
