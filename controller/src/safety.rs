@@ -254,8 +254,8 @@ pub struct SafetyConfig {
 
 /// Period of the gateway's control signals (angles, rates, pressures), s: 100 Hz (docs/protocol.md).
 pub const SENSOR_PERIOD_S: f64 = 0.01;
-/// Period of the gateway status, s: 10 Hz (docs/protocol.md).
-pub const GATEWAY_STATUS_PERIOD_S: f64 = 0.1;
+/// Period of the gateway status, s: 20 Hz (docs/protocol.md).
+pub const GATEWAY_STATUS_PERIOD_S: f64 = 0.05;
 /// The gateway's heartbeat watchdog and command timeout, s (`firmware_bridge::gateway::GatewayConfig`).
 pub const GATEWAY_WATCHDOG_S: f64 = 0.1;
 /// The controller's control period, s ([`crate::run::CONTROL_PERIOD`]).
@@ -282,7 +282,7 @@ impl SafetyConfig {
             "status_max_age_s",
             self.status_max_age_s,
             Limits::above(GATEWAY_STATUS_PERIOD_S, 1.0, "s"),
-            "above the 100 ms gateway status period",
+            "above the 50 ms gateway status period",
         )?;
         check(
             S,
