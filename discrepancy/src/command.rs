@@ -1,4 +1,4 @@
-//! `excavator-ctl discrepancy`: the model-discrepancy workflow on measured sessions (issue 8,
+//! `excavator-ctl discrepancy`: the model-discrepancy workflow on measured sessions (
 //! docs/discrepancy.md).
 //!
 //! - [`read`]: a session folder (`trace.log` + `scans/`) -> 100 Hz records per dig;
@@ -17,21 +17,12 @@ use anyhow::Context as _;
 use clap::{Args, Subcommand};
 use planner::machine::MachineConfig;
 
-/// Arguments of `excavator-ctl discrepancy`.
-#[derive(Debug, Clone, Args)]
-#[command(args_conflicts_with_subcommands = true)]
-pub struct DiscrepancyArgs {
-    /// `eval` or `bench`; without one, analyse the `--measured` sessions.
-    #[command(subcommand)]
-    pub cmd: Option<DiscrepancyCommand>,
-    /// The analysis of measured sessions.
-    #[command(flatten)]
-    pub analyse: AnalyseArgs,
-}
-
 /// Subcommands of `excavator-ctl discrepancy`.
 #[derive(Debug, Clone, Subcommand)]
 pub enum DiscrepancyCommand {
+    /// Analyse measured sessions: where the model and the measurements disagree, the missing effect
+    /// named and added to the model.
+    Analyse(AnalyseArgs),
     /// Hidden-effect evaluation: generate sessions with one hidden effect each (and effect-free ones),
     /// analyse them told nothing, print the confusion table.
     Eval(eval::EvalArgs),
@@ -43,7 +34,7 @@ pub enum DiscrepancyCommand {
 #[derive(Debug, Clone, Args)]
 pub struct AnalyseArgs {
     /// Session folders as `excavator-ctl demo` writes them (`trace.log`, `scans/`); repeatable.
-    #[arg(long, value_name = "DIR", num_args = 1..)]
+    #[arg(long, value_name = "DIR", num_args = 1.., required = true)]
     pub measured: Vec<PathBuf>,
     /// Starting model file (default: the shipped nominal model, config/nominal_greybox.json).
     #[arg(long, value_name = "FILE")]
@@ -66,17 +57,17 @@ pub struct AnalyseArgs {
 ///
 /// # Errors
 /// Reading the sessions, too little data, writing the outputs.
-pub fn run(args: DiscrepancyArgs) -> anyhow::Result<()> {
-    match args.cmd {
-        Some(DiscrepancyCommand::Eval(a)) => eval::run_eval(&a),
-        Some(DiscrepancyCommand::Bench(a)) => eval::run_bench(&a),
-        None => {
-            if args.analyse.measured.is_empty() {
-                anyhow::bail!("give at least one --measured DIR (or a subcommand: eval, bench)");
+pub fn run(cmd: DiscrepancyCommand) -> anyhow::Result<()> {
+    match cmd {
+        DiscrepancyCommand::Eval(a) => eval::run_eval(&a),
+        DiscrepancyCommand::Bench(a) => eval::run_bench(&a),
+        DiscrepancyCommand::Analyse(a) => {
+            if a.measured.is_empty() {
+                anyhow::bail!("give at least one --measured DIR");
             }
-            let out = run_analysis(&args.analyse)?;
+            let out = run_analysis(&a)?;
             print!("{}", report::summary_text(&out.result));
-            println!("report: {}", args.analyse.out.join("report.md").display());
+            println!("report: {}", a.out.join("report.md").display());
             Ok(())
         }
     }

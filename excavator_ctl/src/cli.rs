@@ -40,10 +40,14 @@ pub enum Command {
         #[command(subcommand)]
         cmd: lab::model::ModelCommand,
     },
-    /// Model-discrepancy workflow: where the model and measured sessions disagree, the missing effect
-    /// named and added (`--measured DIR... --out DIR`), `eval` (hidden-effect confusion table), `bench`
+    /// Model-discrepancy workflow: `analyse` measured sessions (where the model and the measurements
+    /// disagree, the missing effect named and added), `eval` (hidden-effect confusion table), `bench`
     /// (docs/discrepancy.md).
-    Discrepancy(discrepancy::command::DiscrepancyArgs),
+    Discrepancy {
+        /// The discrepancy command.
+        #[command(subcommand)]
+        cmd: discrepancy::command::DiscrepancyCommand,
+    },
 }
 
 /// Arguments of `excavator-ctl run`.
@@ -144,6 +148,19 @@ mod tests {
         assert!(
             Cli::try_parse_from(["excavator-ctl", "discrepancy", "eval", "--digs", "2"]).is_ok()
         );
+        // The analysis is a subcommand like the others, and needs its sessions.
+        assert!(Cli::try_parse_from(["excavator-ctl", "discrepancy", "analyse"]).is_err());
+        assert!(
+            Cli::try_parse_from([
+                "excavator-ctl",
+                "discrepancy",
+                "analyse",
+                "--measured",
+                "s1"
+            ])
+            .is_ok()
+        );
+        assert!(Cli::try_parse_from(["excavator-ctl", "discrepancy", "--measured", "s1"]).is_err());
     }
 
     /// Table 2 and Fig. 52 are `experiment` commands that print the simulator's and the dig model's
