@@ -4,7 +4,7 @@
 
 use serde::Serialize;
 
-use super::greybox::SignalGroups;
+use crate::signal::SignalGroups;
 
 /// Number of candidate effects.
 pub const N_CANDIDATES: usize = 12;

@@ -28,6 +28,7 @@ pub mod greybox;
 pub mod model;
 pub mod read;
 pub mod report;
+pub mod signal;
 pub mod soil_replay;
 pub mod stats;
 
