@@ -8,14 +8,13 @@
 //!
 //! The physics, fitting and statistics are `planner::discrepancy`.
 
-
 use std::path::{Path, PathBuf};
 
+use crate::greybox::PreparedRecord;
+use crate::{AnalysisConfig, AnalysisResult, AugmentedModel, analyse};
+use crate::{eval, read, report};
 use anyhow::Context as _;
 use clap::{Args, Subcommand};
-use crate::greybox::PreparedRecord;
-use crate::{eval, read, report};
-use crate::{AnalysisConfig, AnalysisResult, AugmentedModel, analyse};
 use planner::machine::MachineConfig;
 
 /// Arguments of `excavator-ctl discrepancy`.

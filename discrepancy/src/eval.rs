@@ -8,9 +8,9 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
+use crate::{AnalysisConfig, Candidate, analyse};
 use anyhow::Context as _;
 use clap::Args;
-use crate::{AnalysisConfig, Candidate, analyse};
 use rayon::prelude::*;
 use serde::Serialize;
 

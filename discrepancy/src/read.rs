@@ -7,10 +7,10 @@ use std::fs::File;
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
+use crate::{DigRecord, LoadTag, Sample, StageTag};
 use anyhow::Context as _;
 use firmware_bridge::messages::{Activity, AutodigStageCode, GatewayMode, Message};
 use firmware_bridge::trace::{ReadMode, TraceReader};
-use crate::{DigRecord, LoadTag, Sample, StageTag};
 use planner::machine::MachineConfig;
 use planner::terrain::SectionProfile;
 use serde::Deserialize;

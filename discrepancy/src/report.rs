@@ -6,10 +6,10 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::Context as _;
 use crate::greybox::{N_SIGNALS, PreparedRecord, SignalGroups, replay};
 use crate::model::ModelEffect;
 use crate::{AnalysisResult, AugmentedModel, Signal};
+use anyhow::Context as _;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use serde::Serialize;

@@ -4,8 +4,8 @@
 
 use std::sync::atomic::AtomicBool;
 
-use lab::demo::{DemoArgs, run_session};
 use discrepancy::command::{AnalyseArgs, run_analysis};
+use lab::demo::{DemoArgs, run_session};
 
 fn session(dir: &std::path::Path, effect: Option<&str>, seed: u64) {
     let mut demo = DemoArgs::new(dir.to_path_buf());
