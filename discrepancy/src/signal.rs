@@ -1,8 +1,7 @@
 //! The signals the grey-box model predicts and the discrepancy workflow compares with the
 //! measurements (cylinder velocities, pump pressures, cylinder and soil forces, end-stop angles, the
-//! weighed payload), and the groups a replay recomputes. Shared by the replay ([`crate::greybox`]),
-//! the candidate library ([`crate::effects`]: which groups a candidate acts on), the statistics and
-//! the reports.
+//! weighed payload), and the groups a replay recomputes. Shared by the grey-box replay, the
+//! candidate library (which groups a candidate acts on), the statistics and the reports.
 
 use serde::{Deserialize, Serialize};
 
