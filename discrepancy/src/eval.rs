@@ -14,7 +14,8 @@ use clap::Args;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::command::{AnalyseArgs, load_machine, load_model, prepare_sessions, run_analysis};
+use crate::analysis::{AnalyseArgs, run_analysis};
+use crate::session::{load_machine, load_model, prepare_sessions};
 use lab::demo::{DemoArgs, SoilContact, run_session};
 
 /// Arguments of `discrepancy eval`.

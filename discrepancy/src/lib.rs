@@ -20,6 +20,7 @@
 //! - [`model`]: the augmented model file ([`AugmentedModel`]), and the grey-box actuator that implements
 //!   [`planner::dig_model::ActuatorDynamics`] so the planner's dig model runs with it.
 
+pub mod analysis;
 pub mod command;
 pub mod effects;
 pub mod eval;
@@ -28,6 +29,7 @@ pub mod greybox;
 pub mod model;
 pub mod read;
 pub mod report;
+pub mod session;
 pub mod signal;
 pub mod soil_replay;
 pub mod stats;

@@ -40,8 +40,9 @@ pub enum Command {
         cmd: lab::model_cmd::ModelCommand,
     },
     /// Model-discrepancy workflow: where the model and measured sessions disagree, the missing effect
-    /// named and added (`--measured DIR... --out DIR`), `eval` (hidden-effect confusion table), `bench`
-    /// (docs/discrepancy.md).
+    /// named and added (`analyse --measured DIR... --out DIR`), `eval` (hidden-effect confusion
+    /// table), `bench` (docs/discrepancy.md).
+    #[command(subcommand)]
     Discrepancy(discrepancy::command::DiscrepancyArgs),
 }
 
@@ -134,6 +135,7 @@ mod tests {
             &["excavator-ctl", "discrepancy", "eval", "--digs", "1"],
             &["excavator-ctl", "discrepancy", "eval", "--seeds", "0"],
             &["excavator-ctl", "discrepancy", "bench", "--digs", "0"],
+            &["excavator-ctl", "discrepancy", "analyse", "--out", "d"],
             &["excavator-ctl", "run", "--iface", "vcan0", "--digs", "0"],
         ] {
             assert!(Cli::try_parse_from(args).is_err(), "{args:?} parsed");
