@@ -2,6 +2,8 @@
 //!
 //! Layout (data flows top to bottom):
 //! - [`machine`]: the machine description (`config/machine.toml`): geometry, cylinders, masses, hydraulics.
+//! - [`effects`]: the catalogue of hidden physical effects (names, units, ranges) that the simulator
+//!   applies and the discrepancy workflow identifies.
 //! - [`kinematics`]: joint angles <-> cylinder lengths, forward/inverse kinematics, Jacobian, gravity and
 //!   tip forces <-> cylinder forces (Appendix, Eqs. A1-A23).
 //! - [`terrain`]: the 2.5-D elevation grid, section profiles, cutting, spoil piles and the swept-volume
@@ -23,6 +25,7 @@ pub mod actuator;
 pub mod autodig;
 pub mod cleanup;
 pub mod dig_model;
+pub mod effects;
 pub mod estimate;
 mod input_check;
 pub mod kinematics;
