@@ -8,6 +8,7 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
+use crate::effects::CandidateEffect as _;
 use crate::{AnalysisConfig, Candidate, analyse};
 use anyhow::Context as _;
 use clap::Args;
@@ -550,5 +551,19 @@ mod tests {
             session.join("trace.log").exists(),
             "a finished session is kept"
         );
+    }
+
+    /// Every evaluation magnitude is one the simulator accepts for the effect of that name (eval
+    /// hides it as `--effect NAME=VALUE`).
+    #[test]
+    fn the_evaluation_magnitudes_are_in_the_simulators_ranges() {
+        for c in Candidate::ALL {
+            for m in magnitudes(c) {
+                let mut set = vcan_sim::effects::EffectSet::nominal();
+                if let Err(e) = set.apply_arg(&format!("{}={m}", c.name())) {
+                    panic!("{e}");
+                }
+            }
+        }
     }
 }

@@ -216,6 +216,7 @@ pub fn replay(
 mod tests {
     use super::super::inertia::gravity_forces;
     use super::*;
+    use crate::effects::CandidateEffect as _;
     use crate::{DigRecord, LoadTag, Sample, StageTag};
     use planner::kinematics::{Joint, JointAngles, Kinematics};
     use planner::machine::MachineConfig;
