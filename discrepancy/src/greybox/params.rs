@@ -81,7 +81,7 @@ pub struct GreyBoxParams {
 
     /// The spill of a full bucket on the terrain in the soil relation: what the edge cuts beyond the
     /// capacity piles up around the edge at [`Self::spill_repose_rad`], and out of the soil the
-    /// bucket holds less as its opening tips down ([`soil_replay::CutSection::spill`]). Off: the
+    /// bucket holds less as its opening tips down ([`crate::soil_replay::CutSection::spill`]). Off: the
     /// spill leaves the terrain untouched and the bucket holds the cut volume up to its capacity.
     #[serde(default)]
     pub spill_pile: bool,

@@ -21,7 +21,7 @@ pub const WARMUP_SAMPLES: usize = 50;
 
 /// A pause between two samples longer than this is a gap in the record, s (the reader leaves out the
 /// samples under the gateway's position mode, whose spools the gateway set itself): the spool
-/// integration ([`spools`]) steps over it as one sample and comes out of it with the state before it.
+/// integration ([`super::spools`]) steps over it as one sample and comes out of it with the state before it.
 const GAP_S: f64 = 0.05;
 
 /// Whether each sample is at least [`WARMUP_SAMPLES`] past the start of its record or the last gap.
@@ -121,7 +121,7 @@ impl PreparedRecord {
     /// Precomputes the kinematic and soil terms of a record.
     ///
     /// # Errors
-    /// [`DiscrepancyError`] when the record is invalid or the machine geometry cannot be built.
+    /// [`crate::DiscrepancyError`] when the record is invalid or the machine geometry cannot be built.
     pub fn new(record: &DigRecord, cfg: &MachineConfig, params: &GreyBoxParams) -> Result<Self> {
         record.validate()?;
         params.validate()?;
