@@ -3,17 +3,6 @@
 
 use super::world::World;
 
-/// The angle-of-repose relaxation of the bench material near the cuts ([`World::advance_slopes`]).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(super) struct Slump {
-    /// `tan` of the bench material's angle of repose.
-    pub(super) tan_repose: f64,
-    /// Cells `[i0, i1, j0, j1]` (inclusive) the bucket cut or a slump moved since the last pass.
-    pub(super) dirty: Option<[usize; 4]>,
-    /// Time since the last pass, s (runs while something is dirty).
-    pub(super) clock_s: f64,
-}
-
 /// Period of the slope relaxation passes, s (5 Hz: a slump of a 1 m wall of 0.1 m cells settles
 /// within a few seconds of simulated time).
 const SLUMP_PERIOD_S: f64 = 0.2;
@@ -26,8 +15,6 @@ const SLUMP_RATE: f64 = 1.0;
 const SLUMP_MARGIN_CELLS: usize = 3;
 /// Smallest height moved between two cells, m (below it the pair counts as at rest).
 const SLUMP_MIN_MOVE_M: f64 = 1.0e-4;
-/// Sweeps of the relaxation over the whole grid that settle an undulating bench before the start.
-pub(super) const INITIAL_SETTLE_SWEEPS: usize = 400;
 
 impl World {
     /// Marks the cells `i0..i1`, `j0..j1` (exclusive ends) as cut, for the next relaxation pass.

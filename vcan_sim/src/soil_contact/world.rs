@@ -6,7 +6,6 @@ use planner::soil::SoilProperties;
 use planner::terrain::{TerrainError, TerrainGrid};
 use rand::{RngExt, SeedableRng};
 
-use super::slump::{INITIAL_SETTLE_SWEEPS, Slump};
 use crate::scenario::{Boulder, Scenario, SoilSpec};
 
 /// Soil properties `Psi` of a scenario soil (degrees in the file, radians here).
@@ -60,6 +59,19 @@ pub struct World {
     pub(super) slump: Option<Slump>,
 }
 
+/// The angle-of-repose relaxation of the bench material near the cuts ([`World::advance_slopes`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Slump {
+    /// `tan` of the bench material's angle of repose.
+    pub(super) tan_repose: f64,
+    /// Cells `[i0, i1, j0, j1]` (inclusive) the bucket cut or a slump moved since the last pass.
+    pub(super) dirty: Option<[usize; 4]>,
+    /// Time since the last pass, s (runs while something is dirty).
+    pub(super) clock_s: f64,
+}
+
+/// Sweeps of the relaxation over the whole grid that settle an undulating bench before the start.
+const INITIAL_SETTLE_SWEEPS: usize = 400;
 /// Undulation: Fourier modes of the random field and the height over the floor over which its
 /// amplitude tapers to zero at the toe, m.
 const UNDULATION_MODES: usize = 64;
