@@ -87,7 +87,8 @@ fn effect_free_session_reports_no_missing_effect() {
 }
 
 /// The CI-sized confusion table (`excavator-ctl discrepancy eval --quick`: six hidden effects, one
-/// effect-free session, four digs each; seconds): the targets on it, every case counted.
+/// effect-free session, four digs each; seconds): the workflow's targets on it (docs/discrepancy.md),
+/// every case counted.
 #[test]
 fn quick_confusion_table() {
     let tmp = tempfile::tempdir().unwrap();
