@@ -1,125 +1,32 @@
-//! The library of candidate effects: each a named physical augmentation of the grey-box model with one
-//! parameter, its unit and bounds (the simulator's names, units and ranges, so a fitted magnitude
-//! compares with a hidden one directly) and the signals it acts on.
+//! The library of candidate effects: every effect of the catalogue ([`planner::effects`]: the
+//! simulator's names, units and ranges, so a fitted magnitude compares with a hidden one directly) as
+//! a one-parameter augmentation of the grey-box model, with how the model adds it and the signals it
+//! acts on ([`CandidateEffect`]).
 
-use serde::Serialize;
+use crate::signal::SignalGroups;
 
-use super::greybox::SignalGroups;
+/// A candidate effect: an effect of the catalogue.
+pub use planner::effects::Effect as Candidate;
+/// Number of candidate effects: the catalogue's.
+pub use planner::effects::N_EFFECTS as N_CANDIDATES;
 
-/// Number of candidate effects.
-pub const N_CANDIDATES: usize = 12;
+/// What the candidate library adds to a catalogue effect: how the grey-box model represents it,
+/// which signals it acts on and the scale of its fit. Its name, unit and bounds (the catalogue's
+/// range) are the catalogue's.
+pub trait CandidateEffect {
+    /// How the grey-box model adds the effect, in plain language (the reports' description).
+    fn model_description(self) -> &'static str;
 
-/// One candidate effect.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Candidate {
-    /// Valve dead band: `|u|` below the magnitude gives no spool motion.
-    ValveDeadband,
-    /// Extra fixed command-to-spool delay.
-    TransportDelay,
-    /// Extra first-order lag in series with the spool response.
-    HydraulicLag,
-    /// Boom meter-in area scaled by `1 - m |bucket spool|` (shared pump 1).
-    FlowSharing,
-    /// Pumps saturating at `(1 - m)` of their nominal maximum flow.
-    PumpSaturation,
-    /// Dry friction with stiction in every cylinder.
-    CoulombFriction,
-    /// Extra viscous friction in every cylinder.
-    ViscousFriction,
-    /// Cross-piston leakage `m (p_h - p_r)` in every cylinder.
-    InternalLeakage,
-    /// Offset on every pressure reading.
-    PressureSensorOffset,
-    /// Offset on the boom, stick and bucket resolver readings.
-    ResolverOffset,
-    /// Higher soil cohesion (FEE `c`, Eq. 17).
-    SoilCohesion,
-    /// Higher soil density (FEE `gamma`, Eq. 17, and the payload).
-    SoilDensity,
+    /// The signal groups the candidate is fitted and scored on (the others need no recomputation
+    /// when fitting it).
+    fn groups(self) -> SignalGroups;
+
+    /// A typical magnitude, the scale of the golden-section tolerance and of the uncertainty step.
+    fn scale(self) -> f64;
 }
 
-impl Candidate {
-    /// Every candidate, in the simulator's registry order.
-    pub const ALL: [Candidate; N_CANDIDATES] = [
-        Candidate::ValveDeadband,
-        Candidate::TransportDelay,
-        Candidate::HydraulicLag,
-        Candidate::FlowSharing,
-        Candidate::PumpSaturation,
-        Candidate::CoulombFriction,
-        Candidate::ViscousFriction,
-        Candidate::InternalLeakage,
-        Candidate::PressureSensorOffset,
-        Candidate::ResolverOffset,
-        Candidate::SoilCohesion,
-        Candidate::SoilDensity,
-    ];
-
-    /// Index in [`Candidate::ALL`] and in [`super::Augmentation::values`].
-    pub fn index(self) -> usize {
-        self as usize
-    }
-
-    /// The simulator's effect name (`excavator-sim --list-effects`).
-    pub fn name(self) -> &'static str {
-        match self {
-            Candidate::ValveDeadband => "valve_deadband",
-            Candidate::TransportDelay => "transport_delay",
-            Candidate::HydraulicLag => "hydraulic_lag",
-            Candidate::FlowSharing => "flow_sharing",
-            Candidate::PumpSaturation => "pump_saturation",
-            Candidate::CoulombFriction => "coulomb_friction",
-            Candidate::ViscousFriction => "viscous_friction",
-            Candidate::InternalLeakage => "internal_leakage",
-            Candidate::PressureSensorOffset => "pressure_sensor_offset",
-            Candidate::ResolverOffset => "resolver_offset",
-            Candidate::SoilCohesion => "soil_cohesion",
-            Candidate::SoilDensity => "soil_density",
-        }
-    }
-
-    /// Looks a candidate up by its name.
-    pub fn from_name(name: &str) -> Option<Self> {
-        Self::ALL.iter().copied().find(|c| c.name() == name.trim())
-    }
-
-    /// Unit of the magnitude (the simulator's).
-    pub fn unit(self) -> &'static str {
-        match self {
-            Candidate::ValveDeadband => "fraction of full command",
-            Candidate::TransportDelay | Candidate::HydraulicLag => "s",
-            Candidate::FlowSharing => "fraction",
-            Candidate::PumpSaturation => "fraction of nominal maximum pump flow",
-            Candidate::CoulombFriction => "N",
-            Candidate::ViscousFriction => "N s/m",
-            Candidate::InternalLeakage => "m^3/(s Pa)",
-            Candidate::PressureSensorOffset | Candidate::SoilCohesion => "Pa",
-            Candidate::ResolverOffset => "rad",
-            Candidate::SoilDensity => "kg/m^3",
-        }
-    }
-
-    /// Search bounds of the magnitude (the simulator's ranges).
-    pub fn bounds(self) -> (f64, f64) {
-        match self {
-            Candidate::ValveDeadband => (0.0, 0.3),
-            Candidate::TransportDelay => (0.0, 0.3),
-            Candidate::HydraulicLag => (0.0, 0.5),
-            Candidate::FlowSharing => (0.0, 1.0),
-            Candidate::PumpSaturation => (0.0, 0.6),
-            Candidate::CoulombFriction => (0.0, 50_000.0),
-            Candidate::ViscousFriction => (0.0, 2.0e6),
-            Candidate::InternalLeakage => (0.0, 2.0e-11),
-            Candidate::PressureSensorOffset => (-2.0e6, 2.0e6),
-            Candidate::ResolverOffset => (-0.1, 0.1),
-            Candidate::SoilCohesion => (0.0, 100_000.0),
-            Candidate::SoilDensity => (0.0, 1000.0),
-        }
-    }
-
-    /// Plain-language description of the physical augmentation.
-    pub fn description(self) -> &'static str {
+impl CandidateEffect for Candidate {
+    fn model_description(self) -> &'static str {
         match self {
             Candidate::ValveDeadband => {
                 "valve dead band: commands below the magnitude do not move the spool, above it the \
@@ -168,10 +75,9 @@ impl Candidate {
         }
     }
 
-    /// The signal groups the candidate is fitted and scored on (the others need no recomputation when
-    /// fitting it). A resolver offset also moves the gravity forces of the augmented model's replay,
-    /// but is identified on the end-stop angles alone.
-    pub fn groups(self) -> SignalGroups {
+    /// A resolver offset also moves the gravity forces of the augmented model's replay, but is
+    /// identified on the end-stop angles alone.
+    fn groups(self) -> SignalGroups {
         let (hydraulic, force, soil) = match self {
             Candidate::ValveDeadband
             | Candidate::TransportDelay
@@ -215,9 +121,8 @@ impl Candidate {
         }
     }
 
-    /// A typical magnitude, the scale of the golden-section tolerance and of the uncertainty step.
-    pub fn scale(self) -> f64 {
-        let (lo, hi) = self.bounds();
+    fn scale(self) -> f64 {
+        let (lo, hi) = self.range();
         hi.max(-lo)
     }
 }
@@ -225,16 +130,20 @@ impl Candidate {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use vcan_sim::effects::registry;
 
+    /// The candidate library and the simulator do not drift apart: every effect the simulator can
+    /// hide is a candidate of the same name, unit and range, and every candidate is one of them.
     #[test]
-    fn names_round_trip_and_bounds_contain_zero() {
-        for (i, c) in Candidate::ALL.iter().enumerate() {
-            assert_eq!(c.index(), i);
-            assert_eq!(Candidate::from_name(c.name()), Some(*c));
-            let (lo, hi) = c.bounds();
-            assert!(lo <= 0.0 && 0.0 < hi, "{}", c.name());
-            assert!(!c.description().is_empty() && !c.unit().is_empty());
+    fn every_simulator_effect_is_a_candidate_of_the_same_name_unit_and_range() {
+        let simulator = registry();
+        assert_eq!(simulator.len(), N_CANDIDATES);
+        for info in simulator {
+            let c = Candidate::from_name(info.name)
+                .unwrap_or_else(|| panic!("no candidate named {}", info.name));
+            assert_eq!(c.unit(), info.unit, "{}", info.name);
+            assert_eq!(c.range(), (info.min, info.max), "{}", info.name);
+            assert!(!c.model_description().is_empty(), "{}", info.name);
         }
-        assert_eq!(Candidate::from_name("bogus"), None);
     }
 }

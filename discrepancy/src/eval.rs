@@ -8,13 +8,15 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
+use crate::effects::CandidateEffect as _;
 use crate::{AnalysisConfig, Candidate, analyse};
 use anyhow::Context as _;
 use clap::Args;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::command::{AnalyseArgs, load_model, prepare_sessions, run_analysis};
+use crate::analysis::{AnalyseArgs, run_analysis};
+use crate::session::{load_machine, load_model, prepare_sessions};
 use lab::demo::{DemoArgs, SoilContact, run_session};
 
 /// Arguments of `discrepancy eval`.
@@ -461,7 +463,7 @@ pub fn run_bench(args: &BenchArgs) -> anyhow::Result<()> {
         demo.effects = vec!["valve_deadband=0.1".into()];
         run_session(&demo, &AtomicBool::new(false)).context("generating the bench session")?;
     }
-    let machine = planner::machine::MachineConfig::default_machine()?;
+    let machine = load_machine(None)?;
     let model = load_model(None)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
@@ -549,5 +551,19 @@ mod tests {
             session.join("trace.log").exists(),
             "a finished session is kept"
         );
+    }
+
+    /// Every evaluation magnitude is one the simulator accepts for the effect of that name (eval
+    /// hides it as `--effect NAME=VALUE`).
+    #[test]
+    fn the_evaluation_magnitudes_are_in_the_simulators_ranges() {
+        for c in Candidate::ALL {
+            for m in magnitudes(c) {
+                let mut set = vcan_sim::effects::EffectSet::nominal();
+                if let Err(e) = set.apply_arg(&format!("{}={m}", c.name())) {
+                    panic!("{e}");
+                }
+            }
+        }
     }
 }

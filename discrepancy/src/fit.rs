@@ -23,7 +23,7 @@
 
 use serde::Serialize;
 
-use super::effects::Candidate;
+use super::effects::{Candidate, CandidateEffect as _};
 use super::greybox::{
     Augmentation, GreyBoxParams, N_SIGNALS, PreparedRecord, Signal, SignalGroups, replay,
 };
@@ -465,7 +465,7 @@ pub fn analyse(
         for c in &remaining {
             let c = *c;
             let groups = c.groups();
-            let (lo, hi) = c.bounds();
+            let (lo, hi) = c.range();
             let mut cost = |x: f64| {
                 let mut a = aug;
                 a.set(c, x);
@@ -582,7 +582,7 @@ pub fn analyse(
             magnitude: s.magnitude,
             uncertainty: s.uncertainty,
             unit: c.unit(),
-            description: c.description(),
+            description: c.model_description(),
             heldout_delta_bic: s.heldout_delta_bic,
         });
         remaining.retain(|r| *r != c);

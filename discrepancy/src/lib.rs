@@ -1,25 +1,33 @@
-//! Model-discrepancy workflow (issue 8): find where the model and the measurements disagree, name the
+//! Model-discrepancy workflow: find where the model and the measurements disagree, name the
 //! missing physical effect, add it to the model and show the gap shrink.
 //!
 //! Grey-box system identification in the spirit of residual analysis (MATLAB's `resid`), sparse term
 //! selection and information criteria (BIC), specialised to the excavator's hydraulics and soil. Pure
 //! computation: the controller reads traces and writes reports (`excavator-ctl discrepancy`).
 //!
-//! Layout (data flows top to bottom):
+//! Layout (data flows top to bottom; each module imports only modules above it):
 //! - this module: the measured records ([`Sample`], [`DigRecord`]), 100 Hz samples of one work cycle
 //!   with the Autodig stage of every sample;
+//! - [`signal`]: the predicted signals ([`Signal`]) and the groups a replay recomputes;
+//! - [`effects`]: the candidate-effect library ([`Candidate`]): the effects of the catalogue
+//!   [`planner::effects`], which the simulator hides, with how the grey-box model adds each;
+//! - [`soil_replay`]: the pre-dig section cut along the measured edge path and the FEE force on it;
 //! - [`greybox`]: the physical replay model ([`GreyBoxParams`], the nominal model the project ships in
 //!   `config/nominal_greybox.json`) and its augmentation by named effects ([`Augmentation`]); it replays
 //!   a record from the measured inputs and predicts cylinder velocities (Eq. 1 orifices), pump pressures
 //!   (open-centre flow balance), cylinder forces (Eq. 3 with Appendix gravity and inertia) and the soil
 //!   force on the bucket (FEE, Eqs. 14-18);
-//! - [`effects`]: the candidate-effect library ([`Candidate`]), named as the simulator names them;
 //! - [`stats`]: residuals per signal, stage and operating regime, whiteness and input cross-correlation;
 //! - [`fit`]: bounded 1-D fits of each candidate on training digs, held-out BIC scoring, greedy forward
 //!   selection and the uncertainty from the cost curvature;
 //! - [`model`]: the augmented model file ([`AugmentedModel`]), and the grey-box actuator that implements
-//!   [`planner::dig_model::ActuatorDynamics`] so the planner's dig model runs with it.
+//!   [`planner::dig_model::ActuatorDynamics`] so the planner's dig model runs with it;
+//! - [`read`] and [`session`]: session folders (`trace.log` + `scans/`) -> prepared records per dig;
+//! - [`report`]: `report.json`, `report.md`, the figures and `model.json` of an analysis;
+//! - [`analysis`], [`eval`], [`command`]: `excavator-ctl discrepancy analyse`, `eval` and `bench`, and
+//!   the subcommand dispatch.
 
+pub mod analysis;
 pub mod command;
 pub mod effects;
 pub mod eval;
@@ -28,6 +36,8 @@ pub mod greybox;
 pub mod model;
 pub mod read;
 pub mod report;
+pub mod session;
+pub mod signal;
 pub mod soil_replay;
 pub mod stats;
 

@@ -99,7 +99,7 @@ impl AugmentedModel {
         for e in &self.effects {
             let c = Candidate::from_name(&e.name)
                 .ok_or_else(|| DiscrepancyError::Invalid(format!("unknown effect {}", e.name)))?;
-            let (lo, hi) = c.bounds();
+            let (lo, hi) = c.range();
             if !(e.magnitude.is_finite() && (lo..=hi).contains(&e.magnitude)) {
                 return Err(DiscrepancyError::Invalid(format!(
                     "effect {} = {} outside [{lo}, {hi}]",

@@ -14,7 +14,7 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use serde::Serialize;
 
-use crate::command::Analysis;
+use crate::session::{Analysis, SkippedSession};
 
 fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
     anyhow::anyhow!("plot: {e}")
@@ -25,7 +25,7 @@ fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
 struct ReportJson<'a> {
     measured: Vec<String>,
     /// Sessions that could not be read and were left out (the others were analysed).
-    skipped_sessions: &'a [crate::command::SkippedSession],
+    skipped_sessions: &'a [SkippedSession],
     model_in: &'a str,
     model_out: &'static str,
     digs: usize,

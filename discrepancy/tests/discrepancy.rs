@@ -4,7 +4,7 @@
 
 use std::sync::atomic::AtomicBool;
 
-use discrepancy::command::{AnalyseArgs, run_analysis};
+use discrepancy::analysis::{AnalyseArgs, run_analysis};
 use lab::demo::{DemoArgs, run_session};
 
 fn session(dir: &std::path::Path, effect: Option<&str>, seed: u64) {
@@ -16,7 +16,7 @@ fn session(dir: &std::path::Path, effect: Option<&str>, seed: u64) {
     run_session(&demo, &AtomicBool::new(false)).expect("demo session");
 }
 
-fn analyse(session: &std::path::Path, out: &std::path::Path) -> discrepancy::command::Analysis {
+fn analyse(session: &std::path::Path, out: &std::path::Path) -> discrepancy::session::Analysis {
     run_analysis(&AnalyseArgs {
         measured: vec![session.to_path_buf()],
         model: None,
@@ -87,7 +87,8 @@ fn effect_free_session_reports_no_missing_effect() {
 }
 
 /// The CI-sized confusion table (`excavator-ctl discrepancy eval --quick`: six hidden effects, one
-/// effect-free session, four digs each; seconds): the targets on it, every case counted.
+/// effect-free session, four digs each; seconds): the workflow's targets on it (docs/discrepancy.md),
+/// every case counted.
 #[test]
 fn quick_confusion_table() {
     let tmp = tempfile::tempdir().unwrap();

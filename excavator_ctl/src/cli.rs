@@ -43,11 +43,8 @@ pub enum Command {
     /// Model-discrepancy workflow: `analyse` measured sessions (where the model and the measurements
     /// disagree, the missing effect named and added), `eval` (hidden-effect confusion table), `bench`
     /// (docs/discrepancy.md).
-    Discrepancy {
-        /// The discrepancy command.
-        #[command(subcommand)]
-        cmd: discrepancy::command::DiscrepancyCommand,
-    },
+    #[command(subcommand)]
+    Discrepancy(discrepancy::command::DiscrepancyArgs),
 }
 
 /// Arguments of `excavator-ctl run`.

@@ -32,7 +32,7 @@ fn main() -> std::process::ExitCode {
         Command::Experiment(args) => lab::experiment::run(&args),
         Command::Trace { cmd } => runtime.block_on(trace_tools::run(cmd)),
         Command::Model { cmd } => lab::model::run(cmd),
-        Command::Discrepancy { cmd } => discrepancy::command::run(cmd),
+        Command::Discrepancy(args) => discrepancy::command::run(args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -4,6 +4,8 @@
 //! - `linkage` (private): the implement linkage in plain numbers, cylinder triangles and the bucket
 //!   four-bar (Eqs. A5-A19), below both the machine description's geometric checks and the kinematics.
 //! - [`machine`]: the machine description (`config/machine.toml`): geometry, cylinders, masses, hydraulics.
+//! - [`effects`]: the catalogue of hidden physical effects (names, units, ranges) that the simulator
+//!   applies and the discrepancy workflow identifies.
 //! - [`kinematics`]: joint angles <-> cylinder lengths, forward/inverse kinematics, Jacobian, gravity and
 //!   tip forces <-> cylinder forces (Appendix, Eqs. A1-A23).
 //! - [`terrain`]: the 2.5-D elevation grid, section profiles, cutting, spoil piles and the swept-volume
@@ -28,6 +30,7 @@ pub mod actuator;
 pub mod autodig;
 pub mod cleanup;
 pub mod dig_model;
+pub mod effects;
 pub mod estimate;
 mod input_check;
 pub mod kinematics;

@@ -9,9 +9,11 @@
 //!   (Eqs. 14-18).
 //! - [`sensors`]: resolvers, pressures, odometry and the range-sensor emulation (ray casting).
 //! - [`plant`]: the whole machine stepped at 1 kHz.
-//! - [`effects`]: the hidden-effects registry; [`scenario`]: bench scenarios (`config/bench.toml`).
+//! - [`effects`]: the hidden effects the plant applies (the catalogue [`planner::effects`]);
+//!   [`scenario`]: bench scenarios (`config/bench.toml`).
 //! - [`node`]: the gateway firmware ([`firmware_bridge::gateway`]) in front of the plant: frames in,
-//!   frames out, still without I/O.
+//!   frames out, still without I/O; its sensor frames ([`node::sensor_messages`]) are the ones every
+//!   trace of the simulated gateway holds.
 //!
 //! I/O lives only in [`embedded`] (in-process bus, virtual time), [`realtime`] (SocketCAN, tokio,
 //! scan socket) and the binary.

@@ -132,13 +132,7 @@ impl MachineNode {
         {
             self.sensor_frames(&r, out);
             if self.steps.is_multiple_of(PUMP_PERIOD_STEPS) {
-                self.push(
-                    Message::PumpPressures(PumpPressures {
-                        pump1_pa: r.pump_pa[0],
-                        pump2_pa: r.pump_pa[1],
-                    }),
-                    out,
-                );
+                self.push(pump_message(&r), out);
             }
         }
         if self.steps.is_multiple_of(STATUS_PERIOD_STEPS) {
@@ -188,50 +182,75 @@ impl MachineNode {
     }
 
     fn sensor_frames(&mut self, r: &SensorReadings, out: &mut Vec<CanFrame>) {
-        // Inside the DBC range [-3.1416, 3.1416].
-        let angle = |a: f64| a.clamp(-std::f64::consts::PI + 1e-4, std::f64::consts::PI - 1e-4);
-        let rate = |w: f64| w.clamp(-31.9, 31.9);
-        self.push(
-            Message::JointAngles(JointAngles {
-                boom_rad: angle(r.angles_rad[0]),
-                stick_rad: angle(r.angles_rad[1]),
-                bucket_rad: angle(r.angles_rad[2]),
-                swing_rad: angle(r.angles_rad[3]),
-            }),
-            out,
-        );
-        self.push(
-            Message::JointRates(JointRates {
-                boom_rad_per_s: rate(r.rates_rad_per_s[0]),
-                stick_rad_per_s: rate(r.rates_rad_per_s[1]),
-                bucket_rad_per_s: rate(r.rates_rad_per_s[2]),
-                swing_rad_per_s: rate(r.rates_rad_per_s[3]),
-            }),
-            out,
-        );
-        let rated = self.plant.hydraulics.params().pumps[0].max_flow_m3_per_s;
-        for (i, cylinder) in Cylinder::ALL.iter().enumerate() {
-            let h = &self.plant.hydraulics;
-            let a = h.actuators[i];
-            let cmd = self.valve_commands[i];
-            let (state, area) = if cmd > 0.0 {
-                (ValveState::Extend, h.head_area_m2(i))
-            } else if cmd < 0.0 {
-                (ValveState::Retract, h.rod_area_m2(i))
-            } else {
-                (ValveState::Block, 0.0)
-            };
-            let flow = (a.velocity.abs() * area / rated * 100.0).clamp(0.0, 160.0);
-            let msg = Message::AuxValveMeasured(AuxValveMeasured {
-                cylinder: *cylinder,
-                flow_percent: flow,
-                state,
-                head_pressure_pa: r.head_pa[i],
-                rod_pressure_pa: r.rod_pa[i],
-            });
+        let [boom, stick, bucket, ..] = self.valve_commands;
+        for msg in sensor_messages(&self.plant, r, [boom, stick, bucket]) {
             self.push(msg, out);
         }
     }
+}
+
+/// The sensor messages the gateway sends every [`SENSOR_PERIOD_STEPS`] for one set of `readings`, in
+/// transmit order: `JointAngles`, `JointRates`, `AuxValveMeasured` for boom, stick and bucket.
+/// Angles and rates are clamped into their DBC ranges; the measured flow is the
+/// cylinder's oil flow as a percentage of one pump's rated flow, on the side the valve command
+/// (`valve_commands`, boom, stick, bucket) opens. Every program that writes the gateway's frames
+/// (this node, the lab's simulated digs) encodes these, so their traces cannot drift apart.
+pub fn sensor_messages(
+    plant: &Plant,
+    readings: &SensorReadings,
+    valve_commands: [f64; 3],
+) -> [Message; 5] {
+    let r = readings;
+    // Inside the DBC range [-3.1416, 3.1416].
+    let angle = |a: f64| a.clamp(-std::f64::consts::PI + 1e-4, std::f64::consts::PI - 1e-4);
+    let rate = |w: f64| w.clamp(-31.9, 31.9);
+    let h = &plant.hydraulics;
+    let rated = h.params().pumps[0].max_flow_m3_per_s;
+    let valve = |i: usize| {
+        let a = h.actuators[i];
+        let cmd = valve_commands[i];
+        let (state, area) = if cmd > 0.0 {
+            (ValveState::Extend, h.head_area_m2(i))
+        } else if cmd < 0.0 {
+            (ValveState::Retract, h.rod_area_m2(i))
+        } else {
+            (ValveState::Block, 0.0)
+        };
+        let flow = (a.velocity.abs() * area / rated * 100.0).clamp(0.0, 160.0);
+        Message::AuxValveMeasured(AuxValveMeasured {
+            cylinder: Cylinder::ALL[i],
+            flow_percent: flow,
+            state,
+            head_pressure_pa: r.head_pa[i],
+            rod_pressure_pa: r.rod_pa[i],
+        })
+    };
+    [
+        Message::JointAngles(JointAngles {
+            boom_rad: angle(r.angles_rad[0]),
+            stick_rad: angle(r.angles_rad[1]),
+            bucket_rad: angle(r.angles_rad[2]),
+            swing_rad: angle(r.angles_rad[3]),
+        }),
+        Message::JointRates(JointRates {
+            boom_rad_per_s: rate(r.rates_rad_per_s[0]),
+            stick_rad_per_s: rate(r.rates_rad_per_s[1]),
+            bucket_rad_per_s: rate(r.rates_rad_per_s[2]),
+            swing_rad_per_s: rate(r.rates_rad_per_s[3]),
+        }),
+        valve(0),
+        valve(1),
+        valve(2),
+    ]
+}
+
+/// The `PumpPressures` message for `readings` (sent every [`PUMP_PERIOD_STEPS`], after that step's
+/// [`sensor_messages`]).
+pub fn pump_message(readings: &SensorReadings) -> Message {
+    Message::PumpPressures(PumpPressures {
+        pump1_pa: readings.pump_pa[0],
+        pump2_pa: readings.pump_pa[1],
+    })
 }
 
 /// Number of physics steps in `dt_s` seconds (rounded to the nearest step).

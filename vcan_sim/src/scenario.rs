@@ -145,7 +145,7 @@ impl Default for BenchSpec {
 pub struct TerrainSpec {
     /// Angle of repose of the bench material (degrees): ground the bucket has cut that is left steeper
     /// than this slumps to it (a mass-conserving relaxation of the height grid near the cuts,
-    /// [`crate::soil_contact`]). `None`: off.
+    /// the `soil_contact` module). `None`: off.
     pub repose_deg: Option<f64>,
     /// Standard deviation of the seeded undulation added to the bench top and face above the floor, m
     /// (a smooth Gaussian random field drawn from the scenario seed). 0: off.
@@ -284,7 +284,7 @@ pub struct Scenario {
     pub soil_regions: Vec<SoilRegion>,
     /// The native ground below `bench.floor_elevation_m` (`[native_soil]`), when the bench declares
     /// it: a layered ground whose lower layer has its own soil everywhere on the map (the soil
-    /// regions apply above the floor only); see [`crate::soil_contact`] for how a cut that reaches
+    /// regions apply above the floor only); see the `soil_contact` module for how a cut that reaches
     /// it is resisted. `None` (the default): one soil from the surface down, as before.
     pub native_soil: Option<SoilSpec>,
     /// Slope stability and initial undulation of the bench material (`[terrain]`, off when absent).

@@ -1,4 +1,4 @@
-//! The "done when" tests, through the public API: flow-limited cylinder speed, stall at relief,
+//! The simulator's acceptance tests, through the public API: flow-limited cylinder speed, stall at relief,
 //! the heartbeat watchdog over the in-process bus in virtual time, and soil mass conservation.
 
 // Test helpers panic on setup failure by design (clippy only exempts `#[test]` bodies).

@@ -9,9 +9,8 @@ use std::io::BufWriter;
 
 use anyhow::bail;
 use firmware_bridge::messages::{
-    Activity, AutodigStageCode, AuxValveCommand, AuxValveMeasured, ControllerHeartbeat,
-    ControllerStatus, Cylinder, JointAngles as JointAnglesMsg, JointRates, Message, PumpPressures,
-    RequestedMode, Valve, ValveState,
+    Activity, AutodigStageCode, AuxValveCommand, ControllerHeartbeat, ControllerStatus, Message,
+    RequestedMode, Valve,
 };
 use firmware_bridge::trace::{Direction, TraceWriter};
 use planner::autodig::{Autodig, AutodigInputs, AutodigMaps, EndReason, Stage};
@@ -303,7 +302,6 @@ pub fn run_sim_dig_diagnosed(
     let cyl = &cfg.machine.cylinders;
     let areas = [&cyl.boom, &cyl.stick, &cyl.bucket].map(|c| (c.head_area_m2(), c.rod_area_m2()));
     let strokes = Joint::ALL.map(|j| kin.stroke(j));
-    let rated = plant.hydraulics.params().pumps[0].max_flow_m3_per_s;
     let dig_index = u16::try_from(setup.index % 60_000).unwrap_or(0);
 
     let mut rec = Recorder { writer: trace };
@@ -323,59 +321,12 @@ pub fn run_sim_dig_diagnosed(
     for step in 0usize.. {
         let t = plant.time_s();
         let r = plant.read_sensors();
-        // The gateway's frames (vcan_sim::node's layout).
-        let angle = |a: f64| a.clamp(-std::f64::consts::PI + 1e-4, std::f64::consts::PI - 1e-4);
-        let rate = |w: f64| w.clamp(-31.9, 31.9);
-        let pressure = |p: f64| p.clamp(0.0, 100e6);
-        rec.emit(
-            t,
-            Message::JointAngles(JointAnglesMsg {
-                boom_rad: angle(r.angles_rad[0]),
-                stick_rad: angle(r.angles_rad[1]),
-                bucket_rad: angle(r.angles_rad[2]),
-                swing_rad: angle(r.angles_rad[3]),
-            }),
-            Direction::Receive,
-        )?;
-        rec.emit(
-            t,
-            Message::JointRates(JointRates {
-                boom_rad_per_s: rate(r.rates_rad_per_s[0]),
-                stick_rad_per_s: rate(r.rates_rad_per_s[1]),
-                bucket_rad_per_s: rate(r.rates_rad_per_s[2]),
-                swing_rad_per_s: rate(r.rates_rad_per_s[3]),
-            }),
-            Direction::Receive,
-        )?;
-        for (i, cylinder) in Cylinder::ALL.iter().enumerate() {
-            let a = plant.hydraulics.actuators[i];
-            let (state, area) = if command[i] > 0.0 {
-                (ValveState::Extend, areas[i].0)
-            } else if command[i] < 0.0 {
-                (ValveState::Retract, areas[i].1)
-            } else {
-                (ValveState::Block, 0.0)
-            };
-            rec.emit(
-                t,
-                Message::AuxValveMeasured(AuxValveMeasured {
-                    cylinder: *cylinder,
-                    flow_percent: (a.velocity.abs() * area / rated * 100.0).clamp(0.0, 160.0),
-                    state,
-                    head_pressure_pa: pressure(r.head_pa[i]),
-                    rod_pressure_pa: pressure(r.rod_pa[i]),
-                }),
-                Direction::Receive,
-            )?;
+        // The gateway's sensor frames.
+        // (Pump pressures every step: this trace is the model's training data, not a bus schedule.)
+        for msg in vcan_sim::node::sensor_messages(&plant, &r, command) {
+            rec.emit(t, msg, Direction::Receive)?;
         }
-        rec.emit(
-            t,
-            Message::PumpPressures(PumpPressures {
-                pump1_pa: pressure(r.pump_pa[0]),
-                pump2_pa: pressure(r.pump_pa[1]),
-            }),
-            Direction::Receive,
-        )?;
+        rec.emit(t, vcan_sim::node::pump_message(&r), Direction::Receive)?;
 
         // The controller's step.
         let q = JointAngles {
