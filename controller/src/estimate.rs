@@ -433,6 +433,7 @@ impl Estimator {
             Message::AuxValveCommand(_)
             | Message::PositionSetpoint(_)
             | Message::ControllerHeartbeat(_)
+            | Message::GatewaySession(_)
             | Message::ControllerStatus(_) => return false,
         };
         self.received_s[signal.slot()] = Some(time_s);

@@ -37,6 +37,7 @@ use firmware_bridge::messages::{
     Activity, AutodigStageCode, AuxValveCommand, ControllerStatus as StatusMessage, Message,
     PositionSetpoint, Valve,
 };
+use firmware_bridge::secoc::{SealError, Sealer, SessionKey};
 use firmware_bridge::transport::BusFault;
 use firmware_bridge::{
     CONTROLLER_ADDRESS, CanFrame, CanId, DecodeError, GATEWAY_ADDRESS, J1939Id, TimestampedFrame,
@@ -620,6 +621,8 @@ pub struct FrameCounters {
     pub bus_errors: u64,
     /// Frames that did not fit the outbox (never expected).
     pub outbox_overflow: u64,
+    /// Secured frames not sent because no gateway session was known yet.
+    pub held_no_session: u64,
 }
 
 /// The controller's status (sent on the bus as `ControllerStatus` at 20 Hz, with the fault code).
@@ -645,8 +648,9 @@ pub struct ControllerNode {
     cycle: WorkCycle,
     track_every_steps: u32,
     steps: u64,
-    setpoint_sequence: u8,
     tracks_moving: bool,
+    /// Seals the heartbeat, valve commands and setpoints for the gateway's session.
+    sealer: Sealer,
     counters: FrameCounters,
     last_motion: Option<ArmMode>,
     last_command: CycleCommand,
@@ -701,8 +705,8 @@ impl ControllerNode {
             cycle,
             track_every_steps: config.track_every_steps,
             steps: 0,
-            setpoint_sequence: 15,
             tracks_moving: false,
+            sealer: Sealer::new(&SessionKey::PUBLIC),
             counters: FrameCounters::default(),
             last_motion: None,
             last_command: CycleCommand::Neutral,
@@ -712,6 +716,18 @@ impl ControllerNode {
                 reason: e.to_string(),
             })?,
         })
+    }
+
+    /// Provisions the machine's authentication key (the gateway holds the same one); without it the
+    /// frames carry freshness and the session binding, keyed with [`SessionKey::PUBLIC`]. Call before
+    /// the first step: the session is learnt again from the gateway.
+    pub fn set_key(&mut self, key: &SessionKey) {
+        self.sealer = Sealer::new(key);
+    }
+
+    /// The gateway session the node seals its frames for, once the gateway has announced one.
+    pub fn session(&self) -> Option<u32> {
+        self.sealer.session()
     }
 
     /// The estimate.
@@ -865,7 +881,12 @@ impl ControllerNode {
         match Message::decode(frame) {
             Ok(decoded) => {
                 let sa = decoded.id.source_address();
-                if sa == GATEWAY_ADDRESS && self.est.on_message(&decoded.message, time_s) {
+                if let (GATEWAY_ADDRESS, Message::GatewaySession(session)) = (sa, decoded.message) {
+                    if self.sealer.set_session(session.session_id) {
+                        tracing::info!(session = session.session_id, "gateway session");
+                    }
+                    self.counters.consumed += 1;
+                } else if sa == GATEWAY_ADDRESS && self.est.on_message(&decoded.message, time_s) {
                     self.counters.consumed += 1;
                 } else {
                     // Our address used by someone else, a gateway frame the gateway does not send, or
@@ -911,9 +932,12 @@ impl ControllerNode {
     }
 
     fn push_message(&mut self, message: Message) {
-        match message.encode() {
+        match self.sealer.seal(&message) {
             Ok(f) => self.push(f),
-            Err(e) => tracing::error!(error = %e, ?message, "cannot encode"),
+            // Before the gateway's first `GatewaySession` nothing secured can be accepted; the safety
+            // layer does not arm before a gateway status, which comes with the session.
+            Err(SealError::NoSession) => self.counters.held_no_session += 1,
+            Err(SealError::Encode(e)) => tracing::error!(error = %e, ?message, "cannot encode"),
         }
     }
 
@@ -936,21 +960,22 @@ impl ControllerNode {
     }
 
     fn push_setpoint(&mut self, q: [f64; 4]) -> bool {
-        let next = (self.setpoint_sequence + 1) % 16;
         let sp = PositionSetpoint {
             boom_rad: q[0],
             stick_rad: q[1],
             bucket_rad: q[2],
             swing_rad: q[3],
-            sequence: next,
         };
-        match Message::PositionSetpoint(sp).encode() {
+        match self.sealer.seal(&Message::PositionSetpoint(sp)) {
             Ok(f) => {
-                self.setpoint_sequence = next;
                 self.push(f);
                 true
             }
-            Err(_) => false,
+            Err(SealError::NoSession) => {
+                self.counters.held_no_session += 1;
+                true
+            }
+            Err(SealError::Encode(_)) => false,
         }
     }
 

@@ -1213,6 +1213,7 @@ mod tests {
     fn estop_reset_with_the_gateway_firmware_goes_reset_disarm_arm() {
         use firmware_bridge::gateway::{Gateway, VALVES};
         use firmware_bridge::messages::{AuxValveCommand, Valve};
+        use firmware_bridge::secoc::{Sealer, SessionKey};
         /// What the gateway saw and did: requested modes (each change once) and the boom output
         /// of every 1 ms gateway tick.
         #[derive(Default)]
@@ -1221,7 +1222,10 @@ mod tests {
             boom: Vec<f64>,
         }
         fn run(rig: &mut Rig, gw: &mut Gateway, t: &mut f64, periods: u32, log: &mut Log) {
+            // The frames sealed for the gateway's session, as the node sends them.
+            let mut sealer = Sealer::new(&SessionKey::PUBLIC);
             for k in 0..periods {
+                sealer.set_session(gw.session().session_id);
                 rig.feed_sensors(*t, Q);
                 if k % 5 == 0 {
                     let status = Message::GatewayStatus(gw.next_status());
@@ -1232,10 +1236,12 @@ mod tests {
                 let tick = rig.safety.tick(*t, Some(ArmMode::Valve));
                 if tick.motion == Some(ArmMode::Valve) {
                     let cmd = AuxValveCommand::from_fraction(Valve::Boom, 1.0).unwrap();
-                    gw.on_frame(&Message::AuxValveCommand(cmd).encode().unwrap(), *t);
+                    let frame = sealer.seal(&Message::AuxValveCommand(cmd)).unwrap();
+                    gw.on_frame(&frame, *t);
                 }
                 if let Some(hb) = tick.heartbeat {
-                    gw.on_frame(&hb.to_frame().unwrap(), *t);
+                    let frame = sealer.seal(&Message::ControllerHeartbeat(hb)).unwrap();
+                    gw.on_frame(&frame, *t);
                     if log.requests.last() != Some(&hb.mode) {
                         log.requests.push(hb.mode);
                     }

@@ -91,6 +91,11 @@ async fn the_loop_ends_with_neutral_valves_and_a_disarm_heartbeat() {
     let ctl = bus.attach();
     let observer = bus.attach();
     let mut n = node();
+    // The gateway's session: without one the node sends no secured frame (the gateway would refuse it).
+    let session = firmware_bridge::messages::GatewaySession { session_id: 7 };
+    observer
+        .send(Message::GatewaySession(session).encode().unwrap())
+        .unwrap();
     let shutdown = tokio::time::sleep(std::time::Duration::from_millis(60));
     let (reason, stats) =
         controller::run::run_loop(&ctl, &mut n, controller::run::CONTROL_PERIOD, shutdown)

@@ -186,6 +186,10 @@ pub const SCHEDULE: &[ScheduleEntry] = &[
         rate_hz: 20.0,
     },
     ScheduleEntry {
+        message: "GatewaySession",
+        rate_hz: 20.0,
+    },
+    ScheduleEntry {
         message: "ControllerStatus",
         rate_hz: 20.0,
     },

@@ -351,15 +351,15 @@ mod tests {
         assert_eq!(aux_valve_measured_boom::PGN, 65056);
         assert_eq!(joint_angles::PGN, 0xFF50);
         assert_eq!(controller_status::MESSAGE.default_id, 0x18FF_6227);
-        assert_eq!(MESSAGES.len(), 17);
+        assert_eq!(MESSAGES.len(), 18);
     }
 
     #[test]
     fn signed_fields_round_trip_at_odd_offsets() {
-        let sig = position_setpoint::STICK_SETPOINT; // 15 bits starting at bit 15
+        let sig = position_setpoint::STICK_SETPOINT; // 13 bits starting at bit 13
         let mut data = [0xFFu8; 8];
-        insert_raw(&sig, -12345, &mut data).unwrap();
-        assert_eq!(extract_raw(&sig, &data), Some(-12345));
+        insert_raw(&sig, -3456, &mut data).unwrap();
+        assert_eq!(extract_raw(&sig, &data), Some(-3456));
         // Neighbours untouched.
         assert_eq!(
             extract_raw(&position_setpoint::BOOM_SETPOINT, &data),

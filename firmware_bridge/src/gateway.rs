@@ -70,9 +70,10 @@
 use crate::frame::CanFrame;
 use crate::id::CONTROLLER_ADDRESS;
 use crate::messages::{
-    DecodeError, GatewayFaults, GatewayMode, GatewayStatus, Message, RequestedMode,
+    DecodeError, GatewayFaults, GatewayMode, GatewaySession, GatewayStatus, Message, RequestedMode,
     heartbeat_checksum, is_next_alive,
 };
+use crate::secoc::{SessionKey, SessionNonces, Verifier};
 
 /// Number of valve outputs: boom, stick, bucket, swing, left track, right track.
 pub const VALVES: usize = 6;
@@ -225,12 +226,16 @@ pub struct Gateway {
     valve_cmd_at_s: [Option<f64>; VALVES],
     setpoint: Option<[f64; JOINTS]>,
     setpoint_at_s: Option<f64>,
-    last_sequence: Option<u8>,
     integral: [f64; JOINTS],
     position_cmd: [f64; JOINTS],
     last_tick_s: Option<f64>,
     /// The latest valid time seen (frames and ticks), the reference of the clock check.
     clock_s: Option<f64>,
+    /// Freshness and authentication of the controller's frames in the current session.
+    verifier: Verifier,
+    nonces: SessionNonces,
+    /// A valid heartbeat was accepted in this session (a session ends when they stop).
+    session_used: bool,
     alive_counter: u8,
     unexpected: u16,
     rejected: u16,
@@ -266,7 +271,20 @@ impl Gateway {
         Ok(Self::with_valid_config(config))
     }
 
+    /// The same gateway with a provisioned `key` (both ends must hold it; [`SessionKey::PUBLIC`] when
+    /// none is) and session nonces from `session_seed`, which must differ at every power-up (a
+    /// hardware random number or a persisted boot counter): starts a new session.
+    pub fn with_security(mut self, key: &SessionKey, session_seed: u64) -> Self {
+        self.nonces = SessionNonces::new(session_seed);
+        let first = self.nonces.next_after(None);
+        self.verifier = Verifier::new(key, first);
+        self.session_used = false;
+        self
+    }
+
     fn with_valid_config(config: GatewayConfig) -> Self {
+        let mut nonces = SessionNonces::new(0);
+        let first = nonces.next_after(None);
         Self {
             config,
             mode: GatewayMode::Disarmed,
@@ -278,11 +296,13 @@ impl Gateway {
             valve_cmd_at_s: [None; VALVES],
             setpoint: None,
             setpoint_at_s: None,
-            last_sequence: None,
             integral: [0.0; JOINTS],
             position_cmd: [0.0; JOINTS],
             last_tick_s: None,
             clock_s: None,
+            verifier: Verifier::new(&SessionKey::PUBLIC, first),
+            nonces,
+            session_used: false,
             alive_counter: 0,
             unexpected: 0,
             rejected: 0,
@@ -398,6 +418,15 @@ impl Gateway {
             Err(_) => return self.reject(),
         };
         let from_controller = decoded.id.source_address() == CONTROLLER_ADDRESS;
+        if from_controller
+            && decoded.trailer.is_some()
+            && self.verifier.verify(&decoded, frame).is_err()
+        {
+            // Replayed, recorded in another session, from a second sender with the controller's
+            // address, or without the key. Neutral when armed; counted otherwise.
+            self.fault(GatewayFaults::AUTH_FAILURE);
+            return self.reject();
+        }
         match decoded.message {
             Message::ControllerHeartbeat(hb) => {
                 if !from_controller {
@@ -420,6 +449,7 @@ impl Gateway {
                 }
                 self.last_alive = Some(hb.alive_counter);
                 self.last_heartbeat_s = Some(now_s);
+                self.session_used = true;
                 self.on_request(hb.mode, now_s);
                 FrameVerdict::Accepted
             }
@@ -451,10 +481,6 @@ impl Gateway {
                 if !from_controller || self.mode != GatewayMode::ArmedPosition {
                     return self.reject();
                 }
-                if self.last_sequence == Some(sp.sequence) {
-                    return self.reject();
-                }
-                self.last_sequence = Some(sp.sequence);
                 let target = [sp.boom_rad, sp.stick_rad, sp.bucket_rad, sp.swing_rad];
                 let in_range = target
                     .iter()
@@ -505,7 +531,6 @@ impl Gateway {
                 self.clear_commands();
                 self.mode = GatewayMode::ArmedPosition;
                 self.armed_at_s = now_s;
-                self.last_sequence = None;
             }
             _ => {}
         }
@@ -527,8 +552,13 @@ impl Gateway {
         } else {
             0.0
         };
+        let hb_age = self.last_heartbeat_s.map_or(f64::INFINITY, |t| now_s - t);
+        if self.session_used && (hb_age >= self.config.heartbeat_timeout_s || hb_age.is_nan()) {
+            // The controller of this session is gone: nothing recorded in it will be accepted again,
+            // and the next controller starts a new one.
+            self.new_session();
+        }
         if self.is_armed() {
-            let hb_age = self.last_heartbeat_s.map_or(f64::INFINITY, |t| now_s - t);
             // This output holds until the next tick, up to one tick period later: go neutral now if
             // the deadline could pass before then. Written so a NaN or infinite age counts as expired.
             let alive = hb_age + self.config.tick_period_s + 1e-9 < self.config.heartbeat_timeout_s;
@@ -607,6 +637,20 @@ impl Gateway {
         out
     }
 
+    fn new_session(&mut self) {
+        let next = self.nonces.next_after(Some(self.verifier.session()));
+        self.verifier.start_session(next);
+        self.session_used = false;
+        self.last_alive = None;
+    }
+
+    /// The session nonce to broadcast (`GatewaySession`, with every status frame).
+    pub fn session(&self) -> GatewaySession {
+        GatewaySession {
+            session_id: self.verifier.session(),
+        }
+    }
+
     /// The status for the next status frame: advances the 8-bit alive counter by one. Call it exactly
     /// once per `GatewayStatus` frame sent; nothing else advances the counter, so consecutive frames
     /// carry consecutive counters (`messages::is_next_alive(prev, next, 8)`).
@@ -635,53 +679,70 @@ mod tests {
         Activity, AutodigStageCode, AuxValveCommand, ControllerHeartbeat, ControllerStatus,
         JointAngles, PositionSetpoint, Valve,
     };
+    use crate::secoc::{Sealer, SessionKey};
     use proptest::prelude::*;
 
     const PERIOD_S: f64 = 0.01;
 
-    fn hb(mode: RequestedMode, alive: u8) -> CanFrame {
-        ControllerHeartbeat {
-            mode,
-            alive_counter: alive % 16,
+    /// The controller's side of the link: seals its frames in the gateway's current session, as the
+    /// controller does after reading `GatewaySession`.
+    #[derive(Default)]
+    struct Link {
+        sealer: Option<Sealer>,
+    }
+
+    impl Link {
+        fn seal(&mut self, g: &Gateway, message: Message) -> CanFrame {
+            let sealer = self
+                .sealer
+                .get_or_insert_with(|| Sealer::new(&SessionKey::PUBLIC));
+            sealer.set_session(g.session().session_id);
+            sealer.seal(&message).unwrap()
         }
-        .to_frame()
-        .unwrap()
+
+        fn hb(&mut self, g: &Gateway, mode: RequestedMode, alive: u8) -> CanFrame {
+            let hb = ControllerHeartbeat {
+                mode,
+                alive_counter: alive % 16,
+            };
+            self.seal(g, Message::ControllerHeartbeat(hb))
+        }
+
+        fn valve(&mut self, g: &Gateway, v: Valve, u: f64) -> CanFrame {
+            let cmd = AuxValveCommand::from_fraction(v, u).unwrap();
+            self.seal(g, Message::AuxValveCommand(cmd))
+        }
+
+        fn setpoint(&mut self, g: &Gateway, q: [f64; 4]) -> CanFrame {
+            let sp = PositionSetpoint {
+                boom_rad: q[0],
+                stick_rad: q[1],
+                bucket_rad: q[2],
+                swing_rad: q[3],
+            };
+            self.seal(g, Message::PositionSetpoint(sp))
+        }
     }
 
-    fn valve(v: Valve, u: f64) -> CanFrame {
-        Message::AuxValveCommand(AuxValveCommand::from_fraction(v, u).unwrap())
-            .encode()
-            .unwrap()
-    }
-
-    fn setpoint(q: [f64; 4], seq: u8) -> CanFrame {
-        Message::PositionSetpoint(PositionSetpoint {
-            boom_rad: q[0],
-            stick_rad: q[1],
-            bucket_rad: q[2],
-            swing_rad: q[3],
-            sequence: seq % 16,
-        })
-        .encode()
-        .unwrap()
-    }
-
-    /// A gateway armed in valve mode at t = 0 with heartbeat counter 0.
-    fn armed() -> Gateway {
+    /// A gateway armed in valve mode at t = 0 with heartbeat counter 0, and its controller link.
+    fn armed() -> (Gateway, Link) {
         let mut g = Gateway::default();
+
+        let mut l = Link::default();
         assert_eq!(
-            g.on_frame(&hb(RequestedMode::ArmValve, 0), 0.0),
+            g.on_frame(&l.hb(&g, RequestedMode::ArmValve, 0), 0.0),
             FrameVerdict::Accepted
         );
         assert_eq!(g.mode(), GatewayMode::ArmedValve);
-        g
+        (g, l)
     }
 
     #[test]
     fn boots_disarmed_and_ignores_commands() {
         let mut g = Gateway::default();
+        let mut l = Link::default();
         assert_eq!(
-            g.on_frame(&valve(Valve::Boom, 0.5), 0.0),
+            g.on_frame(&l.valve(&g, Valve::Boom, 0.5), 0.0),
             FrameVerdict::Rejected
         );
         assert_eq!(g.tick(0.0, None).valve_commands, [0.0; VALVES]);
@@ -690,8 +751,8 @@ mod tests {
 
     #[test]
     fn armed_valve_mode_applies_commands() {
-        let mut g = armed();
-        g.on_frame(&valve(Valve::Stick, -0.25), 0.005);
+        let (mut g, mut l) = armed();
+        g.on_frame(&l.valve(&g, Valve::Stick, -0.25), 0.005);
         let out = g.tick(0.01, None);
         assert!((out.valve_commands[1] + 0.25).abs() < 1e-3);
         assert_eq!(out.status.mode, GatewayMode::ArmedValve);
@@ -699,15 +760,15 @@ mod tests {
 
     #[test]
     fn missing_heartbeat_neutralises_within_100_ms_and_needs_disarm_then_arm() {
-        let mut g = armed();
+        let (mut g, mut l) = armed();
         let mut t = 0.0;
         let mut alive = 0;
         // Heartbeats and commands every 10 ms for 0.5 s.
         while t < 0.5 {
             t += PERIOD_S;
             alive += 1;
-            g.on_frame(&hb(RequestedMode::ArmValve, alive), t);
-            g.on_frame(&valve(Valve::Boom, 1.0), t);
+            g.on_frame(&l.hb(&g, RequestedMode::ArmValve, alive), t);
+            g.on_frame(&l.valve(&g, Valve::Boom, 1.0), t);
             assert_eq!(g.tick(t, None).valve_commands[0], 1.0);
         }
         // Heartbeats stop; commands keep coming.
@@ -715,7 +776,7 @@ mod tests {
         let mut neutral_at = None;
         while t < 1.0 {
             t += 0.001;
-            g.on_frame(&valve(Valve::Boom, 1.0), t);
+            g.on_frame(&l.valve(&g, Valve::Boom, 1.0), t);
             if g.tick(t, None).valve_commands == [0.0; VALVES] && neutral_at.is_none() {
                 neutral_at = Some(t);
             }
@@ -729,14 +790,14 @@ mod tests {
         assert_eq!(g.mode(), GatewayMode::Faulted);
         assert!(g.faults().contains(GatewayFaults::WATCHDOG_TIMEOUT));
         // Arm requests alone do not clear the fault.
-        g.on_frame(&hb(RequestedMode::ArmValve, 3), t);
-        g.on_frame(&hb(RequestedMode::ArmValve, 4), t + 0.01);
+        g.on_frame(&l.hb(&g, RequestedMode::ArmValve, 3), t);
+        g.on_frame(&l.hb(&g, RequestedMode::ArmValve, 4), t + 0.01);
         assert_eq!(g.mode(), GatewayMode::Faulted);
         // Disarm acknowledges, then a fresh arm request re-arms.
-        g.on_frame(&hb(RequestedMode::Disarm, 5), t + 0.02);
+        g.on_frame(&l.hb(&g, RequestedMode::Disarm, 5), t + 0.02);
         assert_eq!(g.mode(), GatewayMode::Disarmed);
         assert!(g.faults().is_empty());
-        g.on_frame(&hb(RequestedMode::ArmValve, 6), t + 0.03);
+        g.on_frame(&l.hb(&g, RequestedMode::ArmValve, 6), t + 0.03);
         assert_eq!(g.mode(), GatewayMode::ArmedValve);
         // The old command does not come back: valves stay neutral until a new one arrives.
         assert_eq!(g.tick(t + 0.035, None).valve_commands, [0.0; VALVES]);
@@ -744,10 +805,10 @@ mod tests {
 
     #[test]
     fn stale_command_faults() {
-        let mut g = armed();
-        g.on_frame(&valve(Valve::Bucket, 0.6), 0.0);
+        let (mut g, mut l) = armed();
+        g.on_frame(&l.valve(&g, Valve::Bucket, 0.6), 0.0);
         for k in 1..=9 {
-            g.on_frame(&hb(RequestedMode::ArmValve, k), 0.01 * f64::from(k));
+            g.on_frame(&l.hb(&g, RequestedMode::ArmValve, k), 0.01 * f64::from(k));
         }
         assert_eq!(g.tick(0.09, None).valve_commands[2], 0.6);
         let out = g.tick(0.11, None);
@@ -757,8 +818,8 @@ mod tests {
 
     #[test]
     fn bad_checksum_faults_and_is_rejected() {
-        let mut g = armed();
-        let frame = hb(RequestedMode::ArmValve, 1);
+        let (mut g, mut l) = armed();
+        let frame = l.hb(&g, RequestedMode::ArmValve, 1);
         let mut data = [0u8; 8];
         data.copy_from_slice(frame.data());
         data[7] ^= 0x5A;
@@ -774,7 +835,7 @@ mod tests {
     /// at 20 Hz consecutive status frames differed by 51.
     #[test]
     fn status_alive_counter_advances_once_per_status_frame_not_per_tick() {
-        let mut g = armed();
+        let (mut g, mut l) = armed();
         let mut prev = g.next_status().alive_counter;
         let mut t = 0.0;
         for frame in 0..600u32 {
@@ -783,7 +844,7 @@ mod tests {
                 t += 0.001;
                 if k % 10 == 0 {
                     g.on_frame(
-                        &hb(RequestedMode::ArmValve, (frame * 10 + k / 10 + 1) as u8),
+                        &l.hb(&g, RequestedMode::ArmValve, (frame * 10 + k / 10 + 1) as u8),
                         t,
                     );
                 }
@@ -797,11 +858,209 @@ mod tests {
         assert_eq!(g.mode(), GatewayMode::ArmedValve);
     }
 
+    /// The controller's frames over 0.5 s of a session: arm, then heartbeats every 50 ms and boom and
+    /// stick commands every 10 ms, each with its time; the gateway ticks every 1 ms. Returns the
+    /// recording and the time of its last frame.
+    fn record_session(g: &mut Gateway, l: &mut Link, t0_s: f64) -> (Vec<(f64, CanFrame)>, f64) {
+        let mut recording = Vec::new();
+        let mut t = t0_s;
+        for k in 0..500u32 {
+            t = t0_s + f64::from(k) * 0.001;
+            if k % 50 == 0 {
+                let frame = l.hb(g, RequestedMode::ArmValve, (k / 50) as u8);
+                recording.push((t, frame));
+                g.on_frame(&frame, t);
+            }
+            if k % 10 == 0 {
+                for (v, u) in [(Valve::Boom, 1.0), (Valve::Stick, -0.8)] {
+                    let frame = l.valve(g, v, u);
+                    recording.push((t, frame));
+                    g.on_frame(&frame, t);
+                }
+            }
+            g.tick(t, None);
+        }
+        assert_eq!(
+            g.mode(),
+            GatewayMode::ArmedValve,
+            "the recorded session drove"
+        );
+        (recording, t)
+    }
+
+    /// Plays `recording` into `g` from `start_s` with its original spacing, ticking every 1 ms, and
+    /// returns the largest valve output seen and whether the gateway was ever armed.
+    fn replay(g: &mut Gateway, recording: &[(f64, CanFrame)], start_s: f64) -> (f64, bool) {
+        let t0 = recording.first().map_or(0.0, |(t, _)| *t);
+        let (mut peak, mut armed) = (0.0_f64, false);
+        let mut next = 0;
+        for k in 0..1000u32 {
+            let t = start_s + f64::from(k) * 0.001;
+            while let Some((at, frame)) = recording.get(next) {
+                if start_s + (at - t0) > t {
+                    break;
+                }
+                g.on_frame(frame, t);
+                next += 1;
+            }
+            let out = g.tick(t, None);
+            peak = out.valve_commands.iter().fold(peak, |m, u| m.max(u.abs()));
+            armed |= g.is_armed();
+        }
+        (peak, armed)
+    }
+
+    /// Regression: with the controller dead, `trace replay` of the controller's ids from an earlier
+    /// session armed the gateway within 0.46 s and moved all joints; after the watchdog fault any
+    /// valid `Disarm` cleared it and `ArmValve` re-armed.
+    #[test]
+    fn a_replayed_controller_trace_neither_arms_nor_drives() {
+        let mut g = Gateway::default().with_security(&SessionKey::PUBLIC, 1);
+        let mut l = Link::default();
+        let (recording, end) = record_session(&mut g, &mut l, 0.0);
+        // The controller dies; the watchdog faults and ends the session.
+        for k in 1..=200u32 {
+            g.tick(end + f64::from(k) * 0.001, None);
+        }
+        assert_eq!(g.mode(), GatewayMode::Faulted);
+        let (peak, armed) = replay(&mut g, &recording, end + 0.3);
+        assert_eq!((peak, armed), (0.0, false), "the replay moved the machine");
+        assert_eq!(
+            g.mode(),
+            GatewayMode::Faulted,
+            "a replayed Disarm cleared the fault"
+        );
+        // A gateway after a power cycle (a new seed: a new session) does not take it either.
+        let mut rebooted = Gateway::default().with_security(&SessionKey::PUBLIC, 2);
+        let (peak, armed) = replay(&mut rebooted, &recording, 0.0);
+        assert_eq!((peak, armed), (0.0, false));
+        assert!(rebooted.frame_counts().1 > 0, "the replay is counted");
+    }
+
+    /// Regression: sixteen recorded heartbeats replayed in order passed the 4-bit alive counter
+    /// forever; after the controller was killed they and each valve's last command kept the valves
+    /// driven.
+    #[test]
+    fn replayed_heartbeats_do_not_keep_the_valves_driven() {
+        let mut g = Gateway::default();
+        let mut l = Link::default();
+        let (recording, end) = record_session(&mut g, &mut l, 0.0);
+        let pgn = |f: &CanFrame| Message::decode(f).map(|d| d.id.pgn()).unwrap_or(0);
+        let heartbeats: Vec<CanFrame> = recording
+            .iter()
+            .map(|(_, f)| *f)
+            .filter(|f| pgn(f) == crate::dbc::controller_heartbeat::PGN)
+            .collect();
+        let last_commands: Vec<CanFrame> =
+            recording.iter().rev().take(2).map(|(_, f)| *f).collect();
+        // Killed at `end`: the attacker plays the heartbeats cyclically at 50 ms and the last commands
+        // at 10 ms, for 5 s.
+        let mut driven_until = end;
+        for k in 1..=5000u32 {
+            let t = end + f64::from(k) * 0.001;
+            if k % 50 == 0 {
+                let hb = heartbeats[(k as usize / 50) % heartbeats.len()];
+                g.on_frame(&hb, t);
+            }
+            if k % 10 == 0 {
+                for f in &last_commands {
+                    g.on_frame(f, t);
+                }
+            }
+            if g.tick(t, None).valve_commands != [0.0; VALVES] {
+                driven_until = t;
+            }
+        }
+        assert!(
+            driven_until - end <= 0.1 + 1e-9,
+            "driven {:.3} s after the kill",
+            driven_until - end
+        );
+        assert_eq!(g.mode(), GatewayMode::Faulted);
+    }
+
+    /// Regression: a command spoofed from the controller's own address was applied for one control
+    /// period before the controller noticed. A second sender with the controller's address (its own
+    /// counters) is never applied, and with a provisioned key not even one that copies the
+    /// controller's counters is.
+    #[test]
+    fn a_spoofed_command_from_the_controllers_address_is_never_applied() {
+        let (mut g, mut l) = armed();
+        let mut spoofer = Link::default();
+        g.on_frame(&l.valve(&g, Valve::Boom, 0.2), 0.001);
+        assert_eq!(
+            g.on_frame(&spoofer.valve(&g, Valve::Boom, 1.0), 0.002),
+            FrameVerdict::Rejected
+        );
+        let out = g.tick(0.003, None);
+        assert_eq!(out.valve_commands, [0.0; VALVES], "spoofed once: neutral");
+        assert!(out.status.faults.contains(GatewayFaults::AUTH_FAILURE));
+
+        let key = SessionKey::from_hex("2b7e151628aed2a6abf7158809cf4f3c").unwrap();
+        let mut g = Gateway::default().with_security(&key, 9);
+        let mut owner = Sealer::new(&key);
+        owner.set_session(g.session().session_id);
+        let hb = |mode| {
+            Message::ControllerHeartbeat(ControllerHeartbeat {
+                mode,
+                alive_counter: 0,
+            })
+        };
+        assert_eq!(
+            g.on_frame(&owner.seal(&hb(RequestedMode::ArmValve)).unwrap(), 0.0),
+            FrameVerdict::Accepted
+        );
+        // The spoofer reads the session and follows the counters, but has no key.
+        let mut spoofer = Sealer::new(&SessionKey::PUBLIC);
+        spoofer.set_session(g.session().session_id);
+        spoofer.seal(&hb(RequestedMode::ArmValve)).unwrap();
+        let boom =
+            Message::AuxValveCommand(AuxValveCommand::from_fraction(Valve::Boom, 1.0).unwrap());
+        assert_eq!(
+            g.on_frame(&spoofer.seal(&boom).unwrap(), 0.001),
+            FrameVerdict::Rejected
+        );
+        assert_eq!(g.tick(0.002, None).valve_commands, [0.0; VALVES]);
+        // Nor can a node without the key arm a disarmed gateway.
+        let mut g = Gateway::default().with_security(&key, 10);
+        let mut stranger = Sealer::new(&SessionKey::PUBLIC);
+        stranger.set_session(g.session().session_id);
+        for k in 0..100u32 {
+            let frame = stranger.seal(&hb(RequestedMode::ArmValve)).unwrap();
+            g.on_frame(&frame, f64::from(k) * 0.01);
+        }
+        assert_eq!(g.mode(), GatewayMode::Disarmed);
+    }
+
+    #[test]
+    fn a_new_controller_gets_a_new_session_after_the_old_one_falls_silent() {
+        let (mut g, mut l) = armed();
+        let first = g.session();
+        g.on_frame(&l.hb(&g, RequestedMode::Disarm, 1), 0.01);
+        for k in 1..=150u32 {
+            g.tick(0.01 + f64::from(k) * 0.001, None);
+        }
+        assert_ne!(g.session(), first, "silence ends the session");
+        // A restarted controller (new counters) in the new session arms.
+        let mut restarted = Link::default();
+        g.on_frame(&restarted.hb(&g, RequestedMode::ArmValve, 9), 0.2);
+        assert_eq!(g.mode(), GatewayMode::ArmedValve);
+        // An unused session does not expire on its own.
+        let session = g.session();
+        let mut idle = Gateway::default();
+        let before = idle.session();
+        for k in 0..1000u32 {
+            idle.tick(f64::from(k) * 0.001, None);
+        }
+        assert_eq!(idle.session(), before);
+        assert_ne!(session, before);
+    }
+
     #[test]
     fn skipped_alive_counter_faults_and_replay_is_rejected_only() {
-        let mut g = armed();
+        let (mut g, mut l) = armed();
         assert_eq!(
-            g.on_frame(&hb(RequestedMode::ArmValve, 0), 0.005),
+            g.on_frame(&l.hb(&g, RequestedMode::ArmValve, 0), 0.005),
             FrameVerdict::Rejected
         );
         assert_eq!(
@@ -810,7 +1069,7 @@ mod tests {
             "a replay is ignored, not a fault"
         );
         assert_eq!(
-            g.on_frame(&hb(RequestedMode::ArmValve, 2), 0.01),
+            g.on_frame(&l.hb(&g, RequestedMode::ArmValve, 2), 0.01),
             FrameVerdict::Rejected
         );
         assert!(g.faults().contains(GatewayFaults::BAD_ALIVE_COUNTER));
@@ -819,7 +1078,8 @@ mod tests {
     #[test]
     fn e_stop_latches_in_any_mode() {
         let mut g = Gateway::default();
-        g.on_frame(&hb(RequestedMode::EStop, 0), 0.0);
+        let mut l = Link::default();
+        g.on_frame(&l.hb(&g, RequestedMode::EStop, 0), 0.0);
         assert_eq!(g.mode(), GatewayMode::Faulted);
         assert!(g.faults().contains(GatewayFaults::E_STOP));
     }
@@ -828,12 +1088,12 @@ mod tests {
     /// boom 100 % moved the boom 1 ms after the e-stop.
     #[test]
     fn e_stop_is_not_cleared_by_disarm_only_by_a_reset_then_disarm_then_arm() {
-        let mut g = armed();
-        g.on_frame(&valve(Valve::Boom, 0.5), 0.001);
-        g.on_frame(&hb(RequestedMode::EStop, 1), 0.002);
-        g.on_frame(&hb(RequestedMode::Disarm, 2), 0.0025);
-        g.on_frame(&hb(RequestedMode::ArmValve, 3), 0.0026);
-        g.on_frame(&valve(Valve::Boom, 1.0), 0.0027);
+        let (mut g, mut l) = armed();
+        g.on_frame(&l.valve(&g, Valve::Boom, 0.5), 0.001);
+        g.on_frame(&l.hb(&g, RequestedMode::EStop, 1), 0.002);
+        g.on_frame(&l.hb(&g, RequestedMode::Disarm, 2), 0.0025);
+        g.on_frame(&l.hb(&g, RequestedMode::ArmValve, 3), 0.0026);
+        g.on_frame(&l.valve(&g, Valve::Boom, 1.0), 0.0027);
         let out = g.tick(0.003, None);
         assert_eq!(
             out.valve_commands, [0.0; VALVES],
@@ -842,43 +1102,43 @@ mod tests {
         assert_eq!(g.mode(), GatewayMode::Faulted);
         assert!(g.faults().contains(GatewayFaults::E_STOP));
         // The reset clears the e-stop but not the Faulted mode: arm requests still do nothing.
-        g.on_frame(&hb(RequestedMode::ResetEStop, 4), 0.01);
+        g.on_frame(&l.hb(&g, RequestedMode::ResetEStop, 4), 0.01);
         assert!(!g.faults().contains(GatewayFaults::E_STOP));
         assert_eq!(g.mode(), GatewayMode::Faulted);
-        g.on_frame(&hb(RequestedMode::ArmValve, 5), 0.02);
-        g.on_frame(&valve(Valve::Boom, 1.0), 0.02);
+        g.on_frame(&l.hb(&g, RequestedMode::ArmValve, 5), 0.02);
+        g.on_frame(&l.valve(&g, Valve::Boom, 1.0), 0.02);
         assert_eq!(g.tick(0.021, None).valve_commands, [0.0; VALVES]);
         assert_eq!(g.mode(), GatewayMode::Faulted);
         // Disarm acknowledges, then an arm request arms.
-        g.on_frame(&hb(RequestedMode::Disarm, 6), 0.03);
+        g.on_frame(&l.hb(&g, RequestedMode::Disarm, 6), 0.03);
         assert_eq!(g.mode(), GatewayMode::Disarmed);
         assert!(g.faults().is_empty());
-        g.on_frame(&hb(RequestedMode::ArmValve, 7), 0.04);
-        g.on_frame(&valve(Valve::Boom, 1.0), 0.04);
+        g.on_frame(&l.hb(&g, RequestedMode::ArmValve, 7), 0.04);
+        g.on_frame(&l.valve(&g, Valve::Boom, 1.0), 0.04);
         assert_eq!(g.tick(0.041, None).valve_commands[0], 1.0);
     }
 
     #[test]
     fn reset_request_without_an_e_stop_never_arms() {
-        let mut g = armed();
-        g.on_frame(&valve(Valve::Boom, 1.0), 0.001);
-        g.on_frame(&hb(RequestedMode::ResetEStop, 1), 0.002);
+        let (mut g, mut l) = armed();
+        g.on_frame(&l.valve(&g, Valve::Boom, 1.0), 0.001);
+        g.on_frame(&l.hb(&g, RequestedMode::ResetEStop, 1), 0.002);
         assert_eq!(g.mode(), GatewayMode::Disarmed);
         assert_eq!(g.tick(0.003, None).valve_commands, [0.0; VALVES]);
-        g.on_frame(&hb(RequestedMode::ResetEStop, 2), 0.01);
+        g.on_frame(&l.hb(&g, RequestedMode::ResetEStop, 2), 0.01);
         assert_eq!(g.mode(), GatewayMode::Disarmed);
     }
 
     /// Drives the boom at 100 % with heartbeats and commands every 10 ms and 1 ms ticks from `t0_s` for
     /// 0.2 s; returns the time of the last tick.
-    fn drive_boom(g: &mut Gateway, t0_s: f64, alive: &mut u8) -> f64 {
+    fn drive_boom(g: &mut Gateway, l: &mut Link, t0_s: f64, alive: &mut u8) -> f64 {
         let mut t = t0_s;
         for k in 0..200 {
             t = t0_s + f64::from(k) * 0.001;
             if k % 10 == 0 {
                 *alive = alive.wrapping_add(1);
-                g.on_frame(&hb(RequestedMode::ArmValve, *alive), t);
-                g.on_frame(&valve(Valve::Boom, 1.0), t);
+                g.on_frame(&l.hb(g, RequestedMode::ArmValve, *alive), t);
+                g.on_frame(&l.valve(g, Valve::Boom, 1.0), t);
             }
             g.tick(t, None);
         }
@@ -890,9 +1150,10 @@ mod tests {
     #[test]
     fn clock_stepped_back_10_s_does_not_keep_valves_driven() {
         let mut g = Gateway::default();
+        let mut l = Link::default();
         let mut alive = 0;
-        g.on_frame(&hb(RequestedMode::ArmValve, alive), 100.0);
-        let t = drive_boom(&mut g, 100.0, &mut alive);
+        g.on_frame(&l.hb(&g, RequestedMode::ArmValve, alive), 100.0);
+        let t = drive_boom(&mut g, &mut l, 100.0, &mut alive);
         assert_eq!(g.tick(t, None).valve_commands[0], 1.0);
         // The clock steps back 10 s and the controller says nothing more.
         let back = t - 10.0;
@@ -907,52 +1168,52 @@ mod tests {
         // In the new time base the controller's Disarm acknowledges and motion needs a fresh arm.
         let t = back + 2.001;
         alive += 1;
-        g.on_frame(&hb(RequestedMode::ArmValve, alive), t);
-        g.on_frame(&valve(Valve::Boom, 1.0), t);
+        g.on_frame(&l.hb(&g, RequestedMode::ArmValve, alive), t);
+        g.on_frame(&l.valve(&g, Valve::Boom, 1.0), t);
         assert_eq!(
             g.tick(t, None).valve_commands,
             [0.0; VALVES],
             "still Faulted"
         );
         alive += 1;
-        g.on_frame(&hb(RequestedMode::Disarm, alive), t + 0.01);
+        g.on_frame(&l.hb(&g, RequestedMode::Disarm, alive), t + 0.01);
         assert_eq!(g.mode(), GatewayMode::Disarmed);
         assert!(g.faults().is_empty());
-        let t = drive_boom(&mut g, t + 0.02, &mut alive);
+        let t = drive_boom(&mut g, &mut l, t + 0.02, &mut alive);
         assert_eq!(g.tick(t, None).valve_commands[0], 1.0);
     }
 
     #[test]
     fn a_command_stamped_nan_does_not_drive_the_boom() {
-        let mut g = armed();
+        let (mut g, mut l) = armed();
         assert_eq!(
-            g.on_frame(&valve(Valve::Boom, 1.0), f64::NAN),
+            g.on_frame(&l.valve(&g, Valve::Boom, 1.0), f64::NAN),
             FrameVerdict::Rejected
         );
         assert!(g.faults().contains(GatewayFaults::CLOCK_FAULT));
         // Heartbeats and ticks go on with good times: the boom stays put until Disarm, Arm.
         for k in 1..=20u8 {
             let t = f64::from(k) * 0.005;
-            g.on_frame(&hb(RequestedMode::ArmValve, k), t);
+            g.on_frame(&l.hb(&g, RequestedMode::ArmValve, k), t);
             assert_eq!(g.tick(t, None).valve_commands, [0.0; VALVES]);
         }
         // A frame from before the latest time is a clock fault too, as is a NaN tick.
-        let mut g = armed();
+        let (mut g, mut l) = armed();
         g.tick(0.01, None);
         assert_eq!(
-            g.on_frame(&valve(Valve::Boom, 1.0), 0.009),
+            g.on_frame(&l.valve(&g, Valve::Boom, 1.0), 0.009),
             FrameVerdict::Rejected
         );
         assert!(g.faults().contains(GatewayFaults::CLOCK_FAULT));
-        let mut g = armed();
-        g.on_frame(&valve(Valve::Boom, 1.0), 0.001);
+        let (mut g, mut l) = armed();
+        g.on_frame(&l.valve(&g, Valve::Boom, 1.0), 0.001);
         assert_eq!(g.tick(0.002, None).valve_commands[0], 1.0);
         let out = g.tick(f64::NAN, None);
         assert_eq!(out.valve_commands, [0.0; VALVES]);
         assert!(out.status.faults.contains(GatewayFaults::CLOCK_FAULT));
         // Equal times are fine.
-        let mut g = armed();
-        g.on_frame(&valve(Valve::Boom, 1.0), 0.0);
+        let (mut g, mut l) = armed();
+        g.on_frame(&l.valve(&g, Valve::Boom, 1.0), 0.0);
         assert_eq!(g.tick(0.0, None).valve_commands[0], 1.0);
         assert!(g.faults().is_empty());
     }
@@ -960,6 +1221,7 @@ mod tests {
     #[test]
     fn frame_counters_saturate_and_say_so() {
         let mut g = Gateway::default();
+
         let unknown = CanFrame::new_extended(0x18FE_EE00, &[1, 2, 3]).unwrap();
         for k in 0..70_000u32 {
             g.on_frame(&unknown, f64::from(k) * 1e-6);
@@ -1028,7 +1290,7 @@ mod tests {
 
     #[test]
     fn foreign_source_address_and_unknown_frames_are_counted_not_acted_on() {
-        let mut g = armed();
+        let (mut g, mut l) = armed();
         let foreign =
             Message::AuxValveCommand(AuxValveCommand::from_fraction(Valve::Boom, 1.0).unwrap())
                 .encode_from(0x33)
@@ -1047,7 +1309,7 @@ mod tests {
         .encode_from(GATEWAY_ADDRESS)
         .unwrap();
         assert_eq!(g.on_frame(&own, 0.003), FrameVerdict::Unexpected);
-        let good = valve(Valve::Boom, 1.0);
+        let good = l.valve(&g, Valve::Boom, 1.0);
         let short = CanFrame::new_data(good.id(), &good.data()[..4]).unwrap();
         assert_eq!(g.on_frame(&short, 0.004), FrameVerdict::Rejected);
         let out = g.tick(0.005, None);
@@ -1063,7 +1325,7 @@ mod tests {
     /// counter rose by one per frame and saturated within an hour.
     #[test]
     fn controller_status_is_ignored_not_unexpected() {
-        let mut g = armed();
+        let (mut g, _) = armed();
         let status = Message::ControllerStatus(ControllerStatus {
             activity: Activity::Dig,
             stage: AutodigStageCode::Dig,
@@ -1087,26 +1349,29 @@ mod tests {
     /// hold, and the step that re-arms) counted as rejected, six per period, next to every re-arm.
     #[test]
     fn neutral_valve_commands_outside_valve_mode_are_ignored_others_rejected() {
-        let mut g = armed();
-        g.on_frame(&hb(RequestedMode::Disarm, 1), 0.01);
+        let (mut g, mut l) = armed();
+        g.on_frame(&l.hb(&g, RequestedMode::Disarm, 1), 0.01);
         assert_eq!(g.mode(), GatewayMode::Disarmed);
         for v in Valve::ALL {
-            assert_eq!(g.on_frame(&valve(v, 0.0), 0.02), FrameVerdict::Ignored);
+            assert_eq!(
+                g.on_frame(&l.valve(&g, v, 0.0), 0.02),
+                FrameVerdict::Ignored
+            );
         }
         assert_eq!(
-            g.on_frame(&valve(Valve::Boom, 0.3), 0.02),
+            g.on_frame(&l.valve(&g, Valve::Boom, 0.3), 0.02),
             FrameVerdict::Rejected,
             "motion while disarmed is wrong"
         );
         // The same in position mode: neutral ignored, motion rejected, and nothing moves the valve.
-        g.on_frame(&hb(RequestedMode::ArmPosition, 2), 0.03);
+        g.on_frame(&l.hb(&g, RequestedMode::ArmPosition, 2), 0.03);
         assert_eq!(g.mode(), GatewayMode::ArmedPosition);
         assert_eq!(
-            g.on_frame(&valve(Valve::Stick, 0.0), 0.031),
+            g.on_frame(&l.valve(&g, Valve::Stick, 0.0), 0.031),
             FrameVerdict::Ignored
         );
         assert_eq!(
-            g.on_frame(&valve(Valve::Stick, -1.0), 0.032),
+            g.on_frame(&l.valve(&g, Valve::Stick, -1.0), 0.032),
             FrameVerdict::Rejected
         );
         assert_eq!(g.tick(0.033, None).valve_commands, [0.0; VALVES]);
@@ -1117,31 +1382,32 @@ mod tests {
     #[test]
     fn position_mode_drives_toward_the_setpoint_with_rate_limit() {
         let mut g = Gateway::default();
-        g.on_frame(&hb(RequestedMode::ArmPosition, 0), 0.0);
+        let mut l = Link::default();
+        g.on_frame(&l.hb(&g, RequestedMode::ArmPosition, 0), 0.0);
         assert_eq!(g.mode(), GatewayMode::ArmedPosition);
-        g.on_frame(&setpoint([0.5, -1.0, -1.0, 0.0], 0), 0.0);
+        g.on_frame(&l.setpoint(&g, [0.5, -1.0, -1.0, 0.0]), 0.0);
         let q = [0.0, -1.5, -0.5, 0.0];
         let first = g.tick(0.0, Some(q)).valve_commands;
         assert_eq!(first, [0.0; VALVES], "rate limited from zero");
-        g.on_frame(&hb(RequestedMode::ArmPosition, 1), 0.01);
-        g.on_frame(&setpoint([0.5, -1.0, -1.0, 0.0], 1), 0.01);
+        g.on_frame(&l.hb(&g, RequestedMode::ArmPosition, 1), 0.01);
+        let second = l.setpoint(&g, [0.5, -1.0, -1.0, 0.0]);
+        g.on_frame(&second, 0.01);
         let out = g.tick(0.01, Some(q)).valve_commands;
         assert!((out[0] - 0.05).abs() < 1e-9, "boom up: extend, {out:?}");
         assert!(out[1] < 0.0, "stick angle must rise: retract, {out:?}");
         assert!(out[2] > 0.0, "bucket angle must fall: extend, {out:?}");
         assert_eq!(out[3], 0.0);
-        // Same sequence counter again: a replay, rejected.
-        assert_eq!(
-            g.on_frame(&setpoint([0.5, -1.0, -1.0, 0.0], 1), 0.015),
-            FrameVerdict::Rejected
-        );
+        // The same frame again: a replay, rejected (and a fault: armed).
+        assert_eq!(g.on_frame(&second, 0.015), FrameVerdict::Rejected);
+        assert!(g.faults().contains(GatewayFaults::AUTH_FAILURE));
     }
 
     #[test]
     fn position_mode_faults_on_stale_or_out_of_range_setpoints() {
         let mut g = Gateway::default();
-        g.on_frame(&hb(RequestedMode::ArmPosition, 0), 0.0);
-        g.on_frame(&hb(RequestedMode::ArmPosition, 1), 0.09);
+        let mut l = Link::default();
+        g.on_frame(&l.hb(&g, RequestedMode::ArmPosition, 0), 0.0);
+        g.on_frame(&l.hb(&g, RequestedMode::ArmPosition, 1), 0.09);
         g.tick(0.09, Some([0.0; 4]));
         assert_eq!(
             g.mode(),
@@ -1151,9 +1417,10 @@ mod tests {
         g.tick(0.11, Some([0.0; 4]));
         assert!(g.faults().contains(GatewayFaults::STALE_COMMAND));
         let mut g = Gateway::default();
-        g.on_frame(&hb(RequestedMode::ArmPosition, 0), 0.0);
-        g.on_frame(&setpoint([0.0, 0.0, 0.0, 0.0], 0), 0.0);
-        g.on_frame(&setpoint([0.0, -1.0, 2.0, 0.0], 1), 0.0);
+        let mut l = Link::default();
+        g.on_frame(&l.hb(&g, RequestedMode::ArmPosition, 0), 0.0);
+        g.on_frame(&l.setpoint(&g, [0.0, 0.0, 0.0, 0.0]), 0.0);
+        g.on_frame(&l.setpoint(&g, [0.0, -1.0, 2.0, 0.0]), 0.0);
         assert!(g.faults().contains(GatewayFaults::SETPOINT_OUT_OF_RANGE));
     }
 
@@ -1167,6 +1434,7 @@ mod tests {
     /// after it. Returns the last heartbeat's time and the time of the first tick with neutral output.
     fn first_neutral_after_last_heartbeat(phase_s: f64, last: u32) -> (f64, f64) {
         let mut g = Gateway::default();
+        let mut l = Link::default();
         let last_hb_s = phase_s + f64::from(last) * SWEEP_HEARTBEAT_PERIOD_S;
         let mut n = 0u32;
         let mut k = 0u32;
@@ -1180,9 +1448,9 @@ mod tests {
                 }
                 if n <= last {
                     let mode = RequestedMode::ArmValve;
-                    g.on_frame(&hb(mode, (n % 16) as u8), at);
+                    g.on_frame(&l.hb(&g, mode, (n % 16) as u8), at);
                 }
-                g.on_frame(&valve(Valve::Boom, 1.0), at);
+                g.on_frame(&l.valve(&g, Valve::Boom, 1.0), at);
                 n += 1;
             }
             let out = g.tick(t, None);
@@ -1225,6 +1493,7 @@ mod tests {
             measured in proptest::array::uniform4(any::<f64>()),
         ) {
             let mut g = Gateway::default();
+
             let mut t = 0.0;
             for (id, data, extended) in frames {
                 let frame = if extended {

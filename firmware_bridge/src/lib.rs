@@ -12,6 +12,9 @@
 //!   truth, and the generic signal codec.
 //! - [`messages`]: the typed [`Message`] enum (`Message::AuxValveCommand`, `Message::JointAngles`, ...)
 //!   with `encode` to and `decode` from frames, through the DBC descriptors only.
+//! - [`secoc`]: freshness and authentication of the controller's control frames (session nonce,
+//!   per-id counters, truncated AES-CMAC): [`secoc::Sealer`] on the controller, [`secoc::Verifier`] in
+//!   the gateway.
 //! - [`transport`]: the async [`Bus`] trait with two implementations, SocketCAN
 //!   ([`transport::SocketCanBus`]) and the in-process bus ([`transport::InProcessBus`]) with its
 //!   synchronous path and [`transport::VirtualClock`] for virtual-time simulation.
@@ -24,7 +27,7 @@
 //!
 //! ```text
 //! sender:   Message --encode (dbc descriptors)--> CanFrame --Bus::send--> wire / in-process bus
-//! receiver: wire --Bus::recv--> TimestampedFrame --Message::decode--> Decoded { id, message }
+//! receiver: wire --Bus::recv--> TimestampedFrame --Message::decode--> Decoded { id, message, trailer }
 //!                       \--> Recorder (candump -L log) on both sides
 //! ```
 //!
@@ -38,6 +41,7 @@ pub mod gateway;
 pub mod id;
 pub mod messages;
 pub mod scan;
+pub mod secoc;
 pub mod trace;
 pub mod transport;
 

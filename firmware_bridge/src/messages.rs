@@ -197,6 +197,10 @@ impl GatewayFaults {
     /// The gateway's time input was not finite or went backwards: its watchdog and staleness checks
     /// cannot be trusted, so it latched (in any mode).
     pub const CLOCK_FAULT: u16 = 1 << 8;
+    /// A secured frame from the controller's address that did not verify for this session and a fresh
+    /// counter: replayed, recorded in another session, from a second sender, or without the key
+    /// ([`crate::secoc`]).
+    pub const AUTH_FAILURE: u16 = 1 << 9;
 
     /// True if every bit of `bits` is set.
     pub const fn contains(self, bits: u16) -> bool {
@@ -374,7 +378,8 @@ impl GatewayStatus {
 }
 
 /// Joint position setpoints for the gateway's closed-loop position mode (Proprietary B PGN 0xFF60),
-/// rad, `[-pi, pi]`, 2e-4 rad resolution (15-bit fields so four angles and a counter fit 8 bytes).
+/// rad, `[-pi, pi]`, 8e-4 rad resolution (13-bit fields so four angles, a freshness value and an
+/// authenticator fit 8 bytes; the freshness is the sender's, [`crate::secoc`]).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct PositionSetpoint {
     /// Boom angle setpoint.
@@ -385,8 +390,14 @@ pub struct PositionSetpoint {
     pub bucket_rad: f64,
     /// Swing angle setpoint.
     pub swing_rad: f64,
-    /// Sequence counter `0..=15`, increments by one per setpoint.
-    pub sequence: u8,
+}
+
+/// Gateway session (Proprietary B PGN 0xFF55), 20 Hz with the status: the nonce that binds the
+/// controller's secured frames to this session ([`crate::secoc`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct GatewaySession {
+    /// The session's nonce.
+    pub session_id: u32,
 }
 
 /// Controller heartbeat and mode request (Proprietary B PGN 0xFF61) with a 4-bit alive counter and a
@@ -560,6 +571,8 @@ pub enum Message {
     TrackOdometry(TrackOdometry),
     /// Gateway status.
     GatewayStatus(GatewayStatus),
+    /// Gateway session nonce.
+    GatewaySession(GatewaySession),
     /// Position setpoints.
     PositionSetpoint(PositionSetpoint),
     /// Controller heartbeat.
@@ -568,13 +581,83 @@ pub enum Message {
     ControllerStatus(ControllerStatus),
 }
 
-/// A decoded frame: the J1939 id (so receivers can check the source address) and the message.
+/// A decoded frame: the J1939 id (so receivers can check the source address), the message, and the
+/// secured trailer of the controller's control messages.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Decoded {
     /// The frame's id.
     pub id: J1939Id,
     /// The message.
     pub message: Message,
+    /// The freshness value and authenticator as received, for the messages that carry them
+    /// (valve commands, position setpoints, heartbeats); `None` for the others. Checked by
+    /// [`crate::secoc::Verifier`], not by the decoder.
+    pub trailer: Option<Trailer>,
+}
+
+impl Decoded {
+    /// The values by DBC signal name, as [`Message::signal_values`] but with the trailer received.
+    pub fn signal_values(&self) -> Vec<(&'static str, f64)> {
+        let mut values = self.message.signal_values();
+        let Some(t) = self.trailer else {
+            return values;
+        };
+        // The heartbeat's checksum covers the trailer: recompute it over the bytes as received.
+        let checksum = trailer_signals(self.id.pgn()).and_then(|(fv, auth)| {
+            let frame = self.message.encode().ok()?;
+            let mut d: [u8; 8] = frame.data().try_into().ok()?;
+            dbc::encode_raw(fv, i64::from(t.freshness), &mut d).ok()?;
+            dbc::encode_raw(auth, i64::from(t.authenticator), &mut d).ok()?;
+            Some(heartbeat_checksum(&d))
+        });
+        for (name, v) in &mut values {
+            match *name {
+                "FreshnessValue" => *v = f64::from(t.freshness),
+                "Authenticator" => *v = f64::from(t.authenticator),
+                "Checksum" => *v = checksum.map_or(f64::NAN, f64::from),
+                _ => {}
+            }
+        }
+        values
+    }
+}
+
+/// The freshness value (the low bits of the sender's counter) and the truncated authenticator of a
+/// secured message, raw as on the wire.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Trailer {
+    /// `FreshnessValue`: the low 8 (setpoint: 4) bits of the sender's freshness counter.
+    pub freshness: u8,
+    /// `Authenticator`: the truncated CMAC, 24 (setpoint: 8) bits.
+    pub authenticator: u32,
+}
+
+/// The trailer signals (`FreshnessValue`, `Authenticator`) of a secured message, by PGN.
+pub(crate) fn trailer_signals(pgn: u32) -> Option<(&'static SignalDesc, &'static SignalDesc)> {
+    use dbc::{controller_heartbeat as hb, position_setpoint as sp};
+    if AUX_VALVE_COMMAND.iter().any(|m| m.pgn == pgn) {
+        return Some((&cmd::FRESHNESS_VALUE, &cmd::AUTHENTICATOR));
+    }
+    match pgn {
+        hb::PGN => Some((&hb::FRESHNESS_VALUE, &hb::AUTHENTICATOR)),
+        sp::PGN => Some((&sp::FRESHNESS_VALUE, &sp::AUTHENTICATOR)),
+        _ => None,
+    }
+}
+
+/// The trailer of `data` for a message with these trailer signals (raw values; every raw value is in
+/// range, the DBC ranges cover them all).
+fn read_trailer(
+    (fv, auth): (&'static SignalDesc, &'static SignalDesc),
+    data: &[u8],
+) -> Result<Trailer, DecodeError> {
+    Ok(Trailer {
+        freshness: raw_u8(fv, data)?,
+        authenticator: u32::try_from(raw(auth, data)?).map_err(|_| DecodeError::OutOfRange {
+            signal: auth.name,
+            raw: -1,
+        })?,
+    })
 }
 
 const AUX_VALVE_COMMAND: [&MessageDesc; 6] = [
@@ -596,7 +679,8 @@ const AUX_VALVE_MEASURED: [&MessageDesc; 3] = [
 // signal descriptors are used for all of them. `tests::valve_messages_share_one_layout` checks it.
 mod cmd {
     pub use crate::dbc::aux_valve_command_boom::{
-        FAIL_SAFE_MODE, PORT_FLOW_COMMAND, PORT_FLOW_COMMAND_FINE, VALVE_STATE,
+        AUTHENTICATOR, FAIL_SAFE_MODE, FRESHNESS_VALUE, PORT_FLOW_COMMAND, PORT_FLOW_COMMAND_FINE,
+        VALVE_STATE,
     };
 }
 mod meas {
@@ -641,6 +725,7 @@ impl Message {
             Self::PumpPressures(_) => &dbc::pump_pressures::MESSAGE,
             Self::TrackOdometry(_) => &dbc::track_odometry::MESSAGE,
             Self::GatewayStatus(_) => &dbc::gateway_status::MESSAGE,
+            Self::GatewaySession(_) => &dbc::gateway_session::MESSAGE,
             Self::PositionSetpoint(_) => &dbc::position_setpoint::MESSAGE,
             Self::ControllerHeartbeat(_) => &dbc::controller_heartbeat::MESSAGE,
             Self::ControllerStatus(_) => &dbc::controller_status::MESSAGE,
@@ -733,13 +818,16 @@ impl Message {
                 dbc::encode_raw(&s::UNEXPECTED_FRAMES, i64::from(m.unexpected_frames), d)?;
                 dbc::encode_raw(&s::REJECTED_FRAMES, i64::from(m.rejected_frames), d)?;
             }
+            Self::GatewaySession(m) => {
+                use dbc::gateway_session as s;
+                dbc::encode_raw(&s::SESSION_ID, i64::from(m.session_id), d)?;
+            }
             Self::PositionSetpoint(m) => {
                 use dbc::position_setpoint as s;
                 put(&s::BOOM_SETPOINT, m.boom_rad, d)?;
                 put(&s::STICK_SETPOINT, m.stick_rad, d)?;
                 put(&s::BUCKET_SETPOINT, m.bucket_rad, d)?;
                 put(&s::SWING_SETPOINT, m.swing_rad, d)?;
-                dbc::encode_raw(&s::SEQUENCE_COUNTER, i64::from(m.sequence), d)?;
             }
             Self::ControllerHeartbeat(m) => {
                 use dbc::controller_heartbeat as s;
@@ -789,7 +877,14 @@ impl Message {
             });
         }
         let message = Self::decode_body(desc, data)?;
-        Ok(Decoded { id, message })
+        let trailer = trailer_signals(pgn)
+            .map(|signals| read_trailer(signals, data))
+            .transpose()?;
+        Ok(Decoded {
+            id,
+            message,
+            trailer,
+        })
     }
 
     fn decode_body(desc: &MessageDesc, d: &[u8]) -> Result<Self, DecodeError> {
@@ -867,6 +962,16 @@ impl Message {
                     rejected_frames: raw_u16(&s::REJECTED_FRAMES, d)?,
                 })
             }
+            dbc::gateway_session::PGN => {
+                use dbc::gateway_session as s;
+                let raw_id = raw(&s::SESSION_ID, d)?;
+                Self::GatewaySession(GatewaySession {
+                    session_id: u32::try_from(raw_id).map_err(|_| DecodeError::OutOfRange {
+                        signal: s::SESSION_ID.name,
+                        raw: raw_id,
+                    })?,
+                })
+            }
             dbc::position_setpoint::PGN => {
                 use dbc::position_setpoint as s;
                 Self::PositionSetpoint(PositionSetpoint {
@@ -874,7 +979,6 @@ impl Message {
                     stick_rad: get(&s::STICK_SETPOINT, d)?,
                     bucket_rad: get(&s::BUCKET_SETPOINT, d)?,
                     swing_rad: get(&s::SWING_SETPOINT, d)?,
-                    sequence: raw_u8(&s::SEQUENCE_COUNTER, d)?,
                 })
             }
             dbc::controller_heartbeat::PGN => {
@@ -907,14 +1011,20 @@ impl Message {
 
     /// The message's values by DBC signal name, as this decoder understands them (physical units of the
     /// DBC; enums and counters as their raw numbers). Used to compare with other DBC tools and to print
-    /// traces. The heartbeat's `Checksum` is computed as [`Message::encode`] would send it.
+    /// traces. The heartbeat's `Checksum` and the trailer (`FreshnessValue`, `Authenticator`) are as
+    /// [`Message::encode`] sends them, unsealed (all ones); [`Decoded::signal_values`] has the trailer
+    /// received.
     pub fn signal_values(&self) -> Vec<(&'static str, f64)> {
+        const UNSEALED_FRESHNESS: f64 = 255.0;
+        const UNSEALED_AUTHENTICATOR: f64 = 16_777_215.0;
         match self {
             Self::AuxValveCommand(m) => vec![
                 ("PortFlowCommand", m.flow_percent),
+                ("FreshnessValue", UNSEALED_FRESHNESS),
                 ("ValveState", f64::from(m.state as u8)),
                 ("FailSafeMode", f64::from(m.fail_safe as u8)),
                 ("PortFlowCommandFine", m.flow_percent),
+                ("Authenticator", UNSEALED_AUTHENTICATOR),
             ],
             Self::AuxValveMeasured(m) => vec![
                 ("MeasuredFlow", m.flow_percent),
@@ -950,12 +1060,14 @@ impl Message {
                 ("UnexpectedFrames", f64::from(m.unexpected_frames)),
                 ("RejectedFrames", f64::from(m.rejected_frames)),
             ],
+            Self::GatewaySession(m) => vec![("SessionId", f64::from(m.session_id))],
             Self::PositionSetpoint(m) => vec![
                 ("BoomSetpoint", m.boom_rad),
                 ("StickSetpoint", m.stick_rad),
                 ("BucketSetpoint", m.bucket_rad),
                 ("SwingSetpoint", m.swing_rad),
-                ("SequenceCounter", f64::from(m.sequence)),
+                ("FreshnessValue", 15.0),
+                ("Authenticator", 255.0),
             ],
             Self::ControllerHeartbeat(m) => {
                 let checksum = self
@@ -966,6 +1078,8 @@ impl Message {
                 vec![
                     ("RequestedMode", f64::from(m.mode as u8)),
                     ("AliveCounter", f64::from(m.alive_counter)),
+                    ("FreshnessValue", UNSEALED_FRESHNESS),
+                    ("Authenticator", UNSEALED_AUTHENTICATOR),
                     ("Checksum", checksum),
                 ]
             }

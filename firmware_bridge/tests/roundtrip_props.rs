@@ -114,13 +114,12 @@ fn message() -> impl Strategy<Value = Message> {
                     }
                 )
             ),
-        (angle(), angle(), angle(), angle(), 0u8..16).prop_map(|(a, b, c, d, seq)| {
+        (angle(), angle(), angle(), angle()).prop_map(|(a, b, c, d)| {
             Message::PositionSetpoint(PositionSetpoint {
                 boom_rad: a,
                 stick_rad: b,
                 bucket_rad: c,
                 swing_rad: d,
-                sequence: seq,
             })
         }),
         (0u8..5, 0u8..16).prop_map(|(mode, alive)| {

@@ -436,7 +436,8 @@ mod tests {
         assert_eq!(
             line(DecodeFilter::default(), BOOM_HALF).unwrap(),
             "(1700000000.123456) vcan0 0CFE3027#7DFF31204EFFFFFF T :: AuxValveCommand_Boom(\
-             PortFlowCommand: 50 %, ValveState: Extend, FailSafeMode: Block, PortFlowCommandFine: 50 %)"
+             PortFlowCommand: 50 %, FreshnessValue: 255, ValveState: Extend, FailSafeMode: Block, \
+             PortFlowCommandFine: 50 %, Authenticator: 16777215)"
         );
     }
 

@@ -7,6 +7,11 @@
 //! the ones after it; a timestamp that goes backwards is sent at once, never earlier than the frame
 //! before it ([`ReplayClock`]). Error frames and CAN FD frames cannot be sent on a classic socket and
 //! are skipped and counted. The file is streamed: each `--loop` pass reopens it.
+//!
+//! The controller's frames (source address `0x27`) and heartbeats from any address are withheld and
+//! counted unless `--allow-control-frames` is given: on a bus with a gateway they request arming and
+//! drive valves. The gateway refuses a recording of another session ([`firmware_bridge::secoc`]), but
+//! a replay is no place to rely on that; the flag is for benches without a machine.
 
 use std::collections::HashSet;
 use std::io::{self, Write as _};
@@ -40,6 +45,38 @@ pub struct ReplayArgs {
     /// Stop at the first malformed line (default: report it and skip it).
     #[arg(long)]
     pub strict: bool,
+    /// Also send the controller's frames (source address 0x27) and heartbeats, which are withheld by
+    /// default: on a bus with a gateway they arm it and drive the valves. Only on a bench without a
+    /// machine.
+    #[arg(long)]
+    pub allow_control_frames: bool,
+}
+
+/// How to replay (the options of [`ReplayArgs`] apart from the file and the interface).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ReplayOptions {
+    /// Time scale (positive, finite).
+    pub speed: f64,
+    /// Only these ids (all when empty).
+    pub ids: Vec<u32>,
+    /// Loop until stopped.
+    pub repeat: bool,
+    /// Stop at the first malformed line.
+    pub strict: bool,
+    /// Send the controller's frames and heartbeats too (see the module docs).
+    pub allow_control_frames: bool,
+}
+
+/// True for a frame that can arm the gateway or drive a valve: from the controller's source address,
+/// or a heartbeat (the arming request) from any address.
+pub fn is_control_frame(frame: &firmware_bridge::CanFrame) -> bool {
+    let CanId::Extended(raw) = frame.id() else {
+        return false;
+    };
+    firmware_bridge::J1939Id::from_raw(raw).is_ok_and(|id| {
+        id.source_address() == firmware_bridge::CONTROLLER_ADDRESS
+            || id.pgn() == firmware_bridge::dbc::controller_heartbeat::PGN
+    })
 }
 
 /// Maps trace timestamps to send offsets from the start of the replay.
@@ -86,6 +123,8 @@ pub struct ReplaySummary {
     pub filtered: u64,
     /// Error and CAN FD frames that cannot be sent.
     pub unsendable: u64,
+    /// Controller frames and heartbeats withheld (without `--allow-control-frames`).
+    pub withheld_control: u64,
     /// Malformed lines skipped.
     pub malformed: u64,
     /// Passes over the file.
@@ -101,12 +140,12 @@ pub struct ReplaySummary {
 pub async fn replay_pass<B: Bus>(
     bus: &B,
     input: Box<dyn io::BufRead + Send>,
-    speed: f64,
+    options: &ReplayOptions,
     ids: &HashSet<u32>,
-    strict: bool,
     summary: &mut ReplaySummary,
 ) -> anyhow::Result<()> {
-    let mut clock = ReplayClock::new(speed)?;
+    let strict = options.strict;
+    let mut clock = ReplayClock::new(options.speed)?;
     let start = tokio::time::Instant::now();
     let mut reported = 0u64;
     for item in Records::new(input) {
@@ -141,6 +180,10 @@ pub async fn replay_pass<B: Bus>(
             summary.unsendable += 1;
             continue;
         }
+        if !options.allow_control_frames && is_control_frame(&frame) {
+            summary.withheld_control += 1;
+            continue;
+        }
         tokio::time::sleep_until(at).await;
         summary.max_late = summary
             .max_late
@@ -161,22 +204,20 @@ pub async fn replay_pass<B: Bus>(
 pub async fn replay_to<B: Bus>(
     bus: &B,
     path: &Path,
-    speed: f64,
-    ids: &[u32],
-    repeat: bool,
-    strict: bool,
+    options: &ReplayOptions,
     stop: impl std::future::Future<Output = ()>,
 ) -> anyhow::Result<ReplaySummary> {
+    let repeat = options.repeat;
     if repeat && input::is_stdin(path) {
         anyhow::bail!("--loop needs a file, not stdin");
     }
-    ReplayClock::new(speed)?;
-    let ids: HashSet<u32> = ids.iter().copied().collect();
+    ReplayClock::new(options.speed)?;
+    let ids: HashSet<u32> = options.ids.iter().copied().collect();
     let mut summary = ReplaySummary::default();
     let work = async {
         loop {
             let reader = input::open(path)?;
-            replay_pass(bus, reader, speed, &ids, strict, &mut summary).await?;
+            replay_pass(bus, reader, options, &ids, &mut summary).await?;
             if !repeat {
                 return anyhow::Ok(());
             }
@@ -203,17 +244,29 @@ pub async fn run(args: &ReplayArgs) -> anyhow::Result<()> {
             std::future::pending::<()>().await;
         }
     };
-    let summary = replay_to(
-        &bus,
-        &args.file,
-        args.speed,
-        &args.ids,
-        args.repeat,
-        args.strict,
-        stop,
-    )
-    .await?;
+    let options = ReplayOptions {
+        speed: args.speed,
+        ids: args.ids.clone(),
+        repeat: args.repeat,
+        strict: args.strict,
+        allow_control_frames: args.allow_control_frames,
+    };
     let mut err = io::stderr();
+    if args.allow_control_frames {
+        let _ = writeln!(
+            err,
+            "warning: --allow-control-frames: the controller's frames and heartbeats go onto {} as recorded; on a bus with a machine gateway they can arm it and move the machine",
+            args.iface
+        );
+    }
+    let summary = replay_to(&bus, &args.file, &options, stop).await?;
+    if summary.withheld_control > 0 {
+        let _ = writeln!(
+            err,
+            "warning: withheld {} controller frame(s) and heartbeat(s): replayed onto a bus with a machine gateway they request arming and drive valves (--allow-control-frames sends them, on a bench without a machine only)",
+            summary.withheld_control
+        );
+    }
     let _ = writeln!(
         err,
         "replayed {} frame(s) onto {} in {} pass(es); {} filtered, {} error/FD frame(s) skipped, {} malformed line(s); latest send {:.3} ms behind schedule",

@@ -287,7 +287,7 @@ mod tests {
         assert_eq!(value_name("BoomAngle", 0), None);
         // The stick command has no VAL_ line of its own; the boom's table applies by name.
         let (stick, _) = message_of_id(0x0CFE_3127).unwrap();
-        let table = value_table(stick, 1).unwrap();
+        let table = value_table(stick, 2).unwrap();
         assert!(table.contains(&(2, "Retract")));
         assert!(value_table(stick, 0).is_none());
     }

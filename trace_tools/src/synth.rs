@@ -15,9 +15,11 @@ use std::io::{self, Write};
 use firmware_bridge::frame::CanFrame;
 use firmware_bridge::messages::{
     Activity, AutodigStageCode, AuxValveCommand, AuxValveMeasured, ControllerHeartbeat,
-    ControllerStatus, Cylinder, GatewayFaults, GatewayMode, GatewayStatus, JointAngles, JointRates,
-    PositionSetpoint, PumpPressures, RequestedMode, TrackOdometry, Valve, ValveState,
+    ControllerStatus, Cylinder, GatewayFaults, GatewayMode, GatewaySession, GatewayStatus,
+    JointAngles, JointRates, PositionSetpoint, PumpPressures, RequestedMode, TrackOdometry, Valve,
+    ValveState,
 };
+use firmware_bridge::secoc::{Sealer, SessionKey};
 use firmware_bridge::{Message, trace};
 use planner::kinematics::{BucketPose, Kinematics};
 use planner::machine::MachineConfig;
@@ -85,11 +87,15 @@ pub struct SyntheticTrace {
     heartbeat: ControllerHeartbeat,
     gateway_alive: u8,
     status_alive: u8,
-    setpoint_seq: u8,
+    /// The controller's frames are sealed as on the bus, for session [`SYNTH_SESSION_ID`].
+    sealer: Sealer,
     swept_m3: f64,
 }
 
 /// Stage, activity and bucket-tip pose `(x, z, bucket_abs)` at a phase of the cycle (seconds).
+/// The gateway session of synthetic traces.
+pub const SYNTH_SESSION_ID: u32 = 0x5157_0001;
+
 fn cycle_pose(t: f64) -> (AutodigStageCode, Activity, [f64; 3], f64) {
     fn lerp(a: [f64; 3], b: [f64; 3], s: f64) -> [f64; 3] {
         let s = (0.5 - 0.5 * (std::f64::consts::PI * s.clamp(0.0, 1.0)).cos()).clamp(0.0, 1.0);
@@ -187,7 +193,11 @@ impl SyntheticTrace {
             },
             gateway_alive: 0,
             status_alive: 0,
-            setpoint_seq: 0,
+            sealer: {
+                let mut sealer = Sealer::new(&SessionKey::PUBLIC);
+                sealer.set_session(SYNTH_SESSION_ID);
+                sealer
+            },
             swept_m3: 0.0,
         }
     }
@@ -259,9 +269,7 @@ impl SyntheticTrace {
             stick_rad: now.q[1],
             bucket_rad: now.q[2],
             swing_rad: now.swing_rad,
-            sequence: self.setpoint_seq,
         }));
-        self.setpoint_seq = (self.setpoint_seq + 1) % 16;
         if every(5) {
             out.push(Message::ControllerHeartbeat(self.heartbeat));
             self.heartbeat = self.heartbeat.next(RequestedMode::ArmValve);
@@ -320,6 +328,9 @@ impl SyntheticTrace {
                 rejected_frames: 0,
             }));
             self.gateway_alive = self.gateway_alive.wrapping_add(1);
+            out.push(Message::GatewaySession(GatewaySession {
+                session_id: SYNTH_SESSION_ID,
+            }));
         }
         if now.stage == AutodigStageCode::Dig {
             self.swept_m3 = (self.swept_m3 + 1.2 / 350.0).min(6.0);
@@ -353,7 +364,9 @@ impl SyntheticTrace {
             .saturating_add(step.saturating_mul((PERIOD_S * 1e9) as u64));
         let messages = self.period_messages(step);
         for (i, msg) in messages.iter().enumerate() {
-            let Ok(frame) = msg.encode() else { continue };
+            let Ok(frame) = self.sealer.seal(msg) else {
+                continue;
+            };
             let t = base + i as u64 * FRAME_SPACING_NS + self.jitter();
             self.pending.push((t, frame));
         }
@@ -400,11 +413,11 @@ mod tests {
     #[test]
     fn follows_the_schedule_rate() {
         let frames: Vec<_> = SyntheticTrace::new(SynthConfig {
-            frames: 11_600,
+            frames: 11_700,
             ..SynthConfig::default()
         })
         .collect();
-        assert_eq!(frames.len(), 11_600);
+        assert_eq!(frames.len(), 11_700);
         let span_s = (frames[frames.len() - 1].0 - frames[0].0) as f64 * 1e-9;
         assert!((span_s - 10.0).abs() < 0.02, "{span_s}");
         assert!(frames.windows(2).all(|w| w[0].0 < w[1].0));

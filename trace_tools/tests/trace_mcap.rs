@@ -12,7 +12,7 @@ use std::process::Command;
 use trace_tools::convert;
 use trace_tools::synth::{self, SynthConfig};
 
-const FRAMES: u64 = 5800;
+const FRAMES: u64 = 5850;
 
 fn write_fixture(path: &Path) {
     let mut f = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
@@ -53,8 +53,8 @@ fn mcap_reads_back_with_the_mcap_crate() {
         .expect("a summary section");
     let stats = summary.stats.as_ref().expect("statistics");
     assert_eq!(stats.message_count, 2 * FRAMES + 2);
-    // 17 message channels + /can/raw.
-    assert_eq!(summary.channels.len(), 18);
+    // 18 message channels + /can/raw.
+    assert_eq!(summary.channels.len(), 19);
 
     let mut per_topic: HashMap<String, u64> = HashMap::new();
     let mut last_time = 0;

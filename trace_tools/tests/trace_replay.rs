@@ -8,7 +8,7 @@ use std::sync::Mutex;
 use firmware_bridge::frame::CanFrame;
 use firmware_bridge::transport::{Bus, Result, TimestampedFrame};
 use tokio::time::{Duration, Instant};
-use trace_tools::replay::{self, ReplayClock};
+use trace_tools::replay::{self, ReplayClock, ReplayOptions};
 use trace_tools::synth::{self, SynthConfig};
 
 /// A bus that remembers when each frame was sent (tokio clock) and never receives.
@@ -61,15 +61,56 @@ fn fixture(dir: &std::path::Path, frames: u64) -> (std::path::PathBuf, Vec<(u64,
     (path, synth::SyntheticTrace::new(cfg).collect())
 }
 
+/// Every frame at `speed`, the controller's included (a bench without a machine).
+fn all_frames(speed: f64) -> ReplayOptions {
+    ReplayOptions {
+        speed,
+        allow_control_frames: true,
+        ..ReplayOptions::default()
+    }
+}
+
+/// Regression: `trace replay --iface` of a controller trace armed a live gateway. Without
+/// `--allow-control-frames` no frame from the controller's address and no heartbeat goes out.
+#[tokio::test(start_paused = true)]
+async fn replay_withholds_the_controllers_frames_unless_allowed() {
+    let dir = tempfile::tempdir().unwrap();
+    let (path, frames) = fixture(dir.path(), 1170);
+    let bus = RecordingBus::new();
+    let options = ReplayOptions {
+        allow_control_frames: false,
+        ..all_frames(1.0)
+    };
+    let summary = replay::replay_to(&bus, &path, &options, std::future::pending())
+        .await
+        .unwrap();
+    let control = frames
+        .iter()
+        .filter(|(_, f)| replay::is_control_frame(f))
+        .count() as u64;
+    assert!(control > 500, "the fixture has the controller's traffic");
+    assert_eq!(summary.withheld_control, control);
+    assert_eq!(summary.sent, 1170 - control);
+    let sent = bus.sent();
+    assert!(sent.iter().all(|(_, f)| !replay::is_control_frame(f)));
+    // Heartbeats from another address are withheld too: they are arming requests.
+    let foreign_hb =
+        CanFrame::new_extended(0x0CFF_6133, &[0x51, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0])
+            .unwrap();
+    assert!(replay::is_control_frame(&foreign_hb));
+    let gateway = CanFrame::new_extended(0x0CFF_5080, &[0; 8]).unwrap();
+    assert!(!replay::is_control_frame(&gateway));
+}
+
 #[tokio::test(start_paused = true)]
 async fn replay_keeps_the_recorded_spacing() {
     let dir = tempfile::tempdir().unwrap();
-    let (path, frames) = fixture(dir.path(), 1160);
+    let (path, frames) = fixture(dir.path(), 1170);
     let bus = RecordingBus::new();
-    let summary = replay::replay_to(&bus, &path, 1.0, &[], false, false, std::future::pending())
+    let summary = replay::replay_to(&bus, &path, &all_frames(1.0), std::future::pending())
         .await
         .unwrap();
-    assert_eq!(summary.sent, 1160);
+    assert_eq!(summary.sent, 1170);
     let sent = bus.sent();
     let t0 = frames[0].0;
     for ((at, frame), (t, original)) in sent.iter().zip(&frames) {
@@ -91,22 +132,18 @@ async fn replay_keeps_the_recorded_spacing() {
 #[tokio::test(start_paused = true)]
 async fn replay_speed_and_id_filter() {
     let dir = tempfile::tempdir().unwrap();
-    let (path, frames) = fixture(dir.path(), 1160);
+    let (path, frames) = fixture(dir.path(), 1170);
     let bus = RecordingBus::new();
-    let summary = replay::replay_to(
-        &bus,
-        &path,
-        4.0,
-        &[0x0CFF_5080, 0x0CFF_6127],
-        false,
-        false,
-        std::future::pending(),
-    )
-    .await
-    .unwrap();
+    let options = ReplayOptions {
+        ids: vec![0x0CFF_5080, 0x0CFF_6127],
+        ..all_frames(4.0)
+    };
+    let summary = replay::replay_to(&bus, &path, &options, std::future::pending())
+        .await
+        .unwrap();
     // One second: 100 JointAngles and 20 heartbeats.
     assert_eq!(summary.sent, 120);
-    assert_eq!(summary.filtered, 1040);
+    assert_eq!(summary.filtered, 1050);
     let sent = bus.sent();
     let t0 = frames[0].0;
     let last_angles = frames
@@ -133,13 +170,14 @@ async fn replay_loops_until_stopped() {
     let (path, _) = fixture(dir.path(), 116);
     let bus = RecordingBus::new();
     // 116 frames span about 0.1 s; stop after 1.05 s: about ten passes.
+    let options = ReplayOptions {
+        repeat: true,
+        ..all_frames(1.0)
+    };
     let summary = replay::replay_to(
         &bus,
         &path,
-        1.0,
-        &[],
-        true,
-        false,
+        &options,
         tokio::time::sleep(Duration::from_millis(1050)),
     )
     .await

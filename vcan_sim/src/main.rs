@@ -12,6 +12,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
+use firmware_bridge::secoc::SessionKey;
 use vcan_sim::node::MachineNode;
 use vcan_sim::plant::PHYSICS_DT_S;
 use vcan_sim::realtime::{RealtimeOptions, run};
@@ -47,6 +48,10 @@ struct Cli {
     /// HOST:PORT of the range-scan socket (docs/scan-protocol.md), e.g. 127.0.0.1:7878.
     #[arg(long)]
     scan_socket: Option<String>,
+    /// File with the machine's 128-bit authentication key (32 hex digits); the controller must hold
+    /// the same key. Without it the gateway checks freshness and session only (docs/protocol.md).
+    #[arg(long)]
+    key_file: Option<PathBuf>,
     /// Print the hidden-effects registry and exit.
     #[arg(long)]
     list_effects: bool,
@@ -254,7 +259,14 @@ fn real_main() -> Result<()> {
         )
         .with_writer(std::io::stderr)
         .init();
-    let node = MachineNode::new(config.build().context("building the machine")?);
+    let key = match &cli.key_file {
+        Some(path) => SessionKey::from_file(path)?,
+        None => SessionKey::PUBLIC,
+    };
+    // Every start is a new series of sessions, so no recording of an earlier run is accepted.
+    let session_seed: u64 = rand::random();
+    let node = MachineNode::new(config.build().context("building the machine")?)
+        .with_security(&key, session_seed);
     let options = RealtimeOptions {
         iface,
         state_log: cli.state_log,

@@ -7,7 +7,7 @@
 //! [`firmware_bridge::busload::SCHEDULE`] (a test checks they agree):
 //! - every 10 ms (100 Hz): `JointAngles`, `JointRates`, `AuxValveMeasured` for boom, stick, bucket;
 //! - every 20 ms (50 Hz): `PumpPressures`;
-//! - every 50 ms (20 Hz): `TrackOdometry` and `GatewayStatus`.
+//! - every 50 ms (20 Hz): `TrackOdometry`, `GatewayStatus` and `GatewaySession`.
 //!
 //! Only sensor readings and the gateway status go out; nothing reveals the hidden effects.
 
@@ -17,6 +17,7 @@ use firmware_bridge::messages::{
     AuxValveMeasured, Cylinder, JointAngles, JointRates, Message, PumpPressures, TrackOdometry,
     ValveState,
 };
+use firmware_bridge::secoc::SessionKey;
 
 use crate::plant::{PHYSICS_DT_S, Plant};
 use crate::sensors::{Scan, ScanRequest, SensorReadings};
@@ -55,6 +56,14 @@ impl MachineNode {
     /// [`GatewayConfigError`] if the configuration does not validate.
     pub fn with_gateway(plant: Plant, config: GatewayConfig) -> Result<Self, GatewayConfigError> {
         Ok(Self::with(plant, Gateway::new(config)?))
+    }
+
+    /// The same node with the gateway's key (both ends hold it; [`SessionKey::PUBLIC`] when none is
+    /// provisioned) and session seed (see [`Gateway::with_security`]: it must differ at every start
+    /// outside a reproducible simulation).
+    pub fn with_security(mut self, key: &SessionKey, session_seed: u64) -> Self {
+        self.gateway = std::mem::take(&mut self.gateway).with_security(key, session_seed);
+        self
     }
 
     fn with(plant: Plant, gateway: Gateway) -> Self {
@@ -138,6 +147,7 @@ impl MachineNode {
         if self.steps.is_multiple_of(STATUS_PERIOD_STEPS) {
             let status = self.gateway.next_status();
             self.push(Message::GatewayStatus(status), out);
+            self.push(Message::GatewaySession(self.gateway.session()), out);
         }
         if self.steps.is_multiple_of(ODOMETRY_PERIOD_STEPS) {
             let pose = self.plant.pose();

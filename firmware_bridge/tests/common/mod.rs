@@ -68,7 +68,9 @@ pub fn sample_messages() -> Vec<Message> {
         stick_rad: -1.0,
         bucket_rad: 2.0,
         swing_rad: -3.0,
-        sequence: 7,
+    }));
+    out.push(Message::GatewaySession(GatewaySession {
+        session_id: 0xDEAD_BEEF,
     }));
     out.push(Message::ControllerHeartbeat(ControllerHeartbeat {
         mode: RequestedMode::ArmValve,
