@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{heartbeat, valve_command};
+use common::Link;
 
 use firmware_bridge::messages::{GatewayMode, Message, Valve};
 use firmware_bridge::transport::{InProcessBus, VirtualClock};
@@ -100,10 +100,15 @@ fn missing_heartbeat_neutralises_the_valves_within_100_ms_of_simulated_time() {
     let bus = InProcessBus::with_virtual_clock("sim0", clock.clone());
     let controller = bus.attach();
     let mut machine = EmbeddedMachine::new(plant_in_air(&config()), bus.attach(), Some(clock));
+    let mut link = Link::new();
     let mut alive = 0u8;
     for _ in 0..100 {
-        controller.send(heartbeat(alive)).unwrap();
-        controller.send(valve_command(Valve::Boom, 0.5)).unwrap();
+        controller
+            .send(link.heartbeat(machine.node().gateway(), alive))
+            .unwrap();
+        controller
+            .send(link.valve_command(machine.node().gateway(), Valve::Boom, 0.5))
+            .unwrap();
         alive = alive.wrapping_add(1);
         machine.advance(0.01);
     }
@@ -112,7 +117,9 @@ fn missing_heartbeat_neutralises_the_valves_within_100_ms_of_simulated_time() {
     let last_heartbeat_s = machine.time_s() - 0.01;
     let mut neutral_at = None;
     for _ in 0..300 {
-        controller.send(valve_command(Valve::Boom, 0.5)).unwrap();
+        controller
+            .send(link.valve_command(machine.node().gateway(), Valve::Boom, 0.5))
+            .unwrap();
         machine.advance(0.001);
         // The commands returned were computed by the gateway at the start of the step.
         if neutral_at.is_none() && machine.node().valve_commands() == [0.0; 6] {

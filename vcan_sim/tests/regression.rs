@@ -22,7 +22,7 @@
 
 mod common;
 
-use common::{heartbeat, valve_command};
+use common::Link;
 
 use firmware_bridge::messages::{Message, Valve};
 use firmware_bridge::transport::{InProcessBus, VirtualClock};
@@ -279,12 +279,19 @@ fn scripted_embedded_run_sends_the_recorded_frames() {
     let bus = InProcessBus::with_virtual_clock("sim0", clock.clone());
     let controller = bus.attach();
     let mut machine = EmbeddedMachine::new(plant_in_air(&[], 5), bus.attach(), Some(clock));
+    let mut link = Link::new();
     let (mut count, mut boom_sum, mut pump_sum) = (0u64, 0.0, 0.0);
     for k in 0..300u32 {
-        controller.send(heartbeat(k as u8)).unwrap();
+        controller
+            .send(link.heartbeat(machine.node().gateway(), k as u8))
+            .unwrap();
         let u = if k < 150 { 0.6 } else { -0.4 };
-        controller.send(valve_command(Valve::Boom, u)).unwrap();
-        controller.send(valve_command(Valve::Stick, -u)).unwrap();
+        controller
+            .send(link.valve_command(machine.node().gateway(), Valve::Boom, u))
+            .unwrap();
+        controller
+            .send(link.valve_command(machine.node().gateway(), Valve::Stick, -u))
+            .unwrap();
         machine.advance(0.01);
         while let Some(f) = controller.try_recv() {
             count += 1;
@@ -314,9 +321,9 @@ fn scripted_embedded_run_sends_the_recorded_frames() {
 }
 
 // Frame count and pump-pressure sum re-recorded when PumpPressures went to 50 Hz (the documented
-// schedule); the angles are unchanged.
+// schedule); the angles are unchanged. The frame count again with GatewaySession (20 Hz, +60 in 3 s).
 const EMBEDDED: (u64, f64, f64, f64, f64) = (
-    1770,
+    1830,
     223.45190000000002,
     2774851000.0,
     0.3929410779031565,
