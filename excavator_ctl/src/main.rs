@@ -29,7 +29,7 @@ fn main() -> std::process::ExitCode {
         }
     };
     let result = match cli.command {
-        Command::Run(args) => runtime.block_on(controller::run::run(args.into())),
+        Command::Run(args) => runtime.block_on(lab::wire::run(args)),
         Command::Demo(args) => runtime.block_on(lab::demo::run(args)),
         Command::Experiment(args) => lab::experiment::run(&args),
         Command::Trace { cmd } => runtime.block_on(trace_tools::run(cmd)),
