@@ -710,8 +710,12 @@ pub fn run(args: &ConvertArgs) -> anyhow::Result<()> {
             )?
         }
     };
+    let view = match args.format {
+        Format::Csv => String::new(),
+        Format::Mcap => format!(", {} view message(s)", summary.view_written),
+    };
     eprintln!(
-        "{}: {} record(s) read, {} {} written",
+        "{}: {} record(s) read, {} {} written{view}",
         args.out.display(),
         summary.read.records,
         summary.written,

@@ -454,7 +454,7 @@ pub struct Signals {
     pub hardness_index: Option<f64>,
     /// Swept volume of the current dig, m^3.
     pub swept_volume_m3: Option<f64>,
-    /// Safety state (`Disarmed`, `Arming`, `Armed`, `Faulted`, `ListenOnly`).
+    /// Safety state (`Disarmed`, `Arming`, `Armed`, `Faulted`, `ListenOnly`, `Shutdown`).
     pub safety_state: Option<String>,
     /// The active fault's code (0 healthy).
     pub fault_code: Option<u8>,
@@ -647,6 +647,53 @@ mod tests {
         }
         assert!(v["pressure_pa"]["pump1"].is_null());
         assert_eq!(v["joints_deg"]["boom"], 0.0);
+    }
+
+    /// The shipped Foxglove layout names only topics of the view and fields of `/signals`, so it
+    /// cannot drift from what the stream and the MCAP export write.
+    #[test]
+    fn the_shipped_layout_names_only_view_topics_and_signal_fields() {
+        let layout: serde_json::Value =
+            serde_json::from_str(include_str!("../../docs/foxglove-layout.json")).unwrap();
+        let sample = serde_json::to_value(Signals::default()).unwrap();
+        let topics = [
+            TOPIC_TRANSFORMS,
+            TOPIC_TERRAIN,
+            TOPIC_SCENE,
+            TOPIC_SIGNALS,
+            TOPIC_LOG,
+        ];
+        let mut paths = Vec::new();
+        fn collect(v: &serde_json::Value, out: &mut Vec<String>) {
+            match v {
+                serde_json::Value::String(s) if s.starts_with('/') => out.push(s.clone()),
+                serde_json::Value::Array(a) => a.iter().for_each(|x| collect(x, out)),
+                serde_json::Value::Object(o) => {
+                    for (k, x) in o {
+                        if k.starts_with('/') {
+                            out.push(k.clone());
+                        }
+                        collect(x, out);
+                    }
+                }
+                _ => {}
+            }
+        }
+        collect(&layout["configById"], &mut paths);
+        assert!(paths.len() > 10, "{paths:?}");
+        for path in &paths {
+            let (topic, fields) = path.split_once('.').unwrap_or((path, ""));
+            assert!(topics.contains(&topic), "{path}: no such topic");
+            if !fields.is_empty() {
+                assert_eq!(topic, TOPIC_SIGNALS, "{path}");
+                let mut v = &sample;
+                for f in fields.split('.') {
+                    v = v
+                        .get(f)
+                        .unwrap_or_else(|| panic!("{path}: no field {f} in Signals"));
+                }
+            }
+        }
     }
 
     #[test]
