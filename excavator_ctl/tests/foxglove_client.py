@@ -1,7 +1,8 @@
 """A Foxglove WebSocket client (protocol foxglove.sdk.v1) for the live-view test.
 
 Connects to ws://HOST:PORT, subscribes to the live view's topics, and decodes what arrives for up to
-SECONDS: protobuf channels with Foxglove's published schema classes (foxglove-schemas-protobuf), JSON
+SECONDS (with a third argument `hold`, stays the whole time instead of leaving once every topic
+has arrived): protobuf channels with Foxglove's published schema classes (foxglove-schemas-protobuf), JSON
 channels with json. Prints one JSON object: per topic the advertised schema and the count of messages
 decoded, and a few decoded values. Exits non-zero on a message that does not decode.
 """
@@ -11,6 +12,7 @@ import struct
 import sys
 import time
 
+from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from foxglove_schemas_protobuf.Grid_pb2 import Grid
@@ -28,6 +30,7 @@ TOPICS = ["/tf", "/terrain", "/signals", "/scene", "/log"]
 
 def main():
     url, seconds = sys.argv[1], float(sys.argv[2])
+    hold = len(sys.argv) > 3 and sys.argv[3] == "hold"
     out = {"topics": {}, "frames": [], "grid": None, "signals": None, "logs": []}
     channels = {}
     subs = {}
@@ -36,7 +39,8 @@ def main():
         while time.monotonic() < deadline:
             try:
                 raw = ws.recv(timeout=max(0.05, deadline - time.monotonic()))
-            except TimeoutError:
+            except (TimeoutError, ConnectionClosed):
+                # The session is over (the server closed) or the time is up.
                 break
             if isinstance(raw, str):
                 msg = json.loads(raw)
@@ -90,7 +94,7 @@ def main():
                     out["signals"] = value
             out["topics"][topic]["count"] += 1
             counts = out["topics"]
-            if all(counts.get(t, {}).get("count", 0) >= 1 for t in TOPICS) and counts["/tf"]["count"] >= 50 \
+            if not hold and all(counts.get(t, {}).get("count", 0) >= 1 for t in TOPICS) and counts["/tf"]["count"] >= 50 \
                     and out["signals"] is not None:
                 break
     print(json.dumps(out))
