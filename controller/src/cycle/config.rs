@@ -3,7 +3,7 @@
 use planner::cleanup::FloorPolicy;
 use serde::{Deserialize, Serialize};
 
-use crate::node::{Limits, ParamError, check, check_count, check_deg};
+use crate::config::{Limits, ParamError, check, check_count, check_deg};
 
 use super::action::{Action, StartPose};
 use super::scan_grid::ScanGrid;
