@@ -8,8 +8,8 @@ use std::process::{Command, Output, Stdio};
 
 use trace_tools::synth::{self, SynthConfig};
 
-/// Frames of the standard fixture: 2 s of the full schedule (1160 frames/s).
-const FRAMES: u64 = 2320;
+/// Frames of the standard fixture: 2 s of the synthetic schedule (1170 frames/s).
+const FRAMES: u64 = 2340;
 
 fn exe() -> &'static str {
     env!("CARGO_BIN_EXE_excavator-ctl")
@@ -96,8 +96,8 @@ fn decode_filters() {
     let o = trace(&["decode", log, "--source-address", "0x80"]);
     let out = stdout(&o);
     assert!(out.lines().all(|l| l.contains("80#")), "{out}");
-    // 100 + 100 + 3 x 100 + 50 + 20 + 10 frames/s over 2 s.
-    assert_eq!(out.lines().count(), 2 * 580);
+    // 100 + 100 + 3 x 100 + 50 + 20 + 10 (status) + 10 (session) frames/s over 2 s.
+    assert_eq!(out.lines().count(), 2 * 590);
     // Time window: [0.5, 1.0] s holds 50 or 51 periods of JointAngles.
     let o = trace(&[
         "decode",
@@ -202,7 +202,7 @@ fn truncated_file_is_read_up_to_the_damage() {
 #[test]
 fn stats_reports_rates_load_and_injected_faults() {
     let dir = tempfile::tempdir().unwrap();
-    let log = fixture(dir.path(), "dig.log", 11_600);
+    let log = fixture(dir.path(), "dig.log", 11_700);
     let text = std::fs::read_to_string(&log).unwrap();
     // Drop 50 ms of JointAngles (a gap), corrupt one heartbeat checksum, add an unknown id and an
     // error frame.
@@ -281,7 +281,7 @@ fn stats_reports_rates_load_and_injected_faults() {
 fn plot_draws_signals_and_the_dig_preset() {
     let dir = tempfile::tempdir().unwrap();
     // One whole 12 s work cycle.
-    let log = fixture(dir.path(), "dig.log", 14_000);
+    let log = fixture(dir.path(), "dig.log", 14_100);
     let svg = dir.path().join("dig.svg");
     let o = trace(&[
         "plot",

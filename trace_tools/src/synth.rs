@@ -1,4 +1,4 @@
-//! Synthetic but realistic traces: the full message schedule (`busload::SCHEDULE`, 1160 frames/s)
+//! Synthetic but realistic traces: the full message schedule (`busload::SCHEDULE`, 1170 frames/s)
 //! of a machine digging over and over, for the tests, the benchmark and the documentation examples.
 //!
 //! One work cycle lasts [`CYCLE_S`]: Autodig (boom down, pre-dig, dig, capture, done), then swing to

@@ -13,6 +13,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use firmware_bridge::secoc::SessionKey;
+use firmware_bridge::transport::TimeScale;
 use vcan_sim::node::MachineNode;
 use vcan_sim::plant::PHYSICS_DT_S;
 use vcan_sim::realtime::{RealtimeOptions, run};
@@ -52,6 +53,10 @@ struct Cli {
     /// the same key. Without it the gateway checks freshness and session only (docs/protocol.md).
     #[arg(long)]
     key_file: Option<PathBuf>,
+    /// Simulated seconds per wall second, 0.1 to 20 (default 1, real time); the controller must run
+    /// at the same scale (`excavator-ctl run --time-scale`).
+    #[arg(long, value_name = "X", default_value_t = TimeScale::REAL_TIME)]
+    time_scale: TimeScale,
     /// Print the hidden-effects registry and exit.
     #[arg(long)]
     list_effects: bool,
@@ -258,6 +263,8 @@ fn real_main() -> Result<()> {
                 .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
         )
         .with_writer(std::io::stderr)
+        // Colours only for a person at a terminal: a journal, a file or a pipe gets plain text.
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
     let key = match &cli.key_file {
         Some(path) => SessionKey::from_file(path)?,
@@ -271,6 +278,7 @@ fn real_main() -> Result<()> {
         iface,
         state_log: cli.state_log,
         scan_socket: cli.scan_socket,
+        time_scale: cli.time_scale,
     };
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
