@@ -100,3 +100,41 @@ async fn the_planned_session_runs_over_a_bus_in_scaled_real_time() {
     }
     assert!(std::fs::read_dir(out.join("scans")).unwrap().count() >= 2);
 }
+
+/// The arguments of `run --iface vcan0 --config CONFIG [--digs N]` with the fixed strategy.
+fn fixed_args(config: &std::path::Path, digs: Option<u32>) -> RunArgs {
+    RunArgs {
+        iface: "vcan0".into(),
+        listen_only: false,
+        machine: None,
+        maps: None,
+        config: Some(config.to_owned()),
+        trace: None,
+        digs,
+        scan_addr: None,
+        strategy: DemoStrategy::Fixed,
+        bench: None,
+        seed: None,
+        planner: None,
+        hardness: None,
+        time_scale: TimeScale::REAL_TIME,
+        out: None,
+    }
+}
+
+#[test]
+fn the_fixed_strategy_keeps_the_configs_dig_limit_unless_digs_is_given() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("plan.toml");
+    std::fs::write(
+        &config,
+        "[cycle]\nrepeat = true\nmax_digs = 4\n\n[[cycle.actions]]\nkind = \"dig\"\nswing_deg = 0.0\n\
+         start = { kind = \"tip\", x_m = 7.5, z_m = 2.4, bucket_abs_deg = -55.0 }\n",
+    )
+    .unwrap();
+    // A repeating plan ends only at its limit: dropping it would run forever.
+    let (node, _, _) = lab::wire::build(&fixed_args(&config, None)).unwrap();
+    assert_eq!(node.cycle().config().max_digs, Some(4));
+    let (node, _, _) = lab::wire::build(&fixed_args(&config, Some(2))).unwrap();
+    assert_eq!(node.cycle().config().max_digs, Some(2));
+}
