@@ -15,7 +15,9 @@ use planner::cleanup::CleanupConfig;
 use planner::toml_lines::{field_at_offset, line_of_field, line_of_offset};
 use serde::{Deserialize, Serialize};
 use std::fmt;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+use firmware_bridge::secoc::{KeyFileError, SessionKey};
 
 use crate::ControllerError;
 use crate::cycle::CycleConfig;
@@ -42,6 +44,49 @@ pub struct ControllerConfig {
     pub track_every_steps: u32,
     /// Start the work cycle at the first step (otherwise call [`ControllerNode::start`](crate::ControllerNode::start)). Default true.
     pub autostart: bool,
+    /// Authentication of the control path.
+    pub security: SecurityConfig,
+}
+
+/// The `[security]` table: the machine's authentication key (docs/protocol.md, "Freshness and
+/// authentication").
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SecurityConfig {
+    /// File with the machine's 128-bit key: 32 hex digits, readable by its owner only (`chmod
+    /// 600`); the gateway holds the same key (`excavator-sim --key-file`). A relative path is taken
+    /// from the config file's folder; `excavator-ctl run --key-file` overrides it. Default: none
+    /// (freshness and the session binding only, which anyone who reads the protocol can forge).
+    pub key_file: Option<PathBuf>,
+}
+
+impl SecurityConfig {
+    /// `key_file`, when set, names a file (not an empty path).
+    ///
+    /// # Errors
+    /// [`ParamError`] for an empty path.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        match &self.key_file {
+            Some(p) if p.as_os_str().is_empty() => Err(ParamError::new(
+                "security",
+                "key_file",
+                Some("\"\"".to_owned()),
+                "must name the key file (or be left out: no key)",
+            )),
+            _ => Ok(()),
+        }
+    }
+
+    /// Reads and checks the key of `key_file` ([`SessionKey::from_file`]); `None` without one.
+    ///
+    /// # Errors
+    /// [`KeyFileError`] naming the file and what is wrong with it.
+    pub fn load_key(&self) -> Result<Option<SessionKey>, KeyFileError> {
+        self.key_file
+            .as_deref()
+            .map(SessionKey::from_file)
+            .transpose()
+    }
 }
 
 impl Default for ControllerConfig {
@@ -63,6 +108,7 @@ impl Default for ControllerConfig {
             },
             track_every_steps: 5,
             autostart: true,
+            security: SecurityConfig::default(),
         }
     }
 }
@@ -80,6 +126,7 @@ impl ControllerConfig {
     /// The first [`ParamError`], naming the field as the TOML file spells it.
     pub fn validate(&self) -> Result<(), ParamError> {
         self.safety.validate()?;
+        self.security.validate()?;
         self.estimator.validate()?;
         self.cycle.validate()?;
         self.autodig.validate().map_err(|e| match e {
@@ -116,7 +163,8 @@ impl ControllerConfig {
         })
     }
 
-    /// Reads, parses and checks a controller config file (`excavator-ctl run --config`).
+    /// Reads, parses and checks a controller config file (`excavator-ctl run --config`); a relative
+    /// `security.key_file` is taken from the file's folder.
     ///
     /// # Errors
     /// [`ConfigFileError`] naming the file, the line and the field.
@@ -126,7 +174,13 @@ impl ControllerConfig {
             origin: origin.clone(),
             source,
         })?;
-        Self::from_toml_str_named(&text, &origin)
+        let mut config = Self::from_toml_str_named(&text, &origin)?;
+        if let (Some(key), Some(dir)) = (&config.security.key_file, path.parent())
+            && key.is_relative()
+        {
+            config.security.key_file = Some(dir.join(key));
+        }
+        Ok(config)
     }
 
     /// Parses and checks TOML text, naming `origin` (a file name; empty: none) in errors.

@@ -1001,6 +1001,28 @@ start = { kind = \"tip\", x_m = inf, z_m = 2.4, bucket_abs_deg = -55.0 }
     }
 
     #[test]
+    fn the_key_file_is_taken_from_the_config_files_folder_and_an_empty_one_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let plan = dir.path().join("plan.toml");
+        std::fs::write(&plan, "[security]\nkey_file = \"machine.key\"\n").unwrap();
+        let c = ControllerConfig::from_toml_file(&plan).unwrap();
+        assert_eq!(c.security.key_file, Some(dir.path().join("machine.key")));
+        // Not there yet: the error names it.
+        let e = c.security.load_key().unwrap_err().to_string();
+        assert!(e.contains("machine.key"), "{e}");
+        std::fs::write(
+            &plan,
+            "track_every_steps = 5\n[security]\nkey_file = \"\"\n",
+        )
+        .unwrap();
+        let e = ControllerConfig::from_toml_file(&plan)
+            .unwrap_err()
+            .to_string();
+        assert!(e.ends_with("plan.toml:3: security.key_file = \"\": must name the key file (or be left out: no key)"), "{e}");
+        assert_eq!(ControllerConfig::default().security.load_key(), Ok(None));
+    }
+
+    #[test]
     fn a_missing_file_is_named() {
         let err =
             ControllerConfig::from_toml_file(Path::new("/nonexistent/plan.toml")).unwrap_err();

@@ -65,11 +65,13 @@ impl SessionKey {
         Ok(Self(key))
     }
 
-    /// The key in a file: 32 hex digits, surrounding whitespace ignored. Keep the file readable by the
-    /// program's user only; the key is never printed.
+    /// The key in a file: 32 hex digits (16 bytes), surrounding whitespace ignored. The file must be
+    /// readable by its owner only (`chmod 600`): a key others can read authenticates nothing. The key
+    /// is never printed.
     ///
     /// # Errors
-    /// [`KeyFileError`] naming the file: unreadable, longer than 256 bytes, or not a valid key.
+    /// [`KeyFileError`] naming the file and what is wrong: unreadable, open to group or others,
+    /// longer than 256 bytes, or not a valid key.
     pub fn from_file(path: &std::path::Path) -> Result<Self, KeyFileError> {
         use std::io::Read as _;
         let err = |reason: String| KeyFileError {
@@ -77,6 +79,11 @@ impl SessionKey {
             reason,
         };
         let file = std::fs::File::open(path).map_err(|e| err(e.to_string()))?;
+        let meta = file.metadata().map_err(|e| err(e.to_string()))?;
+        if !meta.is_file() {
+            return Err(err("not a regular file".into()));
+        }
+        check_private(&meta).map_err(err)?;
         let mut text = String::new();
         file.take(257)
             .read_to_string(&mut text)
@@ -85,6 +92,17 @@ impl SessionKey {
             return Err(err("longer than 256 bytes".into()));
         }
         Self::from_hex(text.trim()).map_err(|e| err(e.to_string()))
+    }
+
+    /// A random key (the operating system's generator), for a session whose both ends are in one
+    /// process (`demo`, the lab): the control path is authenticated as on a provisioned machine.
+    pub fn generate() -> Self {
+        loop {
+            let key: [u8; 16] = rand::random();
+            if key != [0; 16] {
+                return Self(key);
+            }
+        }
     }
 
     /// True for [`SessionKey::PUBLIC`] (no key provisioned).
@@ -129,6 +147,26 @@ pub enum KeyError {
     /// The all-zero key, which is public.
     #[error("the all-zero key is the public one and authenticates nothing")]
     Public,
+}
+
+/// `Err` (the reason, with the fix) when a key file's permissions let group or others at it.
+#[cfg(unix)]
+fn check_private(meta: &std::fs::Metadata) -> Result<(), String> {
+    use std::os::unix::fs::PermissionsExt as _;
+    let mode = meta.permissions().mode() & 0o777;
+    if mode & 0o077 != 0 {
+        return Err(format!(
+            "open to group or others (mode {mode:03o}): anyone who can read the key can arm and \
+             drive the machine; make it private with `chmod 600`"
+        ));
+    }
+    Ok(())
+}
+
+/// Permissions are not checked where they are not Unix modes.
+#[cfg(not(unix))]
+fn check_private(_meta: &std::fs::Metadata) -> Result<(), String> {
+    Ok(())
 }
 
 /// A key file that cannot be used (the error never contains the key).
@@ -519,5 +557,54 @@ mod tests {
             assert_ne!(Some(next), prev);
             prev = Some(next);
         }
+    }
+
+    /// Writes `text` to a file with `mode` and returns it (the directory lives as long as the test).
+    #[cfg(unix)]
+    fn key_file(dir: &tempfile::TempDir, text: &str, mode: u32) -> std::path::PathBuf {
+        use std::os::unix::fs::PermissionsExt as _;
+        let path = dir.path().join("machine.key");
+        std::fs::write(&path, text).unwrap();
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(mode)).unwrap();
+        path
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn key_file_errors_name_the_file_and_what_is_wrong() {
+        let dir = tempfile::tempdir().unwrap();
+        let good = key_file(&dir, &format!("{KEY_HEX}\n"), 0o600);
+        assert_eq!(
+            SessionKey::from_file(&good).unwrap(),
+            SessionKey::from_hex(KEY_HEX).unwrap()
+        );
+        let err = |text: &str, mode: u32| {
+            let path = key_file(&dir, text, mode);
+            let e = SessionKey::from_file(&path).unwrap_err().to_string();
+            assert!(e.contains(&path.display().to_string()), "{e}");
+            assert!(!e.contains(KEY_HEX), "the key in an error: {e}");
+            e
+        };
+        // Readable by others: refused with the fix, the key never shown.
+        let e = err(KEY_HEX, 0o644);
+        assert!(e.contains("mode 644") && e.contains("chmod 600"), "{e}");
+        assert!(err(KEY_HEX, 0o640).contains("chmod 600"));
+        // 15 bytes, 17 bytes, not hex, the public key.
+        assert!(err(&KEY_HEX[..30], 0o600).contains("this one has 30"));
+        assert!(err(&format!("{KEY_HEX}10"), 0o600).contains("this one has 34"));
+        assert!(err(&KEY_HEX.replace('a', "g"), 0o600).contains("hexadecimal"));
+        assert!(err(&"0".repeat(32), 0o600).contains("public"));
+        assert!(err(&"0".repeat(300), 0o600).contains("longer than 256 bytes"));
+        let missing = dir.path().join("none.key");
+        let e = SessionKey::from_file(&missing).unwrap_err().to_string();
+        assert!(e.contains("none.key"), "{e}");
+    }
+
+    #[test]
+    fn generated_keys_are_provisioned_and_differ() {
+        let a = SessionKey::generate();
+        let b = SessionKey::generate();
+        assert!(!a.is_public());
+        assert_ne!(a, b);
     }
 }

@@ -5,9 +5,14 @@
 //! One control period ([`Harness::step`]): the machine advances 10 ms (ten 1 ms physics steps; its
 //! gateway sees the frames sent since the last period and sends its sensor frames), then the node steps
 //! once at the bus's virtual time with the frames it received, and its frames go on the bus.
+//!
+//! The gateway and the node share a key ([`HarnessOptions::key`]; by default a random one per
+//! harness), so the control path is authenticated with the truncated CMAC as on a provisioned
+//! machine (docs/protocol.md). The gateway's session ids follow the simulator's seed.
 
 use firmware_bridge::CanFrame;
 use firmware_bridge::scan::{Scan, ScanRequest};
+use firmware_bridge::secoc::SessionKey;
 use firmware_bridge::transport::{InProcessBus, InProcessNode, TimestampedFrame, VirtualClock};
 use planner::autodig::AutodigMaps;
 use vcan_sim::SimConfig;
@@ -28,6 +33,9 @@ pub struct HarnessOptions {
     pub controller_queue: Option<usize>,
     /// Receive queue of the machine's bus node, frames (the bus's default when `None`).
     pub machine_queue: Option<usize>,
+    /// The key the gateway and the controller share; `None`: a random one for this harness
+    /// ([`SessionKey::generate`]).
+    pub key: Option<SessionKey>,
 }
 
 impl Default for HarnessOptions {
@@ -36,6 +44,7 @@ impl Default for HarnessOptions {
             bus_name: "vcan0".to_owned(),
             controller_queue: None,
             machine_queue: None,
+            key: None,
         }
     }
 }
@@ -104,12 +113,15 @@ impl Harness {
             None => bus.attach(),
         };
         let ctl = attach(options.controller_queue);
-        let machine = EmbeddedMachine::new(
+        let mut machine = EmbeddedMachine::new(
             sim.build()?,
             attach(options.machine_queue),
             Some(clock.clone()),
         );
-        let node = ControllerNode::new(&sim.machine, maps, config)?;
+        let key = options.key.clone().unwrap_or_else(SessionKey::generate);
+        machine.node_mut().set_security(&key, sim.scenario.seed);
+        let mut node = ControllerNode::new(&sim.machine, maps, config)?;
+        node.set_key(&key);
         Ok(Self {
             clock,
             bus,

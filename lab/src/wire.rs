@@ -48,6 +48,11 @@ pub struct RunArgs {
     /// Controller config: safety, plan, Autodig and cleanup parameters (TOML; see docs/controller.md).
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
+    /// The machine's authentication key: 32 hex digits in a file readable by its owner only (chmod
+    /// 600), the same file the gateway holds (excavator-sim --key-file). Overrides the config's
+    /// [security] key_file. Without a key the control frames carry freshness only (docs/protocol.md).
+    #[arg(long, value_name = "FILE")]
+    pub key_file: Option<PathBuf>,
     /// Record a candump -L log of every frame sent and received (default with --out: DIR/trace.log).
     #[arg(long, value_name = "FILE")]
     pub trace: Option<PathBuf>,
@@ -146,8 +151,22 @@ pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, R
     let full_bucket_n = machine.bucket.capacity_m3
         * sim.scenario.soil.density_kg_per_m3
         * planner::machine::GRAVITY_M_PER_S2;
+    if let Some(file) = &args.key_file {
+        config.security.key_file = Some(file.clone());
+    }
+    let key = config.security.load_key().context("the machine's key")?;
     let mut node =
         ControllerNode::new(&machine, maps, config).context("controller configuration")?;
+    match &key {
+        Some(key) => {
+            node.set_key(key);
+            tracing::info!("control frames authenticated with the provisioned key");
+        }
+        None => tracing::warn!(
+            "no key provisioned (--key-file, [security] key_file): the control frames carry \
+             freshness only, and anyone who can send on the bus can forge them (docs/protocol.md)"
+        ),
+    }
     let mut driver = SessionDriver::new(session, None, &mut node);
     driver.set_detached_planning(true);
     let setup = RunSetup {

@@ -1,7 +1,8 @@
 //! `excavator-ctl run --strategy planned` through the real run loop ([`lab::wire::run_on`],
 //! [`controller::run::run_session_loop`]) over the in-process bus on the wall clock, against the
 //! simulator's real-time loop (`vcan_sim::realtime::run_on`) with its scan socket on loopback TCP,
-//! both at the same time scale: the session folder is the one `demo` writes.
+//! both at the same time scale: the session folder is the one `demo` writes. Both ends hold the same
+//! key file, so the control path is authenticated.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
@@ -13,6 +14,32 @@ use lab::demo::{DemoArgs, DemoStrategy, DemoSummary};
 use lab::wire::RunArgs;
 use vcan_sim::node::MachineNode;
 use vcan_sim::realtime::RealtimeOptions;
+
+/// A fresh key in `dir/machine.key`, readable by its owner only.
+fn write_key_file(dir: &std::path::Path) -> std::path::PathBuf {
+    use std::os::unix::fs::PermissionsExt as _;
+    let path = dir.join("machine.key");
+    let key: String = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos()
+        .to_be_bytes()
+        .iter()
+        .map(|b| format!("{:02x}", b ^ 0x5a))
+        .collect();
+    std::fs::write(&path, format!("{key}\n")).unwrap();
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).unwrap();
+    path
+}
+
+/// A session seed that differs between runs (as a gateway's must at every start).
+fn rand_seed() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .subsec_nanos()
+        .into()
+}
 
 fn free_port() -> String {
     let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
@@ -35,7 +62,10 @@ async fn the_planned_session_runs_over_a_bus_in_scaled_real_time() {
         scan_socket: Some(scan_addr.clone()),
         time_scale,
     };
-    let machine = MachineNode::new(sim.build().unwrap());
+    // The key provisioned on both ends, as on a machine: the gateway's and `run --key-file`.
+    let key_file = write_key_file(dir.path());
+    let key = firmware_bridge::secoc::SessionKey::from_file(&key_file).unwrap();
+    let machine = MachineNode::new(sim.build().unwrap()).with_security(&key, rand_seed());
     let (stop_sim, sim_stopped) = tokio::sync::oneshot::channel::<()>();
     let simulator = tokio::spawn(async move {
         vcan_sim::realtime::run_on(&sim_node, machine, options, async {
@@ -54,6 +84,7 @@ async fn the_planned_session_runs_over_a_bus_in_scaled_real_time() {
         machine: None,
         maps: None,
         config: None,
+        key_file: Some(key_file),
         trace: None,
         digs: Some(2),
         scan_addr: Some(scan_addr),
@@ -109,6 +140,7 @@ fn fixed_args(config: &std::path::Path, digs: Option<u32>) -> RunArgs {
         machine: None,
         maps: None,
         config: Some(config.to_owned()),
+        key_file: None,
         trace: None,
         digs,
         scan_addr: None,
@@ -137,4 +169,35 @@ fn the_fixed_strategy_keeps_the_configs_dig_limit_unless_digs_is_given() {
     assert_eq!(node.cycle().config().max_digs, Some(4));
     let (node, _, _) = lab::wire::build(&fixed_args(&config, Some(2))).unwrap();
     assert_eq!(node.cycle().config().max_digs, Some(2));
+}
+
+#[test]
+fn the_key_file_is_checked_before_the_bus_is_touched() {
+    use std::os::unix::fs::PermissionsExt as _;
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("plan.toml");
+    std::fs::write(&config, "[security]\nkey_file = \"machine.key\"\n").unwrap();
+    let key = write_key_file(dir.path());
+    // The config's key file, relative to the config's folder.
+    assert!(lab::wire::build(&fixed_args(&config, Some(1))).is_ok());
+    // Readable by others: refused, naming the file and the fix.
+    std::fs::set_permissions(&key, std::fs::Permissions::from_mode(0o644)).unwrap();
+    let e = format!(
+        "{:#}",
+        lab::wire::build(&fixed_args(&config, Some(1)))
+            .err()
+            .unwrap()
+    );
+    assert!(e.contains("machine.key") && e.contains("chmod 600"), "{e}");
+    // --key-file overrides the config's: a 15-byte key is refused, naming the file.
+    let short = dir.path().join("short.key");
+    std::fs::write(&short, "000102030405060708090a0b0c0d0e").unwrap();
+    std::fs::set_permissions(&short, std::fs::Permissions::from_mode(0o600)).unwrap();
+    let mut args = fixed_args(&config, Some(1));
+    args.key_file = Some(short);
+    let e = format!("{:#}", lab::wire::build(&args).err().unwrap());
+    assert!(
+        e.contains("short.key") && e.contains("32 hexadecimal digits") && e.contains("has 30"),
+        "{e}"
+    );
 }

@@ -56,6 +56,7 @@ impl Session {
                 bus_name: "sim0".to_owned(),
                 controller_queue: Some(1 << 16),
                 machine_queue: Some(1 << 16),
+                key: None,
             },
         )
         .unwrap_or_else(|e| panic!("harness: {e}"));

@@ -62,8 +62,13 @@ impl MachineNode {
     /// provisioned) and session seed (see [`Gateway::with_security`]: it must differ at every start
     /// outside a reproducible simulation).
     pub fn with_security(mut self, key: &SessionKey, session_seed: u64) -> Self {
-        self.gateway = std::mem::take(&mut self.gateway).with_security(key, session_seed);
+        self.set_security(key, session_seed);
         self
+    }
+
+    /// As [`Self::with_security`] in place (before the first step: the gateway starts a new session).
+    pub fn set_security(&mut self, key: &SessionKey, session_seed: u64) {
+        self.gateway = std::mem::take(&mut self.gateway).with_security(key, session_seed);
     }
 
     fn with(plant: Plant, gateway: Gateway) -> Self {
