@@ -1,5 +1,8 @@
 //! The work-cycle plan of the end-to-end tests: three digs into the default bench and a floor cleanup
-//! beside it (repeated until four completed), then return home and disarm.
+//! beside it (repeated until four completed), then return home and disarm; and the machine's key both
+//! ends of a session are provisioned with ([`write_key_file`]).
+
+use std::path::{Path, PathBuf};
 
 use controller::node::ControllerConfig;
 
@@ -92,6 +95,27 @@ pub fn write_plan(dir: &std::path::Path) -> std::path::PathBuf {
         PLAN_TOML.to_owned()
     };
     std::fs::write(&path, text).unwrap_or_else(|e| panic!("cannot write {}: {e}", path.display()));
+    path
+}
+
+/// Writes a fresh random machine key (32 hex digits from `/dev/urandom`) to `dir/machine.key`, readable
+/// by its owner only, as `excavator-sim --key-file` and `excavator-ctl run --key-file` require. `dir`
+/// must support Unix permissions (a temporary directory, not a shared folder of the VM).
+///
+/// # Panics
+/// When `/dev/urandom` cannot be read or the file cannot be written.
+pub fn write_key_file(dir: &Path) -> PathBuf {
+    use std::io::Read as _;
+    use std::os::unix::fs::PermissionsExt as _;
+    let mut key = [0u8; 16];
+    std::fs::File::open("/dev/urandom")
+        .and_then(|mut f| f.read_exact(&mut key))
+        .unwrap_or_else(|e| panic!("cannot read /dev/urandom: {e}"));
+    let hex: String = key.iter().map(|b| format!("{b:02x}")).collect();
+    let path = dir.join("machine.key");
+    std::fs::write(&path, format!("{hex}\n"))
+        .and_then(|()| std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)))
+        .unwrap_or_else(|e| panic!("cannot write {}: {e}", path.display()));
     path
 }
 

@@ -43,6 +43,10 @@ fn the_planned_session_over_vcan_matches_demo() {
     let dir = env::artifacts("planned_session");
     let bench = concat!(env!("CARGO_MANIFEST_DIR"), "/../config/bench_extended.toml");
     let scan_addr = format!("127.0.0.1:{}", free_port());
+    // Both ends hold the same machine key: the control path is authenticated.
+    let key_dir = tempfile::tempdir().unwrap();
+    let key_file = hil_tests::plan::write_key_file(key_dir.path());
+    let key_file = key_file.to_str().unwrap();
     let mut sim = Proc::spawn(
         "excavator-sim",
         &env::binary("excavator-sim"),
@@ -57,6 +61,8 @@ fn the_planned_session_over_vcan_matches_demo() {
             &scan_addr,
             "--time-scale",
             TIME_SCALE,
+            "--key-file",
+            key_file,
         ],
         &dir.join("sim.log"),
     );
@@ -88,6 +94,8 @@ fn the_planned_session_over_vcan_matches_demo() {
             &digs,
             "--out",
             out.to_str().unwrap(),
+            "--key-file",
+            key_file,
         ],
         &dir.join("ctl.log"),
     );

@@ -1,6 +1,7 @@
 //! A vcan session for the end-to-end tests: `candump -L` recording the bus, `excavator-sim` with its
 //! state log and scan socket, `excavator-ctl run` with the HIL plan, each a separate process on the
-//! real SocketCAN interface. Everything is killed when the session drops (also on a failed assertion);
+//! real SocketCAN interface, both provisioned with the same fresh machine key (`--key-file`), so the
+//! control path is authenticated as on a machine. Everything is killed when the session drops (also on a failed assertion);
 //! the logs stay in the artefact directory and their tails are printed on failure.
 
 #![allow(dead_code, clippy::unwrap_used)]
@@ -39,6 +40,17 @@ pub struct Session {
     pub sim_started_unix_s: f64,
     /// Raw socket of the test.
     pub socket: CanSocket,
+    /// The machine key both ends hold (in `key_dir`).
+    pub key_file: PathBuf,
+    /// The controller's `run` arguments (for a restart).
+    ctl_args: Vec<String>,
+    /// The scan socket's address.
+    scan_addr: String,
+    /// Controllers started so far (names their logs).
+    ctl_starts: u32,
+    /// Holds the key file: a private temporary directory (the artefact directory may be a shared
+    /// folder without Unix permissions).
+    _key_dir: tempfile::TempDir,
 }
 
 fn unix_now_s() -> f64 {
@@ -87,7 +99,6 @@ impl Session {
     pub fn start(test: &str, ctl_args: &[&str]) -> Self {
         let iface = env::vcan_iface();
         let sim_bin = env::binary("excavator-sim");
-        let ctl_bin = env::binary("excavator-ctl");
         let candump_bin = env::tool("candump", "can-utils");
         let dir = env::artifacts(test);
         let socket = open_socket(&iface);
@@ -112,6 +123,8 @@ impl Session {
 
         let state_log = dir.join("state.jsonl");
         let scan_addr = format!("127.0.0.1:{}", free_port());
+        let key_dir = tempfile::tempdir().unwrap();
+        let key_file = hil_tests::plan::write_key_file(key_dir.path());
         let sim_started_unix_s = unix_now_s();
         let mut sim = Proc::spawn(
             "excavator-sim",
@@ -125,6 +138,8 @@ impl Session {
                 state_log.to_str().unwrap(),
                 "--scan-socket",
                 &scan_addr,
+                "--key-file",
+                key_file.to_str().unwrap(),
             ],
             &dir.join("sim.log"),
         );
@@ -134,35 +149,62 @@ impl Session {
             sim.log_tail(30)
         );
 
-        let plan = hil_tests::plan::write_plan(&dir);
         let ctl_trace = dir.join("ctl-trace.log");
-        let mut args: Vec<&str> = vec![
-            "run",
-            "--iface",
-            &iface,
-            "--config",
-            plan.to_str().unwrap(),
-            "--trace",
-            ctl_trace.to_str().unwrap(),
-            "--scan-addr",
-            &scan_addr,
-        ];
-        args.extend_from_slice(ctl_args);
-        let ctl = Proc::spawn("excavator-ctl", &ctl_bin, &args, &dir.join("ctl.log"));
         let mut s = Self {
             dir,
             iface,
             candump,
             sim,
-            ctl: Some(ctl),
+            ctl: None,
             candump_log,
             state_log,
             ctl_trace,
             sim_started_unix_s,
             socket,
+            key_file,
+            ctl_args: ctl_args.iter().map(|a| (*a).to_owned()).collect(),
+            scan_addr,
+            ctl_starts: 0,
+            _key_dir: key_dir,
         };
+        s.start_controller();
         s.sim.assert_running();
         s
+    }
+
+    /// Starts `excavator-ctl run` with the HIL plan, the session's key and the session's extra
+    /// arguments. The first one writes `ctl-trace.log` and `ctl.log`; a restart `ctl-trace-N.log` and
+    /// `ctl-N.log`.
+    ///
+    /// # Panics
+    /// When a controller is running.
+    pub fn start_controller(&mut self) {
+        assert!(self.ctl.is_none(), "a controller is running");
+        let ctl_bin = env::binary("excavator-ctl");
+        let plan = hil_tests::plan::write_plan(&self.dir);
+        let (trace, log) = match self.ctl_starts {
+            0 => (self.ctl_trace.clone(), self.dir.join("ctl.log")),
+            n => (
+                self.dir.join(format!("ctl-trace-{n}.log")),
+                self.dir.join(format!("ctl-{n}.log")),
+            ),
+        };
+        self.ctl_starts += 1;
+        let mut args: Vec<&str> = vec![
+            "run",
+            "--iface",
+            &self.iface,
+            "--config",
+            plan.to_str().unwrap(),
+            "--trace",
+            trace.to_str().unwrap(),
+            "--scan-addr",
+            &self.scan_addr,
+            "--key-file",
+            self.key_file.to_str().unwrap(),
+        ];
+        args.extend(self.ctl_args.iter().map(String::as_str));
+        self.ctl = Some(Proc::spawn("excavator-ctl", &ctl_bin, &args, &log));
     }
 
     /// The controller.
