@@ -56,6 +56,16 @@ fn armed(mode: GatewayMode) -> bool {
     matches!(mode, GatewayMode::ArmedValve | GatewayMode::ArmedPosition)
 }
 
+/// The gateway's rejected-frame count rose by `n` or more between two of its statuses.
+fn assert_rejected_at_least(before: &GatewayStatus, after: &GatewayStatus, n: u32) {
+    assert!(
+        u32::from(after.rejected_frames) >= u32::from(before.rejected_frames) + n,
+        "rejected {} -> {}, expected {n} more",
+        before.rejected_frames,
+        after.rejected_frames
+    );
+}
+
 /// The largest motion of any joint over `angles`, rad.
 fn largest_motion_rad(angles: &[(f64, [f64; 4])]) -> f64 {
     (0..4)
@@ -364,12 +374,7 @@ fn replayed_controller_trace_with_the_controller_dead_does_not_arm_the_gateway()
         "the replayed trace armed the gateway"
     );
     // The gateway saw the frames and refused them.
-    assert!(
-        u32::from(after.rejected_frames) >= u32::from(before.rejected_frames) + 20,
-        "rejected {} -> {}",
-        before.rejected_frames,
-        after.rejected_frames
-    );
+    assert_rejected_at_least(&before, &after, 20);
     assert!(angles.len() > 100, "{} angle frames", angles.len());
     assert!(
         moved < REST_MOTION_RAD,
@@ -487,12 +492,7 @@ fn replayed_heartbeats_after_a_kill_do_not_keep_the_valves_driven() {
         armed_after.is_empty(),
         "armed again at {armed_after:?} s after the kill"
     );
-    assert!(
-        u32::from(after.rejected_frames) >= u32::from(before.rejected_frames) + 40,
-        "rejected {} -> {}",
-        before.rejected_frames,
-        after.rejected_frames
-    );
+    assert_rejected_at_least(&before, &after, 40);
     assert!(
         measured_after > 300,
         "{measured_after} valve measurements after the kill"
