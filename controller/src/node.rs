@@ -576,6 +576,12 @@ impl ControllerNode {
     /// swept volume and fault code.
     fn status_message(&mut self) -> StatusMessage {
         self.status_alive = (self.status_alive + 1) % 16;
+        self.bus_status()
+    }
+
+    /// What the controller reports on the bus as `ControllerStatus` now (the last alive counter
+    /// sent), for a view of the session that shows what a trace would.
+    pub fn bus_status(&self) -> StatusMessage {
         let activity = if self.safety.active_fault().is_some() {
             Activity::Faulted
         } else {

@@ -25,19 +25,17 @@
 //! caller closes the trace recorder afterwards so the buffered tail reaches the file.
 
 use std::future::Future;
-use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::Context as _;
-use firmware_bridge::trace::Recorder;
-use firmware_bridge::transport::{self, Bus, BusFault, SocketCanBus, TimestampedFrame};
-use planner::autodig::AutodigMaps;
-use planner::machine::MachineConfig;
+use firmware_bridge::transport::{self, Bus, BusFault, TimeScale, TimestampedFrame};
 use tokio::time::MissedTickBehavior;
 
-use crate::cycle::Phase;
-use crate::node::{ControllerConfig, ControllerNode};
-use crate::scan_client::{ScanClient, ScanClientConfig, ScanService};
+use crate::node::ControllerNode;
+use crate::scan_client::ScanClientConfig;
+#[cfg(doc)]
+use crate::scan_client::ScanService;
+use crate::session::{PlanOutcome, ScanSource, SessionDriver, SessionEvent};
 
 /// The control period (100 Hz).
 pub const CONTROL_PERIOD: Duration = Duration::from_millis(10);
@@ -59,27 +57,6 @@ pub const MIN_STEP_FRACTION: f64 = 0.8;
 /// ... and no gap between two ticks longer than this, s (the gateway's watchdog is 0.1 s; scheduling
 /// jitter in a TCG VM reaches 0.03 s).
 pub const MAX_TICK_GAP_S: f64 = 0.08;
-
-/// Options of `excavator-ctl run`.
-#[derive(Debug, Clone, Default)]
-pub struct RunOptions {
-    /// CAN interface (`can0`, `vcan0`).
-    pub iface: String,
-    /// Decode and log, never transmit.
-    pub listen_only: bool,
-    /// Machine file (default: the built-in `config/machine.toml`).
-    pub machine: Option<PathBuf>,
-    /// Autodig maps (default: the built-in `config/autodig_maps.toml`).
-    pub maps: Option<PathBuf>,
-    /// Controller config (safety, cycle plan, Autodig, cleanup) as TOML.
-    pub config: Option<PathBuf>,
-    /// Record a candump log of everything sent and received.
-    pub trace: Option<PathBuf>,
-    /// Stop after this many digs.
-    pub digs: Option<u32>,
-    /// Address of the range-scan service.
-    pub scan_addr: Option<String>,
-}
 
 /// Why the loop ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -227,43 +204,6 @@ impl LoopMonitor {
     }
 }
 
-/// Builds the node from the options' files.
-///
-/// # Errors
-/// Unreadable or invalid files, or an inconsistent configuration.
-pub fn build_node(opts: &RunOptions) -> anyhow::Result<ControllerNode> {
-    let machine =
-        MachineConfig::load_or_default(opts.machine.as_deref()).context("machine file")?;
-    let maps = match &opts.maps {
-        Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("reading Autodig maps {}", p.display()))?;
-            AutodigMaps::from_toml_str(&text)
-                .with_context(|| format!("Autodig maps {}", p.display()))?
-        }
-        None => AutodigMaps::builtin().context("built-in Autodig maps")?,
-    };
-    // Errors name the file, the line and the field.
-    let mut config = match &opts.config {
-        Some(p) => ControllerConfig::from_toml_file(p).context("controller config")?,
-        None => ControllerConfig::default(),
-    };
-    config.safety.listen_only |= opts.listen_only;
-    if let Some(n) = opts.digs {
-        config.cycle.max_digs = Some(n);
-    }
-    // Without a scan service nobody would answer the cycle's requests: dig on the plain angle rules
-    // at once instead of waiting `scan_timeout_s` before every dig.
-    if opts.scan_addr.is_none() {
-        config.cycle.scan = false;
-    }
-    ControllerNode::new(&machine, maps, config).context("controller configuration")
-}
-
-fn now_s<B: Bus>(bus: &B) -> f64 {
-    bus.now_ns() as f64 * 1e-9
-}
-
 /// Sends `frames`; a full transmit queue is reported to the node as a bus fault (the bus is likely
 /// off), any other error ends the loop.
 async fn send_all<B: Bus>(
@@ -271,12 +211,13 @@ async fn send_all<B: Bus>(
     node: &mut ControllerNode,
     frames: &[firmware_bridge::CanFrame],
     stats: &mut LoopStats,
+    now_s: f64,
 ) -> anyhow::Result<()> {
     for f in frames {
         match bus.send(*f).await {
             Ok(()) => stats.sent += 1,
             Err(transport::Error::TxQueueFull { .. }) => {
-                node.on_bus_fault(now_s(bus), transport::BusFault::TxTimeout);
+                node.on_bus_fault(now_s, transport::BusFault::TxTimeout);
             }
             Err(e) => {
                 return Err(e).with_context(|| format!("sending on {}", bus.interface()));
@@ -299,7 +240,8 @@ pub fn scan_client_config(node: &ControllerNode, addr: &str) -> ScanClientConfig
 }
 
 /// Runs `node` on `bus` until `shutdown` resolves, the plan finishes or an I/O error occurs; then sends
-/// the shutdown frames (neutral valves, disarm). Without a scan service; see [`run_loop_with_scans`].
+/// the shutdown frames (neutral valves, disarm). Without a session driver (nobody answers scan
+/// requests or plans); see [`run_session_loop`].
 ///
 /// # Errors
 /// A receive or send error of the bus (after the shutdown frames were attempted).
@@ -309,7 +251,31 @@ pub async fn run_loop<B: Bus>(
     period: Duration,
     shutdown: impl Future<Output = ()>,
 ) -> anyhow::Result<(StopReason, LoopStats)> {
-    run_loop_with_scans(bus, node, period, shutdown, None).await
+    run_session_loop(bus, node, period, TimeScale::REAL_TIME, shutdown, None).await
+}
+
+/// What is called after every control step with the step's session events (the lab writes the
+/// session folder from them). An error ends the loop.
+pub type StepObserver<'a> =
+    dyn FnMut(&ControllerNode, &SessionDriver, &[SessionEvent]) -> anyhow::Result<()> + 'a;
+
+/// The session around the node in [`run_session_loop`]: the driver (planning detached, module
+/// docs), its scan source and the observer of its events.
+pub struct LoopSession<'a> {
+    /// The session driver.
+    pub driver: &'a mut SessionDriver,
+    /// Where its scans come from ([`ScanService`] over the network).
+    pub scans: &'a mut dyn ScanSource,
+    /// Called after every step.
+    pub observer: &'a mut StepObserver<'a>,
+}
+
+impl std::fmt::Debug for LoopSession<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LoopSession")
+            .field("driver", &self.driver)
+            .finish_non_exhaustive()
+    }
 }
 
 /// Logs the monitor's verdict on an overloaded window and stops motion when the loop rate is lost.
@@ -359,54 +325,46 @@ fn judge_load(
     );
 }
 
-/// Hands a scan result to the node, or logs why there is none (Autodig then uses its plain angle
-/// rules).
-fn on_scan_result(
-    node: &mut ControllerNode,
-    result: Result<planner::terrain::TerrainGrid, crate::scan_client::ScanError>,
-    stats: &mut LoopStats,
-) {
-    match result {
-        Ok(terrain) if node.status().phase == Phase::Scan => {
-            stats.scans_ok += 1;
-            tracing::info!("range scan: terrain map handed to the work cycle");
-            node.provide_terrain(terrain);
-        }
-        Ok(_) => {
-            stats.scans_failed += 1;
-            tracing::warn!(
-                "range scan arrived after the work cycle stopped waiting; discarded (plain angle rules)"
-            );
-        }
-        Err(e) => {
-            stats.scans_failed += 1;
-            tracing::warn!(
-                reason = %e,
-                "range scan failed: Autodig digs on its plain angle rules"
-            );
-        }
+/// A planning step running on tokio's blocking pool.
+type PlanTask = tokio::task::JoinHandle<PlanOutcome>;
+
+/// The outcome of the planning step in flight, or never without one (cancel-safe).
+async fn planned(task: &mut Option<PlanTask>) -> Result<PlanOutcome, tokio::task::JoinError> {
+    match task {
+        Some(t) => t.await,
+        None => std::future::pending().await,
     }
 }
 
-/// [`run_loop`] with an optional range-scan service answering the work cycle's scan requests.
+/// [`run_loop`] with a session driver: after every step the driver answers the work cycle's scan
+/// requests from its scan source and, when the cycle waits for an action, stages a planning step,
+/// which runs on tokio's blocking pool (the planner takes up to ~160 ms; the cycle holds in Idle
+/// meanwhile) and whose action is pushed when it is done. Session time runs `time_scale` times as
+/// fast as the monotonic clock: the tick is `period / time_scale` of wall time and the node steps at
+/// the scaled time (the simulator must run at the same scale).
 ///
 /// # Errors
-/// A receive or send error of the bus (after the shutdown frames were attempted).
-pub async fn run_loop_with_scans<B: Bus>(
+/// A receive or send error of the bus, a session error or an observer's error (after the shutdown
+/// frames were attempted).
+pub async fn run_session_loop<B: Bus>(
     bus: &B,
     node: &mut ControllerNode,
     period: Duration,
+    time_scale: TimeScale,
     shutdown: impl Future<Output = ()>,
-    mut scans: Option<&mut ScanService>,
+    mut session: Option<LoopSession<'_>>,
 ) -> anyhow::Result<(StopReason, LoopStats)> {
     let mut stats = LoopStats::default();
     let mut monitor = LoopMonitor::new();
     let mut foreign_seen = 0_u64;
-    let mut interval = tokio::time::interval(period);
+    let wall_period = period.div_f64(time_scale.get());
+    let mut interval = tokio::time::interval(wall_period);
     interval.set_missed_tick_behavior(MissedTickBehavior::Skip);
     let mut inbox: Vec<TimestampedFrame> = Vec::with_capacity(MAX_INBOX);
     let mut last_tick: Option<tokio::time::Instant> = None;
     let mut last_report_s = f64::NEG_INFINITY;
+    let clock = SessionClock::start(time_scale);
+    let mut plan_task: Option<PlanTask> = None;
     tokio::pin!(shutdown);
     let result: anyhow::Result<StopReason> = loop {
         tokio::select! {
@@ -415,14 +373,14 @@ pub async fn run_loop_with_scans<B: Bus>(
             tick = interval.tick() => {
                 if let Some(t) = last_tick {
                     let gap = tick.duration_since(t);
-                    if gap > period + period / 2 {
+                    if gap > wall_period + wall_period / 2 {
                         stats.late_ticks += 1;
                     }
                     stats.max_tick_gap_us =
                         stats.max_tick_gap_us.max(u64::try_from(gap.as_micros()).unwrap_or(u64::MAX));
                 }
                 last_tick = Some(tick);
-                let now = now_s(bus);
+                let now = clock.now_s();
                 if let Some(report) = monitor.on_tick(now) {
                     judge_load(&report, period, node, now, &mut stats);
                 }
@@ -433,20 +391,34 @@ pub async fn run_loop_with_scans<B: Bus>(
                 monitor.on_foreign(foreign.saturating_sub(foreign_seen));
                 foreign_seen = foreign;
                 stats.steps += 1;
-                if let Err(e) = send_all(bus, node, &out, &mut stats).await {
+                if let Err(e) = send_all(bus, node, &out, &mut stats, now).await {
                     break Err(e);
                 }
-                if node.take_scan_request() {
-                    match scans.as_deref_mut() {
-                        Some(service) => {
-                            if !service.request() {
-                                tracing::debug!("a range scan is already in flight");
+                match session.as_mut() {
+                    Some(s) => {
+                        let events = match s.driver.after_step(node, &mut *s.scans) {
+                            Ok(events) => events.to_vec(),
+                            Err(e) => break Err(anyhow::Error::new(e).context("session")),
+                        };
+                        for e in &events {
+                            if let SessionEvent::Scanned(_) = e {
+                                stats.scans_ok += 1;
                             }
                         }
-                        None => tracing::warn!(
-                            "the work cycle asked for a range scan but no scan service is configured \
-                             (--scan-addr): plain angle rules"
-                        ),
+                        if let Err(e) = (s.observer)(node, s.driver, &events) {
+                            break Err(e);
+                        }
+                        if let Some(job) = s.driver.take_plan_job() {
+                            plan_task = Some(tokio::task::spawn_blocking(move || job.run()));
+                        }
+                    }
+                    None => {
+                        if node.take_scan_request() {
+                            tracing::warn!(
+                                "the work cycle asked for a range scan but no scan service is \
+                                 configured (--scan-addr): plain angle rules"
+                            );
+                        }
                     }
                 }
                 if now - last_report_s >= 1.0 {
@@ -458,6 +430,7 @@ pub async fn run_loop_with_scans<B: Bus>(
                         digs = s.dig_index,
                         safety = ?s.safety,
                         gateway = ?node.state().gateway.map(|g| g.mode),
+                        planning = plan_task.is_some(),
                         "status"
                     );
                 }
@@ -471,37 +444,74 @@ pub async fn run_loop_with_scans<B: Bus>(
                     monitor.on_received();
                     tracing::trace!(frame = ?tf.frame, "received");
                     if inbox.len() < MAX_INBOX {
-                        inbox.push(tf);
+                        // The node ages sensor data and times faults against the step's `now`, so a
+                        // frame carries the session clock's time of its arrival, not the bus's (wall)
+                        // clock; the trace keeps the bus's timestamp.
+                        inbox.push(TimestampedFrame {
+                            timestamp_ns: clock.now_ns(),
+                            frame: tf.frame,
+                        });
                     } else {
                         stats.dropped += 1;
                         monitor.on_dropped();
                     }
                 }
-                Err(transport::Error::Fault(fault)) => node.on_bus_fault(now_s(bus), fault),
+                Err(transport::Error::Fault(fault)) => node.on_bus_fault(clock.now_s(), fault),
                 Err(e) => {
                     break Err(anyhow::Error::new(e).context(format!("receiving on {}", bus.interface())));
                 }
             },
-            result = next_scan(&mut scans) => on_scan_result(node, result, &mut stats),
+            outcome = planned(&mut plan_task) => {
+                plan_task = None;
+                let Some(s) = session.as_mut() else { continue };
+                let finished = outcome
+                    .context("the planning task failed")
+                    .and_then(|o| s.driver.finish_plan(node, o).context("session"));
+                if let Err(e) = finished {
+                    break Err(e);
+                }
+            }
         }
     };
-    let out = node.shutdown(now_s(bus));
+    let out = node.shutdown(clock.now_s());
     for f in &out {
         if let Err(e) = bus.send(*f).await {
             tracing::error!(error = %e, "could not send a shutdown frame");
         }
     }
     stats.sent += out.len() as u64;
+    // A planning step still out holds the session: bring it back (its action is not run).
+    if let (Some(task), Some(s)) = (plan_task, session.as_mut())
+        && let Ok(outcome) = task.await
+    {
+        s.driver.return_session(outcome);
+    }
     result.map(|r| (r, stats))
 }
 
-/// The next scan result, or never without a service.
-async fn next_scan(
-    scans: &mut Option<&mut ScanService>,
-) -> Result<planner::terrain::TerrainGrid, crate::scan_client::ScanError> {
-    match scans {
-        Some(service) => service.next_result().await,
-        None => std::future::pending().await,
+/// Session time: the monotonic clock since the loop started, times the time scale, s.
+#[derive(Debug, Clone, Copy)]
+struct SessionClock {
+    start: tokio::time::Instant,
+    scale: f64,
+}
+
+impl SessionClock {
+    fn start(scale: TimeScale) -> Self {
+        Self {
+            start: tokio::time::Instant::now(),
+            scale: scale.get(),
+        }
+    }
+
+    fn now_s(&self) -> f64 {
+        self.start.elapsed().as_secs_f64() * self.scale
+    }
+
+    /// [`Self::now_s`] in nanoseconds (a frame's timestamp).
+    fn now_ns(&self) -> u64 {
+        // Saturating float-to-int cast; session time is non-negative and far below 584 years.
+        (self.now_s() * 1e9) as u64
     }
 }
 
@@ -526,65 +536,6 @@ pub async fn shutdown_signal() {
     {
         let _ = tokio::signal::ctrl_c().await;
     }
-}
-
-/// `excavator-ctl run`: opens the interface, runs the loop until Ctrl-C/SIGTERM or the end of the
-/// plan, and closes the trace.
-///
-/// # Errors
-/// Configuration, interface or bus errors, and trace file errors.
-pub async fn run(opts: RunOptions) -> anyhow::Result<()> {
-    let mut node = build_node(&opts)?;
-    let mut bus = SocketCanBus::open(&opts.iface)
-        .with_context(|| format!("opening CAN interface {}", opts.iface))?;
-    let recorder = match &opts.trace {
-        Some(p) => {
-            let r = Recorder::create(p, &opts.iface)
-                .with_context(|| format!("creating trace {}", p.display()))?;
-            bus.set_recorder(r.clone());
-            Some(r)
-        }
-        None => None,
-    };
-    tracing::info!(
-        iface = %opts.iface,
-        listen_only = node.safety().config().listen_only,
-        scan_addr = opts.scan_addr.as_deref().unwrap_or("none"),
-        "excavator-ctl running; Ctrl-C stops (valves neutral, disarm)"
-    );
-    let mut scans = opts
-        .scan_addr
-        .as_deref()
-        .map(|addr| ScanService::spawn(ScanClient::new(scan_client_config(&node, addr))));
-    let result = run_loop_with_scans(
-        &bus,
-        &mut node,
-        CONTROL_PERIOD,
-        shutdown_signal(),
-        scans.as_mut(),
-    )
-    .await;
-    if let Some(r) = recorder {
-        let closed = r.close().context("closing the trace");
-        if let Ok(stats) = &closed {
-            tracing::info!(?stats, "trace closed");
-        }
-        closed?;
-    }
-    let (reason, stats) = result?;
-    tracing::info!(?reason, ?stats, digs = node.statistics().len(), "stopped");
-    for d in node.statistics() {
-        tracing::info!(
-            dig = d.index,
-            action = ?d.action,
-            weight_n = ?d.weight_n,
-            time_s = d.time_s,
-            energy_kj = d.energy_kj(),
-            swept_m3 = d.swept_volume_m3,
-            "dig"
-        );
-    }
-    Ok(())
 }
 
 #[cfg(test)]

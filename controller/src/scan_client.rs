@@ -1,19 +1,19 @@
 //! The range-scan client of the real-time loop (docs/scan-protocol.md): JSON lines over TCP.
 //!
-//! The work cycle asks for a scan before each dig ([`crate::ControllerNode::take_scan_request`]); the
-//! run loop hands the request to [`ScanService`], a tokio task that owns the connection, so the
-//! control loop never waits on the network. The task
+//! The session driver ([`crate::session::SessionDriver`]) asks for scans: the work cycle's before each
+//! dig, and the planner's workspace scan before it plans. Over the network its [`ScanSource`] is
+//! [`ScanService`], a tokio task that owns the connection, so the control loop never waits on the
+//! network. The task
 //!
 //! 1. connects (or reuses the connection; a failed exchange drops it and the next request reconnects),
 //! 2. writes one [`ScanRequest`] as a JSON line and reads one reply line,
-//! 3. parses the [`Scan`] (or the server's `{"error": ...}`) and bins its points into a
-//!    [`TerrainGrid`] with the cycle's [`ScanGrid`] (`TerrainGrid::from_scan`) on tokio's blocking
-//!    pool, because a default scan is about 10,000 points,
+//! 3. parses the [`Scan`] (or the server's `{"error": ...}`) on tokio's blocking pool, because a
+//!    default scan is about 10,000 points,
 //!
-//! all within one timeout, and sends back the terrain or a [`ScanError`] naming the reason. The loop
-//! then calls [`crate::ControllerNode::provide_terrain`], or logs the reason and lets Autodig fall
-//! back to its plain angle rules (the cycle's own `scan_timeout_s` also covers a reply that never
-//! comes).
+//! all within one timeout, and hands back the raw scan or a [`ScanError`] naming the reason. The
+//! driver fuses the scan into the planner's map (or bins it on the cycle's grid without a planner)
+//! exactly as with the in-process simulator's scans; a failure is logged and Autodig falls back to
+//! its plain angle rules (the cycle's own `scan_timeout_s` also covers a reply that never comes).
 
 use std::time::Duration;
 
@@ -25,6 +25,7 @@ use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
 use tokio::sync::mpsc;
 
 use crate::cycle::ScanGrid;
+use crate::session::{BoxError, ScanSource};
 
 /// Longest reply line accepted (a 2000 x 2000 scan would be far larger; the default is about 0.5 MB).
 pub const MAX_REPLY_BYTES: usize = 64 * 1024 * 1024;
@@ -115,36 +116,30 @@ impl ScanClient {
         &self.config
     }
 
-    /// One scan turned into a terrain map, within the configured timeout.
+    /// One scan for `request`, within the configured timeout (the reply is parsed on tokio's
+    /// blocking pool: a default scan is about 10,000 points, 0.5 MB of JSON).
     ///
     /// # Errors
     /// [`ScanError`] naming what failed; the connection is dropped and reopened next time.
-    pub async fn terrain(&mut self) -> Result<TerrainGrid, ScanError> {
+    pub async fn scan(&mut self, request: &ScanRequest) -> Result<Scan, ScanError> {
         let timeout = self.config.timeout;
-        let result = match tokio::time::timeout(timeout, self.exchange()).await {
-            Ok(r) => r,
-            Err(_) => Err(ScanError::Timeout {
-                addr: self.config.addr.clone(),
-                timeout_s: timeout.as_secs_f64(),
-            }),
+        let addr = self.config.addr.clone();
+        let timed_out = || ScanError::Timeout {
+            addr: addr.clone(),
+            timeout_s: timeout.as_secs_f64(),
         };
-        let result = match result {
-            Ok(line) => {
-                let grid = self.config.grid;
-                // Parsing and binning ~10,000 points takes milliseconds: keep it off the runtime's
-                // thread, which also drives the control loop.
-                let task = tokio::task::spawn_blocking(move || terrain_from_reply(&line, &grid));
-                // The timeout covers the whole exchange; what is left of it bounds the binning.
+        let result = match tokio::time::timeout(timeout, self.exchange(request)).await {
+            Ok(Ok(line)) => {
+                let task = tokio::task::spawn_blocking(move || scan_from_reply(&line));
+                // The timeout covers the whole exchange; what is left of it bounds the parsing.
                 match tokio::time::timeout(timeout, task).await {
                     Ok(Ok(r)) => r,
-                    Ok(Err(e)) => Err(ScanError::Terrain(format!("terrain task failed: {e}"))),
-                    Err(_) => Err(ScanError::Timeout {
-                        addr: self.config.addr.clone(),
-                        timeout_s: timeout.as_secs_f64(),
-                    }),
+                    Ok(Err(e)) => Err(ScanError::Malformed(format!("parsing task failed: {e}"))),
+                    Err(_) => Err(timed_out()),
                 }
             }
-            Err(e) => Err(e),
+            Ok(Err(e)) => Err(e),
+            Err(_) => Err(timed_out()),
         };
         if result.is_err() {
             // A late reply to this request must not be taken as the answer to the next one.
@@ -153,8 +148,21 @@ impl ScanClient {
         result
     }
 
+    /// One scan with the configured request turned into a terrain map on the configured grid.
+    ///
+    /// # Errors
+    /// As [`Self::scan`]; [`ScanError::Terrain`] when the points make no map.
+    pub async fn terrain(&mut self) -> Result<TerrainGrid, ScanError> {
+        let request = self.config.request;
+        let scan = self.scan(&request).await?;
+        self.config
+            .grid
+            .terrain(&scan.points)
+            .map_err(|e| ScanError::Terrain(e.to_string()))
+    }
+
     /// Sends the request and returns the reply line.
-    async fn exchange(&mut self) -> Result<String, ScanError> {
+    async fn exchange(&mut self, request: &ScanRequest) -> Result<String, ScanError> {
         let addr = self.config.addr.clone();
         let io = |source| ScanError::Io {
             addr: addr.clone(),
@@ -175,7 +183,7 @@ impl ScanClient {
         let Some((read, write)) = self.conn.as_mut() else {
             return Err(ScanError::Closed { addr });
         };
-        let mut request = serde_json::to_string(&self.config.request)
+        let mut request = serde_json::to_string(request)
             .map_err(|e| ScanError::Malformed(format!("encoding the request: {e}")))?;
         request.push('\n');
         write.write_all(request.as_bytes()).await.map_err(io)?;
@@ -192,11 +200,11 @@ impl ScanClient {
     }
 }
 
-/// Parses one reply line (a [`Scan`] or `{"error": ...}`) and bins the points into `grid`.
+/// Parses one reply line: a [`Scan`] or `{"error": ...}`.
 ///
 /// # Errors
-/// [`ScanError::Refused`], [`ScanError::Malformed`] or [`ScanError::Terrain`].
-pub fn terrain_from_reply(line: &str, grid: &ScanGrid) -> Result<TerrainGrid, ScanError> {
+/// [`ScanError::Refused`] or [`ScanError::Malformed`].
+pub fn scan_from_reply(line: &str) -> Result<Scan, ScanError> {
     let value: serde_json::Value =
         serde_json::from_str(line.trim_end()).map_err(|e| ScanError::Malformed(e.to_string()))?;
     if let Some(error) = value.get("error") {
@@ -205,18 +213,16 @@ pub fn terrain_from_reply(line: &str, grid: &ScanGrid) -> Result<TerrainGrid, Sc
             .map_or_else(|| error.to_string(), str::to_owned);
         return Err(ScanError::Refused(text));
     }
-    let scan: Scan =
-        serde_json::from_value(value).map_err(|e| ScanError::Malformed(e.to_string()))?;
-    grid.terrain(&scan.points)
-        .map_err(|e| ScanError::Terrain(e.to_string()))
+    serde_json::from_value(value).map_err(|e| ScanError::Malformed(e.to_string()))
 }
 
-/// The scan task seen from the control loop: requests go in without waiting, results come back on a
-/// channel the loop `select!`s on.
+/// The scan task seen from the control loop, the session driver's [`ScanSource`] over the network:
+/// a request goes in without waiting, the raw scan is taken on a later step when it is there (the
+/// session fuses it into its map exactly as the in-process demo does).
 #[derive(Debug)]
 pub struct ScanService {
-    requests: mpsc::Sender<()>,
-    results: mpsc::Receiver<Result<TerrainGrid, ScanError>>,
+    requests: mpsc::Sender<ScanRequest>,
+    results: mpsc::Receiver<Result<Scan, ScanError>>,
     addr: String,
 }
 
@@ -224,11 +230,11 @@ impl ScanService {
     /// Spawns the task owning `client` on the current tokio runtime.
     pub fn spawn(mut client: ScanClient) -> Self {
         let addr = client.config().addr.clone();
-        let (requests, mut pending) = mpsc::channel::<()>(1);
+        let (requests, mut pending) = mpsc::channel::<ScanRequest>(1);
         let (done, results) = mpsc::channel(1);
         tokio::spawn(async move {
-            while pending.recv().await.is_some() {
-                let result = client.terrain().await;
+            while let Some(request) = pending.recv().await {
+                let result = client.scan(&request).await;
                 if done.send(result).await.is_err() {
                     break;
                 }
@@ -248,16 +254,51 @@ impl ScanService {
 
     /// Asks for a scan. Returns false when one is still in flight (the request is then answered by
     /// that one) or the task is gone.
-    pub fn request(&self) -> bool {
-        self.requests.try_send(()).is_ok()
+    pub fn send_request(&self, request: &ScanRequest) -> bool {
+        self.requests.try_send(*request).is_ok()
     }
 
-    /// The next result (cancel-safe: use it in `select!`).
-    pub async fn next_result(&mut self) -> Result<TerrainGrid, ScanError> {
+    /// The next result (cancel-safe).
+    pub async fn next_result(&mut self) -> Result<Scan, ScanError> {
         self.results
             .recv()
             .await
             .unwrap_or(Err(ScanError::TaskGone))
+    }
+}
+
+impl ScanSource for ScanService {
+    fn request(&mut self, request: &ScanRequest) {
+        if !self.send_request(request) {
+            tracing::debug!("a range scan is already in flight");
+        }
+    }
+
+    fn take(&mut self) -> Option<Result<Scan, BoxError>> {
+        match self.results.try_recv() {
+            Ok(r) => Some(r.map_err(|e| Box::new(e) as BoxError)),
+            Err(mpsc::error::TryRecvError::Empty) => None,
+            Err(mpsc::error::TryRecvError::Disconnected) => {
+                Some(Err(Box::new(ScanError::TaskGone)))
+            }
+        }
+    }
+}
+
+/// No scan service (`run` without `--scan-addr`): every request fails at once with the reason.
+#[derive(Debug, Default)]
+pub struct NoScans {
+    failed: bool,
+}
+
+impl ScanSource for NoScans {
+    fn request(&mut self, _request: &ScanRequest) {
+        self.failed = true;
+    }
+
+    fn take(&mut self) -> Option<Result<Scan, BoxError>> {
+        std::mem::take(&mut self.failed)
+            .then(|| Err("no scan service is configured (--scan-addr)".into()))
     }
 }
 
@@ -371,8 +412,8 @@ mod tests {
     async fn the_service_answers_without_blocking_the_caller() {
         let addr = server(vec![Some(flat_scan_json())]).await;
         let mut service = ScanService::spawn(ScanClient::new(config(addr, 5000)));
-        assert!(service.request());
-        let grid = service.next_result().await.unwrap();
-        assert!(grid.height_at(7.0, 0.0).is_ok());
+        assert!(service.send_request(&ScanRequest::default()));
+        let scan = service.next_result().await.unwrap();
+        assert_eq!(scan.points.len(), 200);
     }
 }

@@ -37,6 +37,42 @@ pub trait ScanSource {
     fn take(&mut self) -> Option<Result<Scan, BoxError>>;
 }
 
+/// Watches a session from the control loop (a live view, a recorder): called after every control
+/// step with the node and what the session driver reported for that step. It runs on the control
+/// loop, so it must return at once: hand the data to another thread and drop it when that thread is
+/// behind, never wait. `demo` calls it; `run` can call it at the same point of its loop.
+pub trait SessionObserver {
+    /// After the control step at `time_s` and the driver's [`SessionDriver::after_step`] (its
+    /// `events`); `session` is the planned session when the planner drives (its terrain map).
+    fn after_step(
+        &mut self,
+        time_s: f64,
+        node: &ControllerNode,
+        session: Option<&PlannedSession>,
+        events: &[SessionEvent],
+    );
+
+    /// The session ended at `time_s` because of `reason`.
+    fn finished(&mut self, time_s: f64, reason: &str) {
+        let _ = (time_s, reason);
+    }
+}
+
+/// The observer that watches nothing.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct NoObserver;
+
+impl SessionObserver for NoObserver {
+    fn after_step(
+        &mut self,
+        _time_s: f64,
+        _node: &ControllerNode,
+        _session: Option<&PlannedSession>,
+        _events: &[SessionEvent],
+    ) {
+    }
+}
+
 /// What a pending scan is for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum ScanPurpose {
@@ -140,6 +176,18 @@ pub struct SessionDriver {
     pending_scan: Option<ScanPurpose>,
     cycle_scan_wanted: bool,
     events: Vec<SessionEvent>,
+    detached: bool,
+    job: Option<Staged>,
+    workspace_scan_failures: u32,
+}
+
+/// A detached planning step.
+#[derive(Debug)]
+enum Staged {
+    /// Staged, not yet taken.
+    Ready(Box<PlanJob>),
+    /// Taken: running off the loop.
+    Away,
 }
 
 impl SessionDriver {
@@ -171,10 +219,13 @@ impl SessionDriver {
             pending_scan: None,
             cycle_scan_wanted: false,
             events: Vec::new(),
+            detached: false,
+            job: None,
+            workspace_scan_failures: 0,
         }
     }
 
-    /// The planned session, if the planner drives.
+    /// The planned session, if the planner drives (`None` while a detached planning step holds it).
     pub fn session(&self) -> Option<&PlannedSession> {
         self.session.as_ref()
     }
@@ -229,19 +280,11 @@ impl SessionDriver {
             && let Some(result) = scans.take()
         {
             self.pending_scan = None;
-            let scan = result.map_err(DriverError::Scan)?;
-            match &mut self.session {
-                // The session's map fuses every scan; the cycle digs with it (3.2).
-                Some(s) => match s.observe_scan_from(scan_origin(&scan), &scan.points) {
-                    Ok(_) => node.provide_terrain(s.terrain().clone()),
-                    Err(e) => tracing::warn!(error = %e, "scan not usable"),
-                },
-                None => match node.cycle().config().scan_grid.terrain(&scan.points) {
-                    Ok(grid) => node.provide_terrain(grid),
-                    Err(e) => tracing::warn!(error = %e, "scan not usable"),
-                },
+            match result {
+                Ok(scan) => self.on_cycle_scan(node, scan),
+                // The cycle's own scan timeout lets Autodig dig on its plain angle rules.
+                Err(e) => tracing::warn!(error = %e, "range scan failed: plain angle rules"),
             }
-            self.events.push(SessionEvent::Scanned(scan));
         }
         self.plan(node, scans)?;
         self.follow_dig(node);
@@ -249,16 +292,47 @@ impl SessionDriver {
         Ok(&self.events)
     }
 
-    /// When the cycle waits for an action: scan the workspace, then plan and push.
+    /// A scan the work cycle asked for: into the session's map (or binned on the cycle's grid
+    /// without a session) and on to the cycle.
+    fn on_cycle_scan(&mut self, node: &mut ControllerNode, scan: Scan) {
+        let terrain = match &mut self.session {
+            // The session's map fuses every scan; the cycle digs with it (3.2).
+            Some(s) => s
+                .observe_scan_from(scan_origin(&scan), &scan.points)
+                .map(|_| s.terrain().clone())
+                .map_err(|e| e.to_string()),
+            None => node
+                .cycle()
+                .config()
+                .scan_grid
+                .terrain(&scan.points)
+                .map_err(|e| e.to_string()),
+        };
+        match terrain {
+            Ok(grid) => {
+                tracing::info!(
+                    points = scan.points.len(),
+                    "range scan: terrain map handed to the work cycle"
+                );
+                node.provide_terrain(grid);
+            }
+            Err(e) => tracing::warn!(error = %e, "scan not usable"),
+        }
+        self.events.push(SessionEvent::Scanned(scan));
+    }
+
+    /// When the cycle waits for an action: scan the workspace, then plan (here, or off the loop as a
+    /// [`PlanJob`] when planning is detached) and push.
     fn plan(
         &mut self,
         node: &mut ControllerNode,
         scans: &mut dyn ScanSource,
     ) -> Result<(), DriverError> {
-        let Some(s) = &mut self.session else {
-            return Ok(());
-        };
-        if self.over.is_some() || !node.cycle().needs_action() {
+        if self.session.is_none()
+            || self.job.is_some()
+            || self.over.is_some()
+            || !node.cycle().needs_action()
+        {
             return Ok(());
         }
         // The map must show the last dig: scan the workspace (swing 0 +- the fan) first.
@@ -273,64 +347,110 @@ impl SessionDriver {
             return Ok(());
         };
         self.pending_scan = None;
-        let scan = result.map_err(DriverError::Scan)?;
-        if let Err(e) = s.observe_scan_from(scan_origin(&scan), &scan.points) {
-            tracing::warn!(error = %e, "workspace scan not usable");
+        let scan = match result {
+            Ok(scan) => {
+                self.workspace_scan_failures = 0;
+                scan
+            }
+            Err(e) => {
+                // Asked again on the next step; a scan service that keeps failing ends the session.
+                self.workspace_scan_failures += 1;
+                tracing::warn!(
+                    error = %e,
+                    failures = self.workspace_scan_failures,
+                    "workspace scan failed"
+                );
+                if self.workspace_scan_failures >= MAX_WORKSPACE_SCAN_FAILURES {
+                    return Err(DriverError::Scan(e));
+                }
+                return Ok(());
+            }
+        };
+        let Some(session) = self.session.take() else {
+            return Ok(());
+        };
+        self.events.push(SessionEvent::Scanned(scan.clone()));
+        let job = PlanJob {
+            session,
+            scan,
+            pose: node.estimator().state().pose,
+            predefined_joints: self.predefined_joints,
+        };
+        if self.detached {
+            self.job = Some(Staged::Ready(Box::new(job)));
+            Ok(())
+        } else {
+            self.finish_plan(node, job.run())
         }
-        self.events.push(SessionEvent::Scanned(scan));
-        let pose = node.estimator().state().pose;
-        if s.strategy() == Strategy::Predefined && s.predefined().is_none() {
-            let start = match self.predefined_joints {
-                Some(q) => Some(q),
-                None => s.virtual_expert_start(&pose)?,
-            };
-            let Some(start) = start else {
-                return Err(DriverError::NoPredefinedStart);
-            };
-            // The median start is a planned tip APPROACH_HEIGHT_M (0.8 m) up: Boom-Down starts above
-            // the face everywhere (with 0.4 m, and no second raise, the move to a start on the face
-            // pressed the bucket into it and timed out).
-            self.predefined_joints = Some(start);
-            let seq = PredefinedSequence::from_planner(s.planner(), s.terrain(), &pose, start)?;
-            s.set_predefined(seq);
+    }
+
+    /// Plans off the control loop: [`Self::after_step`] then stages each planning step as a
+    /// [`PlanJob`] ([`Self::take_plan_job`]) instead of running it, and the work cycle holds in Idle
+    /// until [`Self::finish_plan`] pushes the action. The session is inside the job meanwhile
+    /// ([`Self::session`] is `None`, [`Self::planning`] true).
+    pub fn set_detached_planning(&mut self, detached: bool) {
+        self.detached = detached;
+    }
+
+    /// The staged planning step, once (detached planning): run it anywhere ([`PlanJob::run`]) and
+    /// hand its outcome to [`Self::finish_plan`].
+    pub fn take_plan_job(&mut self) -> Option<PlanJob> {
+        match self.job.take() {
+            Some(Staged::Ready(job)) => {
+                self.job = Some(Staged::Away);
+                Some(*job)
+            }
+            other => {
+                self.job = other;
+                None
+            }
         }
-        let t0 = std::time::Instant::now();
-        match s.next_action(&pose) {
-            Ok(Some(a)) => {
-                self.plan_ms.push(t0.elapsed().as_secs_f64() * 1e3);
-                let planned = match s.steps().last().and_then(|st| st.plan.as_ref()) {
-                    Some(plan) => match &plan.action {
-                        ActionChoice::Dig(d) => PlannedDig {
-                            quality: Some(d.quality.quality),
-                            volume_m3: Some(d.summary.swept_volume_m3),
-                            time_s: Some(d.summary.time_s),
-                            energy_kj: Some(d.summary.energy_kj()),
-                            min_tip_z_m: Some(d.summary.min_tip_z_m),
-                            start: Some([
-                                d.pose.x_m,
-                                d.pose.z_m,
-                                d.pose.bucket_abs_rad.to_degrees(),
-                            ]),
-                        },
-                        _ => PlannedDig::default(),
-                    },
-                    None => PlannedDig::default(),
-                };
+    }
+
+    /// Whether a planning step is out (staged or running).
+    pub fn planning(&self) -> bool {
+        self.job.is_some()
+    }
+
+    /// A planning step's outcome after the loop stopped: the session comes back, its action is
+    /// dropped.
+    pub fn return_session(&mut self, outcome: PlanOutcome) {
+        self.job = None;
+        self.session = Some(outcome.session);
+        self.predefined_joints = outcome.predefined_joints;
+    }
+
+    /// A planning step's outcome: the session comes back, the action (if any) goes to the cycle.
+    ///
+    /// # Errors
+    /// [`DriverError`]: the predefined sequence has no start, or the cycle refused the action.
+    pub fn finish_plan(
+        &mut self,
+        node: &mut ControllerNode,
+        outcome: PlanOutcome,
+    ) -> Result<(), DriverError> {
+        self.job = None;
+        let PlanOutcome {
+            session,
+            predefined_joints,
+            result,
+            plan_ms,
+        } = outcome;
+        self.session = Some(session);
+        self.predefined_joints = predefined_joints;
+        match result? {
+            Planned::Action { action, planned } => {
+                self.plan_ms.push(plan_ms);
                 // The cycle appends: the action's index is the current plan length.
                 let index = node.cycle().config().actions.len();
                 if self.planned.len() <= index {
                     self.planned.resize(index + 1, PlannedDig::default());
                 }
                 self.planned[index] = planned;
-                node.push_action(a)?;
+                node.push_action(action)?;
             }
-            Ok(None) => {
-                self.over = Some(s.end_reason().unwrap_or("nothing left to do").to_owned());
-                node.set_external_plan(false);
-            }
-            Err(e) => {
-                tracing::warn!(error = %e, "planning failed: session ends");
-                self.over = Some(format!("planning failed: {e}"));
+            Planned::Over(reason) => {
+                self.over = Some(reason);
                 node.set_external_plan(false);
             }
         }
@@ -447,6 +567,110 @@ impl SessionDriver {
             }
         }
     }
+}
+
+/// Workspace scans failing in a row that end the session (a scan service that is gone).
+pub const MAX_WORKSPACE_SCAN_FAILURES: u32 = 5;
+
+/// A planning step off the control loop (detached planning): the session, the workspace scan and the
+/// pose it was taken at.
+#[derive(Debug)]
+pub struct PlanJob {
+    session: PlannedSession,
+    scan: Scan,
+    pose: MachinePose,
+    predefined_joints: Option<JointAngles>,
+}
+
+/// What a [`PlanJob`] decided.
+#[derive(Debug)]
+enum Planned {
+    /// The next action and the planner's prediction for it.
+    Action { action: Action, planned: PlannedDig },
+    /// The session is over, with the reason.
+    Over(String),
+}
+
+/// The outcome of a [`PlanJob`], for [`SessionDriver::finish_plan`].
+#[derive(Debug)]
+pub struct PlanOutcome {
+    session: PlannedSession,
+    predefined_joints: Option<JointAngles>,
+    result: Result<Planned, DriverError>,
+    plan_ms: f64,
+}
+
+impl PlanJob {
+    /// Fuses the workspace scan into the map and plans the next action (or sets up the predefined
+    /// sequence and takes its next action). Takes up to a few hundred milliseconds.
+    #[must_use]
+    pub fn run(self) -> PlanOutcome {
+        let Self {
+            mut session,
+            scan,
+            pose,
+            mut predefined_joints,
+        } = self;
+        let t0 = std::time::Instant::now();
+        let result = plan_step(&mut session, &scan, &pose, &mut predefined_joints);
+        PlanOutcome {
+            session,
+            predefined_joints,
+            result,
+            plan_ms: t0.elapsed().as_secs_f64() * 1e3,
+        }
+    }
+}
+
+/// The planning step of [`PlanJob::run`]. A planning failure is not an error: it ends the session.
+fn plan_step(
+    s: &mut PlannedSession,
+    scan: &Scan,
+    pose: &MachinePose,
+    predefined_joints: &mut Option<JointAngles>,
+) -> Result<Planned, DriverError> {
+    if let Err(e) = s.observe_scan_from(scan_origin(scan), &scan.points) {
+        tracing::warn!(error = %e, "workspace scan not usable");
+    }
+    if s.strategy() == Strategy::Predefined && s.predefined().is_none() {
+        let start = match *predefined_joints {
+            Some(q) => Some(q),
+            None => s.virtual_expert_start(pose)?,
+        };
+        let Some(start) = start else {
+            return Err(DriverError::NoPredefinedStart);
+        };
+        // The median start is a planned tip APPROACH_HEIGHT_M (0.8 m) up: Boom-Down starts above
+        // the face everywhere (with 0.4 m, and no second raise, the move to a start on the face
+        // pressed the bucket into it and timed out).
+        *predefined_joints = Some(start);
+        let seq = PredefinedSequence::from_planner(s.planner(), s.terrain(), pose, start)?;
+        s.set_predefined(seq);
+    }
+    Ok(match s.next_action(pose) {
+        Ok(Some(action)) => {
+            let planned = match s.steps().last().and_then(|st| st.plan.as_ref()) {
+                Some(plan) => match &plan.action {
+                    ActionChoice::Dig(d) => PlannedDig {
+                        quality: Some(d.quality.quality),
+                        volume_m3: Some(d.summary.swept_volume_m3),
+                        time_s: Some(d.summary.time_s),
+                        energy_kj: Some(d.summary.energy_kj()),
+                        min_tip_z_m: Some(d.summary.min_tip_z_m),
+                        start: Some([d.pose.x_m, d.pose.z_m, d.pose.bucket_abs_rad.to_degrees()]),
+                    },
+                    _ => PlannedDig::default(),
+                },
+                None => PlannedDig::default(),
+            };
+            Planned::Action { action, planned }
+        }
+        Ok(None) => Planned::Over(s.end_reason().unwrap_or("nothing left to do").to_owned()),
+        Err(e) => {
+            tracing::warn!(error = %e, "planning failed: session ends");
+            Planned::Over(format!("planning failed: {e}"))
+        }
+    })
 }
 
 /// The sensor's world position of a scan.

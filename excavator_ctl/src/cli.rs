@@ -1,10 +1,6 @@
 //! The command line of `excavator-ctl` (clap).
 
-use std::path::PathBuf;
-
 use clap::{Args, Parser, Subcommand};
-
-use controller::run::RunOptions;
 
 /// The excavator controller: Autodig, cleanup and the work cycle over CAN (after Cannon, CMU 1999).
 #[derive(Debug, Parser)]
@@ -18,12 +14,14 @@ pub struct Cli {
 /// Subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Run on a CAN interface in real time (SocketCAN): arm, dig, dump; Ctrl-C leaves the valves
-    /// neutral and the gateway disarmed.
-    Run(RunArgs),
+    /// Run on a CAN interface in real time (SocketCAN): the planned session of `demo`, the
+    /// predefined sequence or the config's plan (--strategy); Ctrl-C leaves the valves neutral and
+    /// the gateway disarmed; --out writes the session folder as `demo` does.
+    Run(lab::wire::RunArgs),
     /// The embedded default: the simulator in-process in virtual time and a full autonomous session;
-    /// writes the trace, scans, summary and plots into --out (docs/demo-output.md).
-    Demo(lab::demo::DemoArgs),
+    /// writes the trace, scans, summary and plots into --out (docs/demo-output.md); --live serves it
+    /// to Foxglove as it runs (docs/live-view.md).
+    Demo(DemoCmd),
     /// The thesis's results reproduced in the simulator and the dig model: Tables 1-5, Figs. 52, 53
     /// and 60, the scoreboard of its statements and the results page (docs/results.md).
     Experiment(lab::experiment::ExperimentArgs),
@@ -47,48 +45,15 @@ pub enum Command {
     Discrepancy(discrepancy::command::DiscrepancyArgs),
 }
 
-/// Arguments of `excavator-ctl run`.
+/// Arguments of `excavator-ctl demo`: the session's and the live view's.
 #[derive(Debug, Args)]
-pub struct RunArgs {
-    /// CAN interface, e.g. can0 (the machine) or vcan0 (excavator-sim).
-    #[arg(long)]
-    pub iface: String,
-    /// Decode and log the bus but never transmit (first contact with a machine).
-    #[arg(long)]
-    pub listen_only: bool,
-    /// Machine file (default: the built-in config/machine.toml).
-    #[arg(long, value_name = "FILE")]
-    pub machine: Option<PathBuf>,
-    /// Autodig maps (default: the built-in config/autodig_maps.toml).
-    #[arg(long, value_name = "FILE")]
-    pub maps: Option<PathBuf>,
-    /// Controller config: safety, plan, Autodig and cleanup parameters (TOML; see docs/controller.md).
-    #[arg(long, value_name = "FILE")]
-    pub config: Option<PathBuf>,
-    /// Record a candump -L log of every frame sent and received.
-    #[arg(long, value_name = "FILE")]
-    pub trace: Option<PathBuf>,
-    /// Stop after this many digs (then swing home, neutral, disarm).
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
-    pub digs: Option<u32>,
-    /// Range-scan service address (host:port) for the perception enhancements.
-    #[arg(long, value_name = "ADDR")]
-    pub scan_addr: Option<String>,
-}
-
-impl From<RunArgs> for RunOptions {
-    fn from(a: RunArgs) -> Self {
-        RunOptions {
-            iface: a.iface,
-            listen_only: a.listen_only,
-            machine: a.machine,
-            maps: a.maps,
-            config: a.config,
-            trace: a.trace,
-            digs: a.digs,
-            scan_addr: a.scan_addr,
-        }
-    }
+pub struct DemoCmd {
+    /// The session.
+    #[command(flatten)]
+    pub session: lab::demo::DemoArgs,
+    /// The live view.
+    #[command(flatten)]
+    pub live: live::LiveArgs,
 }
 
 #[cfg(test)]
@@ -99,6 +64,23 @@ mod tests {
     #[test]
     fn cli_is_consistent() {
         Cli::command().debug_assert();
+    }
+
+    #[test]
+    fn live_takes_an_optional_address() {
+        let live = |args: &[&str]| {
+            let mut all = vec!["excavator-ctl", "demo"];
+            all.extend_from_slice(args);
+            match Cli::try_parse_from(all).unwrap().command {
+                Command::Demo(d) => d.live,
+                _ => panic!("not demo"),
+            }
+        };
+        assert_eq!(live(&[]).live, None);
+        assert_eq!(live(&["--live"]).live.as_deref(), Some(live::DEFAULT_ADDR));
+        let l = live(&["--live", "0.0.0.0:9000", "--pace", "2"]);
+        assert_eq!(l.live.as_deref(), Some("0.0.0.0:9000"));
+        assert_eq!(l.pace, Some(2.0));
     }
 
     #[test]
@@ -113,16 +95,35 @@ mod tests {
             "3",
             "--trace",
             "t.log",
+            "--strategy",
+            "planned",
+            "--time-scale",
+            "4",
         ])
         .unwrap();
-        let Command::Run(a) = cli.command else {
+        let Command::Run(o) = cli.command else {
             panic!("not run")
         };
-        let o = RunOptions::from(a);
         assert_eq!(o.iface, "vcan0");
         assert!(o.listen_only);
         assert_eq!(o.digs, Some(3));
+        assert_eq!(o.strategy, lab::demo::DemoStrategy::Planned);
+        assert!((o.time_scale.get() - 4.0).abs() < 1e-12);
         assert!(Cli::try_parse_from(["excavator-ctl", "run"]).is_err());
+        for bad in ["0", "25", "NaN", "-2"] {
+            assert!(
+                Cli::try_parse_from([
+                    "excavator-ctl",
+                    "run",
+                    "--iface",
+                    "vcan0",
+                    "--time-scale",
+                    bad
+                ])
+                .is_err(),
+                "{bad}"
+            );
+        }
     }
 
     /// A count of zero ran an empty demo, printed Table 2 from no runs and generated 54 sessions the
@@ -142,6 +143,8 @@ mod tests {
             assert!(Cli::try_parse_from(args).is_err(), "{args:?} parsed");
         }
         assert!(Cli::try_parse_from(["excavator-ctl", "demo", "--digs", "1"]).is_ok());
+        // --pace and --live-queue only with --live.
+        assert!(Cli::try_parse_from(["excavator-ctl", "demo", "--pace", "1"]).is_err());
         assert!(
             Cli::try_parse_from(["excavator-ctl", "discrepancy", "eval", "--digs", "2"]).is_ok()
         );

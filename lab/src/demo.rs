@@ -49,7 +49,7 @@ use vcan_sim::scenario::{Scenario, SoilContactIntegration};
 use controller::cycle::{Action, ActionKind, DigStats, Phase, StartPose};
 use controller::node::{ControllerConfig, ControllerNode};
 use controller::planned::{PlannedSession, Strategy, median_joints};
-use controller::session::{PlannedDig, SessionDriver, SessionEvent};
+use controller::session::{NoObserver, PlannedDig, SessionDriver, SessionEvent, SessionObserver};
 
 pub use crate::harness::PERIOD_S;
 use crate::harness::{Harness, SimScans};
@@ -460,6 +460,17 @@ pub struct DemoSummary {
 /// # Errors
 /// Bad arguments or files, simulator or controller construction errors, I/O errors writing the outputs.
 pub async fn run(args: DemoArgs) -> anyhow::Result<()> {
+    run_observed(args, Box::new(NoObserver)).await
+}
+
+/// As [`run`], with `observer` watching every control step (the live view).
+///
+/// # Errors
+/// As [`run`].
+pub async fn run_observed(
+    args: DemoArgs,
+    mut observer: Box<dyn SessionObserver + Send>,
+) -> anyhow::Result<()> {
     let stop = Arc::new(AtomicBool::new(false));
     let stop_on_signal = Arc::clone(&stop);
     let signal = tokio::spawn(async move {
@@ -468,9 +479,11 @@ pub async fn run(args: DemoArgs) -> anyhow::Result<()> {
         }
     });
     let session_stop = Arc::clone(&stop);
-    let summary = tokio::task::spawn_blocking(move || run_session(&args, &session_stop))
-        .await
-        .context("demo session thread")??;
+    let summary = tokio::task::spawn_blocking(move || {
+        run_session_observed(&args, &session_stop, observer.as_mut())
+    })
+    .await
+    .context("demo session thread")??;
     signal.abort();
     print!("{}", summary_markdown(&summary));
     Ok(())
@@ -679,11 +692,11 @@ pub(crate) fn true_section(machine: &EmbeddedMachine, swing_rad: f64) -> Vec<Tip
         .collect()
 }
 
-/// A dig's record as it begins: the action, the planner's prediction, and the simulator's truth (the
-/// terrain along the digging plane, the map's error against it).
+/// A dig's record as it begins: the action, the planner's prediction, and with the simulator at hand
+/// its truth (the terrain along the digging plane, the map's error against it).
 fn begin_record(
     node: &ControllerNode,
-    machine: &EmbeddedMachine,
+    machine: Option<&EmbeddedMachine>,
     session: Option<&PlannedSession>,
     info: &PlannedDig,
     pose: MachinePose,
@@ -691,7 +704,7 @@ fn begin_record(
 ) -> DigRecord {
     let action = node.action().copied();
     let swing_rad = node.state().swing_rad;
-    let truth = true_section(machine, swing_rad);
+    let truth = machine.map_or_else(Vec::new, |m| true_section(m, swing_rad));
     let map_error_m = session.and_then(|s| {
         let errs: Vec<f64> = truth
             .iter()
@@ -806,6 +819,18 @@ pub struct BenchSnapshot {
 /// # Errors
 /// As [`setup`]; I/O errors creating the folder or writing the outputs; bus errors.
 pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSummary> {
+    run_session_observed(args, stop, &mut NoObserver)
+}
+
+/// As [`run_session`], with `observer` called after every control step and at the end.
+///
+/// # Errors
+/// As [`run_session`].
+pub fn run_session_observed(
+    args: &DemoArgs,
+    stop: &AtomicBool,
+    observer: &mut dyn SessionObserver,
+) -> anyhow::Result<DemoSummary> {
     let wall = std::time::Instant::now();
     let (sim, config, maps) = setup(args)?;
     let out = &args.out;
@@ -837,13 +862,9 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
     let terrain_before = h.machine.plant().world.terrain.clone();
 
     let progress = progress_bar(args);
-    let mut records: Vec<DigRecord> = Vec::new();
-    let mut current: Option<DigRecord> = None;
-    let mut scans = 0usize;
+    let mut log = SessionRecords::new(scans_dir);
     let budget_s = SIM_BUDGET_PER_DIG_S * f64::from(args.digs.max(1));
     let mut result: anyhow::Result<()> = Ok(());
-    // Every dig's soil samples (4.3.5), for `soil_samples.json` and `model soil-cv`.
-    let mut soil_samples = crate::session::SoilSamplesFile::default();
     let mut snapshots: Vec<BenchSnapshot> = Vec::new();
     let finished = |h: &Harness| h.node().is_none_or(ControllerNode::finished);
     while !finished(&h) && h.time_s() < budget_s && !stop.load(Ordering::Relaxed) {
@@ -867,77 +888,40 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
         let events = driver
             .after_step(node, &mut SimScans::new(machine))?
             .to_vec();
-        for event in events {
-            match event {
-                SessionEvent::Scanned(scan) => {
-                    let path = scans_dir.join(format!("scan_{scans:04}.json"));
-                    std::fs::write(&path, serde_json::to_vec(&scan)?)
-                        .with_context(|| format!("writing {}", path.display()))?;
-                    scans += 1;
+        observer.after_step(time_s, node, driver.session(), &events);
+        for event in &events {
+            if let SessionEvent::PhaseChanged { from, to } = event {
+                let st = node.state();
+                tracing::debug!(
+                    time_s,
+                    from = ?from,
+                    to = ?to,
+                    joints_deg = ?[
+                        st.joints.boom_rad.to_degrees(),
+                        st.joints.stick_rad.to_degrees(),
+                        st.joints.bucket_rad.to_degrees(),
+                    ],
+                    tip = ?(st.tip.x_m, st.tip.z_m),
+                    action = ?node.action(),
+                    "demo phase"
+                );
+            }
+            let finished = log.on_event(node, &driver, Some(machine), event)?;
+            if finished {
+                if driver.session().is_some()
+                    && args.bench_after.contains(&(log.records.len() as u32))
+                {
+                    let t = machine.plant().true_state();
+                    snapshots.push(BenchSnapshot {
+                        digs: log.records.len(),
+                        backups: driver.backups(),
+                        terrain: machine.plant().world.terrain.clone(),
+                        pose: t.pose,
+                    });
                 }
-                SessionEvent::PhaseChanged { from, to } => {
-                    let st = node.state();
-                    tracing::debug!(
-                        time_s,
-                        from = ?from,
-                        to = ?to,
-                        joints_deg = ?[
-                            st.joints.boom_rad.to_degrees(),
-                            st.joints.stick_rad.to_degrees(),
-                            st.joints.bucket_rad.to_degrees(),
-                        ],
-                        tip = ?(st.tip.x_m, st.tip.z_m),
-                        action = ?node.action(),
-                        "demo phase"
-                    );
-                    if to == Phase::Weigh
-                        && let Some(c) = &mut current
-                    {
-                        c.true_payload_kg = machine.plant().true_state().payload_kg;
-                    }
-                }
-                SessionEvent::DigStarted { planned, pose } => {
-                    current = Some(begin_record(
-                        node,
-                        machine,
-                        driver.session(),
-                        &planned,
-                        pose,
-                        records.len(),
-                    ));
-                }
-                SessionEvent::DigFinished {
-                    index,
-                    tip_path,
-                    soil_samples: samples,
-                } => {
-                    let (Some(mut c), Some(d)) = (current.take(), node.statistics().get(index))
-                    else {
-                        continue;
-                    };
-                    finish_record(&mut c, d, &tip_path);
-                    if !samples.is_empty() {
-                        soil_samples.digs.push(crate::session::SoilDigSamples {
-                            index: c.index,
-                            samples,
-                        });
-                    }
-                    records.push(c);
-                    if driver.session().is_some()
-                        && args.bench_after.contains(&(records.len() as u32))
-                    {
-                        let t = machine.plant().true_state();
-                        snapshots.push(BenchSnapshot {
-                            digs: records.len(),
-                            backups: driver.backups(),
-                            terrain: machine.plant().world.terrain.clone(),
-                            pose: t.pose,
-                        });
-                    }
-                    if let Some(p) = &progress {
-                        p.set_position(records.len() as u64);
-                        p.set_message(format!("{} backups", driver.backups()));
-                    }
+                if let Some(p) = &progress {
+                    p.set_position(log.records.len() as u64);
+                    p.set_message(format!("{} backups", driver.backups()));
                 }
             }
         }
@@ -964,6 +948,7 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
     } else {
         "error".to_owned()
     };
+    observer.finished(clock.now_s(), &end);
     // Whatever stopped the loop: neutral valves and a Disarm heartbeat, then let the gateway act.
     let now = clock.now_s();
     let shutdown = h.node_mut().map(|n| n.shutdown(now));
@@ -985,7 +970,241 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
         anyhow::bail!("the controller is gone");
     };
     let session = driver.session();
+    let summary = session_summary(
+        log.records,
+        SessionEnd {
+            strategy: args.strategy,
+            bench: sim.scenario.name.clone(),
+            seed: sim.scenario.seed,
+            soil_contact: sim.scenario.soil_contact,
+            effects: args.effects.clone(),
+            full_bucket_n,
+            end,
+            track_backs,
+            backups: backups_done,
+            plan_ms: &plan_ms,
+            scans: log.scans,
+            session_time_s: clock.now_s(),
+            wall_time_s: wall.elapsed().as_secs_f64(),
+            trace,
+        },
+        node,
+        session,
+    );
+    let plan: Vec<Action> = node.cycle().config().actions.clone();
+    let after = machine.plant().world.terrain.clone();
+    if let Some(s) = &session {
+        write_planner_outputs(out, s, machine.plant().true_state().pose)?;
+    }
+    if session.is_some() {
+        snapshots.push(BenchSnapshot {
+            digs: summary.digs.len(),
+            backups: backups_done,
+            terrain: after.clone(),
+            pose: machine.plant().true_state().pose,
+        });
+    }
+    write_outputs(
+        out,
+        &summary,
+        Some((&terrain_before, &after)),
+        &plan,
+        &snapshots,
+    )?;
+    write_soil_samples(out, &log.soil_samples)?;
+    Ok(summary)
+}
 
+/// The planner's outputs of a session: its last cycle (`last_plan.json`), the refined grid of the
+/// first planned dig (`refined_grid.svg`, Figs. 47/48) and its map at the end (`map_after.svg`, the
+/// machine at world `pose` `[x, y, heading]`).
+///
+/// # Errors
+/// Writing the files.
+pub fn write_planner_outputs(out: &Path, s: &PlannedSession, pose: [f64; 3]) -> anyhow::Result<()> {
+    // The planner's last cycle (cleanup candidates, tracking limits, regions) and its map.
+    if let Some(p) = s.steps().iter().rev().find_map(|st| st.plan.as_ref()) {
+        let last = serde_json::json!({
+            "coarse": p.coarse,
+            "best_dig": p.best_dig,
+            "cleanup_track": p.cleanup_track,
+            "action": p.action.kind().map(|k| format!("{k:?}")),
+        });
+        let path = out.join("last_plan.json");
+        std::fs::write(&path, serde_json::to_vec_pretty(&last)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    // Figs. 47/48: the refined planner's evaluated grid of the region of the first planned dig.
+    if let Some((plan, dig)) = s.steps().iter().find_map(|st| match &st.plan {
+        Some(p) => match &p.action {
+            planner::plan::ActionChoice::Dig(d) => Some((p, d)),
+            _ => None,
+        },
+        None => None,
+    }) && let Some(refined) = plan
+        .refined
+        .iter()
+        .find(|r| r.region.index == dig.region_index)
+    {
+        let q = s.planner().quality();
+        let max_q = q.w_volume * q.xi_max + q.w_time * q.psi_max + q.w_energy * q.zeta_max;
+        let path = out.join("refined_grid.svg");
+        std::fs::write(
+            &path,
+            crate::plots::refined_grid_svg(
+                refined,
+                s.planner().config().floor_z_m,
+                max_q,
+                &format!(
+                    "refined plan of the first planned dig (region {}, thesis Figs. 47/48)",
+                    dig.region_index
+                ),
+            )?,
+        )
+        .with_context(|| format!("writing {}", path.display()))?;
+    }
+    let path = out.join("map_after.svg");
+    std::fs::write(
+        &path,
+        crate::plots::bench_svg(
+            s.terrain(),
+            pose,
+            "the planner's terrain map at the end (elevation, m)",
+        )?,
+    )
+    .with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+/// The records of a session as it runs, from the session driver's events: the scans written to
+/// `scans/`, one [`DigRecord`] per dig and cleanup, and their soil samples. `demo` and `run` keep
+/// them alike; `demo` adds the simulator's truth.
+#[derive(Debug)]
+pub struct SessionRecords {
+    scans_dir: PathBuf,
+    /// Scans written.
+    pub scans: usize,
+    /// Finished digs and cleanups.
+    pub records: Vec<DigRecord>,
+    current: Option<DigRecord>,
+    /// Every dig's soil samples (4.3.5), for `soil_samples.json` and `model soil-cv`.
+    pub soil_samples: crate::session::SoilSamplesFile,
+}
+
+impl SessionRecords {
+    /// Records whose scans go to `scans_dir` (created by the caller).
+    #[must_use]
+    pub fn new(scans_dir: PathBuf) -> Self {
+        Self {
+            scans_dir,
+            scans: 0,
+            records: Vec::new(),
+            current: None,
+            soil_samples: crate::session::SoilSamplesFile::default(),
+        }
+    }
+
+    /// Takes one event of `driver` for `node`, with the simulator's truth when `machine` is given.
+    /// Returns whether a dig or cleanup finished.
+    ///
+    /// # Errors
+    /// Writing a scan.
+    pub fn on_event(
+        &mut self,
+        node: &ControllerNode,
+        driver: &SessionDriver,
+        machine: Option<&EmbeddedMachine>,
+        event: &SessionEvent,
+    ) -> anyhow::Result<bool> {
+        match event {
+            SessionEvent::Scanned(scan) => {
+                let path = self.scans_dir.join(format!("scan_{:04}.json", self.scans));
+                std::fs::write(&path, serde_json::to_vec(scan)?)
+                    .with_context(|| format!("writing {}", path.display()))?;
+                self.scans += 1;
+            }
+            SessionEvent::PhaseChanged { to, .. } => {
+                if *to == Phase::Weigh
+                    && let (Some(c), Some(m)) = (&mut self.current, machine)
+                {
+                    c.true_payload_kg = m.plant().true_state().payload_kg;
+                }
+            }
+            SessionEvent::DigStarted { planned, pose } => {
+                self.current = Some(begin_record(
+                    node,
+                    machine,
+                    driver.session(),
+                    planned,
+                    *pose,
+                    self.records.len(),
+                ));
+            }
+            SessionEvent::DigFinished {
+                index,
+                tip_path,
+                soil_samples,
+            } => {
+                let (Some(mut c), Some(d)) = (self.current.take(), node.statistics().get(*index))
+                else {
+                    return Ok(false);
+                };
+                finish_record(&mut c, d, tip_path);
+                if !soil_samples.is_empty() {
+                    self.soil_samples.digs.push(crate::session::SoilDigSamples {
+                        index: c.index,
+                        samples: soil_samples.clone(),
+                    });
+                }
+                self.records.push(c);
+                return Ok(true);
+            }
+        }
+        Ok(false)
+    }
+}
+
+/// How a session ended and what it was, for [`session_summary`].
+#[derive(Debug, Clone)]
+pub struct SessionEnd<'a> {
+    /// The action source.
+    pub strategy: DemoStrategy,
+    /// The bench's name.
+    pub bench: String,
+    /// The simulator's seed.
+    pub seed: u64,
+    /// The simulator's soil-contact integration.
+    pub soil_contact: SoilContactIntegration,
+    /// The hidden effects.
+    pub effects: Vec<String>,
+    /// A full bucket's weight, N.
+    pub full_bucket_n: f64,
+    /// Why it ended.
+    pub end: String,
+    /// Track backs begun.
+    pub track_backs: usize,
+    /// Track backs done.
+    pub backups: usize,
+    /// Wall time of each planning cycle, ms.
+    pub plan_ms: &'a [f64],
+    /// Scans taken.
+    pub scans: usize,
+    /// Session (simulated or scaled) time, s.
+    pub session_time_s: f64,
+    /// Wall time, s.
+    pub wall_time_s: f64,
+    /// The trace recorder's counts.
+    pub trace: firmware_bridge::trace::RecorderStats,
+}
+
+/// `summary.json` of a session: the records, their totals and Tables 3-5 figures.
+#[must_use]
+pub fn session_summary(
+    records: Vec<DigRecord>,
+    end: SessionEnd<'_>,
+    node: &ControllerNode,
+    session: Option<&PlannedSession>,
+) -> DemoSummary {
     let n = records.len();
     let mean = |f: &dyn Fn(&DigRecord) -> f64| {
         if n == 0 {
@@ -1005,21 +1224,22 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
             .filter(|r| r.action == ActionKind::Dig)
             .count(),
         cleanup_actions: cleanups,
-        track_backs,
+        track_backs: end.track_backs,
         weight_n: records.iter().filter_map(|r| r.weight_n).sum(),
         mean_weight_n: mean(&|r| r.weight_n.unwrap_or(0.0)),
         mean_time_s: mean(&|r| r.time_s),
         mean_energy_kj: mean(&|r| r.energy_kj),
         energy_kj: records.iter().map(|r| r.energy_kj).sum(),
         swept_volume_m3: records.iter().map(|r| r.swept_volume_m3).sum(),
-        scans,
-        sim_time_s: clock.now_s(),
-        wall_time_s: wall.elapsed().as_secs_f64(),
-        trace_frames: trace.recorded,
-        trace_dropped: trace.dropped,
+        scans: end.scans,
+        sim_time_s: end.session_time_s,
+        wall_time_s: end.wall_time_s,
+        trace_frames: end.trace.recorded,
+        trace_dropped: end.trace.dropped,
         finished: node.finished(),
         last_fault: node.last_fault().map(|f| f.to_string()),
     };
+    let plan_ms = end.plan_ms;
     let planning = if plan_ms.is_empty() {
         PlanningStats::default()
     } else {
@@ -1029,97 +1249,40 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
             max_ms: plan_ms.iter().copied().fold(0.0, f64::max),
         }
     };
-    let summary = DemoSummary {
-        strategy: args.strategy.name().to_owned(),
-        bench: sim.scenario.name.clone(),
-        backups: backups_done,
+    DemoSummary {
+        strategy: end.strategy.name().to_owned(),
+        bench: end.bench,
+        backups: end.backups,
         cleanups,
-        end,
-        stats: SessionStats::of(&records, full_bucket_n),
+        end: end.end,
+        stats: SessionStats::of(&records, end.full_bucket_n),
         planning,
-        predefined_start_deg: session.as_ref().and_then(|s| s.predefined()).map(|p| {
+        predefined_start_deg: session.and_then(|s| s.predefined()).map(|p| {
             [
                 p.start.boom_rad.to_degrees(),
                 p.start.stick_rad.to_degrees(),
                 p.start.bucket_rad.to_degrees(),
             ]
         }),
-        seed: sim.scenario.seed,
-        soil_contact: sim.scenario.soil_contact,
-        effects: args.effects.clone(),
+        seed: end.seed,
+        soil_contact: end.soil_contact,
+        effects: end.effects,
         digs: records,
         totals,
-    };
-    let plan: Vec<Action> = node.cycle().config().actions.clone();
-    let after = machine.plant().world.terrain.clone();
-    if let Some(s) = &session {
-        // The planner's last cycle (cleanup candidates, tracking limits, regions) and its map.
-        if let Some(p) = s.steps().iter().rev().find_map(|st| st.plan.as_ref()) {
-            let last = serde_json::json!({
-                "coarse": p.coarse,
-                "best_dig": p.best_dig,
-                "cleanup_track": p.cleanup_track,
-                "action": p.action.kind().map(|k| format!("{k:?}")),
-            });
-            let path = out.join("last_plan.json");
-            std::fs::write(&path, serde_json::to_vec_pretty(&last)?)
-                .with_context(|| format!("writing {}", path.display()))?;
-        }
-        // Figs. 47/48: the refined planner's evaluated grid of the region of the first planned dig.
-        if let Some((plan, dig)) = s.steps().iter().find_map(|st| match &st.plan {
-            Some(p) => match &p.action {
-                planner::plan::ActionChoice::Dig(d) => Some((p, d)),
-                _ => None,
-            },
-            None => None,
-        }) && let Some(refined) = plan
-            .refined
-            .iter()
-            .find(|r| r.region.index == dig.region_index)
-        {
-            let q = s.planner().quality();
-            let max_q = q.w_volume * q.xi_max + q.w_time * q.psi_max + q.w_energy * q.zeta_max;
-            let path = out.join("refined_grid.svg");
-            std::fs::write(
-                &path,
-                crate::plots::refined_grid_svg(
-                    refined,
-                    s.planner().config().floor_z_m,
-                    max_q,
-                    &format!(
-                        "refined plan of the first planned dig (region {}, thesis Figs. 47/48)",
-                        dig.region_index
-                    ),
-                )?,
-            )
-            .with_context(|| format!("writing {}", path.display()))?;
-        }
-        let path = out.join("map_after.svg");
-        std::fs::write(
-            &path,
-            crate::plots::bench_svg(
-                s.terrain(),
-                machine.plant().true_state().pose,
-                "the planner's terrain map at the end (elevation, m)",
-            )?,
-        )
-        .with_context(|| format!("writing {}", path.display()))?;
     }
-    if session.is_some() {
-        snapshots.push(BenchSnapshot {
-            digs: summary.digs.len(),
-            backups: backups_done,
-            terrain: after.clone(),
-            pose: machine.plant().true_state().pose,
-        });
-    }
-    write_outputs(out, &summary, &terrain_before, &after, &plan, &snapshots)?;
-    std::fs::write(
-        out.join("soil_samples.json"),
-        serde_json::to_vec(&soil_samples)?,
-    )
-    .with_context(|| format!("writing {}", out.join("soil_samples.json").display()))?;
-    Ok(summary)
+}
+
+/// Writes `soil_samples.json`.
+///
+/// # Errors
+/// Writing the file.
+pub fn write_soil_samples(
+    out: &Path,
+    samples: &crate::session::SoilSamplesFile,
+) -> anyhow::Result<()> {
+    let path = out.join("soil_samples.json");
+    std::fs::write(&path, serde_json::to_vec(samples)?)
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 fn progress_bar(args: &DemoArgs) -> Option<indicatif::ProgressBar> {
@@ -1136,11 +1299,16 @@ fn progress_bar(args: &DemoArgs) -> Option<indicatif::ProgressBar> {
     Some(bar)
 }
 
-fn write_outputs(
+/// Writes `summary.json`, `summary.md`, `plan.json`, the plots of the digs and, given the terrain
+/// before and after (the simulator's truth), its plots, and the bench `snapshots` (Fig. 55) with the
+/// dig sequence (Fig. 56).
+///
+/// # Errors
+/// Writing the files.
+pub fn write_outputs(
     out: &Path,
     summary: &DemoSummary,
-    before: &planner::terrain::TerrainGrid,
-    after: &planner::terrain::TerrainGrid,
+    terrain: Option<(&TerrainGrid, &TerrainGrid)>,
     plan: &[Action],
     snapshots: &[BenchSnapshot],
 ) -> anyhow::Result<()> {
@@ -1155,14 +1323,18 @@ fn write_outputs(
         "trajectories.svg",
         crate::plots::trajectories_svg(&summary.digs)?.as_bytes(),
     )?;
-    write(
-        "terrain_before.svg",
-        crate::plots::terrain_svg(before, "terrain before the session (elevation, m)")?.as_bytes(),
-    )?;
-    write(
-        "terrain_after.svg",
-        crate::plots::terrain_svg(after, "terrain after the session (elevation, m)")?.as_bytes(),
-    )?;
+    if let Some((before, after)) = terrain {
+        write(
+            "terrain_before.svg",
+            crate::plots::terrain_svg(before, "terrain before the session (elevation, m)")?
+                .as_bytes(),
+        )?;
+        write(
+            "terrain_after.svg",
+            crate::plots::terrain_svg(after, "terrain after the session (elevation, m)")?
+                .as_bytes(),
+        )?;
+    }
     write(
         "dig_stats.svg",
         crate::plots::dig_stats_svg(&summary.digs)?.as_bytes(),

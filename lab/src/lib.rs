@@ -15,6 +15,8 @@
 //! - [`results`]: the layout of the generated results page (docs/results.md).
 //! - [`session`]: the records of a session folder (per-dig records, tip paths, soil samples).
 //! - [`thesis`]: the thesis's figures and statements the reproductions are checked against.
+//! - [`wire`]: `excavator-ctl run`, the same session on a CAN bus in real time (planned, predefined
+//!   or fixed), writing the same session folder.
 //!
 //! # Data flow
 //!
@@ -33,3 +35,4 @@ pub mod plots;
 pub mod results;
 pub mod session;
 pub mod thesis;
+pub mod wire;

@@ -12,6 +12,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
+use firmware_bridge::transport::TimeScale;
 use vcan_sim::node::MachineNode;
 use vcan_sim::plant::PHYSICS_DT_S;
 use vcan_sim::realtime::{RealtimeOptions, run};
@@ -47,6 +48,10 @@ struct Cli {
     /// HOST:PORT of the range-scan socket (docs/scan-protocol.md), e.g. 127.0.0.1:7878.
     #[arg(long)]
     scan_socket: Option<String>,
+    /// Simulated seconds per wall second, 0.1 to 20 (default 1, real time); the controller must run
+    /// at the same scale (`excavator-ctl run --time-scale`).
+    #[arg(long, value_name = "X", default_value_t = TimeScale::REAL_TIME)]
+    time_scale: TimeScale,
     /// Print the hidden-effects registry and exit.
     #[arg(long)]
     list_effects: bool,
@@ -261,6 +266,7 @@ fn real_main() -> Result<()> {
         iface,
         state_log: cli.state_log,
         scan_socket: cli.scan_socket,
+        time_scale: cli.time_scale,
     };
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()

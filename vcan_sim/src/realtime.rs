@@ -1,7 +1,9 @@
 //! The simulator in real time on a SocketCAN interface (tokio), with the optional JSON-lines state log
 //! and the range-sensor scan socket (docs/scan-protocol.md).
 //!
-//! Every 10 ms the loop steps the physics as many 1 ms steps as wall time requires, sends the frames
+//! Every 10 ms of simulated time (`10 ms / time_scale` of wall time; real time by default, faster
+//! with `--time-scale` when the controller runs at the same scale) the loop steps the physics as many
+//! 1 ms steps as the elapsed (scaled) monotonic time requires, sends the frames
 //! due, and handles received frames and scan requests in between. Shutdown is passed in and
 //! `select!`ed on.
 //!
@@ -15,9 +17,11 @@
 use std::future::Future;
 use std::io::Write;
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use firmware_bridge::transport::{Bus, SocketCanBus};
+use tokio::time::Instant;
+
+use firmware_bridge::transport::{Bus, SocketCanBus, TimeScale};
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
 use tokio::net::TcpListener;
 use tokio::sync::{mpsc, oneshot};
@@ -36,6 +40,8 @@ pub struct RealtimeOptions {
     pub state_log: Option<PathBuf>,
     /// `HOST:PORT` for the scan socket (loopback TCP, JSON lines).
     pub scan_socket: Option<String>,
+    /// Simulated seconds per wall second (the controller must run at the same scale).
+    pub time_scale: TimeScale,
 }
 
 /// What a run did.
@@ -108,12 +114,25 @@ fn error_json(message: &str) -> String {
 /// [`SimError::Bus`] if the interface cannot be opened, [`SimError::Io`] for the state log or the
 /// scan socket.
 pub async fn run(
-    mut node: MachineNode,
+    node: MachineNode,
     options: RealtimeOptions,
     shutdown: impl Future<Output = ()>,
 ) -> Result<RunSummary> {
     let bus = SocketCanBus::open(&options.iface)
         .map_err(|e| SimError::Bus(format!("{}: {e}", options.iface)))?;
+    run_on(&bus, node, options, shutdown).await
+}
+
+/// As [`run`] on any bus (`options.iface` unused): the in-process bus of the lab's tests.
+///
+/// # Errors
+/// [`SimError::Io`] for the state log or the scan socket.
+pub async fn run_on<B: Bus>(
+    bus: &B,
+    mut node: MachineNode,
+    options: RealtimeOptions,
+    shutdown: impl Future<Output = ()>,
+) -> Result<RunSummary> {
     let mut log = match &options.state_log {
         Some(path) => Some(std::io::BufWriter::new(
             std::fs::File::create(path).map_err(|source| SimError::Io {
@@ -137,7 +156,8 @@ pub async fn run(
         drop(scan_tx);
     }
     let mut summary = RunSummary::default();
-    let mut interval = tokio::time::interval(Duration::from_millis(10));
+    let scale = options.time_scale.get();
+    let mut interval = tokio::time::interval(Duration::from_millis(10).div_f64(scale));
     interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let start = Instant::now();
     let mut steps_done: u64 = 0;
@@ -159,7 +179,7 @@ pub async fn run(
             }
             _ = interval.tick() => {
                 // Wall-clock physics steps due, minus the time slipped so far.
-                let due = ((start.elapsed().as_secs_f64() / PHYSICS_DT_S) as u64).saturating_sub(slipped_steps);
+                let due = ((start.elapsed().as_secs_f64() * scale / PHYSICS_DT_S) as u64).saturating_sub(slipped_steps);
                 let behind = due.saturating_sub(steps_done);
                 summary.max_lag_s = summary.max_lag_s.max(behind as f64 * PHYSICS_DT_S);
                 let n = behind.min(MAX_CATCH_UP_STEPS);

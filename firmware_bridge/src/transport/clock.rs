@@ -95,3 +95,78 @@ mod tests {
         assert!(Clock::Wall.now_ns() > 1_600_000_000_000_000_000);
     }
 }
+
+/// How many times faster than real time a bus session runs (the simulator and the controller must
+/// agree: `excavator-sim --time-scale` and `excavator-ctl run --time-scale`). 1 is real time; the
+/// accepted range is [`TimeScale::MIN`] to [`TimeScale::MAX`].
+#[derive(Debug, Clone, Copy, PartialEq, PartialOrd)]
+pub struct TimeScale(f64);
+
+/// A time scale outside the accepted range.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("time scale {0}: expected a number from {min} to {max}", min = TimeScale::MIN, max = TimeScale::MAX)]
+pub struct TimeScaleError(pub String);
+
+impl TimeScale {
+    /// Real time.
+    pub const REAL_TIME: Self = Self(1.0);
+    /// The slowest accepted scale.
+    pub const MIN: f64 = 0.1;
+    /// The fastest accepted scale: a 10 ms control period is then 0.5 ms of wall time.
+    pub const MAX: f64 = 20.0;
+
+    /// A checked scale.
+    ///
+    /// # Errors
+    /// [`TimeScaleError`] when `x` is not finite or outside [`Self::MIN`]..=[`Self::MAX`].
+    pub fn new(x: f64) -> std::result::Result<Self, TimeScaleError> {
+        if x.is_finite() && (Self::MIN..=Self::MAX).contains(&x) {
+            Ok(Self(x))
+        } else {
+            Err(TimeScaleError(x.to_string()))
+        }
+    }
+
+    /// The factor.
+    pub fn get(self) -> f64 {
+        self.0
+    }
+}
+
+impl Default for TimeScale {
+    fn default() -> Self {
+        Self::REAL_TIME
+    }
+}
+
+impl std::fmt::Display for TimeScale {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.0.fmt(f)
+    }
+}
+
+impl std::str::FromStr for TimeScale {
+    type Err = TimeScaleError;
+
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        let x: f64 = s.trim().parse().map_err(|_| TimeScaleError(s.to_owned()))?;
+        Self::new(x)
+    }
+}
+
+#[cfg(test)]
+mod time_scale_tests {
+    use super::*;
+
+    #[test]
+    fn time_scales_are_checked() {
+        assert_eq!("1".parse::<TimeScale>(), Ok(TimeScale::REAL_TIME));
+        assert_eq!("20".parse::<TimeScale>().map(TimeScale::get), Ok(20.0));
+        assert_eq!(" 0.1 ".parse::<TimeScale>().map(TimeScale::get), Ok(0.1));
+        for bad in ["0", "-1", "20.5", "NaN", "inf", "", "fast", "0.09"] {
+            let e = bad.parse::<TimeScale>().unwrap_err();
+            assert!(e.to_string().contains("from 0.1 to 20"), "{bad}: {e}");
+        }
+        assert_eq!(TimeScale::default(), TimeScale::REAL_TIME);
+    }
+}

@@ -15,7 +15,7 @@ mod clock;
 mod in_process;
 mod socketcan;
 
-pub use clock::{Clock, VirtualClock};
+pub use clock::{Clock, TimeScale, TimeScaleError, VirtualClock};
 pub use in_process::{FaultInjection, InProcessBus, InProcessNode};
 pub use socketcan::{IdFilter, SendRetry, SocketCanBus, send_with_retry};
 

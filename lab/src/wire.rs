@@ -1,0 +1,333 @@
+//! `excavator-ctl run`: the controller on a CAN bus in real time (or `--time-scale` times faster,
+//! with the simulator at the same scale), with the action source of `--strategy`:
+//!
+//! - `planned` / `predefined`: the session driver that `demo` runs ([`SessionDriver`]: the dig
+//!   planner or the predefined sequence, Autodig, cleanup, tracking back, the hardness index and the
+//!   soil estimate online), with range scans from the scan service (`--scan-addr`;
+//!   docs/scan-protocol.md) and the bench file's grid, floor and start pose (`--bench`, default
+//!   config/bench_extended.toml, as in `demo`); the planner runs off the control loop
+//!   ([`controller::run::run_session_loop`]);
+//! - `fixed` (default): the controller config's action list, as before the planner was wired.
+//!
+//! With `--out DIR` the session folder is the one `demo` writes (trace, scans, `summary.json`,
+//! `summary.md`, plots, `soil_samples.json`; docs/demo-output.md), without the simulator's truth
+//! (true payload, true terrain), which a bus session does not have.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context as _;
+use clap::Args;
+use controller::node::{ControllerConfig, ControllerNode};
+use controller::run::{
+    CONTROL_PERIOD, LoopSession, StopReason, run_session_loop, scan_client_config,
+};
+use controller::scan_client::{NoScans, ScanClient, ScanService};
+use controller::session::{ScanSource, SessionDriver, SessionEvent};
+use firmware_bridge::trace::Recorder;
+use firmware_bridge::transport::{Bus, SocketCanBus, TimeScale};
+use planner::machine::MachineConfig;
+
+use crate::demo::{self, DemoArgs, DemoStrategy, SessionEnd, SessionRecords};
+
+/// Arguments of `excavator-ctl run`.
+#[derive(Debug, Clone, Args)]
+pub struct RunArgs {
+    /// CAN interface, e.g. can0 (the machine) or vcan0 (excavator-sim).
+    #[arg(long)]
+    pub iface: String,
+    /// Decode and log the bus but never transmit (first contact with a machine).
+    #[arg(long)]
+    pub listen_only: bool,
+    /// Machine file (default: the built-in config/machine.toml).
+    #[arg(long, value_name = "FILE")]
+    pub machine: Option<PathBuf>,
+    /// Autodig maps (default: the built-in config/autodig_maps.toml).
+    #[arg(long, value_name = "FILE")]
+    pub maps: Option<PathBuf>,
+    /// Controller config: safety, plan, Autodig and cleanup parameters (TOML; see docs/controller.md).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Record a candump -L log of every frame sent and received (default with --out: DIR/trace.log).
+    #[arg(long, value_name = "FILE")]
+    pub trace: Option<PathBuf>,
+    /// Stop after this many digs (then swing home, neutral, disarm).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    pub digs: Option<u32>,
+    /// Range-scan service address (host:port): the planner's map and the perception enhancements.
+    #[arg(long, value_name = "ADDR")]
+    pub scan_addr: Option<String>,
+    /// The action source: the dig planner, the predefined sequence of 6.2, or the config's plan.
+    #[arg(long, value_enum, default_value_t = DemoStrategy::Fixed)]
+    pub strategy: DemoStrategy,
+    /// Bench scenario file: the map's grid, the floor and the start pose of the planned and
+    /// predefined strategies (default: the built-in config/bench_extended.toml).
+    #[arg(long, value_name = "FILE")]
+    pub bench: Option<PathBuf>,
+    /// The simulator's seed, recorded in summary.json (default: the bench file's).
+    #[arg(long, value_name = "N")]
+    pub seed: Option<u64>,
+    /// Planner settings (default: the built-in config/planner.toml); the floor is the bench's.
+    #[arg(long, value_name = "FILE")]
+    pub planner: Option<PathBuf>,
+    /// Hardness regression (default: the built-in config/hardness_regression.toml).
+    #[arg(long, value_name = "FILE")]
+    pub hardness: Option<PathBuf>,
+    /// Session seconds per wall second, 0.1 to 20 (default 1, real time); excavator-sim must run
+    /// with the same --time-scale.
+    #[arg(long, value_name = "X", default_value_t = TimeScale::REAL_TIME)]
+    pub time_scale: TimeScale,
+    /// Session folder: trace, scans, summary and plots as `demo` writes them.
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+}
+
+impl RunArgs {
+    /// `demo`'s arguments for the same strategy, files and bench (one setup for both).
+    fn demo_args(&self) -> DemoArgs {
+        let mut d = DemoArgs::new(self.out.clone().unwrap_or_default());
+        d.strategy = self.strategy;
+        d.machine.clone_from(&self.machine);
+        d.bench.clone_from(&self.bench);
+        d.seed = self.seed;
+        d.maps.clone_from(&self.maps);
+        d.config.clone_from(&self.config);
+        d.planner.clone_from(&self.planner);
+        d.hardness.clone_from(&self.hardness);
+        d
+    }
+}
+
+/// Builds the node and the driver of a run (see the module docs for the strategies).
+///
+/// # Errors
+/// Unreadable or invalid files, an inconsistent configuration, a planned strategy without a scan
+/// service.
+pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, RunSetup)> {
+    let dargs = args.demo_args();
+    let (sim, mut config, maps) = demo::setup(&dargs)?;
+    let session = match args.strategy.session() {
+        Some(st) => {
+            anyhow::ensure!(
+                args.scan_addr.is_some(),
+                "--strategy {} plans on range scans: give the scan service's --scan-addr",
+                args.strategy.name()
+            );
+            Some(demo::build_session(&dargs, &sim, st)?)
+        }
+        None => {
+            // The config's plan as it is (repeat and all), not the demo's plan.
+            config = match &args.config {
+                Some(p) => ControllerConfig::from_toml_file(p).context("controller config")?,
+                None => ControllerConfig::default(),
+            };
+            None
+        }
+    };
+    config.cycle.max_digs = match (args.digs, args.strategy) {
+        (Some(n), _) => Some(n),
+        // The config's own limit (a repeating plan may stop only there).
+        (None, DemoStrategy::Fixed) => config.cycle.max_digs,
+        // The session driver ends the session when its region is done.
+        (None, _) => None,
+    };
+    config.safety.listen_only |= args.listen_only;
+    // Without a scan service nobody would answer the cycle's requests: dig on the plain angle rules
+    // at once instead of waiting `scan_timeout_s` before every dig.
+    if args.scan_addr.is_none() {
+        config.cycle.scan = false;
+    }
+    let machine = match args.strategy {
+        DemoStrategy::Fixed => {
+            MachineConfig::load_or_default(args.machine.as_deref()).context("machine file")?
+        }
+        _ => sim.machine.clone(),
+    };
+    let full_bucket_n = machine.bucket.capacity_m3
+        * sim.scenario.soil.density_kg_per_m3
+        * planner::machine::GRAVITY_M_PER_S2;
+    let mut node =
+        ControllerNode::new(&machine, maps, config).context("controller configuration")?;
+    let mut driver = SessionDriver::new(session, None, &mut node);
+    driver.set_detached_planning(true);
+    let setup = RunSetup {
+        bench: sim.scenario.name.clone(),
+        seed: sim.scenario.seed,
+        soil_contact: sim.scenario.soil_contact,
+        full_bucket_n,
+    };
+    Ok((node, driver, setup))
+}
+
+/// What a run's summary takes from its setup.
+#[derive(Debug, Clone)]
+pub struct RunSetup {
+    bench: String,
+    seed: u64,
+    soil_contact: vcan_sim::scenario::SoilContactIntegration,
+    full_bucket_n: f64,
+}
+
+/// `excavator-ctl run`: opens the interface, runs the session until Ctrl-C/SIGTERM or its end, closes
+/// the trace and writes the session folder.
+///
+/// # Errors
+/// Configuration, interface, bus, scan and file errors.
+pub async fn run(args: RunArgs) -> anyhow::Result<()> {
+    let mut bus = SocketCanBus::open(&args.iface)
+        .with_context(|| format!("opening CAN interface {}", args.iface))?;
+    let trace = trace_path(&args);
+    let recorder = match &trace {
+        Some(p) => {
+            if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
+                std::fs::create_dir_all(dir)
+                    .with_context(|| format!("creating {}", dir.display()))?;
+            }
+            let r = Recorder::create(p, &args.iface)
+                .with_context(|| format!("creating trace {}", p.display()))?;
+            bus.set_recorder(r.clone());
+            Some(r)
+        }
+        None => None,
+    };
+    run_on(&bus, recorder, &args, controller::run::shutdown_signal()).await
+}
+
+fn trace_path(args: &RunArgs) -> Option<PathBuf> {
+    args.trace
+        .clone()
+        .or_else(|| args.out.as_ref().map(|o| o.join("trace.log")))
+}
+
+/// As [`run`] on a bus the caller opened (with `recorder` attached to it, closed here).
+///
+/// # Errors
+/// As [`run`].
+pub async fn run_on<B: Bus>(
+    bus: &B,
+    recorder: Option<Recorder>,
+    args: &RunArgs,
+    shutdown: impl std::future::Future<Output = ()>,
+) -> anyhow::Result<()> {
+    let wall = Instant::now();
+    let (mut node, mut driver, setup) = build(args)?;
+    let scans_dir = args.out.as_ref().map(|o| o.join("scans"));
+    if let Some(d) = &scans_dir {
+        std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
+    }
+    tracing::info!(
+        iface = %bus.interface(),
+        strategy = args.strategy.name(),
+        time_scale = %args.time_scale,
+        listen_only = node.safety().config().listen_only,
+        scan_addr = args.scan_addr.as_deref().unwrap_or("none"),
+        "excavator-ctl running; Ctrl-C stops (valves neutral, disarm)"
+    );
+    let mut scans: Box<dyn ScanSource> = match &args.scan_addr {
+        Some(addr) => Box::new(ScanService::spawn(ScanClient::new(scan_client_config(
+            &node, addr,
+        )))),
+        None => Box::new(NoScans::default()),
+    };
+    let mut log = SessionRecords::new(scans_dir.clone().unwrap_or_default());
+    let mut observer = |node: &ControllerNode, driver: &SessionDriver, events: &[SessionEvent]| {
+        for e in events {
+            if scans_dir.is_none() && matches!(e, SessionEvent::Scanned(_)) {
+                continue;
+            }
+            if log.on_event(node, driver, None, e)? {
+                let d = log.records.last();
+                tracing::info!(
+                    dig = d.map(|d| d.index),
+                    action = ?d.map(|d| d.action),
+                    weight_n = ?d.and_then(|d| d.weight_n),
+                    backups = driver.backups(),
+                    "dig done"
+                );
+            }
+        }
+        Ok(())
+    };
+    let result = run_session_loop(
+        bus,
+        &mut node,
+        CONTROL_PERIOD,
+        args.time_scale,
+        shutdown,
+        Some(LoopSession {
+            driver: &mut driver,
+            scans: &mut *scans,
+            observer: &mut observer,
+        }),
+    )
+    .await;
+    let trace = match recorder {
+        Some(r) => {
+            let closed = r.close().context("closing the trace")?;
+            tracing::info!(?closed, "trace closed");
+            closed
+        }
+        None => firmware_bridge::trace::RecorderStats::default(),
+    };
+    let (reason, stats) = result?;
+    tracing::info!(?reason, ?stats, digs = node.statistics().len(), "stopped");
+    let Some(out) = &args.out else {
+        return Ok(());
+    };
+    let end = match (reason, driver.end_reason()) {
+        (StopReason::Signal, _) => "stopped".to_owned(),
+        (StopReason::Finished, Some(why)) => why.to_owned(),
+        (StopReason::Finished, None) => "dig count reached".to_owned(),
+    };
+    let summary = demo::session_summary(
+        log.records,
+        SessionEnd {
+            strategy: args.strategy,
+            bench: setup.bench,
+            seed: setup.seed,
+            soil_contact: setup.soil_contact,
+            effects: Vec::new(),
+            full_bucket_n: setup.full_bucket_n,
+            end,
+            track_backs: driver.track_backs(),
+            backups: driver.backups(),
+            plan_ms: driver.planning_ms(),
+            scans: log.scans,
+            session_time_s: (CONTROL_PERIOD * u32::try_from(stats.steps).unwrap_or(u32::MAX))
+                .as_secs_f64(),
+            wall_time_s: wall.elapsed().as_secs_f64(),
+            trace,
+        },
+        &node,
+        driver.session(),
+    );
+    write_folder(out, &summary, &node, &driver, log.soil_samples)?;
+    print!("{}", demo::summary_markdown(&summary));
+    Ok(())
+}
+
+/// The session folder's files besides the trace and the scans.
+fn write_folder(
+    out: &Path,
+    summary: &demo::DemoSummary,
+    node: &ControllerNode,
+    driver: &SessionDriver,
+    soil: crate::session::SoilSamplesFile,
+) -> anyhow::Result<()> {
+    let plan = node.cycle().config().actions.clone();
+    let mut snapshots = Vec::new();
+    if let Some(s) = driver.session() {
+        // The planner's map stands for the terrain: a bus session has no simulator truth.
+        let pose = node.estimator().state().pose;
+        let pose = [pose.x_m, pose.y_m, pose.heading_rad];
+        demo::write_planner_outputs(out, s, pose)?;
+        snapshots.push(demo::BenchSnapshot {
+            digs: summary.digs.len(),
+            backups: summary.backups,
+            terrain: s.terrain().clone(),
+            pose,
+        });
+    }
+    demo::write_outputs(out, summary, None, &plan, &snapshots)?;
+    demo::write_soil_samples(out, &soil)
+}

@@ -1,0 +1,140 @@
+//! `excavator-ctl run --strategy planned` through the real run loop ([`lab::wire::run_on`],
+//! [`controller::run::run_session_loop`]) over the in-process bus on the wall clock, against the
+//! simulator's real-time loop (`vcan_sim::realtime::run_on`) with its scan socket on loopback TCP,
+//! both at the same time scale: the session folder is the one `demo` writes.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::time::Duration;
+
+use firmware_bridge::trace::Recorder;
+use firmware_bridge::transport::{InProcessBus, TimeScale};
+use lab::demo::{DemoArgs, DemoStrategy, DemoSummary};
+use lab::wire::RunArgs;
+use vcan_sim::node::MachineNode;
+use vcan_sim::realtime::RealtimeOptions;
+
+fn free_port() -> String {
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    l.local_addr().unwrap().to_string()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_planned_session_runs_over_a_bus_in_scaled_real_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let scan_addr = free_port();
+    let time_scale = TimeScale::new(4.0).unwrap();
+    let (sim, _, _) = lab::demo::setup(&DemoArgs::planned(out.clone())).unwrap();
+    let bus = InProcessBus::with_wall_clock("vcan0");
+    let sim_node = bus.attach();
+    let mut ctl_node = bus.attach();
+    let options = RealtimeOptions {
+        iface: "vcan0".into(),
+        state_log: None,
+        scan_socket: Some(scan_addr.clone()),
+        time_scale,
+    };
+    let machine = MachineNode::new(sim.build().unwrap());
+    let (stop_sim, sim_stopped) = tokio::sync::oneshot::channel::<()>();
+    let simulator = tokio::spawn(async move {
+        vcan_sim::realtime::run_on(&sim_node, machine, options, async {
+            let _ = sim_stopped.await;
+        })
+        .await
+    });
+    // The scan socket is bound by the simulator's task.
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    std::fs::create_dir_all(&out).unwrap();
+    let recorder = Recorder::create(&out.join("trace.log"), "vcan0").unwrap();
+    ctl_node.set_recorder(recorder.clone());
+    let args = RunArgs {
+        iface: "vcan0".into(),
+        listen_only: false,
+        machine: None,
+        maps: None,
+        config: None,
+        trace: None,
+        digs: Some(2),
+        scan_addr: Some(scan_addr),
+        strategy: DemoStrategy::Planned,
+        bench: None,
+        seed: None,
+        planner: None,
+        hardness: None,
+        time_scale,
+        out: Some(out.clone()),
+    };
+    // A budget far above the session's ~2 x 30 s at 4x; the test fails if it is what stops it.
+    let budget = tokio::time::sleep(Duration::from_secs(150));
+    lab::wire::run_on(&ctl_node, Some(recorder), &args, budget)
+        .await
+        .unwrap();
+    let _ = stop_sim.send(());
+    let summary = simulator.await.unwrap().unwrap();
+    assert!(summary.simulated_s > 10.0, "{summary:?}");
+
+    let s: DemoSummary =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(s.strategy, "planned");
+    assert_ne!(s.end, "stopped", "the session ran out of its budget: {s:?}");
+    assert_eq!(s.totals.digs, 2, "{:?}", s.totals);
+    assert!(s.totals.finished);
+    assert!(s.planning.cycles >= 2, "{:?}", s.planning);
+    assert!(s.totals.scans >= 2, "{:?}", s.totals);
+    assert!(
+        s.digs.iter().all(|d| d.weight_n.is_some_and(|w| w > 0.0)),
+        "{:?}",
+        s.digs
+    );
+    assert!(s.totals.trace_frames > 1000, "{:?}", s.totals);
+    for f in [
+        "summary.md",
+        "trajectories.svg",
+        "dig_stats.svg",
+        "soil_samples.json",
+        "map_after.svg",
+        "trace.log",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    assert!(std::fs::read_dir(out.join("scans")).unwrap().count() >= 2);
+}
+
+/// The arguments of `run --iface vcan0 --config CONFIG [--digs N]` with the fixed strategy.
+fn fixed_args(config: &std::path::Path, digs: Option<u32>) -> RunArgs {
+    RunArgs {
+        iface: "vcan0".into(),
+        listen_only: false,
+        machine: None,
+        maps: None,
+        config: Some(config.to_owned()),
+        trace: None,
+        digs,
+        scan_addr: None,
+        strategy: DemoStrategy::Fixed,
+        bench: None,
+        seed: None,
+        planner: None,
+        hardness: None,
+        time_scale: TimeScale::REAL_TIME,
+        out: None,
+    }
+}
+
+#[test]
+fn the_fixed_strategy_keeps_the_configs_dig_limit_unless_digs_is_given() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("plan.toml");
+    std::fs::write(
+        &config,
+        "[cycle]\nrepeat = true\nmax_digs = 4\n\n[[cycle.actions]]\nkind = \"dig\"\nswing_deg = 0.0\n\
+         start = { kind = \"tip\", x_m = 7.5, z_m = 2.4, bucket_abs_deg = -55.0 }\n",
+    )
+    .unwrap();
+    // A repeating plan ends only at its limit: dropping it would run forever.
+    let (node, _, _) = lab::wire::build(&fixed_args(&config, None)).unwrap();
+    assert_eq!(node.cycle().config().max_digs, Some(4));
+    let (node, _, _) = lab::wire::build(&fixed_args(&config, Some(2))).unwrap();
+    assert_eq!(node.cycle().config().max_digs, Some(2));
+}
