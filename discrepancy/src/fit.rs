@@ -103,6 +103,8 @@ pub struct CandidateScore {
 pub struct NamedEffect {
     /// Effect name (the simulator's, `excavator-sim --list-effects`).
     pub name: &'static str,
+    /// What kind of candidate it is: `effect` (the effect library).
+    pub kind: &'static str,
     /// Fitted magnitude.
     pub magnitude: f64,
     /// Standard uncertainty.
@@ -156,6 +158,8 @@ pub struct AnalysisResult {
     pub train_digs: Vec<u32>,
     /// Dig indices held out.
     pub test_digs: Vec<u32>,
+    /// Samples per signal in the training digs (the held-out ones are in `rms`).
+    pub train_samples: Vec<usize>,
     /// Nominal residual standard deviation per signal on the training digs.
     pub sigma: Vec<f64>,
     /// Decorrelation factor per signal (samples per independent sample).
@@ -579,6 +583,7 @@ pub fn analyse(
         aug.set(c, s.magnitude);
         named.push(NamedEffect {
             name: c.name(),
+            kind: "effect",
             magnitude: s.magnitude,
             uncertainty: s.uncertainty,
             unit: c.unit(),
@@ -600,6 +605,7 @@ pub fn analyse(
         localisation,
         train_digs: train.iter().map(|r| r.index).collect(),
         test_digs: test.iter().map(|r| r.index).collect(),
+        train_samples: n0.to_vec(),
         sigma,
         kappa,
     })

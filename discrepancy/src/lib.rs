@@ -23,6 +23,9 @@
 //! - [`model`]: the augmented model file ([`AugmentedModel`]), and the grey-box actuator that implements
 //!   [`planner::dig_model::ActuatorDynamics`] so the planner's dig model runs with it;
 //! - [`read`] and [`session`]: session folders (`trace.log` + `scans/`) -> prepared records per dig;
+//! - [`sufficiency`]: whether the sessions hold enough completed digs and samples to name anything;
+//! - [`reference`] and [`verdict`]: what "expected" is (the residual structure of sessions declared
+//!   healthy) and every signal judged against it: expected, named, partly explained, unexplained;
 //! - [`report`]: `report.json`, `report.md`, the figures and `model.json` of an analysis;
 //! - [`analysis`], [`eval`], [`command`]: `excavator-ctl discrepancy analyse`, `eval` and `bench`, and
 //!   the subcommand dispatch.
@@ -34,12 +37,16 @@ pub mod eval;
 pub mod fit;
 pub mod greybox;
 pub mod model;
+pub mod plant;
 pub mod read;
+pub mod reference;
 pub mod report;
 pub mod session;
 pub mod signal;
 pub mod soil_replay;
 pub mod stats;
+pub mod sufficiency;
+pub mod verdict;
 
 pub use effects::Candidate;
 pub use fit::{AnalysisConfig, AnalysisResult, NamedEffect, analyse};
