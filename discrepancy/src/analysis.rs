@@ -10,6 +10,7 @@ use anyhow::Context as _;
 use clap::Args;
 
 use crate::greybox::PreparedRecord;
+use crate::model::ModelEffect;
 use crate::reference::{Reference, structure};
 use crate::session::{Analysis, load_machine, load_model, prepare_readable_sessions};
 use crate::{AnalysisConfig, AugmentedModel, analyse, report, sufficiency, verdict};
@@ -58,9 +59,11 @@ impl AnalyseArgs {
     }
 }
 
-/// The reference of `paths`: one `reference.json` file, or session folders replayed through
-/// `model` (every readable dig; an unreadable folder is an error, unlike among the measured ones:
-/// the user declared it healthy and it must be there).
+/// The reference of `paths`: one `reference.json` file, or session folders analysed from `model`
+/// (every readable dig; an unreadable folder is an error, unlike among the measured ones: the user
+/// declared it healthy and it must be there). The effects that analysis names are the model's
+/// calibration to the healthy machine ([`Reference::calibration`]), and the reference levels are
+/// the residuals with them.
 ///
 /// # Errors
 /// Reading the file or the sessions; a file mixed with folders; no usable dig.
@@ -86,15 +89,61 @@ pub fn load_reference(
     }
     let records = crate::session::prepare_sessions(paths, machine, model)
         .context("reading the reference sessions")?;
+    let config = AnalysisConfig {
+        base: model.augmentation()?,
+        ..AnalysisConfig::default()
+    };
+    let fit = analyse(&records, &model.params, &config, &mut |_, _| {})
+        .context("calibrating on the reference sessions")?;
+    let calibration = fit
+        .named_effects
+        .iter()
+        .map(|e| ModelEffect {
+            name: e.name.to_string(),
+            magnitude: e.magnitude,
+            uncertainty: e.uncertainty,
+        })
+        .collect();
     let reference = Reference::from_records(
         &records,
         &model.params,
-        &model.augmentation()?,
+        &fit.augmentation,
         paths.iter().map(|p| p.display().to_string()).collect(),
         model.provenance.clone(),
+        calibration,
     )
     .context("the reference sessions")?;
     Ok(Some(reference))
+}
+
+/// `model` with the reference's calibration added (itself when there is none).
+///
+/// # Errors
+/// A calibration effect the library does not know, or out of its range.
+pub fn calibrated(model: AugmentedModel, reference: &Reference) -> anyhow::Result<AugmentedModel> {
+    if reference.calibration.is_empty() {
+        return Ok(model);
+    }
+    let mut effects = model.effects.clone();
+    effects.extend(reference.calibration.iter().cloned());
+    let out = AugmentedModel::new(
+        model.params,
+        effects,
+        format!(
+            "{}; calibrated on the reference sessions ({}): {}",
+            model.provenance,
+            reference.source.join(", "),
+            reference
+                .calibration
+                .iter()
+                .map(|e| format!("{} = {:.4e}", e.name, e.magnitude))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    );
+    out.augmentation()
+        .context("the reference's calibration on the starting model")?;
+    Ok(out)
 }
 
 /// Reads the sessions, runs the analysis and writes the outputs to `args.out`.
@@ -110,6 +159,16 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
     }
     let mut warnings = sufficiency::check_records(&records)?;
     let reference = load_reference(&args.reference, &machine, &model)?;
+    if let Some(r) = reference.as_ref().filter(|r| r.model != model.provenance) {
+        warnings.push(format!(
+            "the reference was made with another starting model ({}); its levels may not be this model's",
+            r.model
+        ));
+    }
+    let model = match &reference {
+        Some(r) => calibrated(model, r)?,
+        None => model,
+    };
     if reference.is_none() {
         warnings.push(
             "no reference (--reference): the residuals are not judged against what a healthy \
@@ -119,6 +178,11 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
     }
     let config = AnalysisConfig {
         base: model.augmentation()?,
+        refit: reference
+            .iter()
+            .flat_map(|r| &r.calibration)
+            .filter_map(|e| crate::Candidate::from_name(&e.name))
+            .collect(),
         ..AnalysisConfig::default()
     };
     let bar = (!args.quiet && std::io::IsTerminal::is_terminal(&std::io::stdout())).then(|| {

@@ -56,8 +56,13 @@ pub struct AnalysisConfig {
     pub grid_points: usize,
     /// Golden-section iterations.
     pub golden_iterations: usize,
-    /// The model's effects before the analysis (from `--model`); their candidates are not refitted.
+    /// The model's effects before the analysis (from `--model`); their candidates are not refitted,
+    /// except those in `refit`.
     pub base: Augmentation,
+    /// Candidates of `base` fitted again (the calibration on a reference: a healthy machine's own
+    /// transport delay must not hide a larger one); a named one's magnitude is the change on top
+    /// of `base`.
+    pub refit: Vec<Candidate>,
 }
 
 impl Default for AnalysisConfig {
@@ -72,6 +77,7 @@ impl Default for AnalysisConfig {
             grid_points: 9,
             golden_iterations: 12,
             base: Augmentation::nominal(),
+            refit: Vec::new(),
         }
     }
 }
@@ -448,7 +454,7 @@ pub fn analyse(
         .candidates
         .iter()
         .copied()
-        .filter(|c| config.base.get(*c) == 0.0)
+        .filter(|c| config.base.get(*c) == 0.0 || config.refit.contains(c))
         .collect();
     let total = config.candidates.len() * (config.max_effects + 1).min(config.candidates.len() + 1);
     let mut done = 0;
@@ -548,8 +554,10 @@ pub fn analyse(
             let consistent = (0..N_SIGNALS).all(|j| {
                 n_test[j] < 100 || test_sse[j] <= MAX_SIGNAL_WORSENING.powi(2) * test_base_sse[j]
             });
+            // The change on top of the starting model (a refitted calibration's value included).
+            let change = x - config.base.get(c);
             let significant = consistent
-                && x.abs() > MIN_MAGNITUDE_Z * uncertainty
+                && change.abs() > MIN_MAGNITUDE_Z * uncertainty
                 && ((delta_bic > config.min_delta_bic && explained_acted > config.min_explained)
                     || (delta_bic > config.strong_delta_bic
                         && explained > config.strong_explained));
@@ -557,7 +565,7 @@ pub fn analyse(
                 c,
                 CandidateScore {
                     name: c.name(),
-                    magnitude: x,
+                    magnitude: change,
                     uncertainty,
                     train_chi2_drop: train_chi0 - fx,
                     heldout_delta_bic: delta_bic,
@@ -580,7 +588,7 @@ pub fn analyse(
         let Some((c, s)) = best else {
             break;
         };
-        aug.set(c, s.magnitude);
+        aug.set(c, config.base.get(c) + s.magnitude);
         named.push(NamedEffect {
             name: c.name(),
             kind: "effect",

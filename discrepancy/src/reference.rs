@@ -248,6 +248,12 @@ pub struct Reference {
     pub source: Vec<String>,
     /// The model it was replayed with (its provenance).
     pub model: String,
+    /// Effects the analysis of the healthy sessions named on the starting model: the starting
+    /// model's calibration to this machine (a healthy machine's own signature, e.g. a few ms of
+    /// transport delay the nominal model lacks on another bench). The measured sessions are
+    /// analysed from the model with these added, and the levels below are the residuals with them.
+    #[serde(default)]
+    pub calibration: Vec<crate::model::ModelEffect>,
     /// Digs.
     pub digs: usize,
     /// Per signal, [`Signal::ALL`] order.
@@ -265,6 +271,7 @@ impl Reference {
         aug: &Augmentation,
         source: Vec<String>,
         model: String,
+        calibration: Vec<crate::model::ModelEffect>,
     ) -> Result<Self> {
         if records.is_empty() {
             return Err(DiscrepancyError::NotEnoughData(
@@ -276,6 +283,7 @@ impl Reference {
             format: REFERENCE_FORMAT.to_string(),
             source,
             model,
+            calibration,
             digs: records.len(),
             signals: structure(&refs, params, aug),
         })
@@ -397,6 +405,7 @@ mod tests {
             format: REFERENCE_FORMAT.into(),
             source: vec!["healthy".into()],
             model: "nominal".into(),
+            calibration: Vec::new(),
             digs: 4,
             signals,
         }

@@ -355,11 +355,20 @@ pub fn write_outputs(
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let r = &a.result;
     let mut effects: Vec<ModelEffect> = a.model.effects.clone();
-    effects.extend(r.named_effects.iter().map(|e| ModelEffect {
-        name: e.name.to_string(),
-        magnitude: e.magnitude,
-        uncertainty: e.uncertainty,
-    }));
+    for e in &r.named_effects {
+        // A refitted calibration effect adds its change to the calibrated value.
+        match effects.iter_mut().find(|m| m.name == e.name) {
+            Some(m) => {
+                m.magnitude += e.magnitude;
+                m.uncertainty = m.uncertainty.hypot(e.uncertainty);
+            }
+            None => effects.push(ModelEffect {
+                name: e.name.to_string(),
+                magnitude: e.magnitude,
+                uncertainty: e.uncertainty,
+            }),
+        }
+    }
     let model = AugmentedModel::new(
         a.model.params.clone(),
         effects,

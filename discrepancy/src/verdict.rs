@@ -464,6 +464,7 @@ mod tests {
             format: REFERENCE_FORMAT.into(),
             source: vec!["healthy".into()],
             model: "nominal".into(),
+            calibration: Vec::new(),
             digs: 4,
             signals: Signal::ALL
                 .iter()

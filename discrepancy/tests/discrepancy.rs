@@ -223,4 +223,41 @@ fn a_plant_change_outside_the_library_is_not_silent_and_a_clean_session_stays_cl
     let a = run_analysis(&args).expect("analysis");
     let v = a.verdict.as_ref().expect("a verdict");
     assert_eq!(v.outcome, Outcome::Expected, "{v:#?}");
+    // A reference whose healthy sessions carry a few ms of transport delay calibrates the starting
+    // model; a larger hidden delay is still named, as the change on top of that calibration, and
+    // model.json carries their sum.
+    let mut reference: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("reference.json")).unwrap())
+            .unwrap();
+    reference["calibration"] = serde_json::json!([
+        {"name": "transport_delay", "magnitude": 0.005, "uncertainty": 0.0002}
+    ]);
+    let calibrated = tmp.path().join("calibrated.json");
+    std::fs::write(&calibrated, reference.to_string()).unwrap();
+    let delayed = tmp.path().join("delayed");
+    session(&delayed, Some("transport_delay=0.1"), 34);
+    let delayed_out = tmp.path().join("delayed_report");
+    let mut args = AnalyseArgs::new(vec![delayed], delayed_out.clone());
+    args.reference = vec![calibrated];
+    let a = run_analysis(&args).expect("analysis");
+    assert!(a.model.provenance.contains("calibrated on the reference"));
+    let named = a
+        .result
+        .named_effects
+        .iter()
+        .find(|e| e.name == "transport_delay")
+        .expect("the delay beyond the calibration is named");
+    assert!((named.magnitude - 0.095).abs() < 0.25 * 0.095, "{named:?}");
+    let model = discrepancy::AugmentedModel::from_json(
+        &std::fs::read_to_string(delayed_out.join("model.json")).unwrap(),
+    )
+    .unwrap();
+    let delays: Vec<f64> = model
+        .effects
+        .iter()
+        .filter(|e| e.name == "transport_delay")
+        .map(|e| e.magnitude)
+        .collect();
+    assert_eq!(delays.len(), 1, "{:?}", model.effects);
+    assert!((delays[0] - 0.005 - named.magnitude).abs() < 1e-12);
 }
