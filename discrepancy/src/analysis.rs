@@ -183,6 +183,7 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
             .flat_map(|r| &r.calibration)
             .filter_map(|e| crate::Candidate::from_name(&e.name))
             .collect(),
+        parameters: Some(crate::parameters::ParameterLibrary::derive(&machine)?),
         ..AnalysisConfig::default()
     };
     let bar = (!args.quiet && std::io::IsTerminal::is_terminal(&std::io::stdout())).then(|| {
@@ -210,7 +211,7 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
             .iter()
             .filter(|rec| result.test_digs.contains(&rec.index))
             .collect();
-        let after = structure(&test, &model.params, &result.augmentation);
+        let after = structure(&test, &result.params, &result.augmentation);
         verdict::judge(&result, &after, r)
     });
     for w in &warnings {

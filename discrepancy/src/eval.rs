@@ -19,7 +19,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::analysis::{AnalyseArgs, load_reference, run_analysis};
-use crate::plant::{PlantChange, PlantFile, default_plant_changes};
+use crate::plant::{PlantChange, PlantFile, PlantOp, default_plant_changes};
 use crate::session::{load_machine, load_model, prepare_sessions};
 use crate::verdict::Outcome;
 use lab::demo::{DemoArgs, DemoStrategy, SoilContact, run_session};
@@ -402,6 +402,9 @@ fn run_case(
             .map(|m| crate::report::reduction_percent(m.acted.1, m.acted.2))
             .min_by(f64::total_cmp);
     }
+    if let Hidden::Plant(p) = hidden {
+        magnitude_error_percent = parameter_error_percent(p, &r.named_effects);
+    }
     let verdict = analysis.verdict.as_ref();
     let max_ratio = verdict.and_then(|v| {
         v.signals
@@ -438,6 +441,25 @@ fn run_case(
         max_ratio,
         warnings: analysis.warnings.len(),
     })
+}
+
+/// The error of a named machine parameter against a machine plant change of the same key, in % of
+/// the change (`None` when the change is not named as its parameter).
+fn parameter_error_percent(p: &PlantChange, named: &[crate::NamedEffect]) -> Option<f64> {
+    if p.file != PlantFile::Machine {
+        return None;
+    }
+    let e = named
+        .iter()
+        .find(|e| e.kind == "parameter" && e.name == p.key)?;
+    let machine = planner::machine::MachineConfig::default_machine().ok()?;
+    let library = crate::parameters::ParameterLibrary::derive(&machine).ok()?;
+    let nominal = library.parameters[library.find(&p.key)?].nominal;
+    let truth = match p.op {
+        PlantOp::Scale(f) => nominal * f,
+        PlantOp::Set(v) => v,
+    };
+    (truth != nominal).then(|| 100.0 * (e.magnitude - truth) / (truth - nominal))
 }
 
 /// The outcomes against the reference per kind of case, and per plant change over its seeds (the
@@ -542,13 +564,15 @@ pub fn outcome_text(results: &[CaseResult]) -> String {
                 cases
                     .iter()
                     .map(|c| format!(
-                        "{}{}",
+                        "{}{}{}",
                         c.outcome.map_or("error", Outcome::name),
                         if c.named == "none" || c.named == "error" {
                             String::new()
                         } else {
                             format!(" ({})", c.named)
-                        }
+                        },
+                        c.magnitude_error_percent
+                            .map_or(String::new(), |e| format!(" {e:+.0} % of the change"))
                     ))
                     .collect::<Vec<_>>()
                     .join("; ")

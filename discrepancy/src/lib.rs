@@ -17,6 +17,8 @@
 //!   a record from the measured inputs and predicts cylinder velocities (Eq. 1 orifices), pump pressures
 //!   (open-centre flow balance), cylinder forces (Eq. 3 with Appendix gravity and inertia) and the soil
 //!   force on the bucket (FEE, Eqs. 14-18);
+//! - [`parameters`]: the machine's own parameters as candidates (parameter drift), derived from the
+//!   fields of its machine file that the grey-box parameters come from;
 //! - [`stats`]: residuals per signal, stage and operating regime, whiteness and input cross-correlation;
 //! - [`fit`]: bounded 1-D fits of each candidate on training digs, held-out BIC scoring, greedy forward
 //!   selection and the uncertainty from the cost curvature;
@@ -37,6 +39,7 @@ pub mod eval;
 pub mod fit;
 pub mod greybox;
 pub mod model;
+pub mod parameters;
 pub mod plant;
 pub mod read;
 pub mod reference;

@@ -355,7 +355,8 @@ pub fn write_outputs(
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let r = &a.result;
     let mut effects: Vec<ModelEffect> = a.model.effects.clone();
-    for e in &r.named_effects {
+    // The named machine parameters are in the parameters (`r.params`), the effects listed.
+    for e in r.named_effects.iter().filter(|e| e.kind == "effect") {
         // A refitted calibration effect adds its change to the calibrated value.
         match effects.iter_mut().find(|m| m.name == e.name) {
             Some(m) => {
@@ -370,7 +371,7 @@ pub fn write_outputs(
         }
     }
     let model = AugmentedModel::new(
-        a.model.params.clone(),
+        r.params.clone(),
         effects,
         format!(
             "augmented by excavator-ctl discrepancy from {} ({})",

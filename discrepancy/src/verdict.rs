@@ -17,6 +17,7 @@ use serde::Serialize;
 
 use crate::effects::CandidateEffect as _;
 use crate::fit::{AnalysisResult, SignalRms};
+use crate::parameters::ParameterLibrary;
 use crate::reference::{MIN_JUDGED_SAMPLES, Reference, Regressor, SignalStructure};
 use crate::{Candidate, Signal};
 
@@ -92,7 +93,7 @@ pub struct SignalVerdict {
     /// Ljung-Box `Q(20)` of the held-out residual over the reference's.
     pub whiteness_ratio: f64,
     /// Named effects acting on the signal.
-    pub named: Vec<&'static str>,
+    pub named: Vec<String>,
     /// The outcome.
     pub outcome: Outcome,
     /// One line for the report.
@@ -117,7 +118,7 @@ pub struct Unexplained {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct NamedOutcome {
     /// Effect name.
-    pub name: &'static str,
+    pub name: String,
     /// [`Outcome::Named`] or [`Outcome::PartlyExplained`].
     pub outcome: Outcome,
     /// Its signals that stay beyond the reference, `(signal, ratio to expected)`.
@@ -153,16 +154,17 @@ pub struct Verdict {
 }
 
 /// The candidates whose signals include `sig`, among the named ones.
-fn named_acting(result: &AnalysisResult, sig: Signal) -> Vec<&'static str> {
+fn named_acting(result: &AnalysisResult, sig: Signal) -> Vec<String> {
     result
         .named_effects
         .iter()
-        .filter(|e| {
-            Candidate::ALL
+        .filter(|e| match e.kind {
+            "parameter" => ParameterLibrary::groups().contains(sig.index()),
+            _ => Candidate::ALL
                 .iter()
-                .any(|c| c.name() == e.name && c.groups().contains(sig.index()))
+                .any(|c| c.name() == e.name && c.groups().contains(sig.index())),
         })
-        .map(|e| e.name)
+        .map(|e| e.name.clone())
         .collect()
 }
 
@@ -198,7 +200,7 @@ fn judge_signal(
     after: &SignalStructure,
     reference: &Reference,
     test_digs: usize,
-    named: Vec<&'static str>,
+    named: Vec<String>,
 ) -> SignalVerdict {
     let refs = &reference.signals[sig.index()];
     let expected = reference.expected_rms(sig);
@@ -336,7 +338,7 @@ pub fn judge(result: &AnalysisResult, after: &[SignalStructure], reference: &Ref
                 .map(|v| (v.signal, v.ratio_after))
                 .collect();
             NamedOutcome {
-                name: e.name,
+                name: e.name.clone(),
                 outcome: if remaining.is_empty() {
                     Outcome::Named
                 } else {
@@ -438,16 +440,17 @@ mod tests {
             named_effects: named
                 .iter()
                 .map(|n| NamedEffect {
-                    name: n,
+                    name: n.to_string(),
                     kind: "effect",
                     magnitude: 0.1,
                     uncertainty: 0.01,
                     unit: "",
-                    description: "",
+                    description: String::new(),
                     heldout_delta_bic: 500.0,
                 })
                 .collect(),
             augmentation: crate::Augmentation::nominal(),
+            params: crate::AugmentedModel::nominal().unwrap().params,
             rounds: Vec::new(),
             rms,
             localisation: Vec::new(),
