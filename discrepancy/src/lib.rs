@@ -26,7 +26,7 @@
 //!   [`planner::dig_model::ActuatorDynamics`] so the planner's dig model runs with it;
 //! - [`read`] and [`session`]: session folders (`trace.log` + `scans/`) -> prepared records per dig;
 //! - [`sufficiency`]: whether the sessions hold enough completed digs and samples to name anything;
-//! - [`reference`] and [`verdict`]: what "expected" is (the residual structure of sessions declared
+//! - [`mod@reference`] and [`verdict`]: what "expected" is (the residual structure of sessions declared
 //!   healthy) and every signal judged against it: expected, named, partly explained, unexplained;
 //! - [`report`]: `report.json`, `report.md`, the figures and `model.json` of an analysis;
 //! - [`analysis`], [`eval`], [`command`]: `excavator-ctl discrepancy analyse`, `eval` and `bench`, and

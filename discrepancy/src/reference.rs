@@ -28,7 +28,7 @@ pub const REFERENCE_FORMAT: &str = "excavator-discrepancy-reference";
 pub const MIN_TOLERANCE: f64 = 1.5;
 
 /// Quantile of the bootstrap RMS ratio taken as the tolerance.
-const TOLERANCE_QUANTILE: f64 = 0.99;
+pub const TOLERANCE_QUANTILE: f64 = 0.99;
 
 /// Bootstrap draws of the tolerance.
 const BOOTSTRAP_DRAWS: usize = 400;
