@@ -51,7 +51,18 @@ async fn the_planned_session_runs_over_a_bus_in_scaled_real_time() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("run");
     let scan_addr = free_port();
-    let time_scale = TimeScale::new(4.0).unwrap();
+    let time_scale = TimeScale::new(2.0).unwrap();
+    // The loop shares the test machine's cores with the simulator and other tests: at a load of
+    // several times the core count its 10 ms tick slips past the default 30 ms sensor age and the
+    // five automatic re-arms run out before the first dig. The wider timing of a loaded machine
+    // (the same as the HIL tests' in a TCG VM) keeps the session going; the plumbing is under test.
+    let safety = dir.path().join("safety.toml");
+    std::fs::write(
+        &safety,
+        "[safety]\nsensor_max_age_s = 0.1\nstatus_max_age_s = 0.6\narm_timeout_s = 2.0\n\
+         max_auto_rearms = 1000\n",
+    )
+    .unwrap();
     let (sim, _, _) = lab::demo::setup(&DemoArgs::planned(out.clone())).unwrap();
     let bus = InProcessBus::with_wall_clock("vcan0");
     let sim_node = bus.attach();
@@ -83,7 +94,7 @@ async fn the_planned_session_runs_over_a_bus_in_scaled_real_time() {
         listen_only: false,
         machine: None,
         maps: None,
-        config: None,
+        config: Some(safety),
         key_file: Some(key_file),
         trace: None,
         digs: Some(2),
@@ -96,8 +107,8 @@ async fn the_planned_session_runs_over_a_bus_in_scaled_real_time() {
         time_scale,
         out: Some(out.clone()),
     };
-    // A budget far above the session's ~2 x 30 s at 4x; the test fails if it is what stops it.
-    let budget = tokio::time::sleep(Duration::from_secs(150));
+    // A budget far above the session's ~2 x 30 s at 2x; the test fails if it is what stops it.
+    let budget = tokio::time::sleep(Duration::from_secs(240));
     lab::wire::run_on(&ctl_node, Some(recorder), &args, budget)
         .await
         .unwrap();
