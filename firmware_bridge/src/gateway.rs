@@ -1419,8 +1419,9 @@ mod tests {
         let mut g = Gateway::default();
         let mut l = Link::default();
         g.on_frame(&l.hb(&g, RequestedMode::ArmPosition, 0), 0.0);
-        g.on_frame(&l.setpoint(&g, [0.0, 0.0, 0.0, 0.0]), 0.0);
-        g.on_frame(&l.setpoint(&g, [0.0, -1.0, 2.0, 0.0]), 0.0);
+        g.on_frame(&l.setpoint(&g, [0.0, -1.0, -1.0, 0.0]), 0.0);
+        // On the wire (boom to +-1.638 rad) but past the gateway's boom range (+-1.6 rad).
+        g.on_frame(&l.setpoint(&g, [1.62, -1.0, -1.0, 0.0]), 0.0);
         assert!(g.faults().contains(GatewayFaults::SETPOINT_OUT_OF_RANGE));
     }
 

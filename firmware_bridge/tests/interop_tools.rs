@@ -54,11 +54,17 @@ fn varied_messages() -> Vec<Message> {
             left_m: (f - 30.0) * 1234.5678,
             right_m: f * 0.0001,
         }));
+        // Each setpoint on its own signal's grid and range (the joints' ranges differ).
+        let on_grid = |sig: &dbc::SignalDesc, k: i64| {
+            let steps = sig.raw_max - sig.raw_min + 1;
+            let raw = sig.raw_min + (i64::from(i) * k).rem_euclid(steps);
+            raw as f64 * sig.factor + sig.offset
+        };
         out.push(Message::PositionSetpoint(PositionSetpoint {
-            boom_rad: angle(3),
-            stick_rad: -angle(5),
-            bucket_rad: angle(11) * 0.5,
-            swing_rad: angle(13),
+            boom_rad: on_grid(&dbc::position_setpoint::BOOM_SETPOINT, 3),
+            stick_rad: on_grid(&dbc::position_setpoint::STICK_SETPOINT, 5),
+            bucket_rad: on_grid(&dbc::position_setpoint::BUCKET_SETPOINT, 11),
+            swing_rad: on_grid(&dbc::position_setpoint::SWING_SETPOINT, 13),
         }));
         out.push(Message::ControllerStatus(ControllerStatus {
             activity: Activity::Dig,

@@ -6,9 +6,13 @@ use firmware_bridge::trace::{ReadMode, TraceReader, parse_line};
 use firmware_bridge::{CanFrame, CanId, dbc};
 use proptest::prelude::*;
 
-/// The angle range of the DBC (the same for angles and setpoints).
+/// The angle range of the DBC's joint angles.
 fn angle() -> std::ops::RangeInclusive<f64> {
-    let sig = dbc::joint_angles::BOOM_ANGLE;
+    range(&dbc::joint_angles::BOOM_ANGLE)
+}
+
+/// A signal's range in the DBC (each joint's setpoint has its own).
+fn range(sig: &dbc::SignalDesc) -> std::ops::RangeInclusive<f64> {
     sig.min..=sig.max
 }
 
@@ -114,14 +118,20 @@ fn message() -> impl Strategy<Value = Message> {
                     }
                 )
             ),
-        (angle(), angle(), angle(), angle()).prop_map(|(a, b, c, d)| {
-            Message::PositionSetpoint(PositionSetpoint {
-                boom_rad: a,
-                stick_rad: b,
-                bucket_rad: c,
-                swing_rad: d,
-            })
-        }),
+        (
+            range(&dbc::position_setpoint::BOOM_SETPOINT),
+            range(&dbc::position_setpoint::STICK_SETPOINT),
+            range(&dbc::position_setpoint::BUCKET_SETPOINT),
+            range(&dbc::position_setpoint::SWING_SETPOINT),
+        )
+            .prop_map(|(a, b, c, d)| {
+                Message::PositionSetpoint(PositionSetpoint {
+                    boom_rad: a,
+                    stick_rad: b,
+                    bucket_rad: c,
+                    swing_rad: d,
+                })
+            }),
         (0u8..5, 0u8..16).prop_map(|(mode, alive)| {
             Message::ControllerHeartbeat(ControllerHeartbeat {
                 mode: [

@@ -66,7 +66,7 @@ pub fn sample_messages() -> Vec<Message> {
     out.push(Message::PositionSetpoint(PositionSetpoint {
         boom_rad: 0.5,
         stick_rad: -1.0,
-        bucket_rad: 2.0,
+        bucket_rad: 0.6994,
         swing_rad: -3.0,
     }));
     out.push(Message::GatewaySession(GatewaySession {
