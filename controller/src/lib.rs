@@ -36,6 +36,7 @@ pub mod run;
 pub mod safety;
 pub mod scan_client;
 pub mod session;
+pub mod state_file;
 
 pub use cycle::{Action, CycleConfig, DigStats, WorkCycle};
 pub use estimate::{Estimator, MachineState};
