@@ -9,6 +9,8 @@
 //!   decode errors, joint limits, e-stop, gateway and bus faults, listen-only.
 //! - [`cycle`]: the work cycle: scan, swing to the dig, Autodig with the perception enhancements or
 //!   cleanup, weigh, swing to the spoil pile, dump, return; tracking backwards; per-dig statistics.
+//! - [`config`]: [`ControllerConfig`] (the TOML of `excavator-ctl run --config`), its loading with
+//!   errors naming file, line and field, and the parameter checks every part's `validate()` uses.
 //! - [`node`]: [`ControllerNode`], the synchronous, clock-agnostic control step combining the three:
 //!   frames in, frames out, no I/O.
 //! - [`planned`]: the dig planner as the work cycle's action source (thesis 5.3, Fig. 42), and the
@@ -28,6 +30,7 @@
 //!        Safety::tick (handshake, faults) --> frames: valve commands or a setpoint, then the heartbeat
 //! ```
 
+pub mod config;
 pub mod cycle;
 pub mod estimate;
 pub mod node;
@@ -38,9 +41,10 @@ pub mod scan_client;
 pub mod session;
 pub mod state_file;
 
+pub use config::ControllerConfig;
 pub use cycle::{Action, CycleConfig, DigStats, WorkCycle};
 pub use estimate::{Estimator, MachineState};
-pub use node::{ControllerConfig, ControllerNode, Outbox};
+pub use node::{ControllerNode, Outbox};
 pub use safety::{ArmMode, Fault, Safety, SafetyConfig};
 
 /// Errors building the controller.

@@ -24,14 +24,7 @@
 //! track valves every [`ControllerConfig::track_every_steps`] steps (20 Hz, docs/protocol.md), and at
 //! once when they must become neutral.
 //!
-//! # Configuration
-//!
-//! [`ControllerConfig`] (the TOML of `excavator-ctl run --config`) and each of its parts has a
-//! `validate()` that checks every safety and timing parameter: finite, in range, consistent with the
-//! others and with the protocol's timing (sensor period, gateway watchdog). The constructors
-//! ([`ControllerNode::new`], [`Safety::new`], [`Estimator::new`], [`WorkCycle::new`]) call it, so a
-//! configuration built in code cannot skip it; [`ControllerConfig::from_toml_file`] adds the file and
-//! line: `plan.toml:12: safety.sensor_max_age_s = nan: must be finite and in (0.01, 0.1] s ...`.
+//! Its configuration, [`ControllerConfig`], and the checks of every parameter live in [`crate::config`].
 
 use firmware_bridge::messages::{
     Activity, AutodigStageCode, AuxValveCommand, ControllerStatus as StatusMessage, Message,
@@ -41,19 +34,16 @@ use firmware_bridge::transport::BusFault;
 use firmware_bridge::{
     CONTROLLER_ADDRESS, CanFrame, CanId, DecodeError, GATEWAY_ADDRESS, J1939Id, TimestampedFrame,
 };
-use planner::autodig::{AutodigConfig, AutodigMaps, Stage};
-use planner::cleanup::CleanupConfig;
+use planner::autodig::{AutodigMaps, Stage};
 use planner::kinematics::{Joint, Kinematics};
 use planner::machine::MachineConfig;
 use planner::terrain::TerrainGrid;
-use serde::{Deserialize, Serialize};
-use std::fmt;
-use std::path::Path;
 
 use crate::ControllerError;
-use crate::cycle::{Action, CycleCommand, CycleConfig, DigStats, Phase, WorkCycle};
-use crate::estimate::{Estimator, EstimatorConfig, MachineState};
-use crate::safety::{ArmMode, Fault, Safety, SafetyConfig, SafetyState, bus_fault_stops_motion};
+pub use crate::config::{ConfigFileError, ControllerConfig, MAX_TRACK_EVERY_STEPS, ParamError};
+use crate::cycle::{Action, CycleCommand, DigStats, Phase, WorkCycle};
+use crate::estimate::{Estimator, MachineState};
+use crate::safety::{ArmMode, Fault, Safety, SafetyState, bus_fault_stops_motion};
 
 /// Most frames one step sends: six valve commands or a setpoint, neutral valves, and the heartbeat.
 pub const OUTBOX_CAPACITY: usize = 16;
@@ -130,479 +120,6 @@ impl<'a> IntoIterator for &'a Outbox {
     fn into_iter(self) -> Self::IntoIter {
         self.as_slice().iter()
     }
-}
-
-/// Everything the node is configured with (besides the machine and the Autodig maps).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct ControllerConfig {
-    /// Safety layer.
-    pub safety: SafetyConfig,
-    /// Estimator.
-    pub estimator: EstimatorConfig,
-    /// Work cycle and plan.
-    pub cycle: CycleConfig,
-    /// Autodig parameters. The relief pressures and the bucket capacity are taken from the machine
-    /// file at construction; the perception flags are set per dig.
-    pub autodig: AutodigConfig,
-    /// Cleanup parameters (relief pressures from the machine file).
-    pub cleanup: CleanupConfig,
-    /// Send the track valve commands (and the `ControllerStatus`) every this many steps (5: 20 Hz at
-    /// 100 Hz), 1 to [`MAX_TRACK_EVERY_STEPS`]. Default 5.
-    pub track_every_steps: u32,
-    /// Start the work cycle at the first step (otherwise call [`ControllerNode::start`]). Default true.
-    pub autostart: bool,
-}
-
-impl Default for ControllerConfig {
-    fn default() -> Self {
-        Self {
-            safety: SafetyConfig::default(),
-            estimator: EstimatorConfig::default(),
-            cycle: CycleConfig::default(),
-            autodig: AutodigConfig::default(),
-            // The gateway's position loop lags a lowering setpoint by several centimetres; a slower
-            // probe and a larger lag threshold keep that lag from passing for floor contact. The
-            // planner starts a cleanup above what is left of the bench (up to about 2.5 m over the
-            // floor on the default bench), so the probe may need to go that far down.
-            cleanup: CleanupConfig {
-                descent_speed_m_per_s: 0.05,
-                probe_lag_m: 0.15,
-                probe_max_depth_m: 3.0,
-                ..CleanupConfig::default()
-            },
-            track_every_steps: 5,
-            autostart: true,
-        }
-    }
-}
-
-/// Most control steps between two track valve commands (and `ControllerStatus` messages): 50 ms at
-/// the 10 ms control period, half the gateway's 100 ms command timeout, so a moving track is never
-/// stopped by a stale command.
-pub const MAX_TRACK_EVERY_STEPS: u32 = 5;
-
-impl ControllerConfig {
-    /// Checks every part ([`SafetyConfig::validate`], [`EstimatorConfig::validate`],
-    /// [`CycleConfig::validate`], the Autodig and cleanup parameters) and `track_every_steps`.
-    ///
-    /// # Errors
-    /// The first [`ParamError`], naming the field as the TOML file spells it.
-    pub fn validate(&self) -> Result<(), ParamError> {
-        self.safety.validate()?;
-        self.estimator.validate()?;
-        self.cycle.validate()?;
-        self.autodig.validate().map_err(|e| match e {
-            planner::autodig::AutodigError::InvalidConfig { field, reason } => {
-                ParamError::new("autodig", field, None, reason)
-            }
-            other => ParamError::new("autodig", "", None, other.to_string()),
-        })?;
-        self.cleanup.validate().map_err(|e| match e {
-            planner::cleanup::CleanupError::InvalidConfig { field, reason } => {
-                ParamError::new("cleanup", field, None, reason)
-            }
-            other => ParamError::new("cleanup", "", None, other.to_string()),
-        })?;
-        check_count(
-            "",
-            "track_every_steps",
-            u64::from(self.track_every_steps),
-            1,
-            u64::from(MAX_TRACK_EVERY_STEPS),
-            "track commands at least every 50 ms, half the gateway's 100 ms command timeout",
-        )
-    }
-
-    /// Parses and checks a TOML file's text; missing fields take their defaults.
-    ///
-    /// # Errors
-    /// [`ControllerError::Config`] naming the line and the field; [`Self::from_toml_file`] names the
-    /// file too.
-    pub fn from_toml_str(text: &str) -> Result<Self, ControllerError> {
-        Self::from_toml_str_named(text, "").map_err(|e| ControllerError::Config {
-            field: "controller config",
-            reason: e.to_string(),
-        })
-    }
-
-    /// Reads, parses and checks a controller config file (`excavator-ctl run --config`).
-    ///
-    /// # Errors
-    /// [`ConfigFileError`] naming the file, the line and the field.
-    pub fn from_toml_file(path: &Path) -> Result<Self, ConfigFileError> {
-        let origin = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigFileError::Io {
-            origin: origin.clone(),
-            source,
-        })?;
-        Self::from_toml_str_named(&text, &origin)
-    }
-
-    /// Parses and checks TOML text, naming `origin` (a file name; empty: none) in errors.
-    ///
-    /// # Errors
-    /// [`ConfigFileError::Parse`] for bad TOML or a value of the wrong type,
-    /// [`ConfigFileError::Invalid`] for a value out of range or inconsistent.
-    pub fn from_toml_str_named(text: &str, origin: &str) -> Result<Self, ConfigFileError> {
-        let config: Self = toml::from_str(text).map_err(|e| {
-            let offset = e.span().map(|s| s.start);
-            let mut message = e.message().trim().to_owned();
-            if let Some(field) = offset.and_then(|o| field_at_offset(text, o))
-                && !message.contains(&field)
-            {
-                message = format!("{field}: {message}");
-            }
-            ConfigFileError::Parse {
-                origin: origin.to_owned(),
-                line: offset.map(|o| line_of_offset(text, o)),
-                message,
-            }
-        })?;
-        config
-            .validate()
-            .map_err(|error| ConfigFileError::Invalid {
-                origin: origin.to_owned(),
-                line: line_of_field(text, &error.path()),
-                error: Box::new(error),
-            })?;
-        Ok(config)
-    }
-}
-
-/// A configuration value that is not finite, out of range, or inconsistent with another.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{}{}: {rule}", self.path(), value_suffix(self.value.as_deref()))]
-pub struct ParamError {
-    /// The table of the controller config the value lives in (`safety`, `estimator`, `cycle`,
-    /// `autodig`, `cleanup`; empty for top-level keys).
-    pub section: &'static str,
-    /// The key inside it as the file spells it, dotted through nested tables and array entries
-    /// (`sensor_max_age_s`, `joint.kp`, `actions.2.swing_deg`).
-    pub key: String,
-    /// The value as the file states it (degrees for `_deg` keys), when known.
-    pub value: Option<String>,
-    /// The rule it breaks.
-    pub rule: String,
-}
-
-fn value_suffix(value: Option<&str>) -> String {
-    value.map(|v| format!(" = {v}")).unwrap_or_default()
-}
-
-impl ParamError {
-    /// An error for `key` in `section`.
-    pub fn new(
-        section: &'static str,
-        key: impl Into<String>,
-        value: Option<String>,
-        rule: impl Into<String>,
-    ) -> Self {
-        Self {
-            section,
-            key: key.into(),
-            value,
-            rule: rule.into(),
-        }
-    }
-
-    /// The dotted path of the field in the controller config (`safety.sensor_max_age_s`).
-    pub fn path(&self) -> String {
-        match (self.section.is_empty(), self.key.is_empty()) {
-            (true, _) => self.key.clone(),
-            (false, true) => self.section.to_owned(),
-            (false, false) => format!("{}.{}", self.section, self.key),
-        }
-    }
-}
-
-impl From<ParamError> for ControllerError {
-    fn from(e: ParamError) -> Self {
-        let (field, reason) = if e.section.is_empty() {
-            ("controller", e.to_string())
-        } else {
-            (
-                e.section,
-                format!("{}{}: {}", e.key, value_suffix(e.value.as_deref()), e.rule),
-            )
-        };
-        ControllerError::Config { field, reason }
-    }
-}
-
-/// A controller config file that cannot be used.
-#[derive(Debug, thiserror::Error)]
-pub enum ConfigFileError {
-    /// The file cannot be read.
-    #[error("{origin}: cannot read: {source}")]
-    Io {
-        /// The file name.
-        origin: String,
-        /// The error.
-        source: std::io::Error,
-    },
-    /// Not TOML, an unknown key, or a value of the wrong type (the message names the field).
-    #[error("{}: {message}", place(origin, *line))]
-    Parse {
-        /// The file name (empty: none).
-        origin: String,
-        /// 1-based line, when known.
-        line: Option<usize>,
-        /// The parser's message.
-        message: String,
-    },
-    /// A value out of range or inconsistent.
-    #[error("{}: {error}", place(origin, *line))]
-    Invalid {
-        /// The file name (empty: none).
-        origin: String,
-        /// 1-based line of the field (or of its table when the value is a default), when known.
-        line: Option<usize>,
-        /// The field and what is wrong with it (boxed: errors are rare, results common).
-        error: Box<ParamError>,
-    },
-}
-
-fn place(origin: &str, line: Option<usize>) -> String {
-    match (origin.is_empty(), line) {
-        (false, Some(l)) => format!("{origin}:{l}"),
-        (false, None) => origin.to_owned(),
-        (true, Some(l)) => format!("line {l}"),
-        (true, None) => "controller config".to_owned(),
-    }
-}
-
-/// An interval a parameter must lie in; only finite values lie in one.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct Limits {
-    lo: f64,
-    lo_open: bool,
-    hi: f64,
-    hi_open: bool,
-    unit: &'static str,
-}
-
-impl Limits {
-    /// `[lo, hi]`.
-    pub(crate) const fn closed(lo: f64, hi: f64, unit: &'static str) -> Self {
-        Self {
-            lo,
-            lo_open: false,
-            hi,
-            hi_open: false,
-            unit,
-        }
-    }
-
-    /// `(lo, hi)`.
-    pub(crate) const fn open(lo: f64, hi: f64, unit: &'static str) -> Self {
-        Self {
-            lo,
-            lo_open: true,
-            hi,
-            hi_open: true,
-            unit,
-        }
-    }
-
-    /// `(lo, hi]`.
-    pub(crate) const fn above(lo: f64, hi: f64, unit: &'static str) -> Self {
-        Self {
-            lo,
-            lo_open: true,
-            hi,
-            hi_open: false,
-            unit,
-        }
-    }
-
-    /// `[lo, hi)`.
-    pub(crate) const fn below(lo: f64, hi: f64, unit: &'static str) -> Self {
-        Self {
-            lo,
-            lo_open: false,
-            hi,
-            hi_open: true,
-            unit,
-        }
-    }
-
-    fn contains(&self, v: f64) -> bool {
-        let above_lo = if self.lo_open {
-            v > self.lo
-        } else {
-            v >= self.lo
-        };
-        let below_hi = if self.hi_open {
-            v < self.hi
-        } else {
-            v <= self.hi
-        };
-        v.is_finite() && above_lo && below_hi
-    }
-}
-
-impl fmt::Display for Limits {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "{}{}, {}{}",
-            if self.lo_open { '(' } else { '[' },
-            self.lo,
-            self.hi,
-            if self.hi_open { ')' } else { ']' }
-        )?;
-        if !self.unit.is_empty() {
-            write!(f, " {}", self.unit)?;
-        }
-        Ok(())
-    }
-}
-
-/// A value as TOML spells it (`nan`, `inf`, `1e308`, `0.25`).
-pub(crate) fn toml_float(v: f64) -> String {
-    if v.is_nan() {
-        "nan".to_owned()
-    } else if v.is_infinite() {
-        if v > 0.0 { "inf" } else { "-inf" }.to_owned()
-    } else {
-        format!("{v:?}")
-    }
-}
-
-/// `Ok` if `v` is finite and within `limits`; `why` (may be empty) explains the limits.
-pub(crate) fn check(
-    section: &'static str,
-    key: &str,
-    v: f64,
-    limits: Limits,
-    why: &str,
-) -> Result<(), ParamError> {
-    if limits.contains(v) {
-        return Ok(());
-    }
-    let why = if why.is_empty() {
-        String::new()
-    } else {
-        format!(" ({why})")
-    };
-    Err(ParamError::new(
-        section,
-        key,
-        Some(toml_float(v)),
-        format!("must be finite and in {limits}{why}"),
-    ))
-}
-
-/// [`check`] for an angle held in radians and written in degrees (a `_deg` key); `limits` in
-/// degrees.
-pub(crate) fn check_deg(
-    section: &'static str,
-    key: &str,
-    v_rad: f64,
-    limits_deg: Limits,
-) -> Result<(), ParamError> {
-    check(section, key, v_rad.to_degrees(), limits_deg, "")
-}
-
-/// `Ok` if the count `v` is within `[lo, hi]`; `why` (may be empty) explains the limits.
-pub(crate) fn check_count(
-    section: &'static str,
-    key: &str,
-    v: u64,
-    lo: u64,
-    hi: u64,
-    why: &str,
-) -> Result<(), ParamError> {
-    if (lo..=hi).contains(&v) {
-        return Ok(());
-    }
-    let why = if why.is_empty() {
-        String::new()
-    } else {
-        format!(" ({why})")
-    };
-    Err(ParamError::new(
-        section,
-        key,
-        Some(v.to_string()),
-        format!("must be in [{lo}, {hi}]{why}"),
-    ))
-}
-
-fn line_of_offset(text: &str, offset: usize) -> usize {
-    text.get(..offset.min(text.len()))
-        .map_or(0, |s| s.bytes().filter(|&b| b == b'\n').count())
-        + 1
-}
-
-/// The 1-based line of the dotted field `path` (`cycle.actions.2.start.x_m`, array entries by index)
-/// in TOML `text`: the line of its key, or, for a value the file leaves at its default, of the
-/// deepest table on the path that the file has.
-fn line_of_field(text: &str, path: &str) -> Option<usize> {
-    use toml::de::{DeTable, DeValue};
-    let doc = DeTable::parse(text).ok()?;
-    let mut table: &DeTable<'_> = doc.get_ref();
-    let mut value: Option<&DeValue<'_>> = None;
-    let mut found: Option<usize> = None;
-    for segment in path.split('.') {
-        let next = match value {
-            None => table
-                .iter()
-                .find(|(k, _)| k.get_ref().as_ref() == segment)
-                .map(|(k, v)| (k.span().start, v)),
-            Some(DeValue::Array(items)) => segment
-                .parse::<usize>()
-                .ok()
-                .and_then(|i| items.get(i))
-                .map(|v| (v.span().start, v)),
-            Some(_) => None,
-        };
-        let Some((offset, v)) = next else { break };
-        found = Some(offset);
-        match v.get_ref() {
-            DeValue::Table(t) => {
-                table = t;
-                value = None;
-            }
-            other => value = Some(other),
-        }
-    }
-    found.map(|o| line_of_offset(text, o))
-}
-
-/// The dotted field whose key or value covers byte `offset` of TOML `text` (the deepest one), for
-/// parse errors whose message does not name it.
-fn field_at_offset(text: &str, offset: usize) -> Option<String> {
-    use toml::de::{DeTable, DeValue};
-    fn walk(value: &DeValue<'_>, offset: usize, path: &mut Vec<String>) {
-        match value {
-            DeValue::Table(t) => {
-                for (k, v) in t.iter() {
-                    if k.span().contains(&offset) || v.span().contains(&offset) {
-                        path.push(k.get_ref().to_string());
-                        walk(v.get_ref(), offset, path);
-                        return;
-                    }
-                }
-            }
-            DeValue::Array(items) => {
-                for (i, v) in items.iter().enumerate() {
-                    if v.span().contains(&offset) {
-                        path.push(i.to_string());
-                        walk(v.get_ref(), offset, path);
-                        return;
-                    }
-                }
-            }
-            _ => {}
-        }
-    }
-    // A document with a syntax error has no table to search; its message names the place.
-    let doc = DeTable::parse(text).ok()?;
-    let mut path = Vec::new();
-    walk(&DeValue::Table(doc.into_inner()), offset, &mut path);
-    (!path.is_empty()).then(|| path.join("."))
 }
 
 /// Counters of frames the node did not act on.
@@ -1059,6 +576,12 @@ impl ControllerNode {
     /// swept volume and fault code.
     fn status_message(&mut self) -> StatusMessage {
         self.status_alive = (self.status_alive + 1) % 16;
+        self.bus_status()
+    }
+
+    /// What the controller reports on the bus as `ControllerStatus` now (the last alive counter
+    /// sent), for a view of the session that shows what a trace would.
+    pub fn bus_status(&self) -> StatusMessage {
         let activity = if self.safety.active_fault().is_some() {
             Activity::Faulted
         } else {
@@ -1115,7 +638,12 @@ impl ControllerNode {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::config::toml_float;
+    use crate::cycle::CycleConfig;
+    use crate::estimate::EstimatorConfig;
+    use crate::safety::SafetyConfig;
     use crate::safety::{GATEWAY_STATUS_PERIOD_S, GATEWAY_WATCHDOG_S, SENSOR_PERIOD_S};
+    use std::path::Path;
 
     /// The four settings of issue #23 that gave a session that silently did nothing, or one that
     /// drove the valves for 60 s with the sensor frames cut.

@@ -444,7 +444,13 @@ pub async fn run_session_loop<B: Bus>(
                     monitor.on_received();
                     tracing::trace!(frame = ?tf.frame, "received");
                     if inbox.len() < MAX_INBOX {
-                        inbox.push(tf);
+                        // The node ages sensor data and times faults against the step's `now`, so a
+                        // frame carries the session clock's time of its arrival, not the bus's (wall)
+                        // clock; the trace keeps the bus's timestamp.
+                        inbox.push(TimestampedFrame {
+                            timestamp_ns: clock.now_ns(),
+                            frame: tf.frame,
+                        });
                     } else {
                         stats.dropped += 1;
                         monitor.on_dropped();
@@ -500,6 +506,12 @@ impl SessionClock {
 
     fn now_s(&self) -> f64 {
         self.start.elapsed().as_secs_f64() * self.scale
+    }
+
+    /// [`Self::now_s`] in nanoseconds (a frame's timestamp).
+    fn now_ns(&self) -> u64 {
+        // Saturating float-to-int cast; session time is non-negative and far below 584 years.
+        (self.now_s() * 1e9) as u64
     }
 }
 

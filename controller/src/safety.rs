@@ -59,8 +59,8 @@ use planner::kinematics::Joint;
 use serde::{Deserialize, Serialize};
 
 use crate::ControllerError;
+use crate::config::{Limits, ParamError, check, check_count};
 use crate::estimate::{Estimator, Signal, joint_angle};
-use crate::node::{Limits, ParamError, check, check_count};
 
 /// The gateway mode the controller arms for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]

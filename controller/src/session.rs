@@ -37,6 +37,42 @@ pub trait ScanSource {
     fn take(&mut self) -> Option<Result<Scan, BoxError>>;
 }
 
+/// Watches a session from the control loop (a live view, a recorder): called after every control
+/// step with the node and what the session driver reported for that step. It runs on the control
+/// loop, so it must return at once: hand the data to another thread and drop it when that thread is
+/// behind, never wait. `demo` calls it; `run` can call it at the same point of its loop.
+pub trait SessionObserver {
+    /// After the control step at `time_s` and the driver's [`SessionDriver::after_step`] (its
+    /// `events`); `session` is the planned session when the planner drives (its terrain map).
+    fn after_step(
+        &mut self,
+        time_s: f64,
+        node: &ControllerNode,
+        session: Option<&PlannedSession>,
+        events: &[SessionEvent],
+    );
+
+    /// The session ended at `time_s` because of `reason`.
+    fn finished(&mut self, time_s: f64, reason: &str) {
+        let _ = (time_s, reason);
+    }
+}
+
+/// The observer that watches nothing.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct NoObserver;
+
+impl SessionObserver for NoObserver {
+    fn after_step(
+        &mut self,
+        _time_s: f64,
+        _node: &ControllerNode,
+        _session: Option<&PlannedSession>,
+        _events: &[SessionEvent],
+    ) {
+    }
+}
+
 /// What a pending scan is for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum ScanPurpose {

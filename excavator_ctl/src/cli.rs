@@ -1,6 +1,6 @@
 //! The command line of `excavator-ctl` (clap).
 
-use clap::{Parser, Subcommand};
+use clap::{Args, Parser, Subcommand};
 
 /// The excavator controller: Autodig, cleanup and the work cycle over CAN (after Cannon, CMU 1999).
 #[derive(Debug, Parser)]
@@ -19,8 +19,9 @@ pub enum Command {
     /// the gateway disarmed; --out writes the session folder as `demo` does.
     Run(lab::wire::RunArgs),
     /// The embedded default: the simulator in-process in virtual time and a full autonomous session;
-    /// writes the trace, scans, summary and plots into --out (docs/demo-output.md).
-    Demo(lab::demo::DemoArgs),
+    /// writes the trace, scans, summary and plots into --out (docs/demo-output.md); --live serves it
+    /// to Foxglove as it runs (docs/live-view.md).
+    Demo(DemoCmd),
     /// The thesis's results reproduced in the simulator and the dig model: Tables 1-5, Figs. 52, 53
     /// and 60, the scoreboard of its statements and the results page (docs/results.md).
     Experiment(lab::experiment::ExperimentArgs),
@@ -44,6 +45,17 @@ pub enum Command {
     Discrepancy(discrepancy::command::DiscrepancyArgs),
 }
 
+/// Arguments of `excavator-ctl demo`: the session's and the live view's.
+#[derive(Debug, Args)]
+pub struct DemoCmd {
+    /// The session.
+    #[command(flatten)]
+    pub session: lab::demo::DemoArgs,
+    /// The live view.
+    #[command(flatten)]
+    pub live: live::LiveArgs,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -52,6 +64,23 @@ mod tests {
     #[test]
     fn cli_is_consistent() {
         Cli::command().debug_assert();
+    }
+
+    #[test]
+    fn live_takes_an_optional_address() {
+        let live = |args: &[&str]| {
+            let mut all = vec!["excavator-ctl", "demo"];
+            all.extend_from_slice(args);
+            match Cli::try_parse_from(all).unwrap().command {
+                Command::Demo(d) => d.live,
+                _ => panic!("not demo"),
+            }
+        };
+        assert_eq!(live(&[]).live, None);
+        assert_eq!(live(&["--live"]).live.as_deref(), Some(live::DEFAULT_ADDR));
+        let l = live(&["--live", "0.0.0.0:9000", "--pace", "2"]);
+        assert_eq!(l.live.as_deref(), Some("0.0.0.0:9000"));
+        assert_eq!(l.pace, Some(2.0));
     }
 
     #[test]
@@ -114,6 +143,8 @@ mod tests {
             assert!(Cli::try_parse_from(args).is_err(), "{args:?} parsed");
         }
         assert!(Cli::try_parse_from(["excavator-ctl", "demo", "--digs", "1"]).is_ok());
+        // --pace and --live-queue only with --live.
+        assert!(Cli::try_parse_from(["excavator-ctl", "demo", "--pace", "1"]).is_err());
         assert!(
             Cli::try_parse_from(["excavator-ctl", "discrepancy", "eval", "--digs", "2"]).is_ok()
         );

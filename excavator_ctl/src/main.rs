@@ -7,6 +7,25 @@ mod cli;
 
 use cli::{Cli, Command};
 
+/// `demo`, with the live view when `--live` is given (started outside the runtime: it has its own).
+fn demo(runtime: &tokio::runtime::Runtime, cmd: cli::DemoCmd) -> anyhow::Result<()> {
+    use anyhow::Context as _;
+    if cmd.live.live.is_none() {
+        return runtime.block_on(lab::demo::run(cmd.session));
+    }
+    let (sim, _, _) = lab::demo::setup(&cmd.session)?;
+    let stream = live::LiveStream::start(&cmd.live, &sim.machine).context("--live")?;
+    // The port on stderr: with port 0 this is how a client learns it.
+    eprintln!(
+        "live: serving the session on ws://{}:{} (Foxglove: Open connection)",
+        live::LiveAddr::parse(cmd.live.live.as_deref().unwrap_or(live::DEFAULT_ADDR))
+            .map(|a| a.host)
+            .unwrap_or_default(),
+        stream.port()
+    );
+    runtime.block_on(lab::demo::run_observed(cmd.session, Box::new(stream)))
+}
+
 fn main() -> std::process::ExitCode {
     tracing_subscriber::fmt()
         .with_env_filter(
@@ -14,6 +33,8 @@ fn main() -> std::process::ExitCode {
                 .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
         )
         .with_writer(std::io::stderr)
+        // Colours only for a person at a terminal: a journal, a file or a pipe gets plain text.
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
     let cli = Cli::parse();
     let runtime = match tokio::runtime::Builder::new_current_thread()
@@ -28,7 +49,7 @@ fn main() -> std::process::ExitCode {
     };
     let result = match cli.command {
         Command::Run(args) => runtime.block_on(lab::wire::run(args)),
-        Command::Demo(args) => runtime.block_on(lab::demo::run(args)),
+        Command::Demo(cmd) => demo(&runtime, cmd),
         Command::Experiment(args) => lab::experiment::run(&args),
         Command::Trace { cmd } => runtime.block_on(trace_tools::run(cmd)),
         Command::Model { cmd } => lab::model::run(cmd),

@@ -49,7 +49,7 @@ use vcan_sim::scenario::{Scenario, SoilContactIntegration};
 use controller::cycle::{Action, ActionKind, DigStats, Phase, StartPose};
 use controller::node::{ControllerConfig, ControllerNode};
 use controller::planned::{PlannedSession, Strategy, median_joints};
-use controller::session::{PlannedDig, SessionDriver, SessionEvent};
+use controller::session::{NoObserver, PlannedDig, SessionDriver, SessionEvent, SessionObserver};
 
 pub use crate::harness::PERIOD_S;
 use crate::harness::{Harness, SimScans};
@@ -460,6 +460,17 @@ pub struct DemoSummary {
 /// # Errors
 /// Bad arguments or files, simulator or controller construction errors, I/O errors writing the outputs.
 pub async fn run(args: DemoArgs) -> anyhow::Result<()> {
+    run_observed(args, Box::new(NoObserver)).await
+}
+
+/// As [`run`], with `observer` watching every control step (the live view).
+///
+/// # Errors
+/// As [`run`].
+pub async fn run_observed(
+    args: DemoArgs,
+    mut observer: Box<dyn SessionObserver + Send>,
+) -> anyhow::Result<()> {
     let stop = Arc::new(AtomicBool::new(false));
     let stop_on_signal = Arc::clone(&stop);
     let signal = tokio::spawn(async move {
@@ -468,9 +479,11 @@ pub async fn run(args: DemoArgs) -> anyhow::Result<()> {
         }
     });
     let session_stop = Arc::clone(&stop);
-    let summary = tokio::task::spawn_blocking(move || run_session(&args, &session_stop))
-        .await
-        .context("demo session thread")??;
+    let summary = tokio::task::spawn_blocking(move || {
+        run_session_observed(&args, &session_stop, observer.as_mut())
+    })
+    .await
+    .context("demo session thread")??;
     signal.abort();
     print!("{}", summary_markdown(&summary));
     Ok(())
@@ -806,6 +819,18 @@ pub struct BenchSnapshot {
 /// # Errors
 /// As [`setup`]; I/O errors creating the folder or writing the outputs; bus errors.
 pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSummary> {
+    run_session_observed(args, stop, &mut NoObserver)
+}
+
+/// As [`run_session`], with `observer` called after every control step and at the end.
+///
+/// # Errors
+/// As [`run_session`].
+pub fn run_session_observed(
+    args: &DemoArgs,
+    stop: &AtomicBool,
+    observer: &mut dyn SessionObserver,
+) -> anyhow::Result<DemoSummary> {
     let wall = std::time::Instant::now();
     let (sim, config, maps) = setup(args)?;
     let out = &args.out;
@@ -863,6 +888,7 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
         let events = driver
             .after_step(node, &mut SimScans::new(machine))?
             .to_vec();
+        observer.after_step(time_s, node, driver.session(), &events);
         for event in &events {
             if let SessionEvent::PhaseChanged { from, to } = event {
                 let st = node.state();
@@ -922,6 +948,7 @@ pub fn run_session(args: &DemoArgs, stop: &AtomicBool) -> anyhow::Result<DemoSum
     } else {
         "error".to_owned()
     };
+    observer.finished(clock.now_s(), &end);
     // Whatever stopped the loop: neutral valves and a Disarm heartbeat, then let the gateway act.
     let now = clock.now_s();
     let shutdown = h.node_mut().map(|n| n.shutdown(now));

@@ -173,6 +173,10 @@ pub async fn run(args: RunArgs) -> anyhow::Result<()> {
     let trace = trace_path(&args);
     let recorder = match &trace {
         Some(p) => {
+            if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
+                std::fs::create_dir_all(dir)
+                    .with_context(|| format!("creating {}", dir.display()))?;
+            }
             let r = Recorder::create(p, &args.iface)
                 .with_context(|| format!("creating trace {}", p.display()))?;
             bus.set_recorder(r.clone());

@@ -88,6 +88,7 @@ fn demo_writes_all_outputs_with_the_documented_fields_for_two_digs() {
         "controller frames"
     );
     assert!(trace.lines().count() as u64 >= json["totals"]["trace_frames"].as_u64().unwrap());
+    assert_clean_protocol(&out.join("trace.log"));
     // The soil estimator's samples of the planned session, for `model soil-cv`.
     let soil: lab::session::SoilSamplesFile =
         serde_json::from_slice(&std::fs::read(out.join("soil_samples.json")).unwrap()).unwrap();
@@ -95,6 +96,47 @@ fn demo_writes_all_outputs_with_the_documented_fields_for_two_digs() {
     assert!(soil.digs.iter().flat_map(|d| &d.samples).all(|s| {
         s.geometry.depth_m > 0.0 && s.force.fx_n.is_finite() && s.force.fz_n.is_finite()
     }));
+}
+
+/// A clean session's trace has no protocol error in `trace stats` (alive counters, checksums,
+/// out-of-range or backward frames, unknown ids, error frames), and the gateway's own status reports no
+/// rejected or unexpected frame.
+fn assert_clean_protocol(trace: &std::path::Path) {
+    use firmware_bridge::messages::Message;
+    use firmware_bridge::trace::{ReadMode, TraceReader};
+    let file = std::io::BufReader::new(std::fs::File::open(trace).unwrap());
+    let report = trace_tools::stats::collect(
+        file,
+        trace_tools::stats::StatsOptions::default(),
+        true,
+        &mut std::io::sink(),
+    )
+    .unwrap();
+    assert_eq!(report.malformed_lines, 0);
+    assert_eq!(report.unknown_id_frames, 0);
+    assert_eq!(report.error_frames, 0);
+    for id in &report.ids {
+        let what = format!("{} {}", id.id, id.message);
+        assert_eq!(id.alive_errors.unwrap_or(0), 0, "alive counter: {what}");
+        assert_eq!(id.checksum_errors.unwrap_or(0), 0, "checksum: {what}");
+        assert_eq!(id.invalid, 0, "invalid: {what} {:?}", id.last_invalid);
+        assert_eq!(id.backwards, 0, "time backwards: {what}");
+    }
+    let reader = TraceReader::new(
+        std::io::BufReader::new(std::fs::File::open(trace).unwrap()),
+        ReadMode::Stop,
+    );
+    let mut statuses = 0;
+    for record in reader {
+        if let Ok(decoded) = Message::decode(&record.unwrap().frame)
+            && let Message::GatewayStatus(status) = decoded.message
+        {
+            statuses += 1;
+            assert_eq!(status.rejected_frames, 0, "{status:?}");
+            assert_eq!(status.unexpected_frames, 0, "{status:?}");
+        }
+    }
+    assert!(statuses > 0, "the gateway's status is in the trace");
 }
 
 #[test]

@@ -1096,7 +1096,9 @@ mod tests {
     #[test]
     fn gravity_torques_match_potential_energy_gradient() {
         let k = kin();
-        let payload = 2550.0;
+        let payload = MachineConfig::default_machine()
+            .expect("default machine")
+            .rated_payload_kg();
         // G = dV/dq with V = sum m g z_cog: the holding torque equals the potential gradient.
         let pot = |q: &JointAngles| -> f64 {
             let p = k.linkage_points(q);

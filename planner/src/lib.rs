@@ -4,6 +4,8 @@
 //! - `linkage` (private): the implement linkage in plain numbers, cylinder triangles and the bucket
 //!   four-bar (Eqs. A5-A19), below both the machine description's geometric checks and the kinematics.
 //! - [`machine`]: the machine description (`config/machine.toml`): geometry, cylinders, masses, hydraulics.
+//! - [`toml_lines`]: lines and dotted fields of TOML text, for configuration errors naming file, line
+//!   and field.
 //! - [`effects`]: the catalogue of hidden physical effects (names, units, ranges) that the simulator
 //!   applies and the discrepancy workflow identifies.
 //! - [`kinematics`]: joint angles <-> cylinder lengths, forward/inverse kinematics, Jacobian, gravity and
@@ -42,3 +44,4 @@ pub mod soil;
 #[cfg(any(test, feature = "synthetic"))]
 pub mod synthetic;
 pub mod terrain;
+pub mod toml_lines;

@@ -10,6 +10,7 @@
 //! (`crate::linkage`), so a machine that loads is one the kinematics accepts.
 
 use crate::linkage::{FourBar, Linkage, LinkageError, Mount};
+use crate::toml_lines;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -429,13 +430,13 @@ impl MachineConfig {
     pub fn from_toml_str_named(text: &str, origin: &str) -> Result<Self, ConfigError> {
         let cfg: Self = toml::from_str(text).map_err(|e| ConfigError::Parse {
             origin: origin.to_string(),
-            line: e.span().map(|s| line_of_offset(text, s.start)),
+            line: e.span().map(|s| toml_lines::line_of_offset(text, s.start)),
             message: e.message().to_string(),
         })?;
         cfg.validate()
             .map_err(|(field, reason)| ConfigError::Invalid {
                 origin: origin.to_string(),
-                line: locate_field(text, &field),
+                line: toml_lines::line_of_field(text, &field),
                 field,
                 reason,
             })?;
@@ -760,39 +761,6 @@ fn positive(field: &str, v: f64) -> Result<(), (String, String)> {
             format!("must be a positive finite number, got {v}"),
         ))
     }
-}
-
-fn line_of_offset(text: &str, offset: usize) -> usize {
-    text.get(..offset.min(text.len()))
-        .map_or(0, |s| s.bytes().filter(|&b| b == b'\n').count())
-        + 1
-}
-
-/// Finds the 1-based line of a dotted field path (`a.b.key`) in TOML text: the `key =` line inside the
-/// `[a.b]` table, else the table header. A best-effort lookup for error messages.
-#[must_use]
-pub fn locate_field(text: &str, field: &str) -> Option<usize> {
-    let mut parts: Vec<&str> = field.split('.').collect();
-    let key = parts.pop()?;
-    let table = parts.join(".");
-    let mut in_table = table.is_empty();
-    let mut header_line = None;
-    for (i, raw) in text.lines().enumerate() {
-        // Comments never hold a key; strip them so `[table]  # note` is still a header.
-        let line = raw.split('#').next().unwrap_or_default().trim();
-        if line.starts_with('[') {
-            let name = line.trim_start_matches('[').trim_end_matches(']').trim();
-            in_table = name == table;
-            if in_table {
-                header_line = Some(i + 1);
-            }
-            continue;
-        }
-        if in_table && line.split_once('=').is_some_and(|(k, _)| k.trim() == key) {
-            return Some(i + 1);
-        }
-    }
-    header_line
 }
 
 #[cfg(test)]

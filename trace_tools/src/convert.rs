@@ -19,9 +19,17 @@
 //! (`jsonschema` schema encoding, `json` message encoding), so Foxglove and PlotJuggler plot the
 //! fields directly. A message has every signal as a number (`null` when not valid), `<Signal>_name`
 //! for signals with a DBC value table, `can_id`, and `error` (why [`Message::decode`] rejects it, or
-//! `null`). Every frame, including unknown ids and error frames, also goes to `/can/raw` (`id`,
+//! `null`). Frames that are no project message (unknown ids, error frames) go to `/can/raw` (`id`,
 //! `kind`, `dlc`, `data` hex, `interface`, `direction`). Log and publish time are the candump
-//! timestamp in ns. Chunks are uncompressed (the crate is built without zstd/lz4) and indexed.
+//! timestamp in ns.
+//!
+//! Beside them the Foxglove view of the session ([`crate::view`], the topics the live stream
+//! serves): the frames go through the controller's own estimator (`controller::estimate`), and at
+//! each joint-angle frame `/tf` gets the machine's frames and `/signals` the pressures, joint angles,
+//! the valve commands and the `ControllerStatus` fields the controller sent; `/scene` holds the
+//! machine's links, `/log` a line at each change of activity or fault. A trace has no scans, so no
+//! `/terrain`. Chunks are zstd-compressed and indexed by the summary's chunk indexes; there are no
+//! per-message index records (they would take more room than the compressed messages).
 
 use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
@@ -37,6 +45,7 @@ use firmware_bridge::{J1939Id, Message};
 
 use super::input::{self, ReadSummary};
 use super::signals::{self, SignalRef, SignalValue};
+use super::view;
 use super::{InputArgs, format_timestamp};
 
 /// Output format.
@@ -44,7 +53,7 @@ use super::{InputArgs, format_timestamp};
 pub enum Format {
     /// Wide CSV of decoded signals.
     Csv,
-    /// MCAP with JSON messages.
+    /// MCAP: the decoded messages (JSON) and the Foxglove view (well-known schemas), zstd chunks.
     Mcap,
 }
 
@@ -79,6 +88,10 @@ pub struct ConvertArgs {
     /// CSV columns: only these signals (`BoomAngle` or `Message.Signal`); repeatable.
     #[arg(long = "signal", value_name = "NAME")]
     pub signals: Vec<String>,
+    /// MCAP: the machine file whose kinematics place the links (default: the built-in
+    /// config/machine.toml).
+    #[arg(long, value_name = "FILE")]
+    pub machine: Option<PathBuf>,
 }
 
 /// Counts of a conversion.
@@ -86,8 +99,10 @@ pub struct ConvertArgs {
 pub struct ConvertSummary {
     /// What the reader saw.
     pub read: ReadSummary,
-    /// CSV rows or MCAP messages written (not counting `/can/raw`).
+    /// CSV rows or MCAP messages written (not counting `/can/raw` and the view).
     pub written: u64,
+    /// MCAP: messages of the Foxglove view ([`crate::view`]) written.
+    pub view_written: u64,
 }
 
 /// The CSV writer's state: the latest value of every column.
@@ -242,7 +257,11 @@ pub fn to_csv<R: BufRead>(
         written += 1;
     }
     out.flush().context("writing the CSV")?;
-    Ok(ConvertSummary { read, written })
+    Ok(ConvertSummary {
+        read,
+        written,
+        view_written: 0,
+    })
 }
 
 /// JSON Schema of a message's MCAP payload.
@@ -375,18 +394,196 @@ fn kind_name(kind: FrameKind) -> &'static str {
     }
 }
 
-/// Writes `input` as MCAP to `out`.
+/// Adds a channel of a Foxglove message type (its schema and encoding) to an MCAP file.
+fn add_typed_channel<T: foxglove::Encode, W: Write + Seek>(
+    writer: &mut mcap::Writer<W>,
+    topic: &str,
+) -> anyhow::Result<u16> {
+    let (name, encoding, data) = match T::get_schema() {
+        Some(s) => (s.name, s.encoding, s.data),
+        None => (
+            String::new(),
+            String::new(),
+            std::borrow::Cow::Borrowed(&[][..]),
+        ),
+    };
+    let schema = writer
+        .add_schema(&name, &encoding, &data)
+        .with_context(|| format!("adding the schema of {topic}"))?;
+    writer
+        .add_channel(schema, topic, &T::get_message_encoding(), &BTreeMap::new())
+        .with_context(|| format!("adding {topic}"))
+}
+
+/// The Foxglove view of a trace ([`crate::view`]): the frames replayed through the controller's
+/// estimator (the one the live stream reads), with the commands and status the controller sent.
+#[derive(Debug)]
+struct ViewWriter {
+    est: controller::estimate::Estimator,
+    kin: planner::kinematics::Kinematics,
+    track_length_m: f64,
+    valves: [Option<f64>; 6],
+    status: Option<firmware_bridge::messages::ControllerStatus>,
+    tf: u16,
+    scene: u16,
+    signals: u16,
+    log: u16,
+    seq: u32,
+    scene_written: bool,
+    buf: Vec<u8>,
+    written: u64,
+}
+
+impl ViewWriter {
+    fn new<W: Write + Seek>(
+        writer: &mut mcap::Writer<W>,
+        machine: &planner::machine::MachineConfig,
+    ) -> anyhow::Result<Self> {
+        use foxglove::messages::{FrameTransforms, Log, SceneUpdate};
+        let kin = planner::kinematics::Kinematics::new(machine).context("machine kinematics")?;
+        let est = controller::estimate::Estimator::new(
+            kin.clone(),
+            machine.tracks.gauge_m,
+            controller::estimate::EstimatorConfig::default(),
+        )
+        .context("state estimator")?;
+        Ok(Self {
+            est,
+            kin,
+            track_length_m: machine.tracks.length_m,
+            valves: [None; 6],
+            status: None,
+            tf: add_typed_channel::<FrameTransforms, _>(writer, view::TOPIC_TRANSFORMS)?,
+            scene: add_typed_channel::<SceneUpdate, _>(writer, view::TOPIC_SCENE)?,
+            signals: add_typed_channel::<view::Signals, _>(writer, view::TOPIC_SIGNALS)?,
+            log: add_typed_channel::<Log, _>(writer, view::TOPIC_LOG)?,
+            seq: 0,
+            scene_written: false,
+            buf: Vec::with_capacity(1024),
+            written: 0,
+        })
+    }
+
+    fn write<T: foxglove::Encode, W: Write + Seek>(
+        &mut self,
+        writer: &mut mcap::Writer<W>,
+        channel_id: u16,
+        t_ns: u64,
+        msg: &T,
+    ) -> anyhow::Result<()> {
+        self.buf.clear();
+        msg.encode(&mut self.buf)
+            .map_err(|e| anyhow::anyhow!("encoding a view message: {e}"))?;
+        writer
+            .write_to_known_channel(
+                &mcap::records::MessageHeader {
+                    channel_id,
+                    sequence: self.seq,
+                    log_time: t_ns,
+                    publish_time: t_ns,
+                },
+                &self.buf,
+            )
+            .context("writing a view message")?;
+        self.seq = self.seq.wrapping_add(1);
+        self.written += 1;
+        Ok(())
+    }
+
+    /// One record: the estimator takes the gateway's frames; each joint-angle frame (the resolvers'
+    /// 100 Hz) writes the frames and the signals; a change of activity or fault writes a log line.
+    fn record<W: Write + Seek>(
+        &mut self,
+        writer: &mut mcap::Writer<W>,
+        rec: &TraceRecord,
+    ) -> anyhow::Result<()> {
+        use firmware_bridge::messages::{Activity, Valve};
+        let Ok(decoded) = Message::decode(&rec.frame) else {
+            return Ok(());
+        };
+        let t = rec.timestamp_ns;
+        let sa = decoded.id.source_address();
+        match decoded.message {
+            Message::AuxValveCommand(c) if sa == firmware_bridge::CONTROLLER_ADDRESS => {
+                let i = match c.valve {
+                    Valve::Boom => 0,
+                    Valve::Stick => 1,
+                    Valve::Bucket => 2,
+                    Valve::Swing => 3,
+                    Valve::LeftTrack => 4,
+                    Valve::RightTrack => 5,
+                };
+                self.valves[i] = Some(c.to_fraction());
+            }
+            Message::ControllerStatus(s) if sa == firmware_bridge::CONTROLLER_ADDRESS => {
+                let before = self.status.replace(s);
+                let changed = before
+                    .is_none_or(|b| b.activity != s.activity || b.fault_reason != s.fault_reason);
+                if changed {
+                    let level = if s.activity == Activity::Faulted {
+                        foxglove::messages::log::Level::Error
+                    } else {
+                        foxglove::messages::log::Level::Info
+                    };
+                    let text = format!(
+                        "{:?} (dig {}, stage {:?}, fault code {})",
+                        s.activity, s.dig_index, s.stage, s.fault_reason
+                    );
+                    self.write(writer, self.log, t, &view::log(t, level, text))?;
+                }
+            }
+            m if sa == firmware_bridge::GATEWAY_ADDRESS => {
+                self.est.on_message(&m, t as f64 * 1e-9);
+                if let Message::JointAngles(_) = m {
+                    self.est.update();
+                    self.write_state(writer, t)?;
+                }
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    fn write_state<W: Write + Seek>(
+        &mut self,
+        writer: &mut mcap::Writer<W>,
+        t: u64,
+    ) -> anyhow::Result<()> {
+        let st = *self.est.state();
+        if !self.scene_written {
+            let scene = view::scene(view::machine_entities(&self.kin, self.track_length_m, t));
+            self.write(writer, self.scene, t, &scene)?;
+            self.scene_written = true;
+        }
+        let tf = view::machine_transforms(&self.kin, &st.joints, st.swing_rad, &st.pose, t);
+        self.write(writer, self.tf, t, &tf)?;
+        let mut signals = view::estimate_signals(&st);
+        signals.valve_command = view::ValveCommands::from_array(self.valves);
+        if let Some(s) = &self.status {
+            view::apply_status(&mut signals, s);
+        }
+        self.write(writer, self.signals, t, &signals)
+    }
+}
+
+/// Writes `input` as MCAP to `out`: the decoded `/can/...` channels and `/can/raw` (JSON), and the
+/// Foxglove view of the session ([`crate::view`]) for `machine`, in zstd-compressed chunks.
 ///
 /// # Errors
-/// Read errors (as [`input::for_each_record`]) and MCAP write errors.
+/// Read errors (as [`input::for_each_record`]), a machine whose kinematics cannot be built, and
+/// MCAP write errors.
 pub fn to_mcap<R: BufRead, W: Write + Seek>(
     input: R,
     out: W,
+    machine: &planner::machine::MachineConfig,
     strict: bool,
     diag: &mut dyn Write,
 ) -> anyhow::Result<ConvertSummary> {
     let mut writer = mcap::WriteOptions::new()
-        .compression(None)
+        .compression(Some(mcap::Compression::Zstd))
+        // Chunk indexes only: a message index record per message would take more room than the
+        // compressed messages themselves (readers scan a chunk's records instead).
+        .emit_message_indexes(false)
         .profile("")
         .library(concat!("excavator-ctl ", env!("CARGO_PKG_VERSION")))
         .create(out)
@@ -397,6 +594,7 @@ pub fn to_mcap<R: BufRead, W: Write + Seek>(
     let raw_channel = writer
         .add_channel(raw_schema, "/can/raw", "json", &BTreeMap::new())
         .context("adding /can/raw")?;
+    let mut view = ViewWriter::new(&mut writer, machine)?;
     let mut schemas: HashMap<usize, u16> = HashMap::new();
     // (message index, source address) -> (channel id, sequence)
     let mut channels: HashMap<(usize, u8), (u16, u32)> = HashMap::new();
@@ -405,20 +603,22 @@ pub fn to_mcap<R: BufRead, W: Write + Seek>(
     let mut written = 0u64;
     let read = input::for_each_record(input, strict, diag, |rec| {
         let t = rec.timestamp_ns;
-        raw_json(&rec, &mut payload);
-        writer
-            .write_to_known_channel(
-                &mcap::records::MessageHeader {
-                    channel_id: raw_channel,
-                    sequence: raw_seq,
-                    log_time: t,
-                    publish_time: t,
-                },
-                payload.as_bytes(),
-            )
-            .context("writing /can/raw")?;
-        raw_seq = raw_seq.wrapping_add(1);
+        view.record(&mut writer, &rec)?;
         let Some((msg_index, desc)) = signals::message_of(&rec.frame) else {
+            // Frames outside the protocol (unknown ids, error frames) keep their bytes here.
+            raw_json(&rec, &mut payload);
+            writer
+                .write_to_known_channel(
+                    &mcap::records::MessageHeader {
+                        channel_id: raw_channel,
+                        sequence: raw_seq,
+                        log_time: t,
+                        publish_time: t,
+                    },
+                    payload.as_bytes(),
+                )
+                .context("writing /can/raw")?;
+            raw_seq = raw_seq.wrapping_add(1);
             return Ok(true);
         };
         let sa = (rec.frame.id().raw() & 0xFF) as u8;
@@ -469,7 +669,11 @@ pub fn to_mcap<R: BufRead, W: Write + Seek>(
         Ok(true)
     })?;
     writer.finish().context("finishing the MCAP file")?;
-    Ok(ConvertSummary { read, written })
+    Ok(ConvertSummary {
+        read,
+        written,
+        view_written: view.written,
+    })
 }
 
 /// Runs `trace convert`.
@@ -494,15 +698,24 @@ pub fn run(args: &ConvertArgs) -> anyhow::Result<()> {
                 &mut diag,
             )?
         }
-        Format::Mcap => to_mcap(
-            reader,
-            BufWriter::with_capacity(256 * 1024, file),
-            args.input.strict,
-            &mut diag,
-        )?,
+        Format::Mcap => {
+            let machine = planner::machine::MachineConfig::load_or_default(args.machine.as_deref())
+                .context("machine file")?;
+            to_mcap(
+                reader,
+                BufWriter::with_capacity(256 * 1024, file),
+                &machine,
+                args.input.strict,
+                &mut diag,
+            )?
+        }
+    };
+    let view = match args.format {
+        Format::Csv => String::new(),
+        Format::Mcap => format!(", {} view message(s)", summary.view_written),
     };
     eprintln!(
-        "{}: {} record(s) read, {} {} written",
+        "{}: {} record(s) read, {} {} written{view}",
         args.out.display(),
         summary.read.records,
         summary.written,

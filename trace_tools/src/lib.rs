@@ -14,6 +14,8 @@
 //! - [`convert`]: wide CSV and MCAP (JSON messages with JSON schemas, one channel per message).
 //! - [`replay`]: canplayer-like replay onto SocketCAN with the original timing.
 //! - [`diff`]: where two traces of the same scenario first diverge, per signal.
+//! - [`view`]: the Foxglove view of a session (topics, frames, well-known schemas) shared by the MCAP
+//!   export and the live stream.
 //! - [`synth`]: realistic synthetic traces from the message schedule (tests, benchmark, docs).
 //!
 //! # Data flow
@@ -34,6 +36,7 @@ pub mod replay;
 pub mod signals;
 pub mod stats;
 pub mod synth;
+pub mod view;
 
 use std::path::PathBuf;
 

@@ -1,6 +1,7 @@
 //! `trace convert --to mcap`: the file reads back with the `mcap` crate (and with the Python `mcap`
-//! reader from PyPI when it is installed), one channel per message, JSON messages matching their JSON
-//! schemas.
+//! reader and Foxglove's protobuf schema classes from PyPI when they are installed), one channel per
+//! message, JSON messages matching their JSON schemas, the Foxglove view with its well-known schemas,
+//! zstd chunks, smaller than the candump log.
 
 #![allow(clippy::unwrap_used)] // helpers outside #[test] functions fail loudly on purpose
 
@@ -30,31 +31,56 @@ fn write_fixture(path: &Path) {
     writeln!(f, "(1700000005.000100) vcan0 20000040#0000000000000000").unwrap();
 }
 
-fn convert_fixture(dir: &Path) -> std::path::PathBuf {
+fn convert_fixture(dir: &Path) -> (std::path::PathBuf, convert::ConvertSummary) {
     let log = dir.join("dig.log");
     write_fixture(&log);
     let out = dir.join("dig.mcap");
     let reader = BufReader::new(std::fs::File::open(&log).unwrap());
     let file = std::io::BufWriter::new(std::fs::File::create(&out).unwrap());
-    let summary = convert::to_mcap(reader, file, false, &mut std::io::sink()).unwrap();
+    let machine = planner::machine::MachineConfig::default_machine().unwrap();
+    let summary = convert::to_mcap(reader, file, &machine, false, &mut std::io::sink()).unwrap();
     assert_eq!(summary.read.records, FRAMES + 2);
     assert_eq!(summary.written, FRAMES);
-    out
+    // Per joint-angle frame (500) the frames and the signals, the machine's scene, log lines.
+    assert!(summary.view_written > 1000, "{summary:?}");
+    (out, summary)
 }
+
+/// The topics of the Foxglove view and their schema names (crate::view).
+const VIEW: [(&str, &str, &str); 4] = [
+    ("/tf", "foxglove.FrameTransforms", "protobuf"),
+    ("/scene", "foxglove.SceneUpdate", "protobuf"),
+    ("/log", "foxglove.Log", "protobuf"),
+    ("/signals", "excavator.Signals", "jsonschema"),
+];
 
 #[test]
 fn mcap_reads_back_with_the_mcap_crate() {
     let dir = tempfile::tempdir().unwrap();
-    let path = convert_fixture(dir.path());
+    let (path, conv) = convert_fixture(dir.path());
     let bytes = std::fs::read(&path).unwrap();
+    let log_bytes = std::fs::metadata(dir.path().join("dig.log")).unwrap().len();
+    assert!(
+        (bytes.len() as u64) < log_bytes,
+        "MCAP {} bytes, candump log {log_bytes}",
+        bytes.len()
+    );
 
     let summary = mcap::Summary::read(&bytes)
         .unwrap()
         .expect("a summary section");
     let stats = summary.stats.as_ref().expect("statistics");
-    assert_eq!(stats.message_count, 2 * FRAMES + 2);
-    // 17 message channels + /can/raw.
-    assert_eq!(summary.channels.len(), 18);
+    // Every project frame decoded, the unknown id and the error frame raw, and the view.
+    assert_eq!(stats.message_count, FRAMES + 2 + conv.view_written);
+    // 17 message channels + /can/raw + the view's 4.
+    assert_eq!(summary.channels.len(), 22);
+    assert!(
+        summary
+            .chunk_indexes
+            .iter()
+            .all(|c| c.compression == "zstd"),
+        "chunks not zstd-compressed"
+    );
 
     let mut per_topic: HashMap<String, u64> = HashMap::new();
     let mut last_time = 0;
@@ -63,6 +89,27 @@ fn mcap_reads_back_with_the_mcap_crate() {
         *per_topic.entry(msg.channel.topic.clone()).or_insert(0) += 1;
         assert!(msg.log_time >= 1_700_000_000_000_000_000);
         last_time = last_time.max(msg.log_time);
+        if let Some((_, name, encoding)) = VIEW.iter().find(|v| v.0 == msg.channel.topic) {
+            let schema = msg.channel.schema.as_ref().expect("a schema");
+            assert_eq!(
+                (schema.name.as_str(), schema.encoding.as_str()),
+                (*name, *encoding)
+            );
+            if msg.channel.topic == "/tf" {
+                use foxglove::Decode as _;
+                let tf = foxglove::messages::FrameTransforms::decode(&msg.data[..]).unwrap();
+                let children: Vec<&str> = tf
+                    .transforms
+                    .iter()
+                    .map(|t| t.child_frame_id.as_str())
+                    .collect();
+                assert_eq!(
+                    children,
+                    ["base", "house", "boom", "stick", "bucket", "tip"]
+                );
+            }
+            continue;
+        }
         assert_eq!(msg.channel.message_encoding, "json");
         let schema = msg.channel.schema.as_ref().expect("a schema");
         assert_eq!(schema.encoding, "jsonschema");
@@ -86,38 +133,55 @@ fn mcap_reads_back_with_the_mcap_crate() {
             assert!(value["AutodigStage_name"].is_string());
         }
     }
-    assert_eq!(per_topic["/can/raw"], FRAMES + 2);
+    assert_eq!(per_topic["/can/raw"], 2);
     assert_eq!(per_topic["/can/JointAngles"], 500);
     assert_eq!(per_topic["/can/ControllerStatus"], 100);
     assert_eq!(per_topic["/can/GatewayStatus"], 50);
+    assert_eq!(per_topic["/tf"], 500);
+    assert_eq!(per_topic["/signals"], 500);
     assert_eq!(last_time, 1_700_000_005_000_100_000);
 }
 
 #[test]
 fn mcap_reads_back_with_the_python_reader() {
     let have = Command::new("python3")
-        .args(["-c", "import mcap.reader"])
+        .args(["-c", "import mcap.reader, foxglove_schemas_protobuf"])
         .output()
         .is_ok_and(|o| o.status.success());
     if !have {
         if std::env::var("EXCAVATOR_REQUIRE_TOOLS").as_deref() == Ok("1") {
-            panic!("python3 with the mcap package is required (pip install mcap)");
+            panic!(
+                "python3 with mcap and foxglove-schemas-protobuf is required (scripts/install-test-tools)"
+            );
         }
-        println!("skip: python3 -c 'import mcap.reader' failed (pip install mcap)");
+        println!(
+            "skip: python3 without mcap or foxglove-schemas-protobuf (scripts/install-test-tools)"
+        );
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let path = convert_fixture(dir.path());
+    let (path, _) = convert_fixture(dir.path());
+    // JSON channels parse; protobuf channels parse with Foxglove's published schema classes.
     let script = r#"
 import json, sys
 from collections import Counter
 from mcap.reader import make_reader
+from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
+from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
+from foxglove_schemas_protobuf.Log_pb2 import Log
+types = {"foxglove.FrameTransforms": FrameTransforms, "foxglove.SceneUpdate": SceneUpdate, "foxglove.Log": Log}
 counts = Counter()
 with open(sys.argv[1], "rb") as f:
     reader = make_reader(f)
     for schema, channel, message in reader.iter_messages():
-        json.loads(message.data)
-        assert schema.encoding == "jsonschema", schema.encoding
+        if schema.encoding == "protobuf":
+            msg = types[schema.name]()
+            msg.ParseFromString(message.data)
+            if schema.name == "foxglove.FrameTransforms":
+                assert [t.child_frame_id for t in msg.transforms][-1] == "tip"
+        else:
+            assert schema.encoding == "jsonschema", schema.encoding
+            json.loads(message.data)
         counts[channel.topic] += 1
 print(json.dumps(counts))
 "#;
@@ -127,6 +191,8 @@ print(json.dumps(counts))
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let counts: HashMap<String, u64> = serde_json::from_slice(&o.stdout).unwrap();
-    assert_eq!(counts["/can/raw"], FRAMES + 2);
+    assert_eq!(counts["/can/raw"], 2);
     assert_eq!(counts["/can/JointAngles"], 500);
+    assert_eq!(counts["/tf"], 500);
+    assert_eq!(counts["/scene"], 1);
 }

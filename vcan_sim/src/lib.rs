@@ -148,7 +148,7 @@ fn check_transport_delay(cfg: &MachineConfig, text: &str, origin: &str) -> Resul
     }
     Err(SimError::Machine(ConfigError::Invalid {
         origin: origin.to_owned(),
-        line: planner::machine::locate_field(text, FIELD),
+        line: planner::toml_lines::line_of_field(text, FIELD),
         field: FIELD.to_owned(),
         reason: format!(
             "{delay} s: must be finite and in [0, {}] s",

@@ -11,6 +11,7 @@
 
 use std::path::Path;
 
+use planner::toml_lines::{field_at_offset, line_of_field, line_of_offset};
 use serde::Deserialize;
 
 use crate::effects::{EffectError, EffectSet};
@@ -329,70 +330,6 @@ pub const DEFAULT_BENCH_TOML: &str = include_str!("../../config/bench.toml");
 /// The bundled extended-operation bench (`config/bench_extended.toml`, thesis ch. 6).
 pub const EXTENDED_BENCH_TOML: &str = include_str!("../../config/bench_extended.toml");
 
-fn line_of_offset(text: &str, offset: usize) -> usize {
-    text.get(..offset.min(text.len()))
-        .map_or(0, |s| s.bytes().filter(|&b| b == b'\n').count())
-        + 1
-}
-
-/// The dotted field defined on a 1-based line (`table.key`), if that line is a `key = value` line.
-fn field_at_line(text: &str, line: usize) -> Option<String> {
-    let mut table = String::new();
-    for (i, raw) in text.lines().enumerate() {
-        let t = raw.trim();
-        if t.starts_with('[') {
-            table = t.trim_matches(|c| c == '[' || c == ']').trim().to_owned();
-        }
-        if i + 1 == line {
-            let (key, _) = t.split_once('=')?;
-            let key = key.trim();
-            return Some(if table.is_empty() {
-                key.to_owned()
-            } else {
-                format!("{table}.{key}")
-            });
-        }
-    }
-    None
-}
-
-/// 1-based line of a dotted field (`soil_regions.1.x_min_m`, array entries by index) in TOML text:
-/// the line of its key, or, for a value left at its default, of the deepest table on the path that
-/// the file has; 0 when unknown.
-fn locate(text: &str, field: &str) -> usize {
-    use toml::de::{DeTable, DeValue};
-    let Ok(doc) = DeTable::parse(text) else {
-        return 0;
-    };
-    let mut table: &DeTable<'_> = doc.get_ref();
-    let mut value: Option<&DeValue<'_>> = None;
-    let mut found = None;
-    for segment in field.split('.') {
-        let next = match value {
-            None => table
-                .iter()
-                .find(|(k, _)| k.get_ref().as_ref() == segment)
-                .map(|(k, v)| (k.span().start, v)),
-            Some(DeValue::Array(items)) => segment
-                .parse::<usize>()
-                .ok()
-                .and_then(|i| items.get(i))
-                .map(|v| (v.span().start, v)),
-            Some(_) => None,
-        };
-        let Some((offset, v)) = next else { break };
-        found = Some(offset);
-        match v.get_ref() {
-            DeValue::Table(t) => {
-                table = t;
-                value = None;
-            }
-            other => value = Some(other),
-        }
-    }
-    found.map_or(0, |o| line_of_offset(text, o))
-}
-
 impl Scenario {
     /// The default bench (`config/bench.toml`, compiled in).
     ///
@@ -421,9 +358,10 @@ impl Scenario {
     /// [`ScenarioError::Parse`] or [`ScenarioError::Invalid`].
     pub fn from_toml_str_named(text: &str, origin: &str) -> Result<Self> {
         let scenario: Self = toml::from_str(text).map_err(|e| {
-            let line = e.span().map_or(0, |s| line_of_offset(text, s.start));
+            let offset = e.span().map(|s| s.start);
+            let line = offset.map_or(0, |o| line_of_offset(text, o));
             let mut message = e.message().trim().to_owned();
-            if let Some(field) = field_at_line(text, line)
+            if let Some(field) = offset.and_then(|o| field_at_offset(text, o))
                 && !message.contains(&field)
             {
                 message = format!("field `{field}`: {message}");
@@ -438,7 +376,7 @@ impl Scenario {
             .validate()
             .map_err(|(field, reason)| ScenarioError::Invalid {
                 origin: origin.to_owned(),
-                line: locate(text, &field),
+                line: line_of_field(text, &field).unwrap_or(0),
                 field,
                 reason,
             })?;

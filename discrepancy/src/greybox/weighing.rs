@@ -125,7 +125,7 @@ mod tests {
             &Vector3::from(arms),
         );
         let per_kg = payload_reflected_mass_per_kg(&kin, &q).unwrap();
-        let payload_kg = 2550.0;
+        let payload_kg = cfg.rated_payload_kg();
         let sample_for = |accel: [f64; 3], offset_pa: f64| {
             let held = kin
                 .cylinder_forces_from_tip_force(&q, &TipForce::default(), payload_kg)

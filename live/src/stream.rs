@@ -1,0 +1,506 @@
+//! [`LiveStream`]: the session observer that serves the Foxglove view of a session over a WebSocket
+//! (crate docs for the data flow).
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, SyncSender, TryRecvError, TrySendError};
+use std::time::{Duration, Instant};
+
+use foxglove::messages::{FrameTransforms, Grid, Log, SceneEntity, SceneUpdate, log::Level};
+use foxglove::{Channel, Context, WebSocketServer, WebSocketServerHandle};
+use planner::kinematics::{Kinematics, MachinePose};
+use planner::machine::MachineConfig;
+use planner::terrain::TerrainGrid;
+
+use controller::cycle::{Action, CycleCommand, Phase};
+use controller::estimate::MachineState;
+use controller::node::ControllerNode;
+use controller::planned::PlannedSession;
+use controller::safety::{Fault, SafetyState};
+use controller::session::{SessionEvent, SessionObserver};
+use firmware_bridge::messages::ControllerStatus;
+use trace_tools::view;
+
+use crate::{LiveAddr, LiveArgs, LiveError};
+
+/// How often the publisher repeats what does not change every step (the terrain, the scene), wall
+/// time, so a client that connects late sees them.
+const LATCH_EVERY: Duration = Duration::from_secs(1);
+
+/// How often the publisher drains the queue (a 1024-update queue holds 10 s of steps at real time
+/// and about 0.2 s at the demo's virtual-time speed).
+const POLL: Duration = Duration::from_millis(5);
+
+/// One control step's view, copied on the control loop.
+#[derive(Debug, Clone, Copy)]
+struct StepView {
+    time_ns: u64,
+    state: MachineState,
+    status: ControllerStatus,
+    safety: SafetyState,
+    fault: Option<Fault>,
+    fault_count: u64,
+    command: CycleCommand,
+}
+
+/// What the control loop hands to the publisher.
+#[derive(Debug)]
+enum Update {
+    Step(Box<StepView>),
+    Terrain(u64, Box<TerrainGrid>),
+    Scene(u64, Vec<SceneEntity>),
+    Log(u64, Level, String),
+}
+
+/// Counts of a stream.
+#[derive(Debug, Default)]
+pub struct LiveStats {
+    /// Updates handed to the publisher.
+    pub queued: AtomicU64,
+    /// Updates dropped because the queue was full (the publisher or the client was behind).
+    pub dropped: AtomicU64,
+    /// Foxglove messages the publisher logged on its channels.
+    pub published: AtomicU64,
+}
+
+/// The publisher's channels.
+struct Channels {
+    tf: Channel<FrameTransforms>,
+    terrain: Channel<Grid>,
+    scene: Channel<SceneUpdate>,
+    signals: Channel<view::Signals>,
+    log: Channel<Log>,
+}
+
+impl Channels {
+    fn new(ctx: &Arc<Context>) -> Self {
+        Self {
+            tf: ctx.channel_builder(view::TOPIC_TRANSFORMS).build(),
+            terrain: ctx.channel_builder(view::TOPIC_TERRAIN).build(),
+            scene: ctx.channel_builder(view::TOPIC_SCENE).build(),
+            signals: ctx.channel_builder(view::TOPIC_SIGNALS).build(),
+            log: ctx.channel_builder(view::TOPIC_LOG).build(),
+        }
+    }
+}
+
+/// The publisher thread: queue in, Foxglove messages out.
+struct Publisher {
+    channels: Channels,
+    kin: Kinematics,
+    stats: Arc<LiveStats>,
+    /// Scene entities by id (the latest of each), repeated for late clients.
+    scene: BTreeMap<String, SceneEntity>,
+    terrain: Option<Grid>,
+    last_time_ns: u64,
+}
+
+impl Publisher {
+    /// Drains the queue every [`POLL`] rather than waiting on it: a sender never has to wake a
+    /// waiting receiver, so handing over an update costs the control loop no system call.
+    fn run(mut self, rx: &Receiver<Update>) {
+        let mut latched_at = Instant::now();
+        loop {
+            loop {
+                match rx.try_recv() {
+                    Ok(update) => self.publish(update),
+                    Err(TryRecvError::Empty) => break,
+                    Err(TryRecvError::Disconnected) => return,
+                }
+            }
+            if latched_at.elapsed() >= LATCH_EVERY {
+                self.republish_latched();
+                latched_at = Instant::now();
+            }
+            std::thread::sleep(POLL);
+        }
+    }
+
+    fn count(&self, n: u64) {
+        self.stats.published.fetch_add(n, Ordering::Relaxed);
+    }
+
+    fn publish(&mut self, update: Update) {
+        match update {
+            Update::Step(step) => {
+                let t = step.time_ns;
+                self.last_time_ns = t;
+                let st = &step.state;
+                let tf = view::machine_transforms(&self.kin, &st.joints, st.swing_rad, &st.pose, t);
+                self.channels.tf.log_with_time(&tf, t);
+                self.channels.signals.log_with_time(&step_signals(&step), t);
+                self.count(2);
+            }
+            Update::Terrain(t, grid) => {
+                let grid = view::terrain_grid(&grid, t);
+                self.channels.terrain.log_with_time(&grid, t);
+                self.terrain = Some(grid);
+                self.count(1);
+            }
+            Update::Scene(t, entities) => {
+                for e in &entities {
+                    self.scene.insert(e.id.clone(), e.clone());
+                }
+                self.channels.scene.log_with_time(&view::scene(entities), t);
+                self.count(1);
+            }
+            Update::Log(t, level, text) => {
+                self.channels
+                    .log
+                    .log_with_time(&view::log(t, level, text), t);
+                self.count(1);
+            }
+        }
+    }
+
+    fn republish_latched(&mut self) {
+        let t = self.last_time_ns;
+        if let Some(grid) = &self.terrain {
+            self.channels.terrain.log_with_time(grid, t);
+            self.count(1);
+        }
+        if !self.scene.is_empty() {
+            let entities = self.scene.values().cloned().collect();
+            self.channels.scene.log_with_time(&view::scene(entities), t);
+            self.count(1);
+        }
+    }
+}
+
+/// The name of a safety state (its variant).
+fn safety_name(s: SafetyState) -> &'static str {
+    match s {
+        SafetyState::ListenOnly => "ListenOnly",
+        SafetyState::Disarmed => "Disarmed",
+        SafetyState::Arming { .. } => "Arming",
+        SafetyState::Armed { .. } => "Armed",
+        SafetyState::Faulted { .. } => "Faulted",
+        SafetyState::Shutdown => "Shutdown",
+    }
+}
+
+/// The `/signals` sample of a step: the estimate, the status the controller reports, its command.
+fn step_signals(step: &StepView) -> view::Signals {
+    let mut s = view::estimate_signals(&step.state);
+    view::apply_status(&mut s, &step.status);
+    let valves = match step.command {
+        CycleCommand::Neutral => [Some(0.0); 6],
+        CycleCommand::Valves(v) => v.map(view::finite),
+        // Position mode: the gateway's loops drive the valves.
+        CycleCommand::Position(_) => [None; 6],
+    };
+    s.valve_command = view::ValveCommands::from_array(valves);
+    s.safety_state = Some(safety_name(step.safety).to_owned());
+    s.fault = step.fault.map(|f| f.to_string());
+    s.fault_count = Some(step.fault_count);
+    s
+}
+
+/// The live view of a session (crate docs): a Foxglove WebSocket server and the session observer
+/// that feeds it.
+pub struct LiveStream {
+    tx: Option<SyncSender<Update>>,
+    stats: Arc<LiveStats>,
+    pace: Option<f64>,
+    wall_start: Option<(Instant, f64)>,
+    publisher: Option<std::thread::JoinHandle<()>>,
+    server: Option<WebSocketServerHandle>,
+    runtime: Option<tokio::runtime::Runtime>,
+    port: u16,
+    started: Instant,
+    last_fault: Option<Fault>,
+    scene_sent: bool,
+    floor_sent: bool,
+    kin: Kinematics,
+    track_length_m: f64,
+    last_time_s: f64,
+}
+
+impl std::fmt::Debug for LiveStream {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LiveStream")
+            .field("port", &self.port)
+            .field("pace", &self.pace)
+            .field("stats", &self.stats)
+            .finish_non_exhaustive()
+    }
+}
+
+impl LiveStream {
+    /// Starts the server for `args` (which must have `--live`) on its own runtime and the publisher
+    /// thread, for a session of `machine`. Call outside an async context.
+    ///
+    /// # Errors
+    /// [`LiveError`]: a bad address, pace or queue, a server that cannot bind, a machine whose
+    /// kinematics cannot be built.
+    pub fn start(args: &LiveArgs, machine: &MachineConfig) -> Result<Self, LiveError> {
+        let addr_text = args
+            .live
+            .clone()
+            .unwrap_or_else(|| crate::DEFAULT_ADDR.to_owned());
+        let addr = LiveAddr::parse(&addr_text)?;
+        if let Some(p) = args.pace
+            && !(p.is_finite() && p > 0.0)
+        {
+            return Err(LiveError::Pace(p));
+        }
+        if args.live_queue == 0 {
+            return Err(LiveError::Queue);
+        }
+        let kin = Kinematics::new(machine)?;
+        // One worker: the server's I/O never competes with the control loop for both cores.
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(1)
+            .thread_name("live-ws")
+            .enable_all()
+            .build()?;
+        let ctx = Context::new();
+        let server = runtime
+            .block_on(
+                WebSocketServer::new()
+                    .name("excavator")
+                    .context(&ctx)
+                    .bind(addr.host.clone(), addr.port)
+                    .tokio_runtime(runtime.handle())
+                    .start(),
+            )
+            .map_err(|source| LiveError::Server {
+                addr: addr_text.clone(),
+                source,
+            })?;
+        let port = server.port();
+        let stats = Arc::new(LiveStats::default());
+        let (tx, rx) = std::sync::mpsc::sync_channel(args.live_queue);
+        let publisher = Publisher {
+            channels: Channels::new(&ctx),
+            kin: kin.clone(),
+            stats: Arc::clone(&stats),
+            scene: BTreeMap::new(),
+            terrain: None,
+            last_time_ns: 0,
+        };
+        let handle = std::thread::Builder::new()
+            .name("live-publisher".into())
+            .spawn(move || {
+                // The context lives as long as the publisher logs on its channels.
+                let _ctx = ctx;
+                publisher.run(&rx);
+            })?;
+        Ok(Self {
+            tx: Some(tx),
+            stats,
+            pace: args.pace,
+            wall_start: None,
+            publisher: Some(handle),
+            server: Some(server),
+            runtime: Some(runtime),
+            port,
+            started: Instant::now(),
+            last_fault: None,
+            scene_sent: false,
+            floor_sent: false,
+            kin,
+            track_length_m: machine.tracks.length_m,
+            last_time_s: 0.0,
+        })
+    }
+
+    /// The port the server listens on (the one asked for, or the one picked for port 0).
+    pub fn port(&self) -> u16 {
+        self.port
+    }
+
+    /// The stream's counts.
+    pub fn stats(&self) -> &LiveStats {
+        &self.stats
+    }
+
+    /// Hands an update to the publisher without waiting: a full queue drops it (counted).
+    fn offer(&self, update: Update) {
+        let Some(tx) = &self.tx else {
+            return;
+        };
+        match tx.try_send(update) {
+            Ok(()) => {
+                self.stats.queued.fetch_add(1, Ordering::Relaxed);
+            }
+            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
+                self.stats.dropped.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+
+    /// Sleeps until wall time catches up with `time_s / pace` (only with `--pace`).
+    fn pace_to(&mut self, time_s: f64) {
+        let Some(factor) = self.pace else {
+            return;
+        };
+        let (wall0, sim0) = *self.wall_start.get_or_insert((Instant::now(), time_s));
+        let due = Duration::from_secs_f64(((time_s - sim0) / factor).max(0.0));
+        if let Some(wait) = due.checked_sub(wall0.elapsed()) {
+            std::thread::sleep(wait);
+        }
+    }
+
+    /// Session events as log lines and scene entities.
+    fn events(&self, t: u64, node: &ControllerNode, events: &[SessionEvent]) {
+        for event in events {
+            match event {
+                SessionEvent::Scanned(scan) => self.offer(Update::Log(
+                    t,
+                    Level::Debug,
+                    format!("scan: {} points", scan.points.len()),
+                )),
+                SessionEvent::PhaseChanged { from, to } => {
+                    self.offer(Update::Log(
+                        t,
+                        Level::Info,
+                        format!("phase {from:?} -> {to:?}"),
+                    ));
+                    if *to == Phase::Dump {
+                        // The spoil pile is where the bucket dumps.
+                        let st = node.state();
+                        let at = st.pose.world_from_base(st.swing_rad, st.tip.x_m, 0.0);
+                        self.offer(Update::Scene(t, vec![view::spoil_entity(at, t)]));
+                    }
+                }
+                SessionEvent::DigStarted { planned, pose } => {
+                    let swing_rad = match node.action() {
+                        Some(Action::Dig { swing_rad, .. } | Action::Cleanup { swing_rad, .. }) => {
+                            *swing_rad
+                        }
+                        _ => node.state().swing_rad,
+                    };
+                    let mut text = format!(
+                        "dig {} started at swing {:.1} deg",
+                        node.statistics().len() + 1,
+                        swing_rad.to_degrees()
+                    );
+                    if let Some(v) = planned.volume_m3 {
+                        text.push_str(&format!(", planned volume {v:.2} m3"));
+                    }
+                    self.offer(Update::Log(t, Level::Info, text));
+                    if let Some([r_m, z_m, _]) = planned.start {
+                        let start = pose.world_from_base(swing_rad, r_m, z_m);
+                        self.offer(Update::Scene(
+                            t,
+                            vec![view::dig_entity([pose.x_m, pose.y_m], start, t)],
+                        ));
+                    }
+                }
+                SessionEvent::DigFinished { index, .. } => {
+                    if let Some(d) = node.statistics().get(*index) {
+                        self.offer(Update::Log(
+                            t,
+                            Level::Info,
+                            format!(
+                                "dig {} done: {:?}, weight {} N, {:.1} s, {:.1} kJ, swept {:.2} m3",
+                                d.index,
+                                d.action,
+                                d.weight_n.map_or("-".to_owned(), |w| format!("{w:.0}")),
+                                d.time_s,
+                                d.energy_kj(),
+                                d.swept_volume_m3
+                            ),
+                        ));
+                    }
+                }
+            }
+        }
+    }
+}
+
+impl SessionObserver for LiveStream {
+    fn after_step(
+        &mut self,
+        time_s: f64,
+        node: &ControllerNode,
+        session: Option<&PlannedSession>,
+        events: &[SessionEvent],
+    ) {
+        let t = view::time_ns(time_s);
+        self.last_time_s = time_s;
+        if !self.scene_sent {
+            self.offer(Update::Scene(
+                t,
+                view::machine_entities(&self.kin, self.track_length_m, t),
+            ));
+            self.scene_sent = true;
+        }
+        if !self.floor_sent
+            && let Some(s) = session
+        {
+            let pose: MachinePose = node.estimator().state().pose;
+            let floor_z_m = s.planner().config().floor_z_m;
+            self.offer(Update::Scene(
+                t,
+                vec![view::floor_entity(floor_z_m, [pose.x_m, pose.y_m], 30.0, t)],
+            ));
+            self.floor_sent = true;
+        }
+        let fault = node.fault();
+        if fault != self.last_fault {
+            if let Some(f) = fault {
+                self.offer(Update::Log(t, Level::Error, format!("fault: {f}")));
+            } else {
+                self.offer(Update::Log(t, Level::Info, "fault cleared".to_owned()));
+            }
+            self.last_fault = fault;
+        }
+        self.events(t, node, events);
+        if events.iter().any(|e| matches!(e, SessionEvent::Scanned(_))) {
+            let terrain = session
+                .map(PlannedSession::terrain)
+                .or_else(|| node.cycle().terrain());
+            if let Some(grid) = terrain {
+                self.offer(Update::Terrain(t, Box::new(grid.clone())));
+            }
+        }
+        self.offer(Update::Step(Box::new(StepView {
+            time_ns: t,
+            state: *node.state(),
+            status: node.bus_status(),
+            safety: node.safety().state(),
+            fault,
+            fault_count: node.safety().fault_count(),
+            command: node.last_command(),
+        })));
+        self.pace_to(time_s);
+    }
+
+    fn finished(&mut self, time_s: f64, reason: &str) {
+        self.offer(Update::Log(
+            view::time_ns(time_s),
+            Level::Info,
+            format!("session over: {reason}"),
+        ));
+        let wall_s = self.started.elapsed().as_secs_f64();
+        let published = self.stats.published.load(Ordering::Relaxed);
+        tracing::info!(
+            queued = self.stats.queued.load(Ordering::Relaxed),
+            dropped = self.stats.dropped.load(Ordering::Relaxed),
+            published,
+            messages_per_s = format!("{:.0}", published as f64 / wall_s.max(1e-9)),
+            "live stream"
+        );
+    }
+}
+
+impl Drop for LiveStream {
+    fn drop(&mut self) {
+        // Closing the queue ends the publisher once it has sent what is queued.
+        self.tx = None;
+        if let Some(h) = self.publisher.take()
+            && h.join().is_err()
+        {
+            tracing::warn!("the live publisher thread panicked");
+        }
+        if let Some(server) = self.server.take() {
+            drop(server.stop());
+        }
+        if let Some(rt) = self.runtime.take() {
+            rt.shutdown_timeout(Duration::from_secs(1));
+        }
+    }
+}
