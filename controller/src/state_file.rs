@@ -77,6 +77,30 @@ impl FieldError {
     }
 }
 
+impl FieldError {
+    /// This error of a part, named from the whole: `prefix.field`.
+    #[must_use]
+    pub fn within(self, prefix: &str) -> Self {
+        let field = if self.field.starts_with('[') {
+            format!("{prefix}{}", self.field)
+        } else {
+            format!("{prefix}.{}", self.field)
+        };
+        Self { field, ..self }
+    }
+}
+
+impl StateFileError {
+    /// The file `path` has the wrong `error.field`.
+    pub fn field(path: &Path, error: FieldError) -> Self {
+        Self::Field {
+            path: path.to_path_buf(),
+            field: error.field,
+            message: error.message,
+        }
+    }
+}
+
 /// Checks of a loaded state beyond its types (finite values, consistent sizes, ranges).
 pub trait Validate {
     /// The first field that is wrong.
@@ -178,11 +202,9 @@ pub fn load<T: DeserializeOwned + Validate>(path: &Path) -> Result<T, StateFileE
             message,
         }
     })?;
-    value.validate().map_err(|e| StateFileError::Field {
-        path: path.to_path_buf(),
-        field: e.field,
-        message: e.message,
-    })?;
+    value
+        .validate()
+        .map_err(|e| StateFileError::field(path, e))?;
     Ok(value)
 }
 
