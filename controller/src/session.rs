@@ -393,20 +393,30 @@ impl SessionDriver {
     /// A scan the work cycle asked for: into the session's map (or binned on the cycle's grid
     /// without a session) and on to the cycle.
     fn on_cycle_scan(&mut self, node: &mut ControllerNode, scan: Scan) {
-        {
-            match &mut self.session {
-                // The session's map fuses every scan; the cycle digs with it (3.2).
-                Some(s) => match s.observe_scan_from(scan_origin(&scan), &scan.points) {
-                    Ok(_) => node.provide_terrain(s.terrain().clone()),
-                    Err(e) => tracing::warn!(error = %e, "scan not usable"),
-                },
-                None => match node.cycle().config().scan_grid.terrain(&scan.points) {
-                    Ok(grid) => node.provide_terrain(grid),
-                    Err(e) => tracing::warn!(error = %e, "scan not usable"),
-                },
+        let terrain = match &mut self.session {
+            // The session's map fuses every scan; the cycle digs with it (3.2).
+            Some(s) => s
+                .observe_scan_from(scan_origin(&scan), &scan.points)
+                .map(|_| s.terrain().clone())
+                .map_err(|e| e.to_string()),
+            None => node
+                .cycle()
+                .config()
+                .scan_grid
+                .terrain(&scan.points)
+                .map_err(|e| e.to_string()),
+        };
+        match terrain {
+            Ok(grid) => {
+                tracing::info!(
+                    points = scan.points.len(),
+                    "range scan: terrain map handed to the work cycle"
+                );
+                node.provide_terrain(grid);
             }
-            self.events.push(SessionEvent::Scanned(scan));
+            Err(e) => tracing::warn!(error = %e, "scan not usable"),
         }
+        self.events.push(SessionEvent::Scanned(scan));
     }
 
     /// When the cycle waits for an action: scan the workspace, then plan (here, or off the loop as a

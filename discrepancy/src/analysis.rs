@@ -1,13 +1,19 @@
 //! `excavator-ctl discrepancy analyse`: the analysis of measured sessions end to end: read and
-//! prepare them ([`crate::session`]), fit the candidate effects ([`crate::analyse`]), write the
-//! report and the augmented model ([`crate::report`]).
+//! prepare them ([`crate::session`]), check there is enough to name anything
+//! ([`crate::sufficiency`]), fit the candidate effects ([`crate::analyse`]), judge the held-out
+//! residuals against the reference ([`crate::reference`], [`crate::verdict`]), write the report and
+//! the augmented model ([`crate::report`]).
 
 use std::path::PathBuf;
 
+use anyhow::Context as _;
 use clap::Args;
 
+use crate::greybox::PreparedRecord;
+use crate::model::ModelEffect;
+use crate::reference::{Reference, structure};
 use crate::session::{Analysis, load_machine, load_model, prepare_readable_sessions};
-use crate::{AnalysisConfig, analyse, report};
+use crate::{AnalysisConfig, AugmentedModel, analyse, report, sufficiency, verdict};
 
 /// Arguments of `discrepancy analyse`.
 #[derive(Debug, Clone, Args)]
@@ -31,6 +37,113 @@ pub struct AnalyseArgs {
     /// Also write `dig_N_replay.csv` (inputs, measured, nominal and augmented signals) for every dig.
     #[arg(long)]
     pub replay_csv: bool,
+    /// What "expected" is: session folders of this machine declared healthy (repeatable), or one
+    /// `reference.json` an earlier analysis wrote. Every signal's held-out residual is judged as a
+    /// ratio to its level there. Without it the residuals are not judged, only fitted.
+    #[arg(long, value_name = "DIR|FILE", num_args = 1..)]
+    pub reference: Vec<PathBuf>,
+}
+
+impl AnalyseArgs {
+    /// The arguments of an analysis of `measured` into `out`, everything else at its default.
+    pub fn new(measured: Vec<PathBuf>, out: PathBuf) -> Self {
+        Self {
+            measured,
+            model: None,
+            machine: None,
+            out,
+            quiet: true,
+            replay_csv: false,
+            reference: Vec::new(),
+        }
+    }
+}
+
+/// The reference of `paths`: one `reference.json` file, or session folders analysed from `model`
+/// (every readable dig; an unreadable folder is an error, unlike among the measured ones: the user
+/// declared it healthy and it must be there). The effects that analysis names are the model's
+/// calibration to the healthy machine ([`Reference::calibration`]), and the reference levels are
+/// the residuals with them.
+///
+/// # Errors
+/// Reading the file or the sessions; a file mixed with folders; no usable dig.
+pub fn load_reference(
+    paths: &[PathBuf],
+    machine: &planner::machine::MachineConfig,
+    model: &AugmentedModel,
+) -> anyhow::Result<Option<Reference>> {
+    let Some(first) = paths.first() else {
+        return Ok(None);
+    };
+    if first.is_file() {
+        anyhow::ensure!(
+            paths.len() == 1,
+            "--reference: a reference file ({}) stands alone, not among session folders",
+            first.display()
+        );
+        let text = std::fs::read_to_string(first)
+            .with_context(|| format!("reading {}", first.display()))?;
+        return Ok(Some(
+            Reference::from_json(&text).with_context(|| format!("{}", first.display()))?,
+        ));
+    }
+    let records = crate::session::prepare_sessions(paths, machine, model)
+        .context("reading the reference sessions")?;
+    let config = AnalysisConfig {
+        base: model.augmentation()?,
+        ..AnalysisConfig::default()
+    };
+    let fit = analyse(&records, &model.params, &config, &mut |_, _| {})
+        .context("calibrating on the reference sessions")?;
+    let calibration = fit
+        .named_effects
+        .iter()
+        .map(|e| ModelEffect {
+            name: e.name.to_string(),
+            magnitude: e.magnitude,
+            uncertainty: e.uncertainty,
+        })
+        .collect();
+    let reference = Reference::from_records(
+        &records,
+        &model.params,
+        &fit.augmentation,
+        paths.iter().map(|p| p.display().to_string()).collect(),
+        model.provenance.clone(),
+        calibration,
+    )
+    .context("the reference sessions")?;
+    Ok(Some(reference))
+}
+
+/// `model` with the reference's calibration added (itself when there is none).
+///
+/// # Errors
+/// A calibration effect the library does not know, or out of its range.
+pub fn calibrated(model: AugmentedModel, reference: &Reference) -> anyhow::Result<AugmentedModel> {
+    if reference.calibration.is_empty() {
+        return Ok(model);
+    }
+    let mut effects = model.effects.clone();
+    effects.extend(reference.calibration.iter().cloned());
+    let out = AugmentedModel::new(
+        model.params,
+        effects,
+        format!(
+            "{}; calibrated on the reference sessions ({}): {}",
+            model.provenance,
+            reference.source.join(", "),
+            reference
+                .calibration
+                .iter()
+                .map(|e| format!("{} = {:.4e}", e.name, e.magnitude))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    );
+    out.augmentation()
+        .context("the reference's calibration on the starting model")?;
+    Ok(out)
 }
 
 /// Reads the sessions, runs the analysis and writes the outputs to `args.out`.
@@ -44,8 +157,33 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
     for s in &skipped_sessions {
         tracing::warn!("session {} left out: {}", s.session.display(), s.reason);
     }
+    let mut warnings = sufficiency::check_records(&records)?;
+    let reference = load_reference(&args.reference, &machine, &model)?;
+    if let Some(r) = reference.as_ref().filter(|r| r.model != model.provenance) {
+        warnings.push(format!(
+            "the reference was made with another starting model ({}); its levels may not be this model's",
+            r.model
+        ));
+    }
+    let model = match &reference {
+        Some(r) => calibrated(model, r)?,
+        None => model,
+    };
+    if reference.is_none() {
+        warnings.push(
+            "no reference (--reference): the residuals are not judged against what a healthy \
+             machine gives, so a large residual no candidate explains goes unreported"
+                .to_string(),
+        );
+    }
     let config = AnalysisConfig {
         base: model.augmentation()?,
+        refit: reference
+            .iter()
+            .flat_map(|r| &r.calibration)
+            .filter_map(|e| crate::Candidate::from_name(&e.name))
+            .collect(),
+        parameters: Some(crate::parameters::ParameterLibrary::derive(&machine)?),
         ..AnalysisConfig::default()
     };
     let bar = (!args.quiet && std::io::IsTerminal::is_terminal(&std::io::stdout())).then(|| {
@@ -67,11 +205,26 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
     if let Some(b) = bar {
         b.finish_and_clear();
     }
+    warnings.extend(sufficiency::signal_warnings(&result));
+    let verdict = reference.as_ref().map(|r| {
+        let test: Vec<&PreparedRecord> = records
+            .iter()
+            .filter(|rec| result.test_digs.contains(&rec.index))
+            .collect();
+        let after = structure(&test, &result.params, &result.augmentation);
+        verdict::judge(&result, &after, r)
+    });
+    for w in &warnings {
+        tracing::warn!("{w}");
+    }
     let analysis = Analysis {
         result,
         model,
         records,
         skipped_sessions,
+        reference,
+        verdict,
+        warnings,
     };
     report::write_outputs(&args.out, &analysis, &args.measured, args.replay_csv)?;
     Ok(analysis)

@@ -34,7 +34,7 @@ pub fn run(args: DiscrepancyArgs) -> anyhow::Result<()> {
     match args {
         DiscrepancyArgs::Analyse(a) => {
             let out = run_analysis(&a)?;
-            print!("{}", report::summary_text(&out.result));
+            print!("{}", report::summary_text(&out));
             println!("report: {}", a.out.join("report.md").display());
             Ok(())
         }

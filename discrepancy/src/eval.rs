@@ -1,8 +1,11 @@
 //! `excavator-ctl discrepancy eval`: sessions generated in-process by the demo (`demo::run_session`)
 //! with one hidden simulator effect each (every effect of the library at a small and a large
-//! magnitude, several seeds) and effect-free sessions, each analysed from its folder (trace.log +
-//! scans only, told nothing), and the confusion table of hidden against named effects, with the
-//! magnitude errors and the held-out residual reductions. `discrepancy bench` times the analysis.
+//! magnitude, several seeds), with a plant change outside the library ([`crate::plant`]), and
+//! effect-free sessions, each analysed from its folder (trace.log + scans only, told nothing)
+//! against a reference of healthy sessions generated at other seeds; the confusion table of hidden
+//! against named effects, with the magnitude errors and the held-out residual reductions, and the
+//! outcomes (expected, named, partly explained, unexplained) per kind of case. `discrepancy bench`
+//! times the analysis.
 
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
@@ -15,9 +18,11 @@ use clap::Args;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::analysis::{AnalyseArgs, run_analysis};
+use crate::analysis::{AnalyseArgs, load_reference, run_analysis};
+use crate::plant::{PlantChange, PlantFile, PlantOp, default_plant_changes};
 use crate::session::{load_machine, load_model, prepare_sessions};
-use lab::demo::{DemoArgs, SoilContact, run_session};
+use crate::verdict::Outcome;
+use lab::demo::{DemoArgs, DemoStrategy, SoilContact, run_session};
 
 /// Arguments of `discrepancy eval`.
 #[derive(Debug, Clone, Args)]
@@ -46,6 +51,104 @@ pub struct EvalArgs {
     /// chatter, which the nominal model has never seen; docs/simulator.md).
     #[arg(long, value_enum, value_name = "HOW")]
     pub soil_contact: Option<SoilContact>,
+    /// The action source of the generated sessions (default: `planned`, the session `demo` runs,
+    /// on its extended bench; with --quick `fixed`, the fixed plan on config/bench.toml).
+    #[arg(long, value_enum, value_name = "HOW")]
+    pub strategy: Option<DemoStrategy>,
+    /// Plant changes outside the effect library, FILE:KEY*FACTOR or FILE:KEY=VALUE with FILE
+    /// `machine` or `bench` (repeatable; `default`: the built-in list of `crate::plant`).
+    #[arg(long = "plant", value_name = "CHANGE")]
+    pub plant: Vec<String>,
+    /// Healthy sessions generated at their own seeds (300, 301, ...) as the reference every case
+    /// is judged against (0: no reference, no verdicts; at most 1 with --quick).
+    #[arg(long, default_value_t = 2, value_name = "N")]
+    pub reference_sessions: u64,
+    /// Leave out the effect-library cases (plant changes and effect-free sessions only).
+    #[arg(long)]
+    pub no_effects: bool,
+}
+
+impl EvalArgs {
+    /// The defaults of the command line with `out` as the output folder.
+    pub fn new(out: PathBuf) -> Self {
+        Self {
+            quick: false,
+            seeds: 2,
+            nominal_sessions: 6,
+            digs: None,
+            only: Vec::new(),
+            out,
+            soil_contact: None,
+            strategy: None,
+            plant: Vec::new(),
+            reference_sessions: 2,
+            no_effects: false,
+        }
+    }
+
+    /// The strategy of the generated sessions.
+    pub fn strategy(&self) -> DemoStrategy {
+        self.strategy.unwrap_or(if self.quick {
+            DemoStrategy::Fixed
+        } else {
+            DemoStrategy::Planned
+        })
+    }
+
+    /// The plant changes to evaluate.
+    ///
+    /// # Errors
+    /// A change that does not parse.
+    pub fn plant_changes(&self) -> anyhow::Result<Vec<PlantChange>> {
+        let mut out = Vec::new();
+        for p in &self.plant {
+            if p == "default" {
+                out.extend(default_plant_changes());
+            } else {
+                out.push(p.parse().map_err(anyhow::Error::msg)?);
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// What a case hides from the analysis.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Hidden {
+    /// Nothing: an effect-free session.
+    None,
+    /// An effect of the library at a magnitude.
+    Effect(Candidate, f64),
+    /// A plant change outside the library.
+    Plant(PlantChange),
+}
+
+impl Hidden {
+    /// The kind of case: `effect`, `plant` or `none`.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Hidden::None => "none",
+            Hidden::Effect(..) => "effect",
+            Hidden::Plant(_) => "plant",
+        }
+    }
+
+    /// The hidden effect's magnitude (0 for the others).
+    pub fn magnitude(&self) -> f64 {
+        match self {
+            Hidden::Effect(_, v) => *v,
+            _ => 0.0,
+        }
+    }
+
+    /// What is hidden, as `eval.json`'s `hidden`: the effect's name, the plant change, `none`.
+    pub fn name(&self) -> String {
+        match self {
+            Hidden::None => "none".into(),
+            Hidden::Effect(c, _) => c.name().into(),
+            Hidden::Plant(p) => p.to_string(),
+        }
+    }
 }
 
 /// Arguments of `discrepancy bench`.
@@ -109,6 +212,43 @@ pub struct CaseResult {
     pub best_acted_rms_change_percent: Option<f64>,
     /// Analysis wall time, s.
     pub analysis_s: f64,
+    /// `effect`, `plant` or `none`.
+    pub kind: String,
+    /// The verdict against the reference (`expected`, `named`, `partly_explained`,
+    /// `unexplained`, `not_judged`); `None` without a reference or when the analysis failed.
+    pub outcome: Option<Outcome>,
+    /// Signals beyond the reference after the named effects, with their ratio to it.
+    pub unexplained: Vec<(String, f64)>,
+    /// The largest held-out ratio to the reference over the judged signals, before and after the
+    /// named effects.
+    pub max_ratio: Option<(f64, f64)>,
+    /// Data-sufficiency warnings of the analysis.
+    pub warnings: usize,
+}
+
+impl CaseResult {
+    /// A case whose session could not be generated or analysed (counted as a miss, named `error`).
+    fn failed(case: String, hidden: &Hidden, seed: u64) -> Self {
+        Self {
+            case,
+            hidden: hidden.name(),
+            hidden_magnitude: hidden.magnitude(),
+            seed,
+            digs: 0,
+            named: "error".into(),
+            named_all: Vec::new(),
+            magnitude_error_percent: None,
+            best_rms_change_percent: None,
+            best_signal: None,
+            best_acted_rms_change_percent: None,
+            analysis_s: 0.0,
+            kind: hidden.kind().into(),
+            outcome: None,
+            unexplained: Vec::new(),
+            max_ratio: None,
+            warnings: 0,
+        }
+    }
 }
 
 fn signals_of(c: Candidate) -> Vec<&'static str> {
@@ -137,44 +277,100 @@ fn session_complete(session: &std::path::Path) -> anyhow::Result<bool> {
     Ok(false)
 }
 
-fn run_case(
+/// Where a generated session of `case` goes and whether it is there already; the demo settings of
+/// the strategy, soil contact and seed.
+struct SessionPlan {
+    case: String,
+    demo: DemoArgs,
+}
+
+impl SessionPlan {
+    fn new(
+        out: &std::path::Path,
+        base: &str,
+        seed: u64,
+        digs: u32,
+        soil_contact: Option<SoilContact>,
+        strategy: DemoStrategy,
+    ) -> Self {
+        let mut case = base.to_string();
+        // Sessions of another plant or strategy must not be reused for this one.
+        if soil_contact == Some(SoilContact::Implicit) {
+            case.push_str("_implicit");
+        }
+        if strategy != DemoStrategy::Fixed {
+            case.push('_');
+            case.push_str(strategy.name());
+        }
+        let mut demo = DemoArgs::new(out.join("sessions").join(&case));
+        demo.digs = digs;
+        demo.seed = Some(seed);
+        demo.quiet = true;
+        demo.soil_contact = soil_contact;
+        demo.strategy = strategy;
+        Self { case, demo }
+    }
+
+    /// Generates the session unless a finished one is there.
+    fn generate(&self) -> anyhow::Result<PathBuf> {
+        if !session_complete(&self.demo.out)? {
+            run_session(&self.demo, &AtomicBool::new(false))
+                .with_context(|| format!("generating session {}", self.case))?;
+        }
+        Ok(self.demo.out.clone())
+    }
+}
+
+/// Writes the changed machine or bench file of a plant change and points the demo at it.
+fn apply_plant(
+    plan: &mut SessionPlan,
+    change: &PlantChange,
     out: &std::path::Path,
-    hidden: Option<(Candidate, f64)>,
+) -> anyhow::Result<()> {
+    let (base, name) = match change.file {
+        PlantFile::Machine => (planner::machine::DEFAULT_MACHINE_TOML, "machine"),
+        PlantFile::Bench if plan.demo.strategy == DemoStrategy::Fixed => {
+            (vcan_sim::scenario::DEFAULT_BENCH_TOML, "bench")
+        }
+        PlantFile::Bench => (vcan_sim::scenario::EXTENDED_BENCH_TOML, "bench_extended"),
+    };
+    let dir = out.join("plant");
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let path = dir.join(format!("{}_{name}.toml", change.slug()));
+    std::fs::write(&path, change.apply(base)?)
+        .with_context(|| format!("writing {}", path.display()))?;
+    match change.file {
+        PlantFile::Machine => plan.demo.machine = Some(path),
+        PlantFile::Bench => plan.demo.bench = Some(path),
+    }
+    Ok(())
+}
+
+fn run_case(
+    args: &EvalArgs,
+    hidden: &Hidden,
     seed: u64,
     digs: u32,
-    soil_contact: Option<SoilContact>,
+    reference: Option<&std::path::Path>,
 ) -> anyhow::Result<CaseResult> {
-    let mut case = match hidden {
-        Some((c, v)) => format!("{}_{v}_s{seed}", c.name()),
-        None => format!("none_s{seed}"),
+    let out = &args.out;
+    let base = match hidden {
+        Hidden::Effect(c, v) => format!("{}_{v}_s{seed}", c.name()),
+        Hidden::Plant(p) => format!("plant_{}_s{seed}", p.slug()),
+        Hidden::None => format!("none_s{seed}"),
     };
-    // Sessions of another plant must not be reused for this one.
-    if soil_contact == Some(SoilContact::Implicit) {
-        case.push_str("_implicit");
+    let mut plan = SessionPlan::new(out, &base, seed, digs, args.soil_contact, args.strategy());
+    match hidden {
+        Hidden::Effect(c, v) => plan.demo.effects = vec![format!("{}={v}", c.name())],
+        Hidden::Plant(p) => apply_plant(&mut plan, p, out)?,
+        Hidden::None => {}
     }
-    let session = out.join("sessions").join(&case);
-    let mut demo = DemoArgs::new(session.clone());
-    demo.digs = digs;
-    demo.seed = Some(seed);
-    demo.quiet = true;
-    demo.soil_contact = soil_contact;
-    if let Some((c, v)) = hidden {
-        demo.effects = vec![format!("{}={v}", c.name())];
-    }
-    if !session_complete(&session)? {
-        run_session(&demo, &AtomicBool::new(false))
-            .with_context(|| format!("generating session {case}"))?;
-    }
+    let session = plan.generate()?;
+    let case = plan.case;
     let t = Instant::now();
-    let analysis = run_analysis(&AnalyseArgs {
-        measured: vec![session],
-        model: None,
-        machine: None,
-        out: out.join("reports").join(&case),
-        quiet: true,
-        replay_csv: false,
-    })
-    .with_context(|| format!("analysing {case}"))?;
+    let mut analyse_args = AnalyseArgs::new(vec![session], out.join("reports").join(&case));
+    analyse_args.reference = reference.map(|r| vec![r.to_path_buf()]).unwrap_or_default();
+    let analysis = run_analysis(&analyse_args).with_context(|| format!("analysing {case}"))?;
     let analysis_s = t.elapsed().as_secs_f64();
     let r = &analysis.result;
     let named = r
@@ -184,7 +380,8 @@ fn run_case(
     let (mut magnitude_error_percent, mut best_rms_change_percent, mut best_signal) =
         (None, None, None);
     let mut best_acted_rms_change_percent = None;
-    if let Some((c, v)) = hidden {
+    if let Hidden::Effect(c, v) = hidden {
+        let (c, v) = (*c, *v);
         if let Some(e) = r.named_effects.iter().find(|e| e.name == c.name()) {
             magnitude_error_percent = Some(100.0 * (e.magnitude - v) / v.abs());
         }
@@ -205,10 +402,21 @@ fn run_case(
             .map(|m| crate::report::reduction_percent(m.acted.1, m.acted.2))
             .min_by(f64::total_cmp);
     }
+    if let Hidden::Plant(p) = hidden {
+        magnitude_error_percent = parameter_error_percent(p, &r.named_effects);
+    }
+    let verdict = analysis.verdict.as_ref();
+    let max_ratio = verdict.and_then(|v| {
+        v.signals
+            .iter()
+            .filter(|s| s.outcome != Outcome::NotJudged)
+            .map(|s| (s.ratio_before, s.ratio_after))
+            .reduce(|a, b| (a.0.max(b.0), a.1.max(b.1)))
+    });
     Ok(CaseResult {
         case,
-        hidden: hidden.map_or("none".into(), |(c, _)| c.name().to_string()),
-        hidden_magnitude: hidden.map_or(0.0, |(_, v)| v),
+        hidden: hidden.name(),
+        hidden_magnitude: hidden.magnitude(),
         seed,
         digs: analysis.records.len(),
         named,
@@ -222,7 +430,175 @@ fn run_case(
         best_signal,
         best_acted_rms_change_percent,
         analysis_s,
+        kind: hidden.kind().into(),
+        outcome: verdict.map(|v| v.outcome),
+        unexplained: verdict.map_or_else(Vec::new, |v| {
+            v.unexplained
+                .iter()
+                .map(|u| (u.signal.to_string(), u.ratio_to_expected))
+                .collect()
+        }),
+        max_ratio,
+        warnings: analysis.warnings.len(),
     })
+}
+
+/// The error of a named machine parameter against a machine plant change of the same key, in % of
+/// the change (`None` when the change is not named as its parameter).
+fn parameter_error_percent(p: &PlantChange, named: &[crate::NamedEffect]) -> Option<f64> {
+    if p.file != PlantFile::Machine {
+        return None;
+    }
+    let e = named
+        .iter()
+        .find(|e| e.kind == "parameter" && e.name == p.key)?;
+    let machine = planner::machine::MachineConfig::default_machine().ok()?;
+    let library = crate::parameters::ParameterLibrary::derive(&machine).ok()?;
+    let nominal = library.parameters[library.find(&p.key)?].nominal;
+    let truth = match p.op {
+        PlantOp::Scale(f) => nominal * f,
+        PlantOp::Set(v) => v,
+    };
+    (truth != nominal).then(|| 100.0 * (e.magnitude - truth) / (truth - nominal))
+}
+
+/// The outcomes against the reference per kind of case, and per plant change over its seeds (the
+/// median and the worst largest ratio to the reference, not the best).
+pub fn outcome_text(results: &[CaseResult]) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    let judged: Vec<&CaseResult> = results.iter().filter(|c| c.outcome.is_some()).collect();
+    if judged.is_empty() {
+        return s;
+    }
+    let outcomes = [
+        Outcome::Expected,
+        Outcome::Named,
+        Outcome::PartlyExplained,
+        Outcome::Unexplained,
+        Outcome::NotJudged,
+    ];
+    let _ = writeln!(
+        s,
+        "\noutcomes against the reference (rows: kind of case; columns: outcome)"
+    );
+    let _ = write!(s, "{:<10}", "kind");
+    for o in outcomes {
+        let _ = write!(s, "{:>18}", o.name());
+    }
+    let _ = writeln!(s, "{:>8}", "error");
+    for kind in ["effect", "plant", "none"] {
+        let cases: Vec<&CaseResult> = results.iter().filter(|c| c.kind == kind).collect();
+        if cases.is_empty() {
+            continue;
+        }
+        let _ = write!(s, "{kind:<10}");
+        for o in outcomes {
+            let n = cases.iter().filter(|c| c.outcome == Some(o)).count();
+            let _ = write!(s, "{n:>18}");
+        }
+        let errors = cases.iter().filter(|c| c.named == "error").count();
+        let _ = writeln!(s, "{errors:>8}");
+    }
+    // Judged cases of a kind, and how many of them were judged expected.
+    let of_kind = |kind: &str| -> (Vec<&CaseResult>, usize) {
+        let cases: Vec<&CaseResult> = judged.iter().copied().filter(|c| c.kind == kind).collect();
+        let expected = cases
+            .iter()
+            .filter(|c| c.outcome == Some(Outcome::Expected))
+            .count();
+        (cases, expected)
+    };
+    let (clean, ok) = of_kind("none");
+    if !clean.is_empty() {
+        let _ = writeln!(
+            s,
+            "effect-free sessions judged expected (no false alarm): {ok}/{}",
+            clean.len()
+        );
+    }
+    let (plant, silent) = of_kind("plant");
+    if !plant.is_empty() {
+        let _ = writeln!(
+            s,
+            "plant changes reported silently as expected: {silent}/{} (the rest unexplained, partly explained or named)",
+            plant.len()
+        );
+        let mut names: Vec<&str> = Vec::new();
+        for c in &plant {
+            if !names.contains(&c.hidden.as_str()) {
+                names.push(c.hidden.as_str());
+            }
+        }
+        let _ = writeln!(
+            s,
+            "{:<52} {:>6} {:>26} {:>22}  outcomes",
+            "plant change", "seeds", "max ratio before (med/worst)", "after (med/worst)"
+        );
+        for name in names {
+            let cases: Vec<&&CaseResult> = plant.iter().filter(|c| c.hidden == name).collect();
+            let mut before: Vec<f64> = cases
+                .iter()
+                .filter_map(|c| c.max_ratio.map(|r| r.0))
+                .collect();
+            let mut after: Vec<f64> = cases
+                .iter()
+                .filter_map(|c| c.max_ratio.map(|r| r.1))
+                .collect();
+            // The worst seed of a plant change is the one closest to passing as healthy: the
+            // lowest ratio.
+            let med_worst = |v: &mut Vec<f64>| -> String {
+                if v.is_empty() {
+                    return "-".into();
+                }
+                v.sort_by(f64::total_cmp);
+                format!("{:.1}/{:.1}", v[v.len() / 2], v[0])
+            };
+            let _ = writeln!(
+                s,
+                "{:<52} {:>6} {:>26} {:>22}  {}",
+                name,
+                cases.len(),
+                med_worst(&mut before),
+                med_worst(&mut after),
+                cases
+                    .iter()
+                    .map(|c| format!(
+                        "{}{}{}",
+                        c.outcome.map_or("error", Outcome::name),
+                        if c.named == "none" || c.named == "error" {
+                            String::new()
+                        } else {
+                            format!(" ({})", c.named)
+                        },
+                        c.magnitude_error_percent
+                            .map_or(String::new(), |e| format!(" {e:+.0} % of the change"))
+                    ))
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            );
+        }
+    }
+    let _ = writeln!(
+        s,
+        "\nper judged case: outcome, largest ratio before -> after, beyond the reference"
+    );
+    for c in &judged {
+        let _ = writeln!(
+            s,
+            "{:<60} {:<17} {:>12} {}",
+            c.case,
+            c.outcome.map_or("-", Outcome::name),
+            c.max_ratio
+                .map_or("-".into(), |(b, a)| format!("{b:.1}->{a:.1}")),
+            c.unexplained
+                .iter()
+                .map(|(sig, r)| format!("{sig} {r:.1}x"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    s
 }
 
 /// The confusion table and the summary figures as text.
@@ -273,7 +649,7 @@ pub fn confusion_text(results: &[CaseResult]) -> String {
         s,
         "(column codes: first letters of the names, e.g. vd = valve_deadband, pso = pressure_sensor_offset)"
     );
-    let with: Vec<&CaseResult> = results.iter().filter(|c| c.hidden != "none").collect();
+    let with: Vec<&CaseResult> = results.iter().filter(|c| c.kind == "effect").collect();
     let without: Vec<&CaseResult> = results.iter().filter(|c| c.hidden == "none").collect();
     let named_ok = with.iter().filter(|c| c.named == c.hidden).count();
     let mag_ok = with
@@ -354,11 +730,18 @@ pub fn confusion_text(results: &[CaseResult]) -> String {
 }
 
 /// The cases of an evaluation.
-pub fn cases(args: &EvalArgs) -> Vec<(Option<(Candidate, f64)>, u64)> {
+///
+/// # Errors
+/// A plant change that does not parse.
+pub fn cases(args: &EvalArgs) -> anyhow::Result<Vec<(Hidden, u64)>> {
     let mut effects: Vec<Candidate> = Candidate::ALL.to_vec();
     if !args.only.is_empty() {
         effects.retain(|c| args.only.iter().any(|n| n == c.name()));
     }
+    if args.no_effects {
+        effects.clear();
+    }
+    let plant = args.plant_changes()?;
     let mut out = Vec::new();
     if args.quick {
         let quick = [
@@ -370,22 +753,67 @@ pub fn cases(args: &EvalArgs) -> Vec<(Option<(Candidate, f64)>, u64)> {
             Candidate::FlowSharing,
         ];
         for c in quick.iter().filter(|c| effects.contains(c)) {
-            out.push((Some((*c, magnitudes(*c)[1])), 11));
+            out.push((Hidden::Effect(*c, magnitudes(*c)[1]), 11));
         }
-        out.push((None, 11));
-        return out;
+        for p in plant {
+            out.push((Hidden::Plant(p), 11));
+        }
+        out.push((Hidden::None, 11));
+        return Ok(out);
     }
     for seed in 0..args.seeds {
         for c in &effects {
             for m in magnitudes(*c) {
-                out.push((Some((*c, m)), 100 + seed));
+                out.push((Hidden::Effect(*c, m), 100 + seed));
             }
+        }
+        for p in &plant {
+            out.push((Hidden::Plant(p.clone()), 400 + seed));
         }
     }
     for seed in 0..args.nominal_sessions {
-        out.push((None, 200 + seed));
+        out.push((Hidden::None, 200 + seed));
     }
-    out
+    Ok(out)
+}
+
+/// Generates the reference sessions (healthy, at seeds 300, 301, ...) and writes their reference
+/// to `out/reference.json`; `None` for no reference sessions.
+///
+/// # Errors
+/// Generating or reading a session.
+fn reference_file(args: &EvalArgs, digs: u32) -> anyhow::Result<Option<PathBuf>> {
+    let n = if args.quick {
+        args.reference_sessions.min(1)
+    } else {
+        args.reference_sessions
+    };
+    if n == 0 {
+        return Ok(None);
+    }
+    let sessions: Vec<PathBuf> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let seed = 300 + i;
+            SessionPlan::new(
+                &args.out,
+                &format!("reference_s{seed}"),
+                seed,
+                digs,
+                args.soil_contact,
+                args.strategy(),
+            )
+            .generate()
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let machine = load_machine(None)?;
+    let model = load_model(None)?;
+    let reference = load_reference(&sessions, &machine, &model)?
+        .ok_or_else(|| anyhow::anyhow!("no reference sessions"))?;
+    let path = args.out.join("reference.json");
+    std::fs::write(&path, reference.to_json()?)
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(Some(path))
 }
 
 /// Runs the evaluation, prints the table, writes `eval.json` and `eval.md`.
@@ -394,43 +822,29 @@ pub fn cases(args: &EvalArgs) -> Vec<(Option<(Candidate, f64)>, u64)> {
 /// A session that cannot be generated or analysed; writing the outputs.
 pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
     let digs = args.digs.unwrap_or(if args.quick { 4 } else { 8 });
-    let list = cases(args);
+    let list = cases(args)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
+    let t = Instant::now();
+    let reference = reference_file(args, digs)?;
     let bar = indicatif::ProgressBar::new(list.len() as u64);
     if !std::io::IsTerminal::is_terminal(&std::io::stdout()) {
         bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
     }
-    let t = Instant::now();
-    let results: Vec<CaseResult> =
-        list.par_iter()
-            .map(|(hidden, seed)| {
-                // A session that cannot be analysed (e.g. the hidden effect stopped the work cycle
-                // after one dig) counts as a miss, named `error`, and the evaluation goes on.
-                let r = run_case(&args.out, *hidden, *seed, digs, args.soil_contact)
-                    .unwrap_or_else(|e| CaseResult {
-                        case: format!(
-                            "{}_s{seed} ({e:#})",
-                            hidden.map_or("none", |(c, _)| c.name())
-                        ),
-                        hidden: hidden.map_or("none".into(), |(c, _)| c.name().to_string()),
-                        hidden_magnitude: hidden.map_or(0.0, |(_, v)| v),
-                        seed: *seed,
-                        digs: 0,
-                        named: "error".into(),
-                        named_all: Vec::new(),
-                        magnitude_error_percent: None,
-                        best_rms_change_percent: None,
-                        best_signal: None,
-                        best_acted_rms_change_percent: None,
-                        analysis_s: 0.0,
-                    });
-                bar.inc(1);
-                r
-            })
-            .collect();
+    let results: Vec<CaseResult> = list
+        .par_iter()
+        .map(|(hidden, seed)| {
+            // A session that cannot be analysed (e.g. the hidden effect stopped the work cycle
+            // after one dig) counts as a miss, named `error`, and the evaluation goes on.
+            let r = run_case(args, hidden, *seed, digs, reference.as_deref()).unwrap_or_else(|e| {
+                CaseResult::failed(format!("{}_s{seed} ({e:#})", hidden.name()), hidden, *seed)
+            });
+            bar.inc(1);
+            r
+        })
+        .collect();
     bar.finish_and_clear();
-    let text = confusion_text(&results);
+    let text = format!("{}{}", confusion_text(&results), outcome_text(&results));
     print!("{text}");
     println!(
         "{} cases in {:.0} s (generation and analysis, {} rayon threads)",

@@ -27,6 +27,7 @@ use super::effects::{Candidate, CandidateEffect as _};
 use super::greybox::{
     Augmentation, GreyBoxParams, N_SIGNALS, PreparedRecord, Signal, SignalGroups, replay,
 };
+use super::parameters::{FACTOR_RANGE, ParameterLibrary};
 use super::stats::{self, ResidualSummary};
 use super::{DiscrepancyError, Result};
 
@@ -56,8 +57,17 @@ pub struct AnalysisConfig {
     pub grid_points: usize,
     /// Golden-section iterations.
     pub golden_iterations: usize,
-    /// The model's effects before the analysis (from `--model`); their candidates are not refitted.
+    /// The model's effects before the analysis (from `--model`); their candidates are not refitted,
+    /// except those in `refit`.
     pub base: Augmentation,
+    /// Candidates of `base` fitted again (the calibration on a reference: a healthy machine's own
+    /// transport delay must not hide a larger one); a named one's magnitude is the change on top
+    /// of `base`.
+    pub refit: Vec<Candidate>,
+    /// The machine's own parameters as candidates (parameter drift), derived from its file; none
+    /// without it.
+    #[serde(skip)]
+    pub parameters: Option<ParameterLibrary>,
 }
 
 impl Default for AnalysisConfig {
@@ -72,6 +82,8 @@ impl Default for AnalysisConfig {
             grid_points: 9,
             golden_iterations: 12,
             base: Augmentation::nominal(),
+            refit: Vec::new(),
+            parameters: None,
         }
     }
 }
@@ -79,9 +91,10 @@ impl Default for AnalysisConfig {
 /// A candidate's fit and score in one round of the forward selection.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct CandidateScore {
-    /// Effect name (the simulator's).
-    pub name: &'static str,
-    /// Fitted magnitude, in the simulator's unit.
+    /// Effect name (the simulator's) or machine-file key.
+    pub name: String,
+    /// Fitted magnitude, in the simulator's unit (a parameter: the factor on the file's value
+    /// less 1).
     pub magnitude: f64,
     /// Standard uncertainty of the magnitude.
     pub uncertainty: f64,
@@ -101,16 +114,20 @@ pub struct CandidateScore {
 /// An effect the analysis named.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct NamedEffect {
-    /// Effect name (the simulator's, `excavator-sim --list-effects`).
-    pub name: &'static str,
-    /// Fitted magnitude.
+    /// Effect name (the simulator's, `excavator-sim --list-effects`), or the machine file's key of
+    /// a parameter.
+    pub name: String,
+    /// What kind of candidate it is: `effect` (the effect library) or `parameter` (a machine-file
+    /// field, [`crate::parameters`]).
+    pub kind: &'static str,
+    /// Fitted magnitude (a parameter: the fitted value in the machine file's units).
     pub magnitude: f64,
     /// Standard uncertainty.
     pub uncertainty: f64,
     /// Unit of the magnitude.
     pub unit: &'static str,
     /// What the effect is.
-    pub description: &'static str,
+    pub description: String,
     /// Held-out BIC improvement when it was added.
     pub heldout_delta_bic: f64,
 }
@@ -145,6 +162,9 @@ pub struct AnalysisResult {
     pub named_effects: Vec<NamedEffect>,
     /// The final augmentation (magnitudes per candidate).
     pub augmentation: Augmentation,
+    /// The final grey-box parameters (the starting model's, with the named machine parameters).
+    #[serde(skip)]
+    pub params: GreyBoxParams,
     /// Every round's candidate scores.
     pub rounds: Vec<Vec<CandidateScore>>,
     /// Held-out residual RMS per signal, before and after.
@@ -156,6 +176,8 @@ pub struct AnalysisResult {
     pub train_digs: Vec<u32>,
     /// Dig indices held out.
     pub test_digs: Vec<u32>,
+    /// Samples per signal in the training digs (the held-out ones are in `rms`).
+    pub train_samples: Vec<usize>,
     /// Nominal residual standard deviation per signal on the training digs.
     pub sigma: Vec<f64>,
     /// Decorrelation factor per signal (samples per independent sample).
@@ -175,6 +197,53 @@ const MAX_SIGNAL_WORSENING: f64 = 1.1;
 
 fn groups_contain(g: SignalGroups, j: usize) -> bool {
     g.contains(j)
+}
+
+/// A candidate of the forward selection: an effect of the library, or a machine parameter (index
+/// into [`AnalysisConfig::parameters`]) fitted as a factor on the file's value.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Trial {
+    Effect(Candidate),
+    Parameter(usize),
+}
+
+impl Trial {
+    fn groups(self) -> SignalGroups {
+        match self {
+            Trial::Effect(c) => c.groups(),
+            Trial::Parameter(_) => ParameterLibrary::groups(),
+        }
+    }
+
+    fn range(self) -> (f64, f64) {
+        match self {
+            Trial::Effect(c) => c.range(),
+            Trial::Parameter(_) => FACTOR_RANGE,
+        }
+    }
+
+    fn scale(self) -> f64 {
+        match self {
+            Trial::Effect(c) => c.scale(),
+            Trial::Parameter(_) => 1.0,
+        }
+    }
+
+    /// The value of the starting model (an effect's calibrated magnitude; a factor of 1).
+    fn base(self, base: &Augmentation) -> f64 {
+        match self {
+            Trial::Effect(c) => base.get(c),
+            Trial::Parameter(_) => 1.0,
+        }
+    }
+
+    fn name(self, library: Option<&ParameterLibrary>) -> String {
+        match (self, library) {
+            (Trial::Effect(c), _) => c.name().to_string(),
+            (Trial::Parameter(i), Some(l)) => l.parameters[i].key.clone(),
+            (Trial::Parameter(i), None) => format!("parameter {i}"),
+        }
+    }
 }
 
 /// Per-signal weights of the chi-square.
@@ -211,17 +280,13 @@ fn chi2(w: &Weights, s: &[f64; N_SIGNALS]) -> f64 {
 /// Replays records with an augmentation, recomputing only `groups` over the cached nominal replay.
 struct Evaluator<'a> {
     records: Vec<&'a PreparedRecord>,
-    params: &'a GreyBoxParams,
+    params: GreyBoxParams,
     base: Vec<Vec<[f64; N_SIGNALS]>>,
     scratch: Vec<Vec<[f64; N_SIGNALS]>>,
 }
 
 impl<'a> Evaluator<'a> {
-    fn new(
-        records: Vec<&'a PreparedRecord>,
-        params: &'a GreyBoxParams,
-        aug: &Augmentation,
-    ) -> Self {
+    fn new(records: Vec<&'a PreparedRecord>, params: &GreyBoxParams, aug: &Augmentation) -> Self {
         let base: Vec<_> = records
             .iter()
             .map(|r| {
@@ -233,15 +298,22 @@ impl<'a> Evaluator<'a> {
         Self {
             scratch: base.clone(),
             records,
-            params,
+            params: params.clone(),
             base,
         }
     }
 
-    fn sse_with(&mut self, aug: &Augmentation, groups: SignalGroups) -> [f64; N_SIGNALS] {
+    /// Sum of squares per signal under `aug` and `params` (the evaluator's own without).
+    fn sse_with(
+        &mut self,
+        aug: &Augmentation,
+        params: Option<&GreyBoxParams>,
+        groups: SignalGroups,
+    ) -> [f64; N_SIGNALS] {
+        let params = params.unwrap_or(&self.params);
         for ((rec, out), base) in self.records.iter().zip(&mut self.scratch).zip(&self.base) {
             out.clone_from(base);
-            replay(rec, self.params, aug, groups, out);
+            replay(rec, params, aug, groups, out);
         }
         sse(&self.records, &self.scratch).0
     }
@@ -438,15 +510,24 @@ pub fn analyse(
     let localisation = stats::localise(&order, params, &nominal);
 
     let mut aug = config.base;
+    let mut params_now = params.clone();
     let mut named = Vec::new();
     let mut rounds = Vec::new();
-    let mut remaining: Vec<Candidate> = config
+    let mut remaining: Vec<Trial> = config
         .candidates
         .iter()
         .copied()
-        .filter(|c| config.base.get(*c) == 0.0)
+        .filter(|c| config.base.get(*c) == 0.0 || config.refit.contains(c))
+        .map(Trial::Effect)
+        .chain(
+            config
+                .parameters
+                .iter()
+                .flat_map(|l| (0..l.parameters.len()).map(Trial::Parameter)),
+        )
         .collect();
-    let total = config.candidates.len() * (config.max_effects + 1).min(config.candidates.len() + 1);
+    let n_trials = remaining.len();
+    let total = n_trials * (config.max_effects + 1).min(n_trials + 1);
     let mut done = 0;
     while named.len() < config.max_effects && !remaining.is_empty() {
         // The residual spread and decorrelation of the model as it stands this round (after an
@@ -461,15 +542,30 @@ pub fn analyse(
         };
         let train_chi0 = chi2(&w, &train_eval.base_sse().0);
         let test_base_sse = test_eval.base_sse().0;
-        let mut scores: Vec<(Candidate, CandidateScore)> = Vec::new();
+        let mut scores: Vec<(Trial, CandidateScore)> = Vec::new();
         for c in &remaining {
             let c = *c;
+            let library = config.parameters.as_ref();
             let groups = c.groups();
             let (lo, hi) = c.range();
-            let mut cost = |x: f64| {
-                let mut a = aug;
-                a.set(c, x);
-                chi2(&w, &train_eval.sse_with(&a, groups))
+            // The model with the trial at `x`: an effect's magnitude, or a parameter's factor on
+            // the file's value (`None`: the machine file is not valid there).
+            let at = |x: f64| -> Option<(Augmentation, Option<GreyBoxParams>)> {
+                match (c, library) {
+                    (Trial::Effect(e), _) => {
+                        let mut a = aug;
+                        a.set(e, x);
+                        Some((a, None))
+                    }
+                    (Trial::Parameter(i), Some(l)) => {
+                        l.apply(&params_now, i, x).ok().map(|p| (aug, Some(p)))
+                    }
+                    (Trial::Parameter(_), None) => None,
+                }
+            };
+            let mut cost = |x: f64| match at(x) {
+                Some((a, p)) => chi2(&w, &train_eval.sse_with(&a, p.as_ref(), groups)),
+                None => f64::INFINITY,
             };
             let (x, fx) = minimise(
                 &mut cost,
@@ -493,13 +589,14 @@ pub fn analyse(
                 // One-sided at a bound: the slope over the step, as a lower bound of the curvature.
                 ((f2 - f1) / (x2 - x1)).abs() / h
             };
-            let uncertainty = if curvature > 0.0 {
+            let uncertainty = if curvature.is_finite() && curvature > 0.0 {
                 (2.0 / curvature).sqrt()
             } else {
                 c.scale()
             };
-            let mut a = aug;
-            a.set(c, x);
+            let Some((a, p)) = at(x) else {
+                continue;
+            };
             // The decorrelation of the noise the candidate leaves (training digs): the nominal
             // residual's autocorrelation includes the candidate's own signature, which is smooth
             // where the effect is (a viscous friction `c v` follows the speed over a whole stroke:
@@ -508,7 +605,7 @@ pub fn analyse(
             // independent samples. The test is against the noise under the alternative (as an F
             // test takes the full model's residual); the spread stays the nominal one (larger,
             // conservative), and a candidate fitted near zero leaves the noise model as it was.
-            train_eval.sse_with(&a, groups);
+            train_eval.sse_with(&a, p.as_ref(), groups);
             let mut kappa_c = kappa_r.clone();
             let mut w_c = w;
             for j in (0..N_SIGNALS).filter(|j| groups_contain(groups, *j)) {
@@ -518,7 +615,7 @@ pub fn analyse(
                 }
             }
             let test_chi0_c = chi2(&w_c, &test_base_sse);
-            let test_sse = test_eval.sse_with(&a, groups);
+            let test_sse = test_eval.sse_with(&a, p.as_ref(), groups);
             let test_chi = chi2(&w_c, &test_sse);
             let delta_bic = test_chi0_c - test_chi - n_eff(&w_c.inv_var, &kappa_c).ln();
             // Explained share of the held-out chi-square of the signals the candidate acts on (a
@@ -544,16 +641,18 @@ pub fn analyse(
             let consistent = (0..N_SIGNALS).all(|j| {
                 n_test[j] < 100 || test_sse[j] <= MAX_SIGNAL_WORSENING.powi(2) * test_base_sse[j]
             });
+            // The change on top of the starting model (a refitted calibration's value included).
+            let change = x - c.base(&config.base);
             let significant = consistent
-                && x.abs() > MIN_MAGNITUDE_Z * uncertainty
+                && change.abs() > MIN_MAGNITUDE_Z * uncertainty
                 && ((delta_bic > config.min_delta_bic && explained_acted > config.min_explained)
                     || (delta_bic > config.strong_delta_bic
                         && explained > config.strong_explained));
             scores.push((
                 c,
                 CandidateScore {
-                    name: c.name(),
-                    magnitude: x,
+                    name: c.name(library),
+                    magnitude: change,
                     uncertainty,
                     train_chi2_drop: train_chi0 - fx,
                     heldout_delta_bic: delta_bic,
@@ -576,30 +675,60 @@ pub fn analyse(
         let Some((c, s)) = best else {
             break;
         };
-        aug.set(c, s.magnitude);
-        named.push(NamedEffect {
-            name: c.name(),
-            magnitude: s.magnitude,
-            uncertainty: s.uncertainty,
-            unit: c.unit(),
-            description: c.model_description(),
-            heldout_delta_bic: s.heldout_delta_bic,
-        });
+        match (c, config.parameters.as_ref()) {
+            (Trial::Effect(e), _) => {
+                aug.set(e, config.base.get(e) + s.magnitude);
+                named.push(NamedEffect {
+                    name: e.name().to_string(),
+                    kind: "effect",
+                    magnitude: s.magnitude,
+                    uncertainty: s.uncertainty,
+                    unit: e.unit(),
+                    description: e.model_description().to_string(),
+                    heldout_delta_bic: s.heldout_delta_bic,
+                });
+            }
+            (Trial::Parameter(i), Some(l)) => {
+                let factor = 1.0 + s.magnitude;
+                params_now = l.apply(&params_now, i, factor)?;
+                let p = &l.parameters[i];
+                named.push(NamedEffect {
+                    name: p.key.clone(),
+                    kind: "parameter",
+                    magnitude: p.nominal * factor,
+                    uncertainty: p.nominal.abs() * s.uncertainty,
+                    unit: p.unit,
+                    description: format!(
+                        "machine-file parameter {} = {:.6} {} ({:+.1} % of the file's {}): \
+                         write it back to the machine file",
+                        p.key,
+                        p.nominal * factor,
+                        p.unit,
+                        100.0 * s.magnitude,
+                        p.nominal
+                    ),
+                    heldout_delta_bic: s.heldout_delta_bic,
+                });
+            }
+            (Trial::Parameter(_), None) => break,
+        }
         remaining.retain(|r| *r != c);
-        train_eval = Evaluator::new(train.clone(), params, &aug);
-        test_eval = Evaluator::new(test.clone(), params, &aug);
+        train_eval = Evaluator::new(train.clone(), &params_now, &aug);
+        test_eval = Evaluator::new(test.clone(), &params_now, &aug);
     }
     progress(total, total);
 
-    let rms = before_after(&test, params, &config.base, &aug, &sigma);
+    let rms = before_after(&test, (params, &config.base), (&params_now, &aug), &sigma);
     Ok(AnalysisResult {
         named_effects: named,
         augmentation: aug,
+        params: params_now,
         rounds,
         rms,
         localisation,
         train_digs: train.iter().map(|r| r.index).collect(),
         test_digs: test.iter().map(|r| r.index).collect(),
+        train_samples: n0.to_vec(),
         sigma,
         kappa,
     })
@@ -609,9 +738,8 @@ pub fn analyse(
 /// a tenth of `sigma`) of records under the model `before` and the augmented one.
 pub fn before_after(
     records: &[&PreparedRecord],
-    params: &GreyBoxParams,
-    before: &Augmentation,
-    aug: &Augmentation,
+    (params, before): (&GreyBoxParams, &Augmentation),
+    (params_after, aug): (&GreyBoxParams, &Augmentation),
     sigma: &[f64],
 ) -> Vec<SignalRms> {
     let nominal = *before;
@@ -621,7 +749,7 @@ pub fn before_after(
     let (mut p0, mut p1) = (Vec::new(), Vec::new());
     for rec in records {
         replay(rec, params, &nominal, SignalGroups::ALL, &mut p0);
-        replay(rec, params, aug, SignalGroups::ALL, &mut p1);
+        replay(rec, params_after, aug, SignalGroups::ALL, &mut p1);
         for (k, m) in rec.measured.iter().enumerate() {
             let st = super::StageTag::ALL
                 .iter()
@@ -704,5 +832,99 @@ mod tests {
             })
             .collect();
         assert!(integrated_time(&smooth) > 10.0);
+    }
+}
+
+#[cfg(test)]
+mod parameter_tests {
+    use super::*;
+    use crate::parameters::ParameterLibrary;
+    use crate::{DigRecord, LoadTag, Sample, StageTag};
+    use planner::machine::MachineConfig;
+
+    /// Records whose measured velocities and pump pressures are the replay of a machine with
+    /// the valve discharge coefficient 0.85 times the file's, plus a little noise.
+    fn drifted_records() -> (Vec<PreparedRecord>, GreyBoxParams, ParameterLibrary) {
+        let cfg = MachineConfig::default_machine().unwrap();
+        let params = crate::AugmentedModel::nominal().unwrap().params;
+        let library = ParameterLibrary::derive(&cfg).unwrap();
+        let cd = library
+            .find("hydraulics.valve_discharge_coefficient")
+            .unwrap();
+        let drifted = library.apply(&params, cd, 0.85).unwrap();
+        let mut noise = 0x2545_f491_u64;
+        let mut records = Vec::new();
+        for index in 0..6u32 {
+            let samples = (0..600)
+                .map(|k| {
+                    let t = 0.01 * f64::from(k);
+                    let u = 0.6 * (t * (1.3 + 0.1 * f64::from(index))).sin();
+                    Sample {
+                        time_s: t,
+                        command: [u, -0.8 * u, 0.5 * u],
+                        angles_rad: [0.3, -1.5, -1.0],
+                        head_pa: [8.0e6, 6.0e6, 4.0e6],
+                        rod_pa: [1.5e6, 1.2e6, 1.0e6],
+                        pump_pa: [11.0e6, 9.0e6],
+                        stage: StageTag::Outside,
+                        load: LoadTag::EmptyFreeAir,
+                        ..Sample::default()
+                    }
+                })
+                .collect();
+            let record = DigRecord {
+                index,
+                samples,
+                section: None,
+                lanes: Vec::new(),
+            };
+            let mut rec = PreparedRecord::new(&record, &cfg, &params).unwrap();
+            let mut truth = Vec::new();
+            replay(
+                &rec,
+                &drifted,
+                &Augmentation::nominal(),
+                SignalGroups::ALL,
+                &mut truth,
+            );
+            for (m, p) in rec.measured.iter_mut().zip(&truth) {
+                for j in 0..5 {
+                    noise ^= noise << 13;
+                    noise ^= noise >> 7;
+                    noise ^= noise << 17;
+                    let e = (noise % 2001) as f64 / 1000.0 - 1.0;
+                    let scale = if j < 3 { 2.0e-3 } else { 5.0e4 };
+                    m[j] = p[j] + e * scale;
+                }
+            }
+            records.push(rec);
+        }
+        (records, params, library)
+    }
+
+    /// A discharge coefficient 15 % low is named as the machine file's parameter with its value,
+    /// not as an effect of the library.
+    #[test]
+    fn a_drifted_discharge_coefficient_is_named_as_the_machine_parameter() {
+        let (records, params, library) = drifted_records();
+        let nominal = library.parameters[library
+            .find("hydraulics.valve_discharge_coefficient")
+            .unwrap()]
+        .nominal;
+        let config = AnalysisConfig {
+            parameters: Some(library),
+            max_effects: 1,
+            ..AnalysisConfig::default()
+        };
+        let result = analyse(&records, &params, &config, &mut |_, _| {}).unwrap();
+        let named = &result.named_effects;
+        assert_eq!(named.len(), 1, "{named:?}");
+        assert_eq!(named[0].kind, "parameter");
+        assert_eq!(named[0].name, "hydraulics.valve_discharge_coefficient");
+        assert!(
+            (named[0].magnitude / nominal - 0.85).abs() < 0.02,
+            "{named:?}"
+        );
+        assert!((result.params.meter_in_k[0] / params.meter_in_k[0] - 0.85).abs() < 0.02);
     }
 }

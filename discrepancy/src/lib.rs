@@ -17,12 +17,17 @@
 //!   a record from the measured inputs and predicts cylinder velocities (Eq. 1 orifices), pump pressures
 //!   (open-centre flow balance), cylinder forces (Eq. 3 with Appendix gravity and inertia) and the soil
 //!   force on the bucket (FEE, Eqs. 14-18);
+//! - [`parameters`]: the machine's own parameters as candidates (parameter drift), derived from the
+//!   fields of its machine file that the grey-box parameters come from;
 //! - [`stats`]: residuals per signal, stage and operating regime, whiteness and input cross-correlation;
 //! - [`fit`]: bounded 1-D fits of each candidate on training digs, held-out BIC scoring, greedy forward
 //!   selection and the uncertainty from the cost curvature;
 //! - [`model`]: the augmented model file ([`AugmentedModel`]), and the grey-box actuator that implements
 //!   [`planner::dig_model::ActuatorDynamics`] so the planner's dig model runs with it;
 //! - [`read`] and [`session`]: session folders (`trace.log` + `scans/`) -> prepared records per dig;
+//! - [`sufficiency`]: whether the sessions hold enough completed digs and samples to name anything;
+//! - [`mod@reference`] and [`verdict`]: what "expected" is (the residual structure of sessions declared
+//!   healthy) and every signal judged against it: expected, named, partly explained, unexplained;
 //! - [`report`]: `report.json`, `report.md`, the figures and `model.json` of an analysis;
 //! - [`analysis`], [`eval`], [`command`]: `excavator-ctl discrepancy analyse`, `eval` and `bench`, and
 //!   the subcommand dispatch.
@@ -34,12 +39,17 @@ pub mod eval;
 pub mod fit;
 pub mod greybox;
 pub mod model;
+pub mod parameters;
+pub mod plant;
 pub mod read;
+pub mod reference;
 pub mod report;
 pub mod session;
 pub mod signal;
 pub mod soil_replay;
 pub mod stats;
+pub mod sufficiency;
+pub mod verdict;
 
 pub use effects::Candidate;
 pub use fit::{AnalysisConfig, AnalysisResult, NamedEffect, analyse};

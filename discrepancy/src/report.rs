@@ -29,8 +29,19 @@ struct ReportJson<'a> {
     model_in: &'a str,
     model_out: &'static str,
     digs: usize,
+    /// The session's outcome against the reference (`expected`, `named`, `partly_explained`,
+    /// `unexplained`, `not_judged`), absent without a reference.
+    outcome: Option<crate::verdict::Outcome>,
     named_effects: &'a [crate::NamedEffect],
+    /// No effect named and (with a reference) no signal beyond it.
     no_missing_effect_found: bool,
+    /// Signals beyond the reference after the named effects.
+    unexplained: &'a [crate::verdict::Unexplained],
+    warnings: &'a [String],
+    /// Every signal judged against the reference, and what each named effect left.
+    verdict: Option<&'a crate::verdict::Verdict>,
+    /// The reference sessions (`--reference`).
+    reference: Option<&'a [String]>,
     residual_rms: &'a [crate::fit::SignalRms],
     rounds: &'a [Vec<crate::fit::CandidateScore>],
     localisation: &'a [crate::stats::ResidualSummary],
@@ -41,11 +52,20 @@ struct ReportJson<'a> {
     figures: Vec<String>,
 }
 
-/// A short text summary (printed by the command).
-pub fn summary_text(r: &AnalysisResult) -> String {
+/// A short text summary (printed by the command): the verdict against the reference first, the
+/// warnings, the named effects, the held-out residuals.
+pub fn summary_text(a: &Analysis) -> String {
+    let r = &a.result;
     let mut s = String::new();
+    if let Some(v) = &a.verdict {
+        s.push_str(&crate::verdict::verdict_text(v));
+    }
+    for w in &a.warnings {
+        let _ = writeln!(s, "warning: {w}");
+    }
     if r.named_effects.is_empty() {
-        s.push_str("no missing effect found\n");
+        s.push_str(no_effect_line(a));
+        s.push('\n');
     }
     for e in &r.named_effects {
         let _ = writeln!(
@@ -71,6 +91,21 @@ pub fn summary_text(r: &AnalysisResult) -> String {
     s
 }
 
+/// What to say when nothing is named: "no missing effect found" only when the residuals are within
+/// the reference.
+fn no_effect_line(a: &Analysis) -> &'static str {
+    match &a.verdict {
+        Some(v) if v.unexplained.is_empty() && v.outcome != crate::verdict::Outcome::NotJudged => {
+            "no missing effect found: no candidate is significant and every signal is within the reference"
+        }
+        Some(v) if v.unexplained.is_empty() => {
+            "no candidate is significant; the residuals could not be judged against the reference (too few samples)"
+        }
+        Some(_) => "no effect in the library explains the residuals beyond the reference (above)",
+        None => "no candidate is significant (the residuals were not judged: no --reference)",
+    }
+}
+
 /// `100 (after - before) / before`, 0 when `before` is 0.
 pub fn reduction_percent(before: f64, after: f64) -> f64 {
     if before > 0.0 {
@@ -78,6 +113,75 @@ pub fn reduction_percent(before: f64, after: f64) -> f64 {
     } else {
         0.0
     }
+}
+
+fn upper_first(s: &str) -> String {
+    let mut c = s.chars();
+    c.next()
+        .map(|f| f.to_uppercase().chain(c).collect())
+        .unwrap_or_default()
+}
+
+/// The report's lead: the verdict per signal group against the reference, what each named effect
+/// left, and the warnings.
+fn verdict_markdown(s: &mut String, a: &Analysis) {
+    let _ = writeln!(s, "## Verdict\n");
+    for w in &a.warnings {
+        let _ = writeln!(s, "**Warning**: {w}.\n");
+    }
+    let Some(v) = &a.verdict else {
+        let _ = writeln!(
+            s,
+            "Not judged: no reference (`--reference` sessions of this machine declared healthy, or a `reference.json`).\n"
+        );
+        return;
+    };
+    let _ = writeln!(
+        s,
+        "Against the reference ({}): **{}**.\n",
+        v.reference.join(", "),
+        v.outcome.name()
+    );
+    let groups: [(&str, std::ops::RangeInclusive<usize>); 6] = [
+        ("cylinder velocities", 0..=2),
+        ("pump pressures", 3..=4),
+        ("cylinder forces", 5..=7),
+        ("soil force", 8..=9),
+        ("end stops", 10..=10),
+        ("payload", 11..=11),
+    ];
+    let _ = writeln!(
+        s,
+        "| group | signal | outcome | ratio to expected (before -> after) | tolerance | expected RMS | note |\n|---|---|---|---|---|---|---|"
+    );
+    for (group, range) in groups {
+        for sv in &v.signals[range] {
+            let _ = writeln!(
+                s,
+                "| {group} | {} | {} | {:.2} -> {:.2} | {:.2} | {:.3e} {} | {} |",
+                sv.signal,
+                sv.outcome.name(),
+                sv.ratio_before,
+                sv.ratio_after,
+                sv.tolerance,
+                sv.expected_rms,
+                sv.unit,
+                sv.note
+            );
+        }
+    }
+    s.push('\n');
+    for n in &v.named {
+        if n.outcome == crate::verdict::Outcome::PartlyExplained {
+            let _ = writeln!(
+                s,
+                "- `{}` explains only part: {} stay beyond the reference; it may stand in for something the library lacks.",
+                n.name,
+                n.remaining_text()
+            );
+        }
+    }
+    s.push('\n');
 }
 
 fn markdown(a: &Analysis, measured: &[PathBuf], figures: &[String]) -> String {
@@ -105,12 +209,10 @@ fn markdown(a: &Analysis, measured: &[PathBuf], figures: &[String]) -> String {
             skipped.reason
         );
     }
+    verdict_markdown(&mut s, a);
     let _ = writeln!(s, "## Named effects\n");
     if r.named_effects.is_empty() {
-        let _ = writeln!(
-            s,
-            "No missing effect found: no candidate was significant on the held-out digs.\n"
-        );
+        let _ = writeln!(s, "{}.\n", upper_first(no_effect_line(a)));
     } else {
         let _ = writeln!(
             s,
@@ -253,13 +355,23 @@ pub fn write_outputs(
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let r = &a.result;
     let mut effects: Vec<ModelEffect> = a.model.effects.clone();
-    effects.extend(r.named_effects.iter().map(|e| ModelEffect {
-        name: e.name.to_string(),
-        magnitude: e.magnitude,
-        uncertainty: e.uncertainty,
-    }));
+    // The named machine parameters are in the parameters (`r.params`), the effects listed.
+    for e in r.named_effects.iter().filter(|e| e.kind == "effect") {
+        // A refitted calibration effect adds its change to the calibrated value.
+        match effects.iter_mut().find(|m| m.name == e.name) {
+            Some(m) => {
+                m.magnitude += e.magnitude;
+                m.uncertainty = m.uncertainty.hypot(e.uncertainty);
+            }
+            None => effects.push(ModelEffect {
+                name: e.name.to_string(),
+                magnitude: e.magnitude,
+                uncertainty: e.uncertainty,
+            }),
+        }
+    }
     let model = AugmentedModel::new(
-        a.model.params.clone(),
+        r.params.clone(),
         effects,
         format!(
             "augmented by excavator-ctl discrepancy from {} ({})",
@@ -272,6 +384,10 @@ pub fn write_outputs(
         ),
     );
     std::fs::write(out.join("model.json"), model.to_json()?).context("writing model.json")?;
+    if let Some(reference) = &a.reference {
+        std::fs::write(out.join("reference.json"), reference.to_json()?)
+            .context("writing reference.json")?;
+    }
     let mut figures = Vec::new();
     let test: Vec<&PreparedRecord> = a
         .records
@@ -303,8 +419,19 @@ pub fn write_outputs(
         model_in: &a.model.provenance,
         model_out: "model.json",
         digs: a.records.len(),
+        outcome: a.verdict.as_ref().map(|v| v.outcome),
         named_effects: &r.named_effects,
-        no_missing_effect_found: r.named_effects.is_empty(),
+        no_missing_effect_found: r.named_effects.is_empty()
+            && a.verdict.as_ref().is_some_and(|v| {
+                v.unexplained.is_empty() && v.outcome != crate::verdict::Outcome::NotJudged
+            }),
+        unexplained: a
+            .verdict
+            .as_ref()
+            .map_or(&[][..], |v| v.unexplained.as_slice()),
+        warnings: &a.warnings,
+        verdict: a.verdict.as_ref(),
+        reference: a.reference.as_ref().map(|r| r.source.as_slice()),
         residual_rms: &r.rms,
         rounds: &r.rounds,
         localisation: &r.localisation,

@@ -20,6 +20,12 @@ pub struct Analysis {
     /// Sessions left out because they could not be read, with the reason (only when other
     /// sessions could be).
     pub skipped_sessions: Vec<SkippedSession>,
+    /// The reference the residuals were judged against (`--reference`).
+    pub reference: Option<crate::reference::Reference>,
+    /// The verdict against it.
+    pub verdict: Option<crate::verdict::Verdict>,
+    /// Data-sufficiency and other warnings.
+    pub warnings: Vec<String>,
 }
 
 /// A session folder left out of an analysis (`report.json`'s `skipped_sessions`).

@@ -17,14 +17,10 @@ fn session(dir: &std::path::Path, effect: Option<&str>, seed: u64) {
 }
 
 fn analyse(session: &std::path::Path, out: &std::path::Path) -> discrepancy::session::Analysis {
-    run_analysis(&AnalyseArgs {
-        measured: vec![session.to_path_buf()],
-        model: None,
-        machine: None,
-        out: out.to_path_buf(),
-        quiet: true,
-        replay_csv: false,
-    })
+    run_analysis(&AnalyseArgs::new(
+        vec![session.to_path_buf()],
+        out.to_path_buf(),
+    ))
     .expect("analysis")
 }
 
@@ -92,15 +88,8 @@ fn effect_free_session_reports_no_missing_effect() {
 #[test]
 fn quick_confusion_table() {
     let tmp = tempfile::tempdir().unwrap();
-    let args = discrepancy::eval::EvalArgs {
-        quick: true,
-        seeds: 1,
-        nominal_sessions: 1,
-        digs: None,
-        only: Vec::new(),
-        out: tmp.path().to_path_buf(),
-        soil_contact: None,
-    };
+    let mut args = discrepancy::eval::EvalArgs::new(tmp.path().to_path_buf());
+    args.quick = true;
     discrepancy::eval::run_eval(&args).unwrap();
     let results: Vec<serde_json::Value> =
         serde_json::from_str(&std::fs::read_to_string(tmp.path().join("eval.json")).unwrap())
@@ -155,14 +144,7 @@ fn an_unreadable_session_among_others_is_left_out_and_reported() {
     let bad = tmp.path().join("bad");
     std::fs::create_dir_all(&bad).unwrap();
     let out = tmp.path().join("report");
-    let args = |measured: Vec<std::path::PathBuf>| AnalyseArgs {
-        measured,
-        model: None,
-        machine: None,
-        out: out.clone(),
-        quiet: true,
-        replay_csv: false,
-    };
+    let args = |measured: Vec<std::path::PathBuf>| AnalyseArgs::new(measured, out.clone());
     let a = run_analysis(&args(vec![good.clone(), bad.clone()])).expect("analysis");
     assert!(!a.records.is_empty());
     assert_eq!(a.skipped_sessions.len(), 1);
@@ -179,4 +161,110 @@ fn an_unreadable_session_among_others_is_left_out_and_reported() {
         panic!("a lone unreadable session must be an error");
     };
     assert!(format!("{e:#}").contains("reading session"), "{e:#}");
+}
+
+/// A session of a machine whose valves pass 15 % less than the model's (a discharge coefficient no
+/// effect of the library names) is not reported as healthy: judged against a healthy reference
+/// session, it is named as the drift of the machine file's `hydraulics.valve_discharge_coefficient`
+/// with its value, in `report.json` too. An effect-free session at another seed, judged
+/// against the same reference, stays expected: nothing named, nothing beyond.
+#[test]
+fn a_plant_change_outside_the_library_is_not_silent_and_a_clean_session_stays_clean() {
+    use discrepancy::verdict::Outcome;
+    let tmp = tempfile::tempdir().unwrap();
+    let healthy = tmp.path().join("healthy");
+    session(&healthy, None, 31);
+    let changed = tmp.path().join("changed");
+    let change: discrepancy::plant::PlantChange =
+        "machine:hydraulics.valve_discharge_coefficient*0.85"
+            .parse()
+            .unwrap();
+    let machine = tmp.path().join("machine.toml");
+    std::fs::write(
+        &machine,
+        change
+            .apply(planner::machine::DEFAULT_MACHINE_TOML)
+            .unwrap(),
+    )
+    .unwrap();
+    let mut demo = DemoArgs::new(changed.clone());
+    demo.digs = 4;
+    demo.seed = Some(32);
+    demo.quiet = true;
+    demo.machine = Some(machine);
+    run_session(&demo, &AtomicBool::new(false)).expect("demo session");
+    let out = tmp.path().join("report");
+    let mut args = AnalyseArgs::new(vec![changed], out.clone());
+    args.reference = vec![healthy.clone()];
+    let a = run_analysis(&args).expect("analysis");
+    let v = a.verdict.as_ref().expect("a verdict against the reference");
+    // Named as the machine file's parameter, with its value in the file's units within 25 % of the
+    // change, and every signal back within the reference.
+    assert_eq!(v.outcome, Outcome::Named, "{v:#?}");
+    let nominal = planner::machine::MachineConfig::default_machine()
+        .unwrap()
+        .hydraulics
+        .valve_discharge_coefficient;
+    let named = &a.result.named_effects;
+    let cd = named
+        .iter()
+        .find(|e| e.kind == "parameter" && e.name == "hydraulics.valve_discharge_coefficient")
+        .unwrap_or_else(|| panic!("{named:?}"));
+    let change = -0.15 * nominal;
+    assert!(
+        ((cd.magnitude - nominal) - change).abs() < 0.25 * change.abs(),
+        "{named:?}"
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(json["named_effects"][0]["kind"], "parameter");
+    assert_eq!(json["no_missing_effect_found"], false);
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.starts_with("# Model-discrepancy report"));
+    assert!(md.contains("## Verdict"), "{md}");
+    // The reference written by the analysis judges the next session the same way.
+    let clean = tmp.path().join("clean");
+    session(&clean, None, 33);
+    let mut args = AnalyseArgs::new(vec![clean], tmp.path().join("clean_report"));
+    args.reference = vec![out.join("reference.json")];
+    let a = run_analysis(&args).expect("analysis");
+    let v = a.verdict.as_ref().expect("a verdict");
+    assert_eq!(v.outcome, Outcome::Expected, "{v:#?}");
+    // A reference whose healthy sessions carry a few ms of transport delay calibrates the starting
+    // model; a larger hidden delay is still named, as the change on top of that calibration, and
+    // model.json carries their sum.
+    let mut reference: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("reference.json")).unwrap())
+            .unwrap();
+    reference["calibration"] = serde_json::json!([
+        {"name": "transport_delay", "magnitude": 0.005, "uncertainty": 0.0002}
+    ]);
+    let calibrated = tmp.path().join("calibrated.json");
+    std::fs::write(&calibrated, reference.to_string()).unwrap();
+    let delayed = tmp.path().join("delayed");
+    session(&delayed, Some("transport_delay=0.1"), 34);
+    let delayed_out = tmp.path().join("delayed_report");
+    let mut args = AnalyseArgs::new(vec![delayed], delayed_out.clone());
+    args.reference = vec![calibrated];
+    let a = run_analysis(&args).expect("analysis");
+    assert!(a.model.provenance.contains("calibrated on the reference"));
+    let named = a
+        .result
+        .named_effects
+        .iter()
+        .find(|e| e.name == "transport_delay")
+        .expect("the delay beyond the calibration is named");
+    assert!((named.magnitude - 0.095).abs() < 0.25 * 0.095, "{named:?}");
+    let model = discrepancy::AugmentedModel::from_json(
+        &std::fs::read_to_string(delayed_out.join("model.json")).unwrap(),
+    )
+    .unwrap();
+    let delays: Vec<f64> = model
+        .effects
+        .iter()
+        .filter(|e| e.name == "transport_delay")
+        .map(|e| e.magnitude)
+        .collect();
+    assert_eq!(delays.len(), 1, "{:?}", model.effects);
+    assert!((delays[0] - 0.005 - named.magnitude).abs() < 1e-12);
 }

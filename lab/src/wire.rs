@@ -201,7 +201,13 @@ pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, R
             None
         }
     };
-    config.cycle.max_digs = args.digs;
+    config.cycle.max_digs = match (args.digs, args.strategy) {
+        (Some(n), _) => Some(n),
+        // The config's own limit (a repeating plan may stop only there).
+        (None, DemoStrategy::Fixed) => config.cycle.max_digs,
+        // The session driver ends the session when its region is done.
+        (None, _) => None,
+    };
     config.safety.listen_only |= args.listen_only;
     // Without a scan service nobody would answer the cycle's requests: dig on the plain angle rules
     // at once instead of waiting `scan_timeout_s` before every dig.

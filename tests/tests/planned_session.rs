@@ -67,6 +67,14 @@ fn the_planned_session_over_vcan_matches_demo() {
     );
     let out = dir.join("run");
     let digs = DIGS.to_string();
+    // Inside the TCG VM the loop falls behind (hil_tests::plan::VM_SAFETY_TOML): the VM's safety
+    // timing; natively the session's defaults.
+    let vm_config = dir.join("vm-safety.toml");
+    let mut extra: Vec<&str> = Vec::new();
+    if env::in_vm() {
+        std::fs::write(&vm_config, hil_tests::plan::VM_SAFETY_TOML).unwrap();
+        extra.extend(["--config", vm_config.to_str().unwrap()]);
+    }
     let mut ctl = Proc::spawn(
         "excavator-ctl",
         &env::binary("excavator-ctl"),
@@ -88,7 +96,10 @@ fn the_planned_session_over_vcan_matches_demo() {
             &digs,
             "--out",
             out.to_str().unwrap(),
-        ],
+        ]
+        .into_iter()
+        .chain(extra)
+        .collect::<Vec<_>>(),
         &dir.join("ctl.log"),
     );
     let status = ctl.wait_timeout(SESSION_TIMEOUT);

@@ -104,6 +104,8 @@ pub struct PreparedRecord {
     /// Oil flow taken by the compression of each cylinder's `[head, rod]` chamber (Eq. 2:
     /// `V / beta dp/dt`, the measured pressures' central differences), m^3/s.
     pub(super) compression: Vec<[[f64; 2]; 3]>,
+    /// The bulk modulus `compression` was computed with, Pa (a replay with another one scales it).
+    pub(super) compression_bulk_modulus_pa: f64,
     /// Cylinder forces holding the links against gravity at the measured angles, N.
     pub(super) gravity_force: Vec<[f64; 3]>,
     /// Their derivative with respect to a common offset of the three resolvers, N/rad.
@@ -510,6 +512,7 @@ impl PreparedRecord {
             velocity,
             accel,
             compression,
+            compression_bulk_modulus_pa: params.bulk_modulus_pa,
             gravity_force,
             gravity_force_per_rad,
             mass,

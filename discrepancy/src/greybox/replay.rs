@@ -41,6 +41,8 @@ pub fn replay(
     let viscous = params.damping_n_s_per_m + aug.get(C::ViscousFriction).max(0.0);
     let cohesion = aug.get(C::SoilCohesion);
     let density = aug.get(C::SoilDensity);
+    // The Eq. 2 compression flows scale with `1 / beta` (a bulk-modulus parameter candidate).
+    let compression_scale = rec.compression_bulk_modulus_pa / params.bulk_modulus_pa;
     let spool = if groups.hydraulic || groups.pumps {
         spools(&rec.samples, params, aug)
     } else {
@@ -97,7 +99,7 @@ pub fn replay(
                     gallery,
                     cross,
                     leak,
-                    rec.compression[k][i],
+                    rec.compression[k][i].map(|c| c * compression_scale),
                     [
                         smp.head_pa[i] <= CLAMPED_READING_PA,
                         smp.rod_pa[i] <= CLAMPED_READING_PA,

@@ -1,0 +1,468 @@
+//! The absolute reference for "expected": the residual level, spread and structure of every signal
+//! on sessions the user declares healthy (`analyse --reference DIR...`), replayed through the same
+//! starting model as the measured sessions. A measured signal is judged by its held-out residual as
+//! a ratio to this level, not by its own nominal residual (which a large systematic error inflates
+//! until it sets its own noise level).
+//!
+//! Per signal the reference keeps: the residual RMS over all its digs and per Autodig stage, each
+//! dig's mean square (from which [`Reference::tolerance`] takes how far the RMS of a few digs of a
+//! healthy machine strays), the whiteness (Ljung-Box `Q(20)`) and largest command cross-correlation
+//! ([`crate::stats::localise`]), and the correlation of the residual with a few physical regressors
+//! ([`Regressor`]).
+
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::greybox::{
+    Augmentation, GreyBoxParams, N_SIGNALS, PreparedRecord, Signal, SignalGroups, replay,
+};
+use crate::{DiscrepancyError, Result, StageTag, stats};
+
+/// Format name of a reference file.
+pub const REFERENCE_FORMAT: &str = "excavator-discrepancy-reference";
+
+/// A ratio to the reference below this is never called beyond it, whatever the reference's own
+/// spread: two healthy sessions of the same machine on different ground differ by up to about this
+/// much (clean simulated sessions at different seeds, docs/discrepancy.md).
+pub const MIN_TOLERANCE: f64 = 1.5;
+
+/// Quantile of the bootstrap RMS ratio taken as the tolerance.
+pub const TOLERANCE_QUANTILE: f64 = 0.99;
+
+/// Bootstrap draws of the tolerance.
+const BOOTSTRAP_DRAWS: usize = 400;
+
+/// A signal is judged only with at least this many samples (held-out and in the reference).
+pub const MIN_JUDGED_SAMPLES: usize = 100;
+
+/// Quantities the residual is correlated with in the structure test.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Regressor {
+    /// The measured signal itself (a residual proportional to it is a gain error: a bore, a
+    /// discharge coefficient, a mass).
+    Measured,
+    /// The valve command of the signal's cylinder, or the summed magnitude of the commands on the
+    /// signal's pump.
+    Command,
+    /// The pressure of the pump feeding the signal's cylinder.
+    PumpPressure,
+    /// Head less rod pressure of the signal's cylinder.
+    PressureDifference,
+    /// The swept volume the controller reports (in the soil stages).
+    SweptVolume,
+}
+
+impl Regressor {
+    /// Every regressor.
+    pub const ALL: [Regressor; 5] = [
+        Regressor::Measured,
+        Regressor::Command,
+        Regressor::PumpPressure,
+        Regressor::PressureDifference,
+        Regressor::SweptVolume,
+    ];
+
+    /// Name for reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Regressor::Measured => "the measured value",
+            Regressor::Command => "the valve command",
+            Regressor::PumpPressure => "the pump pressure",
+            Regressor::PressureDifference => "the head-rod pressure difference",
+            Regressor::SweptVolume => "the swept volume",
+        }
+    }
+
+    /// The regressor's value at sample `k` of `rec` for signal `sig` (NaN where it means nothing).
+    fn value(self, sig: Signal, rec: &PreparedRecord, k: usize) -> f64 {
+        let s = &rec.samples[k];
+        let pump_of = |i: usize| if i == 1 { 1 } else { 0 };
+        match (self, sig.cylinder()) {
+            (Regressor::Measured, _) => rec.measured[k][sig.index()],
+            (Regressor::Command, Some(i)) => s.command[i],
+            (Regressor::Command, None) => match sig {
+                Signal::Pump1Pressure => s.command[0].abs() + s.command[2].abs(),
+                Signal::Pump2Pressure => s.command[1].abs() + s.swing_command.abs(),
+                _ => f64::NAN,
+            },
+            (Regressor::PumpPressure, Some(i)) => s.pump_pa[pump_of(i)],
+            (Regressor::PressureDifference, Some(i)) => s.head_pa[i] - s.rod_pa[i],
+            (Regressor::SweptVolume, _) if s.stage.in_soil() => s.swept_volume_m3,
+            (Regressor::SweptVolume, _) => 0.0,
+            _ => f64::NAN,
+        }
+    }
+}
+
+/// Pearson correlation accumulated over samples.
+#[derive(Debug, Clone, Copy, Default)]
+struct CorrAcc {
+    n: f64,
+    sx: f64,
+    sy: f64,
+    sxx: f64,
+    syy: f64,
+    sxy: f64,
+}
+
+impl CorrAcc {
+    fn add(&mut self, x: f64, y: f64) {
+        self.n += 1.0;
+        self.sx += x;
+        self.sy += y;
+        self.sxx += x * x;
+        self.syy += y * y;
+        self.sxy += x * y;
+    }
+
+    fn value(&self) -> f64 {
+        if self.n < 3.0 {
+            return 0.0;
+        }
+        let vx = self.sxx - self.sx * self.sx / self.n;
+        let vy = self.syy - self.sy * self.sy / self.n;
+        let c = self.sxy - self.sx * self.sy / self.n;
+        if vx > 0.0 && vy > 0.0 {
+            c / (vx * vy).sqrt()
+        } else {
+            0.0
+        }
+    }
+}
+
+/// Residual level of one group of samples.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Level {
+    /// What the group is (`all` or a stage name).
+    pub group: String,
+    /// Samples.
+    pub samples: usize,
+    /// Residual RMS.
+    pub rms: f64,
+}
+
+/// Residual structure of one signal over a set of digs under one model: what the reference keeps of
+/// a signal, and what the verdict compares with it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SignalStructure {
+    /// Signal name.
+    pub signal: String,
+    /// Unit of the RMS.
+    pub unit: String,
+    /// Residual RMS over all samples.
+    pub overall: Level,
+    /// Per Autodig stage (stages with samples).
+    pub per_stage: Vec<Level>,
+    /// Per dig: `(samples, mean square residual)`.
+    pub per_dig: Vec<(usize, f64)>,
+    /// Ljung-Box `Q(20)` (mean over digs).
+    pub ljung_box_q: f64,
+    /// Largest cross-correlation with the command over lags -30..=30 samples, and its lag.
+    pub input_cross_correlation: (f64, i32),
+    /// Correlation of the residual with each regressor ([`Regressor::ALL`] order; 0 where it
+    /// means nothing for the signal).
+    pub correlations: Vec<f64>,
+}
+
+/// The residual structure of every signal of `records` under `params` and `aug`.
+pub fn structure(
+    records: &[&PreparedRecord],
+    params: &GreyBoxParams,
+    aug: &Augmentation,
+) -> Vec<SignalStructure> {
+    let n_stages = StageTag::ALL.len();
+    let mut overall = [(0usize, 0.0f64); N_SIGNALS];
+    let mut stage = vec![[(0usize, 0.0f64); N_SIGNALS]; n_stages];
+    let mut per_dig: Vec<Vec<(usize, f64)>> = vec![Vec::new(); N_SIGNALS];
+    let mut corr = vec![[CorrAcc::default(); Regressor::ALL.len()]; N_SIGNALS];
+    let mut pred = Vec::new();
+    for rec in records {
+        replay(rec, params, aug, SignalGroups::ALL, &mut pred);
+        let mut dig = [(0usize, 0.0f64); N_SIGNALS];
+        for (k, (m, p)) in rec.measured.iter().zip(&pred).enumerate() {
+            let st = StageTag::ALL
+                .iter()
+                .position(|t| *t == rec.samples[k].stage)
+                .unwrap_or(0);
+            for sig in Signal::ALL {
+                let j = sig.index();
+                let r = m[j] - p[j];
+                if !r.is_finite() {
+                    continue;
+                }
+                for acc in [&mut overall[j], &mut stage[st][j], &mut dig[j]] {
+                    acc.0 += 1;
+                    acc.1 += r * r;
+                }
+                for (g, reg) in Regressor::ALL.iter().enumerate() {
+                    let x = reg.value(sig, rec, k);
+                    if x.is_finite() {
+                        corr[j][g].add(x, r);
+                    }
+                }
+            }
+        }
+        for j in 0..N_SIGNALS {
+            if dig[j].0 > 0 {
+                per_dig[j].push((dig[j].0, dig[j].1 / dig[j].0 as f64));
+            }
+        }
+    }
+    let localised = stats::localise(records, params, aug);
+    let level = |group: &str, (n, s): (usize, f64)| Level {
+        group: group.to_string(),
+        samples: n,
+        rms: if n > 0 { (s / n as f64).sqrt() } else { 0.0 },
+    };
+    Signal::ALL
+        .iter()
+        .zip(localised)
+        .map(|(sig, loc)| {
+            let j = sig.index();
+            SignalStructure {
+                signal: sig.name().to_string(),
+                unit: sig.unit().to_string(),
+                overall: level("all", overall[j]),
+                per_stage: StageTag::ALL
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, _)| stage[*i][j].0 > 0)
+                    .map(|(i, t)| level(t.name(), stage[i][j]))
+                    .collect(),
+                per_dig: std::mem::take(&mut per_dig[j]),
+                ljung_box_q: loc.ljung_box_q,
+                input_cross_correlation: loc.input_cross_correlation,
+                correlations: corr[j].iter().map(CorrAcc::value).collect(),
+            }
+        })
+        .collect()
+}
+
+/// The reference: residual structure of every signal on sessions declared healthy.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Reference {
+    /// Format name ([`REFERENCE_FORMAT`]).
+    pub format: String,
+    /// Where it comes from (the session folders).
+    pub source: Vec<String>,
+    /// The model it was replayed with (its provenance).
+    pub model: String,
+    /// Effects the analysis of the healthy sessions named on the starting model: the starting
+    /// model's calibration to this machine (a healthy machine's own signature, e.g. a few ms of
+    /// transport delay the nominal model lacks on another bench). The measured sessions are
+    /// analysed from the model with these added, and the levels below are the residuals with them.
+    #[serde(default)]
+    pub calibration: Vec<crate::model::ModelEffect>,
+    /// Digs.
+    pub digs: usize,
+    /// Per signal, [`Signal::ALL`] order.
+    pub signals: Vec<SignalStructure>,
+}
+
+impl Reference {
+    /// The reference of healthy records under the starting model.
+    ///
+    /// # Errors
+    /// [`DiscrepancyError::NotEnoughData`] without records.
+    pub fn from_records(
+        records: &[PreparedRecord],
+        params: &GreyBoxParams,
+        aug: &Augmentation,
+        source: Vec<String>,
+        model: String,
+        calibration: Vec<crate::model::ModelEffect>,
+    ) -> Result<Self> {
+        if records.is_empty() {
+            return Err(DiscrepancyError::NotEnoughData(
+                "the reference sessions hold no usable dig".into(),
+            ));
+        }
+        let refs: Vec<&PreparedRecord> = records.iter().collect();
+        Ok(Self {
+            format: REFERENCE_FORMAT.to_string(),
+            source,
+            model,
+            calibration,
+            digs: records.len(),
+            signals: structure(&refs, params, aug),
+        })
+    }
+
+    /// Parses a reference file written by [`Reference::to_json`].
+    ///
+    /// # Errors
+    /// [`DiscrepancyError::Invalid`] for JSON that is not a reference, has the wrong signal list or
+    /// non-finite levels.
+    pub fn from_json(text: &str) -> Result<Self> {
+        let r: Reference = serde_json::from_str(text)
+            .map_err(|e| DiscrepancyError::Invalid(format!("reference file: {e}")))?;
+        if r.format != REFERENCE_FORMAT {
+            return Err(DiscrepancyError::Invalid(format!(
+                "reference file: format {:?}, expected {REFERENCE_FORMAT:?}",
+                r.format
+            )));
+        }
+        if r.signals.len() != N_SIGNALS
+            || r.signals
+                .iter()
+                .zip(Signal::ALL)
+                .any(|(s, sig)| s.signal != sig.name())
+        {
+            return Err(DiscrepancyError::Invalid(format!(
+                "reference file: signals {:?}, expected {:?}",
+                r.signals.iter().map(|s| &s.signal).collect::<Vec<_>>(),
+                Signal::ALL.map(Signal::name)
+            )));
+        }
+        for s in &r.signals {
+            let bad = !(s.overall.rms.is_finite() && s.overall.rms >= 0.0)
+                || s.per_dig
+                    .iter()
+                    .any(|(_, ms)| !(ms.is_finite() && *ms >= 0.0));
+            if bad {
+                return Err(DiscrepancyError::Invalid(format!(
+                    "reference file: signal {}: a residual level is not a finite non-negative number",
+                    s.signal
+                )));
+            }
+        }
+        Ok(r)
+    }
+
+    /// The reference as JSON.
+    ///
+    /// # Errors
+    /// Serialisation (not expected).
+    pub fn to_json(&self) -> Result<String> {
+        serde_json::to_string_pretty(self)
+            .map_err(|e| DiscrepancyError::Invalid(format!("reference to JSON: {e}")))
+    }
+
+    /// The expected residual RMS of signal `sig` (0 where the reference has too few samples to say).
+    pub fn expected_rms(&self, sig: Signal) -> f64 {
+        let s = &self.signals[sig.index()];
+        if s.overall.samples >= MIN_JUDGED_SAMPLES {
+            s.overall.rms
+        } else {
+            0.0
+        }
+    }
+
+    /// The ratio to the expected RMS above which `digs` digs of a healthy machine are unlikely
+    /// (bootstrap of the reference's digs, the [`TOLERANCE_QUANTILE`] quantile of the RMS of
+    /// `digs` digs drawn with replacement over the reference RMS), at least [`MIN_TOLERANCE`].
+    pub fn tolerance(&self, sig: Signal, digs: usize) -> f64 {
+        let s = &self.signals[sig.index()];
+        if s.per_dig.len() < 2 || s.overall.rms <= 0.0 || digs == 0 {
+            return MIN_TOLERANCE;
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(0x5EED + sig.index() as u64);
+        let mut ratios: Vec<f64> = (0..BOOTSTRAP_DRAWS)
+            .map(|_| {
+                let (mut n, mut sq) = (0usize, 0.0);
+                for _ in 0..digs {
+                    let (dn, ms) = s.per_dig[rng.random_range(0..s.per_dig.len())];
+                    n += dn;
+                    sq += ms * dn as f64;
+                }
+                (sq / n.max(1) as f64).sqrt() / s.overall.rms
+            })
+            .collect();
+        ratios.sort_by(f64::total_cmp);
+        let q = ratios[((TOLERANCE_QUANTILE * ratios.len() as f64) as usize).min(ratios.len() - 1)];
+        q.max(MIN_TOLERANCE)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn signal(rms: f64, per_dig: Vec<(usize, f64)>) -> SignalStructure {
+        SignalStructure {
+            signal: String::new(),
+            unit: String::new(),
+            overall: Level {
+                group: "all".into(),
+                samples: 1000,
+                rms,
+            },
+            per_stage: Vec::new(),
+            per_dig,
+            ljung_box_q: 0.0,
+            input_cross_correlation: (0.0, 0),
+            correlations: vec![0.0; Regressor::ALL.len()],
+        }
+    }
+
+    fn reference(signals: Vec<SignalStructure>) -> Reference {
+        let mut signals = signals;
+        for (s, sig) in signals.iter_mut().zip(Signal::ALL) {
+            s.signal = sig.name().to_string();
+        }
+        Reference {
+            format: REFERENCE_FORMAT.into(),
+            source: vec!["healthy".into()],
+            model: "nominal".into(),
+            calibration: Vec::new(),
+            digs: 4,
+            signals,
+        }
+    }
+
+    /// Digs that agree give the floor tolerance; digs that scatter widely give a wider one, and
+    /// fewer judged digs a wider one than many.
+    #[test]
+    fn the_tolerance_follows_the_reference_digs_spread() {
+        let even = signal(1.0, vec![(100, 1.0); 6]);
+        let scattered = signal(
+            1.0,
+            vec![
+                (100, 0.1),
+                (100, 0.2),
+                (100, 0.3),
+                (100, 4.0),
+                (100, 0.2),
+                (100, 1.2),
+            ],
+        );
+        let r = reference(
+            (0..N_SIGNALS)
+                .map(|i| {
+                    if i == 0 {
+                        scattered.clone()
+                    } else {
+                        even.clone()
+                    }
+                })
+                .collect(),
+        );
+        assert_eq!(r.tolerance(Signal::StickVelocity, 4), MIN_TOLERANCE);
+        let one = r.tolerance(Signal::BoomVelocity, 1);
+        let eight = r.tolerance(Signal::BoomVelocity, 8);
+        assert!(one > 1.9 && one > eight, "{one} {eight}");
+    }
+
+    #[test]
+    fn a_reference_file_round_trips_and_bad_ones_are_errors() {
+        let r = reference(vec![signal(2.0, vec![(100, 4.0)]); N_SIGNALS]);
+        let back = Reference::from_json(&r.to_json().unwrap()).unwrap();
+        assert_eq!(back, r);
+        let mut wrong = r.clone();
+        wrong.format = "something else".into();
+        let e = Reference::from_json(&wrong.to_json().unwrap()).unwrap_err();
+        assert!(e.to_string().contains("format"), "{e}");
+        let mut short = r.clone();
+        short.signals.pop();
+        let e = Reference::from_json(&short.to_json().unwrap()).unwrap_err();
+        assert!(e.to_string().contains("signals"), "{e}");
+        let text = r
+            .to_json()
+            .unwrap()
+            .replacen("\"rms\": 2.0", "\"rms\": -2.0", 1);
+        let e = Reference::from_json(&text).unwrap_err();
+        assert!(e.to_string().contains("finite non-negative"), "{e}");
+        assert!(Reference::from_json("{").is_err());
+    }
+}
