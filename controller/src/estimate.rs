@@ -284,6 +284,22 @@ impl Estimator {
         &self.kin
     }
 
+    /// The track odometry reading `[left, right]` (m) the dead-reckoned pose belongs to, once one
+    /// arrived.
+    pub fn odometry_m(&self) -> Option<[f64; 2]> {
+        self.odometry_origin_m.map(|_| self.state.track_travel_m)
+    }
+
+    /// Continues the dead reckoning of a saved session: the machine stood at `pose` when the track
+    /// odometry read `odometry_m`, so the next readings move it on from there as if this estimator
+    /// had run throughout (a controller restarted while the gateway kept counting). Without a saved
+    /// reading the reckoning starts at `pose` from the first reading.
+    pub fn continue_from(&mut self, pose: MachinePose, odometry_m: Option<[f64; 2]>) {
+        self.config.initial_pose = pose;
+        self.state.pose = pose;
+        self.odometry_origin_m = odometry_m;
+    }
+
     /// The current estimate.
     pub fn state(&self) -> &MachineState {
         &self.state

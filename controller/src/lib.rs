@@ -17,7 +17,13 @@
 //!   predefined excavation sequence of 6.2.
 //! - [`session`]: the session driver: after every control step it answers scan requests, asks the
 //!   planner for the next action when the cycle waits for one, and feeds each dig's outcome back
-//!   (the loop `demo` and `run` share).
+//!   (the loop `demo` and `run` share); after every completed action it takes a checkpoint.
+//! - [`session_state`]: the resumable session: the driver's checkpoint, the identity a saved session
+//!   belongs to, and its validated loading (`run --resume`).
+//! - [`state_file`]: atomic JSON state files (temp, fsync, rename) and loading that names file and
+//!   field.
+//! - [`operator`]: operator control of a running controller over a Unix socket (status, pause,
+//!   resume, e-stop, reset, stop), served beside the loop and applied before each step.
 //! - [`run`]: the real-time loop over SocketCAN (tokio drives a 10 ms interval around the node).
 //! - [`scan_client`]: the range-scan client of the real-time loop (JSON lines over TCP).
 //!
@@ -34,11 +40,14 @@ pub mod config;
 pub mod cycle;
 pub mod estimate;
 pub mod node;
+pub mod operator;
 pub mod planned;
 pub mod run;
 pub mod safety;
 pub mod scan_client;
 pub mod session;
+pub mod session_state;
+pub mod state_file;
 
 pub use config::ControllerConfig;
 pub use cycle::{Action, CycleConfig, DigStats, WorkCycle};

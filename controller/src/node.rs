@@ -285,6 +285,32 @@ impl ControllerNode {
         self.cycle.push_action(action, self.est.kinematics())
     }
 
+    /// Puts a saved session's work cycle and dead-reckoned pose into this fresh node (see
+    /// [`crate::session_state`]); the arming handshake runs as for a new session.
+    ///
+    /// # Errors
+    /// As [`crate::cycle::WorkCycle::restore`].
+    pub fn restore(
+        &mut self,
+        cycle: &crate::cycle::CycleSnapshot,
+        pose: planner::kinematics::MachinePose,
+        odometry_m: Option<[f64; 2]>,
+    ) -> Result<(), crate::ControllerError> {
+        self.cycle.restore(cycle, self.est.kinematics())?;
+        self.est.continue_from(pose, odometry_m);
+        Ok(())
+    }
+
+    /// The operator's pause or resume (see [`WorkCycle::set_paused`]).
+    pub fn set_paused(&mut self, paused: bool) {
+        self.cycle.set_paused(paused);
+    }
+
+    /// The operator's stop after the current action (see [`WorkCycle::request_stop`]).
+    pub fn request_stop(&mut self) {
+        self.cycle.request_stop();
+    }
+
     /// The active fault (motion stopped), if any.
     pub fn fault(&self) -> Option<Fault> {
         self.safety.active_fault()
@@ -609,6 +635,8 @@ impl ControllerNode {
     pub fn bus_status(&self) -> StatusMessage {
         let activity = if self.safety.active_fault().is_some() {
             Activity::Faulted
+        } else if self.cycle.paused() && self.cycle.phase() == Phase::Idle {
+            Activity::Paused
         } else {
             match self.cycle.phase() {
                 Phase::Idle | Phase::Finished | Phase::Weigh => Activity::Idle,

@@ -40,6 +40,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::cycle::{Action, StartPose};
 use crate::node::ControllerNode;
+use crate::session_state::{PlannedSnapshot, StepSnapshot, TerrainSnapshot};
+use crate::state_file::FieldError;
 
 /// How far above the planned start the bucket is brought before Autodig's Boom-Down lowers it onto
 /// the terrain, m. The planner's start (Fig. 45) has the tip on the surface, where the dig model
@@ -230,6 +232,8 @@ pub struct PlannedSession {
     predefined_index: usize,
     regression: HardnessRegression,
     hardness_index: Option<f64>,
+    /// The latest soil estimate given to [`Self::set_soil_estimate`].
+    soil_estimate: Option<EmpiricalSoilModel>,
     dig_starts: Vec<JointAngles>,
     /// World-frame start tips of planned digs whose bucket pass has not been observed yet, oldest
     /// first. The caller observes a dig's pass after it has planned the next action (the statistics
@@ -278,6 +282,7 @@ impl PlannedSession {
             predefined_index: 0,
             regression: HardnessRegression::nominal()?,
             hardness_index: None,
+            soil_estimate: None,
             dig_starts: Vec::new(),
             unconfirmed_digs: Vec::new(),
             steps: Vec::new(),
@@ -476,7 +481,73 @@ impl PlannedSession {
         let model = self.planner.model_mut();
         model.set_hardness_index(index).map_err(PlanError::from)?;
         self.hardness_index = Some(index);
+        self.soil_estimate = Some(soil);
         Ok(index)
+    }
+
+    /// The session's state for a saved session (the plans behind the steps are left out).
+    #[must_use]
+    pub fn snapshot(&self) -> PlannedSnapshot {
+        PlannedSnapshot {
+            strategy: self.strategy,
+            planner: self.state.clone(),
+            terrain: TerrainSnapshot::of(self.mapper.grid()),
+            map_scans: self.mapper.scans(),
+            predefined: self.predefined.clone(),
+            predefined_index: self.predefined_index,
+            soil_estimate: self.soil_estimate,
+            dig_starts: self.dig_starts.clone(),
+            unconfirmed_digs: self.unconfirmed_digs.clone(),
+            steps: self
+                .steps
+                .iter()
+                .map(|st| StepSnapshot {
+                    action: st.action,
+                    pose: st.pose,
+                })
+                .collect(),
+            finished: self.finished,
+            end_reason: self.end_reason.clone(),
+        }
+    }
+
+    /// Puts a saved session's state into this fresh session (same strategy and map grid).
+    ///
+    /// # Errors
+    /// The field of `s` this session cannot take: another strategy, another map grid, a soil
+    /// estimate the regression refuses.
+    pub fn restore(&mut self, s: &PlannedSnapshot) -> std::result::Result<(), FieldError> {
+        if s.strategy != self.strategy {
+            return Err(FieldError::new(
+                "strategy",
+                format!("{:?}, this session is {:?}", s.strategy, self.strategy),
+            ));
+        }
+        let grid = s.terrain.grid().map_err(|e| e.within("terrain"))?;
+        self.mapper
+            .restore(grid, s.map_scans)
+            .map_err(|e| FieldError::new("terrain", e.to_string()))?;
+        if let Some(model) = s.soil_estimate {
+            self.set_soil_estimate(model)
+                .map_err(|e| FieldError::new("soil_estimate", e.to_string()))?;
+        }
+        self.state.clone_from(&s.planner);
+        self.predefined.clone_from(&s.predefined);
+        self.predefined_index = s.predefined_index;
+        self.dig_starts.clone_from(&s.dig_starts);
+        self.unconfirmed_digs.clone_from(&s.unconfirmed_digs);
+        self.steps = s
+            .steps
+            .iter()
+            .map(|st| SessionStep {
+                action: st.action,
+                plan: None,
+                pose: st.pose,
+            })
+            .collect();
+        self.finished = s.finished;
+        self.end_reason.clone_from(&s.end_reason);
+        Ok(())
     }
 
     /// Plans the next action for the machine at `pose` (world frame) on the current terrain map.
@@ -693,6 +764,19 @@ impl SoilMonitor {
     #[must_use]
     pub fn len(&self) -> usize {
         self.window.len()
+    }
+
+    /// The window's samples, oldest first (a saved session).
+    #[must_use]
+    pub fn window(&self) -> Vec<SoilSample> {
+        self.window.iter().copied().collect()
+    }
+
+    /// Puts a saved window back (between digs).
+    pub fn restore_window(&mut self, samples: &[SoilSample]) {
+        for s in samples {
+            self.window.push(*s);
+        }
     }
 
     /// Whether no sample is held.

@@ -32,6 +32,7 @@ use firmware_bridge::transport::{self, Bus, BusFault, TimeScale, TimestampedFram
 use tokio::time::MissedTickBehavior;
 
 use crate::node::ControllerNode;
+use crate::operator::OperatorPort;
 use crate::scan_client::ScanClientConfig;
 #[cfg(doc)]
 use crate::scan_client::ScanService;
@@ -251,7 +252,16 @@ pub async fn run_loop<B: Bus>(
     period: Duration,
     shutdown: impl Future<Output = ()>,
 ) -> anyhow::Result<(StopReason, LoopStats)> {
-    run_session_loop(bus, node, period, TimeScale::REAL_TIME, shutdown, None).await
+    run_session_loop(
+        bus,
+        node,
+        period,
+        TimeScale::REAL_TIME,
+        shutdown,
+        None,
+        None,
+    )
+    .await
 }
 
 /// What is called after every control step with the step's session events (the lab writes the
@@ -343,6 +353,9 @@ async fn planned(task: &mut Option<PlanTask>) -> Result<PlanOutcome, tokio::task
 /// fast as the monotonic clock: the tick is `period / time_scale` of wall time and the node steps at
 /// the scaled time (the simulator must run at the same scale).
 ///
+/// With an `operator` port ([`crate::operator`]) the operator's requests are applied before each
+/// step (never waiting for them).
+///
 /// # Errors
 /// A receive or send error of the bus, a session error or an observer's error (after the shutdown
 /// frames were attempted).
@@ -353,6 +366,7 @@ pub async fn run_session_loop<B: Bus>(
     time_scale: TimeScale,
     shutdown: impl Future<Output = ()>,
     mut session: Option<LoopSession<'_>>,
+    mut operator: Option<&mut OperatorPort>,
 ) -> anyhow::Result<(StopReason, LoopStats)> {
     let mut stats = LoopStats::default();
     let mut monitor = LoopMonitor::new();
@@ -383,6 +397,9 @@ pub async fn run_session_loop<B: Bus>(
                 let now = clock.now_s();
                 if let Some(report) = monitor.on_tick(now) {
                     judge_load(&report, period, node, now, &mut stats);
+                }
+                if let Some(op) = operator.as_mut() {
+                    op.serve(node, now);
                 }
                 let out = node.step(now, &inbox);
                 inbox.clear();

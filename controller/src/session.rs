@@ -22,6 +22,8 @@ use planner::plan::ActionChoice;
 use crate::cycle::{Action, Phase};
 use crate::node::ControllerNode;
 use crate::planned::{PlannedSession, PredefinedSequence, SoilMonitor, Strategy, plane_section};
+use crate::session_state::DriverSnapshot;
+use crate::state_file::FieldError;
 
 /// Where range scans come from. A scan is requested, then taken when it is there: the in-process
 /// simulator answers at once, a scan service over the network some control periods later, and the
@@ -103,7 +105,8 @@ pub enum DriverError {
 }
 
 /// What the planner predicted for an action it pushed (for the dig's record).
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct PlannedDig {
     /// Dig quality (Eq. 26 terms weighted).
     pub quality: Option<f64>,
@@ -179,6 +182,10 @@ pub struct SessionDriver {
     detached: bool,
     job: Option<Staged>,
     workspace_scan_failures: u32,
+    /// The cycle's `(action index, actions)` at the last checkpoint.
+    checkpoint_key: Option<(usize, usize)>,
+    /// The checkpoint taken in the last [`Self::after_step`], if any.
+    checkpoint: Option<Box<DriverSnapshot>>,
 }
 
 /// A detached planning step.
@@ -222,6 +229,95 @@ impl SessionDriver {
             detached: false,
             job: None,
             workspace_scan_failures: 0,
+            checkpoint_key: None,
+            checkpoint: None,
+        }
+    }
+
+    /// The checkpoint the last [`Self::after_step`] took, if it took one: the session between two
+    /// actions, to be saved by the caller with its records ([`crate::session_state`]).
+    pub fn checkpoint(&self) -> Option<&DriverSnapshot> {
+        self.checkpoint.as_deref()
+    }
+
+    /// The driver's and `node`'s state now (the planned session must be here, not out planning).
+    pub fn snapshot(&self, node: &ControllerNode) -> DriverSnapshot {
+        DriverSnapshot {
+            cycle: node.cycle().snapshot(),
+            pose: node.estimator().state().pose,
+            odometry_m: node.estimator().odometry_m(),
+            planned: self.planned.clone(),
+            plan_ms: self.plan_ms.clone(),
+            soil_window: self.soil.window(),
+            track_backs: self.track_backs,
+            backups: self.backups,
+            predefined_joints: self.predefined_joints,
+            over: self.over.clone(),
+            session: self.session.as_ref().map(PlannedSession::snapshot),
+        }
+    }
+
+    /// Puts a saved session into this fresh driver and its fresh `node` (built from the same
+    /// configuration): the session goes on at the saved action after the arming handshake.
+    ///
+    /// # Errors
+    /// The field of `s` that does not fit (`driver.` prefixed): a planned session saved for a run
+    /// without one or the reverse, another strategy or map grid, a plan the node refuses.
+    pub fn restore(
+        &mut self,
+        s: &DriverSnapshot,
+        node: &mut ControllerNode,
+    ) -> Result<(), FieldError> {
+        match (&mut self.session, &s.session) {
+            (Some(session), Some(saved)) => session
+                .restore(saved)
+                .map_err(|e| e.within("driver.session"))?,
+            (None, None) => {}
+            (have, _) => {
+                return Err(FieldError::new(
+                    "driver.session",
+                    if have.is_some() {
+                        "the state has no planned session, this run plans"
+                    } else {
+                        "the state has a planned session, this run has none"
+                    },
+                ));
+            }
+        }
+        node.restore(&s.cycle, s.pose, s.odometry_m)
+            .map_err(|e| FieldError::new("driver.cycle", e.to_string()))?;
+        if let Some(session) = &self.session
+            && let Some(index) = session.hardness_index()
+        {
+            node.set_hardness_index(index);
+        }
+        if s.over.is_some() {
+            node.set_external_plan(false);
+        }
+        self.planned.clone_from(&s.planned);
+        self.plan_ms.clone_from(&s.plan_ms);
+        self.soil.restore_window(&s.soil_window);
+        self.digs_done = s.cycle.stats.len();
+        self.track_backs = s.track_backs;
+        self.backups = s.backups;
+        self.predefined_joints = s.predefined_joints;
+        self.over.clone_from(&s.over);
+        self.checkpoint_key = Some((s.cycle.action_index, s.cycle.actions.len()));
+        Ok(())
+    }
+
+    /// Takes a checkpoint when the cycle stands between actions, the last dig's bookkeeping is done,
+    /// the session is here and the plan moved on since the last one.
+    fn take_checkpoint(&mut self, node: &ControllerNode) {
+        let cycle = node.cycle();
+        let key = (cycle.action_index(), cycle.config().actions.len());
+        let between = cycle.phase() == Phase::Idle
+            && self.dig.is_none()
+            && self.digs_done == node.statistics().len()
+            && self.job.is_none();
+        if between && self.checkpoint_key != Some(key) {
+            self.checkpoint_key = Some(key);
+            self.checkpoint = Some(Box::new(self.snapshot(node)));
         }
     }
 
@@ -268,6 +364,7 @@ impl SessionDriver {
         scans: &mut dyn ScanSource,
     ) -> Result<&[SessionEvent], DriverError> {
         self.events.clear();
+        self.checkpoint = None;
         if node.take_scan_request() {
             self.cycle_scan_wanted = true;
         }
@@ -288,6 +385,7 @@ impl SessionDriver {
         }
         self.plan(node, scans)?;
         self.follow_dig(node);
+        self.take_checkpoint(node);
         self.steps += 1;
         Ok(&self.events)
     }
@@ -366,6 +464,8 @@ impl SessionDriver {
                 return Ok(());
             }
         };
+        // The last chance to save the session between these two actions before the planner holds it.
+        self.take_checkpoint(node);
         let Some(session) = self.session.take() else {
             return Ok(());
         };

@@ -71,6 +71,7 @@ fn load_tag(status: &Status) -> LoadTag {
     }
     match status.activity {
         Activity::Idle
+        | Activity::Paused
         | Activity::Scan
         | Activity::SwingToDig
         | Activity::Return

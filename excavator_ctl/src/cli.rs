@@ -18,6 +18,9 @@ pub enum Command {
     /// predefined sequence or the config's plan (--strategy); Ctrl-C leaves the valves neutral and
     /// the gateway disarmed; --out writes the session folder as `demo` does.
     Run(lab::wire::RunArgs),
+    /// Operator control of a running `run` over its control socket: status, pause, resume, estop,
+    /// reset, stop (docs/controller.md).
+    Ctl(lab::wire::CtlArgs),
     /// The embedded default: the simulator in-process in virtual time and a full autonomous session;
     /// writes the trace, scans, summary and plots into --out (docs/demo-output.md); --live serves it
     /// to Foxglove as it runs (docs/live-view.md).

@@ -49,6 +49,7 @@ fn main() -> std::process::ExitCode {
     };
     let result = match cli.command {
         Command::Run(args) => runtime.block_on(lab::wire::run(args)),
+        Command::Ctl(args) => runtime.block_on(lab::wire::ctl(args)),
         Command::Demo(cmd) => demo(&runtime, cmd),
         Command::Experiment(args) => lab::experiment::run(&args),
         Command::Trace { cmd } => runtime.block_on(trace_tools::run(cmd)),

@@ -511,6 +511,8 @@ signal_enum! {
         Track = 8,
         /// Halted by a fault; valves neutral.
         Faulted = 9,
+        /// Held between actions by the operator's pause; valves neutral, disarmed.
+        Paused = 10,
     }
 }
 

@@ -167,7 +167,7 @@ fn message() -> impl Strategy<Value = Message> {
     ]
 }
 
-const ACTIVITIES: [Activity; 10] = [
+const ACTIVITIES: [Activity; 11] = [
     Activity::Idle,
     Activity::Scan,
     Activity::SwingToDig,
@@ -178,6 +178,7 @@ const ACTIVITIES: [Activity; 10] = [
     Activity::Return,
     Activity::Track,
     Activity::Faulted,
+    Activity::Paused,
 ];
 
 const STAGES: [AutodigStageCode; 6] = [

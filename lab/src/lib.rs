@@ -13,6 +13,8 @@
 //!   model, cross-validation of the soil models on a session's soil samples (4.3.5).
 //! - [`plots`]: the SVG figures of sessions and experiments.
 //! - [`results`]: the layout of the generated results page (docs/results.md).
+//! - [`resume`]: a resumable `run`: the records saved with the session driver's checkpoints, the
+//!   writer that saves them off the control loop, the trace a resumed session appends to.
 //! - [`session`]: the records of a session folder (per-dig records, tip paths, soil samples).
 //! - [`thesis`]: the thesis's figures and statements the reproductions are checked against.
 //! - [`wire`]: `excavator-ctl run`, the same session on a CAN bus in real time (planned, predefined
@@ -33,6 +35,7 @@ pub mod harness;
 pub mod model;
 pub mod plots;
 pub mod results;
+pub mod resume;
 pub mod session;
 pub mod thesis;
 pub mod wire;

@@ -11,7 +11,10 @@
 //!
 //! With `--out DIR` the session folder is the one `demo` writes (trace, scans, `summary.json`,
 //! `summary.md`, plots, `soil_samples.json`; docs/demo-output.md), without the simulator's truth
-//! (true payload, true terrain), which a bus session does not have.
+//! (true payload, true terrain), which a bus session does not have, plus `session_state.json`: the
+//! session saved after every completed action ([`crate::resume`]). `--resume DIR` loads it, checks
+//! that it is this machine's, bench's and configuration's, and goes on with the session where it
+//! stood after the normal arming handshake, appending to its trace and records.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -24,11 +27,14 @@ use controller::run::{
 };
 use controller::scan_client::{NoScans, ScanClient, ScanService};
 use controller::session::{ScanSource, SessionDriver, SessionEvent};
+use controller::session_state::{SessionIdentity, fingerprint};
+use controller::state_file::StateFileError;
 use firmware_bridge::trace::Recorder;
 use firmware_bridge::transport::{Bus, SocketCanBus, TimeScale};
 use planner::machine::MachineConfig;
 
 use crate::demo::{self, DemoArgs, DemoStrategy, SessionEnd, SessionRecords};
+use crate::resume::{RunRecords, RunState, StateWriter};
 
 /// Arguments of `excavator-ctl run`.
 #[derive(Debug, Clone, Args)]
@@ -85,12 +91,83 @@ pub struct RunArgs {
     /// Session folder: trace, scans, summary and plots as `demo` writes them.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Go on with the session saved in this session folder (its `session_state.json`), with the
+    /// same files and settings it was started with; the folder is the session folder.
+    #[arg(long, value_name = "DIR")]
+    pub resume: Option<PathBuf>,
+    /// The operator's control socket (`excavator-ctl ctl`; default: `control.sock` in the session
+    /// folder, none without one).
+    #[arg(long, value_name = "PATH")]
+    pub control_socket: Option<PathBuf>,
+}
+
+/// Arguments of `excavator-ctl ctl`.
+#[derive(Debug, Clone, Args)]
+pub struct CtlArgs {
+    /// The running controller's control socket (`run --control-socket`, default
+    /// `SESSION_DIR/control.sock`).
+    #[arg(long, value_name = "PATH")]
+    pub socket: PathBuf,
+    /// status, pause, resume, estop, reset or stop.
+    pub command: controller::operator::Command,
+    /// Why (written to the controller's log).
+    #[arg(long)]
+    pub reason: Option<String>,
+}
+
+/// `excavator-ctl ctl`: sends one operator command and prints the controller's state after it.
+///
+/// # Errors
+/// The socket cannot be reached, or the controller refused the request.
+pub async fn ctl(args: CtlArgs) -> anyhow::Result<()> {
+    let reply = controller::operator::request(
+        &args.socket,
+        &controller::operator::Request {
+            cmd: args.command,
+            reason: args.reason,
+        },
+    )
+    .await
+    .context("control socket")?;
+    if let Some(s) = &reply.status {
+        println!(
+            "phase {} | safety {} | fault {} | action {} (#{}) | digs {}{}{}",
+            s.phase,
+            s.safety,
+            s.fault.as_deref().unwrap_or("none"),
+            s.action.as_deref().unwrap_or("none"),
+            s.action_index,
+            s.digs,
+            if s.paused { " | paused" } else { "" },
+            if s.stopping { " | stopping" } else { "" },
+        );
+    }
+    match reply.error {
+        Some(e) if !reply.ok => anyhow::bail!("the controller refused: {e}"),
+        _ => Ok(()),
+    }
 }
 
 impl RunArgs {
+    /// The session folder: `--resume`'s or `--out`'s.
+    ///
+    /// # Errors
+    /// `--out` and `--resume` name different folders.
+    pub fn session_dir(&self) -> anyhow::Result<Option<PathBuf>> {
+        match (&self.out, &self.resume) {
+            (Some(o), Some(r)) if o != r => anyhow::bail!(
+                "--out {} and --resume {}: a resumed session stays in its folder",
+                o.display(),
+                r.display()
+            ),
+            (o, r) => Ok(r.clone().or_else(|| o.clone())),
+        }
+    }
+
     /// `demo`'s arguments for the same strategy, files and bench (one setup for both).
     fn demo_args(&self) -> DemoArgs {
-        let mut d = DemoArgs::new(self.out.clone().unwrap_or_default());
+        let out = self.resume.clone().or_else(|| self.out.clone());
+        let mut d = DemoArgs::new(out.unwrap_or_default());
         d.strategy = self.strategy;
         d.machine.clone_from(&self.machine);
         d.bench.clone_from(&self.bench);
@@ -155,6 +232,22 @@ pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, R
         config.security.key_file = Some(file.clone());
     }
     let key = config.security.load_key().context("the machine's key")?;
+    let identity = SessionIdentity {
+        machine: fingerprint(&machine),
+        bench: sim.scenario.name.clone(),
+        seed: sim.scenario.seed,
+        strategy: args.strategy.name().to_owned(),
+        config: {
+            // The dig count, listen-only and the key file may change between a session and its resumption.
+            let mut c = config.clone();
+            c.cycle.max_digs = None;
+            c.safety.listen_only = false;
+            // The key is the machine's, not the session's: it may be re-provisioned.
+            c.security.key_file = None;
+            let planner = demo::planner_config(&dargs, &sim)?;
+            fingerprint(&(c, planner, &maps))
+        },
+    };
     let mut node =
         ControllerNode::new(&machine, maps, config).context("controller configuration")?;
     match &key {
@@ -174,6 +267,7 @@ pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, R
         seed: sim.scenario.seed,
         soil_contact: sim.scenario.soil_contact,
         full_bucket_n,
+        identity,
     };
     Ok((node, driver, setup))
 }
@@ -185,6 +279,16 @@ pub struct RunSetup {
     seed: u64,
     soil_contact: vcan_sim::scenario::SoilContactIntegration,
     full_bucket_n: f64,
+    identity: SessionIdentity,
+}
+
+/// The session's trace file as the run records it.
+#[derive(Debug)]
+pub struct SessionTrace {
+    /// Records every frame sent and received (attached to the bus by the caller).
+    pub recorder: Recorder,
+    /// Frames already in the file (a resumed session's earlier runs).
+    pub frames_before: u64,
 }
 
 /// `excavator-ctl run`: opens the interface, runs the session until Ctrl-C/SIGTERM or its end, closes
@@ -195,42 +299,67 @@ pub struct RunSetup {
 pub async fn run(args: RunArgs) -> anyhow::Result<()> {
     let mut bus = SocketCanBus::open(&args.iface)
         .with_context(|| format!("opening CAN interface {}", args.iface))?;
-    let trace = trace_path(&args);
-    let recorder = match &trace {
+    let trace = match trace_path(&args)? {
         Some(p) => {
-            if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
-                std::fs::create_dir_all(dir)
-                    .with_context(|| format!("creating {}", dir.display()))?;
-            }
-            let r = Recorder::create(p, &args.iface)
-                .with_context(|| format!("creating trace {}", p.display()))?;
-            bus.set_recorder(r.clone());
-            Some(r)
+            let (recorder, frames_before) =
+                crate::resume::open_trace(&p, &args.iface, args.resume.is_some())?;
+            bus.set_recorder(recorder.clone());
+            Some(SessionTrace {
+                recorder,
+                frames_before,
+            })
         }
         None => None,
     };
-    run_on(&bus, recorder, &args, controller::run::shutdown_signal()).await
+    run_on(&bus, trace, &args, controller::run::shutdown_signal()).await
 }
 
-fn trace_path(args: &RunArgs) -> Option<PathBuf> {
-    args.trace
-        .clone()
-        .or_else(|| args.out.as_ref().map(|o| o.join("trace.log")))
-}
-
-/// As [`run`] on a bus the caller opened (with `recorder` attached to it, closed here).
+/// `--trace`, or the session folder's `trace.log`.
 ///
 /// # Errors
-/// As [`run`].
+/// As [`RunArgs::session_dir`].
+pub fn trace_path(args: &RunArgs) -> anyhow::Result<Option<PathBuf>> {
+    Ok(match &args.trace {
+        Some(t) => Some(t.clone()),
+        None => args.session_dir()?.map(|o| o.join("trace.log")),
+    })
+}
+
+/// As [`run`] on a bus the caller opened (with the trace's recorder attached to it, closed here).
+///
+/// # Errors
+/// As [`run`]; with `--resume`, a missing, broken or foreign state file (naming the file and the
+/// field).
 pub async fn run_on<B: Bus>(
     bus: &B,
-    recorder: Option<Recorder>,
+    trace: Option<SessionTrace>,
     args: &RunArgs,
     shutdown: impl std::future::Future<Output = ()>,
 ) -> anyhow::Result<()> {
     let wall = Instant::now();
     let (mut node, mut driver, setup) = build(args)?;
-    let scans_dir = args.out.as_ref().map(|o| o.join("scans"));
+    let out_dir = args.session_dir()?;
+    let resumed = match &args.resume {
+        Some(dir) => {
+            let path = crate::resume::state_path(dir);
+            let state: RunState = controller::session_state::load(&path, &setup.identity)
+                .context("--resume: the saved session")?;
+            driver
+                .restore(&state.driver, &mut node)
+                .map_err(|e| StateFileError::field(&path, e))
+                .context("--resume: the saved session")?;
+            tracing::info!(
+                state = %path.display(),
+                actions_done = state.driver.cycle.action_index,
+                digs = state.records.digs.len(),
+                "resuming the session after the arming handshake"
+            );
+            Some(state.records)
+        }
+        None => None,
+    };
+    let base = resumed.clone().unwrap_or_default();
+    let scans_dir = out_dir.as_ref().map(|o| o.join("scans"));
     if let Some(d) = &scans_dir {
         std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
     }
@@ -249,7 +378,31 @@ pub async fn run_on<B: Bus>(
         None => Box::new(NoScans::default()),
     };
     let mut log = SessionRecords::new(scans_dir.clone().unwrap_or_default());
+    if let Some(r) = resumed {
+        log.records = r.digs;
+        log.soil_samples = r.soil_samples;
+        log.scans = r.scans;
+    }
+    let mut state_writer = match &out_dir {
+        Some(o) => Some(StateWriter::spawn(crate::resume::state_path(o))?),
+        None => None,
+    };
+    let socket_path = args
+        .control_socket
+        .clone()
+        .or_else(|| out_dir.as_deref().map(controller::operator::default_path));
+    let mut operator = match &socket_path {
+        Some(p) => {
+            let (port, task) = controller::operator::listen(p)
+                .with_context(|| format!("control socket {}", p.display()))?;
+            tracing::info!(socket = %p.display(), "operator control: excavator-ctl ctl --socket");
+            Some((port, task))
+        }
+        None => None,
+    };
+    let mut steps = 0_u64;
     let mut observer = |node: &ControllerNode, driver: &SessionDriver, events: &[SessionEvent]| {
+        steps += 1;
         for e in events {
             if scans_dir.is_none() && matches!(e, SessionEvent::Scanned(_)) {
                 continue;
@@ -265,6 +418,20 @@ pub async fn run_on<B: Bus>(
                 );
             }
         }
+        if let (Some(w), Some(cp)) = (&mut state_writer, driver.checkpoint()) {
+            let records = RunRecords {
+                digs: log.records.clone(),
+                soil_samples: log.soil_samples.clone(),
+                scans: log.scans,
+                session_time_s: base.session_time_s + session_s(steps),
+                wall_time_s: base.wall_time_s + wall.elapsed().as_secs_f64(),
+            };
+            w.save(crate::resume::run_state(
+                &setup.identity,
+                cp.clone(),
+                records,
+            ));
+        }
         Ok(())
     };
     let result = run_session_loop(
@@ -278,23 +445,37 @@ pub async fn run_on<B: Bus>(
             scans: &mut *scans,
             observer: &mut observer,
         }),
+        operator.as_mut().map(|(port, _)| port),
     )
     .await;
-    let trace = match recorder {
-        Some(r) => {
-            let closed = r.close().context("closing the trace")?;
+    if let (Some((_, task)), Some(p)) = (operator, &socket_path) {
+        task.abort();
+        let _ = std::fs::remove_file(p);
+    }
+    let saved = state_writer.map(StateWriter::finish);
+    let trace = match trace {
+        Some(t) => {
+            let mut closed = t.recorder.close().context("closing the trace")?;
             tracing::info!(?closed, "trace closed");
+            closed.recorded += t.frames_before;
             closed
         }
         None => firmware_bridge::trace::RecorderStats::default(),
     };
     let (reason, stats) = result?;
-    tracing::info!(?reason, ?stats, digs = node.statistics().len(), "stopped");
-    let Some(out) = &args.out else {
+    tracing::info!(
+        ?reason,
+        ?stats,
+        ?saved,
+        digs = node.statistics().len(),
+        "stopped"
+    );
+    let Some(out) = &out_dir else {
         return Ok(());
     };
     let end = match (reason, driver.end_reason()) {
         (StopReason::Signal, _) => "stopped".to_owned(),
+        (StopReason::Finished, _) if node.cycle().stop_requested() => "operator stop".to_owned(),
         (StopReason::Finished, Some(why)) => why.to_owned(),
         (StopReason::Finished, None) => "dig count reached".to_owned(),
     };
@@ -312,9 +493,8 @@ pub async fn run_on<B: Bus>(
             backups: driver.backups(),
             plan_ms: driver.planning_ms(),
             scans: log.scans,
-            session_time_s: (CONTROL_PERIOD * u32::try_from(stats.steps).unwrap_or(u32::MAX))
-                .as_secs_f64(),
-            wall_time_s: wall.elapsed().as_secs_f64(),
+            session_time_s: base.session_time_s + session_s(stats.steps),
+            wall_time_s: base.wall_time_s + wall.elapsed().as_secs_f64(),
             trace,
         },
         &node,
@@ -322,7 +502,20 @@ pub async fn run_on<B: Bus>(
     );
     write_folder(out, &summary, &node, &driver, log.soil_samples)?;
     print!("{}", demo::summary_markdown(&summary));
-    Ok(())
+    match saved {
+        Some(s) if s.failed > 0 => Err(anyhow::anyhow!(
+            "the session state could not be saved {} times (last: {}): the session cannot be \
+             resumed from its last actions",
+            s.failed,
+            s.last_error.unwrap_or_default()
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// Session time of `steps` control steps, s.
+fn session_s(steps: u64) -> f64 {
+    CONTROL_PERIOD.as_secs_f64() * steps as f64
 }
 
 /// The session folder's files besides the trace and the scans.

@@ -1,8 +1,9 @@
 //! `excavator-ctl run --strategy planned` through the real run loop ([`lab::wire::run_on`],
 //! [`controller::run::run_session_loop`]) over the in-process bus on the wall clock, against the
 //! simulator's real-time loop (`vcan_sim::realtime::run_on`) with its scan socket on loopback TCP,
-//! both at the same time scale: the session folder is the one `demo` writes. Both ends hold the same
-//! key file, so the control path is authenticated.
+//! both at the same time scale: the session folder is the one `demo` writes; a controller dropped
+//! mid-session and started again with `--resume` finishes the session without losing or repeating
+//! an action. Both ends hold the same key file, so the control path is authenticated.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
@@ -46,39 +47,34 @@ fn free_port() -> String {
     l.local_addr().unwrap().to_string()
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn the_planned_session_runs_over_a_bus_in_scaled_real_time() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("run");
+/// The simulator's real-time loop on an in-process bus (the planned demo's bench), serving range
+/// scans; it runs until `stop` is sent.
+struct Simulator {
+    bus: InProcessBus,
+    scan_addr: String,
+    /// The key provisioned on both ends, as on a machine: the gateway's and `run --key-file`.
+    key_file: std::path::PathBuf,
+    stop: tokio::sync::oneshot::Sender<()>,
+    task: tokio::task::JoinHandle<vcan_sim::Result<vcan_sim::realtime::RunSummary>>,
+}
+
+async fn simulator(out: &std::path::Path, time_scale: TimeScale) -> Simulator {
     let scan_addr = free_port();
-    let time_scale = TimeScale::new(2.0).unwrap();
-    // The loop shares the test machine's cores with the simulator and other tests: at a load of
-    // several times the core count its 10 ms tick slips past the default 30 ms sensor age and the
-    // five automatic re-arms run out before the first dig. The wider timing of a loaded machine
-    // (the same as the HIL tests' in a TCG VM) keeps the session going; the plumbing is under test.
-    let safety = dir.path().join("safety.toml");
-    std::fs::write(
-        &safety,
-        "[safety]\nsensor_max_age_s = 0.1\nstatus_max_age_s = 0.6\narm_timeout_s = 2.0\n\
-         max_auto_rearms = 1000\n",
-    )
-    .unwrap();
-    let (sim, _, _) = lab::demo::setup(&DemoArgs::planned(out.clone())).unwrap();
+    let (sim, _, _) = lab::demo::setup(&DemoArgs::planned(out.to_path_buf())).unwrap();
     let bus = InProcessBus::with_wall_clock("vcan0");
     let sim_node = bus.attach();
-    let mut ctl_node = bus.attach();
     let options = RealtimeOptions {
         iface: "vcan0".into(),
         state_log: None,
         scan_socket: Some(scan_addr.clone()),
         time_scale,
     };
-    // The key provisioned on both ends, as on a machine: the gateway's and `run --key-file`.
-    let key_file = write_key_file(dir.path());
+    std::fs::create_dir_all(out.parent().unwrap()).unwrap();
+    let key_file = write_key_file(out.parent().unwrap());
     let key = firmware_bridge::secoc::SessionKey::from_file(&key_file).unwrap();
     let machine = MachineNode::new(sim.build().unwrap()).with_security(&key, rand_seed());
-    let (stop_sim, sim_stopped) = tokio::sync::oneshot::channel::<()>();
-    let simulator = tokio::spawn(async move {
+    let (stop, sim_stopped) = tokio::sync::oneshot::channel::<()>();
+    let task = tokio::spawn(async move {
         vcan_sim::realtime::run_on(&sim_node, machine, options, async {
             let _ = sim_stopped.await;
         })
@@ -86,34 +82,77 @@ async fn the_planned_session_runs_over_a_bus_in_scaled_real_time() {
     });
     // The scan socket is bound by the simulator's task.
     tokio::time::sleep(Duration::from_millis(200)).await;
-    std::fs::create_dir_all(&out).unwrap();
-    let recorder = Recorder::create(&out.join("trace.log"), "vcan0").unwrap();
-    ctl_node.set_recorder(recorder.clone());
-    let args = RunArgs {
+    Simulator {
+        bus,
+        scan_addr,
+        key_file,
+        stop,
+        task,
+    }
+}
+
+/// `run --strategy planned --digs N --out DIR --config SAFETY` against `sim`, SAFETY (written beside
+/// DIR) the wider safety timing of a loaded machine: the loop shares the test machine's cores with
+/// the simulator and other tests, and at a load of several times the core count its 10 ms tick slips
+/// past the default 30 ms sensor age and the five automatic re-arms run out before the first dig
+/// (the same timing as the HIL tests' in a TCG VM). The plumbing is under test, not the timing.
+fn planned_run(
+    sim: &Simulator,
+    digs: u32,
+    time_scale: TimeScale,
+    out: &std::path::Path,
+) -> RunArgs {
+    let safety = out.with_file_name("safety.toml");
+    std::fs::write(
+        &safety,
+        "[safety]\nsensor_max_age_s = 0.1\nstatus_max_age_s = 0.6\narm_timeout_s = 2.0\n\
+         max_auto_rearms = 1000\n",
+    )
+    .unwrap();
+    RunArgs {
         iface: "vcan0".into(),
         listen_only: false,
         machine: None,
         maps: None,
         config: Some(safety),
-        key_file: Some(key_file),
+        key_file: Some(sim.key_file.clone()),
         trace: None,
-        digs: Some(2),
-        scan_addr: Some(scan_addr),
+        digs: Some(digs),
+        scan_addr: Some(sim.scan_addr.clone()),
         strategy: DemoStrategy::Planned,
         bench: None,
         seed: None,
         planner: None,
         hardness: None,
         time_scale,
-        out: Some(out.clone()),
-    };
+        out: Some(out.to_path_buf()),
+        resume: None,
+        control_socket: None,
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_planned_session_runs_over_a_bus_in_scaled_real_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let time_scale = TimeScale::new(2.0).unwrap();
+    let sim = simulator(&out, time_scale).await;
+    let mut ctl_node = sim.bus.attach();
+    std::fs::create_dir_all(&out).unwrap();
+    let recorder = Recorder::create(&out.join("trace.log"), "vcan0").unwrap();
+    ctl_node.set_recorder(recorder.clone());
+    let args = planned_run(&sim, 2, time_scale, &out);
     // A budget far above the session's ~2 x 30 s at 2x; the test fails if it is what stops it.
     let budget = tokio::time::sleep(Duration::from_secs(240));
-    lab::wire::run_on(&ctl_node, Some(recorder), &args, budget)
+    let trace = lab::wire::SessionTrace {
+        recorder,
+        frames_before: 0,
+    };
+    lab::wire::run_on(&ctl_node, Some(trace), &args, budget)
         .await
         .unwrap();
-    let _ = stop_sim.send(());
-    let summary = simulator.await.unwrap().unwrap();
+    let _ = sim.stop.send(());
+    let summary = sim.task.await.unwrap().unwrap();
     assert!(summary.simulated_s > 10.0, "{summary:?}");
 
     let s: DemoSummary =
@@ -143,6 +182,141 @@ async fn the_planned_session_runs_over_a_bus_in_scaled_real_time() {
     assert!(std::fs::read_dir(out.join("scans")).unwrap().count() >= 2);
 }
 
+/// The `DigIndex` of every `ControllerStatus` the controller sent, in trace order.
+fn status_dig_indices(trace: &std::path::Path) -> Vec<u16> {
+    use firmware_bridge::messages::Message;
+    std::fs::read_to_string(trace)
+        .unwrap()
+        .lines()
+        .map(|l| firmware_bridge::trace::parse_line(l).unwrap())
+        .filter_map(|r| match Message::decode(&r.frame) {
+            Ok(d) => match d.message {
+                Message::ControllerStatus(s) => Some(s.dig_index),
+                _ => None,
+            },
+            Err(_) => None,
+        })
+        .collect()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_controller_killed_mid_session_resumes_without_losing_or_repeating_an_action() {
+    const DIGS: u32 = 2;
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
+        .try_init();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    // Twice real time: the kill and the restart need the loop's rate kept on a loaded host.
+    let time_scale = TimeScale::new(2.0).unwrap();
+    let sim = simulator(&out, time_scale).await;
+    let mut args = planned_run(&sim, DIGS, time_scale, &out);
+    let state_path = lab::resume::state_path(&out);
+    let trace_path = out.join("trace.log");
+
+    // The first controller: killed (its future dropped at whatever step it is in) a while after
+    // its first completed dig reached the state file.
+    {
+        let mut ctl_node = sim.bus.attach();
+        let (recorder, before) = lab::resume::open_trace(&trace_path, "vcan0", false).unwrap();
+        assert_eq!(before, 0);
+        ctl_node.set_recorder(recorder.clone());
+        let trace = lab::wire::SessionTrace {
+            recorder,
+            frames_before: 0,
+        };
+        let killer = async {
+            loop {
+                tokio::time::sleep(Duration::from_millis(50)).await;
+                let digs = std::fs::read(&state_path)
+                    .ok()
+                    .and_then(|b| serde_json::from_slice::<lab::resume::RunState>(&b).ok())
+                    .map_or(0, |s| s.records.digs.len());
+                if digs >= 1 {
+                    break;
+                }
+            }
+            // Into the next action (the planner, the swing, the dig).
+            tokio::time::sleep(Duration::from_millis(2500)).await;
+        };
+        tokio::select! {
+            r = lab::wire::run_on(&ctl_node, Some(trace), &args, std::future::pending()) => {
+                panic!("the first run ended before it was killed: {r:?}");
+            }
+            () = killer => {}
+            () = tokio::time::sleep(Duration::from_secs(200)) => panic!("no dig within the budget"),
+        }
+    }
+    let saved: lab::resume::RunState =
+        serde_json::from_slice(&std::fs::read(&state_path).unwrap()).unwrap();
+    assert_eq!(saved.records.digs.len(), 1, "{:?}", saved.records);
+    let before_resume = status_dig_indices(&trace_path).len();
+
+    // The second controller: `--resume`, after the gateway's watchdog neutralised the valves.
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    args.out = None;
+    args.resume = Some(out.clone());
+    let mut ctl_node = sim.bus.attach();
+    let (recorder, frames_before) = lab::resume::open_trace(&trace_path, "vcan0", true).unwrap();
+    assert!(frames_before > 1000, "{frames_before}");
+    ctl_node.set_recorder(recorder.clone());
+    let trace = lab::wire::SessionTrace {
+        recorder,
+        frames_before,
+    };
+    let budget = tokio::time::sleep(Duration::from_secs(200));
+    lab::wire::run_on(&ctl_node, Some(trace), &args, budget)
+        .await
+        .unwrap();
+    let _ = sim.stop.send(());
+    sim.task.await.unwrap().unwrap();
+
+    let s: DemoSummary =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    assert_ne!(s.end, "stopped", "the session ran out of its budget: {s:?}");
+    // An uninterrupted session of the same bench and seed (virtual time) does the same actions.
+    let mut reference_args = DemoArgs::planned(dir.path().join("reference"));
+    reference_args.digs = DIGS;
+    reference_args.quiet = true;
+    let reference =
+        lab::demo::run_session(&reference_args, &std::sync::atomic::AtomicBool::new(false))
+            .unwrap();
+    assert_eq!(s.totals.digs, reference.totals.digs, "{:?}", s.totals);
+    assert_eq!(
+        (s.totals.dig_actions, s.totals.cleanup_actions),
+        (
+            reference.totals.dig_actions,
+            reference.totals.cleanup_actions
+        )
+    );
+    // Each action once in the summary, the first one as saved before the kill.
+    let indices: Vec<u32> = s.digs.iter().map(|d| d.index).collect();
+    assert_eq!(indices, (0..DIGS).collect::<Vec<_>>());
+    assert_eq!(s.digs[0].time_s, saved.records.digs[0].time_s);
+    assert!(s.digs.iter().all(|d| d.weight_n.is_some_and(|w| w > 0.0)));
+    // The trace: one file, every line whole, the dig count never going back behind what was saved
+    // and reaching the session's end.
+    let digs = status_dig_indices(&trace_path);
+    let (killed, resumed) = digs.split_at(before_resume);
+    let saved_digs = u16::try_from(saved.records.digs.len()).unwrap();
+    for part in [killed, resumed] {
+        assert!(part.windows(2).all(|w| w[1] >= w[0]), "{part:?}");
+    }
+    assert!(
+        resumed.first().is_some_and(|&d| d >= saved_digs),
+        "{resumed:?}"
+    );
+    assert_eq!(resumed.last().copied(), Some(u16::try_from(DIGS).unwrap()));
+    let lines = std::fs::read_to_string(&trace_path)
+        .unwrap()
+        .lines()
+        .count();
+    assert_eq!(s.totals.trace_frames, lines as u64);
+    // Scans numbered on without gaps.
+    let scans = std::fs::read_dir(out.join("scans")).unwrap().count();
+    assert_eq!(scans, s.totals.scans);
+}
+
 /// The arguments of `run --iface vcan0 --config CONFIG [--digs N]` with the fixed strategy.
 fn fixed_args(config: &std::path::Path, digs: Option<u32>) -> RunArgs {
     RunArgs {
@@ -162,6 +336,8 @@ fn fixed_args(config: &std::path::Path, digs: Option<u32>) -> RunArgs {
         hardness: None,
         time_scale: TimeScale::REAL_TIME,
         out: None,
+        resume: None,
+        control_socket: None,
     }
 }
 

@@ -845,6 +845,11 @@ impl SoilWindow {
         self.samples.is_empty()
     }
 
+    /// The samples, oldest first, without making them contiguous.
+    pub fn iter(&self) -> impl Iterator<Item = &SoilSample> {
+        self.samples.iter()
+    }
+
     /// The samples, oldest first.
     pub fn samples(&mut self) -> &[SoilSample] {
         self.samples.make_contiguous()

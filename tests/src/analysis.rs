@@ -131,7 +131,7 @@ pub fn count_cycles(sequence: &[Activity]) -> Cycles {
     let mut step = Step::None;
     for a in sequence {
         step = match (*a, step) {
-            (Activity::Idle | Activity::Scan | Activity::Faulted, s) => s,
+            (Activity::Idle | Activity::Paused | Activity::Scan | Activity::Faulted, s) => s,
             (Activity::Dig, Step::Working(true)) => Step::Working(true),
             (Activity::Dig, _) => Step::Working(false),
             (Activity::Cleanup, _) => Step::Working(true),

@@ -37,6 +37,7 @@
 //! - `action`: [`StartPose`], [`Action`], [`ActionKind`].
 //! - `config`: [`CycleConfig`] and [`PGain`], with their validation.
 //! - `scan_grid`: [`ScanGrid`].
+//! - `snapshot`: [`CycleSnapshot`], the cycle's part of a saved session.
 //! - `stats`: [`DigStats`] and the record a running dig keeps.
 //! - `weigh`: the payload average over whole oscillation periods and the Weigh thresholds.
 //! - this module: [`WorkCycle`] (state, phase changes, [`WorkCycle::step`]); its phases in `moving`
@@ -48,6 +49,7 @@ mod config;
 mod digging;
 mod moving;
 mod scan_grid;
+mod snapshot;
 mod stats;
 #[cfg(test)]
 mod test_support;
@@ -57,6 +59,7 @@ mod weigh_dump_track;
 pub use action::{Action, ActionKind, StartPose};
 pub use config::{CycleConfig, PGain};
 pub use scan_grid::ScanGrid;
+pub use snapshot::CycleSnapshot;
 pub use stats::DigStats;
 
 use planner::autodig::{Autodig, AutodigConfig, AutodigMaps, Stage};
@@ -197,6 +200,10 @@ pub struct WorkCycle {
     failed_attempts: u32,
     /// The current action was abandoned and is tried again when the bucket has been emptied.
     retry_pending: bool,
+    /// The operator's pause: no new action starts.
+    paused: bool,
+    /// The operator's stop: after the current action the cycle returns home and finishes.
+    stop_requested: bool,
 }
 
 impl WorkCycle {
@@ -261,6 +268,8 @@ impl WorkCycle {
             external_plan: false,
             failed_attempts: 0,
             retry_pending: false,
+            paused: false,
+            stop_requested: false,
         })
     }
 
@@ -279,9 +288,33 @@ impl WorkCycle {
         }
     }
 
+    /// The operator's pause (`true`) or resume: while paused the current action runs to its end and
+    /// no new one starts (the cycle holds neutral in Idle, disarmed).
+    pub fn set_paused(&mut self, paused: bool) {
+        self.paused = paused;
+    }
+
+    /// Whether the operator paused the cycle.
+    pub fn paused(&self) -> bool {
+        self.paused
+    }
+
+    /// The operator's stop: the current action runs to its end, then the cycle returns home and
+    /// finishes instead of starting another.
+    pub fn request_stop(&mut self) {
+        self.stop_requested = true;
+    }
+
+    /// Whether the operator asked the cycle to stop.
+    pub fn stop_requested(&self) -> bool {
+        self.stop_requested
+    }
+
     /// True when the cycle waits for the next action from an external source.
     pub fn needs_action(&self) -> bool {
         self.external_plan
+            && !self.paused
+            && !self.stop_requested
             && self.started
             && self.phase == Phase::Idle
             && self.action_index >= self.config.actions.len()
@@ -535,6 +568,13 @@ impl WorkCycle {
     }
 
     fn begin_action(&mut self, now_s: f64, est: &Estimator) {
+        if self.stop_requested {
+            self.set_phase(Phase::Return, now_s);
+            return;
+        }
+        if self.paused {
+            return; // hold in Idle until resumed
+        }
         if self.action_index >= self.config.actions.len() {
             if self.external_plan && !self.finished_digs() {
                 return; // hold in Idle until push_action

@@ -166,6 +166,19 @@ impl Recorder {
         Self::new(Box::new(file), interface, true, DEFAULT_CAPACITY)
     }
 
+    /// Records to the end of `path` (created if missing) with ` R`/` T` markers: a resumed session
+    /// goes on in its trace.
+    ///
+    /// # Errors
+    /// [`RecorderError::Io`] if the file cannot be opened.
+    pub fn append(path: &Path, interface: &str) -> Result<Self, RecorderError> {
+        let file = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(path)?;
+        Self::new(Box::new(file), interface, true, DEFAULT_CAPACITY)
+    }
+
     /// Records to any writer. `markers` adds ` R`/` T` to each line; `capacity` bounds the queue.
     ///
     /// # Errors

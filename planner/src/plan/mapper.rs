@@ -82,6 +82,26 @@ impl TerrainMapper {
         self.scans
     }
 
+    /// Puts back a saved map with `scans` fused (a resumed session). The grid must have this map's
+    /// geometry (origin, resolution, size); the map is unchanged otherwise.
+    ///
+    /// # Errors
+    /// [`PlanError::Terrain`] with [`TerrainError::InvalidArgument`] for another geometry.
+    pub fn restore(&mut self, grid: TerrainGrid, scans: u64) -> Result<()> {
+        let same = grid.nx() == self.grid.nx()
+            && grid.ny() == self.grid.ny()
+            && grid.origin() == self.grid.origin()
+            && grid.resolution_m() == self.grid.resolution_m();
+        if !same {
+            return Err(PlanError::Terrain(TerrainError::InvalidArgument {
+                what: "the saved map's grid differs from this map's",
+            }));
+        }
+        self.grid = grid;
+        self.scans = scans;
+        Ok(())
+    }
+
     /// Fuses one scan (world-frame points `[x, y, z]`).
     ///
     /// # Errors
