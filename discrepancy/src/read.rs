@@ -511,7 +511,15 @@ mod tests {
                 );
             }
             if position(t) {
-                put(t, Message::PositionSetpoint(PositionSetpoint::default()));
+                put(
+                    t,
+                    Message::PositionSetpoint(PositionSetpoint {
+                        boom_rad: 0.1,
+                        stick_rad: -1.5,
+                        bucket_rad: -0.8,
+                        swing_rad: 0.0,
+                    }),
+                );
             }
             put(
                 t + 0.001,

@@ -378,9 +378,11 @@ impl GatewayStatus {
 }
 
 /// Joint position setpoints for the gateway's closed-loop position mode (Proprietary B PGN 0xFF60),
-/// rad, `[-pi, pi]`, 8e-4 rad resolution (13-bit fields so four angles, a freshness value and an
-/// authenticator fit 8 bytes; the freshness is the sender's, [`crate::secoc`]).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+/// rad: 13-bit fields so four angles, a freshness value and an authenticator fit 8 bytes (the
+/// freshness is the sender's, [`crate::secoc`]). Boom, stick and bucket at 4e-4 rad around each
+/// joint's working range (the DBC's offsets; a zero stick angle is outside it), swing at 8e-4 rad
+/// over `[-pi, pi]`. No `Default`: the all-zero pose is not encodable.
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PositionSetpoint {
     /// Boom angle setpoint.
     pub boom_rad: f64,
