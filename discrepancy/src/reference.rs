@@ -376,6 +376,21 @@ impl Reference {
 }
 
 #[cfg(test)]
+impl Reference {
+    /// A reference of four healthy digs with `signals`, for tests.
+    pub(crate) fn healthy_fixture(signals: Vec<SignalStructure>) -> Self {
+        Reference {
+            format: REFERENCE_FORMAT.into(),
+            source: vec!["healthy".into()],
+            model: "nominal".into(),
+            calibration: Vec::new(),
+            digs: 4,
+            signals,
+        }
+    }
+}
+
+#[cfg(test)]
 mod tests {
     use super::*;
 
@@ -401,14 +416,7 @@ mod tests {
         for (s, sig) in signals.iter_mut().zip(Signal::ALL) {
             s.signal = sig.name().to_string();
         }
-        Reference {
-            format: REFERENCE_FORMAT.into(),
-            source: vec!["healthy".into()],
-            model: "nominal".into(),
-            calibration: Vec::new(),
-            digs: 4,
-            signals,
-        }
+        Reference::healthy_fixture(signals)
     }
 
     /// Digs that agree give the floor tolerance; digs that scatter widely give a wider one, and

@@ -395,7 +395,7 @@ pub fn verdict_text(v: &Verdict) -> String {
 mod tests {
     use super::*;
     use crate::fit::NamedEffect;
-    use crate::reference::{Level, REFERENCE_FORMAT};
+    use crate::reference::Level;
 
     fn level(group: &str, rms: f64) -> Level {
         Level {
@@ -463,17 +463,12 @@ mod tests {
     }
 
     fn reference() -> Reference {
-        Reference {
-            format: REFERENCE_FORMAT.into(),
-            source: vec!["healthy".into()],
-            model: "nominal".into(),
-            calibration: Vec::new(),
-            digs: 4,
-            signals: Signal::ALL
+        Reference::healthy_fixture(
+            Signal::ALL
                 .iter()
                 .map(|s| structure_of(*s, 1.0, 0.05))
                 .collect(),
-        }
+        )
     }
 
     /// A boom velocity residual five times the reference, its own nominal spread making it look

@@ -205,14 +205,7 @@ impl DemoArgs {
 /// The demo plan: five digs across the bench (swing 0, +-10, +-20 degrees), a cleanup of the face's
 /// toe, and a track back of 1.3 m (the thesis's typical distance, 6.2), repeated.
 pub fn demo_plan() -> Vec<Action> {
-    let dig = |swing_deg: f64| Action::Dig {
-        swing_rad: swing_deg.to_radians(),
-        start: StartPose::Tip {
-            x_m: 7.5,
-            z_m: 2.4,
-            bucket_abs_rad: (-55.0_f64).to_radians(),
-        },
-    };
+    let dig = Action::bench_dig;
     vec![
         dig(0.0),
         dig(10.0),

@@ -56,7 +56,7 @@ pub struct RunArgs {
     pub config: Option<PathBuf>,
     /// The machine's authentication key: 32 hex digits in a file readable by its owner only (chmod
     /// 600), the same file the gateway holds (excavator-sim --key-file). Overrides the config's
-    /// [security] key_file. Without a key the control frames carry freshness only (docs/protocol.md).
+    /// `[security] key_file`. Without a key the control frames carry freshness only (docs/protocol.md).
     #[arg(long, value_name = "FILE")]
     pub key_file: Option<PathBuf>,
     /// Record a candump -L log of every frame sent and received (default with --out: DIR/trace.log).
@@ -393,8 +393,13 @@ pub async fn run_on<B: Bus>(
         .or_else(|| out_dir.as_deref().map(controller::operator::default_path));
     let mut operator = match &socket_path {
         Some(p) => {
-            let (port, task) = controller::operator::listen(p)
-                .with_context(|| format!("control socket {}", p.display()))?;
+            let (port, task) = controller::operator::listen(p).with_context(|| {
+                format!(
+                    "control socket {}: a Unix socket needs a local file system (not a network \
+                     share) and a path under 108 bytes; give --control-socket PATH",
+                    p.display()
+                )
+            })?;
             tracing::info!(socket = %p.display(), "operator control: excavator-ctl ctl --socket");
             Some((port, task))
         }

@@ -47,6 +47,7 @@ fn the_planned_session_over_vcan_matches_demo() {
     let key_dir = tempfile::tempdir().unwrap();
     let key_file = hil_tests::plan::write_key_file(key_dir.path());
     let key_file = key_file.to_str().unwrap();
+    let control_socket = key_dir.path().join("control.sock");
     let mut sim = Proc::spawn(
         "excavator-sim",
         &env::binary("excavator-sim"),
@@ -104,6 +105,9 @@ fn the_planned_session_over_vcan_matches_demo() {
             out.to_str().unwrap(),
             "--key-file",
             key_file,
+            // The session folder is on the VM's 9p share, which holds no Unix sockets.
+            "--control-socket",
+            control_socket.to_str().unwrap(),
         ]
         .into_iter()
         .chain(extra)

@@ -107,6 +107,20 @@ pub enum ActionKind {
 }
 
 impl Action {
+    /// A dig of the default bench at `swing_deg`: tip 7.5 m out (stick at about -45 degrees
+    /// absolute), 0.4 m above the bench top, bucket opened to -55 degrees so Pre-Dig's curl bites the
+    /// edge in; Boom-Down lowers it onto the bench.
+    pub fn bench_dig(swing_deg: f64) -> Self {
+        Action::Dig {
+            swing_rad: swing_deg.to_radians(),
+            start: StartPose::Tip {
+                x_m: 7.5,
+                z_m: 2.4,
+                bucket_abs_rad: (-55.0_f64).to_radians(),
+            },
+        }
+    }
+
     /// The action's kind.
     pub fn kind(&self) -> ActionKind {
         match self {

@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::config::{Limits, ParamError, check, check_count, check_deg};
 
-use super::action::{Action, StartPose};
+use super::action::Action;
 use super::scan_grid::ScanGrid;
 
 /// Work cycle parameters.
@@ -85,19 +85,12 @@ pub struct CycleConfig {
 
 impl Default for CycleConfig {
     fn default() -> Self {
-        let dig = |swing_deg: f64| Action::Dig {
-            swing_rad: swing_deg.to_radians(),
-            // The default bench's start: tip 7.5 m out (stick at about -45 degrees absolute), 0.4 m
-            // above the bench top, bucket opened to -55 degrees so Pre-Dig's curl bites the edge in;
-            // Boom-Down lowers it onto the bench.
-            start: StartPose::Tip {
-                x_m: 7.5,
-                z_m: 2.4,
-                bucket_abs_rad: (-55.0_f64).to_radians(),
-            },
-        };
         Self {
-            actions: vec![dig(0.0), dig(7.0), dig(-7.0)],
+            actions: vec![
+                Action::bench_dig(0.0),
+                Action::bench_dig(7.0),
+                Action::bench_dig(-7.0),
+            ],
             repeat: true,
             max_digs: None,
             dump_swing_rad: (-90.0_f64).to_radians(),

@@ -10,8 +10,7 @@ use crate::estimate::Estimator;
 use crate::safety::ControlFault;
 
 use super::action::Action;
-use super::stats::{DigRecord, DigStats};
-use super::weigh::WeighAverage;
+use super::stats::DigRecord;
 use super::{CycleCommand, Phase, WorkCycle};
 
 impl WorkCycle {
@@ -45,28 +44,13 @@ impl WorkCycle {
         cfg.perception.end_dig_on_swept_volume = perception;
         cfg.perception.end_capture_above_terrain = perception;
         let kind = action.kind();
-        self.record = Some(DigRecord {
-            stats: DigStats {
-                index: self.digs_done,
-                action: kind,
-                swing_rad,
-                start_time_s: now_s,
-                time_s: 0.0,
-                ground_contact_time_s: 0.0,
-                energy_j: 0.0,
-                swept_volume_m3: 0.0,
-                weight_n: None,
-                end_reason: None,
-                hand_over: None,
-                floor_z_m: None,
-                perception,
-            },
-            last_lengths_m: None,
-            last_s: None,
-            weigh: WeighAverage::default(),
-            weigh_lifts: 0,
-            weigh_lift_to_rad: None,
-        });
+        self.record = Some(DigRecord::started(
+            self.digs_done,
+            kind,
+            swing_rad,
+            now_s,
+            perception,
+        ));
         match action {
             Action::Cleanup { plan, .. } => {
                 match Cleanup::new(self.cleanup_config, *plan, self.floor) {

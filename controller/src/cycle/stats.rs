@@ -58,3 +58,37 @@ pub(super) struct DigRecord {
     pub(super) weigh_lifts: u32,
     pub(super) weigh_lift_to_rad: Option<f64>,
 }
+
+impl DigRecord {
+    /// The record of an action begun at `start_time_s`: nothing measured yet.
+    pub(super) fn started(
+        index: u32,
+        action: ActionKind,
+        swing_rad: f64,
+        start_time_s: f64,
+        perception: bool,
+    ) -> Self {
+        Self {
+            stats: DigStats {
+                index,
+                action,
+                swing_rad,
+                start_time_s,
+                time_s: 0.0,
+                ground_contact_time_s: 0.0,
+                energy_j: 0.0,
+                swept_volume_m3: 0.0,
+                weight_n: None,
+                end_reason: None,
+                hand_over: None,
+                floor_z_m: None,
+                perception,
+            },
+            last_lengths_m: None,
+            last_s: None,
+            weigh: WeighAverage::default(),
+            weigh_lifts: 0,
+            weigh_lift_to_rad: None,
+        }
+    }
+}

@@ -222,8 +222,7 @@ impl WorkCycle {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cycle::stats::{DigRecord, DigStats};
-    use crate::cycle::weigh::WeighAverage;
+    use crate::cycle::stats::DigRecord;
     use crate::cycle::{Action, ActionKind, CycleCommand, CycleConfig, Phase, WorkCycle};
     use crate::safety::ArmMode;
 
@@ -260,28 +259,9 @@ mod tests {
         let mut c = cycle(CycleConfig::default());
         c.phase = Phase::Weigh;
         c.phase_since_s = 0.0;
-        c.record = Some(DigRecord {
-            stats: DigStats {
-                index: 0,
-                action: ActionKind::Dig,
-                swing_rad: 0.0,
-                start_time_s: 0.0,
-                time_s: 5.0,
-                ground_contact_time_s: 0.0,
-                energy_j: 0.0,
-                swept_volume_m3: 0.0,
-                weight_n: None,
-                end_reason: None,
-                hand_over: None,
-                floor_z_m: None,
-                perception: false,
-            },
-            last_lengths_m: None,
-            last_s: None,
-            weigh: WeighAverage::default(),
-            weigh_lifts: 0,
-            weigh_lift_to_rad: None,
-        });
+        let mut record = DigRecord::started(0, ActionKind::Dig, 0.0, 0.0, false);
+        record.stats.time_s = 5.0;
+        c.record = Some(record);
         c
     }
 
