@@ -77,6 +77,11 @@ pub enum Which {
     /// The results page: the scoreboard, Tables 1 and 2, Fig. 52, the extended run over several seeds
     /// and the dig model's speed, each with the command that made it (docs/results.md).
     Results(ResultsArgs),
+    /// A long shift of the planned session under injected faults (sensor dropouts, garbage and
+    /// flood frames, bus-off, gateway faults, e-stops, controller restarts) against a fault-free
+    /// shift: unsafe outputs, actions, every fault detected and recovered, memory; fails when a
+    /// target is missed.
+    Shift(crate::shift::ShiftArgs),
 }
 
 /// The output folder of a reproduction.
@@ -972,6 +977,7 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
         Which::ExtendedDigCheck => extended_dig_check_report(),
         Which::Scoreboard(a) => scoreboard_report(a),
         Which::Results(a) => results_report(a),
+        Which::Shift(a) => crate::shift::report(a),
     }
 }
 
