@@ -18,8 +18,9 @@
 //! material at the tracks' level (see [`table1_with`]). Each run is one dig action.
 //!
 //! Also: `extended` (6.1-6.2, Tables 3-5, Fig. 60), `hardness-fit` (Fig. 53), `extended-dig-check`,
-//! `scoreboard` (every statement of the thesis about Tables 1, 2 and Fig. 52, with its verdict) and
-//! `results` (the generated page docs/results.md, laid out by [`crate::results`]).
+//! `scoreboard` (every statement of the thesis about Tables 1, 2 and Fig. 52, with its verdict),
+//! `results` (the generated page docs/results.md, laid out by [`crate::results`]) and `shift` (a long
+//! planned session under injected faults, [`crate::shift`]).
 
 use std::path::PathBuf;
 

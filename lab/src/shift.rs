@@ -110,6 +110,10 @@ pub struct ShiftArgs {
     /// Faults injected per hour (at least one of each kind in any shift).
     #[arg(long, default_value_t = 12.0, value_name = "N")]
     pub faults_per_hour: f64,
+    /// The least share of the fault-free shift's actions the shift under faults must complete (0
+    /// checks only the unsafe outputs, detection and recovery).
+    #[arg(long, default_value_t = ACTIONS_TARGET, value_name = "F")]
+    pub actions_target: f64,
     /// Output folder (`shift.md`, `shift.json`, the faulted shift's `session_state.json`).
     #[arg(long, default_value = "out/shift", value_name = "DIR")]
     pub out: PathBuf,
@@ -365,6 +369,8 @@ pub struct ShiftReport {
     pub seed: u64,
     /// Faults per hour asked for.
     pub faults_per_hour: f64,
+    /// The least share of the fault-free shift's actions asked for.
+    pub actions_target: f64,
     /// The fault-free shift.
     pub reference: ShiftTotals,
     /// The shift under faults.
@@ -393,7 +399,7 @@ pub struct ShiftReport {
     pub cpu_time_s: Option<f64>,
 }
 
-/// The minimum share of the fault-free shift's actions.
+/// The default least share of the fault-free shift's actions.
 pub const ACTIONS_TARGET: f64 = 0.9;
 
 impl ShiftReport {
@@ -415,11 +421,11 @@ impl ShiftReport {
                 ));
             }
         }
-        if self.actions_ratio < ACTIONS_TARGET {
+        if self.actions_ratio < self.actions_target {
             missed.push(format!(
                 "{:.1} % of the fault-free shift's actions (target {:.0} %)",
                 100.0 * self.actions_ratio,
-                100.0 * ACTIONS_TARGET
+                100.0 * self.actions_target
             ));
         }
         missed
@@ -489,7 +495,7 @@ impl ShiftReport {
             m,
             "Actions under faults: **{:.1} %** of the fault-free shift's (target {:.0} %).\n",
             100.0 * self.actions_ratio,
-            100.0 * ACTIONS_TARGET
+            100.0 * self.actions_target
         );
         let _ = writeln!(
             m,
@@ -564,6 +570,11 @@ pub fn run_shift(args: &ShiftArgs) -> anyhow::Result<ShiftReport> {
         "--hours {}: more than 0, at most {MAX_HOURS}",
         args.hours
     );
+    anyhow::ensure!(
+        (0.0..=1.0).contains(&args.actions_target),
+        "--actions-target {}: from 0 to 1",
+        args.actions_target
+    );
     let shift_s = args.hours * 3600.0;
     let faults = schedule(args.seed, shift_s, args.faults_per_hour)?;
     std::fs::create_dir_all(&args.out)
@@ -588,6 +599,7 @@ pub fn run_shift(args: &ShiftArgs) -> anyhow::Result<ShiftReport> {
         hours: args.hours,
         seed: args.seed,
         faults_per_hour: args.faults_per_hour,
+        actions_target: args.actions_target,
         actions_ratio: if reference.totals.actions == 0 {
             0.0
         } else {

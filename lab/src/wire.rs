@@ -59,7 +59,7 @@ pub struct RunArgs {
     pub config: Option<PathBuf>,
     /// The machine's authentication key: 32 hex digits in a file readable by its owner only (chmod
     /// 600), the same file the gateway holds (excavator-sim --key-file). Overrides the config's
-    /// [security] key_file. Without a key the control frames carry freshness only (docs/protocol.md).
+    /// `[security] key_file`. Without a key the control frames carry freshness only (docs/protocol.md).
     #[arg(long, value_name = "FILE")]
     pub key_file: Option<PathBuf>,
     /// Record a candump -L log of every frame sent and received (default with --out: DIR/trace.log).
