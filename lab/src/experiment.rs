@@ -18,8 +18,9 @@
 //! material at the tracks' level (see [`table1_with`]). Each run is one dig action.
 //!
 //! Also: `extended` (6.1-6.2, Tables 3-5, Fig. 60), `hardness-fit` (Fig. 53), `extended-dig-check`,
-//! `scoreboard` (every statement of the thesis about Tables 1, 2 and Fig. 52, with its verdict) and
-//! `results` (the generated page docs/results.md, laid out by [`crate::results`]).
+//! `scoreboard` (every statement of the thesis about Tables 1, 2 and Fig. 52, with its verdict),
+//! `results` (the generated page docs/results.md, laid out by [`crate::results`]) and `shift` (a long
+//! planned session under injected faults, [`crate::shift`]).
 
 use std::path::PathBuf;
 
@@ -77,6 +78,11 @@ pub enum Which {
     /// The results page: the scoreboard, Tables 1 and 2, Fig. 52, the extended run over several seeds
     /// and the dig model's speed, each with the command that made it (docs/results.md).
     Results(ResultsArgs),
+    /// A long shift of the planned session under injected faults (sensor dropouts, garbage and
+    /// flood frames, bus-off, gateway faults, e-stops, controller restarts) against a fault-free
+    /// shift: unsafe outputs, actions, every fault detected and recovered, memory; fails when a
+    /// target is missed.
+    Shift(crate::shift::ShiftArgs),
 }
 
 /// The output folder of a reproduction.
@@ -972,6 +978,7 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
         Which::ExtendedDigCheck => extended_dig_check_report(),
         Which::Scoreboard(a) => scoreboard_report(a),
         Which::Results(a) => results_report(a),
+        Which::Shift(a) => crate::shift::report(a),
     }
 }
 

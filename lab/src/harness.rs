@@ -77,6 +77,7 @@ pub struct Harness {
     /// The simulated machine.
     pub machine: EmbeddedMachine,
     node: Option<ControllerNode>,
+    key: SessionKey,
     inbox: Vec<TimestampedFrame>,
     empty: Outbox,
     steps: u64,
@@ -128,6 +129,7 @@ impl Harness {
             ctl,
             machine,
             node: Some(node),
+            key,
             inbox: Vec::new(),
             empty: Outbox::new()?,
             steps: 0,
@@ -170,6 +172,15 @@ impl Harness {
         self.node = None;
     }
 
+    /// Starts `node` in place of the controller (after [`Self::kill_controller`]: a restarted
+    /// controller process), with the harness's key. Frames queued for the dead one are dropped, as a
+    /// new process opens a new socket.
+    pub fn start_controller(&mut self, mut node: ControllerNode) {
+        node.set_key(&self.key);
+        self.drain_controller_inbox();
+        self.node = Some(node);
+    }
+
     /// The frames the controller received in the last period (after any edit by
     /// [`Self::step_with`]).
     pub fn inbox(&self) -> &[TimestampedFrame] {
@@ -193,7 +204,20 @@ impl Harness {
         &mut self,
         edit: impl FnOnce(&mut Vec<TimestampedFrame>),
     ) -> Result<Outbox, HarnessError> {
-        self.machine.advance(PERIOD_S);
+        self.step_watched(edit, |_| {})
+    }
+
+    /// As [`Self::step_with`], with `watch` called after every physics step of the machine (the
+    /// gateway's state and the valve commands it applied in that step).
+    ///
+    /// # Errors
+    /// As [`Self::step`].
+    pub fn step_watched(
+        &mut self,
+        edit: impl FnOnce(&mut Vec<TimestampedFrame>),
+        watch: impl FnMut(&vcan_sim::node::MachineNode),
+    ) -> Result<Outbox, HarnessError> {
+        self.machine.advance_watched(PERIOD_S, watch);
         self.inbox.clear();
         while let Some(f) = self.ctl.try_recv() {
             self.inbox.push(f);

@@ -15,6 +15,8 @@
 //! - [`results`]: the layout of the generated results page (docs/results.md).
 //! - [`resume`]: a resumable `run`: the records saved with the session driver's checkpoints, the
 //!   writer that saves them off the control loop, the trace a resumed session appends to.
+//! - [`shift`]: `experiment shift`, a long planned session under injected faults against a
+//!   fault-free one: unsafe outputs, actions, detection and recovery of every fault, memory.
 //! - [`session`]: the records of a session folder (per-dig records, tip paths, soil samples).
 //! - [`thesis`]: the thesis's figures and statements the reproductions are checked against.
 //! - [`wire`]: `excavator-ctl run`, the same session on a CAN bus in real time (planned, predefined
@@ -37,5 +39,6 @@ pub mod plots;
 pub mod results;
 pub mod resume;
 pub mod session;
+pub mod shift;
 pub mod thesis;
 pub mod wire;

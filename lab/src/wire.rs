@@ -31,7 +31,10 @@ use controller::session_state::{SessionIdentity, fingerprint};
 use controller::state_file::StateFileError;
 use firmware_bridge::trace::Recorder;
 use firmware_bridge::transport::{Bus, SocketCanBus, TimeScale};
+use planner::autodig::AutodigMaps;
 use planner::machine::MachineConfig;
+use planner::plan::PlannerConfig;
+use vcan_sim::SimConfig;
 
 use crate::demo::{self, DemoArgs, DemoStrategy, SessionEnd, SessionRecords};
 use crate::resume::{RunRecords, RunState, StateWriter};
@@ -232,22 +235,8 @@ pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, R
         config.security.key_file = Some(file.clone());
     }
     let key = config.security.load_key().context("the machine's key")?;
-    let identity = SessionIdentity {
-        machine: fingerprint(&machine),
-        bench: sim.scenario.name.clone(),
-        seed: sim.scenario.seed,
-        strategy: args.strategy.name().to_owned(),
-        config: {
-            // The dig count, listen-only and the key file may change between a session and its resumption.
-            let mut c = config.clone();
-            c.cycle.max_digs = None;
-            c.safety.listen_only = false;
-            // The key is the machine's, not the session's: it may be re-provisioned.
-            c.security.key_file = None;
-            let planner = demo::planner_config(&dargs, &sim)?;
-            fingerprint(&(c, planner, &maps))
-        },
-    };
+    let planner = demo::planner_config(&dargs, &sim)?;
+    let identity = session_identity(&machine, &sim, args.strategy, &config, &planner, &maps);
     let mut node =
         ControllerNode::new(&machine, maps, config).context("controller configuration")?;
     match &key {
@@ -270,6 +259,34 @@ pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, R
         identity,
     };
     Ok((node, driver, setup))
+}
+
+/// What a saved session of `strategy` on `machine` and `sim`'s bench with `config`, `planner` and
+/// `maps` belongs to ([`SessionIdentity`]): a state is resumed only by a run with the same.
+#[must_use]
+pub fn session_identity(
+    machine: &MachineConfig,
+    sim: &SimConfig,
+    strategy: DemoStrategy,
+    config: &ControllerConfig,
+    planner: &PlannerConfig,
+    maps: &AutodigMaps,
+) -> SessionIdentity {
+    SessionIdentity {
+        machine: fingerprint(machine),
+        bench: sim.scenario.name.clone(),
+        seed: sim.scenario.seed,
+        strategy: strategy.name().to_owned(),
+        config: {
+            // The dig count, listen-only and the key file may change between a session and its resumption.
+            let mut c = config.clone();
+            c.cycle.max_digs = None;
+            c.safety.listen_only = false;
+            // The key is the machine's, not the session's: it may be re-provisioned.
+            c.security.key_file = None;
+            fingerprint(&(c, planner, maps))
+        },
+    }
 }
 
 /// What a run's summary takes from its setup.

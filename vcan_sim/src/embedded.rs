@@ -49,8 +49,15 @@ impl EmbeddedMachine {
     /// Advances by `dt_s` of simulated time (rounded to 1 ms steps): each step delivers the frames
     /// due to the gateway, runs the gateway and the physics, and sends the frames due.
     pub fn advance(&mut self, dt_s: f64) {
+        self.advance_watched(dt_s, |_| {});
+    }
+
+    /// As [`Self::advance`], with `watch` called after every physics step (the gateway's state and
+    /// the valve commands it applied in that step: [`MachineNode::valve_commands`]).
+    pub fn advance_watched(&mut self, dt_s: f64, mut watch: impl FnMut(&MachineNode)) {
         for _ in 0..steps_in(dt_s) {
             self.step_once();
+            watch(&self.node);
         }
     }
 

@@ -109,6 +109,11 @@ impl MachineNode {
         &self.gateway
     }
 
+    /// The gateway firmware, mutably (fault injection in tests and the lab: a clock step, say).
+    pub fn gateway_mut(&mut self) -> &mut Gateway {
+        &mut self.gateway
+    }
+
     /// The valve commands the gateway applied in the last step.
     pub fn valve_commands(&self) -> [f64; 6] {
         self.valve_commands

@@ -354,6 +354,13 @@ impl Plant {
         self.pose
     }
 
+    /// Places the machine at `pose` in the world, tracks at rest (trucked to another bench); the
+    /// joints, the hydraulics, the bucket's content and the track odometry stay as they are.
+    pub fn place(&mut self, pose: MachinePose) {
+        self.pose = pose;
+        self.track_speed = [0.0; 2];
+    }
+
     /// Current joint angles of the implement.
     pub fn joint_angles(&self) -> JointAngles {
         self.link().q
