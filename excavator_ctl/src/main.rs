@@ -32,7 +32,8 @@ fn main() -> std::process::ExitCode {
             tracing_subscriber::EnvFilter::try_from_default_env()
                 .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
         )
-        .with_writer(std::io::stderr)
+        // Through the console: log lines do not break the progress line of `demo` and `run`.
+        .with_writer(|| lab::console::ConsoleWriter)
         // Colours only for a person at a terminal: a journal, a file or a pipe gets plain text.
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();

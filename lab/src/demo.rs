@@ -27,7 +27,6 @@
 //! One thread alternates the simulator (10 ms, ten 1 kHz physics steps) and the controller step, as in
 //! the closed-loop tests; the run is deterministic for a seed.
 
-use std::io::IsTerminal as _;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -99,6 +98,9 @@ impl DemoStrategy {
         }
     }
 }
+
+/// Control steps between updates of the progress line (0.5 s of session time).
+const PROGRESS_EVERY_STEPS: u64 = 50;
 
 /// Flush the trace every this many control steps (5 s of virtual time), so the recorder's queue never
 /// fills however fast virtual time runs.
@@ -854,7 +856,7 @@ pub fn run_session_observed(
         .with_context(|| format!("creating {}", trace_path.display()))?;
     let terrain_before = h.machine.plant().world.terrain.clone();
 
-    let progress = progress_bar(args);
+    let progress = crate::console::session_bar(Some(args.digs), args.quiet);
     let mut log = SessionRecords::new(scans_dir);
     let budget_s = SIM_BUDGET_PER_DIG_S * f64::from(args.digs.max(1));
     let mut result: anyhow::Result<()> = Ok(());
@@ -875,6 +877,7 @@ pub fn run_session_observed(
             recorder.record(h.clock.now_ns(), Direction::Transmit, f);
         }
         let time_s = h.time_s();
+        let steps = h.steps();
         let Some((node, machine)) = h.parts_mut() else {
             break;
         };
@@ -882,6 +885,9 @@ pub fn run_session_observed(
             .after_step(node, &mut SimScans::new(machine))?
             .to_vec();
         observer.after_step(time_s, node, driver.session(), &events);
+        if steps.is_multiple_of(PROGRESS_EVERY_STEPS) {
+            crate::console::update(progress.as_ref(), log.records.len(), node, driver.backups());
+        }
         for event in &events {
             if let SessionEvent::PhaseChanged { from, to } = event {
                 let st = node.state();
@@ -900,22 +906,17 @@ pub fn run_session_observed(
                 );
             }
             let finished = log.on_event(node, &driver, Some(machine), event)?;
-            if finished {
-                if driver.session().is_some()
-                    && args.bench_after.contains(&(log.records.len() as u32))
-                {
-                    let t = machine.plant().true_state();
-                    snapshots.push(BenchSnapshot {
-                        digs: log.records.len(),
-                        backups: driver.backups(),
-                        terrain: machine.plant().world.terrain.clone(),
-                        pose: t.pose,
-                    });
-                }
-                if let Some(p) = &progress {
-                    p.set_position(log.records.len() as u64);
-                    p.set_message(format!("{} backups", driver.backups()));
-                }
+            if finished
+                && driver.session().is_some()
+                && args.bench_after.contains(&(log.records.len() as u32))
+            {
+                let t = machine.plant().true_state();
+                snapshots.push(BenchSnapshot {
+                    digs: log.records.len(),
+                    backups: driver.backups(),
+                    terrain: machine.plant().world.terrain.clone(),
+                    pose: t.pose,
+                });
             }
         }
         if h.steps().is_multiple_of(FLUSH_EVERY_STEPS)
@@ -1276,20 +1277,6 @@ pub fn write_soil_samples(
     let path = out.join("soil_samples.json");
     std::fs::write(&path, serde_json::to_vec(samples)?)
         .with_context(|| format!("writing {}", path.display()))
-}
-
-fn progress_bar(args: &DemoArgs) -> Option<indicatif::ProgressBar> {
-    if args.quiet || !std::io::stdout().is_terminal() {
-        return None;
-    }
-    let bar = indicatif::ProgressBar::new(u64::from(args.digs));
-    if let Ok(style) = indicatif::ProgressStyle::with_template(
-        "{spinner} {elapsed_precise} [{bar:30}] {pos}/{len} digs",
-    ) {
-        bar.set_style(style);
-    }
-    bar.enable_steady_tick(std::time::Duration::from_millis(200));
-    Some(bar)
 }
 
 /// Writes `summary.json`, `summary.md`, `plan.json`, the plots of the digs and, given the terrain

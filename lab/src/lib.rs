@@ -3,6 +3,7 @@
 //! # Layout
 //!
 //! - [`autodig_maps_svg`]: the Autodig map figures of docs/autodig.md (Figs. 10-11).
+//! - [`console`]: the progress line of `demo` and `run` on stderr, which log lines do not break.
 //! - [`demo`]: `excavator-ctl demo`, a whole autonomous session against the embedded simulator in
 //!   virtual time, and the session folder it writes (trace, scans, summary, plots).
 //! - [`harness`]: the virtual-time harness: the simulated machine and the controller node on one
@@ -31,6 +32,7 @@
 //! ```
 
 pub mod autodig_maps_svg;
+pub mod console;
 pub mod demo;
 pub mod experiment;
 pub mod harness;

@@ -40,6 +40,10 @@ pub struct RunRecords {
     pub session_time_s: f64,
     /// Wall time up to the checkpoint, s.
     pub wall_time_s: f64,
+    /// The session's dig count (`run --digs`; none: until the planner ends the session), which
+    /// `--resume` keeps unless `--digs` is given again.
+    #[serde(default)]
+    pub max_digs: Option<u32>,
 }
 
 impl Validate for RunRecords {
@@ -53,6 +57,12 @@ impl Validate for RunRecords {
             }
         }
         finite("session_time_s", self.session_time_s)?;
+        if self.max_digs == Some(0) {
+            return Err(FieldError::new(
+                "max_digs",
+                "0: a session digs at least once",
+            ));
+        }
         finite("wall_time_s", self.wall_time_s)
     }
 }

@@ -361,6 +361,12 @@ pub async fn run_on<B: Bus>(
             let path = crate::resume::state_path(dir);
             let state: RunState = controller::session_state::load(&path, &setup.identity)
                 .context("--resume: the saved session")?;
+            // The session's dig count, unless --digs gives another.
+            if args.digs.is_none() && state.records.max_digs.is_some() {
+                let mut with_digs = args.clone();
+                with_digs.digs = state.records.max_digs;
+                (node, driver, _) = build(&with_digs)?;
+            }
             driver
                 .restore(&state.driver, &mut node)
                 .map_err(|e| StateFileError::field(&path, e))
@@ -423,8 +429,12 @@ pub async fn run_on<B: Bus>(
         None => None,
     };
     let mut steps = 0_u64;
+    let progress = crate::console::session_bar(args.digs, false);
     let mut observer = |node: &ControllerNode, driver: &SessionDriver, events: &[SessionEvent]| {
         steps += 1;
+        if steps.is_multiple_of(PROGRESS_EVERY_STEPS) {
+            crate::console::update(progress.as_ref(), log.records.len(), node, driver.backups());
+        }
         for e in events {
             if scans_dir.is_none() && matches!(e, SessionEvent::Scanned(_)) {
                 continue;
@@ -447,6 +457,7 @@ pub async fn run_on<B: Bus>(
                 scans: log.scans,
                 session_time_s: base.session_time_s + session_s(steps),
                 wall_time_s: base.wall_time_s + wall.elapsed().as_secs_f64(),
+                max_digs: node.cycle().config().max_digs,
             };
             w.save(crate::resume::run_state(
                 &setup.identity,
@@ -473,6 +484,9 @@ pub async fn run_on<B: Bus>(
     if let (Some((_, task)), Some(p)) = (operator, &socket_path) {
         task.abort();
         let _ = std::fs::remove_file(p);
+    }
+    if let Some(p) = &progress {
+        p.finish_and_clear();
     }
     let saved = state_writer.map(StateWriter::finish);
     let trace = match trace {
@@ -534,6 +548,9 @@ pub async fn run_on<B: Bus>(
         _ => Ok(()),
     }
 }
+
+/// Control steps between updates of the progress line (0.5 s of session time).
+const PROGRESS_EVERY_STEPS: u64 = 50;
 
 /// Session time of `steps` control steps, s.
 fn session_s(steps: u64) -> f64 {

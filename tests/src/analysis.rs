@@ -94,6 +94,20 @@ pub fn joint_angles(recs: &[Rec]) -> Vec<(f64, [f64; 4])> {
         .collect()
 }
 
+/// The largest motion of any joint over `angles`, rad.
+pub fn largest_motion_rad(angles: &[(f64, [f64; 4])]) -> f64 {
+    (0..4)
+        .map(|j| {
+            let (lo, hi) = angles
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), (_, q)| {
+                    (lo.min(q[j]), hi.max(q[j]))
+                });
+            hi - lo
+        })
+        .fold(0.0, f64::max)
+}
+
 /// The activity sequence with consecutive repeats collapsed.
 pub fn activity_sequence(statuses: &[(f64, ControllerStatus)]) -> Vec<Activity> {
     let mut seq: Vec<Activity> = Vec::new();

@@ -5,6 +5,8 @@
 //! - [`env`](mod@env): the vcan interface, the built binaries, can-utils: found or a loud failure naming the fix.
 //! - [`process`]: child processes that die with the test, signals, logs.
 //! - [`plan`]: the HIL work-cycle plan (three digs and a cleanup) as a controller config file.
+//! - [`planned`]: the planned session: the bench where a short session digs, cleans up and tracks
+//!   back, the simulator serving it, `run --strategy planned` and `demo` on it.
 //! - [`analysis`]: what a recorded session shows, computed the same way for a `candump -L` log and an
 //!   in-process recording: the `ControllerStatus` activity sequence and the dig cycles in it, gateway
 //!   status frames, joint angles, heartbeats.
@@ -19,4 +21,5 @@ pub mod analysis;
 pub mod env;
 pub mod inprocess;
 pub mod plan;
+pub mod planned;
 pub mod process;

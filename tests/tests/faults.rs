@@ -19,7 +19,8 @@ use firmware_bridge::messages::{
 };
 use firmware_bridge::{CONTROLLER_ADDRESS, GATEWAY_ADDRESS, dbc};
 use hil_tests::analysis::{
-    controller_statuses, gateway_statuses, heartbeats, joint_angles, messages_from, read_candump,
+    controller_statuses, gateway_statuses, heartbeats, joint_angles, largest_motion_rad,
+    messages_from, read_candump,
 };
 use hil_tests::env;
 use hil_tests::process::Proc;
@@ -64,20 +65,6 @@ fn assert_rejected_at_least(before: &GatewayStatus, after: &GatewayStatus, n: u3
         before.rejected_frames,
         after.rejected_frames
     );
-}
-
-/// The largest motion of any joint over `angles`, rad.
-fn largest_motion_rad(angles: &[(f64, [f64; 4])]) -> f64 {
-    (0..4)
-        .map(|j| {
-            let (lo, hi) = angles
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), (_, q)| {
-                    (lo.min(q[j]), hi.max(q[j]))
-                });
-            hi - lo
-        })
-        .fold(0.0, f64::max)
 }
 
 /// Waits until Autodig is in the soil (Pre-Dig or Dig).

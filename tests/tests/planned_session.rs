@@ -1,171 +1,104 @@
-//! The planned session over a real vcan interface: `excavator-sim --iface vcan0` on the extended
-//! bench and `excavator-ctl run --strategy planned`, both at the same `--time-scale`, as separate
-//! processes; the session folder's `summary.json` is compared with `demo` on the same bench and seed.
+//! The planned session over a real vcan interface: `excavator-sim --iface vcan0` and `excavator-ctl
+//! run --strategy planned`, both at the same `--time-scale`, as separate processes, on the bench
+//! where a short session digs, cleans up and tracks back (`hil_tests::planned::bench_toml`); the
+//! session folder's `summary.json` is compared with `excavator-ctl demo` on the same bench and seed.
 //!
 //! Needs a vcan interface (`EXCAVATOR_VCAN_IFACE`, default `vcan0`), so it is `#[ignore]`d in a plain
 //! `cargo test` and run by `scripts/test-all` through `scripts/vcan-vm run`.
 //!
 //! Tolerances (the two sessions differ in timing: the bus, the planner's wall time while the
-//! machine holds, the sensor noise drawn at other instants, so the same planner may choose other
-//! digs): the same action count (the dig count ends both); at least one dig in the run; cleanups
-//! and track backs within one of demo's; mean bucket weight within 30 % of demo's.
-//!
-//! Real time and three digs: in a TCG VM the 10 ms loop does not keep up at a faster time scale
-//! (the gateway's watchdog then faults the session), and three digs keep the test within minutes.
-//! A track back (seed 1: after about 20 digs) is covered in-process, not here.
+//! machine holds, the sensor noise drawn at other instants, so the same planner may choose another
+//! action where two are close): the same dig and cleanup count (the dig count ends both); digs,
+//! cleanups and track backs each within one of demo's; the mean weight of the digs within 20 % of
+//! demo's; the session's mean weight (digs and cleanups) within what one action of the other kind
+//! changes (demo's dig mean minus its cleanup mean, over the action count) plus 10 %.
 
 #![allow(clippy::unwrap_used)]
 
-use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use hil_tests::env;
-use hil_tests::process::Proc;
-use lab::demo::{DemoArgs, DemoSummary};
+use hil_tests::planned::{PlannedSim, path_str, read_summary};
 
-/// Session seconds per wall second on both ends.
-const TIME_SCALE: &str = "1";
-/// Dig and cleanup actions of the session.
-const DIGS: u32 = 3;
-const SEED: &str = "1";
-/// Far above the session's ~3 x 26 s in real time, for a TCG VM.
-const SESSION_TIMEOUT: Duration = Duration::from_secs(600);
-
-fn free_port() -> u16 {
-    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-    l.local_addr().unwrap().port()
-}
+/// Dig and cleanup actions of the session: on the planned bench dig, cleanup, cleanup, track back,
+/// dig, dig (`hil_tests::planned::bench_toml`): six actions.
+const DIGS: u32 = 5;
+/// Far above the session's ~145 s in real time, for a TCG VM.
+const SESSION_TIMEOUT: Duration = Duration::from_secs(900);
+/// Largest relative difference of the mean dig weight.
+const DIG_WEIGHT_TOLERANCE: f64 = 0.2;
 
 #[test]
 #[ignore = "needs a vcan interface: run through scripts/test-all"]
-fn the_planned_session_over_vcan_matches_demo() {
+fn the_planned_session_over_vcan_digs_cleans_up_tracks_back_and_matches_demo() {
     let iface = env::vcan_iface();
     let dir = env::artifacts("planned_session");
-    let bench = concat!(env!("CARGO_MANIFEST_DIR"), "/../config/bench_extended.toml");
-    let scan_addr = format!("127.0.0.1:{}", free_port());
-    // Both ends hold the same machine key: the control path is authenticated.
-    let key_dir = tempfile::tempdir().unwrap();
-    let key_file = hil_tests::plan::write_key_file(key_dir.path());
-    let key_file = key_file.to_str().unwrap();
-    let control_socket = key_dir.path().join("control.sock");
-    let mut sim = Proc::spawn(
-        "excavator-sim",
-        &env::binary("excavator-sim"),
-        &[
-            "--iface",
-            &iface,
-            "--bench",
-            bench,
-            "--seed",
-            SEED,
-            "--scan-socket",
-            &scan_addr,
-            "--time-scale",
-            TIME_SCALE,
-            "--key-file",
-            key_file,
-        ],
-        &dir.join("sim.log"),
-    );
-    assert!(
-        sim.wait_for_log("scan socket listening", Duration::from_secs(60)),
-        "excavator-sim did not start: {}",
-        sim.log_tail(30)
-    );
+    let mut sim = PlannedSim::start(&iface, &dir);
     let out = dir.join("run");
     let digs = DIGS.to_string();
-    // Inside the TCG VM the loop falls behind (hil_tests::plan::VM_SAFETY_TOML): the VM's safety
-    // timing; natively the session's defaults.
-    let vm_config = dir.join("vm-safety.toml");
-    let mut extra: Vec<&str> = Vec::new();
-    if env::in_vm() {
-        std::fs::write(&vm_config, hil_tests::plan::VM_SAFETY_TOML).unwrap();
-        extra.extend(["--config", vm_config.to_str().unwrap()]);
-    }
-    let mut ctl = Proc::spawn(
-        "excavator-ctl",
-        &env::binary("excavator-ctl"),
-        &[
-            "run",
-            "--iface",
-            &iface,
-            "--strategy",
-            "planned",
-            "--bench",
-            bench,
-            "--seed",
-            SEED,
-            "--scan-addr",
-            &scan_addr,
-            "--time-scale",
-            TIME_SCALE,
-            "--digs",
-            &digs,
-            "--out",
-            out.to_str().unwrap(),
-            "--key-file",
-            key_file,
-            // The session folder is on the VM's 9p share, which holds no Unix sockets.
-            "--control-socket",
-            control_socket.to_str().unwrap(),
-        ]
-        .into_iter()
-        .chain(extra)
-        .collect::<Vec<_>>(),
-        &dir.join("ctl.log"),
-    );
+    let args = sim.run_args(&["--digs", &digs, "--out", path_str(&out)], &[]);
+    let mut ctl = sim.spawn_ctl(&args, "ctl.log");
     let status = ctl.wait_timeout(SESSION_TIMEOUT);
-    sim.kill();
+    sim.sim.kill();
     let status = status.unwrap_or_else(|| panic!("the session did not end: {}", ctl.log_tail(40)));
     assert!(
         status.success(),
         "excavator-ctl run failed: {}",
         ctl.log_tail(40)
     );
-    let run: DemoSummary =
-        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    let run = read_summary(&out);
+    let demo = sim.demo(DIGS);
 
-    let mut args = DemoArgs::planned(dir.join("demo"));
-    args.digs = DIGS;
-    args.seed = Some(SEED.parse().unwrap());
-    let demo = lab::demo::run_session(&args, &AtomicBool::new(false)).unwrap();
-
-    let t = &run.totals;
+    let (t, d) = (&run.totals, &demo.totals);
+    let actions = |s: &lab::demo::DemoSummary| s.totals.digs + s.backups;
     eprintln!(
-        "run: {} actions ({} digs, {} cleanups), {} backups, mean weight {:.0} N; demo: {} actions ({} digs, {} cleanups), {} backups, mean weight {:.0} N",
-        t.digs,
+        "run: {} actions ({} digs, {} cleanups, {} track backs), mean weight {:.0} N (digs {:.0} N), \
+         {:.0} s session time, {:.0} s wall, end {:?}",
+        actions(&run),
         t.dig_actions,
         t.cleanup_actions,
         run.backups,
         t.mean_weight_n,
-        demo.totals.digs,
-        demo.totals.dig_actions,
-        demo.totals.cleanup_actions,
+        run.stats.dig_mean_weight_n,
+        t.sim_time_s,
+        t.wall_time_s,
+        run.end
+    );
+    eprintln!(
+        "demo: {} actions ({} digs, {} cleanups, {} track backs), mean weight {:.0} N (digs {:.0} N)",
+        actions(&demo),
+        d.dig_actions,
+        d.cleanup_actions,
         demo.backups,
-        demo.totals.mean_weight_n
+        d.mean_weight_n,
+        demo.stats.dig_mean_weight_n
     );
     assert_eq!(run.strategy, "planned");
     assert!(t.finished, "{t:?}");
-    assert_eq!(t.digs, demo.totals.digs);
-    assert!(t.dig_actions >= 1, "{t:?}");
+    assert_eq!(t.digs, d.digs);
+    // What the issue asks of the run itself: six actions or more, a dig, a cleanup, a track back.
+    assert!(actions(&run) >= 6, "{} actions", actions(&run));
+    assert!(t.dig_actions >= 1 && t.cleanup_actions >= 1, "{t:?}");
+    assert!(run.backups >= 1, "no track back");
+    for (what, r, e) in [
+        ("digs", t.dig_actions, d.dig_actions),
+        ("cleanups", t.cleanup_actions, d.cleanup_actions),
+        ("track backs", run.backups, demo.backups),
+    ] {
+        assert!(r.abs_diff(e) <= 1, "{r} vs {e} {what}");
+    }
+    let (rw, dw) = (run.stats.dig_mean_weight_n, demo.stats.dig_mean_weight_n);
     assert!(
-        t.cleanup_actions.abs_diff(demo.totals.cleanup_actions) <= 1,
-        "{} vs {} cleanups",
-        t.cleanup_actions,
-        demo.totals.cleanup_actions
+        (rw - dw).abs() <= DIG_WEIGHT_TOLERANCE * dw,
+        "mean dig weight {rw:.0} vs {dw:.0} N"
     );
+    let one_action_n = (dw - demo.stats.cleanup_mean_weight_n).abs() / d.digs as f64;
+    let allowed = one_action_n + 0.1 * d.mean_weight_n;
     assert!(
-        run.backups.abs_diff(demo.backups) <= 1,
-        "{} vs {}",
-        run.backups,
-        demo.backups
-    );
-    let rel = (t.mean_weight_n - demo.totals.mean_weight_n).abs() / demo.totals.mean_weight_n;
-    assert!(
-        rel <= 0.3,
-        "mean weight {} vs {} N",
+        (t.mean_weight_n - d.mean_weight_n).abs() <= allowed,
+        "mean weight {:.0} vs {:.0} N (allowed {allowed:.0} N)",
         t.mean_weight_n,
-        demo.totals.mean_weight_n
+        d.mean_weight_n
     );
     assert!(run.planning.cycles >= t.digs, "{:?}", run.planning);
     for f in [

@@ -53,7 +53,8 @@ pub struct Session {
     _key_dir: tempfile::TempDir,
 }
 
-fn unix_now_s() -> f64 {
+/// Wall-clock time, UNIX s (the clock of candump's timestamps).
+pub fn unix_now_s() -> f64 {
     std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0.0, |d| d.as_secs_f64())
@@ -94,32 +95,41 @@ pub fn from_socketcan(frame: &CanFrame) -> Option<BridgeFrame> {
     BridgeFrame::new_data(id, frame.data()).ok()
 }
 
+/// Starts `candump -L iface` into `log` and waits until it records (a marker frame sent on `socket`
+/// shows in its log).
+///
+/// # Panics
+/// When candump exits or records nothing within [`START_TIMEOUT`].
+pub fn start_candump(iface: &str, socket: &CanSocket, log: &std::path::Path) -> Proc {
+    let candump_bin = env::tool("candump", "can-utils");
+    let mut candump = Proc::spawn("candump", &candump_bin, &["-L", iface], log);
+    let marker = CanFrame::new(StandardId::new(0x7FF).unwrap(), &[0xC0, 0xDE]).unwrap();
+    let deadline = Instant::now() + START_TIMEOUT;
+    loop {
+        socket.write_frame(&marker).unwrap();
+        std::thread::sleep(Duration::from_millis(100));
+        if candump.log().contains("7FF#C0DE") {
+            return candump;
+        }
+        candump.assert_running();
+        assert!(
+            Instant::now() < deadline,
+            "candump -L {iface} recorded nothing"
+        );
+    }
+}
+
 impl Session {
     /// Starts candump, the simulator and the controller (with `ctl_args` added to `run`).
     pub fn start(test: &str, ctl_args: &[&str]) -> Self {
         let iface = env::vcan_iface();
         let sim_bin = env::binary("excavator-sim");
-        let candump_bin = env::tool("candump", "can-utils");
         let dir = env::artifacts(test);
         let socket = open_socket(&iface);
 
-        // candump first, synchronised with a marker frame so nothing of the session is missed.
+        // candump first, so nothing of the session is missed.
         let candump_log = dir.join("candump.log");
-        let mut candump = Proc::spawn("candump", &candump_bin, &["-L", &iface], &candump_log);
-        let marker = CanFrame::new(StandardId::new(0x7FF).unwrap(), &[0xC0, 0xDE]).unwrap();
-        let deadline = Instant::now() + START_TIMEOUT;
-        loop {
-            socket.write_frame(&marker).unwrap();
-            std::thread::sleep(Duration::from_millis(100));
-            if candump.log().contains("7FF#C0DE") {
-                break;
-            }
-            candump.assert_running();
-            assert!(
-                Instant::now() < deadline,
-                "candump -L {iface} recorded nothing"
-            );
-        }
+        let candump = start_candump(&iface, &socket, &candump_log);
 
         let state_log = dir.join("state.jsonl");
         let scan_addr = format!("127.0.0.1:{}", free_port());
