@@ -94,11 +94,18 @@ impl SessionKey {
         Self::from_hex(text.trim()).map_err(|e| err(e.to_string()))
     }
 
-    /// A random key (the operating system's generator), for a session whose both ends are in one
-    /// process (`demo`, the lab): the control path is authenticated as on a provisioned machine.
+    /// A random key (the operating system's generator).
     pub fn generate() -> Self {
+        Self::generate_with(&mut rand::rng())
+    }
+
+    /// A key drawn from `rng`, never the public one. For a session whose both ends are in one
+    /// process (`demo`, the lab) a generator seeded from the session's seed keeps the trace
+    /// reproducible while the control path is authenticated as on a provisioned machine.
+    pub fn generate_with<R: rand::Rng + ?Sized>(rng: &mut R) -> Self {
+        use rand::RngExt as _;
         loop {
-            let key: [u8; 16] = rand::random();
+            let key: [u8; 16] = rng.random();
             if key != [0; 16] {
                 return Self(key);
             }
@@ -606,5 +613,10 @@ mod tests {
         let b = SessionKey::generate();
         assert!(!a.is_public());
         assert_ne!(a, b);
+        // From a seeded generator: the same seed, the same key; another seed, another key.
+        use rand::SeedableRng as _;
+        let seeded = |seed| SessionKey::generate_with(&mut rand_chacha::ChaCha8Rng::seed_from_u64(seed));
+        assert_eq!(seeded(7), seeded(7));
+        assert_ne!(seeded(7), seeded(8));
     }
 }

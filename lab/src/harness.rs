@@ -6,8 +6,8 @@
 //! gateway sees the frames sent since the last period and sends its sensor frames), then the node steps
 //! once at the bus's virtual time with the frames it received, and its frames go on the bus.
 //!
-//! The gateway and the node share a key ([`HarnessOptions::key`]; by default a random one per
-//! harness), so the control path is authenticated with the truncated CMAC as on a provisioned
+//! The gateway and the node share a key ([`HarnessOptions::key`]; by default one drawn from the
+//! simulator's seed, so a session of one seed gives the same trace byte for byte), so the control path is authenticated with the truncated CMAC as on a provisioned
 //! machine (docs/protocol.md). The gateway's session ids follow the simulator's seed.
 
 use firmware_bridge::CanFrame;
@@ -33,9 +33,19 @@ pub struct HarnessOptions {
     pub controller_queue: Option<usize>,
     /// Receive queue of the machine's bus node, frames (the bus's default when `None`).
     pub machine_queue: Option<usize>,
-    /// The key the gateway and the controller share; `None`: a random one for this harness
-    /// ([`SessionKey::generate`]).
+    /// The key the gateway and the controller share; `None`: one drawn from the simulator's seed
+    /// ([`session_key`]).
     pub key: Option<SessionKey>,
+}
+
+/// The key of an in-process session of `seed`: both ends are in this process, so the key only has
+/// to exercise the authenticated path, and drawing it from the seed (on its own stream) keeps the
+/// session reproducible.
+pub fn session_key(seed: u64) -> SessionKey {
+    use rand::SeedableRng as _;
+    /// Separates the key's stream from the other generators seeded from the same seed.
+    const KEY_STREAM: u64 = 0x6b65_795f_7374_7265;
+    SessionKey::generate_with(&mut rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ KEY_STREAM))
 }
 
 impl Default for HarnessOptions {
@@ -119,7 +129,10 @@ impl Harness {
             attach(options.machine_queue),
             Some(clock.clone()),
         );
-        let key = options.key.clone().unwrap_or_else(SessionKey::generate);
+        let key = options
+            .key
+            .clone()
+            .unwrap_or_else(|| session_key(sim.scenario.seed));
         machine.node_mut().set_security(&key, sim.scenario.seed);
         let mut node = ControllerNode::new(&sim.machine, maps, config)?;
         node.set_key(&key);

@@ -717,13 +717,14 @@ impl Setup {
         let plant = sim.build().context("simulator")?;
         let bench = plant.world.terrain.clone();
         let start = plant.pose();
+        let key = crate::harness::session_key(sim.scenario.seed);
         Ok(Self {
             dargs,
             sim,
             config,
             maps,
             identity,
-            key: SessionKey::generate(),
+            key,
             bench,
             start,
         })
