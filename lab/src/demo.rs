@@ -449,6 +449,20 @@ pub struct DemoSummary {
     pub totals: Totals,
 }
 
+impl DemoSummary {
+    /// The summary with its wall-clock figures zeroed: `totals.wall_time_s` and the planning cycles'
+    /// `planning.mean_ms` and `planning.max_ms` (how long this process took, not what the session
+    /// did). Everything else follows from the arguments and the seed: two sessions of one `demo`
+    /// command are equal after this (docs/demo-output.md, "Reproducibility").
+    #[must_use]
+    pub fn without_wall_clock(mut self) -> Self {
+        self.totals.wall_time_s = 0.0;
+        self.planning.mean_ms = 0.0;
+        self.planning.max_ms = 0.0;
+        self
+    }
+}
+
 /// Runs `excavator-ctl demo`: the session on a blocking thread, Ctrl-C stops it cleanly (neutral
 /// valves, a disarmed gateway, the trace flushed and closed, the outputs written).
 ///

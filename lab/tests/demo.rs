@@ -2,9 +2,10 @@
 
 #![allow(clippy::unwrap_used)]
 
+use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
-use lab::demo::{DemoArgs, run_session};
+use lab::demo::{DemoArgs, DemoSummary, run_session, summary_markdown};
 
 #[test]
 fn demo_writes_all_outputs_with_the_documented_fields_for_two_digs() {
@@ -137,6 +138,84 @@ fn assert_clean_protocol(trace: &std::path::Path) {
         }
     }
     assert!(statuses > 0, "the gateway's status is in the trace");
+}
+
+/// Two planned sessions of one seed write the same files byte for byte: the trace, the scans, the
+/// plans and plots; `summary.json` apart from its wall-clock figures, which
+/// `DemoSummary::without_wall_clock` names (and `summary.md` prints nothing else beyond it).
+#[test]
+fn demo_sessions_of_one_seed_are_byte_identical() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |name: &str| {
+        let out = dir.path().join(name);
+        let mut args = DemoArgs::planned(out.clone());
+        args.digs = 1;
+        args.seed = Some(5);
+        let summary = run_session(&args, &AtomicBool::new(false)).unwrap();
+        assert_eq!(summary.digs.len(), 1, "{:?}", summary.totals);
+        assert!(summary.totals.trace_frames > 0);
+        out
+    };
+    let (a, b) = (run("a"), run("b"));
+    let files = files_under(&a);
+    assert_eq!(files, files_under(&b), "the same files");
+    assert!(files.iter().any(|f| f.starts_with("scans")), "{files:?}");
+    for f in &files {
+        let (fa, fb) = (a.join(f), b.join(f));
+        match f.to_str() {
+            Some("summary.json") => {
+                let (sa, sb) = (summary_of(&fa), summary_of(&fb));
+                assert_eq!(sa.without_wall_clock(), sb.without_wall_clock());
+            }
+            Some("summary.md") => {
+                for (md, json) in [(&fa, a.join("summary.json")), (&fb, b.join("summary.json"))] {
+                    let text = std::fs::read_to_string(md).unwrap();
+                    assert_eq!(
+                        text,
+                        summary_markdown(&summary_of(&json)),
+                        "{}",
+                        md.display()
+                    );
+                }
+            }
+            _ => {
+                let (ba, bb) = (std::fs::read(&fa).unwrap(), std::fs::read(&fb).unwrap());
+                if ba != bb {
+                    let line = ba
+                        .split(|&c| c == b'\n')
+                        .zip(bb.split(|&c| c == b'\n'))
+                        .position(|(x, y)| x != y)
+                        .map_or(0, |i| i + 1);
+                    panic!(
+                        "{} differs between the sessions from line {line}",
+                        f.display()
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// The files under `root`, relative to it, sorted.
+fn files_under(root: &Path) -> Vec<PathBuf> {
+    let mut files = Vec::new();
+    let mut dirs = vec![root.to_path_buf()];
+    while let Some(d) = dirs.pop() {
+        for entry in std::fs::read_dir(&d).unwrap() {
+            let p = entry.unwrap().path();
+            if p.is_dir() {
+                dirs.push(p);
+            } else {
+                files.push(p.strip_prefix(root).unwrap().to_path_buf());
+            }
+        }
+    }
+    files.sort();
+    files
+}
+
+fn summary_of(path: &Path) -> DemoSummary {
+    serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
 }
 
 #[test]
