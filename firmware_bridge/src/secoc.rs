@@ -615,7 +615,8 @@ mod tests {
         assert_ne!(a, b);
         // From a seeded generator: the same seed, the same key; another seed, another key.
         use rand::SeedableRng as _;
-        let seeded = |seed| SessionKey::generate_with(&mut rand_chacha::ChaCha8Rng::seed_from_u64(seed));
+        let seeded =
+            |seed| SessionKey::generate_with(&mut rand_chacha::ChaCha8Rng::seed_from_u64(seed));
         assert_eq!(seeded(7), seeded(7));
         assert_ne!(seeded(7), seeded(8));
     }

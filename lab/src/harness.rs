@@ -45,7 +45,9 @@ pub fn session_key(seed: u64) -> SessionKey {
     use rand::SeedableRng as _;
     /// Separates the key's stream from the other generators seeded from the same seed.
     const KEY_STREAM: u64 = 0x6b65_795f_7374_7265;
-    SessionKey::generate_with(&mut rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ KEY_STREAM))
+    SessionKey::generate_with(&mut rand_chacha::ChaCha8Rng::seed_from_u64(
+        seed ^ KEY_STREAM,
+    ))
 }
 
 impl Default for HarnessOptions {
