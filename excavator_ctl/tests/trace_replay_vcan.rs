@@ -78,7 +78,11 @@ fn replay_onto_vcan_preserves_timing() {
         .filter(|r| [0x0CFF_5080, 0x0CFF_6127].contains(&r.frame.id().raw()))
         .collect();
     // About 1.5 s of heartbeats (100 Hz) and gateway statuses (20 Hz).
-    assert!(original.len() > 170, "{} frames of the two ids", original.len());
+    assert!(
+        original.len() > 170,
+        "{} frames of the two ids",
+        original.len()
+    );
 
     // candump -L on stdout and candump -l into its own file (cwd).
     let mut live = Command::new("candump")
