@@ -3,23 +3,14 @@
 
 #![allow(clippy::unwrap_used)]
 
+mod common;
+use common::node;
+
 use std::time::Duration;
 
-use controller::node::{ControllerConfig, ControllerNode};
 use controller::operator::{self, Command, Request, Response};
-use planner::autodig::AutodigMaps;
-use planner::machine::MachineConfig;
 use tokio::io::{AsyncBufReadExt as _, AsyncWriteExt as _, BufReader};
 use tokio::net::UnixStream;
-
-fn node() -> ControllerNode {
-    ControllerNode::new(
-        &MachineConfig::default_machine().unwrap(),
-        AutodigMaps::builtin().unwrap(),
-        ControllerConfig::default(),
-    )
-    .unwrap()
-}
 
 /// Sends raw `lines` on one connection and reads one reply per line.
 async fn exchange(path: &std::path::Path, lines: &[&[u8]]) -> Vec<Response> {

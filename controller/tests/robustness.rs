@@ -3,22 +3,14 @@
 
 #![allow(clippy::unwrap_used)]
 
-use controller::node::{ControllerConfig, ControllerNode, OUTBOX_CAPACITY};
+mod common;
+use common::node;
+
+use controller::node::OUTBOX_CAPACITY;
 use firmware_bridge::messages::{AuxValveCommand, Message, RequestedMode, Valve};
 use firmware_bridge::transport::{InProcessBus, TimestampedFrame};
 use firmware_bridge::{CONTROLLER_ADDRESS, CanFrame, CanId};
-use planner::autodig::AutodigMaps;
-use planner::machine::MachineConfig;
 use proptest::prelude::*;
-
-fn node() -> ControllerNode {
-    ControllerNode::new(
-        &MachineConfig::default_machine().unwrap(),
-        AutodigMaps::builtin().unwrap(),
-        ControllerConfig::default(),
-    )
-    .unwrap()
-}
 
 fn arb_frame() -> impl Strategy<Value = CanFrame> {
     prop_oneof![
