@@ -11,6 +11,8 @@
 
 mod common;
 
+use common::unix_now_s;
+
 use std::process::Command;
 use std::time::{Duration, Instant};
 
@@ -43,13 +45,6 @@ fn jitter_s() -> f64 {
     // simulation-time bound (the status count) is the exact check; this one only catches a gateway
     // that faults late on any clock.
     if env::in_vm() { 0.5 } else { 0.03 }
-}
-
-fn unix_now_s() -> f64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .unwrap()
-        .as_secs_f64()
 }
 
 /// True for an armed mode (valves may be driven).

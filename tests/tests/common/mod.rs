@@ -36,8 +36,6 @@ pub struct Session {
     pub state_log: PathBuf,
     /// The controller's own trace.
     pub ctl_trace: PathBuf,
-    /// Wall-clock time the simulator was started (UNIX s), a first guess of the clock offset.
-    pub sim_started_unix_s: f64,
     /// Raw socket of the test.
     pub socket: CanSocket,
     /// The machine key both ends hold (in `key_dir`).
@@ -135,7 +133,6 @@ impl Session {
         let scan_addr = format!("127.0.0.1:{}", free_port());
         let key_dir = tempfile::tempdir().unwrap();
         let key_file = hil_tests::plan::write_key_file(key_dir.path());
-        let sim_started_unix_s = unix_now_s();
         let mut sim = Proc::spawn(
             "excavator-sim",
             &sim_bin,
@@ -169,7 +166,6 @@ impl Session {
             candump_log,
             state_log,
             ctl_trace,
-            sim_started_unix_s,
             socket,
             key_file,
             ctl_args: ctl_args.iter().map(|a| (*a).to_owned()).collect(),
