@@ -454,15 +454,66 @@ pub fn decoded_joint_angles(text: &str) -> Result<Vec<(f64, [f64; 4])>, String> 
     Ok(out)
 }
 
-/// Puts decoded `JointAngles` on the simulator's clock by their sequence: the simulator samples the
-/// resolvers every 10 ms of simulation time and sends one frame per sample, so the k-th frame is
-/// sample k whatever the wall-clock delays were. [`compare_angles`] then only has to find the
-/// constant offset per segment (a frame lost by candump shifts the rest by one period).
-pub fn on_simulation_clock(decoded: &[(f64, [f64; 4])]) -> Vec<(f64, [f64; 4])> {
+/// The simulator's sensor period, s: one resolver sample and one `JointAngles` frame per period.
+pub const SENSOR_PERIOD_S: f64 = 0.01;
+
+/// Puts decoded `JointAngles` on the simulator's clock by their order: the simulator samples the
+/// resolvers every [`SENSOR_PERIOD_S`] of simulation time and sends one frame per sample, so the
+/// k-th frame captured is sample `k + d_k` with `d_k` the frames the capture lost before it
+/// (non-decreasing). The wall-clock stamps are not used: a loaded host sends catch-up bursts
+/// seconds late, and a capture writing to a slow file loses frames. `d_k` is chosen by dynamic
+/// programming to minimise the summed absolute angle error against the state log, so the only
+/// assumption is that frames keep their order; a decoder that is wrong stays wrong under every
+/// order-preserving assignment. Frames outside the state log keep `d_k` of their neighbours.
+pub fn on_simulation_clock(
+    decoded: &[(f64, [f64; 4])],
+    truth: &[StateSample],
+) -> Vec<(f64, [f64; 4])> {
+    let n = decoded.len();
+    let samples = truth
+        .last()
+        .map_or(0, |s| (s.time_s / SENSOR_PERIOD_S).floor() as usize + 1);
+    let max_lost = samples.saturating_sub(n);
+    let error = |k: usize, d: usize| -> f64 {
+        let t = (k + d) as f64 * SENSOR_PERIOD_S;
+        interpolate(truth, t).map_or(0.0, |(q, _, _)| {
+            (0..4).map(|j| (decoded[k].1[j] - q[j]).abs()).sum::<f64>()
+        })
+    };
+    // cost[d]: the least summed error of frames 0..=k with frame k at sample k + d; from[k][d]: the
+    // lost count of frame k-1 on that path.
+    let mut cost: Vec<f64> = (0..=max_lost).map(|d| error(0, d)).collect();
+    let mut from: Vec<Vec<u32>> = Vec::with_capacity(n);
+    from.push((0..=max_lost as u32).collect());
+    for k in 1..n {
+        let mut best = (f64::INFINITY, 0u32);
+        let mut next = Vec::with_capacity(max_lost + 1);
+        let mut back = Vec::with_capacity(max_lost + 1);
+        for (d, c) in cost.iter().enumerate() {
+            if *c < best.0 {
+                best = (*c, d as u32);
+            }
+            next.push(best.0 + error(k, d));
+            back.push(best.1);
+        }
+        cost = next;
+        from.push(back);
+    }
+    let mut lost = vec![0usize; n];
+    if n > 0 {
+        let mut d = (0..=max_lost)
+            .min_by(|a, b| cost[*a].total_cmp(&cost[*b]))
+            .unwrap_or(0);
+        for k in (0..n).rev() {
+            lost[k] = d;
+            d = from[k][d] as usize;
+        }
+    }
     decoded
         .iter()
+        .zip(lost)
         .enumerate()
-        .map(|(k, (_, q))| (0.01 * k as f64, *q))
+        .map(|(k, ((_, q), d))| ((k + d) as f64 * SENSOR_PERIOD_S, *q))
         .collect()
 }
 
@@ -510,6 +561,55 @@ mod tests {
         );
         // A dig abandoned before its dump is no cycle.
         assert_eq!(count_cycles(&[Dig, SwingToDump, Return]).digs, 0);
+    }
+
+    /// A state log written every 30 ms of a motion, and the frames of every 10 ms sample.
+    fn moving_session() -> (Vec<StateSample>, Vec<[f64; 4]>) {
+        let angles = |t: f64| [0.5 * t.sin(), -1.0 + 0.3 * t, (2.0 * t).cos(), 0.1 * t];
+        let rates = |t: f64| [0.5 * t.cos(), 0.3, -2.0 * (2.0 * t).sin(), 0.1];
+        let truth = (1..=1000)
+            .map(|i| {
+                let t = 0.03 * f64::from(i);
+                StateSample {
+                    time_s: t,
+                    angles_rad: angles(t),
+                    rates_rad_per_s: rates(t),
+                }
+            })
+            .collect();
+        let frames = (0..3000).map(|k| angles(0.01 * f64::from(k))).collect();
+        (truth, frames)
+    }
+
+    #[test]
+    fn frames_go_to_their_samples_whatever_the_capture_lost() {
+        let (truth, frames) = moving_session();
+        // Lose every seventh frame and a run of forty; wall-clock stamps in late bursts.
+        let kept: Vec<usize> = (0..frames.len())
+            .filter(|k| k % 7 != 3 && !(1200..1240).contains(k))
+            .collect();
+        let decoded: Vec<_> = kept
+            .iter()
+            .map(|&k| (1.7e9 + 0.05 * (k / 10) as f64, frames[k]))
+            .collect();
+        let placed = on_simulation_clock(&decoded, &truth);
+        for (p, &k) in placed.iter().zip(&kept).skip(5) {
+            assert!(
+                (p.0 - 0.01 * k as f64).abs() < 1e-9,
+                "frame of sample {k} at {}",
+                p.0
+            );
+        }
+        let cmp = compare_angles(&placed, &truth, 0.0, 5.0, SENSOR_PERIOD_S);
+        assert!(cmp.compared > 2500);
+        assert!(cmp.outside.is_empty(), "{:?}", cmp.outside.first());
+        // A decoder 1 % off in scale is caught under the best order-preserving placement.
+        let wrong: Vec<_> = decoded
+            .iter()
+            .map(|(t, q)| (*t, q.map(|a| a * 1.01)))
+            .collect();
+        let cmp = compare_angles(&on_simulation_clock(&wrong, &truth), &truth, 0.0, 5.0, 0.01);
+        assert!(cmp.outside.len() > 1000, "{}", cmp.outside.len());
     }
 
     #[test]

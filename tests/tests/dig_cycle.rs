@@ -14,9 +14,9 @@ use std::time::{Duration, Instant};
 
 use firmware_bridge::messages::Activity;
 use hil_tests::analysis::{
-    ANGLE_NOISE_RAD, ANGLE_RESOLUTION_RAD, activity_sequence, compare_angles, controller_statuses,
-    count_cycles, decoded_joint_angles, joint_angles, on_simulation_clock, read_candump,
-    read_state_log,
+    ANGLE_NOISE_RAD, ANGLE_RESOLUTION_RAD, SENSOR_PERIOD_S, activity_sequence, compare_angles,
+    controller_statuses, count_cycles, decoded_joint_angles, joint_angles, on_simulation_clock,
+    read_candump, read_state_log,
 };
 use hil_tests::env;
 use hil_tests::plan::{PLAN_CLEANUPS, PLAN_DIGS};
@@ -177,21 +177,25 @@ fn candump_trace_decodes_to_the_simulators_joint_angles() {
         }
     }
 
-    // Decoded angles vs the simulator's truth, on the simulator's clock: the k-th JointAngles frame
-    // carries the resolver sample of simulation time 10 k ms, whatever the host's scheduling did to
-    // the wall-clock stamps (a loaded VM sends catch-up bursts seconds late). The offset per 5 s
-    // segment only takes up a frame candump lost; the window covers the state log's interpolation.
+    // Decoded angles vs the simulator's truth, on the simulator's clock: each frame is put at its
+    // resolver sample by its order (`on_simulation_clock`), not by candump's wall-clock stamps, which
+    // a loaded host's late catch-up bursts put seconds off; the capture may lose frames. The window
+    // covers the state log's interpolation.
     let cmp = compare_angles(
-        &on_simulation_clock(&project),
+        &on_simulation_clock(&project, &truth),
         &truth,
         0.0,
         5.0,
         SAMPLE_WINDOW_S,
     );
     eprintln!(
-        "{} samples compared; offset per segment {:?} s; max error {:?} rad, p99 {:.2e} rad; \
+        "{} samples compared ({} captured of {} sent); offset per segment {:?} s; max error {:?} rad, p99 {:.2e} rad; \
          tolerance {:.2e} rad (+ rate x half the state-log gap) within +/- {} s",
         cmp.compared,
+        project.len(),
+        truth
+            .last()
+            .map_or(0, |l| (l.time_s / SENSOR_PERIOD_S) as usize),
         cmp.offsets_s,
         cmp.max_error_rad,
         cmp.p99_error_rad,

@@ -43,7 +43,7 @@ struct Cli {
     /// Hidden effect NAME=VALUE (repeatable; see --list-effects).
     #[arg(long = "effect", value_name = "NAME=VALUE")]
     effects: Vec<String>,
-    /// JSON-lines log of the true state every 10 ms.
+    /// JSON-lines log of the true state at every resolver sample (every 10 ms of simulated time).
     #[arg(long)]
     state_log: Option<PathBuf>,
     /// HOST:PORT of the range-scan socket (docs/scan-protocol.md), e.g. 127.0.0.1:7878.

@@ -135,9 +135,15 @@ impl MachineNode {
         self.plant.scan(request)
     }
 
+    /// Whether the next [`Self::step`] samples the sensors (every [`SENSOR_PERIOD_STEPS`]): the
+    /// plant's state before that step is what the sensor frames sent one period later measure.
+    pub fn samples_sensors_next(&self) -> bool {
+        self.steps.is_multiple_of(SENSOR_PERIOD_STEPS)
+    }
+
     /// One physics step: gateway tick, plant step, and the frames due now (appended to `out`).
     pub fn step(&mut self, out: &mut Vec<CanFrame>) {
-        if self.steps.is_multiple_of(SENSOR_PERIOD_STEPS) {
+        if self.samples_sensors_next() {
             self.readings = Some(self.plant.read_sensors());
         }
         let now = self.time_s();
@@ -300,6 +306,36 @@ mod tests {
         let mut out = Vec::new();
         node.run_steps(ODOMETRY_PERIOD_STEPS, &mut out);
         node.off_map()
+    }
+
+    #[test]
+    fn every_sensor_sample_is_sent_as_one_joint_angles_frame_a_period_later() {
+        let mut node = node_at(0.0);
+        let (mut samples, mut frames) = (0, 0);
+        let mut out = Vec::new();
+        for step in 0..10 * SENSOR_PERIOD_STEPS {
+            if node.samples_sensors_next() {
+                assert_eq!(step % SENSOR_PERIOD_STEPS, 0);
+                samples += 1;
+            }
+            out.clear();
+            node.step(&mut out);
+            frames += out
+                .iter()
+                .filter(|f| {
+                    matches!(
+                        Message::decode(f).map(|d| d.message),
+                        Ok(Message::JointAngles(_))
+                    )
+                })
+                .count();
+            assert_eq!(
+                frames,
+                samples - usize::from(!node.samples_sensors_next()),
+                "step {step}"
+            );
+        }
+        assert_eq!((samples, frames), (10, 10));
     }
 
     #[test]

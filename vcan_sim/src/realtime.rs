@@ -36,7 +36,8 @@ use crate::{Result, SimError};
 pub struct RealtimeOptions {
     /// CAN interface (`vcan0`, `can0`).
     pub iface: String,
-    /// JSON-lines log of the true state every 10 ms.
+    /// JSON-lines log of the true state at every resolver sample (every 10 ms of simulated time, in
+    /// catch-up steps too): the k-th `JointAngles` frame carries line k's sample.
     pub state_log: Option<PathBuf>,
     /// `HOST:PORT` for the scan socket (loopback TCP, JSON lines).
     pub scan_socket: Option<String>,
@@ -200,6 +201,11 @@ pub async fn run_on<B: Bus>(
                 steps_done += n;
                 out.clear();
                 for _ in 0..n {
+                    if let Some(log) = log.as_mut()
+                        && node.samples_sensors_next()
+                    {
+                        write_state(log, &node)?;
+                    }
                     node.step(&mut out);
                 }
                 for frame in out.drain(..) {
@@ -207,14 +213,6 @@ pub async fn run_on<B: Bus>(
                         Ok(()) => summary.frames_sent += 1,
                         Err(_) => summary.send_errors += 1,
                     }
-                }
-                if let Some(log) = log.as_mut()
-                    && let Ok(line) = serde_json::to_string(&node.plant().true_state())
-                {
-                    writeln!(log, "{line}").map_err(|source| SimError::Io {
-                        context: "writing the state log".into(),
-                        source,
-                    })?;
                 }
             }
         }
@@ -227,4 +225,16 @@ pub async fn run_on<B: Bus>(
     }
     summary.simulated_s = node.time_s();
     Ok(summary)
+}
+
+/// Writes the true state as one line of the state log.
+fn write_state(log: &mut impl Write, node: &MachineNode) -> Result<()> {
+    let line = serde_json::to_string(&node.plant().true_state()).map_err(|e| SimError::Io {
+        context: "encoding the state log".into(),
+        source: std::io::Error::other(e),
+    })?;
+    writeln!(log, "{line}").map_err(|source| SimError::Io {
+        context: "writing the state log".into(),
+        source,
+    })
 }
