@@ -24,17 +24,26 @@ fn push_bits(bits: &mut Vec<bool>, value: u32, count: u32) {
     }
 }
 
-/// CAN CRC-15 (polynomial 0x4599) over a bit sequence.
+/// The CAN CRC-15 (polynomial 0x4599, no initial value, no reflection, no final XOR), from the `crc`
+/// crate's catalogue.
+pub const CRC15_CAN: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_15_CAN);
+
+/// CAN CRC-15 ([`CRC15_CAN`]) over a bit sequence, first bit first.
+///
+/// A frame's bit count is rarely a multiple of eight. With a zero initial value leading zero bits
+/// leave the register at zero, so the sequence is padded with zeros in front to whole bytes and the
+/// bytes are fed most significant bit first.
 pub fn crc15(bits: &[bool]) -> u16 {
-    let mut crc: u16 = 0;
-    for &bit in bits {
-        let next = bit ^ ((crc >> 14) & 1 == 1);
-        crc = (crc << 1) & 0x7FFF;
-        if next {
-            crc ^= 0x4599;
+    let pad = (8 - bits.len() % 8) % 8;
+    let mut digest = CRC15_CAN.digest();
+    let mut byte = 0u8;
+    for (i, &bit) in core::iter::repeat_n(&false, pad).chain(bits).enumerate() {
+        byte = (byte << 1) | u8::from(bit);
+        if i % 8 == 7 {
+            digest.update(&[byte]);
         }
     }
-    crc
+    digest.finalize()
 }
 
 /// Counts the stuff bits a transmitter inserts into `bits`.
@@ -295,6 +304,19 @@ mod tests {
                 assert!((131..=160).contains(&n), "{id:#x} {fill:#x}: {n}");
             }
         }
+    }
+
+    #[test]
+    fn crc15_check_value() {
+        // The catalogue's check value: CRC-15/CAN over the ASCII bytes "123456789", MSB first.
+        let bits: Vec<bool> = b"123456789"
+            .iter()
+            .flat_map(|b| (0..8).rev().map(move |i| (b >> i) & 1 == 1))
+            .collect();
+        assert_eq!(crc15(&bits), 0x059E);
+        assert_eq!(CRC15_CAN.checksum(b"123456789"), 0x059E);
+        // One bit, not byte aligned: the register after shifting in a single 1 is the polynomial.
+        assert_eq!(crc15(&[true]), 0x4599);
     }
 
     #[test]

@@ -10,7 +10,7 @@ use firmware_bridge::dbc::MESSAGES;
 use firmware_bridge::{CanId, Message};
 
 fn load_dbc() -> Dbc {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/excavator.dbc");
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../gateway_core/excavator.dbc");
     let text = std::fs::read_to_string(path).expect("read excavator.dbc");
     Dbc::try_from(text.as_str()).expect("parse excavator.dbc")
 }

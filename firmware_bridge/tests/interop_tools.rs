@@ -13,7 +13,7 @@ use firmware_bridge::messages::*;
 use firmware_bridge::trace::{Direction, ReadMode, Recorder, TraceReader, TraceRecord};
 use firmware_bridge::{CanFrame, CanId, dbc};
 
-const DBC: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/excavator.dbc");
+const DBC: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../gateway_core/excavator.dbc");
 const T0_NS: u64 = 1_700_000_000_000_000_000;
 
 /// The samples plus values swept across every signal's range.

@@ -152,7 +152,7 @@ fn candump_trace_decodes_to_the_simulators_joint_angles() {
     // cantools with the DBC (once: importing it over 9p in the VM takes 15-20 s).
     let dbc = concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../firmware_bridge/excavator.dbc"
+        "/../gateway_core/excavator.dbc"
     );
     let text = decode_with(
         "python3",

@@ -5,7 +5,7 @@
 //! frames/s, about 14 minutes of digging) to a temporary file, decodes it with the `trace decode`
 //! logic into /dev/null, and prints frames/s and the peak RSS (`VmHWM` of /proc/self/status: the file
 //! is streamed, so it stays at a few MB). Then, if cantools is installed, times
-//! `python3 -m cantools decode firmware_bridge/excavator.dbc < sample > /dev/null` on the first
+//! `python3 -m cantools decode gateway_core/excavator.dbc < sample > /dev/null` on the first
 //! `CANTOOLS_SAMPLE` frames of the same file (cantools takes minutes for the whole file), scales its
 //! rate, and prints the throughput ratio (the target is over 20x).
 //!
@@ -123,7 +123,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         out.flush()?;
     }
-    let dbc = Path::new(env!("CARGO_MANIFEST_DIR")).join("../firmware_bridge/excavator.dbc");
+    let dbc = Path::new(env!("CARGO_MANIFEST_DIR")).join("../gateway_core/excavator.dbc");
     let start = Instant::now();
     let status = Command::new("python3")
         .args(["-m", "cantools", "decode"])

@@ -69,7 +69,7 @@ fn decoded_bodies(path: &Path) -> Vec<String> {
 }
 
 fn dbc_path() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../firmware_bridge/excavator.dbc")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../gateway_core/excavator.dbc")
 }
 
 #[test]

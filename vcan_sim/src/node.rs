@@ -18,6 +18,7 @@ use firmware_bridge::messages::{
     ValveState,
 };
 use firmware_bridge::secoc::SessionKey;
+use firmware_bridge::time::Instant;
 
 use crate::plant::{PHYSICS_DT_S, Plant};
 use crate::sensors::{Scan, ScanRequest, SensorReadings};
@@ -124,9 +125,19 @@ impl MachineNode {
         self.encode_errors
     }
 
+    /// The gateway's clock: the physics steps done, as an integer [`Instant`] (the simulation time
+    /// on the exact millisecond grid, as a microcontroller's timer counts; the plant's `f64` time
+    /// accumulates rounding over hours).
+    pub fn gateway_time(&self) -> Instant {
+        // Whole steps of 1 ms as f64 seconds convert exactly (`time::Instant::from_secs_f64`); a
+        // count beyond 292 years of steps saturates.
+        Instant::from_secs_f64(self.steps as f64 * PHYSICS_DT_S)
+            .unwrap_or(Instant::from_nanos(i64::MAX))
+    }
+
     /// Hands a received frame to the gateway.
     pub fn on_frame(&mut self, frame: &CanFrame) {
-        let now = self.time_s();
+        let now = self.gateway_time();
         self.gateway.on_frame(frame, now);
     }
 
@@ -146,7 +157,7 @@ impl MachineNode {
         if self.samples_sensors_next() {
             self.readings = Some(self.plant.read_sensors());
         }
-        let now = self.time_s();
+        let now = self.gateway_time();
         let measured = self.readings.map(|r| r.angles_rad);
         let outputs = self.gateway.tick(now, measured);
         self.valve_commands = outputs.valve_commands;
@@ -161,9 +172,11 @@ impl MachineNode {
             }
         }
         if self.steps.is_multiple_of(STATUS_PERIOD_STEPS) {
-            let status = self.gateway.next_status();
-            self.push(Message::GatewayStatus(status), out);
-            self.push(Message::GatewaySession(self.gateway.session()), out);
+            // Status and session nonce, built by the gateway core as on the machine.
+            match self.gateway.status_frames::<CanFrame>() {
+                Ok(frames) => out.extend(frames),
+                Err(_) => self.encode_errors += 1,
+            }
         }
         if self.steps.is_multiple_of(ODOMETRY_PERIOD_STEPS) {
             let pose = self.plant.pose();

@@ -2,9 +2,11 @@
 //!
 //! [`CanFrame`] is `Copy`, holds at most 64 data bytes inline and never allocates, so it can move through
 //! the control path, channels and queues freely. It is independent of any socket: the SocketCAN transport
-//! converts to and from the `socketcan` crate's frames at the edge.
+//! converts to and from the `socketcan` crate's frames at the edge; a microcontroller's driver through
+//! the [`embedded_can::Frame`] trait, which [`CanFrame`] implements ([`CanFrame::from_frame`] takes any
+//! driver's frame).
 
-use std::fmt;
+use core::fmt;
 
 /// Largest payload of a classic CAN frame.
 pub const CAN_MAX_LEN: usize = 8;
@@ -39,7 +41,7 @@ pub enum FrameError {
 }
 
 /// Result alias for this module.
-pub type Result<T> = std::result::Result<T, FrameError>;
+pub type Result<T> = core::result::Result<T, FrameError>;
 
 /// A CAN identifier.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -272,6 +274,79 @@ impl CanFrame {
     }
 }
 
+impl From<CanId> for embedded_can::Id {
+    fn from(id: CanId) -> Self {
+        match id {
+            // Both constructors accept every value a `CanId` holds (11 and 29 bits by construction).
+            CanId::Standard(raw) => embedded_can::StandardId::new(raw).map_or(
+                Self::Standard(embedded_can::StandardId::ZERO),
+                Self::Standard,
+            ),
+            CanId::Extended(raw) => embedded_can::ExtendedId::new(raw).map_or(
+                Self::Extended(embedded_can::ExtendedId::ZERO),
+                Self::Extended,
+            ),
+        }
+    }
+}
+
+impl From<embedded_can::Id> for CanId {
+    fn from(id: embedded_can::Id) -> Self {
+        match id {
+            embedded_can::Id::Standard(s) => Self::Standard(s.as_raw()),
+            embedded_can::Id::Extended(e) => Self::Extended(e.as_raw()),
+        }
+    }
+}
+
+impl CanFrame {
+    /// The frame of any [`embedded_can::Frame`] implementation (a microcontroller's CAN driver): a data
+    /// or remote frame with its id and length. `None` for a length above 8, which no classic driver
+    /// delivers.
+    pub fn from_frame<F: embedded_can::Frame>(frame: &F) -> Option<Self> {
+        let id = CanId::from(frame.id());
+        if frame.is_remote_frame() {
+            let dlc = u8::try_from(frame.dlc()).ok()?;
+            Self::new_remote(id, dlc).ok()
+        } else {
+            Self::new_data(id, frame.data()).ok()
+        }
+    }
+}
+
+/// Classic data and remote frames. An error frame reads as an extended data frame with its class bits
+/// as the id, and a CAN FD frame as a data frame of its length; `embedded-can` drivers report bus
+/// errors through their `Error` type instead (see [`crate::bus`]).
+impl embedded_can::Frame for CanFrame {
+    fn new(id: impl Into<embedded_can::Id>, data: &[u8]) -> Option<Self> {
+        Self::new_data(CanId::from(id.into()), data).ok()
+    }
+
+    fn new_remote(id: impl Into<embedded_can::Id>, dlc: usize) -> Option<Self> {
+        Self::new_remote(CanId::from(id.into()), u8::try_from(dlc).ok()?).ok()
+    }
+
+    fn is_extended(&self) -> bool {
+        CanFrame::is_extended(self)
+    }
+
+    fn is_remote_frame(&self) -> bool {
+        self.is_remote()
+    }
+
+    fn id(&self) -> embedded_can::Id {
+        CanFrame::id(self).into()
+    }
+
+    fn dlc(&self) -> usize {
+        CanFrame::dlc(self)
+    }
+
+    fn data(&self) -> &[u8] {
+        CanFrame::data(self)
+    }
+}
+
 impl fmt::Debug for CanFrame {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.debug_struct("CanFrame")
@@ -318,6 +393,21 @@ mod tests {
         assert_eq!(f.dlc(), 5);
         assert!(f.is_empty());
         assert_eq!(f.linux_can_id(), 0x4000_0123);
+    }
+
+    #[test]
+    fn embedded_can_frames_round_trip() {
+        use embedded_can::Frame as _;
+        let f = CanFrame::new_extended(0x0CFE_3027, &BOOM_COMMAND).unwrap();
+        let via: CanFrame =
+            embedded_can::Frame::new(embedded_can::Frame::id(&f), f.data()).unwrap();
+        assert_eq!(via, f);
+        assert_eq!(CanFrame::from_frame(&f), Some(f));
+        let std_id = embedded_can::StandardId::new(0x123).unwrap();
+        let r: CanFrame = embedded_can::Frame::new_remote(std_id, 5).unwrap();
+        assert!(r.is_remote_frame() && r.is_standard());
+        assert_eq!(CanFrame::from_frame(&r), Some(r));
+        assert!(<CanFrame as embedded_can::Frame>::new(std_id, &[0; 9]).is_none());
     }
 
     #[test]

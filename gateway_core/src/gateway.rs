@@ -1,10 +1,11 @@
 //! The gateway firmware logic: what the machine's CAN gateway does with the controller's frames.
 //!
-//! Pure logic, no physics, no clock of its own and no I/O: the caller feeds received frames with
-//! [`Gateway::on_frame`] and calls [`Gateway::tick`] at its control rate with the measured joint
-//! angles; the returned [`GatewayOutputs`] carry the per-valve commands in `[-1, 1]` for the valve
-//! drivers and the [`GatewayStatus`] to report. The same code runs in the simulator (`vcan_sim`) and on
-//! a real gateway computer bridging CAN to valve drivers.
+//! Pure logic, no physics, no clock of its own, no I/O and no allocation: the caller feeds received
+//! frames with [`Gateway::on_frame`] (or a bus with [`Gateway::poll`], `crate::bus`) and calls
+//! [`Gateway::tick`] at its control rate with the measured joint angles; the returned
+//! [`GatewayOutputs`] carry the per-valve commands in `[-1, 1]` for the valve drivers and the
+//! [`GatewayStatus`] to report. The same code runs in the simulator (`vcan_sim`) and on the machine's
+//! microcontroller bridging CAN to valve drivers (`docs/gateway-core.md`).
 //!
 //! # Modes and arming (the exact rule)
 //!
@@ -24,12 +25,15 @@
 //!
 //! # Time
 //!
-//! The caller's clock is checked, not trusted: the time of every [`Gateway::on_frame`] and
-//! [`Gateway::tick`] call must be finite and never earlier than the latest time seen before (equal is
-//! fine). Otherwise the gateway latches `CLOCK_FAULT` in any mode (valves neutral; the watchdog and the
-//! staleness checks depend on the clock), rejects the frame, and takes the new time as its reference
-//! (a non-finite one is never taken), so the controller's `Disarm` in the new time base acknowledges
-//! the fault. Stamp frames with the same monotonic clock as the ticks, when they are handed over.
+//! Time is an integer, [`Instant`] (nanoseconds): a microcontroller's timer, or `f64` seconds from a
+//! host clock converted to the nearest nanosecond ([`ClockReading`]). The caller's clock is checked,
+//! not trusted: the time of every [`Gateway::on_frame`] and [`Gateway::tick`] call must be readable
+//! (a finite `f64`) and never earlier than the latest time seen before (equal is fine). Otherwise the
+//! gateway latches `CLOCK_FAULT` in any mode (valves neutral; the watchdog and the staleness checks
+//! depend on the clock), rejects the frame, and takes the new time as its reference (an unreadable
+//! one is never taken), so the controller's `Disarm` in the new time base acknowledges the fault.
+//! Stamp frames with the same monotonic clock as the ticks, when they are handed over. The
+//! durations of [`GatewayConfig`] are converted to nanoseconds once, when the gateway is built.
 //!
 //! # Watchdog and checks (armed modes latch a fault; while Disarmed they only count)
 //!
@@ -74,6 +78,7 @@ use crate::messages::{
     heartbeat_checksum, is_next_alive,
 };
 use crate::secoc::{SessionKey, SessionNonces, Verifier};
+use crate::time::{ClockReading, Instant, NANOS_PER_S, secs_to_nanos};
 
 /// Number of valve outputs: boom, stick, bucket, swing, left track, right track.
 pub const VALVES: usize = 6;
@@ -119,7 +124,7 @@ impl Default for GatewayConfig {
                 (-1.6, 1.6),
                 (-3.0, 0.0),
                 (-3.0, 1.0),
-                (-std::f64::consts::PI, std::f64::consts::PI),
+                (-core::f64::consts::PI, core::f64::consts::PI),
             ],
         }
     }
@@ -142,7 +147,8 @@ impl GatewayConfig {
     ///
     /// # Errors
     /// [`GatewayConfigError`] naming the first bad field: timeouts and the tick period must be finite
-    /// and positive with the tick period below the heartbeat timeout, gains finite and non-negative,
+    /// durations of at least 1 ns (the gateway's clock counts nanoseconds) with the tick period below
+    /// the heartbeat timeout, gains finite and non-negative,
     /// `max_command` in `(0, 1]`, the rate limit finite and positive, the joint signs +1 or -1, and
     /// every setpoint range finite with `min < max`.
     pub fn validate(&self) -> Result<(), GatewayConfigError> {
@@ -154,25 +160,27 @@ impl GatewayConfig {
             })
         };
         let positive = |v: f64| v.is_finite() && v > 0.0;
-        if !positive(self.heartbeat_timeout_s) {
+        // A duration the gateway's integer clock can hold: at least a nanosecond, under 292 years.
+        let duration = |v: f64| secs_to_nanos(v).is_some_and(|ns| ns > 0);
+        if !duration(self.heartbeat_timeout_s) {
             return err(
                 "heartbeat_timeout_s",
                 self.heartbeat_timeout_s,
-                "must be finite and > 0",
+                "must be a finite duration of at least 1 ns",
             );
         }
-        if !positive(self.tick_period_s) || self.tick_period_s >= self.heartbeat_timeout_s {
+        if !duration(self.tick_period_s) || self.tick_period_s >= self.heartbeat_timeout_s {
             return err(
                 "tick_period_s",
                 self.tick_period_s,
-                "must be finite, > 0 and below heartbeat_timeout_s",
+                "must be a finite duration of at least 1 ns, below heartbeat_timeout_s",
             );
         }
-        if !positive(self.command_timeout_s) {
+        if !duration(self.command_timeout_s) {
             return err(
                 "command_timeout_s",
                 self.command_timeout_s,
-                "must be finite and > 0",
+                "must be a finite duration of at least 1 ns",
             );
         }
         for (field, gains) in [("kp", self.kp), ("ki", self.ki)] {
@@ -213,24 +221,47 @@ pub struct GatewayOutputs {
     pub status: GatewayStatus,
 }
 
+/// The durations of a validated [`GatewayConfig`] in nanoseconds: the periodic path compares
+/// integers only.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Timing {
+    heartbeat_timeout_ns: i64,
+    tick_period_ns: i64,
+    command_timeout_ns: i64,
+}
+
+impl Timing {
+    /// `config` has passed [`GatewayConfig::validate`], so every duration converts.
+    fn of(config: &GatewayConfig) -> Self {
+        let ns = |s: f64| secs_to_nanos(s).unwrap_or(i64::MAX);
+        Self {
+            heartbeat_timeout_ns: ns(config.heartbeat_timeout_s),
+            tick_period_ns: ns(config.tick_period_s),
+            command_timeout_ns: ns(config.command_timeout_s),
+        }
+    }
+}
+
 /// The gateway firmware state machine.
 #[derive(Debug, Clone)]
 pub struct Gateway {
     config: GatewayConfig,
     mode: GatewayMode,
     faults: GatewayFaults,
-    last_heartbeat_s: Option<f64>,
+    /// The durations of `config` in the clock's nanoseconds.
+    timing: Timing,
+    last_heartbeat: Option<Instant>,
     last_alive: Option<u8>,
-    armed_at_s: f64,
+    armed_at: Instant,
     valve_cmd: [f64; VALVES],
-    valve_cmd_at_s: [Option<f64>; VALVES],
+    valve_cmd_at: [Option<Instant>; VALVES],
     setpoint: Option<[f64; JOINTS]>,
-    setpoint_at_s: Option<f64>,
+    setpoint_at: Option<Instant>,
     integral: [f64; JOINTS],
     position_cmd: [f64; JOINTS],
-    last_tick_s: Option<f64>,
+    last_tick: Option<Instant>,
     /// The latest valid time seen (frames and ticks), the reference of the clock check.
-    clock_s: Option<f64>,
+    clock: Option<Instant>,
     /// Freshness and authentication of the controller's frames in the current session.
     verifier: Verifier,
     nonces: SessionNonces,
@@ -289,17 +320,18 @@ impl Gateway {
             config,
             mode: GatewayMode::Disarmed,
             faults: GatewayFaults(0),
-            last_heartbeat_s: None,
+            timing: Timing::of(&config),
+            last_heartbeat: None,
             last_alive: None,
-            armed_at_s: 0.0,
+            armed_at: Instant::ZERO,
             valve_cmd: [0.0; VALVES],
-            valve_cmd_at_s: [None; VALVES],
+            valve_cmd_at: [None; VALVES],
             setpoint: None,
-            setpoint_at_s: None,
+            setpoint_at: None,
             integral: [0.0; JOINTS],
             position_cmd: [0.0; JOINTS],
-            last_tick_s: None,
-            clock_s: None,
+            last_tick: None,
+            clock: None,
             verifier: Verifier::new(&SessionKey::PUBLIC, first),
             nonces,
             session_used: false,
@@ -370,35 +402,35 @@ impl Gateway {
 
     fn clear_commands(&mut self) {
         self.valve_cmd = [0.0; VALVES];
-        self.valve_cmd_at_s = [None; VALVES];
+        self.valve_cmd_at = [None; VALVES];
         self.setpoint = None;
-        self.setpoint_at_s = None;
+        self.setpoint_at = None;
         self.integral = [0.0; JOINTS];
         self.position_cmd = [0.0; JOINTS];
     }
 
     /// Checks a time input (see "Time" in the module docs). On a bad one: `CLOCK_FAULT`, and a finite
     /// time becomes the new reference.
-    fn clock_ok(&mut self, now_s: f64) -> bool {
-        let ok = now_s.is_finite() && self.clock_s.is_none_or(|t| now_s >= t);
-        if !ok {
+    fn clock_ok(&mut self, now: ClockReading) -> Option<Instant> {
+        let ok = now.0.filter(|t| self.clock.is_none_or(|c| *t >= c));
+        if ok.is_none() {
             self.fault(GatewayFaults::CLOCK_FAULT);
             // The tick-to-tick interval across the jump means nothing.
-            self.last_tick_s = None;
+            self.last_tick = None;
         }
-        if now_s.is_finite() {
-            self.clock_s = Some(now_s);
+        if now.0.is_some() {
+            self.clock = now.0;
         }
         ok
     }
 
-    /// Handles one received frame at time `now_s` (the caller's monotonic clock, as for
-    /// [`Self::tick`]). A non-finite time or one earlier than the latest seen latches `CLOCK_FAULT`
-    /// and the frame is rejected.
-    pub fn on_frame(&mut self, frame: &CanFrame, now_s: f64) -> FrameVerdict {
-        if !self.clock_ok(now_s) {
+    /// Handles one received frame at time `now` (the caller's monotonic clock, as for
+    /// [`Self::tick`]: an [`Instant`] or `f64` seconds). An unreadable time (a non-finite `f64`) or
+    /// one earlier than the latest seen latches `CLOCK_FAULT` and the frame is rejected.
+    pub fn on_frame(&mut self, frame: &CanFrame, now: impl Into<ClockReading>) -> FrameVerdict {
+        let Some(now) = self.clock_ok(now.into()) else {
             return self.reject();
-        }
+        };
         let decoded = match Message::decode(frame) {
             Ok(d) => d,
             Err(DecodeError::ErrorFrame(_)) => {
@@ -448,9 +480,9 @@ impl Gateway {
                     _ => {}
                 }
                 self.last_alive = Some(hb.alive_counter);
-                self.last_heartbeat_s = Some(now_s);
+                self.last_heartbeat = Some(now);
                 self.session_used = true;
-                self.on_request(hb.mode, now_s);
+                self.on_request(hb.mode, now);
                 FrameVerdict::Accepted
             }
             Message::AuxValveCommand(cmd) => {
@@ -474,7 +506,7 @@ impl Gateway {
                     };
                 }
                 self.valve_cmd[i] = u.clamp(-1.0, 1.0);
-                self.valve_cmd_at_s[i] = Some(now_s);
+                self.valve_cmd_at[i] = Some(now);
                 FrameVerdict::Accepted
             }
             Message::PositionSetpoint(sp) => {
@@ -491,7 +523,7 @@ impl Gateway {
                     return self.reject();
                 }
                 self.setpoint = Some(target);
-                self.setpoint_at_s = Some(now_s);
+                self.setpoint_at = Some(now);
                 FrameVerdict::Accepted
             }
             // Sent for traces; the gateway is allowed to see it and has no use for it.
@@ -501,7 +533,7 @@ impl Gateway {
         }
     }
 
-    fn on_request(&mut self, requested: RequestedMode, now_s: f64) {
+    fn on_request(&mut self, requested: RequestedMode, now: Instant) {
         let estop = self.faults.contains(GatewayFaults::E_STOP);
         match (requested, self.mode) {
             (RequestedMode::EStop, _) => self.fault(GatewayFaults::E_STOP),
@@ -525,56 +557,72 @@ impl Gateway {
             (RequestedMode::ArmValve, m) if m != GatewayMode::ArmedValve => {
                 self.clear_commands();
                 self.mode = GatewayMode::ArmedValve;
-                self.armed_at_s = now_s;
+                self.armed_at = now;
             }
             (RequestedMode::ArmPosition, m) if m != GatewayMode::ArmedPosition => {
                 self.clear_commands();
                 self.mode = GatewayMode::ArmedPosition;
-                self.armed_at_s = now_s;
+                self.armed_at = now;
             }
             _ => {}
         }
     }
 
-    /// Runs the watchdog and the position loop at `now_s` with the measured joint angles
-    /// `[boom, stick, bucket, swing]` (None when the resolvers are unavailable: valves neutral in
-    /// position mode), and returns the valve commands and the status.
+    /// Runs the watchdog and the position loop at `now` (an [`Instant`] or `f64` seconds) with the
+    /// measured joint angles `[boom, stick, bucket, swing]` (None when the resolvers are unavailable:
+    /// valves neutral in position mode), and returns the valve commands and the status.
     ///
-    /// A non-finite `now_s` or one earlier than the latest time seen latches `CLOCK_FAULT` (valves
+    /// An unreadable `now` or one earlier than the latest time seen latches `CLOCK_FAULT` (valves
     /// neutral from this tick on).
-    pub fn tick(&mut self, now_s: f64, measured: Option<[f64; JOINTS]>) -> GatewayOutputs {
-        let dt = if self.clock_ok(now_s) {
-            let dt = self
-                .last_tick_s
-                .map_or(0.0, |t| (now_s - t).clamp(0.0, 1.0));
-            self.last_tick_s = Some(now_s);
-            dt
-        } else {
-            0.0
+    pub fn tick(
+        &mut self,
+        now: impl Into<ClockReading>,
+        measured: Option<[f64; JOINTS]>,
+    ) -> GatewayOutputs {
+        let reading = now.into();
+        let ok = self.clock_ok(reading);
+        let dt_s = match ok {
+            Some(now) => {
+                let dt_ns = self
+                    .last_tick
+                    .map_or(0, |t| now.nanos_since(t).clamp(0, NANOS_PER_S));
+                self.last_tick = Some(now);
+                dt_ns as f64 / NANOS_PER_S as f64
+            }
+            None => 0.0,
         };
-        let hb_age = self.last_heartbeat_s.map_or(f64::INFINITY, |t| now_s - t);
-        if self.session_used && (hb_age >= self.config.heartbeat_timeout_s || hb_age.is_nan()) {
+        let timing = self.timing;
+        // The heartbeat's age; `None` when unknown (no heartbeat yet, or an unreadable clock).
+        let hb_age_ns = reading
+            .0
+            .zip(self.last_heartbeat)
+            .map(|(now, t)| now.nanos_since(t));
+        if self.session_used && hb_age_ns.is_none_or(|age| age >= timing.heartbeat_timeout_ns) {
             // The controller of this session is gone: nothing recorded in it will be accepted again,
             // and the next controller starts a new one.
             self.new_session();
         }
         if self.is_armed() {
             // This output holds until the next tick, up to one tick period later: go neutral now if
-            // the deadline could pass before then. Written so a NaN or infinite age counts as expired.
-            let alive = hb_age + self.config.tick_period_s + 1e-9 < self.config.heartbeat_timeout_s;
+            // the deadline could pass before then.
+            let alive = hb_age_ns.is_some_and(|age| {
+                age.saturating_add(timing.tick_period_ns) < timing.heartbeat_timeout_ns
+            });
             if !alive {
                 self.fault(GatewayFaults::WATCHDOG_TIMEOUT);
                 // A new heartbeat sequence may start at any counter after a timeout.
                 self.last_alive = None;
             }
         }
+        // Armed modes only remain with a good clock reading (a bad one latched `CLOCK_FAULT`).
+        let age_ns = |t: Instant| ok.map_or(i64::MAX, |now| now.nanos_since(t));
         let mut out = [0.0; VALVES];
         match self.mode {
             GatewayMode::ArmedValve => {
-                let timeout = self.config.command_timeout_s;
+                let timeout = timing.command_timeout_ns;
                 let stale = (0..VALVES).any(|i| {
                     self.valve_cmd[i] != 0.0
-                        && self.valve_cmd_at_s[i].is_none_or(|t| now_s - t > timeout)
+                        && self.valve_cmd_at[i].is_none_or(|t| age_ns(t) > timeout)
                 });
                 if stale {
                     self.fault(GatewayFaults::STALE_COMMAND);
@@ -583,15 +631,13 @@ impl Gateway {
                 }
             }
             GatewayMode::ArmedPosition => {
-                let fresh = self
-                    .setpoint_at_s
-                    .is_some_and(|t| now_s - t <= self.config.command_timeout_s);
-                let waiting = self.setpoint_at_s.is_none()
-                    && now_s - self.armed_at_s <= self.config.command_timeout_s;
+                let timeout = timing.command_timeout_ns;
+                let fresh = self.setpoint_at.is_some_and(|t| age_ns(t) <= timeout);
+                let waiting = self.setpoint_at.is_none() && age_ns(self.armed_at) <= timeout;
                 if !fresh && !waiting {
                     self.fault(GatewayFaults::STALE_COMMAND);
                 } else if let (Some(sp), Some(q)) = (self.setpoint, measured) {
-                    out[..JOINTS].copy_from_slice(&self.position_loop(sp, q, dt));
+                    out[..JOINTS].copy_from_slice(&self.position_loop(sp, q, dt_s));
                 } else {
                     self.position_cmd = [0.0; JOINTS];
                 }
@@ -681,6 +727,9 @@ mod tests {
     };
     use crate::secoc::{Sealer, SessionKey};
     use proptest::prelude::*;
+    use std::println;
+    use std::string::ToString;
+    use std::vec::Vec;
 
     const PERIOD_S: f64 = 0.01;
 

@@ -12,7 +12,7 @@
 //! (`PF >= 240`) it is the group extension and belongs to the PGN. Every message of this project is PDU2
 //! (broadcast), but the type handles both so foreign traffic is classified correctly.
 
-use std::fmt;
+use core::fmt;
 
 /// The controller's J1939 source address (see `docs/ARCHITECTURE.md`).
 pub const CONTROLLER_ADDRESS: u8 = 0x27;
@@ -42,12 +42,12 @@ pub enum IdError {
 }
 
 /// Result alias for this module.
-pub type Result<T> = std::result::Result<T, IdError>;
+pub type Result<T> = core::result::Result<T, IdError>;
 
 /// A 29-bit J1939 identifier.
 ///
 /// ```
-/// use firmware_bridge::id::J1939Id;
+/// use gateway_core::id::J1939Id;
 /// let id = J1939Id::from_raw(0x0CFE_3027).unwrap();
 /// assert_eq!((id.priority(), id.pgn(), id.source_address()), (3, 65072, 0x27));
 /// ```

@@ -21,7 +21,7 @@
 //! and sends nothing secured before it knows one. Counters are per id, start at 1 in every session and
 //! never wrap (64 bits).
 
-use std::fmt;
+use core::fmt;
 
 use aes::Aes128;
 use cmac::{Cmac, KeyInit, Mac};
@@ -45,19 +45,17 @@ impl SessionKey {
     /// [`KeyError`] for another length, a non-hex character, or the all-zero public key (provisioning
     /// it would look like authentication and be none). The error never contains the text.
     pub fn from_hex(text: &str) -> Result<Self, KeyError> {
-        let digits: Vec<u8> = text
-            .bytes()
-            .filter(|b| !matches!(b, b' ' | b':' | b'-'))
-            .collect();
-        if digits.len() != 32 {
-            return Err(KeyError::Length(digits.len()));
+        let digits = || text.bytes().filter(|b| !matches!(b, b' ' | b':' | b'-'));
+        let count = digits().count();
+        if count != 32 {
+            return Err(KeyError::Length(count));
         }
         let mut key = [0u8; 16];
-        for (i, pair) in digits.chunks_exact(2).enumerate() {
-            let hex = |c: u8| (c as char).to_digit(16).ok_or(KeyError::NotHex);
-            // Two hex digits fit a byte.
-            key[i] =
-                u8::try_from(hex(pair[0])? * 16 + hex(pair[1])?).map_err(|_| KeyError::NotHex)?;
+        for (i, c) in digits().enumerate() {
+            let nibble = (c as char).to_digit(16).ok_or(KeyError::NotHex)?;
+            // A hex digit fits 4 bits; the high one comes first.
+            let nibble = u8::try_from(nibble).map_err(|_| KeyError::NotHex)?;
+            key[i / 2] |= if i % 2 == 0 { nibble << 4 } else { nibble };
         }
         if key == [0; 16] {
             return Err(KeyError::Public);
@@ -72,8 +70,10 @@ impl SessionKey {
     /// # Errors
     /// [`KeyFileError`] naming the file and what is wrong: unreadable, open to group or others,
     /// longer than 256 bytes, or not a valid key.
+    #[cfg(feature = "std")]
     pub fn from_file(path: &std::path::Path) -> Result<Self, KeyFileError> {
         use std::io::Read as _;
+        use std::string::{String, ToString};
         let err = |reason: String| KeyFileError {
             path: path.display().to_string(),
             reason,
@@ -95,6 +95,7 @@ impl SessionKey {
     }
 
     /// A random key (the operating system's generator).
+    #[cfg(feature = "std")]
     pub fn generate() -> Self {
         Self::generate_with(&mut rand::rng())
     }
@@ -102,6 +103,7 @@ impl SessionKey {
     /// A key drawn from `rng`, never the public one. For a session whose both ends are in one
     /// process (`demo`, the lab) a generator seeded from the session's seed keeps the trace
     /// reproducible while the control path is authenticated as on a provisioned machine.
+    #[cfg(feature = "std")]
     pub fn generate_with<R: rand::Rng + ?Sized>(rng: &mut R) -> Self {
         use rand::RngExt as _;
         loop {
@@ -128,16 +130,18 @@ impl fmt::Debug for SessionKey {
     }
 }
 
-impl TryFrom<String> for SessionKey {
+#[cfg(feature = "std")]
+impl TryFrom<std::string::String> for SessionKey {
     type Error = KeyError;
-    fn try_from(text: String) -> Result<Self, KeyError> {
+    fn try_from(text: std::string::String) -> Result<Self, KeyError> {
         Self::from_hex(&text)
     }
 }
 
+#[cfg(feature = "std")]
 impl<'de> serde::Deserialize<'de> for SessionKey {
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        let text = String::deserialize(d)?;
+        let text = std::string::String::deserialize(d)?;
         Self::from_hex(&text).map_err(serde::de::Error::custom)
     }
 }
@@ -157,12 +161,12 @@ pub enum KeyError {
 }
 
 /// `Err` (the reason, with the fix) when a key file's permissions let group or others at it.
-#[cfg(unix)]
-fn check_private(meta: &std::fs::Metadata) -> Result<(), String> {
+#[cfg(all(feature = "std", unix))]
+fn check_private(meta: &std::fs::Metadata) -> Result<(), std::string::String> {
     use std::os::unix::fs::PermissionsExt as _;
     let mode = meta.permissions().mode() & 0o777;
     if mode & 0o077 != 0 {
-        return Err(format!(
+        return Err(std::format!(
             "open to group or others (mode {mode:03o}): anyone who can read the key can arm and \
              drive the machine; make it private with `chmod 600`"
         ));
@@ -171,19 +175,20 @@ fn check_private(meta: &std::fs::Metadata) -> Result<(), String> {
 }
 
 /// Permissions are not checked where they are not Unix modes.
-#[cfg(not(unix))]
-fn check_private(_meta: &std::fs::Metadata) -> Result<(), String> {
+#[cfg(all(feature = "std", not(unix)))]
+fn check_private(_meta: &std::fs::Metadata) -> Result<(), std::string::String> {
     Ok(())
 }
 
 /// A key file that cannot be used (the error never contains the key).
+#[cfg(feature = "std")]
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("key file {path}: {reason}")]
 pub struct KeyFileError {
     /// The file.
-    pub path: String,
+    pub path: std::string::String,
     /// What is wrong.
-    pub reason: String,
+    pub reason: std::string::String,
 }
 
 /// Why a frame could not be sealed.
@@ -471,6 +476,9 @@ impl SessionNonces {
 mod tests {
     use super::*;
     use crate::messages::{AuxValveCommand, ControllerHeartbeat, RequestedMode, Valve};
+    use std::format;
+    use std::string::ToString;
+    use std::vec::Vec;
 
     const SESSION: u32 = 0x1234_5678;
     const KEY_HEX: &str = "000102030405060708090a0b0c0d0e0f";

@@ -275,7 +275,7 @@ fn decimal_factor(factor: f64) -> Option<(i64, i64)> {
     let mut denominator: i64 = 1;
     for _ in 0..=9 {
         let numerator = factor * denominator as f64;
-        let rounded = numerator.round();
+        let rounded = libm::round(numerator);
         if rounded != 0.0
             && (numerator - rounded).abs() <= 1e-9 * rounded.abs()
             && rounded.abs() < 1e9
@@ -296,7 +296,7 @@ pub fn physical_to_raw(sig: &SignalDesc, value: f64) -> Result<i64, EncodeError>
     if !value.is_finite() {
         return Err(EncodeError::NotFinite { signal: sig.name });
     }
-    let raw = ((value - sig.offset) / sig.factor).round();
+    let raw = libm::round((value - sig.offset) / sig.factor);
     if raw < sig.raw_min as f64 || raw > sig.raw_max as f64 {
         return Err(EncodeError::OutOfRange {
             signal: sig.name,
@@ -433,6 +433,6 @@ mod tests {
             physical_to_raw(&sig, f64::NAN),
             Err(EncodeError::NotFinite { .. })
         ));
-        assert_eq!(physical_to_raw(&sig, std::f64::consts::PI), Ok(31416));
+        assert_eq!(physical_to_raw(&sig, core::f64::consts::PI), Ok(31416));
     }
 }

@@ -453,20 +453,16 @@ pub const fn is_next_alive(prev: u8, next: u8, bits: u32) -> bool {
 }
 
 /// CRC-8 SAE J1850: polynomial 0x1D, initial value 0xFF, final XOR 0xFF, no reflection
-/// (check value over `"123456789"` is 0x4B).
+/// (check value over `"123456789"` is 0x4B), from the `crc` crate's catalogue.
+pub const CRC8_SAE_J1850: crc::Crc<u8> = crc::Crc::<u8>::new(&crc::CRC_8_SAE_J1850);
+
+/// CRC-8 SAE J1850 ([`CRC8_SAE_J1850`]) over `bytes`.
 pub fn crc8_sae_j1850(bytes: impl IntoIterator<Item = u8>) -> u8 {
-    let mut crc: u8 = 0xFF;
+    let mut digest = CRC8_SAE_J1850.digest();
     for byte in bytes {
-        crc ^= byte;
-        for _ in 0..8 {
-            crc = if crc & 0x80 != 0 {
-                (crc << 1) ^ 0x1D
-            } else {
-                crc << 1
-            };
-        }
+        digest.update(&[byte]);
     }
-    crc ^ 0xFF
+    digest.finalize()
 }
 
 /// The heartbeat checksum: CRC-8 SAE J1850 over the PGN (3 bytes, least significant first) followed by
@@ -480,12 +476,12 @@ pub fn heartbeat_checksum(data: &[u8]) -> u8 {
         ((pgn >> 8) & 0xFF) as u8,
         ((pgn >> 16) & 0xFF) as u8,
     ];
-    let body = data
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| *i != checksum_byte)
-        .map(|(_, b)| *b);
-    crc8_sae_j1850(pgn_bytes.into_iter().chain(body))
+    let mut digest = CRC8_SAE_J1850.digest();
+    digest.update(&pgn_bytes);
+    let (before, from_checksum) = data.split_at(checksum_byte.min(data.len()));
+    digest.update(before);
+    digest.update(from_checksum.get(1..).unwrap_or_default());
+    digest.finalize()
 }
 
 signal_enum! {
@@ -599,9 +595,62 @@ pub struct Decoded {
     pub trailer: Option<Trailer>,
 }
 
+/// Most signals of one message (the controller status has seven); a test checks the DBC against it.
+pub const MAX_SIGNALS: usize = 7;
+
+/// A message's values by DBC signal name ([`Message::signal_values`]), held inline: at most
+/// [`MAX_SIGNALS`] pairs, no heap. Dereferences to the slice of pairs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SignalValues {
+    values: [(&'static str, f64); MAX_SIGNALS],
+    len: usize,
+}
+
+impl SignalValues {
+    /// The first [`MAX_SIGNALS`] of `values` (every message has fewer; the generated tables are
+    /// checked against it).
+    fn of(values: &[(&'static str, f64)]) -> Self {
+        let mut out = Self {
+            values: [("", 0.0); MAX_SIGNALS],
+            len: values.len().min(MAX_SIGNALS),
+        };
+        out.values[..out.len].copy_from_slice(&values[..out.len]);
+        out
+    }
+}
+
+impl core::ops::Deref for SignalValues {
+    type Target = [(&'static str, f64)];
+    fn deref(&self) -> &Self::Target {
+        &self.values[..self.len]
+    }
+}
+
+impl core::ops::DerefMut for SignalValues {
+    fn deref_mut(&mut self) -> &mut Self::Target {
+        &mut self.values[..self.len]
+    }
+}
+
+impl<'a> IntoIterator for &'a SignalValues {
+    type Item = &'a (&'static str, f64);
+    type IntoIter = core::slice::Iter<'a, (&'static str, f64)>;
+    fn into_iter(self) -> Self::IntoIter {
+        self.iter()
+    }
+}
+
+impl IntoIterator for SignalValues {
+    type Item = (&'static str, f64);
+    type IntoIter = core::iter::Take<core::array::IntoIter<(&'static str, f64), MAX_SIGNALS>>;
+    fn into_iter(self) -> Self::IntoIter {
+        self.values.into_iter().take(self.len)
+    }
+}
+
 impl Decoded {
     /// The values by DBC signal name, as [`Message::signal_values`] but with the trailer received.
-    pub fn signal_values(&self) -> Vec<(&'static str, f64)> {
+    pub fn signal_values(&self) -> SignalValues {
         let mut values = self.message.signal_values();
         let Some(t) = self.trailer else {
             return values;
@@ -614,7 +663,7 @@ impl Decoded {
             dbc::encode_raw(auth, i64::from(t.authenticator), &mut d).ok()?;
             Some(heartbeat_checksum(&d))
         });
-        for (name, v) in &mut values {
+        for (name, v) in values.iter_mut() {
             match *name {
                 "FreshnessValue" => *v = f64::from(t.freshness),
                 "Authenticator" => *v = f64::from(t.authenticator),
@@ -773,8 +822,9 @@ impl Message {
                 // The standard byte is derived from the fine raw value (not from the float) so that
                 // decode -> encode reproduces the same bytes even at rounding ties.
                 let fine_raw = dbc::physical_to_raw(&cmd::PORT_FLOW_COMMAND_FINE, m.flow_percent)?;
-                let ratio = (cmd::PORT_FLOW_COMMAND.factor / cmd::PORT_FLOW_COMMAND_FINE.factor)
-                    .round() as i64;
+                let ratio =
+                    libm::round(cmd::PORT_FLOW_COMMAND.factor / cmd::PORT_FLOW_COMMAND_FINE.factor)
+                        as i64;
                 dbc::encode_raw(
                     &cmd::PORT_FLOW_COMMAND,
                     (fine_raw + ratio / 2) / ratio.max(1),
@@ -1018,76 +1068,74 @@ impl Message {
     /// traces. The heartbeat's `Checksum` and the trailer (`FreshnessValue`, `Authenticator`) are as
     /// [`Message::encode`] sends them, unsealed (all ones); [`Decoded::signal_values`] has the trailer
     /// received.
-    pub fn signal_values(&self) -> Vec<(&'static str, f64)> {
+    pub fn signal_values(&self) -> SignalValues {
         const UNSEALED_FRESHNESS: f64 = 255.0;
         const UNSEALED_AUTHENTICATOR: f64 = 16_777_215.0;
         match self {
-            Self::AuxValveCommand(m) => vec![
+            Self::AuxValveCommand(m) => SignalValues::of(&[
                 ("PortFlowCommand", m.flow_percent),
                 ("FreshnessValue", UNSEALED_FRESHNESS),
                 ("ValveState", f64::from(m.state as u8)),
                 ("FailSafeMode", f64::from(m.fail_safe as u8)),
                 ("PortFlowCommandFine", m.flow_percent),
                 ("Authenticator", UNSEALED_AUTHENTICATOR),
-            ],
-            Self::AuxValveMeasured(m) => vec![
+            ]),
+            Self::AuxValveMeasured(m) => SignalValues::of(&[
                 ("MeasuredFlow", m.flow_percent),
                 ("ValveState", f64::from(m.state as u8)),
                 ("ExtendPortPressure", m.head_pressure_pa),
                 ("RetractPortPressure", m.rod_pressure_pa),
-            ],
-            Self::JointAngles(m) => vec![
+            ]),
+            Self::JointAngles(m) => SignalValues::of(&[
                 ("BoomAngle", m.boom_rad),
                 ("StickAngle", m.stick_rad),
                 ("BucketAngle", m.bucket_rad),
                 ("SwingAngle", m.swing_rad),
-            ],
-            Self::JointRates(m) => vec![
+            ]),
+            Self::JointRates(m) => SignalValues::of(&[
                 ("BoomRate", m.boom_rad_per_s),
                 ("StickRate", m.stick_rad_per_s),
                 ("BucketRate", m.bucket_rad_per_s),
                 ("SwingRate", m.swing_rad_per_s),
-            ],
+            ]),
             Self::PumpPressures(m) => {
-                vec![("Pump1Pressure", m.pump1_pa), ("Pump2Pressure", m.pump2_pa)]
+                SignalValues::of(&[("Pump1Pressure", m.pump1_pa), ("Pump2Pressure", m.pump2_pa)])
             }
-            Self::TrackOdometry(m) => {
-                vec![
-                    ("LeftTrackTravel", m.left_m),
-                    ("RightTrackTravel", m.right_m),
-                ]
-            }
-            Self::GatewayStatus(m) => vec![
+            Self::TrackOdometry(m) => SignalValues::of(&[
+                ("LeftTrackTravel", m.left_m),
+                ("RightTrackTravel", m.right_m),
+            ]),
+            Self::GatewayStatus(m) => SignalValues::of(&[
                 ("Mode", f64::from(m.mode as u8)),
                 ("AliveCounter", f64::from(m.alive_counter)),
                 ("FaultBits", f64::from(m.faults.0)),
                 ("UnexpectedFrames", f64::from(m.unexpected_frames)),
                 ("RejectedFrames", f64::from(m.rejected_frames)),
-            ],
-            Self::GatewaySession(m) => vec![("SessionId", f64::from(m.session_id))],
-            Self::PositionSetpoint(m) => vec![
+            ]),
+            Self::GatewaySession(m) => SignalValues::of(&[("SessionId", f64::from(m.session_id))]),
+            Self::PositionSetpoint(m) => SignalValues::of(&[
                 ("BoomSetpoint", m.boom_rad),
                 ("StickSetpoint", m.stick_rad),
                 ("BucketSetpoint", m.bucket_rad),
                 ("SwingSetpoint", m.swing_rad),
                 ("FreshnessValue", 15.0),
                 ("Authenticator", 255.0),
-            ],
+            ]),
             Self::ControllerHeartbeat(m) => {
                 let checksum = self
                     .encode()
                     .ok()
                     .and_then(|f| f.data().get(7).copied())
                     .map_or(f64::NAN, f64::from);
-                vec![
+                SignalValues::of(&[
                     ("RequestedMode", f64::from(m.mode as u8)),
                     ("AliveCounter", f64::from(m.alive_counter)),
                     ("FreshnessValue", UNSEALED_FRESHNESS),
                     ("Authenticator", UNSEALED_AUTHENTICATOR),
                     ("Checksum", checksum),
-                ]
+                ])
             }
-            Self::ControllerStatus(m) => vec![
+            Self::ControllerStatus(m) => SignalValues::of(&[
                 ("Activity", f64::from(m.activity as u8)),
                 ("AutodigStage", f64::from(m.stage as u8)),
                 ("DigIndex", f64::from(m.dig_index)),
@@ -1095,7 +1143,7 @@ impl Message {
                 ("SweptVolume", m.swept_volume_m3),
                 ("FaultReason", f64::from(m.fault_reason)),
                 ("AliveCounter", f64::from(m.alive_counter)),
-            ],
+            ]),
         }
     }
 }
@@ -1103,6 +1151,14 @@ impl Message {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::vec::Vec;
+
+    #[test]
+    fn every_message_fits_signal_values() {
+        for desc in dbc::MESSAGES {
+            assert!(desc.signals.len() <= MAX_SIGNALS, "{}", desc.name);
+        }
+    }
 
     /// Boom extend at 50 %: flow byte 125, reserved 0xFF, state 1 with fail-safe block and reserved bits
     /// 4-5 set, fine flow 20000 = 0x4E20, reserved bytes 6-8.
