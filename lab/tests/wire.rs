@@ -131,23 +131,35 @@ fn planned_run(
     }
 }
 
+/// The controller's node on `sim`'s bus, recording to a new `out/trace.log`.
+fn recorded_controller(
+    sim: &Simulator,
+    out: &std::path::Path,
+) -> (
+    firmware_bridge::transport::InProcessNode,
+    lab::wire::SessionTrace,
+) {
+    let mut ctl_node = sim.bus.attach();
+    std::fs::create_dir_all(out).unwrap();
+    let recorder = Recorder::create(&out.join("trace.log"), "vcan0").unwrap();
+    ctl_node.set_recorder(recorder.clone());
+    let trace = lab::wire::SessionTrace {
+        recorder,
+        frames_before: 0,
+    };
+    (ctl_node, trace)
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_planned_session_runs_over_a_bus_in_scaled_real_time() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("run");
     let time_scale = TimeScale::new(2.0).unwrap();
     let sim = simulator(&out, time_scale).await;
-    let mut ctl_node = sim.bus.attach();
-    std::fs::create_dir_all(&out).unwrap();
-    let recorder = Recorder::create(&out.join("trace.log"), "vcan0").unwrap();
-    ctl_node.set_recorder(recorder.clone());
+    let (ctl_node, trace) = recorded_controller(&sim, &out);
     let args = planned_run(&sim, 2, time_scale, &out);
     // A budget far above the session's ~2 x 30 s at 2x; the test fails if it is what stops it.
     let budget = tokio::time::sleep(Duration::from_secs(240));
-    let trace = lab::wire::SessionTrace {
-        recorder,
-        frames_before: 0,
-    };
     lab::wire::run_on(
         &ctl_node,
         Some(trace),
@@ -188,8 +200,10 @@ async fn the_planned_session_runs_over_a_bus_in_scaled_real_time() {
     assert!(std::fs::read_dir(out.join("scans")).unwrap().count() >= 2);
 }
 
-/// The `DigIndex` of every `ControllerStatus` the controller sent, in trace order.
-fn status_dig_indices(trace: &std::path::Path) -> Vec<u16> {
+/// Every `ControllerStatus` the controller sent, in trace order.
+fn controller_statuses(
+    trace: &std::path::Path,
+) -> Vec<firmware_bridge::messages::ControllerStatus> {
     use firmware_bridge::messages::Message;
     std::fs::read_to_string(trace)
         .unwrap()
@@ -197,11 +211,19 @@ fn status_dig_indices(trace: &std::path::Path) -> Vec<u16> {
         .map(|l| firmware_bridge::trace::parse_line(l).unwrap())
         .filter_map(|r| match Message::decode(&r.frame) {
             Ok(d) => match d.message {
-                Message::ControllerStatus(s) => Some(s.dig_index),
+                Message::ControllerStatus(s) => Some(s),
                 _ => None,
             },
             Err(_) => None,
         })
+        .collect()
+}
+
+/// The `DigIndex` of every `ControllerStatus` the controller sent, in trace order.
+fn status_dig_indices(trace: &std::path::Path) -> Vec<u16> {
+    controller_statuses(trace)
+        .iter()
+        .map(|s| s.dig_index)
         .collect()
 }
 
@@ -401,25 +423,6 @@ fn the_key_file_is_checked_before_the_bus_is_touched() {
     );
 }
 
-/// The `ControllerStatus` of every status the controller sent: (activity, fault reason).
-fn status_activity_faults(
-    trace: &std::path::Path,
-) -> Vec<(firmware_bridge::messages::Activity, u8)> {
-    use firmware_bridge::messages::Message;
-    std::fs::read_to_string(trace)
-        .unwrap()
-        .lines()
-        .map(|l| firmware_bridge::trace::parse_line(l).unwrap())
-        .filter_map(|r| match Message::decode(&r.frame) {
-            Ok(d) => match d.message {
-                Message::ControllerStatus(s) => Some((s.activity, s.fault_reason)),
-                _ => None,
-            },
-            Err(_) => None,
-        })
-        .collect()
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_operator_keys_at_a_terminal_estop_reset_and_stop_the_run() {
     use firmware_bridge::messages::Activity;
@@ -430,10 +433,7 @@ async fn the_operator_keys_at_a_terminal_estop_reset_and_stop_the_run() {
     let out = dir.path().join("run");
     let time_scale = TimeScale::new(2.0).unwrap();
     let sim = simulator(&out, time_scale).await;
-    let mut ctl_node = sim.bus.attach();
-    std::fs::create_dir_all(&out).unwrap();
-    let recorder = Recorder::create(&out.join("trace.log"), "vcan0").unwrap();
-    ctl_node.set_recorder(recorder.clone());
+    let (ctl_node, trace) = recorded_controller(&sim, &out);
     let args = planned_run(&sim, 3, time_scale, &out);
     // The operator's terminal: `run` reads the pty's slave end, the test types on the master.
     let pty = nix::pty::openpty(None, None).unwrap();
@@ -441,10 +441,6 @@ async fn the_operator_keys_at_a_terminal_estop_reset_and_stop_the_run() {
     let mut keyboard = std::fs::File::from(pty.master);
     let cooked = tcgetattr(&pty.slave).unwrap().local_flags;
     assert!(cooked.contains(LocalFlags::ICANON | LocalFlags::ECHO));
-    let trace = lab::wire::SessionTrace {
-        recorder,
-        frames_before: 0,
-    };
     let console = lab::wire::RunConsole {
         keys: Some(terminal),
         session_log: false,
@@ -489,15 +485,15 @@ async fn the_operator_keys_at_a_terminal_estop_reset_and_stop_the_run() {
         Some(firmware_bridge::transport::TraceClock::WallAtRead)
     );
     // The e-stop is in the trace (fault code 5), and the run went on after the reset.
-    let statuses = status_activity_faults(&out.join("trace.log"));
+    let statuses = controller_statuses(&out.join("trace.log"));
     let estop = statuses
         .iter()
-        .position(|&(a, f)| a == Activity::Faulted && f == 5)
+        .position(|s| s.activity == Activity::Faulted && s.fault_reason == 5)
         .expect("no e-stop in the trace");
     assert!(
         statuses[estop..]
             .iter()
-            .any(|&(a, _)| !matches!(a, Activity::Faulted | Activity::Idle)),
+            .any(|s| !matches!(s.activity, Activity::Faulted | Activity::Idle)),
         "no activity after the reset"
     );
 }
