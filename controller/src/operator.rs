@@ -4,8 +4,11 @@
 //! ```text
 //! client --line--> connection task: parse (bounded line, malformed -> error reply, counted)
 //!                      --try_send--> bounded queue --try_recv, each tick--> OperatorPort::serve
-//!                                                                      -> apply(node): reply
+//! terminal key --> key reader (lab::keys) --^                             -> apply(node): reply
 //! ```
+//!
+//! The socket and the keys of `run`'s terminal go through the one queue ([`OperatorSender`]), so a
+//! key does exactly what the same command on the socket does.
 //!
 //! The control loop never waits for the socket: [`OperatorPort::serve`] takes at most
 //! [`MAX_REQUESTS_PER_TICK`] queued requests per control step without blocking and applies them
@@ -186,14 +189,40 @@ fn status_of(node: &ControllerNode, malformed_requests: u64) -> Status {
 /// A queued request and where its reply goes.
 type Queued = (Request, oneshot::Sender<Response>);
 
-/// The control loop's end of the socket (module docs).
+/// The control loop's end of the operator's commands (module docs): the socket's and the terminal
+/// keys' requests ([`OperatorSender`]) meet in its one queue.
 #[derive(Debug)]
 pub struct OperatorPort {
     rx: mpsc::Receiver<Queued>,
+    tx: mpsc::Sender<Queued>,
     malformed: Arc<AtomicU64>,
 }
 
+impl Default for OperatorPort {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl OperatorPort {
+    /// A port with an empty queue and no socket yet ([`Self::listen`]).
+    pub fn new() -> Self {
+        let (tx, rx) = mpsc::channel(QUEUE);
+        Self {
+            rx,
+            tx,
+            malformed: Arc::new(AtomicU64::new(0)),
+        }
+    }
+
+    /// A handle that queues requests for this port (the terminal keys' path; the socket's
+    /// connections use the same).
+    pub fn sender(&self) -> OperatorSender {
+        OperatorSender {
+            tx: self.tx.clone(),
+        }
+    }
+
     /// Applies the queued requests (at most [`MAX_REQUESTS_PER_TICK`], never waiting) to `node`
     /// at `now_s` and answers them. Returns the commands applied.
     pub fn serve(&mut self, node: &mut ControllerNode, now_s: f64) -> usize {
@@ -224,28 +253,54 @@ impl OperatorPort {
     pub fn malformed(&self) -> u64 {
         self.malformed.load(Ordering::Relaxed)
     }
+
+    /// Serves the socket at `path` into this port: a listener task that runs until the port is
+    /// dropped. Removes a stale socket file (one nobody listens on); refuses one a running
+    /// controller serves.
+    ///
+    /// # Errors
+    /// The path is in use by a running controller, or cannot be bound.
+    pub fn listen(&self, path: &Path) -> std::io::Result<tokio::task::JoinHandle<()>> {
+        if path.exists() {
+            if std::os::unix::net::UnixStream::connect(path).is_ok() {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::AddrInUse,
+                    format!("{}: another controller serves it", path.display()),
+                ));
+            }
+            std::fs::remove_file(path)?;
+        }
+        let listener = UnixListener::bind(path)?;
+        Ok(tokio::spawn(accept(
+            listener,
+            self.tx.clone(),
+            Arc::clone(&self.malformed),
+        )))
+    }
 }
 
-/// The socket at `path` and its listener task. Removes a stale socket file (one nobody listens
-/// on); refuses one a running controller serves.
+/// Queues requests for an [`OperatorPort`] from outside the control loop (cheap to clone).
+#[derive(Debug, Clone)]
+pub struct OperatorSender {
+    tx: mpsc::Sender<Queued>,
+}
+
+impl OperatorSender {
+    /// Queues `req` and waits (here, not in the loop) for the loop's reply; `busy` when the queue
+    /// is full, an error when the loop does not answer within [`REPLY_TIMEOUT`].
+    pub async fn send(&self, req: Request) -> Response {
+        forward(&self.tx, req).await
+    }
+}
+
+/// A port with the socket at `path` ([`OperatorPort::new`], [`OperatorPort::listen`]).
 ///
 /// # Errors
-/// The path is in use by a running controller, or cannot be bound.
+/// As [`OperatorPort::listen`].
 pub fn listen(path: &Path) -> std::io::Result<(OperatorPort, tokio::task::JoinHandle<()>)> {
-    if path.exists() {
-        if std::os::unix::net::UnixStream::connect(path).is_ok() {
-            return Err(std::io::Error::new(
-                std::io::ErrorKind::AddrInUse,
-                format!("{}: another controller serves it", path.display()),
-            ));
-        }
-        std::fs::remove_file(path)?;
-    }
-    let listener = UnixListener::bind(path)?;
-    let (tx, rx) = mpsc::channel(QUEUE);
-    let malformed = Arc::new(AtomicU64::new(0));
-    let task = tokio::spawn(accept(listener, tx, Arc::clone(&malformed)));
-    Ok((OperatorPort { rx, malformed }, task))
+    let port = OperatorPort::new();
+    let task = port.listen(path)?;
+    Ok((port, task))
 }
 
 /// Accepts connections, at most [`MAX_CONNECTIONS`] at once, until the [`OperatorPort`] is dropped.
@@ -253,6 +308,7 @@ async fn accept(listener: UnixListener, tx: mpsc::Sender<Queued>, malformed: Arc
     let slots = Arc::new(Semaphore::new(MAX_CONNECTIONS));
     loop {
         // The loop's port gone (the controller stopped, or was dropped mid-run): stop listening.
+        // The port holds a sender too, so `closed` waits for its receiver.
         let accepted = tokio::select! {
             () = tx.closed() => return,
             a = listener.accept() => a,

@@ -7,7 +7,9 @@
 //! - a 10 ms interval tick: the frames received since the last tick go through `step`, and its output
 //!   is sent in order,
 //! - receiving: frames are queued for the next tick; error frames (`transport::Error::Fault`) go to
-//!   [`ControllerNode::on_bus_fault`] at once.
+//!   [`ControllerNode::on_bus_fault`] at once. A frame's session time is its arrival: the time it
+//!   was read less the time it waited in the socket since the kernel stamped it ([`MAX_RX_WAIT_S`]),
+//!   so a loop that reads late does not make old sensor data look fresh.
 //!
 //! - with `--scan-addr`, the results of the range-scan task ([`crate::scan_client`]): after a tick in
 //!   which the work cycle asked for a scan ([`ControllerNode::take_scan_request`]) the loop asks the
@@ -465,7 +467,7 @@ pub async fn run_session_loop<B: Bus>(
                         // frame carries the session clock's time of its arrival, not the bus's (wall)
                         // clock; the trace keeps the bus's timestamp.
                         inbox.push(TimestampedFrame {
-                            timestamp_ns: clock.now_ns(),
+                            timestamp_ns: clock.arrival_ns(bus.now_ns(), tf.timestamp_ns),
                             frame: tf.frame,
                         });
                     } else {
@@ -530,6 +532,27 @@ impl SessionClock {
         // Saturating float-to-int cast; session time is non-negative and far below 584 years.
         (self.now_s() * 1e9) as u64
     }
+
+    /// The session time at which a frame stamped `stamp_ns` by the bus arrived, read when the bus
+    /// clock showed `bus_now_ns` ([`arrival_ns`]).
+    fn arrival_ns(&self, bus_now_ns: u64, stamp_ns: u64) -> u64 {
+        arrival_ns(self.now_ns(), self.scale, bus_now_ns, stamp_ns)
+    }
+}
+
+/// Longest wait in the socket credited to a frame, s: a kernel timestamp further in the past than
+/// this (or in the future) is a wall-clock step between the stamp and the read, not a wait.
+pub const MAX_RX_WAIT_S: f64 = 0.25;
+
+/// The session time (ns) at which a frame arrived: `session_now_ns` less the time it waited between
+/// the bus's stamp (`stamp_ns`, the kernel's receive time where the socket gives one) and its read
+/// (`bus_now_ns`), in session time at `scale`. The wait is clamped to `0..=`[`MAX_RX_WAIT_S`], so a
+/// wall-clock step between stamp and read can neither make a frame younger than its read nor age it
+/// by more than that; a frame stamped when read waits 0.
+fn arrival_ns(session_now_ns: u64, scale: f64, bus_now_ns: u64, stamp_ns: u64) -> u64 {
+    let wait_s = (bus_now_ns.saturating_sub(stamp_ns) as f64 * 1e-9).min(MAX_RX_WAIT_S);
+    // Saturating float-to-int cast of a wait of at most a few seconds.
+    session_now_ns.saturating_sub((wait_s * scale * 1e9) as u64)
 }
 
 /// Ctrl-C or SIGTERM (systemd's stop signal).
@@ -596,6 +619,38 @@ mod tests {
         assert!(!first.overloaded());
         assert!(first.rate_kept(CONTROL_PERIOD));
         assert!((reports[1].max_gap_s - 0.01).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_frame_arrives_when_the_kernel_stamped_it_within_bounds() {
+        const NOW_NS: u64 = 50_000_000_000;
+        const BUS_NOW_NS: u64 = 1_700_000_000_000_000_000;
+        // Waited 20 ms in the socket: 20 ms older, 40 ms of session time at 2x.
+        assert_eq!(
+            arrival_ns(NOW_NS, 1.0, BUS_NOW_NS, BUS_NOW_NS - 20_000_000),
+            NOW_NS - 20_000_000
+        );
+        assert_eq!(
+            arrival_ns(NOW_NS, 2.0, BUS_NOW_NS, BUS_NOW_NS - 20_000_000),
+            NOW_NS - 40_000_000
+        );
+        // Stamped when read: no wait.
+        assert_eq!(arrival_ns(NOW_NS, 1.0, BUS_NOW_NS, BUS_NOW_NS), NOW_NS);
+        // The wall clock stepped back between stamp and read: never younger than the read.
+        assert_eq!(
+            arrival_ns(NOW_NS, 1.0, BUS_NOW_NS, BUS_NOW_NS + 3_600_000_000_000),
+            NOW_NS
+        );
+        // ... or forward by an hour: at most MAX_RX_WAIT_S old.
+        assert_eq!(
+            arrival_ns(NOW_NS, 1.0, BUS_NOW_NS + 3_600_000_000_000, BUS_NOW_NS),
+            NOW_NS - 250_000_000
+        );
+        // Early in the session: not before its start.
+        assert_eq!(
+            arrival_ns(1_000, 1.0, BUS_NOW_NS, BUS_NOW_NS - 20_000_000),
+            0
+        );
     }
 
     #[test]

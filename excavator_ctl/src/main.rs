@@ -27,15 +27,22 @@ fn demo(runtime: &tokio::runtime::Runtime, cmd: cli::DemoCmd) -> anyhow::Result<
 }
 
 fn main() -> std::process::ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(
+    use tracing_subscriber::layer::SubscriberExt as _;
+    use tracing_subscriber::util::SubscriberInitExt as _;
+    tracing_subscriber::registry()
+        .with(
             tracing_subscriber::EnvFilter::try_from_default_env()
                 .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
         )
-        // Through the console: log lines do not break the progress line of `demo` and `run`.
-        .with_writer(|| lab::console::ConsoleWriter)
-        // Colours only for a person at a terminal: a journal, a file or a pipe gets plain text.
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with(
+            tracing_subscriber::fmt::layer()
+                // Through the console: log lines do not break the progress line of `demo` and `run`.
+                .with_writer(|| lab::console::ConsoleWriter)
+                // Colours only for a person at a terminal: a journal, a file or a pipe gets plain text.
+                .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr())),
+        )
+        // `run`'s session log (run.log in its session folder), while one is open.
+        .with(lab::session_log::layer())
         .init();
     let cli = Cli::parse();
     let runtime = match tokio::runtime::Builder::new_current_thread()

@@ -443,6 +443,11 @@ pub struct DemoSummary {
     pub soil_contact: SoilContactIntegration,
     /// The hidden effects given on the command line.
     pub effects: Vec<String>,
+    /// What stamped the trace's frames: `virtual` (`demo`: session time since the fixed epoch of
+    /// docs/demo-output.md), `kernel` (`run`: the socket's kernel receive timestamps) or
+    /// `wall_at_read` (`run` without them); absent in summaries written before it was recorded.
+    #[serde(default)]
+    pub trace_clock: Option<firmware_bridge::transport::TraceClock>,
     /// Per dig.
     pub digs: Vec<DigRecord>,
     /// Totals.
@@ -995,6 +1000,7 @@ pub fn run_session_observed(
             session_time_s: clock.now_s(),
             wall_time_s: wall.elapsed().as_secs_f64(),
             trace,
+            trace_clock: firmware_bridge::transport::TraceClock::Virtual,
         },
         node,
         session,
@@ -1203,6 +1209,8 @@ pub struct SessionEnd<'a> {
     pub wall_time_s: f64,
     /// The trace recorder's counts.
     pub trace: firmware_bridge::trace::RecorderStats,
+    /// What stamped the trace.
+    pub trace_clock: firmware_bridge::transport::TraceClock,
 }
 
 /// `summary.json` of a session: the records, their totals and Tables 3-5 figures.
@@ -1275,6 +1283,7 @@ pub fn session_summary(
         seed: end.seed,
         soil_contact: end.soil_contact,
         effects: end.effects,
+        trace_clock: Some(end.trace_clock),
         digs: records,
         totals,
     }

@@ -8,6 +8,8 @@
 //!   virtual time, and the session folder it writes (trace, scans, summary, plots).
 //! - [`harness`]: the virtual-time harness: the simulated machine and the controller node on one
 //!   in-process bus, stepped in lockstep (used by every in-process run and test).
+//! - [`keys`]: the operator's keys at `run`'s terminal (space = e-stop), through the control
+//!   socket's own path.
 //! - [`experiment`]: the thesis's reproductions in closed loop (Tables 1-5, Figs. 52, 53, 60).
 //! - [`model`]: the dig model's commands: train and evaluate the actuator networks, generate
 //!   simulator data, compare the dig model with the simulator, Table 2 and Fig. 52 with the dig
@@ -18,6 +20,7 @@
 //!   writer that saves them off the control loop, the trace a resumed session appends to.
 //! - [`shift`]: `experiment shift`, a long planned session under injected faults against a
 //!   fault-free one: unsafe outputs, actions, detection and recovery of every fault, memory.
+//! - [`session_log`]: `run`'s log in its session folder (`run.log`), stamped with the session clock.
 //! - [`session`]: the records of a session folder (per-dig records, tip paths, soil samples).
 //! - [`thesis`]: the thesis's figures and statements the reproductions are checked against.
 //! - [`wire`]: `excavator-ctl run`, the same session on a CAN bus in real time (planned, predefined
@@ -36,11 +39,13 @@ pub mod console;
 pub mod demo;
 pub mod experiment;
 pub mod harness;
+pub mod keys;
 pub mod model;
 pub mod plots;
 pub mod results;
 pub mod resume;
 pub mod session;
+pub mod session_log;
 pub mod shift;
 pub mod thesis;
 pub mod wire;

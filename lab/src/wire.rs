@@ -14,7 +14,11 @@
 //! (true payload, true terrain), which a bus session does not have, plus `session_state.json`: the
 //! session saved after every completed action ([`crate::resume`]). `--resume DIR` loads it, checks
 //! that it is this machine's, bench's and configuration's, and goes on with the session where it
-//! stood after the normal arming handshake, appending to its trace and records.
+//! stood after the normal arming handshake, appending to its trace and records. The run's log goes
+//! to the folder's `run.log` too ([`crate::session_log`]).
+//!
+//! The operator's commands come from the control socket (`excavator-ctl ctl`) and, when standard
+//! input is a terminal, from its keys ([`crate::keys`]); both through one [`OperatorPort`].
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -22,6 +26,8 @@ use std::time::Instant;
 use anyhow::Context as _;
 use clap::Args;
 use controller::node::{ControllerConfig, ControllerNode};
+#[cfg(doc)]
+use controller::operator::OperatorPort;
 use controller::run::{
     CONTROL_PERIOD, LoopSession, StopReason, run_session_loop, scan_client_config,
 };
@@ -328,7 +334,46 @@ pub async fn run(args: RunArgs) -> anyhow::Result<()> {
         }
         None => None,
     };
-    run_on(&bus, trace, &args, controller::run::shutdown_signal()).await
+    let console = RunConsole {
+        keys: operator_terminal(),
+        session_log: true,
+    };
+    run_on(
+        &bus,
+        trace,
+        &args,
+        console,
+        controller::run::shutdown_signal(),
+    )
+    .await
+}
+
+/// What `run` does besides the session: the operator's keys and the session log.
+#[derive(Debug, Default)]
+pub struct RunConsole {
+    /// The terminal whose keys are operator commands ([`crate::keys`]); `None`: no key reader.
+    pub keys: Option<std::fs::File>,
+    /// Write the log to the session folder's `run.log` too ([`crate::session_log`]; the binary's
+    /// subscriber carries its layer).
+    pub session_log: bool,
+}
+
+/// Standard input when it is a terminal (a person at the console), else `None`: no key reader for a
+/// pipe, a file or a service.
+fn operator_terminal() -> Option<std::fs::File> {
+    use std::io::IsTerminal as _;
+    use std::os::fd::AsFd as _;
+    let stdin = std::io::stdin();
+    if !stdin.is_terminal() {
+        return None;
+    }
+    match stdin.as_fd().try_clone_to_owned() {
+        Ok(fd) => Some(std::fs::File::from(fd)),
+        Err(e) => {
+            tracing::warn!(error = %e, "operator keys: standard input cannot be used: no keys");
+            None
+        }
+    }
 }
 
 /// `--trace`, or the session folder's `trace.log`.
@@ -351,6 +396,7 @@ pub async fn run_on<B: Bus>(
     bus: &B,
     trace: Option<SessionTrace>,
     args: &RunArgs,
+    console: RunConsole,
     shutdown: impl std::future::Future<Output = ()>,
 ) -> anyhow::Result<()> {
     let wall = Instant::now();
@@ -410,13 +456,26 @@ pub async fn run_on<B: Bus>(
         Some(o) => Some(StateWriter::spawn(crate::resume::state_path(o))?),
         None => None,
     };
+    let session_log = match (&out_dir, console.session_log) {
+        (Some(o), true) => {
+            std::fs::create_dir_all(o).with_context(|| format!("creating {}", o.display()))?;
+            let path = o.join(crate::session_log::FILE_NAME);
+            Some(
+                crate::session_log::open(&path, base.session_time_s, args.time_scale.get())
+                    .with_context(|| format!("opening the session log {}", path.display()))?,
+            )
+        }
+        _ => None,
+    };
+    // The socket's and the keys' commands meet in this one port.
+    let mut operator = controller::operator::OperatorPort::new();
     let socket_path = args
         .control_socket
         .clone()
         .or_else(|| out_dir.as_deref().map(controller::operator::default_path));
-    let mut operator = match &socket_path {
+    let socket_task = match &socket_path {
         Some(p) => {
-            let (port, task) = controller::operator::listen(p).with_context(|| {
+            let task = operator.listen(p).with_context(|| {
                 format!(
                     "control socket {}: a Unix socket needs a local file system (not a network \
                      share) and a path under 108 bytes; give --control-socket PATH",
@@ -424,8 +483,25 @@ pub async fn run_on<B: Bus>(
                 )
             })?;
             tracing::info!(socket = %p.display(), "operator control: excavator-ctl ctl --socket");
-            Some((port, task))
+            Some(task)
         }
+        None => None,
+    };
+    let keys = match console.keys {
+        Some(tty) => match crate::keys::KeyReader::start(
+            tty,
+            operator.sender(),
+            tokio::runtime::Handle::current(),
+        ) {
+            Ok(reader) => {
+                tracing::info!("{}", crate::keys::help());
+                Some(reader)
+            }
+            Err(e) => {
+                tracing::warn!(error = %e, "operator keys: the terminal cannot be set up: no keys");
+                None
+            }
+        },
         None => None,
     };
     let mut steps = 0_u64;
@@ -467,6 +543,9 @@ pub async fn run_on<B: Bus>(
         }
         Ok(())
     };
+    if let Some(l) = &session_log {
+        l.start_clock();
+    }
     let result = run_session_loop(
         bus,
         &mut node,
@@ -478,13 +557,16 @@ pub async fn run_on<B: Bus>(
             scans: &mut *scans,
             observer: &mut observer,
         }),
-        operator.as_mut().map(|(port, _)| port),
+        Some(&mut operator),
     )
     .await;
-    if let (Some((_, task)), Some(p)) = (operator, &socket_path) {
+    if let (Some(task), Some(p)) = (socket_task, &socket_path) {
         task.abort();
         let _ = std::fs::remove_file(p);
     }
+    // The port first: a key's request still queued is then answered at once, and the reader ends.
+    drop(operator);
+    drop(keys);
     if let Some(p) = &progress {
         p.finish_and_clear();
     }
@@ -532,6 +614,7 @@ pub async fn run_on<B: Bus>(
             session_time_s: base.session_time_s + session_s(stats.steps),
             wall_time_s: base.wall_time_s + wall.elapsed().as_secs_f64(),
             trace,
+            trace_clock: bus.trace_clock(),
         },
         &node,
         driver.session(),

@@ -131,26 +131,44 @@ fn planned_run(
     }
 }
 
+/// The controller's node on `sim`'s bus, recording to a new `out/trace.log`.
+fn recorded_controller(
+    sim: &Simulator,
+    out: &std::path::Path,
+) -> (
+    firmware_bridge::transport::InProcessNode,
+    lab::wire::SessionTrace,
+) {
+    let mut ctl_node = sim.bus.attach();
+    std::fs::create_dir_all(out).unwrap();
+    let recorder = Recorder::create(&out.join("trace.log"), "vcan0").unwrap();
+    ctl_node.set_recorder(recorder.clone());
+    let trace = lab::wire::SessionTrace {
+        recorder,
+        frames_before: 0,
+    };
+    (ctl_node, trace)
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_planned_session_runs_over_a_bus_in_scaled_real_time() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("run");
     let time_scale = TimeScale::new(2.0).unwrap();
     let sim = simulator(&out, time_scale).await;
-    let mut ctl_node = sim.bus.attach();
-    std::fs::create_dir_all(&out).unwrap();
-    let recorder = Recorder::create(&out.join("trace.log"), "vcan0").unwrap();
-    ctl_node.set_recorder(recorder.clone());
+    let (ctl_node, trace) = recorded_controller(&sim, &out);
     let args = planned_run(&sim, 2, time_scale, &out);
     // A budget far above the session's ~2 x 30 s at 2x; the test fails if it is what stops it.
     let budget = tokio::time::sleep(Duration::from_secs(240));
-    let trace = lab::wire::SessionTrace {
-        recorder,
-        frames_before: 0,
-    };
-    lab::wire::run_on(&ctl_node, Some(trace), &args, budget)
-        .await
-        .unwrap();
+    lab::wire::run_on(
+        &ctl_node,
+        Some(trace),
+        &args,
+        lab::wire::RunConsole::default(),
+        budget,
+    )
+    .await
+    .unwrap();
     let _ = sim.stop.send(());
     let summary = sim.task.await.unwrap().unwrap();
     assert!(summary.simulated_s > 10.0, "{summary:?}");
@@ -182,8 +200,10 @@ async fn the_planned_session_runs_over_a_bus_in_scaled_real_time() {
     assert!(std::fs::read_dir(out.join("scans")).unwrap().count() >= 2);
 }
 
-/// The `DigIndex` of every `ControllerStatus` the controller sent, in trace order.
-fn status_dig_indices(trace: &std::path::Path) -> Vec<u16> {
+/// Every `ControllerStatus` the controller sent, in trace order.
+fn controller_statuses(
+    trace: &std::path::Path,
+) -> Vec<firmware_bridge::messages::ControllerStatus> {
     use firmware_bridge::messages::Message;
     std::fs::read_to_string(trace)
         .unwrap()
@@ -191,11 +211,19 @@ fn status_dig_indices(trace: &std::path::Path) -> Vec<u16> {
         .map(|l| firmware_bridge::trace::parse_line(l).unwrap())
         .filter_map(|r| match Message::decode(&r.frame) {
             Ok(d) => match d.message {
-                Message::ControllerStatus(s) => Some(s.dig_index),
+                Message::ControllerStatus(s) => Some(s),
                 _ => None,
             },
             Err(_) => None,
         })
+        .collect()
+}
+
+/// The `DigIndex` of every `ControllerStatus` the controller sent, in trace order.
+fn status_dig_indices(trace: &std::path::Path) -> Vec<u16> {
+    controller_statuses(trace)
+        .iter()
+        .map(|s| s.dig_index)
         .collect()
 }
 
@@ -240,7 +268,7 @@ async fn a_controller_killed_mid_session_resumes_without_losing_or_repeating_an_
             tokio::time::sleep(Duration::from_millis(2500)).await;
         };
         tokio::select! {
-            r = lab::wire::run_on(&ctl_node, Some(trace), &args, std::future::pending()) => {
+            r = lab::wire::run_on(&ctl_node, Some(trace), &args, lab::wire::RunConsole::default(), std::future::pending()) => {
                 panic!("the first run ended before it was killed: {r:?}");
             }
             () = killer => {}
@@ -265,9 +293,15 @@ async fn a_controller_killed_mid_session_resumes_without_losing_or_repeating_an_
         frames_before,
     };
     let budget = tokio::time::sleep(Duration::from_secs(200));
-    lab::wire::run_on(&ctl_node, Some(trace), &args, budget)
-        .await
-        .unwrap();
+    lab::wire::run_on(
+        &ctl_node,
+        Some(trace),
+        &args,
+        lab::wire::RunConsole::default(),
+        budget,
+    )
+    .await
+    .unwrap();
     let _ = sim.stop.send(());
     sim.task.await.unwrap().unwrap();
 
@@ -386,5 +420,80 @@ fn the_key_file_is_checked_before_the_bus_is_touched() {
     assert!(
         e.contains("short.key") && e.contains("32 hexadecimal digits") && e.contains("has 30"),
         "{e}"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_operator_keys_at_a_terminal_estop_reset_and_stop_the_run() {
+    use firmware_bridge::messages::Activity;
+    use nix::sys::termios::{LocalFlags, tcgetattr};
+    use std::io::Write as _;
+
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let time_scale = TimeScale::new(2.0).unwrap();
+    let sim = simulator(&out, time_scale).await;
+    let (ctl_node, trace) = recorded_controller(&sim, &out);
+    let args = planned_run(&sim, 3, time_scale, &out);
+    // The operator's terminal: `run` reads the pty's slave end, the test types on the master.
+    let pty = nix::pty::openpty(None, None).unwrap();
+    let terminal = std::fs::File::from(pty.slave.try_clone().unwrap());
+    let mut keyboard = std::fs::File::from(pty.master);
+    let cooked = tcgetattr(&pty.slave).unwrap().local_flags;
+    assert!(cooked.contains(LocalFlags::ICANON | LocalFlags::ECHO));
+    let console = lab::wire::RunConsole {
+        keys: Some(terminal),
+        session_log: false,
+    };
+    let slave = pty.slave;
+    let operator = async {
+        // Into the session (armed, the first action under way), then the keys.
+        tokio::time::sleep(Duration::from_secs(6)).await;
+        let during = tcgetattr(&slave).unwrap().local_flags;
+        assert!(
+            !during.intersects(LocalFlags::ICANON | LocalFlags::ECHO),
+            "{during:?}"
+        );
+        keyboard.write_all(b" ").unwrap();
+        tokio::time::sleep(Duration::from_secs(2)).await;
+        keyboard.write_all(b"r").unwrap();
+        tokio::time::sleep(Duration::from_secs(1)).await;
+        keyboard.write_all(b"S").unwrap();
+        std::future::pending::<()>().await;
+    };
+    let budget = tokio::time::sleep(Duration::from_secs(240));
+    let shutdown = async {
+        tokio::select! {
+            () = operator => {}
+            () = budget => {}
+        }
+    };
+    lab::wire::run_on(&ctl_node, Some(trace), &args, console, shutdown)
+        .await
+        .unwrap();
+    let _ = sim.stop.send(());
+    sim.task.await.unwrap().unwrap();
+
+    // The terminal as it was.
+    assert_eq!(tcgetattr(&slave).unwrap().local_flags, cooked);
+    let s: DemoSummary =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(s.end, "operator stop", "{s:?}");
+    assert!(s.totals.digs < 3, "{:?}", s.totals);
+    assert_eq!(
+        s.trace_clock,
+        Some(firmware_bridge::transport::TraceClock::WallAtRead)
+    );
+    // The e-stop is in the trace (fault code 5), and the run went on after the reset.
+    let statuses = controller_statuses(&out.join("trace.log"));
+    let estop = statuses
+        .iter()
+        .position(|s| s.activity == Activity::Faulted && s.fault_reason == 5)
+        .expect("no e-stop in the trace");
+    assert!(
+        statuses[estop..]
+            .iter()
+            .any(|s| !matches!(s.activity, Activity::Faulted | Activity::Idle)),
+        "no activity after the reset"
     );
 }

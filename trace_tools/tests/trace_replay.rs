@@ -6,7 +6,7 @@
 use std::sync::Mutex;
 
 use firmware_bridge::frame::CanFrame;
-use firmware_bridge::transport::{Bus, Result, TimestampedFrame};
+use firmware_bridge::transport::{Bus, Result, TimestampedFrame, TraceClock};
 use tokio::time::{Duration, Instant};
 use trace_tools::replay::{self, ReplayClock, ReplayOptions};
 use trace_tools::synth::{self, SynthConfig};
@@ -47,6 +47,10 @@ impl Bus for RecordingBus {
 
     fn interface(&self) -> &str {
         "recording"
+    }
+
+    fn trace_clock(&self) -> TraceClock {
+        TraceClock::WallAtRead
     }
 }
 

@@ -5,7 +5,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 
 use tokio::sync::Notify;
 
-use super::{Bus, BusFault, Clock, Error, Result, TimestampedFrame, VirtualClock};
+use super::{Bus, BusFault, Clock, Error, Result, TimestampedFrame, TraceClock, VirtualClock};
 use crate::frame::CanFrame;
 use crate::trace::{Direction, Recorder};
 
@@ -335,6 +335,13 @@ impl Bus for InProcessNode {
 
     fn interface(&self) -> &str {
         &self.shared.name
+    }
+
+    fn trace_clock(&self) -> TraceClock {
+        match self.shared.clock {
+            Clock::Wall => TraceClock::WallAtRead,
+            Clock::Virtual(_) => TraceClock::Virtual,
+        }
     }
 }
 

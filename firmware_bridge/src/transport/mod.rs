@@ -1,7 +1,9 @@
 //! How frames travel: the async [`Bus`] trait and its implementations.
 //!
 //! - [`SocketCanBus`]: a Linux SocketCAN interface (`vcan0`, `can0`) through the `socketcan` crate's
-//!   tokio socket. Timestamps are wall-clock nanoseconds since the Unix epoch.
+//!   tokio socket. Timestamps are wall-clock nanoseconds since the Unix epoch: the kernel's receive
+//!   timestamp (`SO_TIMESTAMPNS`) where the socket delivers one, else the time the frame was read
+//!   ([`TraceClock`]).
 //! - [`InProcessBus`]: a broadcast medium inside one process with the same semantics (every attached
 //!   node sees every frame the others send, in order, never its own), timestamped from a [`Clock`] that
 //!   is either the wall clock or a [`VirtualClock`] set by the simulation. Besides the async [`Bus`]
@@ -198,6 +200,35 @@ pub trait Bus: Send + Sync {
 
     /// The interface name used in traces (`vcan0`, `can0`, or the in-process bus's name).
     fn interface(&self) -> &str;
+
+    /// What stamps the received frames (recorded with a session so a reader knows what the trace's
+    /// timestamps mean).
+    fn trace_clock(&self) -> TraceClock;
+}
+
+/// What stamped the frames of a trace (`trace_clock` in a session's `summary.json`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TraceClock {
+    /// The kernel's receive timestamp of the socket (`SO_TIMESTAMPNS`, wall clock since the Unix
+    /// epoch): the time the frame reached the host, not when the program got to read it.
+    Kernel,
+    /// The wall clock (since the Unix epoch) when the program read the frame: the socket delivered
+    /// no kernel timestamp.
+    WallAtRead,
+    /// A simulation's virtual clock, offset by a fixed epoch (`demo`; docs/demo-output.md).
+    Virtual,
+}
+
+impl TraceClock {
+    /// The name in `summary.json`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Kernel => "kernel",
+            Self::WallAtRead => "wall_at_read",
+            Self::Virtual => "virtual",
+        }
+    }
 }
 
 #[cfg(test)]

@@ -2,7 +2,9 @@
 //!
 //! Classic CAN only (the protocol is classic CAN at 500 kbit/s): CAN FD and error frames cannot be
 //! sent. Error frames are enabled on the socket and come back from `recv` as [`Error::Fault`].
-//! Received frames are timestamped with the wall clock when read.
+//! Received frames carry the kernel's receive timestamp (`SO_TIMESTAMPNS`, wall clock since the Unix
+//! epoch), asked for when the socket opens; where the kernel refuses the option or a frame comes
+//! without one, the wall clock when the frame was read ([`TraceClock`]).
 
 use std::future::Future;
 use std::io;
@@ -11,7 +13,7 @@ use std::time::Duration;
 use socketcan::{EmbeddedFrame, ExtendedId, Frame as _, SocketOptions, StandardId};
 
 use super::clock::wall_now_ns;
-use super::{Bus, BusFault, Error, Result, TimestampedFrame};
+use super::{Bus, BusFault, Error, Result, TimestampedFrame, TraceClock};
 use crate::frame::{CAN_MAX_LEN, CanFrame, CanId};
 use crate::trace::{Direction, Recorder};
 
@@ -121,6 +123,8 @@ pub struct SocketCanBus {
     iface: String,
     retry: SendRetry,
     recorder: Option<Recorder>,
+    /// The kernel accepted `SO_TIMESTAMPNS`.
+    kernel_stamps: bool,
 }
 
 fn map_open_error(iface: &str, e: io::Error) -> Error {
@@ -174,11 +178,24 @@ impl SocketCanBus {
             socket.set_filters(&f).map_err(io_err)?;
         }
         socket.set_error_filter_accept_all().map_err(io_err)?;
+        // The kernel's receive time: a frame's age then includes the time it waited in the socket.
+        let kernel_stamps = match socket.set_recv_timestamp(true) {
+            Ok(()) => true,
+            Err(e) => {
+                tracing::warn!(
+                    iface,
+                    error = %e,
+                    "no kernel receive timestamps (SO_TIMESTAMPNS): frames are stamped when read"
+                );
+                false
+            }
+        };
         Ok(Self {
             socket,
             iface: iface.to_string(),
             retry: SendRetry::default(),
             recorder: None,
+            kernel_stamps,
         })
     }
 
@@ -254,11 +271,18 @@ impl Bus for SocketCanBus {
     }
 
     async fn recv(&self) -> Result<TimestampedFrame> {
-        let raw = self.socket.read_frame().await.map_err(|source| Error::Io {
-            iface: self.iface.clone(),
-            source,
-        })?;
-        let timestamp_ns = wall_now_ns();
+        let (raw, stamps) = self
+            .socket
+            .read_frame_with_timestamps()
+            .await
+            .map_err(|source| Error::Io {
+                iface: self.iface.clone(),
+                source,
+            })?;
+        let timestamp_ns = stamps
+            .socket
+            .and_then(|t| epoch_ns(t).ok())
+            .unwrap_or_else(wall_now_ns);
         if let (Some(rec), socketcan::CanFrame::Error(e)) = (&self.recorder, &raw) {
             let mut details = [0u8; CAN_MAX_LEN];
             let n = e.data().len().min(CAN_MAX_LEN);
@@ -284,6 +308,20 @@ impl Bus for SocketCanBus {
     fn interface(&self) -> &str {
         &self.iface
     }
+
+    fn trace_clock(&self) -> TraceClock {
+        if self.kernel_stamps {
+            TraceClock::Kernel
+        } else {
+            TraceClock::WallAtRead
+        }
+    }
+}
+
+/// Nanoseconds since the Unix epoch of a kernel timestamp.
+fn epoch_ns(t: std::time::SystemTime) -> std::result::Result<u64, std::time::SystemTimeError> {
+    t.duration_since(std::time::UNIX_EPOCH)
+        .map(|d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
 }
 
 #[cfg(test)]
