@@ -186,14 +186,58 @@ fn status_of(node: &ControllerNode, malformed_requests: u64) -> Status {
 /// A queued request and where its reply goes.
 type Queued = (Request, oneshot::Sender<Response>);
 
-/// The control loop's end of the socket (module docs).
+/// The control loop's end of the operator's requests (module docs): the control socket's, and those
+/// of every [`OperatorSender`] (an in-process client such as the live view's operator page).
 #[derive(Debug)]
 pub struct OperatorPort {
     rx: mpsc::Receiver<Queued>,
+    tx: mpsc::Sender<Queued>,
     malformed: Arc<AtomicU64>,
 }
 
+/// An in-process client of an [`OperatorPort`]: requests go through the same bounded queue as the
+/// control socket's and are applied by the control loop the same way.
+#[derive(Debug, Clone)]
+pub struct OperatorSender {
+    tx: mpsc::Sender<Queued>,
+}
+
+impl OperatorSender {
+    /// Hands `req` to the control loop and waits (in the caller's task, not in the loop) for the
+    /// reply: an error reply when the queue is full or the loop does not answer within
+    /// [`REPLY_TIMEOUT`]. Needs a tokio runtime with time enabled.
+    pub async fn send(&self, req: Request) -> Response {
+        forward(&self.tx, req).await
+    }
+}
+
+impl Default for OperatorPort {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl OperatorPort {
+    /// A port without a socket: requests come from its [`OperatorSender`]s only ([`listen`] adds
+    /// the socket).
+    #[must_use]
+    pub fn new() -> Self {
+        let (tx, rx) = mpsc::channel(QUEUE);
+        Self {
+            rx,
+            tx,
+            malformed: Arc::new(AtomicU64::new(0)),
+        }
+    }
+
+    /// A client of this port in the same process.
+    #[must_use]
+    pub fn sender(&self) -> OperatorSender {
+        OperatorSender {
+            tx: self.tx.clone(),
+        }
+    }
+
     /// Applies the queued requests (at most [`MAX_REQUESTS_PER_TICK`], never waiting) to `node`
     /// at `now_s` and answers them. Returns the commands applied.
     pub fn serve(&mut self, node: &mut ControllerNode, now_s: f64) -> usize {
@@ -242,10 +286,13 @@ pub fn listen(path: &Path) -> std::io::Result<(OperatorPort, tokio::task::JoinHa
         std::fs::remove_file(path)?;
     }
     let listener = UnixListener::bind(path)?;
-    let (tx, rx) = mpsc::channel(QUEUE);
-    let malformed = Arc::new(AtomicU64::new(0));
-    let task = tokio::spawn(accept(listener, tx, Arc::clone(&malformed)));
-    Ok((OperatorPort { rx, malformed }, task))
+    let port = OperatorPort::new();
+    let task = tokio::spawn(accept(
+        listener,
+        port.tx.clone(),
+        Arc::clone(&port.malformed),
+    ));
+    Ok((port, task))
 }
 
 /// Accepts connections, at most [`MAX_CONNECTIONS`] at once, until the [`OperatorPort`] is dropped.
