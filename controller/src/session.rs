@@ -42,7 +42,7 @@ pub trait ScanSource {
 /// Watches a session from the control loop (a live view, a recorder): called after every control
 /// step with the node and what the session driver reported for that step. It runs on the control
 /// loop, so it must return at once: hand the data to another thread and drop it when that thread is
-/// behind, never wait. `demo` calls it; `run` can call it at the same point of its loop.
+/// behind, never wait. `demo` and `run` call it at the same point of their loops.
 pub trait SessionObserver {
     /// After the control step at `time_s` and the driver's [`SessionDriver::after_step`] (its
     /// `events`); `session` is the planned session when the planner drives (its terrain map).
@@ -57,6 +57,13 @@ pub trait SessionObserver {
     /// The session ended at `time_s` because of `reason`.
     fn finished(&mut self, time_s: f64, reason: &str) {
         let _ = (time_s, reason);
+    }
+
+    /// The session takes operator commands (pause, resume, e-stop, reset, stop) from `sender`, the
+    /// control loop's [`crate::operator::OperatorPort`]: an observer that offers them (the live
+    /// view's operator page) keeps it. Called once, before the first step.
+    fn operator_control(&mut self, sender: crate::operator::OperatorSender) {
+        let _ = sender;
     }
 }
 

@@ -16,8 +16,9 @@ pub struct Cli {
 pub enum Command {
     /// Run on a CAN interface in real time (SocketCAN): the planned session of `demo`, the
     /// predefined sequence or the config's plan (--strategy); Ctrl-C leaves the valves neutral and
-    /// the gateway disarmed; --out writes the session folder as `demo` does.
-    Run(lab::wire::RunArgs),
+    /// the gateway disarmed; --out writes the session folder as `demo` does; --live serves it to
+    /// Foxglove and the operator page (docs/live-view.md).
+    Run(RunCmd),
     /// Operator control of a running `run` over its control socket: status, pause, resume, estop,
     /// reset, stop (docs/controller.md).
     Ctl(lab::wire::CtlArgs),
@@ -54,6 +55,17 @@ pub struct DemoCmd {
     /// The session.
     #[command(flatten)]
     pub session: lab::demo::DemoArgs,
+    /// The live view.
+    #[command(flatten)]
+    pub live: live::LiveArgs,
+}
+
+/// Arguments of `excavator-ctl run`: the session's and the live view's.
+#[derive(Debug, Args)]
+pub struct RunCmd {
+    /// The session.
+    #[command(flatten)]
+    pub run: lab::wire::RunArgs,
     /// The live view.
     #[command(flatten)]
     pub live: live::LiveArgs,
@@ -104,9 +116,10 @@ mod tests {
             "4",
         ])
         .unwrap();
-        let Command::Run(o) = cli.command else {
+        let Command::Run(RunCmd { run: o, live }) = cli.command else {
             panic!("not run")
         };
+        assert_eq!(live.live, None);
         assert_eq!(o.iface, "vcan0");
         assert!(o.listen_only);
         assert_eq!(o.digs, Some(3));

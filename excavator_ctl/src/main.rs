@@ -7,23 +7,53 @@ mod cli;
 
 use cli::{Cli, Command};
 
-/// `demo`, with the live view when `--live` is given (started outside the runtime: it has its own).
-fn demo(runtime: &tokio::runtime::Runtime, cmd: cli::DemoCmd) -> anyhow::Result<()> {
+/// Starts the live view of `args` for a session of `machine` (outside the runtime: it has its own)
+/// and prints where to watch it on stderr (with port 0, this is how a client learns the ports).
+fn start_live(
+    args: &live::LiveArgs,
+    machine: &planner::machine::MachineConfig,
+) -> anyhow::Result<live::LiveStream> {
     use anyhow::Context as _;
+    let stream = live::LiveStream::start(args, machine).context("--live")?;
+    let host = live::LiveAddr::parse(args.live.as_deref().unwrap_or(live::DEFAULT_ADDR))
+        .map(|a| a.host)
+        .unwrap_or_default();
+    eprintln!(
+        "live: serving the session on ws://{host}:{} (Foxglove: Open connection)",
+        stream.port()
+    );
+    eprintln!(
+        "live: operator page on http://{host}:{}/",
+        stream.page_port()
+    );
+    Ok(stream)
+}
+
+/// `demo`, with the live view when `--live` is given.
+fn demo(runtime: &tokio::runtime::Runtime, cmd: cli::DemoCmd) -> anyhow::Result<()> {
     if cmd.live.live.is_none() {
         return runtime.block_on(lab::demo::run(cmd.session));
     }
     let (sim, _, _) = lab::demo::setup(&cmd.session)?;
-    let stream = live::LiveStream::start(&cmd.live, &sim.machine).context("--live")?;
-    // The port on stderr: with port 0 this is how a client learns it.
-    eprintln!(
-        "live: serving the session on ws://{}:{} (Foxglove: Open connection)",
-        live::LiveAddr::parse(cmd.live.live.as_deref().unwrap_or(live::DEFAULT_ADDR))
-            .map(|a| a.host)
-            .unwrap_or_default(),
-        stream.port()
-    );
+    let stream = start_live(&cmd.live, &sim.machine)?;
     runtime.block_on(lab::demo::run_observed(cmd.session, Box::new(stream)))
+}
+
+/// `run`, with the live view when `--live` is given.
+fn run(runtime: &tokio::runtime::Runtime, cmd: cli::RunCmd) -> anyhow::Result<()> {
+    if cmd.live.live.is_none() {
+        return runtime.block_on(lab::wire::run(cmd.run));
+    }
+    anyhow::ensure!(
+        cmd.live.pace.is_none(),
+        "--pace paces demo's virtual time; run follows the bus in real time (--time-scale)"
+    );
+    let machine = lab::wire::machine(&cmd.run)?;
+    let mut stream = start_live(&cmd.live, &machine)?;
+    let result = runtime.block_on(lab::wire::run_observed(cmd.run, &mut stream));
+    // The stream's runtime ends here, outside the session's runtime.
+    drop(stream);
+    result
 }
 
 fn main() -> std::process::ExitCode {
@@ -56,7 +86,7 @@ fn main() -> std::process::ExitCode {
         }
     };
     let result = match cli.command {
-        Command::Run(args) => runtime.block_on(lab::wire::run(args)),
+        Command::Run(cmd) => run(&runtime, cmd),
         Command::Ctl(args) => runtime.block_on(lab::wire::ctl(args)),
         Command::Demo(cmd) => demo(&runtime, cmd),
         Command::Experiment(args) => lab::experiment::run(&args),

@@ -162,12 +162,18 @@ pub fn extract_raw(sig: &SignalDesc, data: &[u8]) -> Option<i64> {
     if len == 0 || len > 32 || start + len > data.len() * 8 {
         return None;
     }
-    let mut value: u64 = 0;
-    for i in 0..len {
-        let bit = start + i;
-        let b = (data[bit / 8] >> (bit % 8)) & 1;
-        value |= u64::from(b) << i;
-    }
+    // Intel (little-endian) bit numbering: the signal is bits `start..start + len` of the payload
+    // read as one little-endian word.
+    let value: u64 = if data.len() <= 8 {
+        let mut word = [0_u8; 8];
+        word[..data.len()].copy_from_slice(data);
+        (u64::from_le_bytes(word) >> start) & ((1_u64 << len) - 1)
+    } else {
+        (0..len).fold(0, |v, i| {
+            let bit = start + i;
+            v | (u64::from((data[bit / 8] >> (bit % 8)) & 1) << i)
+        })
+    };
     if sig.signed && (value >> (len - 1)) & 1 == 1 {
         Some(value as i64 - (1i64 << len))
     } else {
@@ -259,7 +265,14 @@ pub fn decode_physical(sig: &SignalDesc, data: &[u8]) -> Result<f64, DecodeError
 /// division of exact integers (3 * 0.4 -> 1.2, not 1.2000000000000002). That keeps decoding the same
 /// physical value from a coarse and a fine signal bit-identical.
 pub fn raw_to_physical(sig: &SignalDesc, raw: i64) -> f64 {
-    let scaled = match decimal_factor(sig.factor) {
+    raw_to_physical_with(sig, decimal_factor(sig.factor), raw)
+}
+
+/// [`raw_to_physical`] with the signal's [`decimal_factor`] already worked out (a decoder that
+/// keeps it per signal).
+#[must_use]
+pub fn raw_to_physical_with(sig: &SignalDesc, decimal: Option<(i64, i64)>, raw: i64) -> f64 {
+    let scaled = match decimal {
         Some((numerator, denominator))
             if (raw.unsigned_abs() as f64) * (numerator as f64) < 9.0e15 =>
         {
@@ -271,16 +284,20 @@ pub fn raw_to_physical(sig: &SignalDesc, raw: i64) -> f64 {
 }
 
 /// `factor` as `numerator / 10^k` (both exact integers in `f64`), if it has at most nine decimals.
-fn decimal_factor(factor: f64) -> Option<(i64, i64)> {
+#[must_use]
+pub fn decimal_factor(factor: f64) -> Option<(i64, i64)> {
     let mut denominator: i64 = 1;
     for _ in 0..=9 {
         let numerator = factor * denominator as f64;
-        let rounded = libm::round(numerator);
-        if rounded != 0.0
-            && (numerator - rounded).abs() <= 1e-9 * rounded.abs()
-            && rounded.abs() < 1e9
+        // The nearest integer, ties away from zero, as `f64::round` (a library call on baseline
+        // x86-64; this runs for every signal decoded) without the call: a saturating cast.
+        let half = if numerator < 0.0 { -0.5 } else { 0.5 };
+        let rounded = (numerator + half) as i64;
+        if rounded != 0
+            && (numerator - rounded as f64).abs() <= 1e-9 * (rounded as f64).abs()
+            && rounded.unsigned_abs() < 1_000_000_000
         {
-            return Some((rounded as i64, denominator));
+            return Some((rounded, denominator));
         }
         denominator *= 10;
     }

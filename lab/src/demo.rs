@@ -880,6 +880,10 @@ pub fn run_session_observed(
     let budget_s = SIM_BUDGET_PER_DIG_S * f64::from(args.digs.max(1));
     let mut result: anyhow::Result<()> = Ok(());
     let mut snapshots: Vec<BenchSnapshot> = Vec::new();
+    // Operator commands in-process (the live view's page): applied between two steps, as `run`
+    // applies those of its control socket before a step.
+    let mut operator = controller::operator::OperatorPort::new();
+    observer.operator_control(operator.sender());
     let finished = |h: &Harness| h.node().is_none_or(ControllerNode::finished);
     while !finished(&h) && h.time_s() < budget_s && !stop.load(Ordering::Relaxed) {
         let frames = match h.step() {
@@ -904,6 +908,7 @@ pub fn run_session_observed(
             .after_step(node, &mut SimScans::new(machine))?
             .to_vec();
         observer.after_step(time_s, node, driver.session(), &events);
+        operator.serve(node, time_s);
         if steps.is_multiple_of(PROGRESS_EVERY_STEPS) {
             crate::console::update(progress.as_ref(), log.records.len(), node, driver.backups());
         }

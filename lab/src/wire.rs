@@ -32,7 +32,7 @@ use controller::run::{
     CONTROL_PERIOD, LoopSession, StopReason, run_session_loop, scan_client_config,
 };
 use controller::scan_client::{NoScans, ScanClient, ScanService};
-use controller::session::{ScanSource, SessionDriver, SessionEvent};
+use controller::session::{NoObserver, ScanSource, SessionDriver, SessionEvent, SessionObserver};
 use controller::session_state::{SessionIdentity, fingerprint};
 use controller::state_file::StateFileError;
 use firmware_bridge::trace::Recorder;
@@ -228,12 +228,7 @@ pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, R
     if args.scan_addr.is_none() {
         config.cycle.scan = false;
     }
-    let machine = match args.strategy {
-        DemoStrategy::Fixed => {
-            MachineConfig::load_or_default(args.machine.as_deref()).context("machine file")?
-        }
-        _ => sim.machine.clone(),
-    };
+    let machine = machine_of(args, &sim)?;
     let full_bucket_n = machine.bucket.capacity_m3
         * sim.scenario.soil.density_kg_per_m3
         * planner::machine::GRAVITY_M_PER_S2;
@@ -265,6 +260,26 @@ pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, R
         identity,
     };
     Ok((node, driver, setup))
+}
+
+/// The machine a run of `args` controls.
+///
+/// # Errors
+/// An unreadable or invalid machine or bench file.
+pub fn machine(args: &RunArgs) -> anyhow::Result<MachineConfig> {
+    let (sim, _, _) = demo::setup(&args.demo_args())?;
+    machine_of(args, &sim)
+}
+
+/// The machine of `args` with the simulator configuration `sim` of its bench: the fixed plan's is
+/// the machine file's, the planned and predefined strategies' the bench's.
+fn machine_of(args: &RunArgs, sim: &SimConfig) -> anyhow::Result<MachineConfig> {
+    Ok(match args.strategy {
+        DemoStrategy::Fixed => {
+            MachineConfig::load_or_default(args.machine.as_deref()).context("machine file")?
+        }
+        _ => sim.machine.clone(),
+    })
 }
 
 /// What a saved session of `strategy` on `machine` and `sim`'s bench with `config`, `planner` and
@@ -320,6 +335,15 @@ pub struct SessionTrace {
 /// # Errors
 /// Configuration, interface, bus, scan and file errors.
 pub async fn run(args: RunArgs) -> anyhow::Result<()> {
+    run_observed(args, &mut NoObserver).await
+}
+
+/// As [`run`], with `observer` watching every control step (the live view) and offered the
+/// operator control path.
+///
+/// # Errors
+/// As [`run`].
+pub async fn run_observed(args: RunArgs, observer: &mut dyn SessionObserver) -> anyhow::Result<()> {
     let mut bus = SocketCanBus::open(&args.iface)
         .with_context(|| format!("opening CAN interface {}", args.iface))?;
     let trace = match trace_path(&args)? {
@@ -338,12 +362,13 @@ pub async fn run(args: RunArgs) -> anyhow::Result<()> {
         keys: operator_terminal(),
         session_log: true,
     };
-    run_on(
+    run_on_observed(
         &bus,
         trace,
         &args,
         console,
         controller::run::shutdown_signal(),
+        observer,
     )
     .await
 }
@@ -398,6 +423,23 @@ pub async fn run_on<B: Bus>(
     args: &RunArgs,
     console: RunConsole,
     shutdown: impl std::future::Future<Output = ()>,
+) -> anyhow::Result<()> {
+    run_on_observed(bus, trace, args, console, shutdown, &mut NoObserver).await
+}
+
+/// As [`run_on`], with `observer` called after every control step (at the session time of the
+/// step) and at the end, and offered the operator control path (the control socket's port, or a
+/// port of its own without a socket).
+///
+/// # Errors
+/// As [`run_on`].
+pub async fn run_on_observed<B: Bus>(
+    bus: &B,
+    trace: Option<SessionTrace>,
+    args: &RunArgs,
+    console: RunConsole,
+    shutdown: impl std::future::Future<Output = ()>,
+    live: &mut dyn SessionObserver,
 ) -> anyhow::Result<()> {
     let wall = Instant::now();
     let (mut node, mut driver, setup) = build(args)?;
@@ -504,10 +546,12 @@ pub async fn run_on<B: Bus>(
         },
         None => None,
     };
+    live.operator_control(operator.sender());
     let mut steps = 0_u64;
     let progress = crate::console::session_bar(args.digs, false);
     let mut observer = |node: &ControllerNode, driver: &SessionDriver, events: &[SessionEvent]| {
         steps += 1;
+        live.after_step(session_s(steps), node, driver.session(), events);
         if steps.is_multiple_of(PROGRESS_EVERY_STEPS) {
             crate::console::update(progress.as_ref(), log.records.len(), node, driver.backups());
         }
@@ -580,6 +624,14 @@ pub async fn run_on<B: Bus>(
         }
         None => firmware_bridge::trace::RecorderStats::default(),
     };
+    live.finished(
+        session_s(steps),
+        match &result {
+            Ok((StopReason::Signal, _)) => "stopped",
+            Ok((StopReason::Finished, _)) => "finished",
+            Err(_) => "error",
+        },
+    );
     let (reason, stats) = result?;
     tracing::info!(
         ?reason,

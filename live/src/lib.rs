@@ -11,6 +11,9 @@
 //!   full) and paces virtual time when asked; a publisher thread turns the queue into Foxglove
 //!   messages ([`trace_tools::view`], the schemas `trace convert --to mcap` writes too) on the
 //!   server's channels.
+//! - [`page`]: the operator page (static assets in `live/page/`), served over HTTP on the port after
+//!   the WebSocket's: the publisher keeps its state, the page follows it as server-sent events and
+//!   sends the operator commands of the session's control path (`SessionObserver::operator_control`).
 //!
 //! # Data flow
 //!
@@ -18,8 +21,11 @@
 //! control loop --SessionObserver::after_step--> Update (MachineState, status, command, events)
 //!     --bounded queue (try_send; full: dropped, counted)--> publisher thread --view::*--> channels
 //!     --foxglove WebSocket server (its own runtime, per-client backlog)--> Foxglove
+//!                   \--page state (at most 10 Hz)--> HTTP server (same runtime) --SSE--> the page
+//! the page --POST /command--> controller::operator::OperatorSender --> the control loop's port
 //! ```
 
+pub mod page;
 pub mod stream;
 
 pub use stream::{LiveStats, LiveStream};
@@ -50,6 +56,18 @@ pub enum LiveError {
         /// Why.
         #[source]
         source: foxglove::FoxgloveError,
+    },
+    /// The operator page's port (the WebSocket's + 1) does not exist.
+    #[error("--live port {0}: the operator page needs the next port; pick a lower one")]
+    PagePort(u16),
+    /// The operator page's server could not bind.
+    #[error("starting the operator page on {addr}: {source}")]
+    Page {
+        /// The address.
+        addr: String,
+        /// Why.
+        #[source]
+        source: std::io::Error,
     },
     /// The server's runtime or the publisher thread could not start.
     #[error("starting the live view: {0}")]

@@ -2,9 +2,9 @@
 //! (crate docs for the data flow).
 
 use std::collections::BTreeMap;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, TryRecvError, TrySendError};
+use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
 use foxglove::messages::{FrameTransforms, Grid, Log, SceneEntity, SceneUpdate, log::Level};
@@ -13,15 +13,18 @@ use planner::kinematics::{Kinematics, MachinePose};
 use planner::machine::MachineConfig;
 use planner::terrain::TerrainGrid;
 
+use controller::cycle::DigStats;
 use controller::cycle::{Action, CycleCommand, Phase};
 use controller::estimate::MachineState;
 use controller::node::ControllerNode;
+use controller::operator::OperatorSender;
 use controller::planned::PlannedSession;
 use controller::safety::{Fault, SafetyState};
 use controller::session::{SessionEvent, SessionObserver};
 use firmware_bridge::messages::ControllerStatus;
 use trace_tools::view;
 
+use crate::page::{App, PageFeed, PageStep, Snapshot};
 use crate::{LiveAddr, LiveArgs, LiveError};
 
 /// How often the publisher repeats what does not change every step (the terrain, the scene), wall
@@ -42,6 +45,9 @@ struct StepView {
     fault: Option<Fault>,
     fault_count: u64,
     command: CycleCommand,
+    action: Option<Action>,
+    paused: bool,
+    stopping: bool,
 }
 
 /// What the control loop hands to the publisher.
@@ -51,6 +57,14 @@ enum Update {
     Terrain(u64, Box<TerrainGrid>),
     Scene(u64, Vec<SceneEntity>),
     Log(u64, Level, String),
+    /// A dig finished (the page's last dig).
+    DigDone(Box<DigStats>),
+    /// The chosen dig's planned start in the world, m (the page's next dig).
+    NextDig([f64; 3]),
+    /// The page's commands reach a control loop.
+    OperatorControl,
+    /// The session ended, and why.
+    Finished(String),
 }
 
 /// Counts of a stream.
@@ -94,6 +108,7 @@ struct Publisher {
     scene: BTreeMap<String, SceneEntity>,
     terrain: Option<Grid>,
     last_time_ns: u64,
+    page: PageFeed,
 }
 
 impl Publisher {
@@ -109,6 +124,7 @@ impl Publisher {
                     Err(TryRecvError::Disconnected) => return,
                 }
             }
+            self.page.flush(false);
             if latched_at.elapsed() >= LATCH_EVERY {
                 self.republish_latched();
                 latched_at = Instant::now();
@@ -131,8 +147,11 @@ impl Publisher {
                 self.channels.tf.log_with_time(&tf, t);
                 self.channels.signals.log_with_time(&step_signals(&step), t);
                 self.count(2);
+                self.page
+                    .step(&page_step(&step), step.fault.map(|f| f.to_string()));
             }
             Update::Terrain(t, grid) => {
+                self.page.terrain(&grid);
                 let grid = view::terrain_grid(&grid, t);
                 self.channels.terrain.log_with_time(&grid, t);
                 self.terrain = Some(grid);
@@ -146,11 +165,16 @@ impl Publisher {
                 self.count(1);
             }
             Update::Log(t, level, text) => {
+                self.page.log(&format!("{:7.1} s  {text}", t as f64 * 1e-9));
                 self.channels
                     .log
                     .log_with_time(&view::log(t, level, text), t);
                 self.count(1);
             }
+            Update::DigDone(d) => self.page.dig_done(&d),
+            Update::NextDig(at) => self.page.next_dig(at),
+            Update::OperatorControl => self.page.set_operator(true),
+            Update::Finished(reason) => self.page.finished(&reason),
         }
     }
 
@@ -180,17 +204,43 @@ fn safety_name(s: SafetyState) -> &'static str {
     }
 }
 
-/// The `/signals` sample of a step: the estimate, the status the controller reports, its command.
-fn step_signals(step: &StepView) -> view::Signals {
-    let mut s = view::estimate_signals(&step.state);
-    view::apply_status(&mut s, &step.status);
-    let valves = match step.command {
+/// The page's view of a step.
+fn page_step(step: &StepView) -> PageStep {
+    let st = &step.state;
+    let tip = st
+        .pose
+        .world_from_base(st.swing_rad, st.tip.x_m, st.tip.z_m);
+    PageStep {
+        time_s: step.time_ns as f64 * 1e-9,
+        activity: step.status.activity,
+        stage: step.status.stage,
+        digs: step.status.dig_index,
+        safety: safety_name(step.safety),
+        fault_count: step.fault_count,
+        paused: step.paused,
+        stopping: step.stopping,
+        action: step.action,
+        pose: [st.pose.x_m, st.pose.y_m, st.pose.heading_rad],
+        tip_m: tip,
+        valves: valve_fractions(step.command),
+    }
+}
+
+/// The valve commands of `command` as fractions.
+fn valve_fractions(command: CycleCommand) -> [Option<f64>; 6] {
+    match command {
         CycleCommand::Neutral => [Some(0.0); 6],
         CycleCommand::Valves(v) => v.map(view::finite),
         // Position mode: the gateway's loops drive the valves.
         CycleCommand::Position(_) => [None; 6],
-    };
-    s.valve_command = view::ValveCommands::from_array(valves);
+    }
+}
+
+/// The `/signals` sample of a step: the estimate, the status the controller reports, its command.
+fn step_signals(step: &StepView) -> view::Signals {
+    let mut s = view::estimate_signals(&step.state);
+    view::apply_status(&mut s, &step.status);
+    s.valve_command = view::ValveCommands::from_array(valve_fractions(step.command));
     s.safety_state = Some(safety_name(step.safety).to_owned());
     s.fault = step.fault.map(|f| f.to_string());
     s.fault_count = Some(step.fault_count);
@@ -206,8 +256,11 @@ pub struct LiveStream {
     wall_start: Option<(Instant, f64)>,
     publisher: Option<std::thread::JoinHandle<()>>,
     server: Option<WebSocketServerHandle>,
+    page_server: Option<tokio::task::JoinHandle<()>>,
     runtime: Option<tokio::runtime::Runtime>,
     port: u16,
+    page_port: u16,
+    operator: Arc<OnceLock<OperatorSender>>,
     started: Instant,
     last_fault: Option<Fault>,
     scene_sent: bool,
@@ -221,6 +274,7 @@ impl std::fmt::Debug for LiveStream {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("LiveStream")
             .field("port", &self.port)
+            .field("page_port", &self.page_port)
             .field("pace", &self.pace)
             .field("stats", &self.stats)
             .finish_non_exhaustive()
@@ -270,6 +324,32 @@ impl LiveStream {
                 source,
             })?;
         let port = server.port();
+        // The operator page on the neighbouring port (any free one with port 0).
+        let page_port = if addr.port == 0 {
+            0
+        } else {
+            addr.port
+                .checked_add(1)
+                .ok_or(LiveError::PagePort(addr.port))?
+        };
+        let listener = runtime
+            .block_on(tokio::net::TcpListener::bind((
+                addr.host.as_str(),
+                page_port,
+            )))
+            .map_err(|source| LiveError::Page {
+                addr: format!("{}:{page_port}", addr.host),
+                source,
+            })?;
+        let page_port = listener.local_addr()?.port();
+        let (page_tx, page_rx) = tokio::sync::watch::channel(Snapshot::default());
+        let operator = Arc::new(OnceLock::new());
+        let app = crate::page::router(App::new(page_rx, Arc::clone(&operator)));
+        let page_server = runtime.spawn(async move {
+            if let Err(e) = axum::serve(listener, app).await {
+                tracing::error!(error = %e, "the operator page's server stopped");
+            }
+        });
         let stats = Arc::new(LiveStats::default());
         let (tx, rx) = std::sync::mpsc::sync_channel(args.live_queue);
         let publisher = Publisher {
@@ -279,6 +359,7 @@ impl LiveStream {
             scene: BTreeMap::new(),
             terrain: None,
             last_time_ns: 0,
+            page: PageFeed::new(page_tx, false),
         };
         let handle = std::thread::Builder::new()
             .name("live-publisher".into())
@@ -294,8 +375,11 @@ impl LiveStream {
             wall_start: None,
             publisher: Some(handle),
             server: Some(server),
+            page_server: Some(page_server),
             runtime: Some(runtime),
             port,
+            page_port,
+            operator,
             started: Instant::now(),
             last_fault: None,
             scene_sent: false,
@@ -309,6 +393,11 @@ impl LiveStream {
     /// The port the server listens on (the one asked for, or the one picked for port 0).
     pub fn port(&self) -> u16 {
         self.port
+    }
+
+    /// The port of the operator page (HTTP): the WebSocket's port + 1, or a free one with port 0.
+    pub fn page_port(&self) -> u16 {
+        self.page_port
     }
 
     /// The stream's counts.
@@ -383,6 +472,7 @@ impl LiveStream {
                     self.offer(Update::Log(t, Level::Info, text));
                     if let Some([r_m, z_m, _]) = planned.start {
                         let start = pose.world_from_base(swing_rad, r_m, z_m);
+                        self.offer(Update::NextDig(start));
                         self.offer(Update::Scene(
                             t,
                             vec![view::dig_entity([pose.x_m, pose.y_m], start, t)],
@@ -391,6 +481,7 @@ impl LiveStream {
                 }
                 SessionEvent::DigFinished { index, .. } => {
                     if let Some(d) = node.statistics().get(*index) {
+                        self.offer(Update::DigDone(Box::new(*d)));
                         self.offer(Update::Log(
                             t,
                             Level::Info,
@@ -412,6 +503,12 @@ impl LiveStream {
 }
 
 impl SessionObserver for LiveStream {
+    fn operator_control(&mut self, sender: OperatorSender) {
+        if self.operator.set(sender).is_ok() {
+            self.offer(Update::OperatorControl);
+        }
+    }
+
     fn after_step(
         &mut self,
         time_s: f64,
@@ -465,6 +562,9 @@ impl SessionObserver for LiveStream {
             fault,
             fault_count: node.safety().fault_count(),
             command: node.last_command(),
+            action: node.action().copied(),
+            paused: node.cycle().paused(),
+            stopping: node.cycle().stop_requested(),
         })));
         self.pace_to(time_s);
     }
@@ -475,6 +575,7 @@ impl SessionObserver for LiveStream {
             Level::Info,
             format!("session over: {reason}"),
         ));
+        self.offer(Update::Finished(reason.to_owned()));
         let wall_s = self.started.elapsed().as_secs_f64();
         let published = self.stats.published.load(Ordering::Relaxed);
         tracing::info!(
@@ -495,6 +596,9 @@ impl Drop for LiveStream {
             && h.join().is_err()
         {
             tracing::warn!("the live publisher thread panicked");
+        }
+        if let Some(page) = self.page_server.take() {
+            page.abort();
         }
         if let Some(server) = self.server.take() {
             drop(server.stop());

@@ -150,10 +150,7 @@ fn candump_trace_decodes_to_the_simulators_joint_angles() {
     );
     let project = decoded_joint_angles(&text).unwrap();
     // cantools with the DBC (once: importing it over 9p in the VM takes 15-20 s).
-    let dbc = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../gateway_core/excavator.dbc"
-    );
+    let dbc = concat!(env!("CARGO_MANIFEST_DIR"), "/../gateway_core/excavator.dbc");
     let text = decode_with(
         "python3",
         &["-m", "cantools", "decode", "--single-line", dbc],

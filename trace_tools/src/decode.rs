@@ -221,8 +221,10 @@ impl Decoder {
                 first = false;
                 out.push_str(sig.name);
                 out.push_str(": ");
-                let table = signals::value_table(msg_index, sig_index);
-                format_value_with(sig, table, signals::decode_signal(sig, data), out);
+                match dbc::decode_raw(sig, data) {
+                    Ok(raw) => signal_formats()[msg_index][sig_index].push(sig, raw, out),
+                    Err(_) => format_value(sig, signals::decode_signal(sig, data), out),
+                }
             }
             out.push(')');
         }
@@ -260,15 +262,107 @@ pub fn format_value(sig: &dbc::SignalDesc, value: SignalValue, out: &mut String)
     format_value_inner(sig, &name, value, out);
 }
 
-/// As [`format_value`] with the signal's value table already looked up.
-fn format_value_with(
-    sig: &dbc::SignalDesc,
-    table: Option<&[(i64, &'static str)]>,
-    value: SignalValue,
-    out: &mut String,
-) {
-    let name = |raw: i64| table.and_then(|t| t.iter().find(|(v, _)| *v == raw).map(|(_, n)| *n));
-    format_value_inner(sig, &name, value, out);
+/// How the in-range values of one signal print, worked out once per signal of the DBC (the decode
+/// hot path): its value table, and its physical value as an exact decimal of the raw value.
+#[derive(Debug, Clone, Copy)]
+struct SignalFormat {
+    table: Option<&'static [(i64, &'static str)]>,
+    /// The factor as `numerator / 10^k` ([`dbc::decimal_factor`]).
+    decimal: Option<(i64, i64)>,
+    /// `(numerator, offset_scaled, decimals)`: the physical value is `(raw * numerator +
+    /// offset_scaled) / 10^decimals` exactly, for factors and offsets of at most nine decimals.
+    exact: Option<(i64, i64, u32)>,
+}
+
+/// Decimal digits below which a decimal is the shortest representation of the `f64` nearest to
+/// it (what `{}` prints for that `f64`): 15 significant digits round-trip through `f64`.
+const EXACT_LIMIT: i64 = 1_000_000_000_000_000;
+
+fn signal_formats() -> &'static [Vec<SignalFormat>] {
+    static FORMATS: std::sync::OnceLock<Vec<Vec<SignalFormat>>> = std::sync::OnceLock::new();
+    FORMATS.get_or_init(|| {
+        dbc::MESSAGES
+            .iter()
+            .enumerate()
+            .map(|(m, desc)| {
+                desc.signals
+                    .iter()
+                    .enumerate()
+                    .map(|(i, sig)| SignalFormat {
+                        table: signals::value_table(m, i),
+                        decimal: dbc::decimal_factor(sig.factor),
+                        exact: dbc::decimal_factor(sig.factor).and_then(|(num, den)| {
+                            let off = sig.offset * den as f64;
+                            let decimals = den.ilog10();
+                            (off.round() == off && off.abs() < EXACT_LIMIT as f64)
+                                .then_some((num, off as i64, decimals))
+                        }),
+                    })
+                    .collect()
+            })
+            .collect()
+    })
+}
+
+impl SignalFormat {
+    /// Appends the in-range raw value `raw` of `sig` as [`format_value`] does: the enum name, or
+    /// the physical value and the unit, printed from integers when that gives the same text as
+    /// `{}` of the `f64` (module docs of [`dbc::raw_to_physical`]), with `{}` otherwise.
+    fn push(&self, sig: &dbc::SignalDesc, raw: i64, out: &mut String) {
+        if let Some(name) = self
+            .table
+            .and_then(|t| t.iter().find(|(v, _)| *v == raw).map(|(_, n)| *n))
+        {
+            out.push_str(name);
+            return;
+        }
+        let value = dbc::raw_to_physical_with(sig, self.decimal, raw);
+        let exact = self.exact.and_then(|(num, off, decimals)| {
+            let scaled = raw.checked_mul(num)?.checked_add(off)?;
+            let pow = 10_i64.pow(decimals);
+            // The decimal is the f64's shortest text when it has at most 15 digits and the f64 is
+            // the one nearest to it (one correctly rounded division of exact integers).
+            (scaled.abs() < EXACT_LIMIT && scaled as f64 / pow as f64 == value)
+                .then_some((scaled, pow, decimals))
+        });
+        match exact {
+            Some((scaled, pow, decimals)) => push_decimal(scaled, pow, decimals, out),
+            None => {
+                let _ = write!(out, "{value}");
+            }
+        }
+        if !sig.unit.is_empty() {
+            out.push(' ');
+            out.push_str(sig.unit);
+        }
+    }
+}
+
+/// Appends `scaled / pow` (`pow = 10^decimals`) as `{}` prints that decimal: no exponent, no
+/// trailing zeros.
+fn push_decimal(scaled: i64, pow: i64, decimals: u32, out: &mut String) {
+    let mut buf = itoa::Buffer::new();
+    if scaled < 0 {
+        out.push('-');
+    }
+    let abs = scaled.unsigned_abs();
+    let pow = pow.unsigned_abs();
+    out.push_str(buf.format(abs / pow));
+    let mut frac = abs % pow;
+    if frac == 0 {
+        return;
+    }
+    let mut digits = decimals;
+    while frac.is_multiple_of(10) {
+        frac /= 10;
+        digits -= 1;
+    }
+    out.push('.');
+    let text = buf.format(frac);
+    for _ in text.len()..digits as usize {
+        out.push('0');
+    }
+    out.push_str(text);
 }
 
 fn format_value_inner(
@@ -507,6 +601,43 @@ mod tests {
         assert!(line(controller, BOOM_HALF).is_some());
         assert!(DecodeFilter::new(&["Nope".into()], &[], None, None, None).is_err());
         assert!(DecodeFilter::new(&[], &["Nope".into()], None, None, None).is_err());
+    }
+
+    /// The integer printing of the hot path gives the text `{}` gives, for every signal of the DBC
+    /// over its whole raw range (sampled) and its ends.
+    #[test]
+    fn fast_value_text_is_the_display_text() {
+        for (m, desc) in dbc::MESSAGES.iter().enumerate() {
+            for (i, sig) in desc.signals.iter().enumerate() {
+                let span = (sig.raw_max - sig.raw_min).max(1);
+                let step = (span / 5000).max(1);
+                let raws = (sig.raw_min..=sig.raw_max)
+                    .step_by(usize::try_from(step).unwrap())
+                    .chain([sig.raw_max, sig.raw_max - 1, sig.raw_min + 1]);
+                for raw in raws.filter(|r| (sig.raw_min..=sig.raw_max).contains(r)) {
+                    let mut fast = String::new();
+                    signal_formats()[m][i].push(sig, raw, &mut fast);
+                    let mut reference = String::new();
+                    format_value(
+                        sig,
+                        SignalValue::Value(dbc::raw_to_physical(sig, raw)),
+                        &mut reference,
+                    );
+                    assert_eq!(fast, reference, "{}.{} raw {raw}", desc.name, sig.name);
+                }
+            }
+        }
+        for (scaled, pow, decimals, text) in [
+            (-5, 100, 2, "-0.05"),
+            (1360, 100, 2, "13.6"),
+            (8117, 100, 2, "81.17"),
+            (7, 1, 0, "7"),
+            (1_000_001, 1_000, 3, "1000.001"),
+        ] {
+            let mut out = String::new();
+            push_decimal(scaled, pow, decimals, &mut out);
+            assert_eq!(out, text);
+        }
     }
 
     #[test]

@@ -1,0 +1,149 @@
+// The operator page: follows the session's state (server-sent events from /events) and sends the
+// operator's commands (POST /command). Plain JavaScript, no build step.
+"use strict";
+
+const page = { state: null, terrain: null, updates: 0 };
+window.operatorPage = page;
+
+const $ = (id) => document.getElementById(id);
+const fmt = (x, digits, unit) => (x === null || x === undefined || !Number.isFinite(x)) ? "-" : `${x.toFixed(digits)}${unit}`;
+
+function describeAction(a) {
+  if (!a) return "none";
+  const parts = [a.kind];
+  if (a.swing_rad !== undefined) parts.push(`swing ${(a.swing_rad * 180 / Math.PI).toFixed(1)} deg`);
+  return parts.join(", ");
+}
+
+function showState(s) {
+  page.state = s;
+  page.updates += 1;
+  $("time").textContent = fmt(s.time_s, 1, " s");
+  $("safety").textContent = s.safety;
+  $("fault").textContent = s.fault || "none";
+  $("fault").className = s.fault ? "fault" : "";
+  $("fault-count").textContent = s.fault_count;
+  $("activity").textContent = s.activity;
+  $("stage").textContent = s.stage;
+  $("action").textContent = describeAction(s.action);
+  $("operator-state").textContent = [s.paused ? "paused" : "running", s.stopping ? "stopping after this action" : ""].filter(Boolean).join(", ");
+  $("valves").textContent = s.valves.map((v) => v === null ? "pos" : v.toFixed(2)).join("  ");
+  $("digs").textContent = s.digs;
+  const d = s.last_dig;
+  $("digs-done").textContent = d ? d.index + 1 : 0;
+  $("last-dig").textContent = d ? `#${d.index} (${d.action})` : "-";
+  $("last-weight").textContent = d ? fmt(d.weight_n === null ? null : d.weight_n / 1000, 2, " kN") : "-";
+  $("last-time").textContent = d ? fmt(d.time_s, 1, " s") : "-";
+  $("last-energy").textContent = d ? fmt(d.energy_kj, 1, " kJ") : "-";
+  $("last-volume").textContent = d ? fmt(d.swept_volume_m3, 2, " m³") : "-";
+  $("log").textContent = s.log.join("\n");
+  for (const b of document.querySelectorAll("button[data-cmd]")) b.disabled = !s.operator || !!s.session_over;
+  if (s.session_over) {
+    $("session-over").hidden = false;
+    $("session-over").textContent = `session over: ${s.session_over}`;
+  }
+  draw();
+}
+
+// Terrain colours: low blue, high brown; unknown cells dark.
+function colour(z, lo, hi) {
+  const t = hi > lo ? Math.min(1, Math.max(0, (z - lo) / (hi - lo))) : 0.5;
+  const r = Math.round(40 + 150 * t), g = Math.round(70 + 80 * t), b = Math.round(140 - 100 * t);
+  return `rgb(${r},${g},${b})`;
+}
+
+function draw() {
+  const canvas = $("map");
+  const ctx = canvas.getContext("2d");
+  ctx.clearRect(0, 0, canvas.width, canvas.height);
+  const t = page.terrain, s = page.state;
+  // The view: the terrain map's extent, or 20 m around the machine before the first map.
+  let x0, y0, w, h;
+  if (t) {
+    [x0, y0] = t.origin_m; w = t.nx * t.cell_m; h = t.ny * t.cell_m;
+  } else if (s) {
+    x0 = s.pose[0] - 10; y0 = s.pose[1] - 10; w = 20; h = 20;
+  } else {
+    return;
+  }
+  const scale = Math.min(canvas.width / w, canvas.height / h);
+  // World x to the right, y up.
+  const px = (x) => (x - x0) * scale;
+  const py = (y) => canvas.height - (y - y0) * scale;
+  if (t) {
+    const known = t.z_m.filter((z) => z !== null);
+    const lo = Math.min(...known), hi = Math.max(...known);
+    for (let j = 0; j < t.ny; j++) {
+      for (let i = 0; i < t.nx; i++) {
+        const z = t.z_m[j * t.nx + i];
+        ctx.fillStyle = z === null ? "#22272d" : colour(z, lo, hi);
+        ctx.fillRect(px(x0 + i * t.cell_m), py(y0 + (j + 1) * t.cell_m), Math.ceil(t.cell_m * scale), Math.ceil(t.cell_m * scale));
+      }
+    }
+  }
+  if (!s) return;
+  const dot = (p, r, c) => { ctx.beginPath(); ctx.arc(px(p[0]), py(p[1]), r, 0, 2 * Math.PI); ctx.fillStyle = c; ctx.fill(); };
+  if (s.next_dig_m) {
+    dot(s.next_dig_m, 8, "#3ddc84");
+  }
+  // The machine: a triangle along its heading.
+  const [x, y, hd] = s.pose;
+  const L = 2.5;
+  ctx.beginPath();
+  ctx.moveTo(px(x + L * Math.cos(hd)), py(y + L * Math.sin(hd)));
+  ctx.lineTo(px(x + 0.8 * L * Math.cos(hd + 2.5)), py(y + 0.8 * L * Math.sin(hd + 2.5)));
+  ctx.lineTo(px(x + 0.8 * L * Math.cos(hd - 2.5)), py(y + 0.8 * L * Math.sin(hd - 2.5)));
+  ctx.closePath();
+  ctx.fillStyle = "#f2c14e";
+  ctx.fill();
+  // The arm to the bucket tip.
+  ctx.beginPath();
+  ctx.moveTo(px(x), py(y));
+  ctx.lineTo(px(s.tip_m[0]), py(s.tip_m[1]));
+  ctx.strokeStyle = "#ff8c42";
+  ctx.lineWidth = 3;
+  ctx.stroke();
+  dot(s.tip_m, 5, "#ff8c42");
+}
+
+async function send(cmd) {
+  $("command-result").textContent = `${cmd}: sent`;
+  try {
+    const r = await fetch("command", {
+      method: "POST",
+      headers: { "Content-Type": "application/json" },
+      body: JSON.stringify({ cmd }),
+    });
+    const reply = await r.json();
+    const st = reply.status;
+    $("command-result").textContent = reply.ok
+      ? `${cmd}: done (phase ${st ? st.phase : "?"}, fault ${st && st.fault ? st.fault : "none"}${st && st.paused ? ", paused" : ""})`
+      : `${cmd}: refused: ${reply.error}`;
+  } catch (e) {
+    $("command-result").textContent = `${cmd}: failed: ${e}`;
+  }
+}
+
+function connect() {
+  const events = new EventSource("events");
+  events.addEventListener("open", () => {
+    $("connection").textContent = "live";
+    $("connection").className = "badge on";
+  });
+  events.addEventListener("error", () => {
+    $("connection").textContent = "disconnected (retrying)";
+    $("connection").className = "badge off";
+  });
+  events.addEventListener("state", (e) => showState(JSON.parse(e.data)));
+  events.addEventListener("terrain", (e) => {
+    page.terrain = JSON.parse(e.data);
+    const t = page.terrain;
+    $("terrain-info").textContent = `${t.nx} x ${t.ny} cells of ${t.cell_m} m`;
+    draw();
+  });
+}
+
+for (const b of document.querySelectorAll("button[data-cmd]")) {
+  b.addEventListener("click", () => send(b.dataset.cmd));
+}
+connect();

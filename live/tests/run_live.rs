@@ -1,0 +1,190 @@
+//! `excavator-ctl run --live`: the run loop ([`lab::wire::run_on_observed`]) over the in-process
+//! bus on the wall clock, against the simulator's real-time loop, with the live view observing it.
+//! The operator page's event stream follows the session, and its e-stop (an HTTP POST, as the
+//! page's button sends) goes through the run loop's operator port: the controller faults with the
+//! e-stop and commands neutral valves.
+
+#![allow(clippy::unwrap_used)]
+
+use std::time::Duration;
+
+use firmware_bridge::transport::{InProcessBus, TimeScale};
+use lab::demo::{DemoArgs, DemoStrategy};
+use lab::wire::RunArgs;
+use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
+use vcan_sim::node::MachineNode;
+use vcan_sim::realtime::RealtimeOptions;
+
+/// Reads the page's event stream at `addr` until a `state` event satisfies `done`; returns it.
+async fn wait_for_state(
+    addr: &str,
+    done: impl Fn(&serde_json::Value) -> bool,
+) -> serde_json::Value {
+    let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
+    s.write_all(format!("GET /events HTTP/1.1\r\nHost: {addr}\r\n\r\n").as_bytes())
+        .await
+        .unwrap();
+    let mut text = String::new();
+    let mut buf = vec![0_u8; 64 * 1024];
+    loop {
+        let n = s.read(&mut buf).await.unwrap();
+        assert!(n > 0, "the event stream ended: {text}");
+        text.push_str(&String::from_utf8_lossy(&buf[..n]));
+        // Events are `event: state\ndata: {...}\n\n`; keep the unfinished tail.
+        while let Some(end) = text.find("\n\n") {
+            let event: String = text.drain(..end + 2).collect();
+            if let Some(at) = event.find("event: state\ndata: ") {
+                let data = event[at + "event: state\ndata: ".len()..].trim();
+                let state: serde_json::Value = serde_json::from_str(data).unwrap();
+                if done(&state) {
+                    return state;
+                }
+            }
+        }
+    }
+}
+
+/// POSTs `body` to the page's `/command` at `addr`; returns the status code and the reply.
+async fn post_command(addr: &str, body: &str) -> (u16, serde_json::Value) {
+    let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
+    let request = format!(
+        "POST /command HTTP/1.1\r\nHost: {addr}\r\nOrigin: http://{addr}\r\n\
+         Content-Type: application/json\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+        body.len()
+    );
+    s.write_all(request.as_bytes()).await.unwrap();
+    let mut text = String::new();
+    s.read_to_string(&mut text).await.unwrap();
+    let code = text[9..12].parse().unwrap();
+    let reply = text.split("\r\n\r\n").nth(1).unwrap_or_default();
+    (code, serde_json::from_str(reply).unwrap())
+}
+
+#[test]
+fn run_serves_the_page_and_its_estop_reaches_the_run_loop() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut demo_args = DemoArgs::new(dir.path().join("sim"));
+    demo_args.strategy = DemoStrategy::Fixed;
+    let (sim, _, _) = lab::demo::setup(&demo_args).unwrap();
+    // The safety timing of a loaded test machine (as lab's wire tests): the plumbing is under test.
+    let safety = dir.path().join("safety.toml");
+    std::fs::write(
+        &safety,
+        "[safety]\nsensor_max_age_s = 0.1\nstatus_max_age_s = 0.6\narm_timeout_s = 2.0\n\
+         max_auto_rearms = 1000\n",
+    )
+    .unwrap();
+    let time_scale = TimeScale::new(2.0).unwrap();
+    let args = RunArgs {
+        iface: "vcan0".into(),
+        listen_only: false,
+        machine: None,
+        maps: None,
+        config: Some(safety),
+        key_file: None,
+        trace: None,
+        digs: Some(1),
+        scan_addr: None,
+        strategy: DemoStrategy::Fixed,
+        bench: None,
+        seed: None,
+        planner: None,
+        hardness: None,
+        time_scale,
+        out: None,
+        resume: None,
+        control_socket: None,
+    };
+    // The live view has its own runtime: started outside the session's.
+    let mut stream = live::LiveStream::start(
+        &live::LiveArgs {
+            live: Some("127.0.0.1:0".into()),
+            pace: None,
+            live_queue: live::DEFAULT_QUEUE,
+        },
+        &lab::wire::machine(&args).unwrap(),
+    )
+    .unwrap();
+    let page = format!("127.0.0.1:{}", stream.page_port());
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .unwrap();
+    let (moving, after) = runtime.block_on(async {
+        let bus = InProcessBus::with_wall_clock("vcan0");
+        let sim_node = bus.attach();
+        let ctl_node = bus.attach();
+        let (sim_stop, sim_stopped) = tokio::sync::oneshot::channel::<()>();
+        let machine = MachineNode::new(sim.build().unwrap());
+        let options = RealtimeOptions {
+            iface: "vcan0".into(),
+            state_log: None,
+            scan_socket: None,
+            time_scale,
+        };
+        let sim_task = tokio::spawn(async move {
+            vcan_sim::realtime::run_on(&sim_node, machine, options, async {
+                let _ = sim_stopped.await;
+            })
+            .await
+        });
+        let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+        let operator = tokio::spawn({
+            let page = page.clone();
+            async move {
+                let moving = wait_for_state(&page, |s| {
+                    s["operator"] == true
+                        && s["valves"]
+                            .as_array()
+                            .unwrap()
+                            .iter()
+                            .any(|v| v.as_f64().is_some_and(|v| v.abs() > 0.01))
+                })
+                .await;
+                let (code, reply) = post_command(&page, r#"{"cmd":"estop"}"#).await;
+                assert_eq!(code, 200, "{reply}");
+                assert_eq!(reply["status"]["fault"], "emergency stop", "{reply}");
+                let after = wait_for_state(&page, |s| s["fault"] == "emergency stop").await;
+                let _ = stop.send(());
+                (moving, after)
+            }
+        });
+        let budget = async {
+            tokio::select! {
+                _ = stopped => {}
+                () = tokio::time::sleep(Duration::from_secs(120)) => {}
+            }
+        };
+        lab::wire::run_on_observed(
+            &ctl_node,
+            None,
+            &args,
+            lab::wire::RunConsole::default(),
+            budget,
+            &mut stream,
+        )
+        .await
+        .unwrap();
+        let _ = sim_stop.send(());
+        sim_task.await.unwrap().unwrap();
+        tokio::time::timeout(Duration::from_secs(5), operator)
+            .await
+            .expect("the page's operator never saw the e-stop (budget ran out)")
+            .unwrap()
+    });
+    drop(runtime);
+    drop(stream);
+    assert!(moving["time_s"].as_f64().unwrap() > 0.0, "{moving}");
+    assert_eq!(after["safety"], "Faulted", "{after}");
+    assert!(after["fault_count"].as_u64().unwrap() >= 1, "{after}");
+    // From the e-stop on, the controller commands neutral valves.
+    assert!(
+        after["valves"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|v| v.as_f64() == Some(0.0)),
+        "{after}"
+    );
+}
