@@ -202,6 +202,8 @@ pub struct CaseResult {
     pub named: String,
     /// Every named effect with magnitude and uncertainty.
     pub named_all: Vec<(String, f64, f64)>,
+    /// The ambiguous pairs the analysis reported (neither named).
+    pub ambiguous: Vec<[String; 2]>,
     /// Magnitude error of the hidden effect's fit, % (when named correctly).
     pub magnitude_error_percent: Option<f64>,
     /// Largest held-out RMS reduction among the hidden effect's signals, % (negative = fell).
@@ -237,6 +239,7 @@ impl CaseResult {
             digs: 0,
             named: "error".into(),
             named_all: Vec::new(),
+            ambiguous: Vec::new(),
             magnitude_error_percent: None,
             best_rms_change_percent: None,
             best_signal: None,
@@ -373,10 +376,16 @@ fn run_case(
     let analysis = run_analysis(&analyse_args).with_context(|| format!("analysing {case}"))?;
     let analysis_s = t.elapsed().as_secs_f64();
     let r = &analysis.result;
-    let named = r
-        .named_effects
-        .first()
-        .map_or("none".to_string(), |e| e.name.to_string());
+    let ambiguous: Vec<[String; 2]> = r
+        .ambiguous
+        .iter()
+        .map(|a| a.candidates.clone().map(|c| c.name))
+        .collect();
+    let named = match (r.named_effects.first(), ambiguous.first()) {
+        (Some(e), _) => e.name.to_string(),
+        (None, Some([a, b])) => format!("ambiguous({a}|{b})"),
+        (None, None) => "none".to_string(),
+    };
     let (mut magnitude_error_percent, mut best_rms_change_percent, mut best_signal) =
         (None, None, None);
     let mut best_acted_rms_change_percent = None;
@@ -425,6 +434,7 @@ fn run_case(
             .iter()
             .map(|e| (e.name.to_string(), e.magnitude, e.uncertainty))
             .collect(),
+        ambiguous,
         magnitude_error_percent,
         best_rms_change_percent,
         best_signal,

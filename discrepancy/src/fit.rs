@@ -128,8 +128,53 @@ pub struct NamedEffect {
     pub unit: &'static str,
     /// What the effect is.
     pub description: String,
-    /// Held-out BIC improvement when it was added.
+    /// Held-out BIC improvement when it was added (the second of a joint fit: its gain over the
+    /// first alone).
     pub heldout_delta_bic: f64,
+    /// The confusable candidate it was fitted jointly with (both named, each with the joint
+    /// fit's magnitude and marginal uncertainty).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fitted_jointly_with: Option<String>,
+}
+
+/// One candidate of an ambiguous pair: its fit alone and in the joint fit.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct AmbiguousCandidate {
+    /// Effect name or machine-file key.
+    pub name: String,
+    /// `effect` or `parameter`.
+    pub kind: &'static str,
+    /// Unit of the magnitudes (a parameter: the value in the machine file's units).
+    pub unit: &'static str,
+    /// Its magnitude fitted alone.
+    pub alone: f64,
+    /// Uncertainty of that.
+    pub alone_uncertainty: f64,
+    /// Held-out BIC improvement alone.
+    pub alone_delta_bic: f64,
+    /// Its magnitude in the joint fit of the pair.
+    pub joint: f64,
+    /// Its marginal uncertainty in the joint fit (from the joint cost's curvature).
+    pub joint_uncertainty: f64,
+}
+
+/// Two confusable candidates the data cannot tell apart: their effects on the predictions are
+/// alike, either alone explains the residual about as well, and the joint fit does not separate
+/// them. Reported with both fits instead of naming one.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Ambiguity {
+    /// The two candidates, the better one alone first.
+    pub candidates: [AmbiguousCandidate; 2],
+    /// Correlation of their fitted effects on the training predictions (chi-square weighted).
+    pub effect_correlation: f64,
+    /// Correlation of their magnitudes in the joint fit (from its covariance).
+    pub parameter_correlation: f64,
+    /// Held-out BIC gain of the joint fit over the better one alone.
+    pub joint_gain_delta_bic: f64,
+    /// Which one the written model carries (the better one alone).
+    pub in_model: String,
+    /// What it means, for the report.
+    pub note: String,
 }
 
 /// Held-out residual RMS of one signal before and after the augmentation.
@@ -160,7 +205,10 @@ pub struct SignalRms {
 pub struct AnalysisResult {
     /// Named effects, in the order they were added (empty: "no missing effect found").
     pub named_effects: Vec<NamedEffect>,
-    /// The final augmentation (magnitudes per candidate).
+    /// Confusable candidates the data cannot tell apart, reported instead of naming either.
+    pub ambiguous: Vec<Ambiguity>,
+    /// The final augmentation (magnitudes per candidate; of an ambiguous pair, the better one's
+    /// fit alone).
     pub augmentation: Augmentation,
     /// The final grey-box parameters (the starting model's, with the named machine parameters).
     #[serde(skip)]
@@ -234,6 +282,64 @@ impl Trial {
         match self {
             Trial::Effect(c) => base.get(c),
             Trial::Parameter(_) => 1.0,
+        }
+    }
+
+    /// The model with the trial at `x` on top of `aug` and `params`: an effect's magnitude, or a
+    /// parameter's factor on the file's value (`None`: the machine file is not valid there). The
+    /// parameters are `None` when the trial leaves them as they are.
+    fn at(
+        self,
+        x: f64,
+        aug: &Augmentation,
+        params: &GreyBoxParams,
+        library: Option<&ParameterLibrary>,
+    ) -> Option<(Augmentation, Option<GreyBoxParams>)> {
+        match (self, library) {
+            (Trial::Effect(e), _) => {
+                let mut a = *aug;
+                a.set(e, x);
+                Some((a, None))
+            }
+            (Trial::Parameter(i), Some(l)) => l.apply(params, i, x).ok().map(|p| (*aug, Some(p))),
+            (Trial::Parameter(_), None) => None,
+        }
+    }
+
+    /// The model with `self` at `x` and `other` at `y` on top of `aug` and `params`.
+    fn at_pair(
+        self,
+        other: Trial,
+        (x, y): (f64, f64),
+        aug: &Augmentation,
+        params: &GreyBoxParams,
+        library: Option<&ParameterLibrary>,
+    ) -> Option<(Augmentation, Option<GreyBoxParams>)> {
+        let (a, p) = self.at(x, aug, params, library)?;
+        let (a, q) = other.at(y, &a, p.as_ref().unwrap_or(params), library)?;
+        Some((a, q.or(p)))
+    }
+
+    /// How a fitted change of this trial is reported: `(kind, value, uncertainty, unit)`; a
+    /// parameter's value is the fitted value in the machine file's units.
+    fn reported(
+        self,
+        change: f64,
+        uncertainty: f64,
+        library: Option<&ParameterLibrary>,
+    ) -> (&'static str, f64, f64, &'static str) {
+        match (self, library) {
+            (Trial::Parameter(i), Some(l)) => {
+                let p = &l.parameters[i];
+                (
+                    "parameter",
+                    p.nominal * (1.0 + change),
+                    p.nominal.abs() * uncertainty,
+                    p.unit,
+                )
+            }
+            (Trial::Effect(e), _) => ("effect", change, uncertainty, e.unit()),
+            (Trial::Parameter(_), None) => ("parameter", change, uncertainty, "1"),
         }
     }
 
@@ -338,6 +444,22 @@ impl<'a> Evaluator<'a> {
             }
         }
         total
+    }
+
+    /// The last [`Evaluator::sse_with`]'s change of the prediction, every sample and signal in a
+    /// fixed order, weighted by the square root of the chi-square weight (0 where not finite): the
+    /// candidate's fitted effect on the residual.
+    fn weighted_delta(&self, w: &Weights) -> Vec<f64> {
+        let mut out = Vec::new();
+        for (out_rec, base) in self.scratch.iter().zip(&self.base) {
+            for (p, b) in out_rec.iter().zip(base) {
+                for j in 0..N_SIGNALS {
+                    let d = (p[j] - b[j]) * w.inv_var[j].sqrt();
+                    out.push(if d.is_finite() { d } else { 0.0 });
+                }
+            }
+        }
+        out
     }
 
     fn base_sse(&self) -> ([f64; N_SIGNALS], [usize; N_SIGNALS]) {
@@ -512,6 +634,7 @@ pub fn analyse(
     let mut aug = config.base;
     let mut params_now = params.clone();
     let mut named = Vec::new();
+    let mut ambiguous = Vec::new();
     let mut rounds = Vec::new();
     let mut remaining: Vec<Trial> = config
         .candidates
@@ -529,7 +652,7 @@ pub fn analyse(
     let n_trials = remaining.len();
     let total = n_trials * (config.max_effects + 1).min(n_trials + 1);
     let mut done = 0;
-    while named.len() < config.max_effects && !remaining.is_empty() {
+    while named.len() + ambiguous.len() < config.max_effects && !remaining.is_empty() {
         // The residual spread and decorrelation of the model as it stands this round (after an
         // effect is added, the noise is re-estimated, as in forward selection).
         let (sigma_r, kappa_r) = if named.is_empty() {
@@ -550,19 +673,7 @@ pub fn analyse(
             let (lo, hi) = c.range();
             // The model with the trial at `x`: an effect's magnitude, or a parameter's factor on
             // the file's value (`None`: the machine file is not valid there).
-            let at = |x: f64| -> Option<(Augmentation, Option<GreyBoxParams>)> {
-                match (c, library) {
-                    (Trial::Effect(e), _) => {
-                        let mut a = aug;
-                        a.set(e, x);
-                        Some((a, None))
-                    }
-                    (Trial::Parameter(i), Some(l)) => {
-                        l.apply(&params_now, i, x).ok().map(|p| (aug, Some(p)))
-                    }
-                    (Trial::Parameter(_), None) => None,
-                }
-            };
+            let at = |x: f64| c.at(x, &aug, &params_now, library);
             let mut cost = |x: f64| match at(x) {
                 Some((a, p)) => chi2(&w, &train_eval.sse_with(&a, p.as_ref(), groups)),
                 None => f64::INFINITY,
@@ -671,46 +782,67 @@ pub fn analyse(
         // was taken there, candidates explaining `strong_explained` of their signals were
         // preferred, which passed over a 0.2 MPa pressure offset for a resolver offset.)
         let best = scores.iter().find(|(_, s)| s.significant).cloned();
+        let library = config.parameters.as_ref();
+        let round = Round {
+            w,
+            sigma: &sigma_r,
+            kappa: &kappa_r,
+            test_base_sse,
+            n_test,
+            config,
+        };
+        let resolution = match &best {
+            Some((c, s)) => resolve_confusable(
+                (&mut train_eval, &mut test_eval),
+                &train,
+                (*c, s),
+                &scores,
+                &round,
+                (&aug, &params_now),
+            ),
+            None => Resolution::Alone,
+        };
         rounds.push(scores.into_iter().map(|(_, s)| s).collect());
         let Some((c, s)) = best else {
             break;
         };
-        match (c, config.parameters.as_ref()) {
-            (Trial::Effect(e), _) => {
-                aug.set(e, config.base.get(e) + s.magnitude);
-                named.push(NamedEffect {
-                    name: e.name().to_string(),
-                    kind: "effect",
-                    magnitude: s.magnitude,
-                    uncertainty: s.uncertainty,
-                    unit: e.unit(),
-                    description: e.model_description().to_string(),
-                    heldout_delta_bic: s.heldout_delta_bic,
-                });
+        match resolution {
+            Resolution::Alone => {
+                add_trial(c, s.magnitude, config, &mut aug, &mut params_now)?;
+                named.push(named_entry(
+                    c,
+                    (s.magnitude, s.uncertainty, s.heldout_delta_bic),
+                    library,
+                    None,
+                ));
             }
-            (Trial::Parameter(i), Some(l)) => {
-                let factor = 1.0 + s.magnitude;
-                params_now = l.apply(&params_now, i, factor)?;
-                let p = &l.parameters[i];
-                named.push(NamedEffect {
-                    name: p.key.clone(),
-                    kind: "parameter",
-                    magnitude: p.nominal * factor,
-                    uncertainty: p.nominal.abs() * s.uncertainty,
-                    unit: p.unit,
-                    description: format!(
-                        "machine-file parameter {} = {:.6} {} ({:+.1} % of the file's {}): \
-                         write it back to the machine file",
-                        p.key,
-                        p.nominal * factor,
-                        p.unit,
-                        100.0 * s.magnitude,
-                        p.nominal
-                    ),
-                    heldout_delta_bic: s.heldout_delta_bic,
-                });
+            Resolution::Both {
+                other,
+                changes,
+                uncertainties,
+                gain,
+            } => {
+                add_trial(c, changes[0], config, &mut aug, &mut params_now)?;
+                add_trial(other, changes[1], config, &mut aug, &mut params_now)?;
+                named.push(named_entry(
+                    c,
+                    (changes[0], uncertainties[0], s.heldout_delta_bic),
+                    library,
+                    Some(other.name(library)),
+                ));
+                named.push(named_entry(
+                    other,
+                    (changes[1], uncertainties[1], gain),
+                    library,
+                    Some(c.name(library)),
+                ));
+                remaining.retain(|r| *r != other);
             }
-            (Trial::Parameter(_), None) => break,
+            Resolution::Ambiguous { other, ambiguity } => {
+                add_trial(c, s.magnitude, config, &mut aug, &mut params_now)?;
+                ambiguous.push(*ambiguity);
+                remaining.retain(|r| *r != other);
+            }
         }
         remaining.retain(|r| *r != c);
         train_eval = Evaluator::new(train.clone(), &params_now, &aug);
@@ -721,6 +853,7 @@ pub fn analyse(
     let rms = before_after(&test, (params, &config.base), (&params_now, &aug), &sigma);
     Ok(AnalysisResult {
         named_effects: named,
+        ambiguous,
         augmentation: aug,
         params: params_now,
         rounds,
@@ -732,6 +865,304 @@ pub fn analyse(
         sigma,
         kappa,
     })
+}
+
+/// Effects whose fitted changes of the training predictions correlate at least this much
+/// (chi-square weighted) are confusable, and the better one is fitted jointly with the other.
+const CONFUSABLE_CORRELATION: f64 = 0.7;
+
+/// A significant confusable partner that explains at least this share of the better one's
+/// training chi-square drop on its own, and that the joint fit cannot separate, makes the pair
+/// ambiguous (the held-out gains differ more between the two, through the decorrelation each
+/// leaves).
+const AMBIGUOUS_SHARE: f64 = 0.95;
+
+/// Points on the line between two confusable candidates' fits alone where the joint fit starts.
+const JOINT_START_POINTS: usize = 8;
+
+/// At most this many of the round's best-scoring other candidates are checked for confusion.
+const MAX_PARTNERS: usize = 4;
+
+/// The noise model and held-out baseline of one round of the forward selection.
+struct Round<'r> {
+    w: Weights,
+    sigma: &'r [f64],
+    kappa: &'r [f64],
+    test_base_sse: [f64; N_SIGNALS],
+    n_test: [usize; N_SIGNALS],
+    config: &'r AnalysisConfig,
+}
+
+/// What to name after the best candidate of a round is checked against its confusable partners.
+enum Resolution {
+    /// The best candidate alone (no confusable partner, or the partner adds nothing).
+    Alone,
+    /// Both, with the joint fit's changes and marginal uncertainties, and the second's held-out
+    /// BIC gain over the first alone.
+    Both {
+        other: Trial,
+        changes: [f64; 2],
+        uncertainties: [f64; 2],
+        gain: f64,
+    },
+    /// Neither named: the pair is reported.
+    Ambiguous {
+        other: Trial,
+        ambiguity: Box<Ambiguity>,
+    },
+}
+
+/// Cosine of two vectors (0 when either is zero).
+fn cosine(a: &[f64], b: &[f64]) -> f64 {
+    let (mut ab, mut aa, mut bb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        ab += x * y;
+        aa += x * x;
+        bb += y * y;
+    }
+    if aa > 0.0 && bb > 0.0 {
+        ab / (aa * bb).sqrt()
+    } else {
+        0.0
+    }
+}
+
+/// The best candidate `c` of a round against the other candidates that explain the held-out
+/// digs too: the first whose fitted effect on the training predictions correlates with `c`'s by
+/// at least [`CONFUSABLE_CORRELATION`] is fitted jointly with it (coordinate descent, then the
+/// joint cost's curvature for the covariance). Both are named when the joint fit beats `c`
+/// alone on the held-out digs by the strong significance threshold and each change is
+/// 3 uncertainties from zero; the pair is ambiguous when the partner alone is significant and
+/// explains nearly as much of the training cost ([`AMBIGUOUS_SHARE`]); otherwise `c` stands
+/// alone.
+fn resolve_confusable(
+    (train_eval, test_eval): (&mut Evaluator<'_>, &mut Evaluator<'_>),
+    train: &[&PreparedRecord],
+    (c, s): (Trial, &CandidateScore),
+    scores: &[(Trial, CandidateScore)],
+    round: &Round<'_>,
+    (aug, params): (&Augmentation, &GreyBoxParams),
+) -> Resolution {
+    let config = round.config;
+    let library = config.parameters.as_ref();
+    let base = &config.base;
+    let xc = c.base(base) + s.magnitude;
+    let Some((a, p)) = c.at(xc, aug, params, library) else {
+        return Resolution::Alone;
+    };
+    train_eval.sse_with(&a, p.as_ref(), c.groups());
+    let effect_c = train_eval.weighted_delta(&round.w);
+    let partner = scores
+        .iter()
+        .filter(|(d, ds)| {
+            *d != c && ds.heldout_delta_bic > config.strong_delta_bic && ds.magnitude != 0.0
+        })
+        .take(MAX_PARTNERS)
+        .find_map(|(d, ds)| {
+            let (a, p) = d.at(d.base(base) + ds.magnitude, aug, params, library)?;
+            train_eval.sse_with(&a, p.as_ref(), d.groups());
+            let r = cosine(&effect_c, &train_eval.weighted_delta(&round.w));
+            (r.abs() >= CONFUSABLE_CORRELATION).then(|| (*d, ds.clone(), r))
+        });
+    let Some((d, ds, effect_correlation)) = partner else {
+        return Resolution::Alone;
+    };
+    let groups = c.groups().union(d.groups());
+    let mut cost = |x: f64, y: f64| match c.at_pair(d, (x, y), aug, params, library) {
+        Some((a, p)) => chi2(&round.w, &train_eval.sse_with(&a, p.as_ref(), groups)),
+        None => f64::INFINITY,
+    };
+    let ((lo_c, hi_c), (lo_d, hi_d)) = (c.range(), d.range());
+    // Start on the line between the two fits alone (where the confusable pair trades one for
+    // the other: coordinate descent from either end stays on its axis), then coordinate descent.
+    let yd = d.base(base) + ds.magnitude;
+    let (mut x, mut y, mut best) = (xc, d.base(base), f64::INFINITY);
+    for k in 0..=JOINT_START_POINTS {
+        let t = k as f64 / JOINT_START_POINTS as f64;
+        let (xt, yt) = (
+            c.base(base) + t * s.magnitude,
+            d.base(base) + (1.0 - t) * (yd - d.base(base)),
+        );
+        let f = cost(xt, yt);
+        if f < best {
+            (x, y, best) = (xt, yt, f);
+        }
+    }
+    for _ in 0..3 {
+        let (y1, f1) = minimise(
+            |y| cost(x, y),
+            lo_d,
+            hi_d,
+            config.grid_points,
+            config.golden_iterations,
+        );
+        if f1 < best {
+            (y, best) = (y1, f1);
+        }
+        let (x1, f1) = minimise(
+            |x| cost(x, y),
+            lo_c,
+            hi_c,
+            config.grid_points,
+            config.golden_iterations,
+        );
+        if f1 < best {
+            (x, best) = (x1, f1);
+        }
+    }
+    // Covariance 2 H^-1 of the joint training cost (the chi-square is -2 ln L).
+    let hx = (0.05 * x.abs()).max(0.005 * c.scale());
+    let hy = (0.05 * y.abs()).max(0.005 * d.scale());
+    let xs = x.clamp(lo_c + hx, hi_c - hx);
+    let ys = y.clamp(lo_d + hy, hi_d - hy);
+    let f0 = cost(xs, ys);
+    let hxx = (cost(xs + hx, ys) - 2.0 * f0 + cost(xs - hx, ys)) / (hx * hx);
+    let hyy = (cost(xs, ys + hy) - 2.0 * f0 + cost(xs, ys - hy)) / (hy * hy);
+    let hxy = (cost(xs + hx, ys + hy) - cost(xs + hx, ys - hy) - cost(xs - hx, ys + hy)
+        + cost(xs - hx, ys - hy))
+        / (4.0 * hx * hy);
+    let det = hxx * hyy - hxy * hxy;
+    let (ux, uy, rho) = if det.is_finite() && det > 0.0 && hxx > 0.0 && hyy > 0.0 {
+        (
+            (2.0 * hyy / det).sqrt(),
+            (2.0 * hxx / det).sqrt(),
+            -hxy / (hxx * hyy).sqrt(),
+        )
+    } else {
+        (c.scale(), d.scale(), -effect_correlation.signum())
+    };
+    // Held-out: the joint fit against `c` alone, under the noise the joint fit leaves.
+    let (Some((a_joint, p_joint)), Some((a_one, p_one))) = (
+        c.at_pair(d, (x, y), aug, params, library),
+        c.at(xc, aug, params, library),
+    ) else {
+        return Resolution::Alone;
+    };
+    train_eval.sse_with(&a_joint, p_joint.as_ref(), groups);
+    let mut w = round.w;
+    let mut kappa = round.kappa.to_vec();
+    for j in (0..N_SIGNALS).filter(|j| groups.contains(*j)) {
+        if w.inv_var[j] > 0.0 {
+            kappa[j] = decorrelation(train, &train_eval.scratch, j);
+            w.inv_var[j] = 1.0 / (round.sigma[j] * round.sigma[j] * kappa[j]);
+        }
+    }
+    let n_eff = (0..N_SIGNALS)
+        .filter(|j| w.inv_var[*j] > 0.0)
+        .map(|j| round.n_test[j] as f64 / kappa[j])
+        .sum::<f64>()
+        .max(2.0);
+    let test_joint = test_eval.sse_with(&a_joint, p_joint.as_ref(), groups);
+    let test_one = test_eval.sse_with(&a_one, p_one.as_ref(), groups);
+    let gain = chi2(&w, &test_one) - chi2(&w, &test_joint) - n_eff.ln();
+    let consistent = (0..N_SIGNALS).all(|j| {
+        round.n_test[j] < 100
+            || test_joint[j] <= MAX_SIGNAL_WORSENING.powi(2) * round.test_base_sse[j]
+    });
+    let changes = [x - c.base(base), y - d.base(base)];
+    if consistent
+        && gain > config.strong_delta_bic
+        && changes[0].abs() > MIN_MAGNITUDE_Z * ux
+        && changes[1].abs() > MIN_MAGNITUDE_Z * uy
+    {
+        return Resolution::Both {
+            other: d,
+            changes,
+            uncertainties: [ux, uy],
+            gain,
+        };
+    }
+    if !(ds.significant && ds.train_chi2_drop >= AMBIGUOUS_SHARE * s.train_chi2_drop) {
+        return Resolution::Alone;
+    }
+    let entry = |t: Trial, alone: &CandidateScore, joint: (f64, f64)| {
+        let (kind, value, unc, unit) = t.reported(alone.magnitude, alone.uncertainty, library);
+        let (_, joint_value, joint_unc, _) = t.reported(joint.0, joint.1, library);
+        AmbiguousCandidate {
+            name: t.name(library),
+            kind,
+            unit,
+            alone: value,
+            alone_uncertainty: unc,
+            alone_delta_bic: alone.heldout_delta_bic,
+            joint: joint_value,
+            joint_uncertainty: joint_unc,
+        }
+    };
+    let (name_c, name_d) = (c.name(library), d.name(library));
+    let note = format!(
+        "{name_c} and {name_d} change the predictions alike (effect correlation {effect_correlation:+.2}); \
+         either alone explains the residual (held-out dBIC {:.0} and {:.0}) and the joint fit does \
+         not separate them (magnitude correlation {rho:+.2}, joint gain dBIC {gain:.0}): neither is \
+         named; the model carries {name_c} alone. Record what tells them apart.",
+        s.heldout_delta_bic, ds.heldout_delta_bic
+    );
+    Resolution::Ambiguous {
+        other: d,
+        ambiguity: Box::new(Ambiguity {
+            candidates: [
+                entry(c, s, (changes[0], ux)),
+                entry(d, &ds, (changes[1], uy)),
+            ],
+            effect_correlation,
+            parameter_correlation: rho,
+            joint_gain_delta_bic: gain,
+            in_model: name_c,
+            note,
+        }),
+    }
+}
+
+/// Adds trial `c` at `change` on top of the starting model to the model in use.
+fn add_trial(
+    c: Trial,
+    change: f64,
+    config: &AnalysisConfig,
+    aug: &mut Augmentation,
+    params: &mut GreyBoxParams,
+) -> Result<()> {
+    match (c, config.parameters.as_ref()) {
+        (Trial::Effect(e), _) => aug.set(e, config.base.get(e) + change),
+        (Trial::Parameter(i), Some(l)) => *params = l.apply(params, i, 1.0 + change)?,
+        (Trial::Parameter(_), None) => {}
+    }
+    Ok(())
+}
+
+/// The report entry of trial `c` named at `(change, uncertainty, held-out dBIC)`.
+fn named_entry(
+    c: Trial,
+    (change, uncertainty, heldout_delta_bic): (f64, f64, f64),
+    library: Option<&ParameterLibrary>,
+    fitted_jointly_with: Option<String>,
+) -> NamedEffect {
+    let (kind, magnitude, uncertainty, unit) = c.reported(change, uncertainty, library);
+    let description = match (c, library) {
+        (Trial::Parameter(i), Some(l)) => {
+            let p = &l.parameters[i];
+            format!(
+                "machine-file parameter {} = {:.6} {} ({:+.1} % of the file's {}): \
+                 write it back to the machine file",
+                p.key,
+                magnitude,
+                p.unit,
+                100.0 * change,
+                p.nominal
+            )
+        }
+        (Trial::Effect(e), _) => e.model_description().to_string(),
+        (Trial::Parameter(i), None) => format!("parameter {i}"),
+    };
+    NamedEffect {
+        name: c.name(library),
+        kind,
+        magnitude,
+        uncertainty,
+        unit,
+        description,
+        heldout_delta_bic,
+        fitted_jointly_with,
+    }
 }
 
 /// Residual RMS per signal (and per stage, and where the augmentation acts by more than
@@ -842,26 +1273,25 @@ mod parameter_tests {
     use crate::{DigRecord, LoadTag, Sample, StageTag};
     use planner::machine::MachineConfig;
 
-    /// Records whose measured velocities and pump pressures are the replay of a machine with
-    /// the valve discharge coefficient 0.85 times the file's, plus a little noise.
-    fn drifted_records() -> (Vec<PreparedRecord>, GreyBoxParams, ParameterLibrary) {
+    /// Records whose measured velocities and pump pressures are the replay of `truth` (grey-box
+    /// parameters and effects) under the valve commands `command(t, record index)`, plus a little
+    /// noise, prepared for the nominal model.
+    fn synthetic_records(
+        command: impl Fn(f64, u32) -> [f64; 3],
+        truth: impl Fn(&GreyBoxParams) -> (GreyBoxParams, Augmentation),
+    ) -> (Vec<PreparedRecord>, GreyBoxParams) {
         let cfg = MachineConfig::default_machine().unwrap();
         let params = crate::AugmentedModel::nominal().unwrap().params;
-        let library = ParameterLibrary::derive(&cfg).unwrap();
-        let cd = library
-            .find("hydraulics.valve_discharge_coefficient")
-            .unwrap();
-        let drifted = library.apply(&params, cd, 0.85).unwrap();
+        let (truth_params, truth_aug) = truth(&params);
         let mut noise = 0x2545_f491_u64;
         let mut records = Vec::new();
         for index in 0..6u32 {
             let samples = (0..600)
                 .map(|k| {
                     let t = 0.01 * f64::from(k);
-                    let u = 0.6 * (t * (1.3 + 0.1 * f64::from(index))).sin();
                     Sample {
                         time_s: t,
-                        command: [u, -0.8 * u, 0.5 * u],
+                        command: command(t, index),
                         angles_rad: [0.3, -1.5, -1.0],
                         head_pa: [8.0e6, 6.0e6, 4.0e6],
                         rod_pa: [1.5e6, 1.2e6, 1.0e6],
@@ -879,15 +1309,9 @@ mod parameter_tests {
                 lanes: Vec::new(),
             };
             let mut rec = PreparedRecord::new(&record, &cfg, &params).unwrap();
-            let mut truth = Vec::new();
-            replay(
-                &rec,
-                &drifted,
-                &Augmentation::nominal(),
-                SignalGroups::ALL,
-                &mut truth,
-            );
-            for (m, p) in rec.measured.iter_mut().zip(&truth) {
+            let mut out = Vec::new();
+            replay(&rec, &truth_params, &truth_aug, SignalGroups::ALL, &mut out);
+            for (m, p) in rec.measured.iter_mut().zip(&out) {
                 for j in 0..5 {
                     noise ^= noise << 13;
                     noise ^= noise >> 7;
@@ -899,7 +1323,85 @@ mod parameter_tests {
             }
             records.push(rec);
         }
+        (records, params)
+    }
+
+    /// A slow sinusoidal command on the three valves.
+    fn sine_command(t: f64, index: u32) -> [f64; 3] {
+        let u = 0.6 * (t * (1.3 + 0.1 * f64::from(index))).sin();
+        [u, -0.8 * u, 0.5 * u]
+    }
+
+    /// Records of a machine with the valve discharge coefficient 0.85 times the file's.
+    fn drifted_records() -> (Vec<PreparedRecord>, GreyBoxParams, ParameterLibrary) {
+        let cfg = MachineConfig::default_machine().unwrap();
+        let library = ParameterLibrary::derive(&cfg).unwrap();
+        let cd = library
+            .find("hydraulics.valve_discharge_coefficient")
+            .unwrap();
+        let (records, params) = synthetic_records(sine_command, |p| {
+            (library.apply(p, cd, 0.85).unwrap(), Augmentation::nominal())
+        });
         (records, params, library)
+    }
+
+    /// Step commands: a new level on every valve every 0.4 s, different per record.
+    fn step_command(t: f64, index: u32) -> [f64; 3] {
+        let step = (t / 0.4) as u32 + 7 * index;
+        let level = |k: u32| [0.7, -0.5, 0.3, -0.8, 0.55, -0.25, 0.85][(k % 7) as usize];
+        [level(step), level(step + 2), level(step + 4)]
+    }
+
+    fn timing_analysis(
+        command: fn(f64, u32) -> [f64; 3],
+        delay_s: f64,
+        lag_s: f64,
+    ) -> AnalysisResult {
+        let (records, params) = synthetic_records(command, |p| {
+            let mut a = Augmentation::nominal();
+            a.set(Candidate::TransportDelay, delay_s);
+            a.set(Candidate::HydraulicLag, lag_s);
+            (p.clone(), a)
+        });
+        let config = AnalysisConfig {
+            candidates: vec![Candidate::TransportDelay, Candidate::HydraulicLag],
+            ..AnalysisConfig::default()
+        };
+        analyse(&records, &params, &config, &mut |_, _| {}).unwrap()
+    }
+
+    /// A transport delay and a hydraulic lag together, on commands with steps that tell them
+    /// apart, are fitted jointly and both named within 25 %, not lumped into one delay.
+    #[test]
+    fn a_delay_and_a_lag_together_are_both_named_from_a_joint_fit() {
+        let result = timing_analysis(step_command, 0.05, 0.1);
+        let named = &result.named_effects;
+        assert!(result.ambiguous.is_empty(), "{:?}", result.ambiguous);
+        assert_eq!(named.len(), 2, "{named:?}");
+        for (name, truth) in [("transport_delay", 0.05), ("hydraulic_lag", 0.1)] {
+            let e = named.iter().find(|e| e.name == name).unwrap();
+            assert!((e.magnitude / truth - 1.0).abs() < 0.25, "{named:?}");
+            assert!(e.fitted_jointly_with.is_some(), "{named:?}");
+        }
+    }
+
+    /// On slow sinusoidal commands a delay and a lag shift the phase alike: a hidden delay is
+    /// reported as ambiguous with a lag (both fits given), neither named.
+    #[test]
+    fn a_delay_on_slow_commands_is_ambiguous_with_a_lag() {
+        let result = timing_analysis(sine_command, 0.05, 0.0);
+        assert!(
+            result.named_effects.is_empty(),
+            "{:?}",
+            result.named_effects
+        );
+        assert_eq!(result.ambiguous.len(), 1, "{:?}", result.rounds);
+        let a = &result.ambiguous[0];
+        let mut names: Vec<&str> = a.candidates.iter().map(|c| c.name.as_str()).collect();
+        names.sort_unstable();
+        assert_eq!(names, ["hydraulic_lag", "transport_delay"]);
+        assert!(a.effect_correlation.abs() > CONFUSABLE_CORRELATION, "{a:?}");
+        assert!(a.note.contains("neither is named"));
     }
 
     /// A discharge coefficient 15 % low is named as the machine file's parameter with its value,

@@ -33,6 +33,8 @@ struct ReportJson<'a> {
     /// `unexplained`, `not_judged`), absent without a reference.
     outcome: Option<crate::verdict::Outcome>,
     named_effects: &'a [crate::NamedEffect],
+    /// Confusable candidates the data cannot tell apart (neither named; both fits given).
+    ambiguous: &'a [crate::fit::Ambiguity],
     /// No effect named and (with a reference) no signal beyond it.
     no_missing_effect_found: bool,
     /// Signals beyond the reference after the named effects.
@@ -63,9 +65,12 @@ pub fn summary_text(a: &Analysis) -> String {
     for w in &a.warnings {
         let _ = writeln!(s, "warning: {w}");
     }
-    if r.named_effects.is_empty() {
+    if r.named_effects.is_empty() && r.ambiguous.is_empty() {
         s.push_str(no_effect_line(a));
         s.push('\n');
+    }
+    for amb in &r.ambiguous {
+        let _ = writeln!(s, "ambiguous: {}", amb.note);
     }
     for e in &r.named_effects {
         let _ = writeln!(
@@ -230,6 +235,7 @@ fn markdown(a: &Analysis, measured: &[PathBuf], figures: &[String]) -> String {
             "\nThe augmented model is `model.json` (load it with `--model model.json` or `crate::AugmentedModel::from_json`).\n"
         );
     }
+    ambiguous_markdown(&mut s, r);
     let _ = writeln!(s, "## Held-out residual RMS, before and after\n");
     let _ = writeln!(
         s,
@@ -342,6 +348,36 @@ fn markdown(a: &Analysis, measured: &[PathBuf], figures: &[String]) -> String {
     s
 }
 
+/// The ambiguous pairs: both candidates, alone and jointly fitted, and why neither is named.
+fn ambiguous_markdown(s: &mut String, r: &AnalysisResult) {
+    if r.ambiguous.is_empty() {
+        return;
+    }
+    let _ = writeln!(s, "## Ambiguous: confusable candidates\n");
+    for a in &r.ambiguous {
+        let _ = writeln!(s, "{}\n", a.note);
+        let _ = writeln!(
+            s,
+            "| candidate | kind | alone | held-out dBIC alone | joint fit | unit |\n|---|---|---|---|---|---|"
+        );
+        for c in &a.candidates {
+            let _ = writeln!(
+                s,
+                "| {} | {} | {:.4e} +- {:.2e} | {:.0} | {:.4e} +- {:.2e} | {} |",
+                c.name,
+                c.kind,
+                c.alone,
+                c.alone_uncertainty,
+                c.alone_delta_bic,
+                c.joint,
+                c.joint_uncertainty,
+                c.unit
+            );
+        }
+        let _ = writeln!(s);
+    }
+}
+
 /// Writes the analysis outputs to `out`.
 ///
 /// # Errors
@@ -356,17 +392,30 @@ pub fn write_outputs(
     let r = &a.result;
     let mut effects: Vec<ModelEffect> = a.model.effects.clone();
     // The named machine parameters are in the parameters (`r.params`), the effects listed.
-    for e in r.named_effects.iter().filter(|e| e.kind == "effect") {
+    // Of an ambiguous pair, the model carries the better one alone.
+    let carried = r
+        .named_effects
+        .iter()
+        .filter(|e| e.kind == "effect")
+        .map(|e| (e.name.as_str(), e.magnitude, e.uncertainty))
+        .chain(
+            r.ambiguous
+                .iter()
+                .map(|a| &a.candidates[0])
+                .filter(|c| c.kind == "effect")
+                .map(|c| (c.name.as_str(), c.alone, c.alone_uncertainty)),
+        );
+    for (name, magnitude, uncertainty) in carried {
         // A refitted calibration effect adds its change to the calibrated value.
-        match effects.iter_mut().find(|m| m.name == e.name) {
+        match effects.iter_mut().find(|m| m.name == name) {
             Some(m) => {
-                m.magnitude += e.magnitude;
-                m.uncertainty = m.uncertainty.hypot(e.uncertainty);
+                m.magnitude += magnitude;
+                m.uncertainty = m.uncertainty.hypot(uncertainty);
             }
             None => effects.push(ModelEffect {
-                name: e.name.to_string(),
-                magnitude: e.magnitude,
-                uncertainty: e.uncertainty,
+                name: name.to_string(),
+                magnitude,
+                uncertainty,
             }),
         }
     }
@@ -421,7 +470,9 @@ pub fn write_outputs(
         digs: a.records.len(),
         outcome: a.verdict.as_ref().map(|v| v.outcome),
         named_effects: &r.named_effects,
+        ambiguous: &r.ambiguous,
         no_missing_effect_found: r.named_effects.is_empty()
+            && r.ambiguous.is_empty()
             && a.verdict.as_ref().is_some_and(|v| {
                 v.unexplained.is_empty() && v.outcome != crate::verdict::Outcome::NotJudged
             }),

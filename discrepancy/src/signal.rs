@@ -131,6 +131,18 @@ impl SignalGroups {
         payload: true,
     };
 
+    /// The groups of either.
+    pub fn union(self, other: SignalGroups) -> SignalGroups {
+        SignalGroups {
+            hydraulic: self.hydraulic || other.hydraulic,
+            pumps: self.pumps || other.pumps,
+            force: self.force || other.force,
+            soil: self.soil || other.soil,
+            stops: self.stops || other.stops,
+            payload: self.payload || other.payload,
+        }
+    }
+
     /// Whether the group of signal index `s` is among these.
     pub fn contains(&self, s: usize) -> bool {
         match s {

@@ -153,22 +153,33 @@ pub struct Verdict {
     pub unexplained: Vec<Unexplained>,
 }
 
-/// The candidates whose signals include `sig`, among the named ones.
-fn named_acting(result: &AnalysisResult, sig: Signal) -> Vec<String> {
-    result
-        .named_effects
-        .iter()
-        .filter(|e| match e.kind {
-            "parameter" => ParameterLibrary::groups().contains(sig.index()),
-            _ => Candidate::ALL
-                .iter()
-                .any(|c| c.name() == e.name && c.groups().contains(sig.index())),
-        })
-        .map(|e| e.name.clone())
-        .collect()
+/// Whether the candidate `name` of `kind` (`effect` or `parameter`) acts on `sig`.
+fn acts_on(name: &str, kind: &str, sig: Signal) -> bool {
+    match kind {
+        "parameter" => ParameterLibrary::groups().contains(sig.index()),
+        _ => Candidate::ALL
+            .iter()
+            .any(|c| c.name() == name && c.groups().contains(sig.index())),
+    }
 }
 
-/// Correlations of the held-out residual beyond the reference's.
+/// The candidates whose signals include `sig`, among the named ones and those the model carries
+/// for an ambiguous pair.
+fn named_acting(result: &AnalysisResult, sig: Signal) -> Vec<String> {
+    let named = result
+        .named_effects
+        .iter()
+        .filter(|e| acts_on(&e.name, e.kind, sig))
+        .map(|e| e.name.clone());
+    let ambiguous = result
+        .ambiguous
+        .iter()
+        .map(|a| &a.candidates[0])
+        .filter(|c| acts_on(&c.name, c.kind, sig))
+        .map(|c| c.name.clone());
+    named.chain(ambiguous).collect()
+}
+
 fn structure_beyond(test: &SignalStructure, reference: &SignalStructure) -> Vec<Structure> {
     let beyond =
         |c: f64, r: f64| c.abs() > MIN_CORRELATION && c.abs() > r.abs() + CORRELATION_MARGIN;
@@ -349,7 +360,8 @@ pub fn judge(result: &AnalysisResult, after: &[SignalStructure], reference: &Ref
         })
         .collect();
     let judged = signals.iter().any(|v| v.outcome != Outcome::NotJudged);
-    let outcome = match (result.named_effects.is_empty(), unexplained.is_empty()) {
+    let nothing_named = result.named_effects.is_empty() && result.ambiguous.is_empty();
+    let outcome = match (nothing_named, unexplained.is_empty()) {
         _ if !judged => Outcome::NotJudged,
         (true, true) => Outcome::Expected,
         (false, true) => Outcome::Named,
@@ -447,8 +459,10 @@ mod tests {
                     unit: "",
                     description: String::new(),
                     heldout_delta_bic: 500.0,
+                    fitted_jointly_with: None,
                 })
                 .collect(),
+            ambiguous: Vec::new(),
             augmentation: crate::Augmentation::nominal(),
             params: crate::AugmentedModel::nominal().unwrap().params,
             rounds: Vec::new(),
