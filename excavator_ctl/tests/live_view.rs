@@ -46,10 +46,10 @@ struct LiveDemo {
 }
 
 impl LiveDemo {
-    /// Starts a one-dig demo paced at `pace` times real time, writing into `out`.
-    fn spawn(out: &Path, pace: &str) -> Self {
+    /// Starts a demo of `digs` digs paced at `pace` times real time, writing into `out`.
+    fn spawn(out: &Path, digs: &str, pace: &str) -> Self {
         let mut child = Command::new(env!("CARGO_BIN_EXE_excavator-ctl"))
-            .args(["demo", "--digs", "1", "--quiet", "--live", "127.0.0.1:0"])
+            .args(["demo", "--digs", digs, "--quiet", "--live", "127.0.0.1:0"])
             .args(["--pace", pace, "--out"])
             .arg(out)
             .env("RUST_LOG", "info")
@@ -106,7 +106,8 @@ fn a_foxglove_client_sees_the_live_session_and_its_recording() {
     }
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("demo");
-    let demo = LiveDemo::spawn(&out, "5");
+    // Two digs (about 12 s at 5x): long enough for a client that starts slowly on a loaded machine.
+    let demo = LiveDemo::spawn(&out, "2", "5");
     let client = Command::new("python3")
         .args([CLIENT, &demo.ws_url, "60"])
         .output()
@@ -212,7 +213,9 @@ fn the_operator_page_follows_the_session_and_its_estop_stops_the_machine() {
     }
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("demo");
-    let demo = LiveDemo::spawn(&out, "5");
+    // A session longer than the browser's whole timeout (a dig takes about 12 s at 2x), so a
+    // Chromium that starts slowly on a loaded machine still finds it running; Ctrl-C ends it.
+    let demo = LiveDemo::spawn(&out, "20", "2");
     let screenshot = artefacts_dir().join("operator-page.png");
     let browser = Command::new("python3")
         .args([BROWSER, &demo.page_url])
