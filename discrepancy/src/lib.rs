@@ -158,7 +158,7 @@ pub enum LoadTag {
 /// One 100 Hz sample of a measured trace, aligned at the resolver frame.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Sample {
-    /// Time, s.
+    /// Session time, s (a trace's timestamps through `lab::demo::trace_time_base`, the scans' time).
     pub time_s: f64,
     /// Valve commands `[boom, stick, bucket]` in force from this sample to the next, `[-1, 1]`.
     pub command: [f64; 3],

@@ -15,8 +15,9 @@
 //!
 //! Outputs:
 //!
-//! - `trace.log`: `candump -L` of every frame on the bus (firmware_bridge's `Recorder`), flushed as the
-//!   session runs and closed at the end and on Ctrl-C;
+//! - `trace.log`: `candump -L` of every frame on the bus (firmware_bridge's `Recorder`), stamped with
+//!   the virtual time from the fixed epoch (`firmware_bridge::transport::VIRTUAL_EPOCH_UNIX_NS`),
+//!   flushed as the session runs and closed at the end and on Ctrl-C;
 //! - `scans/scan_NNNN.json`: the range scans the controller used (docs/scan-protocol.md format);
 //! - `summary.json`, `summary.md`: per dig weight, time, energy, swept volume (thesis 6.1) and totals;
 //! - `trajectories.svg`, `terrain_before.svg`, `terrain_after.svg`, `dig_stats.svg` ([`crate::plots`]);
@@ -34,6 +35,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use anyhow::Context as _;
 use clap::Args;
 use firmware_bridge::trace::{Direction, Recorder};
+use firmware_bridge::transport::{TraceClock, TraceTimeBase};
 use planner::autodig::AutodigMaps;
 use planner::cleanup::CleanupPlan;
 use serde::{Deserialize, Serialize};
@@ -107,6 +109,8 @@ const PROGRESS_EVERY_STEPS: u64 = 50;
 const FLUSH_EVERY_STEPS: u64 = 500;
 /// Virtual-time budget per dig, s: a session that takes longer stops (a stuck plan).
 const SIM_BUDGET_PER_DIG_S: f64 = 120.0;
+/// What stamps a demo trace: the virtual clock, written from its fixed epoch.
+const TRACE_CLOCK: TraceClock = TraceClock::Virtual;
 
 /// Arguments of `excavator-ctl demo`.
 #[derive(Debug, Clone, Args)]
@@ -447,7 +451,7 @@ pub struct DemoSummary {
     /// docs/demo-output.md), `kernel` (`run`: the socket's kernel receive timestamps) or
     /// `wall_at_read` (`run` without them); absent in summaries written before it was recorded.
     #[serde(default)]
-    pub trace_clock: Option<firmware_bridge::transport::TraceClock>,
+    pub trace_clock: Option<TraceClock>,
     /// Per dig.
     pub digs: Vec<DigRecord>,
     /// Totals.
@@ -466,6 +470,35 @@ impl DemoSummary {
         self.planning.max_ms = 0.0;
         self
     }
+}
+
+/// The session-time base of the trace at `trace` (its frames' session time for the scans and
+/// per-dig records beside it): the clock recorded in the `summary.json` of its folder, else, without
+/// a summary (a session still running or killed, a bare trace), the one its first frame shows
+/// ([`TraceTimeBase`]).
+///
+/// # Errors
+/// A `summary.json` beside the trace that cannot be read, or whose `trace_clock` is not a clock.
+pub fn trace_time_base(trace: &Path) -> anyhow::Result<TraceTimeBase> {
+    #[derive(Deserialize)]
+    struct Recorded {
+        #[serde(default)]
+        trace_clock: Option<TraceClock>,
+    }
+    let summary = trace
+        .parent()
+        .unwrap_or_else(|| Path::new("."))
+        .join("summary.json");
+    let clock = match std::fs::read_to_string(&summary) {
+        Ok(text) => {
+            serde_json::from_str::<Recorded>(&text)
+                .with_context(|| format!("{}: reading trace_clock", summary.display()))?
+                .trace_clock
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+        Err(e) => return Err(e).with_context(|| format!("reading {}", summary.display())),
+    };
+    Ok(TraceTimeBase::new(clock))
 }
 
 /// Runs `excavator-ctl demo`: the session on a blocking thread, Ctrl-C stops it cleanly (neutral
@@ -873,6 +906,8 @@ pub fn run_session_observed(
     let trace_path = out.join("trace.log");
     let recorder = Recorder::create(&trace_path, "vcan0")
         .with_context(|| format!("creating {}", trace_path.display()))?;
+    // Virtual time from the fixed epoch (docs/demo-output.md), exact in integer nanoseconds.
+    let stamp = |virtual_ns| TRACE_CLOCK.trace_ns(virtual_ns);
     let terrain_before = h.machine.plant().world.terrain.clone();
 
     let progress = crate::console::session_bar(Some(args.digs), args.quiet);
@@ -894,10 +929,10 @@ pub fn run_session_observed(
             }
         };
         for f in h.inbox() {
-            recorder.record(f.timestamp_ns, Direction::Receive, &f.frame);
+            recorder.record(stamp(f.timestamp_ns), Direction::Receive, &f.frame);
         }
         for f in &frames {
-            recorder.record(h.clock.now_ns(), Direction::Transmit, f);
+            recorder.record(stamp(h.clock.now_ns()), Direction::Transmit, f);
         }
         let time_s = h.time_s();
         let steps = h.steps();
@@ -971,12 +1006,12 @@ pub fn run_session_observed(
     let now = clock.now_s();
     let shutdown = h.node_mut().map(|n| n.shutdown(now));
     for f in shutdown.iter().flat_map(|o| o.iter()) {
-        recorder.record(clock.now_ns(), Direction::Transmit, f);
+        recorder.record(stamp(clock.now_ns()), Direction::Transmit, f);
         let _ = h.send_from_controller(std::slice::from_ref(f));
     }
     h.machine.advance(2.0 * PERIOD_S);
     for f in h.drain_controller_inbox() {
-        recorder.record(f.timestamp_ns, Direction::Receive, &f.frame);
+        recorder.record(stamp(f.timestamp_ns), Direction::Receive, &f.frame);
     }
     let trace = recorder.close();
     if let Some(p) = &progress {
@@ -1005,7 +1040,7 @@ pub fn run_session_observed(
             session_time_s: clock.now_s(),
             wall_time_s: wall.elapsed().as_secs_f64(),
             trace,
-            trace_clock: firmware_bridge::transport::TraceClock::Virtual,
+            trace_clock: TRACE_CLOCK,
         },
         node,
         session,
@@ -1215,7 +1250,7 @@ pub struct SessionEnd<'a> {
     /// The trace recorder's counts.
     pub trace: firmware_bridge::trace::RecorderStats,
     /// What stamped the trace.
-    pub trace_clock: firmware_bridge::transport::TraceClock,
+    pub trace_clock: TraceClock,
 }
 
 /// `summary.json` of a session: the records, their totals and Tables 3-5 figures.
@@ -1490,4 +1525,42 @@ pub fn tables_markdown(s: &DemoSummary) -> String {
     }
     m.push('\n');
     m
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The clock comes from the `summary.json` beside the trace; without one, from the first frame;
+    /// a summary whose clock is not one is an error naming the file.
+    #[test]
+    fn the_trace_time_base_follows_the_recorded_clock() {
+        let dir = tempfile::tempdir().unwrap();
+        let trace = dir.path().join("trace.log");
+        let summary = dir.path().join("summary.json");
+        let wall_ns = 1_790_000_000_000_000_000;
+        let mut bare = trace_time_base(&trace).unwrap();
+        assert_eq!(bare.clock(), None);
+        assert_eq!(
+            bare.session_ns(TRACE_CLOCK.trace_ns(20_000_000)),
+            20_000_000
+        );
+
+        std::fs::write(&summary, r#"{"seed": 1, "trace_clock": "kernel"}"#).unwrap();
+        let mut kernel = trace_time_base(&trace).unwrap();
+        assert_eq!(kernel.clock(), Some(TraceClock::Kernel));
+        assert_eq!(kernel.session_ns(wall_ns), 0);
+        assert_eq!(kernel.session_ns(wall_ns + 7), 7);
+
+        std::fs::write(&summary, r#"{"trace_clock": "virtual"}"#).unwrap();
+        let mut virt = trace_time_base(&trace).unwrap();
+        assert_eq!(virt.session_ns(TRACE_CLOCK.trace_ns(5)), 5);
+
+        std::fs::write(&summary, r#"{"trace_clock": "sundial"}"#).unwrap();
+        let err = format!("{:#}", trace_time_base(&trace).unwrap_err());
+        assert!(
+            err.contains("summary.json") && err.contains("sundial"),
+            "{err}"
+        );
+    }
 }

@@ -90,6 +90,7 @@ fn demo_writes_all_outputs_with_the_documented_fields_for_two_digs() {
     );
     assert!(trace.lines().count() as u64 >= json["totals"]["trace_frames"].as_u64().unwrap());
     assert_clean_protocol(&out.join("trace.log"));
+    assert_epoch_stamps(&out.join("trace.log"), &summary);
     // The soil estimator's samples of the planned session, for `model soil-cv`.
     let soil: lab::session::SoilSamplesFile =
         serde_json::from_slice(&std::fs::read(out.join("soil_samples.json")).unwrap()).unwrap();
@@ -97,6 +98,31 @@ fn demo_writes_all_outputs_with_the_documented_fields_for_two_digs() {
     assert!(soil.digs.iter().flat_map(|d| &d.samples).all(|s| {
         s.geometry.depth_m > 0.0 && s.force.fx_n.is_finite() && s.force.fz_n.is_finite()
     }));
+}
+
+/// The trace is stamped with the virtual time from the fixed epoch, which `trace_time_base` (the
+/// reader's view of it) turns back into the session's time: the first frame within the first control
+/// steps, the last at the session's end.
+fn assert_epoch_stamps(trace: &Path, summary: &DemoSummary) {
+    use firmware_bridge::transport::{TraceClock, VIRTUAL_EPOCH_UNIX_NS};
+    assert_eq!(summary.trace_clock, Some(TraceClock::Virtual));
+    let records: Vec<_> = std::fs::read_to_string(trace)
+        .unwrap()
+        .lines()
+        .map(|l| firmware_bridge::trace::parse_line(l).unwrap())
+        .collect();
+    let mut base = lab::demo::trace_time_base(trace).unwrap();
+    let first = records.first().unwrap().timestamp_ns;
+    let last = records.last().unwrap().timestamp_ns;
+    assert!(first >= VIRTUAL_EPOCH_UNIX_NS, "first stamp {first} ns");
+    assert!(base.session_s(first) < 0.05, "{}", base.session_s(first));
+    assert_eq!(base.origin_ns(), Some(VIRTUAL_EPOCH_UNIX_NS));
+    let end_s = summary.totals.sim_time_s;
+    assert!(
+        (base.session_s(last) - end_s).abs() < 0.05,
+        "last frame at {} s of a {end_s} s session",
+        base.session_s(last)
+    );
 }
 
 /// A clean session's trace has no protocol error in `trace stats` (alive counters, checksums,
