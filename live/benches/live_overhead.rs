@@ -5,7 +5,9 @@
 //! live view, with the live view and no client, and with the live view and a Foxglove client
 //! subscribed to every topic (the test's Python client, when python3 has `websockets` and
 //! `foxglove-schemas-protobuf`). For each: the controller's step (`ControllerNode::step`) and the
-//! observer's call after it (what the live view adds to the loop), and the stream's counts.
+//! observer's call after it (what the live view adds to the loop), and the stream's counts; the
+//! client's own report of what it decoded, so a client that never connected (a slow Python start)
+//! shows as such instead of passing for one.
 //!
 //! Run: `cargo bench -p live --bench live_overhead`.
 
@@ -105,6 +107,28 @@ fn report(label: &str, s: &LiveStream, wall_s: f64) {
     );
 }
 
+/// What the client's report (`foxglove_client.py`'s JSON) says it received: the figures with a
+/// client are only those of a streaming client if it decoded messages.
+fn received(report: &[u8]) -> String {
+    let Ok(v) = serde_json::from_slice::<serde_json::Value>(report) else {
+        return "WARNING: no report: the figures with a client may be without one".to_owned();
+    };
+    let counts: Vec<(String, u64)> = v["topics"]
+        .as_object()
+        .map(|m| {
+            m.iter()
+                .map(|(t, c)| (t.clone(), c["count"].as_u64().unwrap_or(0)))
+                .collect()
+        })
+        .unwrap_or_default();
+    let total: u64 = counts.iter().map(|(_, n)| n).sum();
+    if total == 0 {
+        return "WARNING: decoded no message: the figures with a client are without one".to_owned();
+    }
+    let per_topic: Vec<String> = counts.iter().map(|(t, n)| format!("{t} {n}")).collect();
+    format!("decoded {total} messages ({})", per_topic.join(", "))
+}
+
 fn client(port: u16) -> Option<Child> {
     let ok = Command::new("python3")
         .args(["-c", "import websockets, foxglove_schemas_protobuf"])
@@ -115,8 +139,8 @@ fn client(port: u16) -> Option<Child> {
         return None;
     }
     Command::new("python3")
-        .args([CLIENT, &format!("ws://127.0.0.1:{port}"), "60", "hold"])
-        .stdout(Stdio::null())
+        .args([CLIENT, &format!("ws://127.0.0.1:{port}"), "30", "hold"])
+        .stdout(Stdio::piped())
         .stderr(Stdio::null())
         .spawn()
         .ok()
@@ -141,9 +165,12 @@ fn main() {
     std::thread::sleep(Duration::from_millis(200));
     report("stream", &s, t.elapsed().as_secs_f64());
     drop(s);
-    if let Some(mut c) = child {
-        let _ = c.kill();
-        let _ = c.wait();
+    // The server has closed: the client prints what it received and leaves.
+    if let Some(c) = child {
+        match c.wait_with_output() {
+            Ok(out) => println!("  client: {}", received(&out.stdout)),
+            Err(e) => println!("  client: no report ({e})"),
+        }
     }
     // Means carry the outliers of a shared machine (a preempted thread); the medians say what a step
     // usually costs.
