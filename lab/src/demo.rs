@@ -452,6 +452,10 @@ pub struct DemoSummary {
     /// `wall_at_read` (`run` without them); absent in summaries written before it was recorded.
     #[serde(default)]
     pub trace_clock: Option<TraceClock>,
+    /// The CAN interface's link when `run` started (bitrate, state, `restart-ms`, listen-only; none
+    /// of them for a vcan); absent for `demo`, which has no interface.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub can_link: Option<firmware_bridge::transport::LinkStatus>,
     /// Per dig.
     pub digs: Vec<DigRecord>,
     /// Totals.
@@ -1324,6 +1328,7 @@ pub fn session_summary(
         soil_contact: end.soil_contact,
         effects: end.effects,
         trace_clock: Some(end.trace_clock),
+        can_link: None,
         digs: records,
         totals,
     }
@@ -1426,6 +1431,9 @@ pub fn summary_markdown(s: &DemoSummary) -> String {
         t.wall_time_s,
         if t.finished { "" } else { " (stopped early)" }
     );
+    if let Some(link) = &s.can_link {
+        let _ = writeln!(m, "CAN link at start: {link}.\n");
+    }
     if !s.strategy.is_empty() && s.strategy != "fixed" {
         m.push_str(&tables_markdown(s));
     }

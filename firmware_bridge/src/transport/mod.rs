@@ -10,16 +10,21 @@
 //!   methods it has a synchronous `send`/`try_recv` path for single-threaded virtual-time loops, and
 //!   optional fault injection ([`FaultInjection`]: latency in clock time, seeded loss).
 //!
+//! - [`link`]: the interface's link over netlink (up, bitrate, state, `restart-ms`, listen-only) and
+//!   whether a controller may start on it.
+//!
 //! Error frames received from the controller driver surface as [`Error::Fault`] with a [`BusFault`];
 //! they do not break the bus, so the caller decides (neutral valves) and keeps calling `recv`.
 
 mod clock;
 mod in_process;
+pub mod link;
 mod socketcan;
 mod trace_clock;
 
 pub use clock::{Clock, TimeScale, TimeScaleError, VirtualClock};
 pub use in_process::{FaultInjection, InProcessBus, InProcessNode};
+pub use link::{LinkRefusal, LinkStatus};
 pub use socketcan::{IdFilter, SendRetry, SocketCanBus, send_with_retry};
 pub use trace_clock::{TraceClock, TraceTimeBase, VIRTUAL_EPOCH_UNIX_NS};
 
@@ -146,7 +151,8 @@ pub enum Error {
     Fault(BusFault),
     /// The interface does not exist.
     #[error(
-        "CAN interface {iface:?} not found (create it, e.g. `ip link add dev {iface} type vcan && ip link set up {iface}`)"
+        "CAN interface {iface:?} not found ({})",
+        link::not_found_advice(iface)
     )]
     InterfaceNotFound {
         /// Interface name.
