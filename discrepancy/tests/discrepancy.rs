@@ -67,6 +67,17 @@ fn hidden_valve_deadband_is_named_with_its_magnitude_and_the_model_file_loads() 
     model
         .dig_model()
         .expect("the planner's dig model runs with the augmented actuator");
+    // The twin: the effect as the simulator takes it, and the simulator re-run with it closer to
+    // the held-out digs than the nominal one.
+    let effects = std::fs::read_to_string(out.join("twin/effects.toml")).unwrap();
+    assert!(
+        effects.contains("[effects]\nvalve_deadband = "),
+        "{effects}"
+    );
+    let (_, twin) = a.twin.as_ref().expect("the twin is updated");
+    let best = twin.ratio.values().copied().fold(f64::INFINITY, f64::min);
+    assert!(best < 0.7, "{twin:#?}");
+    assert_eq!(report["twin"]["effects"][0]["name"], "valve_deadband");
 }
 
 #[test]
@@ -191,7 +202,7 @@ fn a_plant_change_outside_the_library_is_not_silent_and_a_clean_session_stays_cl
     demo.digs = 4;
     demo.seed = Some(32);
     demo.quiet = true;
-    demo.machine = Some(machine);
+    demo.plant_machine = Some(machine);
     run_session(&demo, &AtomicBool::new(false)).expect("demo session");
     let out = tmp.path().join("report");
     let mut args = AnalyseArgs::new(vec![changed], out.clone());
@@ -219,6 +230,16 @@ fn a_plant_change_outside_the_library_is_not_silent_and_a_clean_session_stays_cl
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     assert_eq!(json["named_effects"][0]["kind"], "parameter");
     assert_eq!(json["no_missing_effect_found"], false);
+    // The twin's machine file has the fitted value at the key, and the simulator re-run with it
+    // follows the held-out velocities closer than the nominal machine.
+    let twin_machine =
+        planner::machine::MachineConfig::from_toml_file(&out.join("twin/machine.toml")).unwrap();
+    assert_eq!(
+        twin_machine.hydraulics.valve_discharge_coefficient,
+        cd.magnitude
+    );
+    let (_, twin) = a.twin.as_ref().expect("the twin is updated");
+    assert!(twin.ratio["joint_rate"] < 1.0, "{twin:#?}");
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(md.starts_with("# Model-discrepancy report"));
     assert!(md.contains("## Verdict"), "{md}");
