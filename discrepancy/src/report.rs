@@ -88,13 +88,10 @@ pub fn summary_text(a: &Analysis) -> String {
             "twin: {} ({} samples); simulator gap nominal -> twin (after/before):",
             t.demo_options, t.gap_before.samples
         );
-        for (group, unit) in crate::twin::GAP_GROUPS {
+        for (group, unit, before, after, ratio) in t.rows() {
             let _ = writeln!(
                 s,
-                "  {group:<16} {:>11.4e} -> {:>11.4e} {unit} ({:.2})",
-                t.gap_before.groups.get(group).copied().unwrap_or(f64::NAN),
-                t.gap_after.groups.get(group).copied().unwrap_or(f64::NAN),
-                t.ratio.get(group).copied().unwrap_or(f64::NAN)
+                "  {group:<17} {before:>11.4e} -> {after:>11.4e} {unit} ({ratio:.2})"
             );
         }
     }
@@ -169,13 +166,10 @@ fn twin_markdown(s: &mut String, a: &Analysis) {
         s,
         "| group | unit | nominal plant | twin | after / before |\n|---|---|---|---|---|"
     );
-    for (group, unit) in crate::twin::GAP_GROUPS {
+    for (group, unit, before, after, ratio) in t.rows() {
         let _ = writeln!(
             s,
-            "| {group} | {unit} | {:.4e} | {:.4e} | {:.2} |",
-            t.gap_before.groups.get(group).copied().unwrap_or(f64::NAN),
-            t.gap_after.groups.get(group).copied().unwrap_or(f64::NAN),
-            t.ratio.get(group).copied().unwrap_or(f64::NAN)
+            "| {group} | {unit} | {before:.4e} | {after:.4e} | {ratio:.2} |"
         );
     }
     s.push('\n');

@@ -11,7 +11,7 @@
 //!   start from the measured state (cylinder extensions and rates from the resolvers, the chamber
 //!   and pump pressures; multiple shooting, so the error cannot drift away over a whole dig), the
 //!   spools warmed up on the commands before as the grey-box replay's are ([`WARMUP_SAMPLES`],
-//!   no gap in the record: [`warmed_up`]). Its joint rates and pressures are
+//!   no gap in the record: [`warmed_up`]). Its cylinder velocities and pressures are
 //!   compared with the measured ones, per signal group, with the nominal plant (the machine file,
 //!   no effect) and with the twin's. Only samples with the empty bucket in free air outside Autodig
 //!   are re-run: the re-run has no terrain (the measured one after earlier digs is not known to the
@@ -32,6 +32,11 @@ use vcan_sim::scenario::Scenario;
 
 /// Samples of one re-run window from the measured state (0.5 s).
 pub const WINDOW_SAMPLES: usize = 50;
+
+/// Samples between a command in a record and the physics it acts on beyond the machine file's
+/// transport delay: the gateway applies a command frame at its next control period (the shipped
+/// grey-box model's 70 ms delay against the file's 60 ms is the same period).
+pub const COMMAND_LAG_SAMPLES: usize = 1;
 
 /// How far the re-run's terrain is lowered out of the bucket's reach, m.
 const NO_TERRAIN_DROP_M: f64 = 100.0;
@@ -176,7 +181,7 @@ impl TwinProfile {
 
 /// The signal groups of the re-run, with their unit.
 pub const GAP_GROUPS: [(&str, &str); 3] = [
-    ("joint_rate", "rad/s"),
+    ("cylinder_velocity", "m/s"),
     ("pump_pressure", "Pa"),
     ("chamber_pressure", "Pa"),
 ];
@@ -195,9 +200,9 @@ pub struct SimulatorGap {
 }
 
 const SIGNALS: [(&str, usize); 11] = [
-    ("boom_rate", 0),
-    ("stick_rate", 0),
-    ("bucket_rate", 0),
+    ("boom_velocity", 0),
+    ("stick_velocity", 0),
+    ("bucket_velocity", 0),
     ("pump1_pressure", 1),
     ("pump2_pressure", 1),
     ("boom_head_pressure", 2),
@@ -239,13 +244,13 @@ fn set_measured_state(plant: &mut Plant, s: &Sample) -> bool {
     let Ok(x) = plant.linkage().extensions(&q) else {
         return false;
     };
-    let Ok(link) = plant.linkage().state(x) else {
+    let Some(v) = measured_velocities(plant, s) else {
         return false;
     };
     let a = &mut plant.hydraulics.actuators;
     for (i, cylinder) in a.iter_mut().take(3).enumerate() {
         cylinder.position = x[i];
-        cylinder.velocity = s.rates_rad_per_s[i] * link.arms[i];
+        cylinder.velocity = v[i];
         cylinder.head_pa = (s.head_pa[i] - p_off).max(0.0);
         cylinder.rod_pa = (s.rod_pa[i] - p_off).max(0.0);
     }
@@ -255,7 +260,7 @@ fn set_measured_state(plant: &mut Plant, s: &Sample) -> bool {
     true
 }
 
-/// One control period of the plant on the sample's commands.
+/// One control period of the plant on the commands of sample `s`.
 fn step_period(plant: &mut Plant, s: &Sample) {
     let steps = (crate::PERIOD_S / PHYSICS_DT_S).round() as usize;
     let u = [
@@ -271,20 +276,36 @@ fn step_period(plant: &mut Plant, s: &Sample) {
     }
 }
 
-/// The plant's readings (sensor effects added, no noise) less the measured ones, per signal.
-fn errors(plant: &Plant, s: &Sample) -> [f64; 11] {
+/// The measured cylinder velocities of `s` (resolver rates times the moment arms at the measured
+/// angles less the plant's resolver offset), m/s; `None` outside the linkage.
+fn measured_velocities(plant: &Plant, s: &Sample) -> Option<[f64; 3]> {
+    let q_off = plant.effects().get(Effect::ResolverOffset);
+    let q = JointAngles {
+        boom_rad: s.angles_rad[0] - q_off,
+        stick_rad: s.angles_rad[1] - q_off,
+        bucket_rad: s.angles_rad[2] - q_off,
+    };
+    let x = plant.linkage().extensions(&q).ok()?;
+    let link = plant.linkage().state(x).ok()?;
+    Some([0, 1, 2].map(|i| s.rates_rad_per_s[i] * link.arms[i]))
+}
+
+/// The plant's readings (sensor effects added, no noise) less the measured ones, per signal;
+/// `None` where the measured angles are outside the linkage.
+fn errors(plant: &Plant, s: &Sample) -> Option<[f64; 11]> {
     let t = plant.sensed_truth();
     let p_off = plant.effects().get(Effect::PressureSensorOffset);
+    let v = measured_velocities(plant, s)?;
     let mut e = [0.0; 11];
     for i in 0..3 {
-        e[i] = t.rates_rad_per_s[i] - s.rates_rad_per_s[i];
+        e[i] = plant.hydraulics.actuators[i].velocity - v[i];
         e[5 + 2 * i] = t.head_pa[i] + p_off - s.head_pa[i];
         e[6 + 2 * i] = t.rod_pa[i] + p_off - s.rod_pa[i];
     }
     for i in 0..2 {
         e[3 + i] = t.pump_pa[i] + p_off - s.pump_pa[i];
     }
-    e
+    Some(e)
 }
 
 /// The gap between the simulator of `machine` with `effects` and the measured `records` (module
@@ -307,16 +328,16 @@ pub fn simulator_gap(
         let mut in_step_until = 0usize;
         // Samples with the spool state known: no gap in the record in the warm-up before them.
         let warm = warmed_up(s);
-        let mut k = WARMUP_SAMPLES;
+        let mut k = WARMUP_SAMPLES + COMMAND_LAG_SAMPLES;
         while k + 1 < s.len() {
             if !free_air(&s[k]) || !warm[k] {
                 k += 1;
                 continue;
             }
             if in_step_until != k {
-                for w in &s[k - WARMUP_SAMPLES..k] {
-                    set_measured_state(&mut plant, w);
-                    step_period(&mut plant, w);
+                for w in k - WARMUP_SAMPLES..k {
+                    set_measured_state(&mut plant, &s[w]);
+                    step_period(&mut plant, &s[w - COMMAND_LAG_SAMPLES]);
                 }
             }
             if !set_measured_state(&mut plant, &s[k]) {
@@ -327,9 +348,10 @@ pub fn simulator_gap(
             windows += 1;
             let mut j = k;
             while j + 1 < s.len() && j < k + WINDOW_SAMPLES && free_air(&s[j + 1]) && warm[j + 1] {
-                step_period(&mut plant, &s[j]);
-                let e = errors(&plant, &s[j + 1]);
-                if e.iter().all(|v| v.is_finite()) {
+                step_period(&mut plant, &s[j - COMMAND_LAG_SAMPLES]);
+                if let Some(e) = errors(&plant, &s[j + 1])
+                    && e.iter().all(|v| v.is_finite())
+                {
                     for (acc, v) in sse.iter_mut().zip(e) {
                         *acc += v * v;
                     }
@@ -388,6 +410,26 @@ pub struct TwinReport {
     pub ratio: BTreeMap<String, f64>,
     /// Wall time of the re-runs, s.
     pub wall_s: f64,
+}
+
+impl TwinReport {
+    /// Per group ([`GAP_GROUPS`]): name, unit, gap before, after, and their ratio (NaN where
+    /// missing).
+    pub fn rows(&self) -> Vec<(&'static str, &'static str, f64, f64, f64)> {
+        let get = |m: &BTreeMap<String, f64>, g: &str| m.get(g).copied().unwrap_or(f64::NAN);
+        GAP_GROUPS
+            .iter()
+            .map(|&(g, unit)| {
+                (
+                    g,
+                    unit,
+                    get(&self.gap_before.groups, g),
+                    get(&self.gap_after.groups, g),
+                    get(&self.ratio, g),
+                )
+            })
+            .collect()
+    }
 }
 
 /// The twin of an analysis on the machine file `machine_text`, re-run on the held-out `records`.
@@ -503,7 +545,9 @@ mod tests {
                 pump_pa: t.pump_pa,
                 ..Sample::default()
             });
-            step_period(&mut plant, samples.last().unwrap());
+            // The plant acts on a command one control period late, as the gateway does.
+            let k = samples.len() - 1;
+            step_period(&mut plant, &samples[k.saturating_sub(COMMAND_LAG_SAMPLES)]);
         }
         let rec = crate::DigRecord {
             index: 0,
@@ -522,7 +566,10 @@ mod tests {
         sat.set_by_name("pump_saturation", 0.3).unwrap();
         let other = simulator_gap(&[&prepared], &machine, sat).unwrap();
         assert!(own.samples > 300 && own.windows >= 7, "{own:?}");
-        let (a, b) = (own.groups["joint_rate"], other.groups["joint_rate"]);
+        let (a, b) = (
+            own.groups["cylinder_velocity"],
+            other.groups["cylinder_velocity"],
+        );
         assert!(b > 3.0 * a && b > 1e-3, "own {a:.2e}, saturated {b:.2e}");
     }
 }
