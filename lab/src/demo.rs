@@ -121,9 +121,15 @@ pub struct DemoArgs {
     /// Seed of the simulator (sensor noise, random boulders); default: the bench file's.
     #[arg(long, value_name = "N")]
     pub seed: Option<u64>,
-    /// Machine file (default: the built-in config/machine.toml).
+    /// Machine file (default: the built-in config/machine.toml): the controller's, and the
+    /// simulated machine's unless `--plant-machine` is given.
     #[arg(long, value_name = "FILE")]
     pub machine: Option<PathBuf>,
+    /// Machine file of the simulated machine only (the plant: bores, masses, relief, ... and its
+    /// `[effects]` table); the controller keeps `--machine` (default: the built-in one). Makes
+    /// "measured" sessions of a machine that differs from its file.
+    #[arg(long, value_name = "FILE")]
+    pub plant_machine: Option<PathBuf>,
     /// Bench scenario file (default: the built-in config/bench_extended.toml for the planned and
     /// predefined strategies, config/bench.toml for the fixed plan).
     #[arg(long, value_name = "FILE")]
@@ -182,6 +188,7 @@ impl DemoArgs {
             digs: 10,
             seed: None,
             machine: None,
+            plant_machine: None,
             bench: None,
             effects: Vec::new(),
             soil_contact: None,
@@ -447,6 +454,9 @@ pub struct DemoSummary {
     pub soil_contact: SoilContactIntegration,
     /// The hidden effects given on the command line.
     pub effects: Vec<String>,
+    /// The simulated machine's own file (`--plant-machine`), when it is not the controller's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plant_machine: Option<PlantMachine>,
     /// What stamped the trace's frames: `virtual` (`demo`: session time since the fixed epoch of
     /// docs/demo-output.md), `kernel` (`run`: the socket's kernel receive timestamps) or
     /// `wall_at_read` (`run` without them); absent in summaries written before it was recorded.
@@ -460,6 +470,32 @@ pub struct DemoSummary {
     pub digs: Vec<DigRecord>,
     /// Totals.
     pub totals: Totals,
+}
+
+/// The simulated machine's file of a session made with `--plant-machine` (`summary.json`
+/// `plant_machine`): which file, and its content's hash, so the session says which plant made it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PlantMachine {
+    /// The file as given.
+    pub path: String,
+    /// SHA-256 of its bytes, lower-case hex.
+    pub sha256: String,
+}
+
+impl PlantMachine {
+    /// The record of the file at `path`.
+    ///
+    /// # Errors
+    /// Reading the file.
+    pub fn of(path: &Path) -> anyhow::Result<Self> {
+        use sha2::Digest as _;
+        let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+        let digest = sha2::Sha256::digest(&bytes);
+        Ok(Self {
+            path: path.display().to_string(),
+            sha256: digest.iter().map(|b| format!("{b:02x}")).collect(),
+        })
+    }
 }
 
 impl DemoSummary {
@@ -548,13 +584,22 @@ pub async fn run_observed(
 /// File, simulator and controller construction errors.
 pub fn setup(args: &DemoArgs) -> anyhow::Result<(SimConfig, ControllerConfig, AutodigMaps)> {
     let effects: Vec<&str> = args.effects.iter().map(String::as_str).collect();
+    // With `--plant-machine` the simulator is built from it (its `[effects]` table included); the
+    // controller's machine is `--machine`'s ([`controller_machine`]).
     let mut sim = SimConfig::load(
-        args.machine.as_deref(),
+        args.plant_machine.as_deref().or(args.machine.as_deref()),
         args.bench.as_deref(),
         args.seed,
         &effects,
     )
-    .context("simulator configuration")?;
+    .with_context(|| match &args.plant_machine {
+        Some(p) => format!("simulator configuration (--plant-machine {})", p.display()),
+        None => "simulator configuration".to_owned(),
+    })?;
+    if args.plant_machine.is_some() {
+        // The controller's file is checked before anything runs, as the plant's was.
+        controller_machine(args, &sim)?;
+    }
     if args.bench.is_none() && args.strategy != DemoStrategy::Fixed {
         let scenario =
             Scenario::from_toml_str_named(EXTENDED_BENCH_TOML, "config/bench_extended.toml")
@@ -638,6 +683,25 @@ pub fn setup(args: &DemoArgs) -> anyhow::Result<(SimConfig, ControllerConfig, Au
     Ok((sim, config, maps))
 }
 
+/// The controller's machine of a session: the simulator's, unless the simulated machine has a file
+/// of its own (`--plant-machine`); then `--machine` (or the built-in file), loaded and checked as
+/// the simulator loads a machine file (its `[effects]` table, a simulator setting, is not the
+/// controller's and is ignored).
+///
+/// # Errors
+/// Reading or validating the file (errors name the file, line and field).
+pub fn controller_machine(
+    args: &DemoArgs,
+    sim: &SimConfig,
+) -> anyhow::Result<planner::machine::MachineConfig> {
+    if args.plant_machine.is_none() {
+        return Ok(sim.machine.clone());
+    }
+    let own = SimConfig::load::<&str>(args.machine.as_deref(), None, None, &[])
+        .context("the controller's machine (--machine, or the built-in config/machine.toml)")?;
+    Ok(own.machine)
+}
+
 /// The planner settings of a session: `--planner` or the built-in file, with the desired floor at
 /// the bench's floor elevation (world z = base z: the machine stands on the ground plane).
 ///
@@ -679,8 +743,9 @@ pub fn build_session(
         controller::cycle::ScanGrid::default().max_gap_cells,
     )
     .context("terrain map")?;
+    let machine = controller_machine(args, sim)?;
     let mut session =
-        PlannedSession::new(&sim.machine, cfg, mapper, strategy).context("planned session")?;
+        PlannedSession::new(&machine, cfg, mapper, strategy).context("planned session")?;
     if let Some(p) = &args.hardness {
         let text = std::fs::read_to_string(p)
             .with_context(|| format!("reading the hardness regression {}", p.display()))?;
@@ -902,7 +967,24 @@ pub fn run_session_observed(
     let full_bucket_n = sim.machine.bucket.capacity_m3
         * sim.scenario.soil.density_kg_per_m3
         * planner::machine::GRAVITY_M_PER_S2;
+    // The harness builds the plant and a controller from `sim`; with `--plant-machine` the
+    // controller is the one of its own machine file, started before the first step.
+    let own_controller = match &args.plant_machine {
+        Some(_) => Some(
+            ControllerNode::new(
+                &controller_machine(args, &sim)?,
+                maps.clone(),
+                config.clone(),
+            )
+            .context("controller")?,
+        ),
+        None => None,
+    };
     let mut h = Harness::new(&sim, maps, config).context("controller")?;
+    if let Some(node) = own_controller {
+        h.kill_controller();
+        h.start_controller(node);
+    }
     let mut driver = match h.node_mut() {
         Some(node) => SessionDriver::new(session, predefined_joints, node),
         None => anyhow::bail!("no controller"),
@@ -1049,6 +1131,14 @@ pub fn run_session_observed(
         node,
         session,
     );
+    let summary = DemoSummary {
+        plant_machine: args
+            .plant_machine
+            .as_deref()
+            .map(PlantMachine::of)
+            .transpose()?,
+        ..summary
+    };
     let plan: Vec<Action> = node.cycle().config().actions.clone();
     let after = machine.plant().world.terrain.clone();
     if let Some(s) = &session {
@@ -1327,6 +1417,7 @@ pub fn session_summary(
         seed: end.seed,
         soil_contact: end.soil_contact,
         effects: end.effects,
+        plant_machine: None,
         trace_clock: Some(end.trace_clock),
         can_link: None,
         digs: records,
