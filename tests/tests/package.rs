@@ -106,7 +106,14 @@ fn unit_runs_unprivileged_never_restarts_and_keeps_to_its_address_families() {
 /// directory's `debian/`.
 fn package() -> Option<PathBuf> {
     if let Some(p) = std::env::var_os("EXCAVATOR_DEB") {
-        return Some(PathBuf::from(p));
+        let p = PathBuf::from(p);
+        assert!(
+            p.is_file(),
+            "EXCAVATOR_DEB={}: no such file (an absolute path: this test runs in {})",
+            p.display(),
+            std::env::current_dir().map_or_else(|e| e.to_string(), |d| d.display().to_string())
+        );
+        return Some(p);
     }
     // This test is TARGET/<profile>/deps/package-<hash>.
     let exe = std::env::current_exe().ok()?;
