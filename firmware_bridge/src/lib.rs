@@ -30,6 +30,8 @@
 //!   nodes use to log everything they send and receive.
 //! - [`busload`]: exact stuffed bit counts per frame (CAN CRC-15) and the bus load of a schedule.
 //! - [`scan`]: the range-scan request and result that travel beside the CAN bus (JSON lines).
+//! - [`wire_dbc`]: a DBC loaded at run time and its signal codec (Intel and Motorola, integers and
+//!   floats, 11- and 29-bit ids, multiplexing, value tables), for another gateway's messages.
 //!
 //! # Data flow
 //!
@@ -45,6 +47,7 @@ pub mod busload;
 pub mod scan;
 pub mod trace;
 pub mod transport;
+pub mod wire_dbc;
 
 pub use gateway_core::{bus, dbc, frame, gateway, id, messages, secoc, time};
 
