@@ -220,7 +220,11 @@ fn bit_positions(start_bit: u64, len: u64, order: ByteOrder, size: usize) -> Opt
             for i in 0..len {
                 out.push(u16::try_from(pos).ok().filter(|&p| u64::from(p) < total)?);
                 if i + 1 < len {
-                    pos = if pos.is_multiple_of(8) { pos + 15 } else { pos - 1 };
+                    pos = if pos.is_multiple_of(8) {
+                        pos + 15
+                    } else {
+                        pos - 1
+                    };
                 }
             }
             out.reverse();
@@ -585,7 +589,8 @@ impl WireMessage {
     ///
     /// # Errors
     /// [`DecodeError::WrongLength`] if `data` is not the message's length,
-    /// [`DecodeError::UnknownMux`] if the multiplexor selects no signal.
+    /// [`DecodeError::UnknownMux`] if the multiplexor holds a value no multiplexed signal is defined
+    /// for.
     pub fn decode(&self, data: &[u8]) -> Result<Vec<SignalValue>, DecodeError> {
         if data.len() != self.size {
             return Err(DecodeError::WrongLength {
@@ -595,8 +600,11 @@ impl WireMessage {
             });
         }
         let mux = self.multiplexor.map(|i| self.signals[i].bits(data));
+        let values = self.mux_values();
+        // A multiplexor with no multiplexed signals (every signal plain) accepts any value.
         if let Some(value) = mux
-            && !self.mux_values().contains(&value)
+            && !values.is_empty()
+            && !values.contains(&value)
         {
             return Err(DecodeError::UnknownMux {
                 message: self.name.clone(),

@@ -34,6 +34,7 @@ fn all_messages() -> Vec<WireMessage> {
 /// The multiplexor values a frame of `msg` can carry (`None` for a plain message).
 fn mux_choices(msg: &WireMessage) -> Vec<Option<u64>> {
     match msg.multiplexor {
+        Some(_) if msg.mux_values().is_empty() => vec![Some(0), Some(5)],
         Some(_) => msg.mux_values().into_iter().map(Some).collect(),
         None => vec![None],
     }
