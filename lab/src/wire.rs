@@ -469,13 +469,7 @@ pub async fn run_observed(args: RunArgs, observer: &mut dyn SessionObserver) -> 
         observer,
     )
     .await;
-    let stats = bus.stats();
-    tracing::info!(
-        profile = bus.profile().origin(),
-        unmapped_received = stats.unmapped_received,
-        untranslatable_sent = stats.untranslatable_sent,
-        "machine profile"
-    );
+    bus.log_stats();
     result
 }
 

@@ -170,6 +170,29 @@ fn recorded_controller(
     (ctl_node, trace)
 }
 
+/// Runs the controller on `bus` until its session ends, then stops `sim`; the simulator's summary.
+async fn run_to_the_end<B: firmware_bridge::Bus>(
+    bus: &B,
+    trace: lab::wire::SessionTrace,
+    args: &RunArgs,
+    sim: Simulator,
+) -> vcan_sim::realtime::RunSummary {
+    // A budget far above a session of two digs (~2 x 30 s at 2x); the test fails if it is what stops
+    // it.
+    let budget = tokio::time::sleep(Duration::from_secs(240));
+    lab::wire::run_on(
+        bus,
+        Some(trace),
+        args,
+        lab::wire::RunConsole::default(),
+        budget,
+    )
+    .await
+    .unwrap();
+    let _ = sim.stop.send(());
+    sim.task.await.unwrap().unwrap()
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_planned_session_runs_over_a_bus_in_scaled_real_time() {
     let dir = tempfile::tempdir().unwrap();
@@ -178,19 +201,7 @@ async fn the_planned_session_runs_over_a_bus_in_scaled_real_time() {
     let sim = simulator(&out, time_scale).await;
     let (ctl_node, trace) = recorded_controller(&sim, &out);
     let args = planned_run(&sim, 2, time_scale, &out);
-    // A budget far above the session's ~2 x 30 s at 2x; the test fails if it is what stops it.
-    let budget = tokio::time::sleep(Duration::from_secs(240));
-    lab::wire::run_on(
-        &ctl_node,
-        Some(trace),
-        &args,
-        lab::wire::RunConsole::default(),
-        budget,
-    )
-    .await
-    .unwrap();
-    let _ = sim.stop.send(());
-    let summary = sim.task.await.unwrap().unwrap();
+    let summary = run_to_the_end(&ctl_node, trace, &args, sim).await;
     assert!(summary.simulated_s > 10.0, "{summary:?}");
 
     let s: DemoSummary =
@@ -237,18 +248,7 @@ async fn the_planned_session_runs_over_another_gateways_protocol() {
     let (ctl_node, trace) = recorded_controller(&sim, &out);
     let ctl_bus = ProfileBus::new(ctl_node, profile.clone());
     let args = planned_run(&sim, 1, time_scale, &out);
-    let budget = tokio::time::sleep(Duration::from_secs(240));
-    lab::wire::run_on(
-        &ctl_bus,
-        Some(trace),
-        &args,
-        lab::wire::RunConsole::default(),
-        budget,
-    )
-    .await
-    .unwrap();
-    let _ = sim.stop.send(());
-    let summary = sim.task.await.unwrap().unwrap();
+    let summary = run_to_the_end(&ctl_bus, trace, &args, sim).await;
     assert!(summary.simulated_s > 5.0, "{summary:?}");
     assert_eq!(
         ctl_bus.stats(),

@@ -140,13 +140,7 @@ pub async fn run_with_profile(
         .map_err(|e| SimError::Bus(format!("{}: {e}", options.iface)))?;
     let bus = ProfileBus::new(bus, profile);
     let summary = run_on(&bus, node, options, shutdown).await;
-    let stats = bus.stats();
-    tracing::info!(
-        profile = bus.profile().origin(),
-        unmapped_received = stats.unmapped_received,
-        untranslatable_sent = stats.untranslatable_sent,
-        "machine profile"
-    );
+    bus.log_stats();
     summary
 }
 

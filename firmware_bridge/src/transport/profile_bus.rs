@@ -54,6 +54,17 @@ impl<B: Bus> ProfileBus<B> {
         &self.profile
     }
 
+    /// Logs [`ProfileBus::stats`] with the profile's file (at the end of a run).
+    pub fn log_stats(&self) {
+        let stats = self.stats();
+        tracing::info!(
+            profile = self.profile.origin(),
+            unmapped_received = stats.unmapped_received,
+            untranslatable_sent = stats.untranslatable_sent,
+            "machine profile"
+        );
+    }
+
     /// What was not passed on so far.
     pub fn stats(&self) -> ProfileStats {
         ProfileStats {
