@@ -8,7 +8,9 @@
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-use can_dbc::{ByteOrder, Comment, Dbc, MessageId, MultiplexIndicator, NumericValue, ValueType};
+use can_dbc::{
+    AttributeValue, ByteOrder, Comment, Dbc, MessageId, MultiplexIndicator, NumericValue, ValueType,
+};
 
 fn main() {
     let manifest_dir =
@@ -48,6 +50,7 @@ fn main() {
             })
             .unwrap_or_else(|| format!("DBC message {}.", msg.name));
         let transmitter = msg.transmitter.clone().unwrap_or_default();
+        let cycle_time_ms = cycle_time_ms(&dbc, msg.id, &msg.name);
         writeln!(
             out,
             "/// `{}` (id `0x{id:08X}`, PGN {pgn} = `0x{pgn:04X}`, sent by {transmitter}): {}",
@@ -146,7 +149,7 @@ fn main() {
         writeln!(out, "    /// The message descriptor.").expect("writing to a String cannot fail");
         writeln!(
             out,
-            "    pub const MESSAGE: MessageDesc = MessageDesc {{ name: {:?}, default_id: 0x{id:08X}, pgn: PGN, dlc: {}, transmitter: {:?}, signals: SIGNALS }};",
+            "    pub const MESSAGE: MessageDesc = MessageDesc {{ name: {:?}, default_id: 0x{id:08X}, pgn: PGN, dlc: {}, transmitter: {:?}, cycle_time_ms: {cycle_time_ms}, signals: SIGNALS }};",
             msg.name, msg.size, transmitter
         )
         .expect("writing to a String cannot fail");
@@ -213,4 +216,25 @@ fn snake(name: &str) -> String {
 
 fn screaming(name: &str) -> String {
     snake(name).to_uppercase()
+}
+
+/// The message's `GenMsgCycleTime` attribute, ms: every message of the protocol is periodic, so a
+/// message without one (or with 0 or a value that is not a whole number of ms up to 65535) fails the
+/// build.
+fn cycle_time_ms(dbc: &Dbc, id: MessageId, name: &str) -> u16 {
+    let value = dbc
+        .attribute_values_message
+        .iter()
+        .find(|a| a.name == "GenMsgCycleTime" && a.message_id == id)
+        .map(|a| &a.value)
+        .unwrap_or_else(|| panic!("message {name} has no GenMsgCycleTime attribute"));
+    let ms = match value {
+        AttributeValue::Uint(v) => i128::from(*v),
+        AttributeValue::Int(v) => i128::from(*v),
+        other => panic!("message {name}: GenMsgCycleTime {other:?} is not an integer"),
+    };
+    match u16::try_from(ms) {
+        Ok(ms) if ms > 0 => ms,
+        _ => panic!("message {name}: GenMsgCycleTime {ms} is not in 1..=65535 ms"),
+    }
 }

@@ -58,6 +58,8 @@ pub struct MessageDesc {
     pub dlc: u8,
     /// Sending node in the DBC (`Controller` or `Gateway`).
     pub transmitter: &'static str,
+    /// Transmission period in the DBC (`GenMsgCycleTime`), ms.
+    pub cycle_time_ms: u16,
     /// Signals in DBC order.
     pub signals: &'static [SignalDesc],
 }
