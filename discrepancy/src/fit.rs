@@ -477,12 +477,14 @@ fn minimise(
     iterations: usize,
 ) -> (f64, f64) {
     let grid = grid.max(3);
-    let mut best = (0.0_f64.clamp(lo, hi), f(0.0_f64.clamp(lo, hi)));
     let step = (hi - lo) / (grid - 1) as f64;
-    for g in 0..grid {
-        let x = lo + step * g as f64;
+    // Zero (no change) is always tried; it is a grid point when it is an end of the range.
+    let zero = 0.0_f64.clamp(lo, hi);
+    let mut best = (f64::NAN, f64::INFINITY);
+    let on_grid = (0..grid).map(|g| lo + step * g as f64);
+    for x in on_grid.chain((zero != lo && zero != hi).then_some(zero)) {
         let v = f(x);
-        if v < best.1 {
+        if v < best.1 || best.0.is_nan() {
             best = (x, v);
         }
     }
@@ -880,6 +882,13 @@ const AMBIGUOUS_SHARE: f64 = 0.95;
 /// Points on the line between two confusable candidates' fits alone where the joint fit starts.
 const JOINT_START_POINTS: usize = 8;
 
+/// At most this many sweeps (along each candidate once) of the joint fit's coordinate descent.
+const JOINT_SWEEPS: usize = 3;
+
+/// A sweep of the coordinate descent that lowers the training chi-square by less than this has
+/// converged (a chi-square unit is `-2 ln L`; 0.1 is far below any significance threshold).
+const JOINT_MIN_GAIN: f64 = 0.1;
+
 /// At most this many of the round's best-scoring other candidates are checked for confusion.
 const MAX_PARTNERS: usize = 4;
 
@@ -988,26 +997,32 @@ fn resolve_confusable(
             (x, y, best) = (xt, yt, f);
         }
     }
-    for _ in 0..3 {
-        let (y1, f1) = minimise(
-            |y| cost(x, y),
-            lo_d,
-            hi_d,
-            config.grid_points,
-            config.golden_iterations,
-        );
-        if f1 < best {
-            (y, best) = (y1, f1);
+    // Alternately along y and x, until a sweep over both gains nothing.
+    let mut sweep_gained = false;
+    for step in 0..2 * JOINT_SWEEPS {
+        let along_y = step % 2 == 0;
+        if along_y {
+            sweep_gained = false;
         }
-        let (x1, f1) = minimise(
-            |x| cost(x, y),
-            lo_c,
-            hi_c,
+        let (lo, hi) = if along_y { (lo_d, hi_d) } else { (lo_c, hi_c) };
+        let (z, f1) = minimise(
+            |z| if along_y { cost(x, z) } else { cost(z, y) },
+            lo,
+            hi,
             config.grid_points,
             config.golden_iterations,
         );
         if f1 < best {
-            (x, best) = (x1, f1);
+            sweep_gained |= f1 < best - JOINT_MIN_GAIN;
+            best = f1;
+            if along_y {
+                y = z;
+            } else {
+                x = z;
+            }
+        }
+        if !along_y && !sweep_gained {
+            break;
         }
     }
     // Covariance 2 H^-1 of the joint training cost (the chi-square is -2 ln L).
