@@ -887,7 +887,8 @@ pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
 /// against a `reference.json` (made first, from a healthy session of as many digs), every step
 /// included (read and prepare, the candidate fits, the verdict, the term suggestion, the twin's
 /// re-run, the report). Both sessions are generated first unless they are in `args.out`: the
-/// measured one on the default planned bench with a 0.1 valve dead band hidden (seed 5), the
+/// measured one on the default planned bench with a 0.3 pump saturation hidden (seed 400; a
+/// valve dead band of 0.1 stalls the planned session before its first dig is complete), the
 /// healthy one at seed 300. Prints the wall and CPU time and the load average.
 ///
 /// # Errors
@@ -907,8 +908,8 @@ pub fn run_bench(args: &BenchArgs) -> anyhow::Result<()> {
     };
     let session = generate(
         args.out.join("session"),
-        5,
-        vec!["valve_deadband=0.1".into()],
+        400,
+        vec!["pump_saturation=0.3".into()],
     )?;
     let healthy = generate(args.out.join("healthy"), 300, Vec::new())?;
     let pool = rayon::ThreadPoolBuilder::new()

@@ -3,7 +3,7 @@
 //! regressors and the few that carry it are printed as an equation the engineer can read, e.g.
 //!
 //! ```text
-//! boom_force residual ≈ +9.1 kN·cos(θ_boom) [1.00] − 2.3 kN per MPa·p_pump1 [0.92]
+//! boom_force residual ≈ −375 kN [1.00] − 107 kN·u_boom(t − 50 ms) [0.94] + 3.29 kN per MPa·(p_head − p_rod)_boom [1.00] + ...
 //! ```
 //!
 //! The regression is SINDy's sequentially thresholded least squares (Brunton, Proctor and Kutz,
