@@ -3,12 +3,14 @@
 //! regressors and the few that carry it are printed as an equation the engineer can read, e.g.
 //!
 //! ```text
-//! boom_force residual ≈ −375 kN [1.00] − 107 kN·u_boom(t − 50 ms) [0.94] + 3.29 kN per MPa·(p_head − p_rod)_boom [1.00] + ...
+//! bucket_force residual ≈ 5.10 kN per MPa·(p_head − p_rod)_bucket [1.00] + 3.82 kN [1.00] − 27.6 kN per m/s·v_bucket [0.99] − 4.87 kN·sign(v_bucket) [0.92] + ...
 //! ```
 //!
 //! The regression is SINDy's sequentially thresholded least squares (Brunton, Proctor and Kutz,
 //! PNAS 2016) on standardised regressors, repeated over bootstrap resamples of the training digs:
-//! the ensemble SINDy of Fasel, Kutz, Brunton and Brunton (Proc. R. Soc. A 478, 2022). A term's
+//! the ensemble SINDy of Fasel, Kutz, Brunton and Brunton (Proc. R. Soc. A 478, 2022). The
+//! threshold is the largest of a few whose ensemble's equation explains the training digs about
+//! as well as the best one's ([`TermConfig::parsimony`]): the sparsest equation that does. A term's
 //! **inclusion probability** is the share of the ensemble's models that keep it; the terms kept at
 //! least [`TermConfig::min_inclusion`] of the time make the suggestion, with the ensemble median
 //! of each coefficient ("bragging") and the ensemble spread as its uncertainty. The suggestion is
@@ -42,9 +44,14 @@ use crate::{Signal, StageTag};
 pub struct TermConfig {
     /// Bootstrap resamples of the training digs (models in the ensemble).
     pub bootstrap: usize,
-    /// STLSQ threshold on a standardised coefficient (residual standard deviations per regressor
-    /// standard deviation): a term that moves the residual by less is dropped.
-    pub threshold: f64,
+    /// STLSQ thresholds tried on a standardised coefficient (residual standard deviations per
+    /// regressor standard deviation; a term that moves the residual by less is dropped), smallest
+    /// first. The largest whose ensemble's equation explains at least [`TermConfig::parsimony`]
+    /// of the best one's share of the training residual is taken (the sparsest that explains about
+    /// as much).
+    pub thresholds: [f64; 5],
+    /// See [`TermConfig::thresholds`].
+    pub parsimony: f64,
     /// A term is kept when at least this share of the ensemble's models include it.
     pub min_inclusion: f64,
     /// A suggestion is made only when it removes at least this share of the held-out residual's
@@ -58,7 +65,8 @@ impl Default for TermConfig {
     fn default() -> Self {
         Self {
             bootstrap: 100,
-            threshold: 0.1,
+            thresholds: [0.05, 0.1, 0.2, 0.3, 0.5],
+            parsimony: 0.95,
             min_inclusion: 0.8,
             min_explained: 0.25,
             seed: 0x5eed,
@@ -331,6 +339,11 @@ fn standardisation(g: &DigGram) -> (Vec<f64>, Vec<bool>) {
 /// coefficients' standard deviation over the ensemble.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EnsembleFit {
+    /// The STLSQ threshold chosen.
+    pub threshold: f64,
+    /// Share of the training residual's mean square its equation ([`EnsembleFit::equation`])
+    /// removes.
+    pub train_explained: f64,
     /// Share of the ensemble's models that include each regressor.
     pub inclusion: Vec<f64>,
     /// Median coefficient over the ensemble (zeros included).
@@ -339,27 +352,57 @@ pub struct EnsembleFit {
     pub spread: Vec<f64>,
 }
 
-/// E-SINDy on per-dig equations: STLSQ on bootstrap resamples of `digs` (first regressor the
-/// constant).
+impl EnsembleFit {
+    /// The equation: the median coefficient of every regressor kept in at least `min_inclusion`
+    /// of the models, zero for the others.
+    pub fn equation(&self, min_inclusion: f64) -> Vec<f64> {
+        self.inclusion
+            .iter()
+            .zip(&self.median)
+            .map(|(p, m)| if *p >= min_inclusion { *m } else { 0.0 })
+            .collect()
+    }
+}
+
+/// E-SINDy on per-dig equations (first regressor the constant): for each threshold of
+/// [`TermConfig::thresholds`], STLSQ on bootstrap resamples of `digs` (the same draws for each);
+/// the ensemble of the threshold [`TermConfig::parsimony`] chooses.
 pub fn ensemble_fit(digs: &[DigGram], config: &TermConfig) -> Option<EnsembleFit> {
     let p = digs.first()?.xy.len();
     let all = DigGram::sum(digs, p);
     let (_, active) = standardisation(&all);
-    let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     let draws = config.bootstrap.max(1);
-    let mut coefficients = vec![Vec::with_capacity(draws); p];
-    for _ in 0..draws {
-        let mut g = DigGram::new(p);
-        for _ in 0..digs.len() {
-            g.add_scaled(&digs[rng.random_range(0..digs.len())], 1.0);
-        }
-        let (scale, varies) = standardisation(&g);
-        let usable: Vec<bool> = active.iter().zip(&varies).map(|(a, v)| *a && *v).collect();
-        let xi = stlsq(&g, &scale, &usable, config.threshold);
-        for (j, c) in coefficients.iter_mut().enumerate() {
-            c.push(xi[j]);
-        }
-    }
+    // The draws: how often each dig is in each resample.
+    let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
+    let counts: Vec<Vec<usize>> = (0..draws)
+        .map(|_| {
+            let mut c = vec![0; digs.len()];
+            for _ in 0..digs.len() {
+                c[rng.random_range(0..digs.len())] += 1;
+            }
+            c
+        })
+        .collect();
+    let ensembles: Vec<(f64, Vec<Vec<f64>>)> = config
+        .thresholds
+        .iter()
+        .map(|threshold| {
+            let mut coefficients = vec![Vec::with_capacity(draws); p];
+            for c in &counts {
+                let mut g = DigGram::new(p);
+                for (d, n) in digs.iter().zip(c).filter(|(_, n)| **n > 0) {
+                    g.add_scaled(d, *n as f64);
+                }
+                let (scale, varies) = standardisation(&g);
+                let usable: Vec<bool> = active.iter().zip(&varies).map(|(a, v)| *a && *v).collect();
+                let xi = stlsq(&g, &scale, &usable, *threshold);
+                for (j, c) in coefficients.iter_mut().enumerate() {
+                    c.push(xi[j]);
+                }
+            }
+            (*threshold, coefficients)
+        })
+        .collect();
     let median = |v: &[f64]| {
         let mut s = v.to_vec();
         s.sort_by(f64::total_cmp);
@@ -370,20 +413,44 @@ pub fn ensemble_fit(digs: &[DigGram], config: &TermConfig) -> Option<EnsembleFit
             0.5 * (s[m - 1] + s[m])
         }
     };
-    Some(EnsembleFit {
-        inclusion: coefficients
-            .iter()
-            .map(|c| c.iter().filter(|x| **x != 0.0).count() as f64 / draws as f64)
-            .collect(),
-        median: coefficients.iter().map(|c| median(c)).collect(),
-        spread: coefficients
-            .iter()
-            .map(|c| {
-                let m = c.iter().sum::<f64>() / c.len() as f64;
-                (c.iter().map(|x| (x - m).powi(2)).sum::<f64>() / c.len() as f64).sqrt()
-            })
-            .collect(),
-    })
+    let fits: Vec<EnsembleFit> = ensembles
+        .into_iter()
+        .map(|(threshold, coefficients)| EnsembleFit {
+            threshold,
+            train_explained: 0.0,
+            inclusion: coefficients
+                .iter()
+                .map(|c| c.iter().filter(|x| **x != 0.0).count() as f64 / draws as f64)
+                .collect(),
+            median: coefficients.iter().map(|c| median(c)).collect(),
+            spread: coefficients
+                .iter()
+                .map(|c| {
+                    let m = c.iter().sum::<f64>() / c.len() as f64;
+                    (c.iter().map(|x| (x - m).powi(2)).sum::<f64>() / c.len() as f64).sqrt()
+                })
+                .collect(),
+        })
+        .collect();
+    // Each ensemble's equation (the terms it agrees on) scored on all the training digs; the
+    // sparsest that explains about as much as the best.
+    let mut fits = fits;
+    for f in &mut fits {
+        let xi = DVector::from_vec(f.equation(config.min_inclusion));
+        f.train_explained = if all.yy > 0.0 {
+            1.0 - all.sse(&xi) / all.yy
+        } else {
+            0.0
+        };
+    }
+    let best = fits
+        .iter()
+        .map(|f| f.train_explained)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let choice = fits
+        .iter()
+        .rposition(|f| f.train_explained >= config.parsimony * best)?;
+    fits.into_iter().nth(choice)
 }
 
 /// One term of a suggestion.
@@ -422,6 +489,8 @@ pub struct TermSuggestion {
     pub samples: (usize, usize),
     /// Models in the ensemble.
     pub bootstrap: usize,
+    /// The STLSQ threshold the out-of-bag digs chose ([`TermConfig::thresholds`]).
+    pub threshold: f64,
 }
 
 impl TermSuggestion {
@@ -520,19 +589,11 @@ pub fn suggest(
             continue;
         };
         let p = lib.len();
-        let keep: Vec<usize> = (0..p)
-            .filter(|j| fit.inclusion[*j] >= config.min_inclusion && fit.median[*j] != 0.0)
-            .collect();
+        let xi = DVector::from_vec(fit.equation(config.min_inclusion));
+        let keep: Vec<usize> = (0..p).filter(|j| xi[*j] != 0.0).collect();
         if keep.is_empty() {
             continue;
         }
-        let xi = DVector::from_fn(p, |j, _| {
-            if keep.contains(&j) {
-                fit.median[j]
-            } else {
-                0.0
-            }
-        });
         let held = DigGram::sum(te, p);
         if held.yy <= 0.0 || held.n == 0 {
             continue;
@@ -578,6 +639,7 @@ pub fn suggest(
             heldout_rms: ((held.yy / n).sqrt(), (after / n).sqrt()),
             samples: (all_train.n, held.n),
             bootstrap: config.bootstrap,
+            threshold: fit.threshold,
         });
     }
     out
