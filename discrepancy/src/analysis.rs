@@ -1,7 +1,8 @@
 //! `excavator-ctl discrepancy analyse`: the analysis of measured sessions end to end: read and
 //! prepare them ([`crate::session`]), check there is enough to name anything
 //! ([`crate::sufficiency`]), fit the candidate effects ([`crate::analyse`]), judge the held-out
-//! residuals against the reference ([`crate::reference`], [`crate::verdict`]), update the twin
+//! residuals against the reference ([`crate::reference`], [`crate::verdict`]), suggest a new term
+//! for what stays beyond it ([`crate::term`]), update the twin
 //! ([`crate::twin`]), write the report, the augmented model and the simulator profile
 //! ([`crate::report`]).
 
@@ -96,14 +97,27 @@ pub fn load_reference(
     };
     let fit = analyse(&records, &model.params, &config, &mut |_, _| {})
         .context("calibrating on the reference sessions")?;
+    // The calibration is what the model carries after the fit: the named effects, and of an
+    // ambiguous pair the one the model carries (a healthy machine's few ms of delay or lag, which
+    // the reference's healthy sessions cannot tell apart, are still its calibration: without it
+    // every measured session found the same pair again).
     let calibration = fit
         .named_effects
         .iter()
+        .filter(|e| e.kind == "effect")
         .map(|e| ModelEffect {
             name: e.name.to_string(),
             magnitude: e.magnitude,
             uncertainty: e.uncertainty,
         })
+        .chain(fit.ambiguous.iter().filter_map(|a| {
+            let c = a.candidates.iter().find(|c| c.name == a.in_model)?;
+            (c.kind == "effect").then(|| ModelEffect {
+                name: c.name.clone(),
+                magnitude: c.alone,
+                uncertainty: c.alone_uncertainty,
+            })
+        }))
         .collect();
     let reference = Reference::from_records(
         &records,
@@ -225,6 +239,23 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
         .iter()
         .filter(|rec| result.test_digs.contains(&rec.index))
         .collect();
+    let terms = match &verdict {
+        Some(v) => {
+            let names: Vec<&str> = v.unexplained.iter().map(|u| u.signal).collect();
+            let train: Vec<&PreparedRecord> = records
+                .iter()
+                .filter(|rec| result.train_digs.contains(&rec.index))
+                .collect();
+            crate::term::suggest(
+                &crate::term::signals_named(&names),
+                &train,
+                &held_out,
+                (&result.params, &result.augmentation),
+                &crate::term::TermConfig::default(),
+            )
+        }
+        None => Vec::new(),
+    };
     let twin = match crate::twin::update_twin(&machine_text, &result, &held_out) {
         Ok(t) => Some(t),
         Err(e) => {
@@ -242,6 +273,7 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
         skipped_sessions,
         reference,
         verdict,
+        terms,
         warnings,
         twin,
     };

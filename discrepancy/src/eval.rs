@@ -11,8 +11,8 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
+use crate::Candidate;
 use crate::effects::CandidateEffect as _;
-use crate::{AnalysisConfig, Candidate, analyse};
 use anyhow::Context as _;
 use clap::Args;
 use rayon::prelude::*;
@@ -20,7 +20,7 @@ use serde::Serialize;
 
 use crate::analysis::{AnalyseArgs, load_reference, run_analysis};
 use crate::plant::{PlantChange, PlantFile, PlantOp, default_plant_changes};
-use crate::session::{load_machine, load_model, prepare_sessions};
+use crate::session::{load_machine, load_model};
 use crate::verdict::Outcome;
 use lab::demo::{DemoArgs, DemoStrategy, SoilContact, run_session};
 
@@ -154,10 +154,10 @@ impl Hidden {
 /// Arguments of `discrepancy bench`.
 #[derive(Debug, Clone, Args)]
 pub struct BenchArgs {
-    /// Digs to analyse.
-    #[arg(long, default_value_t = 30, value_name = "N", value_parser = clap::value_parser!(u32).range(2..))]
+    /// Digs of the measured and the reference session.
+    #[arg(long, default_value_t = 16, value_name = "N", value_parser = clap::value_parser!(u32).range(2..))]
     pub digs: u32,
-    /// Output folder for the generated session.
+    /// Output folder for the generated sessions, the reference and the report.
     #[arg(long, default_value = "out/discrepancy-bench", value_name = "DIR")]
     pub out: PathBuf,
 }
@@ -883,70 +883,98 @@ pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Times the analysis of `args.digs` digs (one session with a hidden effect, generated first) with the
-/// full effect library on one core, and prints the load average next to it.
+/// Times `discrepancy analyse` of one session of `args.digs` digs on one core, as a user runs it:
+/// against a `reference.json` (made first, from a healthy session of as many digs), every step
+/// included (read and prepare, the candidate fits, the verdict, the term suggestion, the twin's
+/// re-run, the report). Both sessions are generated first unless they are in `args.out`: the
+/// measured one on the default planned bench with a 0.3 pump saturation hidden (seed 400; a
+/// valve dead band of 0.1 stalls the planned session before its first dig is complete), the
+/// healthy one at seed 300. Prints the wall and CPU time and the load average.
 ///
 /// # Errors
-/// Generating or analysing the session.
+/// Generating or analysing the sessions.
 pub fn run_bench(args: &BenchArgs) -> anyhow::Result<()> {
-    let session = args.out.join("session");
-    if !session_complete(&session)? {
-        let mut demo = DemoArgs::new(session.clone());
-        demo.digs = args.digs;
-        demo.seed = Some(5);
-        demo.quiet = true;
-        demo.effects = vec!["valve_deadband=0.1".into()];
-        run_session(&demo, &AtomicBool::new(false)).context("generating the bench session")?;
-    }
-    let machine = load_machine(None)?;
-    let model = load_model(None)?;
+    let generate = |dir: PathBuf, seed: u64, effects: Vec<String>| -> anyhow::Result<PathBuf> {
+        if !session_complete(&dir)? {
+            let mut demo = DemoArgs::new(dir.clone());
+            demo.digs = args.digs;
+            demo.seed = Some(seed);
+            demo.quiet = true;
+            demo.effects = effects;
+            run_session(&demo, &AtomicBool::new(false))
+                .with_context(|| format!("generating the bench session {}", dir.display()))?;
+        }
+        Ok(dir)
+    };
+    let session = generate(
+        args.out.join("session"),
+        400,
+        vec!["pump_saturation=0.3".into()],
+    )?;
+    let healthy = generate(args.out.join("healthy"), 300, Vec::new())?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
         .context("one-thread pool")?;
-    let (read_s, analyse_s, analyse_cpu_s, digs, named) =
-        pool.install(|| -> anyhow::Result<_> {
-            let t = Instant::now();
-            let records = prepare_sessions(std::slice::from_ref(&session), &machine, &model)?;
-            let read_s = t.elapsed().as_secs_f64();
-            let bar = indicatif::ProgressBar::new(1);
-            let t = Instant::now();
-            let cpu0 = process_cpu_s();
-            let r = analyse(
-                &records,
-                &model.params,
-                &AnalysisConfig::default(),
-                &mut |d, n| {
-                    bar.set_length(n as u64);
-                    bar.set_position(d as u64);
-                },
-            )?;
-            bar.finish_and_clear();
-            let analyse_s = t.elapsed().as_secs_f64();
-            let cpu = process_cpu_s().zip(cpu0).map(|(b, a)| b - a);
-            Ok((
-                read_s,
-                analyse_s,
-                cpu,
-                records.len(),
-                r.named_effects
-                    .iter()
-                    .map(|e| format!("{}={:.3e}", e.name, e.magnitude))
-                    .collect::<Vec<_>>(),
-            ))
-        })?;
-    let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+    let timed = |f: &mut dyn FnMut() -> anyhow::Result<()>| -> anyhow::Result<(f64, Option<f64>)> {
+        let t = Instant::now();
+        let cpu0 = process_cpu_s();
+        f()?;
+        let cpu = process_cpu_s().zip(cpu0).map(|(b, a)| b - a);
+        Ok((t.elapsed().as_secs_f64(), cpu))
+    };
+    let reference_file = args.out.join("reference.json");
+    let (ref_wall, ref_cpu) = pool.install(|| {
+        timed(&mut || {
+            let reference = load_reference(
+                std::slice::from_ref(&healthy),
+                &load_machine(None)?,
+                &load_model(None)?,
+            )?
+            .context("no reference")?;
+            std::fs::create_dir_all(&args.out)?;
+            std::fs::write(&reference_file, reference.to_json()?)
+                .with_context(|| format!("writing {}", reference_file.display()))
+        })
+    })?;
+    let mut analyse_args = AnalyseArgs::new(vec![session], args.out.join("report"));
+    analyse_args.reference = vec![reference_file];
+    let mut outcome = None;
+    let (wall, cpu) = pool.install(|| {
+        timed(&mut || {
+            outcome = Some(run_analysis(&analyse_args)?);
+            Ok(())
+        })
+    })?;
+    let cpu_text = |c: Option<f64>| c.map_or_else(|| "n/a".to_string(), |c| format!("{c:.2} s"));
     println!(
-        "discrepancy bench: {digs} digs, {} candidates, one core: read+prepare {read_s:.2} s, analysis {analyse_s:.2} s, total {:.2} s (target < 30 s); named {named:?}",
-        Candidate::ALL.len(),
-        read_s + analyse_s
+        "discrepancy bench: one analysis of {} digs against a reference.json, one core: wall {wall:.2} s, CPU {} (target < 10 s)",
+        args.digs,
+        cpu_text(cpu)
     );
-    if let Some(cpu) = analyse_cpu_s {
+    println!(
+        "  (the reference from {} healthy digs, once: wall {ref_wall:.2} s, CPU {})",
+        args.digs,
+        cpu_text(ref_cpu)
+    );
+    if let Some(a) = &outcome {
         println!(
-            "analysis CPU time {cpu:.2} s (what one unshared core would take; the wall time above \
-             grows with the machine's load)"
+            "  named {:?}, ambiguous {}, outcome {}",
+            a.result
+                .named_effects
+                .iter()
+                .map(|e| format!("{}={:.3e}", e.name, e.magnitude))
+                .collect::<Vec<_>>(),
+            a.result.ambiguous.len(),
+            a.verdict
+                .as_ref()
+                .map_or("not judged", |v| v.outcome.name())
         );
     }
+    println!(
+        "CPU time is what one unshared core would take; the wall time grows with the machine's load"
+    );
+    let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
     println!("load average: {}", load.trim());
     Ok(())
 }

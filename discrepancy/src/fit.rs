@@ -467,8 +467,17 @@ impl<'a> Evaluator<'a> {
     }
 }
 
-/// Golden-section minimisation of `f` on `[lo, hi]` after a coarse grid (the cost curves of the
-/// timing effects are not unimodal over the whole range).
+/// The search stops when the bracket around the minimum is narrower than this share of the range.
+const SEARCH_TOLERANCE: f64 = 2e-4;
+
+/// Minimisation of `f` on `[lo, hi]`: a coarse grid first (the cost curves of the timing effects
+/// are not unimodal over the whole range), then Brent's method in the grid cell around the best
+/// point: a step to the vertex of the parabola through the bracket and the best point where it
+/// falls well inside the bracket, a golden-section step into the larger half where it does not;
+/// at most `iterations` steps, until the bracket is narrower than [`SEARCH_TOLERANCE`] of the
+/// range. The cost near a candidate's fit is close to a parabola (a chi-square), so a few steps
+/// do; a best grid point at a bound (a candidate that is absent) takes one evaluation beside it
+/// to see the cost rise into the range.
 fn minimise(
     mut f: impl FnMut(f64) -> f64,
     lo: f64,
@@ -477,41 +486,131 @@ fn minimise(
     iterations: usize,
 ) -> (f64, f64) {
     let grid = grid.max(3);
-    let mut best = (0.0_f64.clamp(lo, hi), f(0.0_f64.clamp(lo, hi)));
     let step = (hi - lo) / (grid - 1) as f64;
-    for g in 0..grid {
-        let x = lo + step * g as f64;
-        let v = f(x);
+    let tol = SEARCH_TOLERANCE * (hi - lo);
+    let points: Vec<(f64, f64)> = (0..grid)
+        .map(|g| {
+            let x = if g + 1 == grid {
+                hi
+            } else {
+                lo + step * g as f64
+            };
+            (x, f(x))
+        })
+        .collect();
+    let i = (0..grid)
+        .min_by(|a, b| points[*a].1.total_cmp(&points[*b].1))
+        .unwrap_or(0);
+    // Zero (no change) is always tried; it is a grid point when it is an end of the range.
+    let zero = 0.0_f64.clamp(lo, hi);
+    let mut best = points[i];
+    if zero != lo && zero != hi && points.iter().all(|(x, _)| *x != zero) {
+        let v = f(zero);
         if v < best.1 {
-            best = (x, v);
+            best = (zero, v);
         }
     }
-    let (mut a, mut b) = ((best.0 - step).max(lo), (best.0 + step).min(hi));
-    let phi = 0.5 * (5f64.sqrt() - 1.0);
-    let mut c = b - phi * (b - a);
-    let mut d = a + phi * (b - a);
-    let (mut fc, mut fd) = (f(c), f(d));
-    for _ in 0..iterations {
-        if fc < fd {
-            b = d;
-            d = c;
-            fd = fc;
-            c = b - phi * (b - a);
-            fc = f(c);
+    if best.0 != points[i].0 {
+        // Zero beat the grid: search its neighbourhood, from it alone.
+        return brent(
+            &mut f,
+            ((zero - step).max(lo), (zero + step).min(hi)),
+            [best; 3],
+            tol,
+            iterations,
+        );
+    }
+    let (mut a, mut b) = (points[i.saturating_sub(1)], points[(i + 1).min(grid - 1)]);
+    if i == 0 || i + 1 == grid {
+        // At a bound: the minimum is there unless the cost falls just inside.
+        let inside = if i == 0 { best.0 + tol } else { best.0 - tol };
+        let v = f(inside);
+        if v >= best.1 {
+            return best;
+        }
+        if i == 0 {
+            a = best;
         } else {
-            a = c;
-            c = d;
-            fc = fd;
-            d = a + phi * (b - a);
-            fd = f(d);
+            b = best;
+        }
+        best = (inside, v);
+    }
+    // The bracket's ends are the other two points of the first parabola.
+    brent(&mut f, (a.0, b.0), [best, a, b], tol, iterations)
+}
+
+/// Brent's minimisation in `[a, b]` from the best point so far and two others known (parabolic
+/// steps through the three best points, golden-section steps where they fall badly).
+fn brent(
+    f: &mut impl FnMut(f64) -> f64,
+    (mut a, mut b): (f64, f64),
+    [(mut x, mut fx), (mut w, mut fw), (mut v, mut fv)]: [(f64, f64); 3],
+    tol: f64,
+    iterations: usize,
+) -> (f64, f64) {
+    const GOLDEN: f64 = 0.381_966_011_250_105_1;
+    // `x` the best point so far, `w` and `v` the second and third (Brent's names); a parabolic
+    // step must be shorter than half the step before last.
+    let mut last_step = b - a;
+    for _ in 0..iterations {
+        if x - a <= tol && b - x <= tol {
+            break;
+        }
+        let mid = 0.5 * (a + b);
+        // Towards the larger side of the bracket.
+        let outward = if x >= mid { -1.0 } else { 1.0 };
+        let mut u = f64::NAN;
+        if w != x && v != x && v != w {
+            // Vertex of the parabola through x, w and v.
+            let r = (x - w) * (fx - fv);
+            let q = (x - v) * (fx - fw);
+            let p = (x - v) * q - (x - w) * r;
+            let q2 = 2.0 * (q - r);
+            if q2 != 0.0 {
+                let mut d = -p / q2;
+                if d.abs() < 0.5 * last_step.abs() && x + d > a && x + d < b {
+                    // Never closer to the best point than half the tolerance: a step onto it
+                    // tells nothing; one beside it, into the larger side, narrows the bracket
+                    // to the tolerance.
+                    if d.abs() < 0.5 * tol {
+                        d = 0.5 * tol * outward;
+                    }
+                    if x + d > a && x + d < b {
+                        u = x + d;
+                        last_step = d;
+                    }
+                }
+            }
+        }
+        if u.is_nan() {
+            last_step = if outward < 0.0 { a - x } else { b - x };
+            u = x + GOLDEN * last_step;
+        }
+        let fu = f(u);
+        if fu <= fx {
+            if u >= x {
+                a = x;
+            } else {
+                b = x;
+            }
+            (v, fv) = (w, fw);
+            (w, fw) = (x, fx);
+            (x, fx) = (u, fu);
+        } else {
+            if u < x {
+                a = u;
+            } else {
+                b = u;
+            }
+            if fu <= fw || w == x {
+                (v, fv) = (w, fw);
+                (w, fw) = (u, fu);
+            } else if fu <= fv || v == x || v == w {
+                (v, fv) = (u, fu);
+            }
         }
     }
-    for (x, v) in [(c, fc), (d, fd)] {
-        if v < best.1 {
-            best = (x, v);
-        }
-    }
-    best
+    (x, fx)
 }
 
 /// Integrated autocorrelation time of a residual series (in samples), summed until the
@@ -880,6 +979,13 @@ const AMBIGUOUS_SHARE: f64 = 0.95;
 /// Points on the line between two confusable candidates' fits alone where the joint fit starts.
 const JOINT_START_POINTS: usize = 8;
 
+/// At most this many sweeps (along each candidate once) of the joint fit's coordinate descent.
+const JOINT_SWEEPS: usize = 3;
+
+/// A sweep of the coordinate descent that lowers the training chi-square by less than this has
+/// converged (a chi-square unit is `-2 ln L`; 0.1 is far below any significance threshold).
+const JOINT_MIN_GAIN: f64 = 0.1;
+
 /// At most this many of the round's best-scoring other candidates are checked for confusion.
 const MAX_PARTNERS: usize = 4;
 
@@ -988,26 +1094,32 @@ fn resolve_confusable(
             (x, y, best) = (xt, yt, f);
         }
     }
-    for _ in 0..3 {
-        let (y1, f1) = minimise(
-            |y| cost(x, y),
-            lo_d,
-            hi_d,
-            config.grid_points,
-            config.golden_iterations,
-        );
-        if f1 < best {
-            (y, best) = (y1, f1);
+    // Alternately along y and x, until a sweep over both gains nothing.
+    let mut sweep_gained = false;
+    for step in 0..2 * JOINT_SWEEPS {
+        let along_y = step % 2 == 0;
+        if along_y {
+            sweep_gained = false;
         }
-        let (x1, f1) = minimise(
-            |x| cost(x, y),
-            lo_c,
-            hi_c,
+        let (lo, hi) = if along_y { (lo_d, hi_d) } else { (lo_c, hi_c) };
+        let (z, f1) = minimise(
+            |z| if along_y { cost(x, z) } else { cost(z, y) },
+            lo,
+            hi,
             config.grid_points,
             config.golden_iterations,
         );
         if f1 < best {
-            (x, best) = (x1, f1);
+            sweep_gained |= f1 < best - JOINT_MIN_GAIN;
+            best = f1;
+            if along_y {
+                y = z;
+            } else {
+                x = z;
+            }
+        }
+        if !along_y && !sweep_gained {
+            break;
         }
     }
     // Covariance 2 H^-1 of the joint training cost (the chi-square is -2 ln L).
@@ -1241,10 +1353,44 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     #[test]
-    fn golden_section_finds_a_parabola_minimum_inside_bounds() {
-        let (x, v) = minimise(|x| (x - 0.37).powi(2) + 1.0, 0.0, 1.0, 9, 30);
+    fn the_search_finds_a_parabola_minimum_inside_bounds_in_few_evaluations() {
+        let mut calls = 0;
+        let (x, v) = minimise(
+            |x| {
+                calls += 1;
+                (x - 0.37).powi(2) + 1.0
+            },
+            0.0,
+            1.0,
+            9,
+            30,
+        );
         assert!((x - 0.37).abs() < 1e-4, "{x}");
         assert!((v - 1.0).abs() < 1e-8);
+        // The grid and a few parabolic steps.
+        assert!(calls <= 9 + 6, "{calls} evaluations");
+        // A cost rising from the lower bound: the grid and one evaluation beside the bound.
+        let mut calls = 0;
+        let (x, _) = minimise(
+            |x| {
+                calls += 1;
+                (x + 0.1).powi(2)
+            },
+            0.0,
+            1.0,
+            9,
+            30,
+        );
+        assert_eq!((x, calls), (0.0, 10));
+        // Not unimodal: the grid finds the deeper well.
+        let (x, _) = minimise(
+            |x: f64| (x - 0.8).powi(2).min(0.05 + (x - 0.2).powi(2)),
+            0.0,
+            1.0,
+            9,
+            30,
+        );
+        assert!((x - 0.8).abs() < 1e-3, "{x}");
         let (x, _) = minimise(|x| (x + 5.0).powi(2), -1.0, 1.0, 9, 30);
         assert!((x + 1.0).abs() < 1e-9, "clamped at the bound: {x}");
     }

@@ -28,6 +28,8 @@
 //! - [`sufficiency`]: whether the sessions hold enough completed digs and samples to name anything;
 //! - [`mod@reference`] and [`verdict`]: what "expected" is (the residual structure of sessions declared
 //!   healthy) and every signal judged against it: expected, named, partly explained, unexplained;
+//! - [`term`]: a new term suggested for a signal nothing explains (ensemble SINDy on a library of
+//!   physical regressors);
 //! - [`twin`]: the named effects and parameters as a simulator profile (machine file and effects),
 //!   and the simulator's gap to the held-out digs before and after;
 //! - [`report`]: `report.json`, `report.md`, the figures and `model.json` of an analysis;
@@ -51,6 +53,7 @@ pub mod signal;
 pub mod soil_replay;
 pub mod stats;
 pub mod sufficiency;
+pub mod term;
 pub mod twin;
 pub mod verdict;
 

@@ -15,6 +15,7 @@ use plotters::prelude::*;
 use serde::Serialize;
 
 use crate::session::{Analysis, SkippedSession};
+use crate::term::TermSuggestion;
 
 fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
     anyhow::anyhow!("plot: {e}")
@@ -32,7 +33,12 @@ struct ReportJson<'a> {
     /// The session's outcome against the reference (`expected`, `named`, `partly_explained`,
     /// `unexplained`, `not_judged`), absent without a reference.
     outcome: Option<crate::verdict::Outcome>,
-    named_effects: &'a [crate::NamedEffect],
+    /// The named effects and parameters, then the terms suggested for what nothing explains
+    /// (`kind: "term"`, one entry per term).
+    named_effects: Vec<NamedEntry<'a>>,
+    /// The term suggestions whole: per signal the equation, every term's inclusion probability,
+    /// the held-out share explained.
+    terms: &'a [TermSuggestion],
     /// Confusable candidates the data cannot tell apart (neither named; both fits given).
     ambiguous: &'a [crate::fit::Ambiguity],
     /// No effect named and (with a reference) no signal beyond it.
@@ -55,6 +61,62 @@ struct ReportJson<'a> {
     /// The updated twin: the simulator profile written (`twin/machine.toml`, `twin/effects.toml`)
     /// and the simulator's gap to the held-out digs before and after.
     twin: Option<&'a crate::twin::TwinReport>,
+}
+
+/// An entry of `report.json`'s `named_effects[]`: a named candidate, or one term of a suggestion.
+#[derive(Debug, Serialize)]
+#[serde(untagged)]
+enum NamedEntry<'a> {
+    Candidate(&'a crate::NamedEffect),
+    Term {
+        /// `signal: regressor`, e.g. `boom_force: cos(θ_boom)`.
+        name: String,
+        kind: &'static str,
+        /// The coefficient.
+        magnitude: f64,
+        unit: &'a str,
+        /// Standard deviation of the coefficient over the ensemble.
+        uncertainty: f64,
+        /// Share of the ensemble's models that include the term.
+        inclusion: f64,
+        /// The whole equation.
+        description: &'a str,
+    },
+}
+
+/// `report.json`'s named effects: the candidates, then every suggested term.
+fn named_entries(a: &Analysis) -> Vec<NamedEntry<'_>> {
+    let terms = a.terms.iter().flat_map(|t| {
+        t.terms.iter().map(move |term| NamedEntry::Term {
+            name: format!("{}: {}", t.signal, term.regressor),
+            kind: "term",
+            magnitude: term.coefficient,
+            unit: &term.unit,
+            uncertainty: term.uncertainty,
+            inclusion: term.inclusion,
+            description: &t.equation,
+        })
+    });
+    a.result
+        .named_effects
+        .iter()
+        .map(NamedEntry::Candidate)
+        .chain(terms)
+        .collect()
+}
+
+/// One line per term suggestion: the equation and the held-out share it explains.
+fn term_line(t: &TermSuggestion) -> String {
+    format!(
+        "{} (held-out residual RMS {:.3e} -> {:.3e} {}, {:.0} % of its mean square explained; \
+         inclusion probabilities over {} bootstrap fits in brackets)",
+        t.equation,
+        t.heldout_rms.0,
+        t.heldout_rms.1,
+        t.unit,
+        100.0 * t.heldout_explained,
+        t.bootstrap
+    )
 }
 
 /// A short text summary (printed by the command): the verdict against the reference first, the
@@ -81,6 +143,9 @@ pub fn summary_text(a: &Analysis) -> String {
             "named effect: {} = {:.4e} +- {:.2e} {} (held-out dBIC {:.0})",
             e.name, e.magnitude, e.uncertainty, e.unit, e.heldout_delta_bic
         );
+    }
+    for t in &a.terms {
+        let _ = writeln!(s, "suggested term: {}", term_line(t));
     }
     if let Some((_, t)) = &a.twin {
         let _ = writeln!(
@@ -240,6 +305,20 @@ fn verdict_markdown(s: &mut String, a: &Analysis) {
         }
     }
     s.push('\n');
+    for u in &v.unexplained {
+        match a.terms.iter().find(|t| t.signal == u.signal) {
+            Some(t) => {
+                let _ = writeln!(s, "- `{}`: suggested new term: {}.", u.signal, term_line(t));
+            }
+            None => {
+                let _ = writeln!(
+                    s,
+                    "- `{}`: no term of the regressor library explains it on the held-out digs.",
+                    u.signal
+                );
+            }
+        }
+    }
     for n in &v.named {
         if n.outcome == crate::verdict::Outcome::PartlyExplained {
             let _ = writeln!(
@@ -542,7 +621,8 @@ pub fn write_outputs(
         model_out: "model.json",
         digs: a.records.len(),
         outcome: a.verdict.as_ref().map(|v| v.outcome),
-        named_effects: &r.named_effects,
+        named_effects: named_entries(a),
+        terms: &a.terms,
         ambiguous: &r.ambiguous,
         no_missing_effect_found: r.named_effects.is_empty()
             && r.ambiguous.is_empty()

@@ -24,6 +24,9 @@ pub struct Analysis {
     pub reference: Option<crate::reference::Reference>,
     /// The verdict against it.
     pub verdict: Option<crate::verdict::Verdict>,
+    /// New terms suggested for the signals the verdict leaves beyond the reference
+    /// ([`crate::term`]).
+    pub terms: Vec<crate::term::TermSuggestion>,
     /// Data-sufficiency and other warnings.
     pub warnings: Vec<String>,
     /// The updated twin: the simulator profile and its gap to the held-out digs (`None` when the

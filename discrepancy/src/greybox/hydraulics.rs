@@ -219,21 +219,35 @@ impl NeutralCache {
         params: &GreyBoxParams,
         b: PumpBalance,
         meter_in: &[(f64, f64)],
-        guess_pa: f64,
+        guess: (f64, PumpStart),
     ) -> f64 {
         if meter_in.iter().any(|(k, _)| *k > 0.0) {
-            return pump_pressure(params, b, meter_in, guess_pa);
+            return pump_pressure(params, b, meter_in, guess);
         }
         if let Some((key, p)) = self.last
             && key == b
         {
             return p;
         }
-        let p = pump_pressure(params, b, &[], guess_pa);
+        let p = pump_pressure(params, b, &[], guess);
         self.last = Some((b, p));
         p
     }
 }
+
+/// Where the pump solve starts: the measured reading, or a prediction of a nearby model (the
+/// bracket around it starts narrower: 20 kPa instead of 250 kPa, widening fourfold until it
+/// holds the root).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum PumpStart {
+    /// The measured pump pressure.
+    Reading,
+    /// The pump pressure an earlier replay predicted.
+    Prediction,
+}
+
+/// The pump balance is solved to this pressure, Pa.
+const SOLVE_TOLERANCE_PA: f64 = 1.0e3;
 
 /// Gallery pressure of one pump from its flow balance, solved by regula falsi (the balance falls
 /// monotonically with the pressure, so the root is unique), starting from a bracket around
@@ -242,7 +256,7 @@ fn pump_pressure(
     params: &GreyBoxParams,
     b: PumpBalance,
     meter_in: &[(f64, f64)],
-    guess_pa: f64,
+    (guess_pa, start): (f64, PumpStart),
 ) -> f64 {
     let lam = params.laminar_dp_pa;
     let tank = params.tank_pa;
@@ -271,7 +285,10 @@ fn pump_pressure(
     } else {
         0.5 * (tank + top)
     };
-    let mut step = 2.5e5;
+    let mut step = match start {
+        PumpStart::Reading => 2.5e5,
+        PumpStart::Prediction => 2.0e4,
+    };
     let (mut lo, mut hi) = ((guess - step).max(tank), (guess + step).min(top));
     let (mut f_lo, mut f_hi) = (if lo <= tank { f_tank } else { balance(lo) }, balance(hi));
     while f_lo <= 0.0 || f_hi > 0.0 {
@@ -291,20 +308,27 @@ fn pump_pressure(
             f_hi = balance(hi);
         }
     }
-    // Regula falsi with the Illinois modification: a few evaluations to 1 kPa.
+    // Regula falsi with the Illinois modification: a few evaluations to 1 kPa. It stops when the
+    // bracket is that narrow, or when the balance at the new point is within 1 kPa of its root
+    // along the bracket's secant (`true_lo`, `true_hi`: the balance at the ends before the
+    // Illinois halving): the balance falls monotonically, so the secant's slope is a fair measure
+    // of its slope there, and one side of the bracket often stays put while the other converges.
+    let (mut true_lo, mut true_hi) = (f_lo, f_hi);
     let mut side = 0;
     for _ in 0..60 {
-        if hi - lo < 1.0e3 {
+        if hi - lo < SOLVE_TOLERANCE_PA {
             break;
         }
         let p = (lo * (-f_hi) + hi * f_lo) / (f_lo - f_hi);
         let f = balance(p);
-        if f == 0.0 {
+        let slope = (true_lo - true_hi) / (hi - lo);
+        if f == 0.0 || f.abs() < SOLVE_TOLERANCE_PA * slope {
             return p;
         }
         if f > 0.0 {
             lo = p;
             f_lo = f;
+            true_lo = f;
             if side == 1 {
                 f_hi *= 0.5;
             }
@@ -312,6 +336,7 @@ fn pump_pressure(
         } else {
             hi = p;
             f_hi = f;
+            true_hi = f;
             if side == -1 {
                 f_lo *= 0.5;
             }
@@ -470,13 +495,18 @@ mod tests {
             fixed_demand: 0.0,
         };
         let meter = [(0.5 * params.meter_in_k[0], 8.0e6), (0.0, 0.0)];
-        let reference = pump_pressure(&params, b, &meter, f64::NAN);
+        let reference = pump_pressure(&params, b, &meter, (f64::NAN, PumpStart::Reading));
         assert!(
             reference > params.tank_pa && reference < params.relief_pa + 2.0e6,
             "{reference}"
         );
         for guess in [0.0, 1.0e5, 5.0e6, 9.0e6, 2.0e7, 4.0e7, 1.0e9] {
-            let p = pump_pressure(&params, b, &meter, guess);
+            let p = pump_pressure(&params, b, &meter, (guess, PumpStart::Reading));
+            let q = pump_pressure(&params, b, &meter, (guess, PumpStart::Prediction));
+            assert!(
+                (q - reference).abs() < 2.0e3,
+                "guess {guess} as a prediction: {q} vs {reference}"
+            );
             assert!(
                 (p - reference).abs() < 2.0e3,
                 "guess {guess}: {p} vs {reference}"
@@ -486,13 +516,22 @@ mod tests {
             bypass_k: params.bypass_k,
             ..b
         };
-        let fresh = pump_pressure(&params, neutral, &[], 1.0e6);
+        let fresh = pump_pressure(&params, neutral, &[], (1.0e6, PumpStart::Reading));
         let mut cache = NeutralCache::default();
         let closed = [(0.0, 5.0e6)];
-        assert_eq!(cache.solve(&params, neutral, &closed, 1.0e6), fresh);
-        assert_eq!(cache.solve(&params, neutral, &closed, 3.0e6), fresh);
+        assert_eq!(
+            cache.solve(&params, neutral, &closed, (1.0e6, PumpStart::Reading)),
+            fresh
+        );
+        assert_eq!(
+            cache.solve(&params, neutral, &closed, (3.0e6, PumpStart::Prediction)),
+            fresh
+        );
         // An open orifice is never served from the cache.
-        let open = cache.solve(&params, neutral, &meter, 1.0e6);
-        assert!((open - pump_pressure(&params, neutral, &meter, 1.0e6)).abs() < 1e-9);
+        let open = cache.solve(&params, neutral, &meter, (1.0e6, PumpStart::Reading));
+        assert!(
+            (open - pump_pressure(&params, neutral, &meter, (1.0e6, PumpStart::Reading))).abs()
+                < 1e-9
+        );
     }
 }

@@ -120,6 +120,12 @@ pub struct PreparedRecord {
 }
 
 impl PreparedRecord {
+    /// Measured cylinder velocities per sample (the resolver rates times the moment arms,
+    /// before the prefilter), m/s.
+    pub fn cylinder_velocities(&self) -> &[[f64; 3]] {
+        &self.velocity
+    }
+
     /// Precomputes the kinematic and soil terms of a record.
     ///
     /// # Errors

@@ -2,8 +2,8 @@
 //! every sample from the measured state of that sample (equation-error, one step).
 
 use super::hydraulics::{
-    NeutralCache, PumpBalance, bypass_fraction, crossover_fraction, cylinder_velocity, metering,
-    series_bypass,
+    NeutralCache, PumpBalance, PumpStart, bypass_fraction, crossover_fraction, cylinder_velocity,
+    metering, series_bypass,
 };
 use super::params::{Augmentation, GreyBoxParams};
 use super::prefilter::prefilter_velocities;
@@ -52,6 +52,9 @@ pub fn replay(
     for k in 0..n {
         let m = &rec.measured[k];
         let o = &mut out[k];
+        // The pump pressures already in `out` (an earlier replay of this record: the model a fit
+        // perturbs) start the pump solve closer to its root than the readings do.
+        let prior_pump_pa = [o[3], o[4]];
         for s in 0..N_SIGNALS {
             if groups.contains(s) {
                 o[s] = f64::NAN;
@@ -129,7 +132,11 @@ pub fn replay(
                 bypass_k: bypass1,
                 fixed_demand: 0.0,
             };
-            o[3] = (neutral[0].solve(params, balance1, &meter1, pump[0]) + offset).max(0.0);
+            let start = |j: usize| match prior_pump_pa[j] {
+                p if p.is_finite() && p > 0.0 => (p - offset, PumpStart::Prediction),
+                _ => (pump[j], PumpStart::Reading),
+            };
+            o[3] = (neutral[0].solve(params, balance1, &meter1, start(0)) + offset).max(0.0);
             // Pump 2: stick and swing, and the crossover to the boom (its spool closes the centre).
             let fractions = [
                 bypass_fraction(params, sp[1]),
@@ -154,7 +161,7 @@ pub fn replay(
                 bypass_k: bypass2,
                 fixed_demand: swing_flow,
             };
-            o[4] = (neutral[1].solve(params, balance2, &meter2, pump[1]) + offset).max(0.0);
+            o[4] = (neutral[1].solve(params, balance2, &meter2, start(1)) + offset).max(0.0);
         }
         if groups.force {
             for i in 0..3 {
