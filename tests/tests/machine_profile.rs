@@ -75,7 +75,8 @@ fn the_plan_completes_over_another_gateways_protocol() {
     );
 
     // The example gateway's rates: its angles every 20 ms against the controller's heartbeat every
-    // 50 ms, 2.5 per heartbeat (5 with the project's 10 ms; loose, both ends may slip in the VM).
+    // 50 ms, 2.5 per heartbeat (5 with the project's 10 ms). Loose: both ends slip in the VM, the
+    // controller more (3.1 measured there).
     let count = |pick: fn(&Message) -> bool| {
         canonical
             .iter()
@@ -87,7 +88,7 @@ fn the_plan_completes_over_another_gateways_protocol() {
     let per_heartbeat = angles as f64 / heartbeats.max(1) as f64;
     eprintln!("{angles} joint angles, {heartbeats} heartbeats: {per_heartbeat:.2} per heartbeat");
     assert!(
-        (1.5..3.5).contains(&per_heartbeat),
+        (1.5..4.5).contains(&per_heartbeat),
         "{angles} joint angles, {heartbeats} heartbeats"
     );
 
