@@ -133,6 +133,18 @@ struct ProfileFile {
     messages: Spanned<BTreeMap<String, Spanned<MessageEntry>>>,
     #[serde(default)]
     timeouts: Option<Spanned<TimeoutsEntry>>,
+    #[serde(default)]
+    addresses: Option<Spanned<AddressesEntry>>,
+}
+
+/// The J1939 addresses the wire DBC's ids must carry (checked, never rewritten).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct AddressesEntry {
+    #[serde(default)]
+    controller: Option<u8>,
+    #[serde(default)]
+    gateway: Option<u8>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -623,6 +635,10 @@ impl Profile {
             });
         }
         let timing = timing_of(&routes, &periods, file.timeouts.as_ref(), &invalid)?;
+        if let Some(addresses) = &file.addresses {
+            check_addresses(&routes, &wire, addresses.get_ref())
+                .map_err(|why| invalid(addresses.span(), why))?;
+        }
         let identity = routes.iter().all(|r| {
             let w = &wire.messages[r.wire];
             r.mux.is_none()
@@ -840,6 +856,52 @@ impl Profile {
         }
         Ok(route)
     }
+}
+
+/// Checks that every wire message carries the declared addresses: the sender's as its J1939 source
+/// address, and the gateway's as the destination of a controller's PDU1 message.
+fn check_addresses(
+    routes: &[Route],
+    wire: &WireDbc,
+    addresses: &AddressesEntry,
+) -> Result<(), String> {
+    for route in routes {
+        let wmsg = &wire.messages[route.wire];
+        let name = route.canonical.name;
+        let CanId::Extended(raw) = wmsg.id else {
+            return Err(format!(
+                "[addresses]: {name} travels in {}, an 11-bit id, which carries no address",
+                wmsg.name
+            ));
+        };
+        let id = J1939Id::from_raw(raw).map_err(|e| format!("[addresses]: {name}: {e}"))?;
+        let (sender, receiver) = match route.canonical.transmitter {
+            "Controller" => (addresses.controller, addresses.gateway),
+            _ => (addresses.gateway, addresses.controller),
+        };
+        let role = route.canonical.transmitter.to_lowercase();
+        if let Some(sa) = sender
+            && id.source_address() != sa
+        {
+            return Err(format!(
+                "[addresses]: {name} travels in {} (id 0x{raw:08X}) with source address 0x{:02X}, \
+                 but the {role}'s is 0x{sa:02X}",
+                wmsg.name,
+                id.source_address()
+            ));
+        }
+        if let (Some(da), Some(to)) = (receiver, id.destination_address())
+            && to != da
+            && to != 0xFF
+        {
+            return Err(format!(
+                "[addresses]: {name} travels in {} (id 0x{raw:08X}) to address 0x{to:02X}, not \
+                 0x{da:02X}",
+                wmsg.name
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// A period or timeout from the file, ms, if in `1..=MAX_PERIOD_MS`.

@@ -338,3 +338,46 @@ fn inconsistent_rates_and_timeouts_are_refused_naming_the_line() {
     let (_, line) = refused(float);
     assert_eq!(line, Some(line_of(float, "period_ms = nan")));
 }
+
+/// `[addresses]` checks the DBC's ids against the declared addresses (it never rewrites them).
+#[test]
+fn declared_addresses_must_be_the_ones_the_ids_carry() {
+    let default = std::fs::read_to_string(DEFAULT).expect("default profile");
+    let load = |addresses: &str| {
+        let text = default.replacen(
+            "\n[messages.",
+            &format!("\n[addresses]\n{addresses}\n\n[messages."),
+            1,
+        );
+        Profile::from_toml_str(
+            &text,
+            "gw.toml",
+            Path::new("excavator.dbc"),
+            firmware_bridge::dbc::DBC_TEXT,
+        )
+    };
+    let profile = load("controller = 0x27\ngateway = 0x80").unwrap_or_else(|e| panic!("{e}"));
+    assert!(profile.is_identity());
+    let err = load("controller = 0x28").expect_err("another source address");
+    let text = err.to_string();
+    assert!(
+        text.starts_with("gw.toml:")
+            && text.contains("AuxValveCommand_Boom")
+            && text.contains("source address 0x27, but the controller's is 0x28"),
+        "{text}"
+    );
+    let err = load("gateway = 0x81").expect_err("another gateway");
+    assert!(err.to_string().contains("the gateway's is 0x81"), "{err}");
+    // 11-bit ids carry no address.
+    let (message, _) = refused(|t: &str| {
+        t.replacen(
+            "[timeouts]",
+            "[addresses]\ncontroller = 0x27\n\n[timeouts]",
+            1,
+        )
+    });
+    assert!(
+        message.contains("11-bit id, which carries no address"),
+        "{message}"
+    );
+}
