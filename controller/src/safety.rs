@@ -52,6 +52,7 @@
 use firmware_bridge::messages::{
     ControllerHeartbeat, DecodeError, GatewayFaults, GatewayMode, RequestedMode,
 };
+use firmware_bridge::profile::GatewayTiming;
 use firmware_bridge::transport::BusFault;
 use planner::autodig::AutodigError;
 use planner::cleanup::CleanupError;
@@ -250,6 +251,11 @@ pub struct SafetyConfig {
     /// after a shutdown are sent at once, whatever the period. [`SafetyConfig::validate`] refuses
     /// periods over half the watchdog.
     pub heartbeat_period_s: f64,
+    /// The gateway's periods and watchdogs the limits above are checked against: the project's
+    /// gateway, or a machine profile's ([`SafetyConfig::for_gateway`]). Not in the file: it comes
+    /// with the profile.
+    #[serde(skip)]
+    pub gateway: GatewayTiming,
 }
 
 /// Period of the gateway's control signals (angles, rates, pressures), s: 100 Hz (docs/protocol.md).
@@ -258,10 +264,29 @@ pub const SENSOR_PERIOD_S: f64 = 0.01;
 pub const GATEWAY_STATUS_PERIOD_S: f64 = 0.05;
 /// The gateway's heartbeat watchdog and command timeout, s (`firmware_bridge::gateway::GatewayConfig`).
 pub const GATEWAY_WATCHDOG_S: f64 = 0.1;
+/// The longest gateway status age, in status periods (1 s at the project's 20 Hz).
+const STATUS_AGE_PERIODS: u32 = 20;
 /// The controller's control period, s ([`crate::run::CONTROL_PERIOD`]).
 const CONTROL_PERIOD_S: f64 = crate::run::CONTROL_PERIOD.as_secs_f64();
 
 impl SafetyConfig {
+    /// The configuration for the gateway of a machine profile (`docs/machine-profile.md`, "Rates and
+    /// timeouts"): the stale-data ages and the heartbeat period, set for the project's gateway, are
+    /// scaled by the ratio of that gateway's period to the project's (a gateway that sends its
+    /// angles every 20 ms gets twice the sensor age: the same number of periods), and
+    /// [`SafetyConfig::validate`] checks them against its periods and watchdogs. The project's
+    /// gateway leaves every value as it is.
+    #[must_use]
+    pub fn for_gateway(mut self, timing: GatewayTiming) -> Self {
+        let was = self.gateway;
+        let ratio = |now: u32, was: u32| f64::from(now) / f64::from(was);
+        self.sensor_max_age_s *= ratio(timing.sensor_period_ms, was.sensor_period_ms);
+        self.status_max_age_s *= ratio(timing.status_period_ms, was.status_period_ms);
+        self.heartbeat_period_s *= ratio(timing.heartbeat_period_ms, was.heartbeat_period_ms);
+        self.gateway = timing;
+        self
+    }
+
     /// Checks every parameter against the protocol's timing: stale-data ages between the period of
     /// their signal and what the gateway tolerates, a heartbeat well inside the watchdog, finite
     /// holds and timeouts, bounded counts.
@@ -270,25 +295,34 @@ impl SafetyConfig {
     /// The first [`ParamError`] (section `safety`).
     pub fn validate(&self) -> Result<(), ParamError> {
         const S: &str = "safety";
+        let g = &self.gateway;
+        let secs = GatewayTiming::secs;
         check(
             S,
             "sensor_max_age_s",
             self.sensor_max_age_s,
-            Limits::above(SENSOR_PERIOD_S, GATEWAY_WATCHDOG_S, "s"),
-            "above the 10 ms sensor period, at most the gateway's 100 ms watchdog",
+            Limits::above(secs(g.sensor_period_ms), secs(g.heartbeat_timeout_ms), "s"),
+            &format!(
+                "above the {} ms sensor period, at most the gateway's {} ms watchdog",
+                g.sensor_period_ms, g.heartbeat_timeout_ms
+            ),
         )?;
         check(
             S,
             "status_max_age_s",
             self.status_max_age_s,
-            Limits::above(GATEWAY_STATUS_PERIOD_S, 1.0, "s"),
-            "above the 50 ms gateway status period",
+            Limits::above(
+                secs(g.status_period_ms),
+                secs(STATUS_AGE_PERIODS * g.status_period_ms),
+                "s",
+            ),
+            &format!("above the {} ms gateway status period", g.status_period_ms),
         )?;
         check(
             S,
             "arm_timeout_s",
             self.arm_timeout_s,
-            Limits::above(GATEWAY_STATUS_PERIOD_S, 10.0, "s"),
+            Limits::above(secs(g.status_period_ms), 10.0, "s"),
             "the confirmation comes with a gateway status",
         )?;
         check(
@@ -331,8 +365,11 @@ impl SafetyConfig {
             S,
             "heartbeat_period_s",
             self.heartbeat_period_s,
-            Limits::closed(CONTROL_PERIOD_S, GATEWAY_WATCHDOG_S / 2.0, "s"),
-            "from one control period to half the gateway's 100 ms watchdog",
+            Limits::closed(CONTROL_PERIOD_S, secs(g.heartbeat_timeout_ms) / 2.0, "s"),
+            &format!(
+                "from one control period to half the gateway's {} ms watchdog",
+                g.heartbeat_timeout_ms
+            ),
         )
     }
 }
@@ -351,6 +388,7 @@ impl Default for SafetyConfig {
             max_auto_rearms: 5,
             rearm_reset_s: 10.0,
             heartbeat_period_s: 0.05,
+            gateway: GatewayTiming::canonical(),
         }
     }
 }
@@ -908,6 +946,38 @@ mod tests {
     };
     use planner::kinematics::Kinematics;
     use planner::machine::MachineConfig;
+
+    /// A profile's gateway: the stale-data limits and the heartbeat keep their number of periods, the
+    /// limits are those of its periods and watchdogs; the project's gateway changes nothing.
+    #[test]
+    fn the_limits_follow_the_gateways_periods_and_watchdogs() {
+        let d = SafetyConfig::default();
+        assert_eq!(d.for_gateway(GatewayTiming::canonical()), d);
+        let slow = GatewayTiming {
+            sensor_period_ms: 20,
+            status_period_ms: 100,
+            heartbeat_timeout_ms: 200,
+            ..GatewayTiming::canonical()
+        };
+        let c = d.for_gateway(slow);
+        assert!((c.sensor_max_age_s - 0.06).abs() < 1e-12, "{c:?}");
+        assert!((c.status_max_age_s - 0.7).abs() < 1e-12, "{c:?}");
+        assert_eq!(c.heartbeat_period_s, d.heartbeat_period_s);
+        c.validate().unwrap();
+        // Back to the project's gateway: the values of the file again.
+        let back = c.for_gateway(GatewayTiming::canonical());
+        assert!((back.sensor_max_age_s - d.sensor_max_age_s).abs() < 1e-15);
+        // An age of 10 ms is one period of the project's gateway but half of this one's.
+        let mut short = c;
+        short.sensor_max_age_s = 0.015;
+        let err = short.validate().unwrap_err().to_string();
+        assert!(err.contains("above the 20 ms sensor period"), "{err}");
+        // A heartbeat at 80 ms needs a watchdog of at least 160 ms.
+        let mut hb = d;
+        hb.heartbeat_period_s = 0.08;
+        assert!(hb.validate().is_err());
+        assert!(hb.for_gateway(slow).validate().is_ok());
+    }
 
     /// `ControllerStatus.FaultReason`'s value table in `excavator.dbc` names each fault code by its
     /// variant (and 0 `Healthy`), so cantools and candump readers see the same names as the log.

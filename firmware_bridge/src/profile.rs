@@ -131,6 +131,29 @@ pub enum TranslateError {
 struct ProfileFile {
     dbc: Spanned<String>,
     messages: Spanned<BTreeMap<String, Spanned<MessageEntry>>>,
+    #[serde(default)]
+    timeouts: Option<Spanned<TimeoutsEntry>>,
+    #[serde(default)]
+    addresses: Option<Spanned<AddressesEntry>>,
+}
+
+/// The J1939 addresses the wire DBC's ids must carry (checked, never rewritten).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct AddressesEntry {
+    #[serde(default)]
+    controller: Option<u8>,
+    #[serde(default)]
+    gateway: Option<u8>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TimeoutsEntry {
+    #[serde(default)]
+    heartbeat_ms: Option<Spanned<i64>>,
+    #[serde(default)]
+    command_ms: Option<Spanned<i64>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -139,6 +162,8 @@ struct MessageEntry {
     wire: Spanned<String>,
     #[serde(default)]
     mux: Option<Spanned<u64>>,
+    #[serde(default)]
+    period_ms: Option<Spanned<i64>>,
     #[serde(default)]
     signals: BTreeMap<String, Spanned<SignalEntry>>,
 }
@@ -187,6 +212,105 @@ struct Route {
     wire: usize,
     mux: Option<u64>,
     fields: Vec<Field>,
+    /// The message's period on this gateway, ms.
+    period_ms: u32,
+}
+
+/// The longest period or timeout a profile may give, ms: slower than this no loop closes.
+pub const MAX_PERIOD_MS: u32 = 10_000;
+
+/// The timing of the gateway a profile describes: the periods at which it sends its feedback and
+/// expects the controller's frames, and its watchdogs, ms (`docs/machine-profile.md`, "Rates and
+/// timeouts"). The default profile's is [`GatewayTiming::canonical`], the project's gateway.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct GatewayTiming {
+    /// `JointAngles`, `JointRates` and the three `AuxValveMeasured` (sent together).
+    pub sensor_period_ms: u32,
+    /// `PumpPressures`.
+    pub pump_period_ms: u32,
+    /// `TrackOdometry`.
+    pub odometry_period_ms: u32,
+    /// `GatewayStatus` and `GatewaySession` (sent together).
+    pub status_period_ms: u32,
+    /// `ControllerHeartbeat`, as the gateway expects it.
+    pub heartbeat_period_ms: u32,
+    /// The longest period of the valve commands and the position setpoint the gateway expects.
+    pub command_period_ms: u32,
+    /// Heartbeat watchdog: the gateway goes neutral this long after the last valid heartbeat.
+    pub heartbeat_timeout_ms: u32,
+    /// A non-neutral valve command or a setpoint older than this is stale to the gateway.
+    pub command_timeout_ms: u32,
+}
+
+/// The canonical messages the gateway sends together every sensor period.
+const SENSOR_GROUP: [&str; 5] = [
+    "JointAngles",
+    "JointRates",
+    "AuxValveMeasured_Boom",
+    "AuxValveMeasured_Stick",
+    "AuxValveMeasured_Bucket",
+];
+/// The canonical messages the gateway sends together every status period.
+const STATUS_GROUP: [&str; 2] = ["GatewayStatus", "GatewaySession"];
+/// The commands whose longest period the command timeout must cover.
+const COMMAND_GROUP: [&str; 7] = [
+    "AuxValveCommand_Boom",
+    "AuxValveCommand_Stick",
+    "AuxValveCommand_Bucket",
+    "AuxValveCommand_Swing",
+    "AuxValveCommand_LeftTrack",
+    "AuxValveCommand_RightTrack",
+    "PositionSetpoint",
+];
+
+/// How many periods a timeout must cover at least.
+pub const TIMEOUT_PERIODS: u32 = 2;
+
+impl GatewayTiming {
+    /// The project's gateway: the periods of `excavator.dbc`'s `GenMsgCycleTime` and the watchdogs of
+    /// [`crate::gateway::GatewayConfig::default`].
+    pub fn canonical() -> Self {
+        let gateway = crate::gateway::GatewayConfig::default();
+        let ms = |s: f64| (s * 1000.0).round() as u32;
+        Self::of(
+            |name| {
+                dbc::MESSAGES
+                    .iter()
+                    .find(|m| m.name == name)
+                    .map_or(0, |m| u32::from(m.cycle_time_ms))
+            },
+            ms(gateway.heartbeat_timeout_s),
+            ms(gateway.command_timeout_s),
+        )
+    }
+
+    fn of(
+        period: impl Fn(&str) -> u32,
+        heartbeat_timeout_ms: u32,
+        command_timeout_ms: u32,
+    ) -> Self {
+        Self {
+            sensor_period_ms: period(SENSOR_GROUP[0]),
+            pump_period_ms: period("PumpPressures"),
+            odometry_period_ms: period("TrackOdometry"),
+            status_period_ms: period(STATUS_GROUP[0]),
+            heartbeat_period_ms: period("ControllerHeartbeat"),
+            command_period_ms: COMMAND_GROUP.iter().map(|n| period(n)).max().unwrap_or(0),
+            heartbeat_timeout_ms,
+            command_timeout_ms,
+        }
+    }
+
+    /// Seconds of a number of ms.
+    pub fn secs(ms: u32) -> f64 {
+        f64::from(ms) / 1000.0
+    }
+}
+
+impl Default for GatewayTiming {
+    fn default() -> Self {
+        Self::canonical()
+    }
 }
 
 /// A loaded machine profile.
@@ -198,6 +322,7 @@ pub struct Profile {
     /// One per canonical message, in [`dbc::MESSAGES`] order.
     routes: Vec<Route>,
     identity: bool,
+    timing: GatewayTiming,
 }
 
 fn line_of_offset(text: &str, offset: usize) -> usize {
@@ -289,6 +414,7 @@ impl Profile {
             }
         }
         let mut routes = Vec::with_capacity(dbc::MESSAGES.len());
+        let mut periods = Vec::with_capacity(dbc::MESSAGES.len());
         for canonical in dbc::MESSAGES {
             let Some(entry) = entries.get(canonical.name) else {
                 return Err(invalid(
@@ -375,6 +501,39 @@ impl Profile {
                     ));
                 }
             }
+            let period_ms = match &e.period_ms {
+                Some(p) => period_in_range(*p.get_ref()).ok_or_else(|| {
+                    invalid(
+                        p.span(),
+                        format!(
+                            "{}.period_ms = {}: must be 1 to {MAX_PERIOD_MS} ms",
+                            canonical.name,
+                            p.get_ref()
+                        ),
+                    )
+                })?,
+                None => match wmsg.cycle_time_ms {
+                    Some(ms) if ms > MAX_PERIOD_MS => {
+                        return Err(invalid(
+                            e.wire.span(),
+                            format!(
+                                "{}: GenMsgCycleTime {ms} of {} in {dbc_name} is over \
+                                 {MAX_PERIOD_MS} ms; give `period_ms`",
+                                canonical.name, wmsg.name
+                            ),
+                        ));
+                    }
+                    Some(ms) => ms,
+                    // A DBC without rates: the project's.
+                    None => u32::from(canonical.cycle_time_ms),
+                },
+            };
+            periods.push((
+                period_ms,
+                e.period_ms
+                    .as_ref()
+                    .map_or_else(|| entry.span(), Spanned::span),
+            ));
             let secured = secoc::is_secured(canonical.pgn);
             let mut fields = Vec::with_capacity(canonical.signals.len());
             let mut used = Vec::new();
@@ -472,7 +631,13 @@ impl Profile {
                 wire: wire_index,
                 mux,
                 fields,
+                period_ms,
             });
+        }
+        let timing = timing_of(&routes, &periods, file.timeouts.as_ref(), &invalid)?;
+        if let Some(addresses) = &file.addresses {
+            check_addresses(&routes, &wire, addresses.get_ref())
+                .map_err(|why| invalid(addresses.span(), why))?;
         }
         let identity = routes.iter().all(|r| {
             let w = &wire.messages[r.wire];
@@ -496,7 +661,13 @@ impl Profile {
             wire,
             routes,
             identity,
+            timing,
         })
+    }
+
+    /// The gateway's periods and timeouts.
+    pub fn timing(&self) -> GatewayTiming {
+        self.timing
     }
 
     /// The profile file it was loaded from.
@@ -551,11 +722,9 @@ impl Profile {
                     let ws = &wmsg.signals[wire];
                     let (lo, hi) = ws.raw_limits();
                     let raw = i128::from(raw);
-                    let b = if raw < lo || raw > hi {
-                        not_available_bits(ws)
-                    } else {
-                        ws.bits_of_integer(raw)
-                    };
+                    let b = wire_bits_or_not_available(ws, (lo..=hi).contains(&raw), || {
+                        Ok(ws.bits_of_integer(raw))
+                    })?;
                     bits.push((wire, b));
                 }
                 Target::Physical {
@@ -564,17 +733,16 @@ impl Profile {
                     offset,
                 } => {
                     let ws = &wmsg.signals[wire];
-                    let b = if raw < c.raw_min || raw > c.raw_max {
-                        not_available_bits(ws)
-                    } else {
+                    let available = (c.raw_min..=c.raw_max).contains(&raw);
+                    let b = wire_bits_or_not_available(ws, available, || {
                         let value = dbc::raw_to_physical(c, raw) * scale + offset;
                         ws.bits_of(value, false)
                             .map_err(|_| TranslateError::NotRepresentable {
                                 quantity: quantity(),
                                 signal: ws.name.clone(),
                                 value,
-                            })?
-                    };
+                            })
+                    })?;
                     bits.push((wire, b));
                 }
             }
@@ -635,12 +803,7 @@ impl Profile {
                 Target::Constant(constant) => constant,
                 Target::Raw { wire } => {
                     let ws = &wmsg.signals[wire];
-                    let raw = ws.raw_integer(ws.bits(data));
-                    if fits(c, raw) {
-                        raw as i64
-                    } else {
-                        not_available_raw(c)
-                    }
+                    canonical_raw_or_not_available(c, Some(ws.raw_integer(ws.bits(data))))
                 }
                 Target::Physical {
                     wire,
@@ -649,17 +812,14 @@ impl Profile {
                 } => {
                     let ws = &wmsg.signals[wire];
                     let b = ws.bits(data);
-                    if b == not_available_bits(ws) {
-                        not_available_raw(c)
-                    } else {
-                        let value = (ws.physical(b) - offset) / scale;
-                        let raw = ((value - c.offset) / c.factor).round();
-                        if raw.is_finite() && fits(c, raw as i128) {
-                            raw as i64
-                        } else {
-                            not_available_raw(c)
-                        }
-                    }
+                    let raw = (b != not_available_bits(ws))
+                        .then(|| {
+                            let value = (ws.physical(b) - offset) / scale;
+                            ((value - c.offset) / c.factor).round()
+                        })
+                        .filter(|raw| raw.is_finite())
+                        .map(|raw| raw as i128);
+                    canonical_raw_or_not_available(c, raw)
                 }
             };
             // `fits` checked the raw value against the signal's bits.
@@ -698,12 +858,171 @@ impl Profile {
     }
 }
 
+/// Checks that every wire message carries the declared addresses: the sender's as its J1939 source
+/// address, and the gateway's as the destination of a controller's PDU1 message.
+fn check_addresses(
+    routes: &[Route],
+    wire: &WireDbc,
+    addresses: &AddressesEntry,
+) -> Result<(), String> {
+    for route in routes {
+        let wmsg = &wire.messages[route.wire];
+        let name = route.canonical.name;
+        let CanId::Extended(raw) = wmsg.id else {
+            return Err(format!(
+                "[addresses]: {name} travels in {}, an 11-bit id, which carries no address",
+                wmsg.name
+            ));
+        };
+        let id = J1939Id::from_raw(raw).map_err(|e| format!("[addresses]: {name}: {e}"))?;
+        let (sender, receiver) = match route.canonical.transmitter {
+            "Controller" => (addresses.controller, addresses.gateway),
+            _ => (addresses.gateway, addresses.controller),
+        };
+        let role = route.canonical.transmitter.to_lowercase();
+        if let Some(sa) = sender
+            && id.source_address() != sa
+        {
+            return Err(format!(
+                "[addresses]: {name} travels in {} (id 0x{raw:08X}) with source address 0x{:02X}, \
+                 but the {role}'s is 0x{sa:02X}",
+                wmsg.name,
+                id.source_address()
+            ));
+        }
+        if let (Some(da), Some(to)) = (receiver, id.destination_address())
+            && to != da
+            && to != 0xFF
+        {
+            return Err(format!(
+                "[addresses]: {name} travels in {} (id 0x{raw:08X}) to address 0x{to:02X}, not \
+                 0x{da:02X}",
+                wmsg.name
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// A period or timeout from the file, ms, if in `1..=MAX_PERIOD_MS`.
+fn period_in_range(ms: i64) -> Option<u32> {
+    u32::try_from(ms)
+        .ok()
+        .filter(|ms| (1..=MAX_PERIOD_MS).contains(ms))
+}
+
+/// The gateway's timing of `routes` (with each period's span in `periods`) and the `[timeouts]` table,
+/// checked: the messages sent together share one period, each timeout covers [`TIMEOUT_PERIODS`]
+/// periods of what it watches.
+fn timing_of(
+    routes: &[Route],
+    periods: &[(u32, std::ops::Range<usize>)],
+    timeouts: Option<&Spanned<TimeoutsEntry>>,
+    invalid: &dyn Fn(std::ops::Range<usize>, String) -> ProfileError,
+) -> Result<GatewayTiming, ProfileError> {
+    let index = |name: &str| routes.iter().position(|r| r.canonical.name == name);
+    let period = |name: &str| index(name).map_or(0, |i| periods[i].0);
+    for group in [&SENSOR_GROUP[..], &STATUS_GROUP[..]] {
+        let first = period(group[0]);
+        for name in &group[1..] {
+            let Some(i) = index(name) else { continue };
+            if periods[i].0 != first {
+                return Err(invalid(
+                    periods[i].1.clone(),
+                    format!(
+                        "{name}: period {} ms, but {} has {first} ms: the gateway sends {} together",
+                        periods[i].0,
+                        group[0],
+                        group.join(", ")
+                    ),
+                ));
+            }
+        }
+    }
+    let canonical = GatewayTiming::canonical();
+    let timeout = |field: Option<&Spanned<i64>>, default: u32, key: &str| match field {
+        None => Ok((default, None)),
+        Some(v) => period_in_range(*v.get_ref())
+            .map(|ms| (ms, Some(v.span())))
+            .ok_or_else(|| {
+                invalid(
+                    v.span(),
+                    format!(
+                        "timeouts.{key} = {}: must be 1 to {MAX_PERIOD_MS} ms",
+                        v.get_ref()
+                    ),
+                )
+            }),
+    };
+    let t = timeouts.map(Spanned::get_ref);
+    let (heartbeat_ms, heartbeat_span) = timeout(
+        t.and_then(|t| t.heartbeat_ms.as_ref()),
+        canonical.heartbeat_timeout_ms,
+        "heartbeat_ms",
+    )?;
+    let (command_ms, command_span) = timeout(
+        t.and_then(|t| t.command_ms.as_ref()),
+        canonical.command_timeout_ms,
+        "command_ms",
+    )?;
+    let timing = GatewayTiming::of(period, heartbeat_ms, command_ms);
+    for (key, timeout_ms, span, watched) in [
+        (
+            "heartbeat_ms",
+            heartbeat_ms,
+            heartbeat_span,
+            &["ControllerHeartbeat"][..],
+        ),
+        ("command_ms", command_ms, command_span, &COMMAND_GROUP[..]),
+    ] {
+        for name in watched {
+            let Some(i) = index(name) else { continue };
+            let p = periods[i].0;
+            if timeout_ms < TIMEOUT_PERIODS * p {
+                let origin = if span.is_some() { "" } else { " (the default)" };
+                return Err(invalid(
+                    span.unwrap_or_else(|| periods[i].1.clone()),
+                    format!(
+                        "timeouts.{key} = {timeout_ms}{origin}: must cover {TIMEOUT_PERIODS} periods of \
+                         {name} ({p} ms), at least {} ms",
+                        TIMEOUT_PERIODS * p
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(timing)
+}
+
 fn parse_file(text: &str, origin: &str) -> Result<ProfileFile, ProfileError> {
     toml::from_str(text).map_err(|e| ProfileError::Invalid {
         origin: origin.to_string(),
         line: e.span().map(|s| line_of_offset(text, s.start)),
         message: e.message().trim().to_string(),
     })
+}
+
+/// The wire bits of a canonical value: `bits()` when the value is `available`, else the wire signal's
+/// "not available" bits (one rule for both ways a value reaches the wire).
+fn wire_bits_or_not_available(
+    ws: &WireSignal,
+    available: bool,
+    bits: impl FnOnce() -> Result<u64, TranslateError>,
+) -> Result<u64, TranslateError> {
+    if available {
+        bits()
+    } else {
+        Ok(not_available_bits(ws))
+    }
+}
+
+/// The canonical raw value of a wire value (`None`: not available or not a number), "not available"
+/// when it does not fit the canonical signal.
+fn canonical_raw_or_not_available(c: &SignalDesc, raw: Option<i128>) -> i64 {
+    match raw {
+        Some(raw) if fits(c, raw) => raw as i64,
+        _ => not_available_raw(c),
+    }
 }
 
 /// True if `raw` fits the canonical signal's bits.

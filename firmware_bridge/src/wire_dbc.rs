@@ -19,7 +19,7 @@
 //! panics on any payload; encoding refuses values that do not fit the signal instead of clamping.
 
 use can_dbc::{
-    ByteOrder as DbcByteOrder, Dbc, MessageId, MultiplexIndicator, NumericValue,
+    AttributeValue, ByteOrder as DbcByteOrder, Dbc, MessageId, MultiplexIndicator, NumericValue,
     SignalExtendedValueType, ValueDescription, ValueType,
 };
 
@@ -185,6 +185,9 @@ pub struct WireMessage {
     pub signals: Vec<WireSignal>,
     /// Index of the multiplexor switch in `signals`, if the message is multiplexed.
     pub multiplexor: Option<usize>,
+    /// The message's `GenMsgCycleTime` attribute, ms: its transmit period (each multiplexor value's,
+    /// for a multiplexed message); `None` when the DBC gives none or 0 (not periodic).
+    pub cycle_time_ms: Option<u32>,
 }
 
 /// A DBC loaded at run time.
@@ -391,6 +394,32 @@ fn load_message(dbc: &Dbc, msg: &can_dbc::Message) -> Result<WireMessage, LoadEr
             s.name
         )));
     }
+    let cycle_time_ms = match dbc
+        .attribute_values_message
+        .iter()
+        .find(|a| a.name == "GenMsgCycleTime" && a.message_id == msg.id)
+        .map(|a| &a.value)
+    {
+        None => None,
+        Some(AttributeValue::Uint(v)) => Some(i128::from(*v)),
+        Some(AttributeValue::Int(v)) => Some(i128::from(*v)),
+        Some(other) => {
+            return Err(unsupported(format!(
+                "GenMsgCycleTime {other:?} is not a whole number of ms"
+            )));
+        }
+    };
+    let cycle_time_ms = match cycle_time_ms.map(u32::try_from) {
+        None | Some(Ok(0)) => None,
+        Some(Ok(ms)) => Some(ms),
+        Some(Err(_)) => {
+            return Err(unsupported(format!(
+                "GenMsgCycleTime {} is not a whole number of ms up to {}",
+                cycle_time_ms.unwrap_or_default(),
+                u32::MAX
+            )));
+        }
+    };
     Ok(WireMessage {
         name: msg.name.clone(),
         id,
@@ -398,6 +427,7 @@ fn load_message(dbc: &Dbc, msg: &can_dbc::Message) -> Result<WireMessage, LoadEr
         transmitter: msg.transmitter.clone().unwrap_or_default(),
         signals,
         multiplexor,
+        cycle_time_ms,
     })
 }
 

@@ -254,3 +254,130 @@ fn errors_name_the_file() {
         "{err}"
     );
 }
+
+#[test]
+fn the_gateways_rates_and_timeouts_come_from_its_dbc_and_the_profile() {
+    use firmware_bridge::profile::GatewayTiming;
+    let default = Profile::load(Path::new(DEFAULT)).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(default.timing(), GatewayTiming::canonical());
+    assert_eq!(
+        GatewayTiming::canonical(),
+        GatewayTiming {
+            sensor_period_ms: 10,
+            pump_period_ms: 20,
+            odometry_period_ms: 50,
+            status_period_ms: 50,
+            heartbeat_period_ms: 50,
+            command_period_ms: 50,
+            heartbeat_timeout_ms: 100,
+            command_timeout_ms: 100,
+        }
+    );
+    // The example's DBC's GenMsgCycleTime, the tracks' `period_ms` and its `[timeouts]`.
+    assert_eq!(
+        example().timing(),
+        GatewayTiming {
+            sensor_period_ms: 20,
+            pump_period_ms: 40,
+            odometry_period_ms: 100,
+            status_period_ms: 100,
+            heartbeat_period_ms: 50,
+            command_period_ms: 50,
+            heartbeat_timeout_ms: 200,
+            command_timeout_ms: 120,
+        }
+    );
+}
+
+#[test]
+fn inconsistent_rates_and_timeouts_are_refused_naming_the_line() {
+    // One of the messages sent together at another period.
+    let apart = |t: &str| {
+        t.replacen(
+            "[messages.JointRates]\nwire = \"ArmRates\"\n",
+            "[messages.JointRates]\nwire = \"ArmRates\"\nperiod_ms = 30\n",
+            1,
+        )
+    };
+    let (message, line) = refused(apart);
+    assert!(
+        message.contains("JointRates: period 30 ms") && message.contains("JointAngles"),
+        "{message}"
+    );
+    assert_eq!(line, Some(line_of(apart, "period_ms = 30")));
+    // A watchdog shorter than two heartbeat periods.
+    let short = |t: &str| t.replacen("heartbeat_ms = 200", "heartbeat_ms = 90", 1);
+    let (message, line) = refused(short);
+    assert!(
+        message.contains("timeouts.heartbeat_ms = 90") && message.contains("ControllerHeartbeat"),
+        "{message}"
+    );
+    assert_eq!(line, Some(line_of(short, "heartbeat_ms = 90")));
+    // The default command timeout (100 ms) cannot cover a 60 ms track command period.
+    let slow = |t: &str| {
+        t.replacen("command_ms = 120\n", "", 1)
+            .replacen("period_ms = 50", "period_ms = 60", 1)
+    };
+    let (message, line) = refused(slow);
+    assert!(
+        message.contains("timeouts.command_ms = 100 (the default)")
+            && message.contains("AuxValveCommand_LeftTrack (60 ms)"),
+        "{message}"
+    );
+    assert_eq!(line, Some(line_of(slow, "period_ms = 60")));
+    for bad in ["period_ms = 0", "period_ms = -5", "period_ms = 20000"] {
+        let edit = |t: &str| t.replacen("period_ms = 50", bad, 1);
+        let (message, line) = refused(edit);
+        assert!(
+            message.contains("must be 1 to 10000 ms"),
+            "{bad}: {message}"
+        );
+        assert_eq!(line, Some(line_of(edit, bad)));
+    }
+    let float = |t: &str| t.replacen("period_ms = 50", "period_ms = nan", 1);
+    let (_, line) = refused(float);
+    assert_eq!(line, Some(line_of(float, "period_ms = nan")));
+}
+
+/// `[addresses]` checks the DBC's ids against the declared addresses (it never rewrites them).
+#[test]
+fn declared_addresses_must_be_the_ones_the_ids_carry() {
+    let default = std::fs::read_to_string(DEFAULT).expect("default profile");
+    let load = |addresses: &str| {
+        let text = default.replacen(
+            "\n[messages.",
+            &format!("\n[addresses]\n{addresses}\n\n[messages."),
+            1,
+        );
+        Profile::from_toml_str(
+            &text,
+            "gw.toml",
+            Path::new("excavator.dbc"),
+            firmware_bridge::dbc::DBC_TEXT,
+        )
+    };
+    let profile = load("controller = 0x27\ngateway = 0x80").unwrap_or_else(|e| panic!("{e}"));
+    assert!(profile.is_identity());
+    let err = load("controller = 0x28").expect_err("another source address");
+    let text = err.to_string();
+    assert!(
+        text.starts_with("gw.toml:")
+            && text.contains("AuxValveCommand_Boom")
+            && text.contains("source address 0x27, but the controller's is 0x28"),
+        "{text}"
+    );
+    let err = load("gateway = 0x81").expect_err("another gateway");
+    assert!(err.to_string().contains("the gateway's is 0x81"), "{err}");
+    // 11-bit ids carry no address.
+    let (message, _) = refused(|t: &str| {
+        t.replacen(
+            "[timeouts]",
+            "[addresses]\ncontroller = 0x27\n\n[timeouts]",
+            1,
+        )
+    });
+    assert!(
+        message.contains("11-bit id, which carries no address"),
+        "{message}"
+    );
+}

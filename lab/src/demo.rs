@@ -34,6 +34,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::Context as _;
 use clap::Args;
+use firmware_bridge::profile::Profile;
 use firmware_bridge::trace::{Direction, Recorder};
 use firmware_bridge::transport::{TraceClock, TraceTimeBase};
 use planner::autodig::AutodigMaps;
@@ -174,6 +175,11 @@ pub struct DemoArgs {
     /// fixed gamma) instead of Autodig with the perception enhancements (3.2).
     #[arg(long)]
     pub predefined_plain: bool,
+    /// Machine profile (TOML naming a gateway's DBC and the mapping, docs/machine-profile.md): the
+    /// controller and the simulated gateway speak that gateway's messages, at its rates, on the
+    /// in-process bus, and the trace records them. Default: the project's protocol (excavator.dbc).
+    #[arg(long, value_name = "FILE")]
+    pub profile: Option<PathBuf>,
     /// Predefined strategy: the fixed start joints (library callers; overrides `predefined_from`).
     #[arg(skip)]
     pub predefined_joints: Option<JointAngles>,
@@ -203,6 +209,7 @@ impl DemoArgs {
             bench_after: vec![12],
             predefined_plain: false,
             predefined_joints: None,
+            profile: None,
         }
     }
 
@@ -456,7 +463,10 @@ pub struct DemoSummary {
     pub effects: Vec<String>,
     /// The simulated machine's own file (`--plant-machine`), when it is not the controller's.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub plant_machine: Option<PlantMachine>,
+    pub plant_machine: Option<FileRecord>,
+    /// The machine profile both ends spoke on the bus (`--profile`), when not the project's protocol.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub profile: Option<FileRecord>,
     /// What stamped the trace's frames: `virtual` (`demo`: session time since the fixed epoch of
     /// docs/demo-output.md), `kernel` (`run`: the socket's kernel receive timestamps) or
     /// `wall_at_read` (`run` without them); absent in summaries written before it was recorded.
@@ -472,17 +482,17 @@ pub struct DemoSummary {
     pub totals: Totals,
 }
 
-/// The simulated machine's file of a session made with `--plant-machine` (`summary.json`
-/// `plant_machine`): which file, and its content's hash, so the session says which plant made it.
+/// A file a session was made with (`summary.json` `plant_machine`, `profile`): which file, and its
+/// content's hash, so the session says which plant or which gateway's protocol made it.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct PlantMachine {
+pub struct FileRecord {
     /// The file as given.
     pub path: String,
     /// SHA-256 of its bytes, lower-case hex.
     pub sha256: String,
 }
 
-impl PlantMachine {
+impl FileRecord {
     /// The record of the file at `path`.
     ///
     /// # Errors
@@ -927,6 +937,14 @@ pub struct BenchSnapshot {
     pub pose: [f64; 3],
 }
 
+/// The machine profile at `path`, if one is given: checked completely before anything runs.
+///
+/// # Errors
+/// The profile's error, one line naming the file, the line and the quantity.
+pub fn load_profile(path: Option<&Path>) -> anyhow::Result<Option<Arc<Profile>>> {
+    Ok(path.map(Profile::load).transpose()?.map(Arc::new))
+}
+
 /// Runs one session and writes its outputs into `args.out`. Stops early when `stop` is set.
 ///
 /// The virtual-time harness steps the machine and the controller; the controller's session driver
@@ -948,7 +966,11 @@ pub fn run_session_observed(
     observer: &mut dyn SessionObserver,
 ) -> anyhow::Result<DemoSummary> {
     let wall = std::time::Instant::now();
-    let (sim, config, maps) = setup(args)?;
+    let (sim, mut config, maps) = setup(args)?;
+    let profile = load_profile(args.profile.as_deref())?;
+    if let Some(p) = &profile {
+        config.safety = config.safety.for_gateway(p.timing());
+    }
     let out = &args.out;
     let scans_dir = out.join("scans");
     std::fs::create_dir_all(&scans_dir)
@@ -980,7 +1002,11 @@ pub fn run_session_observed(
         ),
         None => None,
     };
-    let mut h = Harness::new(&sim, maps, config).context("controller")?;
+    let options = crate::harness::HarnessOptions {
+        profile,
+        ..Default::default()
+    };
+    let mut h = Harness::with_options(&sim, maps, config, &options).context("controller")?;
     if let Some(node) = own_controller {
         h.kill_controller();
         h.start_controller(node);
@@ -1007,17 +1033,15 @@ pub fn run_session_observed(
     observer.operator_control(operator.sender());
     let finished = |h: &Harness| h.node().is_none_or(ControllerNode::finished);
     while !finished(&h) && h.time_s() < budget_s && !stop.load(Ordering::Relaxed) {
-        let frames = match h.step() {
-            Ok(frames) => frames,
-            Err(e) => {
-                result = Err(anyhow::Error::new(e));
-                break;
-            }
-        };
-        for f in h.inbox() {
+        if let Err(e) = h.step() {
+            result = Err(anyhow::Error::new(e));
+            break;
+        }
+        // The frames as they were on the bus: a profile's wire frames.
+        for f in h.wire_inbox() {
             recorder.record(stamp(f.timestamp_ns), Direction::Receive, &f.frame);
         }
-        for f in &frames {
+        for f in h.wire_sent() {
             recorder.record(stamp(h.clock.now_ns()), Direction::Transmit, f);
         }
         let time_s = h.time_s();
@@ -1092,14 +1116,22 @@ pub fn run_session_observed(
     let now = clock.now_s();
     let shutdown = h.node_mut().map(|n| n.shutdown(now));
     for f in shutdown.iter().flat_map(|o| o.iter()) {
-        recorder.record(stamp(clock.now_ns()), Direction::Transmit, f);
         let _ = h.send_from_controller(std::slice::from_ref(f));
+        for w in h.wire_sent() {
+            recorder.record(stamp(clock.now_ns()), Direction::Transmit, w);
+        }
     }
     h.machine.advance(2.0 * PERIOD_S);
     for f in h.drain_controller_inbox() {
         recorder.record(stamp(f.timestamp_ns), Direction::Receive, &f.frame);
     }
     let trace = recorder.close();
+    for link in [h.profile_link(), h.machine.profile_link()]
+        .into_iter()
+        .flatten()
+    {
+        link.log_stats();
+    }
     if let Some(p) = &progress {
         p.finish_and_clear();
     }
@@ -1135,8 +1167,9 @@ pub fn run_session_observed(
         plant_machine: args
             .plant_machine
             .as_deref()
-            .map(PlantMachine::of)
+            .map(FileRecord::of)
             .transpose()?,
+        profile: args.profile.as_deref().map(FileRecord::of).transpose()?,
         ..summary
     };
     let plan: Vec<Action> = node.cycle().config().actions.clone();
@@ -1418,6 +1451,7 @@ pub fn session_summary(
         soil_contact: end.soil_contact,
         effects: end.effects,
         plant_machine: None,
+        profile: None,
         trace_clock: Some(end.trace_clock),
         can_link: None,
         digs: records,

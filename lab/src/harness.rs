@@ -9,11 +9,20 @@
 //! The gateway and the node share a key ([`HarnessOptions::key`]; by default one drawn from the
 //! simulator's seed, so a session of one seed gives the same trace byte for byte), so the control path is authenticated with the truncated CMAC as on a provisioned
 //! machine (docs/protocol.md). The gateway's session ids follow the simulator's seed.
+//!
+//! With a machine profile ([`HarnessOptions::profile`]) both ends speak that gateway's wire protocol
+//! on the bus, translated where each end meets it, as `excavator-sim --profile` and `excavator-ctl
+//! run --profile` do (docs/machine-profile.md); the gateway sends at the profile's periods.
 
 use firmware_bridge::CanFrame;
 use firmware_bridge::scan::{Scan, ScanRequest};
 use firmware_bridge::secoc::SessionKey;
-use firmware_bridge::transport::{InProcessBus, InProcessNode, TimestampedFrame, VirtualClock};
+use std::sync::Arc;
+
+use firmware_bridge::profile::Profile;
+use firmware_bridge::transport::{
+    InProcessBus, InProcessNode, ProfileLink, TimestampedFrame, VirtualClock,
+};
 use planner::autodig::AutodigMaps;
 use vcan_sim::SimConfig;
 use vcan_sim::embedded::EmbeddedMachine;
@@ -36,6 +45,8 @@ pub struct HarnessOptions {
     /// The key the gateway and the controller share; `None`: one drawn from the simulator's seed
     /// ([`session_key`]).
     pub key: Option<SessionKey>,
+    /// The machine profile both ends speak on the bus; `None`: the project's protocol.
+    pub profile: Option<Arc<Profile>>,
 }
 
 /// The key of an in-process session of `seed`: both ends are in this process, so the key only has
@@ -57,6 +68,7 @@ impl Default for HarnessOptions {
             controller_queue: None,
             machine_queue: None,
             key: None,
+            profile: None,
         }
     }
 }
@@ -70,6 +82,9 @@ pub enum HarnessError {
     /// The controller could not be built.
     #[error("controller: {0}")]
     Controller(#[from] controller::ControllerError),
+    /// The profile's gateway timeouts do not validate.
+    #[error("the machine profile's gateway: {0}")]
+    Gateway(#[from] firmware_bridge::gateway::GatewayConfigError),
     /// The bus refused a frame of the controller.
     #[error("in-process bus: {0}")]
     Bus(#[from] firmware_bridge::transport::Error),
@@ -91,6 +106,12 @@ pub struct Harness {
     node: Option<ControllerNode>,
     key: SessionKey,
     inbox: Vec<TimestampedFrame>,
+    /// The controller's translation to the profile's wire protocol, if any.
+    link: Option<ProfileLink>,
+    /// With a profile: the wire frames behind `inbox`.
+    wire_inbox: Vec<TimestampedFrame>,
+    /// The frames the controller put on the bus in the last step or send.
+    wire_sent: Vec<CanFrame>,
     empty: Outbox,
     steps: u64,
     node_step_wall: std::time::Duration,
@@ -126,11 +147,14 @@ impl Harness {
             None => bus.attach(),
         };
         let ctl = attach(options.controller_queue);
-        let mut machine = EmbeddedMachine::new(
-            sim.build()?,
-            attach(options.machine_queue),
-            Some(clock.clone()),
-        );
+        let plant = sim.build()?;
+        let machine_bus = attach(options.machine_queue);
+        let mut machine = match &options.profile {
+            Some(p) => {
+                EmbeddedMachine::with_profile(plant, machine_bus, Some(clock.clone()), p.clone())?
+            }
+            None => EmbeddedMachine::new(plant, machine_bus, Some(clock.clone())),
+        };
         let key = options
             .key
             .clone()
@@ -146,6 +170,9 @@ impl Harness {
             node: Some(node),
             key,
             inbox: Vec::new(),
+            link: options.profile.clone().map(ProfileLink::new),
+            wire_inbox: Vec::new(),
+            wire_sent: Vec::new(),
             empty: Outbox::new()?,
             steps: 0,
             node_step_wall: std::time::Duration::ZERO,
@@ -202,6 +229,25 @@ impl Harness {
         &self.inbox
     }
 
+    /// The frames of [`Self::inbox`] as they were on the bus (the profile's wire frames, with one).
+    pub fn wire_inbox(&self) -> &[TimestampedFrame] {
+        match self.link {
+            Some(_) => &self.wire_inbox,
+            None => &self.inbox,
+        }
+    }
+
+    /// The frames the controller put on the bus in the last step or [`Self::send_from_controller`]
+    /// (the profile's wire frames, with one).
+    pub fn wire_sent(&self) -> &[CanFrame] {
+        &self.wire_sent
+    }
+
+    /// The controller's translation to the profile's wire protocol and its counts, if any.
+    pub fn profile_link(&self) -> Option<&ProfileLink> {
+        self.link.as_ref()
+    }
+
     /// One control period (module docs). Returns the controller's frames (empty once killed).
     ///
     /// # Errors
@@ -234,11 +280,24 @@ impl Harness {
     ) -> Result<Outbox, HarnessError> {
         self.machine.advance_watched(PERIOD_S, watch);
         self.inbox.clear();
+        self.wire_inbox.clear();
         while let Some(f) = self.ctl.try_recv() {
-            self.inbox.push(f);
+            match &self.link {
+                None => self.inbox.push(f),
+                Some(link) => {
+                    if let Some(frame) = link.from_wire(&f.frame) {
+                        self.inbox.push(TimestampedFrame {
+                            timestamp_ns: f.timestamp_ns,
+                            frame,
+                        });
+                    }
+                    self.wire_inbox.push(f);
+                }
+            }
         }
         edit(&mut self.inbox);
         self.steps += 1;
+        self.wire_sent.clear();
         let Some(node) = self.node.as_mut() else {
             return Ok(self.empty);
         };
@@ -247,23 +306,39 @@ impl Harness {
         let out = node.step(now_s, &self.inbox);
         self.node_step_wall = t0.elapsed();
         for f in &out {
-            self.ctl.send(*f)?;
+            self.send(f)?;
         }
         Ok(out)
+    }
+
+    /// Puts one of the controller's frames on the bus (translated, with a profile).
+    fn send(&mut self, frame: &CanFrame) -> Result<(), HarnessError> {
+        let wire = match &self.link {
+            None => *frame,
+            Some(link) => match link.to_wire(frame) {
+                Some(wire) => wire,
+                None => return Ok(()),
+            },
+        };
+        self.ctl.send(wire)?;
+        self.wire_sent.push(wire);
+        Ok(())
     }
 
     /// Sends frames from the controller's bus node (its shutdown frames, say).
     ///
     /// # Errors
     /// [`HarnessError::Bus`] when the bus refuses one.
-    pub fn send_from_controller(&self, frames: &[CanFrame]) -> Result<(), HarnessError> {
+    pub fn send_from_controller(&mut self, frames: &[CanFrame]) -> Result<(), HarnessError> {
+        self.wire_sent.clear();
         for f in frames {
-            self.ctl.send(*f)?;
+            self.send(f)?;
         }
         Ok(())
     }
 
-    /// Frames waiting for the controller (received after the last step).
+    /// Frames waiting for the controller (received after the last step), as they are on the bus (the
+    /// profile's wire frames, with one).
     pub fn drain_controller_inbox(&mut self) -> Vec<TimestampedFrame> {
         let mut out = Vec::new();
         while let Some(f) = self.ctl.try_recv() {

@@ -115,8 +115,8 @@ pub struct RunArgs {
     #[arg(long, value_name = "PATH")]
     pub control_socket: Option<PathBuf>,
     /// The deployed configuration's folder (the package's /etc/excavator): machine.toml,
-    /// autodig_maps.toml, controller.toml, bench.toml, planner.toml, hardness_regression.toml and
-    /// key, each used when present; a file given by its own option wins, a missing one is the
+    /// autodig_maps.toml, controller.toml, bench.toml, planner.toml, hardness_regression.toml, key
+    /// and profile.toml, each used when present; a file given by its own option wins, a missing one is the
     /// built-in default.
     #[arg(long, value_name = "DIR")]
     pub config_dir: Option<PathBuf>,
@@ -128,7 +128,7 @@ pub struct RunArgs {
 }
 
 /// The files `--config-dir` supplies, by name in the folder.
-pub const CONFIG_DIR_FILES: [&str; 7] = [
+pub const CONFIG_DIR_FILES: [&str; 8] = [
     "machine.toml",
     "autodig_maps.toml",
     "controller.toml",
@@ -136,6 +136,7 @@ pub const CONFIG_DIR_FILES: [&str; 7] = [
     "planner.toml",
     "hardness_regression.toml",
     "key",
+    "profile.toml",
 ];
 
 /// Arguments of `excavator-ctl ctl`.
@@ -186,6 +187,34 @@ pub async fn ctl(args: CtlArgs) -> anyhow::Result<()> {
 }
 
 impl RunArgs {
+    /// The command line's defaults on `iface`: the fixed strategy at real time, built-in files, no
+    /// session folder (library callers and tests set what they need).
+    #[must_use]
+    pub fn new(iface: &str) -> Self {
+        Self {
+            iface: iface.to_owned(),
+            listen_only: false,
+            machine: None,
+            maps: None,
+            config: None,
+            key_file: None,
+            trace: None,
+            digs: None,
+            scan_addr: None,
+            strategy: DemoStrategy::Fixed,
+            bench: None,
+            seed: None,
+            planner: None,
+            hardness: None,
+            time_scale: TimeScale::REAL_TIME,
+            out: None,
+            resume: None,
+            control_socket: None,
+            config_dir: None,
+            profile: None,
+        }
+    }
+
     /// The session folder: `--resume`'s or `--out`'s.
     ///
     /// # Errors
@@ -209,8 +238,16 @@ impl RunArgs {
         let Some(dir) = &self.config_dir else {
             return a;
         };
-        let [machine, maps, config, bench, planner, hardness, key] =
-            CONFIG_DIR_FILES.map(|name| Some(dir.join(name)).filter(|p| p.is_file()));
+        let [
+            machine,
+            maps,
+            config,
+            bench,
+            planner,
+            hardness,
+            key,
+            profile,
+        ] = CONFIG_DIR_FILES.map(|name| Some(dir.join(name)).filter(|p| p.is_file()));
         for (given, found) in [
             (&mut a.machine, machine),
             (&mut a.maps, maps),
@@ -219,6 +256,7 @@ impl RunArgs {
             (&mut a.planner, planner),
             (&mut a.hardness, hardness),
             (&mut a.key_file, key),
+            (&mut a.profile, profile),
         ] {
             if given.is_none() {
                 *given = found;
@@ -235,7 +273,8 @@ impl RunArgs {
                 .map_or_else(|| "built-in".to_owned(), |p| p.display().to_string())
         };
         format!(
-            "machine {}, maps {}, controller {}, bench {}, planner {}, hardness {}, key {}",
+            "machine {}, maps {}, controller {}, bench {}, planner {}, hardness {}, key {}, \
+             profile {}",
             show(&self.machine),
             show(&self.maps),
             show(&self.config),
@@ -245,6 +284,7 @@ impl RunArgs {
             self.key_file
                 .as_ref()
                 .map_or_else(|| "none".to_owned(), |p| p.display().to_string()),
+            show(&self.profile),
         )
     }
 
@@ -260,6 +300,7 @@ impl RunArgs {
         d.config.clone_from(&self.config);
         d.planner.clone_from(&self.planner);
         d.hardness.clone_from(&self.hardness);
+        d.profile.clone_from(&self.profile);
         d
     }
 }
@@ -299,6 +340,10 @@ pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, R
         (None, _) => None,
     };
     config.safety.listen_only |= args.listen_only;
+    // A profile's gateway: the stale-data limits in its periods, checked against its watchdogs.
+    if let Some(p) = demo::load_profile(args.profile.as_deref())? {
+        config.safety = config.safety.for_gateway(p.timing());
+    }
     // Without a scan service nobody would answer the cycle's requests: dig on the plain angle rules
     // at once instead of waiting `scan_timeout_s` before every dig.
     if args.scan_addr.is_none() {
@@ -421,13 +466,12 @@ pub async fn run(args: RunArgs) -> anyhow::Result<()> {
 /// # Errors
 /// As [`run`].
 pub async fn run_observed(args: RunArgs, observer: &mut dyn SessionObserver) -> anyhow::Result<()> {
-    // A bad profile stops the run before it touches the bus.
-    let profile = args
-        .profile
-        .as_deref()
-        .map(Profile::load)
-        .transpose()?
-        .map(std::sync::Arc::new);
+    // A bad profile stops the run before it touches the bus. Without one the bus speaks the default
+    // profile, the identity: every frame passes unchanged.
+    let profile = match demo::load_profile(args.with_config_dir().profile.as_deref())? {
+        Some(p) => p,
+        None => std::sync::Arc::new(Profile::default_profile()?),
+    };
     let link = check_link(&args)?;
     let mut bus = SocketCanBus::open(&args.iface)
         .with_context(|| format!("opening CAN interface {}", args.iface))?;
@@ -448,17 +492,6 @@ pub async fn run_observed(args: RunArgs, observer: &mut dyn SessionObserver) -> 
         session_log: true,
         link: Some(link),
     };
-    let Some(profile) = profile else {
-        return run_on_observed(
-            &bus,
-            trace,
-            &args,
-            console,
-            controller::run::shutdown_signal(),
-            observer,
-        )
-        .await;
-    };
     let bus = ProfileBus::new(bus, profile);
     let result = run_on_observed(
         &bus,
@@ -469,7 +502,9 @@ pub async fn run_observed(args: RunArgs, observer: &mut dyn SessionObserver) -> 
         observer,
     )
     .await;
-    bus.log_stats();
+    if !bus.profile().is_identity() {
+        bus.log_stats();
+    }
     result
 }
 
@@ -877,6 +912,45 @@ mod tests {
         let line = args(&["--config-dir", d]).with_config_dir().config_files();
         assert!(line.contains("machine.toml, maps built-in"), "{line}");
         assert_eq!(args(&[]).with_config_dir().machine, None);
+    }
+
+    /// `profile.toml` in the folder is the machine profile when no `--profile` names one: the
+    /// controller's stale-data limits follow that gateway's periods; `--profile` wins.
+    #[test]
+    fn config_dir_supplies_the_machine_profile() {
+        let dir = tempfile::tempdir().unwrap();
+        let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples");
+        std::fs::copy(
+            examples.join("other_gateway.toml"),
+            dir.path().join("profile.toml"),
+        )
+        .unwrap();
+        std::fs::copy(
+            examples.join("other_gateway.dbc"),
+            dir.path().join("other_gateway.dbc"),
+        )
+        .unwrap();
+        let d = dir.path().to_str().unwrap();
+        let a = args(&["--config-dir", d]).with_config_dir();
+        assert_eq!(a.profile, Some(dir.path().join("profile.toml")));
+        assert!(
+            a.config_files().ends_with("profile.toml"),
+            "{}",
+            a.config_files()
+        );
+        let (node, _, _) = build(&a).unwrap();
+        let safety = node.safety().config();
+        assert_eq!(safety.gateway.sensor_period_ms, 20);
+        // Three of the gateway's 20 ms periods, as the default is three of 10 ms.
+        assert!((safety.sensor_max_age_s - 0.06).abs() < 1e-12, "{safety:?}");
+        let a = args(&["--config-dir", d, "--profile", "mine.toml"]).with_config_dir();
+        assert_eq!(a.profile, Some("mine.toml".into()), "an option wins");
+        let (node, _, _) = build(&args(&[])).unwrap();
+        assert_eq!(
+            *node.safety().config(),
+            controller::safety::SafetyConfig::default(),
+            "without a profile, the project's gateway"
+        );
     }
 
     #[test]

@@ -7,6 +7,8 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod common;
+
 use std::time::Duration;
 
 use std::sync::Arc;
@@ -84,7 +86,13 @@ async fn simulator_with(
     std::fs::create_dir_all(out.parent().unwrap()).unwrap();
     let key_file = write_key_file(out.parent().unwrap());
     let key = firmware_bridge::secoc::SessionKey::from_file(&key_file).unwrap();
-    let machine = MachineNode::new(sim.build().unwrap()).with_security(&key, rand_seed());
+    // A profile's gateway sends at its periods and keeps its watchdogs, as `excavator-sim --profile`.
+    let plant = sim.build().unwrap();
+    let machine = match &profile {
+        Some(p) => MachineNode::with_timing(plant, &p.timing()).unwrap(),
+        None => MachineNode::new(plant),
+    }
+    .with_security(&key, rand_seed());
     let (stop, sim_stopped) = tokio::sync::oneshot::channel::<()>();
     let task = tokio::spawn(async move {
         let stopped = async {
@@ -128,26 +136,14 @@ fn planned_run(
     )
     .unwrap();
     RunArgs {
-        iface: "vcan0".into(),
-        listen_only: false,
-        machine: None,
-        maps: None,
         config: Some(safety),
         key_file: Some(sim.key_file.clone()),
-        trace: None,
         digs: Some(digs),
         scan_addr: Some(sim.scan_addr.clone()),
         strategy: DemoStrategy::Planned,
-        bench: None,
-        seed: None,
-        planner: None,
-        hardness: None,
         time_scale,
         out: Some(out.to_path_buf()),
-        resume: None,
-        control_socket: None,
-        config_dir: None,
-        profile: None,
+        ..RunArgs::new("vcan0")
     }
 }
 
@@ -247,7 +243,10 @@ async fn the_planned_session_runs_over_another_gateways_protocol() {
     let sim = simulator_with(&out, time_scale, Some(profile.clone())).await;
     let (ctl_node, trace) = recorded_controller(&sim, &out);
     let ctl_bus = ProfileBus::new(ctl_node, profile.clone());
-    let args = planned_run(&sim, 1, time_scale, &out);
+    let args = RunArgs {
+        profile: Some(example.into()),
+        ..planned_run(&sim, 1, time_scale, &out)
+    };
     let summary = run_to_the_end(&ctl_bus, trace, &args, sim).await;
     assert!(summary.simulated_s > 5.0, "{summary:?}");
     assert_eq!(
@@ -263,23 +262,17 @@ async fn the_planned_session_runs_over_another_gateways_protocol() {
     assert!(s.totals.finished);
 
     // The trace holds the wire: the example gateway's 11-bit ids only, each one translating back.
-    let text = std::fs::read_to_string(out.join("trace.log")).unwrap();
-    let (mut frames, mut angles) = (0, 0);
-    for line in text.lines() {
-        let rec = firmware_bridge::trace::parse_line(line).unwrap();
-        assert!(!rec.frame.is_extended(), "{line}");
-        let canonical = profile.from_wire(&rec.frame).unwrap();
-        let decoded = firmware_bridge::Message::decode(&canonical);
-        if let Ok(d) = decoded
-            && matches!(d.message, firmware_bridge::Message::JointAngles(_))
-        {
-            angles += 1;
-        }
-        frames += 1;
-    }
+    let (frames, angles, heartbeats) = common::wire_trace_counts(&out.join("trace.log"), &profile);
     assert!(
         frames > 1000 && angles > 500,
         "{frames} frames, {angles} joint angles"
+    );
+    // The gateway sends its angles at the example's 20 ms, the controller its heartbeat at 50 ms:
+    // 2.5 angles per heartbeat (5 with the project's 10 ms).
+    let per_heartbeat = f64::from(angles) / f64::from(heartbeats);
+    assert!(
+        (2.0..3.0).contains(&per_heartbeat),
+        "{angles} joint angles, {heartbeats} heartbeats"
     );
 }
 
@@ -437,26 +430,9 @@ async fn a_controller_killed_mid_session_resumes_without_losing_or_repeating_an_
 /// The arguments of `run --iface vcan0 --config CONFIG [--digs N]` with the fixed strategy.
 fn fixed_args(config: &std::path::Path, digs: Option<u32>) -> RunArgs {
     RunArgs {
-        iface: "vcan0".into(),
-        listen_only: false,
-        machine: None,
-        maps: None,
         config: Some(config.to_owned()),
-        key_file: None,
-        trace: None,
         digs,
-        scan_addr: None,
-        strategy: DemoStrategy::Fixed,
-        bench: None,
-        seed: None,
-        planner: None,
-        hardness: None,
-        time_scale: TimeScale::REAL_TIME,
-        out: None,
-        resume: None,
-        control_socket: None,
-        config_dir: None,
-        profile: None,
+        ..RunArgs::new("vcan0")
     }
 }
 

@@ -76,26 +76,10 @@ fn run_serves_the_page_and_its_estop_reaches_the_run_loop() {
     .unwrap();
     let time_scale = TimeScale::new(2.0).unwrap();
     let args = RunArgs {
-        iface: "vcan0".into(),
-        listen_only: false,
-        machine: None,
-        maps: None,
         config: Some(safety),
-        key_file: None,
-        trace: None,
         digs: Some(1),
-        scan_addr: None,
-        strategy: DemoStrategy::Fixed,
-        bench: None,
-        seed: None,
-        planner: None,
-        hardness: None,
         time_scale,
-        out: None,
-        resume: None,
-        control_socket: None,
-        config_dir: None,
-        profile: None,
+        ..RunArgs::new("vcan0")
     };
     // The live view has its own runtime: started outside the session's.
     let mut stream = live::LiveStream::start(

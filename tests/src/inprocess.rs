@@ -57,6 +57,7 @@ impl Session {
                 controller_queue: Some(1 << 16),
                 machine_queue: Some(1 << 16),
                 key: None,
+                profile: None,
             },
         )
         .unwrap_or_else(|e| panic!("harness: {e}"));

@@ -176,6 +176,9 @@ fn the_package_installs_its_files_and_its_unit_runs() {
         "usr/share/doc/excavator-ctl/deployment.md",
         "usr/share/doc/excavator-ctl/examples/80-can0.network",
         "usr/share/doc/excavator-ctl/examples/config/machine.toml",
+        "usr/share/doc/excavator-ctl/examples/profiles/other_gateway.toml",
+        "usr/share/doc/excavator-ctl/examples/profiles/other_gateway.dbc",
+        "usr/share/doc/excavator-ctl/machine-profile.md",
     ] {
         assert!(root.join(file).is_file(), "{file} not in the package");
     }

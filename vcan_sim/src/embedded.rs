@@ -17,7 +17,11 @@
 //! # Ok(()) }
 //! ```
 
-use firmware_bridge::transport::{InProcessNode, VirtualClock};
+use std::sync::Arc;
+
+use firmware_bridge::gateway::GatewayConfigError;
+use firmware_bridge::profile::Profile;
+use firmware_bridge::transport::{InProcessNode, ProfileLink, VirtualClock};
 
 use crate::node::{MachineNode, steps_in};
 use crate::plant::{PHYSICS_DT_S, Plant};
@@ -31,19 +35,56 @@ pub struct EmbeddedMachine {
     clock: Option<VirtualClock>,
     outbox: Vec<firmware_bridge::CanFrame>,
     send_errors: u64,
+    /// The machine profile the gateway speaks on the bus, if not the project's protocol.
+    link: Option<ProfileLink>,
 }
 
 impl EmbeddedMachine {
     /// Attaches a plant to a bus node. With `clock`, each physics step sets the bus's virtual clock
     /// to the simulation time (the clock never goes backwards, so a controller loop may set it too).
     pub fn new(plant: Plant, bus: InProcessNode, clock: Option<VirtualClock>) -> Self {
+        Self::attached(MachineNode::new(plant), bus, clock, None)
+    }
+
+    fn attached(
+        node: MachineNode,
+        bus: InProcessNode,
+        clock: Option<VirtualClock>,
+        link: Option<ProfileLink>,
+    ) -> Self {
         Self {
-            node: MachineNode::new(plant),
+            node,
             bus,
             clock,
             outbox: Vec::with_capacity(16),
             send_errors: 0,
+            link,
         }
+    }
+
+    /// As [`Self::new`], the gateway speaking `profile`'s wire protocol on the bus at its periods
+    /// and with its watchdogs ([`MachineNode::with_timing`]; `docs/machine-profile.md`).
+    ///
+    /// # Errors
+    /// [`GatewayConfigError`] if the profile's timeouts do not validate.
+    pub fn with_profile(
+        plant: Plant,
+        bus: InProcessNode,
+        clock: Option<VirtualClock>,
+        profile: Arc<Profile>,
+    ) -> Result<Self, GatewayConfigError> {
+        let node = MachineNode::with_timing(plant, &profile.timing())?;
+        Ok(Self::attached(
+            node,
+            bus,
+            clock,
+            Some(ProfileLink::new(profile)),
+        ))
+    }
+
+    /// The profile's translation and its counts (`None`: the project's protocol).
+    pub fn profile_link(&self) -> Option<&ProfileLink> {
+        self.link.as_ref()
     }
 
     /// Advances by `dt_s` of simulated time (rounded to 1 ms steps): each step delivers the frames
@@ -66,7 +107,14 @@ impl EmbeddedMachine {
             clock.set_ns(((self.node.time_s()) * 1e9).round() as u64);
         }
         while let Some(f) = self.bus.try_recv() {
-            self.node.on_frame(&f.frame);
+            match &self.link {
+                None => self.node.on_frame(&f.frame),
+                Some(link) => {
+                    if let Some(frame) = link.from_wire(&f.frame) {
+                        self.node.on_frame(&frame);
+                    }
+                }
+            }
         }
         self.outbox.clear();
         self.node.step(&mut self.outbox);
@@ -74,6 +122,13 @@ impl EmbeddedMachine {
             clock.set_ns(((self.node.time_s()) * 1e9).round() as u64);
         }
         for frame in self.outbox.drain(..) {
+            let frame = match &self.link {
+                None => frame,
+                Some(link) => match link.to_wire(&frame) {
+                    Some(wire) => wire,
+                    None => continue,
+                },
+            };
             if self.bus.send(frame).is_err() {
                 self.send_errors += 1;
             }

@@ -282,8 +282,14 @@ fn real_main() -> Result<()> {
         .map(std::sync::Arc::new);
     // Every start is a new series of sessions, so no recording of an earlier run is accepted.
     let session_seed: u64 = rand::random();
-    let node = MachineNode::new(config.build().context("building the machine")?)
-        .with_security(&key, session_seed);
+    let plant = config.build().context("building the machine")?;
+    // A profile's gateway sends at its periods and keeps its watchdogs.
+    let node = match &profile {
+        Some(p) => MachineNode::with_timing(plant, &p.timing())
+            .with_context(|| format!("{}: the gateway's timeouts", p.origin()))?,
+        None => MachineNode::new(plant),
+    }
+    .with_security(&key, session_seed);
     let options = RealtimeOptions {
         iface,
         state_log: cli.state_log,

@@ -9,6 +9,9 @@
 //! - every 20 ms (50 Hz): `PumpPressures`;
 //! - every 50 ms (20 Hz): `TrackOdometry`, `GatewayStatus` and `GatewaySession`.
 //!
+//! A machine profile's gateway ([`MachineNode::with_timing`]) sends at the profile's periods and
+//! keeps its watchdogs ([`Schedule`]).
+//!
 //! Only sensor readings and the gateway status go out; nothing reveals the hidden effects.
 
 use firmware_bridge::CanFrame;
@@ -17,6 +20,7 @@ use firmware_bridge::messages::{
     AuxValveMeasured, Cylinder, JointAngles, JointRates, Message, PumpPressures, TrackOdometry,
     ValveState,
 };
+use firmware_bridge::profile::GatewayTiming;
 use firmware_bridge::secoc::SessionKey;
 use firmware_bridge::time::Instant;
 
@@ -32,11 +36,49 @@ pub const ODOMETRY_PERIOD_STEPS: u64 = 50;
 /// Steps between gateway status frames (50 ms).
 pub const STATUS_PERIOD_STEPS: u64 = 50;
 
+/// The gateway's transmit periods, physics steps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Schedule {
+    /// `JointAngles`, `JointRates`, `AuxValveMeasured` (the sensors are sampled at this rate).
+    pub sensor: u64,
+    /// `PumpPressures`.
+    pub pump: u64,
+    /// `TrackOdometry` (and the off-map check).
+    pub odometry: u64,
+    /// `GatewayStatus` and `GatewaySession`.
+    pub status: u64,
+}
+
+impl Default for Schedule {
+    fn default() -> Self {
+        Self {
+            sensor: SENSOR_PERIOD_STEPS,
+            pump: PUMP_PERIOD_STEPS,
+            odometry: ODOMETRY_PERIOD_STEPS,
+            status: STATUS_PERIOD_STEPS,
+        }
+    }
+}
+
+impl Schedule {
+    /// The periods of a profile's gateway (whole ms, so whole steps; at least one step each).
+    pub fn of(timing: &GatewayTiming) -> Self {
+        let steps = |ms: u32| steps_in(GatewayTiming::secs(ms)).max(1);
+        Self {
+            sensor: steps(timing.sensor_period_ms),
+            pump: steps(timing.pump_period_ms),
+            odometry: steps(timing.odometry_period_ms),
+            status: steps(timing.status_period_ms),
+        }
+    }
+}
+
 /// The gateway and the plant behind it.
 #[derive(Debug, Clone)]
 pub struct MachineNode {
     plant: Plant,
     gateway: Gateway,
+    schedule: Schedule,
     readings: Option<SensorReadings>,
     steps: u64,
     valve_commands: [f64; 6],
@@ -72,10 +114,32 @@ impl MachineNode {
         self.gateway = std::mem::take(&mut self.gateway).with_security(key, session_seed);
     }
 
+    /// A node whose gateway sends at `timing`'s periods and keeps its watchdogs (a machine profile's
+    /// gateway; [`GatewayTiming::canonical`] is [`Self::new`]'s).
+    ///
+    /// # Errors
+    /// [`GatewayConfigError`] if the timeouts do not validate.
+    pub fn with_timing(plant: Plant, timing: &GatewayTiming) -> Result<Self, GatewayConfigError> {
+        let config = GatewayConfig {
+            heartbeat_timeout_s: GatewayTiming::secs(timing.heartbeat_timeout_ms),
+            command_timeout_s: GatewayTiming::secs(timing.command_timeout_ms),
+            ..GatewayConfig::default()
+        };
+        let mut node = Self::with_gateway(plant, config)?;
+        node.schedule = Schedule::of(timing);
+        Ok(node)
+    }
+
+    /// The gateway's transmit periods.
+    pub fn schedule(&self) -> Schedule {
+        self.schedule
+    }
+
     fn with(plant: Plant, gateway: Gateway) -> Self {
         Self {
             plant,
             gateway,
+            schedule: Schedule::default(),
             readings: None,
             steps: 0,
             valve_commands: [0.0; 6],
@@ -146,10 +210,10 @@ impl MachineNode {
         self.plant.scan(request)
     }
 
-    /// Whether the next [`Self::step`] samples the sensors (every [`SENSOR_PERIOD_STEPS`]): the
+    /// Whether the next [`Self::step`] samples the sensors (every [`Schedule::sensor`] steps): the
     /// plant's state before that step is what the sensor frames sent one period later measure.
     pub fn samples_sensors_next(&self) -> bool {
-        self.steps.is_multiple_of(SENSOR_PERIOD_STEPS)
+        self.steps.is_multiple_of(self.schedule.sensor)
     }
 
     /// One physics step: gateway tick, plant step, and the frames due now (appended to `out`).
@@ -163,22 +227,28 @@ impl MachineNode {
         self.valve_commands = outputs.valve_commands;
         self.plant.step(outputs.valve_commands);
         self.steps += 1;
-        if self.steps.is_multiple_of(SENSOR_PERIOD_STEPS)
-            && let Some(r) = self.readings
-        {
-            self.sensor_frames(&r, out);
-            if self.steps.is_multiple_of(PUMP_PERIOD_STEPS) {
+        let Schedule {
+            sensor,
+            pump,
+            odometry,
+            status,
+        } = self.schedule;
+        if let Some(r) = self.readings {
+            if self.steps.is_multiple_of(sensor) {
+                self.sensor_frames(&r, out);
+            }
+            if self.steps.is_multiple_of(pump) {
                 self.push(pump_message(&r), out);
             }
         }
-        if self.steps.is_multiple_of(STATUS_PERIOD_STEPS) {
+        if self.steps.is_multiple_of(status) {
             // Status and session nonce, built by the gateway core as on the machine.
             match self.gateway.status_frames::<CanFrame>() {
                 Ok(frames) => out.extend(frames),
                 Err(_) => self.encode_errors += 1,
             }
         }
-        if self.steps.is_multiple_of(ODOMETRY_PERIOD_STEPS) {
+        if self.steps.is_multiple_of(odometry) {
             let pose = self.plant.pose();
             let off_map = self
                 .plant

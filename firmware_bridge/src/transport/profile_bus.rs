@@ -13,7 +13,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::{Bus, Result, TimestampedFrame, TraceClock};
 use crate::frame::CanFrame;
-use crate::profile::Profile;
+use crate::profile::{Profile, TranslateError};
 
 /// Frames a [`ProfileBus`] did not pass on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -24,29 +24,23 @@ pub struct ProfileStats {
     pub untranslatable_sent: u64,
 }
 
-/// A bus translating between the canonical protocol (above) and a profile's wire protocol (below).
+/// A profile with the counts of the frames it did not pass on: the translation of [`ProfileBus`],
+/// for callers that move frames themselves (the lab's in-process harness and embedded machine).
 #[derive(Debug)]
-pub struct ProfileBus<B> {
-    inner: B,
+pub struct ProfileLink {
     profile: Arc<Profile>,
     unmapped_received: AtomicU64,
     untranslatable_sent: AtomicU64,
 }
 
-impl<B: Bus> ProfileBus<B> {
-    /// Wraps `inner`.
-    pub fn new(inner: B, profile: Arc<Profile>) -> Self {
+impl ProfileLink {
+    /// A link translating through `profile`.
+    pub fn new(profile: Arc<Profile>) -> Self {
         Self {
-            inner,
             profile,
             unmapped_received: AtomicU64::new(0),
             untranslatable_sent: AtomicU64::new(0),
         }
-    }
-
-    /// The bus below.
-    pub fn inner(&self) -> &B {
-        &self.inner
     }
 
     /// The profile.
@@ -54,7 +48,7 @@ impl<B: Bus> ProfileBus<B> {
         &self.profile
     }
 
-    /// Logs [`ProfileBus::stats`] with the profile's file (at the end of a run).
+    /// Logs [`ProfileLink::stats`] with the profile's file (at the end of a run).
     pub fn log_stats(&self) {
         let stats = self.stats();
         tracing::info!(
@@ -72,51 +66,99 @@ impl<B: Bus> ProfileBus<B> {
             untranslatable_sent: self.untranslatable_sent.load(Ordering::Relaxed),
         }
     }
+
+    /// The wire frame of a canonical frame to send; `None` (counted, logged at each power of two)
+    /// when the profile cannot carry it.
+    pub fn to_wire(&self, frame: &CanFrame) -> Option<CanFrame> {
+        self.passed(
+            self.profile.to_wire(frame),
+            &self.untranslatable_sent,
+            "frame not sent, the profile cannot carry it",
+        )
+    }
+
+    /// The canonical frame of a received wire frame; `None` (counted, logged at each power of two)
+    /// for a frame the profile does not map.
+    pub fn from_wire(&self, frame: &CanFrame) -> Option<CanFrame> {
+        self.passed(
+            self.profile.from_wire(frame),
+            &self.unmapped_received,
+            "frame rejected",
+        )
+    }
+
+    fn passed(
+        &self,
+        translated: std::result::Result<CanFrame, TranslateError>,
+        counter: &AtomicU64,
+        what: &str,
+    ) -> Option<CanFrame> {
+        match translated {
+            Ok(frame) => Some(frame),
+            Err(e) => {
+                let n = counter.fetch_add(1, Ordering::Relaxed) + 1;
+                if n.is_power_of_two() {
+                    tracing::warn!(profile = self.profile.origin(), count = n, "{what}: {e}");
+                }
+                None
+            }
+        }
+    }
 }
 
-/// Adds one to `counter` and returns the new count (logged at powers of two).
-fn count(counter: &AtomicU64) -> u64 {
-    counter.fetch_add(1, Ordering::Relaxed) + 1
+/// A bus translating between the canonical protocol (above) and a profile's wire protocol (below).
+#[derive(Debug)]
+pub struct ProfileBus<B> {
+    inner: B,
+    link: ProfileLink,
+}
+
+impl<B: Bus> ProfileBus<B> {
+    /// Wraps `inner`.
+    pub fn new(inner: B, profile: Arc<Profile>) -> Self {
+        Self {
+            inner,
+            link: ProfileLink::new(profile),
+        }
+    }
+
+    /// The bus below.
+    pub fn inner(&self) -> &B {
+        &self.inner
+    }
+
+    /// The profile.
+    pub fn profile(&self) -> &Profile {
+        self.link.profile()
+    }
+
+    /// Logs [`ProfileBus::stats`] with the profile's file (at the end of a run).
+    pub fn log_stats(&self) {
+        self.link.log_stats();
+    }
+
+    /// What was not passed on so far.
+    pub fn stats(&self) -> ProfileStats {
+        self.link.stats()
+    }
 }
 
 impl<B: Bus> Bus for ProfileBus<B> {
     async fn send(&self, frame: CanFrame) -> Result<()> {
-        match self.profile.to_wire(&frame) {
-            Ok(wire) => self.inner.send(wire).await,
-            Err(e) => {
-                let n = count(&self.untranslatable_sent);
-                if n.is_power_of_two() {
-                    tracing::warn!(
-                        profile = self.profile.origin(),
-                        count = n,
-                        "frame not sent, the profile cannot carry it: {e}"
-                    );
-                }
-                Ok(())
-            }
+        match self.link.to_wire(&frame) {
+            Some(wire) => self.inner.send(wire).await,
+            None => Ok(()),
         }
     }
 
     async fn recv(&self) -> Result<TimestampedFrame> {
         loop {
             let received = self.inner.recv().await?;
-            match self.profile.from_wire(&received.frame) {
-                Ok(frame) => {
-                    return Ok(TimestampedFrame {
-                        timestamp_ns: received.timestamp_ns,
-                        frame,
-                    });
-                }
-                Err(e) => {
-                    let n = count(&self.unmapped_received);
-                    if n.is_power_of_two() {
-                        tracing::warn!(
-                            profile = self.profile.origin(),
-                            count = n,
-                            "frame rejected: {e}"
-                        );
-                    }
-                }
+            if let Some(frame) = self.link.from_wire(&received.frame) {
+                return Ok(TimestampedFrame {
+                    timestamp_ns: received.timestamp_ns,
+                    frame,
+                });
             }
         }
     }

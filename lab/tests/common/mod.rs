@@ -196,3 +196,26 @@ pub fn floor_extremes(l: &Loop) -> (f64, f64) {
     }
     (lo, hi)
 }
+
+/// What a trace of a session on the 11-bit example profile holds: its frames, and how many of them
+/// are `JointAngles` and `ControllerHeartbeat`. Panics on a 29-bit frame or one that does not
+/// translate back through `profile`.
+pub fn wire_trace_counts(
+    trace: &std::path::Path,
+    profile: &firmware_bridge::profile::Profile,
+) -> (u32, u32, u32) {
+    let text = std::fs::read_to_string(trace).unwrap();
+    let (mut frames, mut angles, mut heartbeats) = (0, 0, 0);
+    for line in text.lines() {
+        let rec = firmware_bridge::trace::parse_line(line).unwrap();
+        assert!(!rec.frame.is_extended(), "{line}");
+        let canonical = profile.from_wire(&rec.frame).unwrap();
+        match Message::decode(&canonical).map(|d| d.message) {
+            Ok(Message::JointAngles(_)) => angles += 1,
+            Ok(Message::ControllerHeartbeat(_)) => heartbeats += 1,
+            _ => {}
+        }
+        frames += 1;
+    }
+    (frames, angles, heartbeats)
+}

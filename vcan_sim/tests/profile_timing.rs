@@ -1,0 +1,82 @@
+//! A machine profile's gateway (`MachineNode::with_timing`): the simulated gateway sends at the
+//! periods of the example profile's DBC (`examples/other_gateway.toml`: angles every 20 ms, pumps
+//! every 40 ms, status and odometry every 100 ms) and its heartbeat watchdog is the profile's; the
+//! project's timing is the default node's, frame for frame.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use firmware_bridge::CanFrame;
+use firmware_bridge::messages::Message;
+use firmware_bridge::profile::{GatewayTiming, Profile};
+use vcan_sim::SimConfig;
+use vcan_sim::node::{MachineNode, Schedule};
+
+const EXAMPLE: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../examples/other_gateway.toml"
+);
+
+fn plant() -> vcan_sim::plant::Plant {
+    SimConfig::load::<&str>(None, None, Some(3), &[])
+        .expect("built-in config")
+        .build()
+        .expect("plant")
+}
+
+/// The frames of `node` in `ms` physics steps.
+fn run(mut node: MachineNode, ms: u64) -> Vec<CanFrame> {
+    let mut out = Vec::new();
+    node.run_steps(ms, &mut out);
+    out
+}
+
+fn count(frames: &[CanFrame], pick: fn(&Message) -> bool) -> usize {
+    frames
+        .iter()
+        .filter(|f| Message::decode(f).is_ok_and(|d| pick(&d.message)))
+        .count()
+}
+
+#[test]
+fn the_gateway_sends_at_the_profiles_periods() {
+    let profile = Profile::load(std::path::Path::new(EXAMPLE)).unwrap();
+    let node = MachineNode::with_timing(plant(), &profile.timing()).unwrap();
+    assert_eq!(
+        node.schedule(),
+        Schedule {
+            sensor: 20,
+            pump: 40,
+            odometry: 100,
+            status: 100
+        }
+    );
+    let frames = run(node, 2000);
+    assert_eq!(
+        count(&frames, |m| matches!(m, Message::JointAngles(_))),
+        100
+    );
+    assert_eq!(count(&frames, |m| matches!(m, Message::JointRates(_))), 100);
+    assert_eq!(
+        count(&frames, |m| matches!(m, Message::AuxValveMeasured(_))),
+        300
+    );
+    assert_eq!(
+        count(&frames, |m| matches!(m, Message::PumpPressures(_))),
+        50
+    );
+    assert_eq!(
+        count(&frames, |m| matches!(m, Message::TrackOdometry(_))),
+        20
+    );
+    assert_eq!(
+        count(&frames, |m| matches!(m, Message::GatewayStatus(_))),
+        20
+    );
+}
+
+#[test]
+fn the_projects_timing_is_the_default_node() {
+    let canonical = MachineNode::with_timing(plant(), &GatewayTiming::canonical()).unwrap();
+    assert_eq!(canonical.schedule(), Schedule::default());
+    assert_eq!(run(canonical, 1000), run(MachineNode::new(plant()), 1000));
+}
