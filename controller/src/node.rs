@@ -6,9 +6,19 @@
 //! output is a fixed-capacity [`Outbox`]; the step allocates nothing except when a dig starts (the
 //! pre-dig terrain section) and never panics.
 //!
+//! Before anything else the node claims the controller's address (`0x27`) with its NAME (J1939-81,
+//! [`firmware_bridge::address_claim`]): the first step sends Address Claimed, and until the claim has
+//! stood for 250 ms a step sends only claim frames (received frames still feed the estimator; the
+//! safety layer and the work cycle wait). A competing claim for `0x27` with a higher NAME is answered
+//! with our claim again; one with a lower NAME wins: the node sends Cannot Claim, raises
+//! [`Fault::AddressLost`] (latched) and from then on sends nothing else, not even the shutdown
+//! frames, since it may no longer use the address ([`ControllerNode::address_lost`]; `run` ends
+//! with that error). A Request for Address Claimed is answered with the claim. In listen-only mode
+//! the node claims nothing.
+//!
 //! Per step, in order:
 //!
-//! 1. Received frames: error frames are bus faults; frames from the gateway (`0x80`) feed the
+//! 1. Received frames: address claims and requests go to the claim procedure; error frames are bus faults; frames from the gateway (`0x80`) feed the
 //!    estimator; decode errors of protocol frames, frames from the gateway's address that the gateway
 //!    does not send, frames with the controller's own address (`0x27`) and protocol messages from other
 //!    addresses are faults. Other traffic (unknown PGNs from other nodes, 11-bit ids, remote and FD
@@ -26,11 +36,13 @@
 //!
 //! Its configuration, [`ControllerConfig`], and the checks of every parameter live in [`crate::config`].
 
+use firmware_bridge::address_claim::{AddressClaimer, ClaimEvent, Name};
 use firmware_bridge::messages::{
     Activity, AutodigStageCode, AuxValveCommand, ControllerStatus as StatusMessage, Message,
     PositionSetpoint, Valve,
 };
 use firmware_bridge::secoc::{SealError, Sealer, SessionKey};
+use firmware_bridge::time::Instant;
 use firmware_bridge::transport::BusFault;
 use firmware_bridge::{
     CONTROLLER_ADDRESS, CanFrame, CanId, DecodeError, GATEWAY_ADDRESS, J1939Id, TimestampedFrame,
@@ -173,6 +185,10 @@ pub struct ControllerNode {
     last_command: CycleCommand,
     status_alive: u8,
     out: Outbox,
+    /// The J1939-81 claim of the controller's address.
+    claim: AddressClaimer,
+    /// Whether the lost claim was reported to the safety layer.
+    address_lost_raised: bool,
 }
 
 impl ControllerNode {
@@ -228,6 +244,8 @@ impl ControllerNode {
             last_motion: None,
             last_command: CycleCommand::Neutral,
             status_alive: 15,
+            claim: AddressClaimer::controller(),
+            address_lost_raised: false,
             out: Outbox::new().map_err(|e| ControllerError::Config {
                 field: "outbox",
                 reason: e.to_string(),
@@ -240,6 +258,26 @@ impl ControllerNode {
     /// the first step: the session is learnt again from the gateway.
     pub fn set_key(&mut self, key: &SessionKey) {
         self.sealer = Sealer::new(key);
+    }
+
+    /// Sets the NAME the node claims its address with (a machine's provisioned serial number; the
+    /// default is [`firmware_bridge::address_claim::CONTROLLER_NAME`]). Call before the first step.
+    pub fn set_name(&mut self, name: Name) {
+        self.claim = AddressClaimer::new(name, self.claim.address());
+    }
+
+    /// The address claim (state, NAME, address).
+    pub fn address_claim(&self) -> &AddressClaimer {
+        &self.claim
+    }
+
+    /// The fault when another node took the controller's address: the node then sends nothing and
+    /// its caller should stop with this error.
+    pub fn address_lost(&self) -> Option<Fault> {
+        self.claim.lost().map(|by| Fault::AddressLost {
+            address: self.claim.address(),
+            winner_name: by.raw(),
+        })
     }
 
     /// The gateway session the node seals its frames for, once the gateway has announced one.
@@ -424,7 +462,29 @@ impl ControllerNode {
         match Message::decode(frame) {
             Ok(decoded) => {
                 let sa = decoded.id.source_address();
-                if let (GATEWAY_ADDRESS, Message::GatewaySession(session)) = (sa, decoded.message) {
+                let at = Instant::from_secs_f64(time_s).unwrap_or_default();
+                if let Some(event) = self.claim.on_message(decoded.id, &decoded.message, at) {
+                    match event {
+                        ClaimEvent::Noted => self.counters.ignored += 1,
+                        ClaimEvent::Lost { competitor } => {
+                            self.counters.consumed += 1;
+                            tracing::error!(
+                                winner_name = format_args!("{:#018X}", competitor.raw()),
+                                "address claim lost: Cannot Claim, the controller goes silent"
+                            );
+                        }
+                        ClaimEvent::Defended { competitor } => {
+                            self.counters.consumed += 1;
+                            tracing::warn!(
+                                competitor_name = format_args!("{:#018X}", competitor.raw()),
+                                "a node with a higher NAME claimed our address: claimed it again"
+                            );
+                        }
+                        ClaimEvent::Answered => self.counters.consumed += 1,
+                    }
+                } else if let (GATEWAY_ADDRESS, Message::GatewaySession(session)) =
+                    (sa, decoded.message)
+                {
                     if self.sealer.set_session(session.session_id) {
                         tracing::info!(session = session.session_id, "gateway session");
                     }
@@ -542,6 +602,9 @@ impl ControllerNode {
         }
         self.est.update();
         self.safety.observe(now_s, &self.est);
+        if !self.claim_allows_transmit(now_s) {
+            return self.out;
+        }
         if self.last_motion.is_some() && self.safety.motion().is_none() {
             // Motion stopped by the safety layer this step (stale data, gateway fault, ...).
             self.cycle.on_fault(false);
@@ -623,6 +686,28 @@ impl ControllerNode {
         self.out
     }
 
+    /// Runs the address claim for this step: queues its frame, raises the lost claim once, and says
+    /// whether application frames may follow. Listen-only nodes claim nothing and send nothing.
+    fn claim_allows_transmit(&mut self, now_s: f64) -> bool {
+        if self.safety.state() == SafetyState::ListenOnly {
+            return true;
+        }
+        if let Some(now) = Instant::from_secs_f64(now_s) {
+            self.claim.update(now);
+        }
+        if let Ok(Some(frame)) = self.claim.take_frame() {
+            self.push(frame);
+        }
+        if let Some(fault) = self.address_lost() {
+            if !self.address_lost_raised {
+                self.address_lost_raised = true;
+                self.raise(now_s, fault);
+            }
+            return false;
+        }
+        self.claim.may_transmit()
+    }
+
     /// The `ControllerStatus` message (20 Hz): activity, Autodig stage, dig number, hardness index,
     /// swept volume and fault code.
     fn status_message(&mut self) -> StatusMessage {
@@ -676,6 +761,15 @@ impl ControllerNode {
     /// listen-only mode.
     pub fn shutdown(&mut self, now_s: f64) -> Outbox {
         self.out.clear();
+        if self.safety.state() != SafetyState::ListenOnly && !self.claim.may_transmit() {
+            // Before the claim stands (or after it was lost) the address is not ours to use; nothing
+            // was armed.
+            self.safety.shutdown(now_s);
+            if let Ok(Some(frame)) = self.claim.take_frame() {
+                self.push(frame);
+            }
+            return self.out;
+        }
         self.safety.shutdown(now_s);
         let tick = self.safety.tick(now_s, None);
         if tick.send_neutral {
@@ -1059,5 +1153,159 @@ start = { kind = \"tip\", x_m = inf, z_m = 2.4, bucket_abs_deg = -55.0 }
                 .starts_with("/nonexistent/plan.toml: cannot read"),
             "{err}"
         );
+    }
+
+    mod address_claim {
+        use super::*;
+        use firmware_bridge::address_claim::{CONTROLLER_NAME, request_address_claimed};
+        use firmware_bridge::messages::{AddressClaimed, GatewaySession};
+
+        const CLAIM_ID: u32 = 0x18EE_FF27;
+        const CANNOT_CLAIM_ID: u32 = 0x18EE_FFFE;
+        const HEARTBEAT_ID: u32 = 0x0CFF_6127;
+
+        fn node() -> ControllerNode {
+            ControllerNode::new(
+                &machine(),
+                AutodigMaps::builtin().unwrap(),
+                ControllerConfig::default(),
+            )
+            .unwrap()
+        }
+
+        fn at(time_s: f64, frame: CanFrame) -> TimestampedFrame {
+            TimestampedFrame {
+                timestamp_ns: (time_s * 1e9).round() as u64,
+                frame,
+            }
+        }
+
+        fn claim(name: Name) -> CanFrame {
+            Message::AddressClaimed(AddressClaimed { name })
+                .encode_from(CONTROLLER_ADDRESS)
+                .unwrap()
+        }
+
+        /// Steps `node` every 10 ms over `[from_s, to_s)` with the gateway's session nonce and the
+        /// `injected` frames at their times; returns what it sent, with the step times in ms.
+        fn run(
+            node: &mut ControllerNode,
+            from_s: f64,
+            to_s: f64,
+            injected: &[(f64, CanFrame)],
+        ) -> Vec<(i64, u32)> {
+            let session = Message::GatewaySession(GatewaySession { session_id: 7 })
+                .encode_from(GATEWAY_ADDRESS)
+                .unwrap();
+            let mut sent = Vec::new();
+            let mut k = 0;
+            loop {
+                let t = from_s + f64::from(k) * 0.01;
+                if t >= to_s - 1e-9 {
+                    return sent;
+                }
+                k += 1;
+                let mut inbox = vec![at(t, session)];
+                inbox.extend(
+                    injected
+                        .iter()
+                        .filter(|(ti, _)| (*ti - t).abs() < 0.005)
+                        .map(|(ti, f)| at(*ti, *f)),
+                );
+                for f in &node.step(t, &inbox) {
+                    sent.push(((t * 1e3).round() as i64, f.id().raw()));
+                }
+            }
+        }
+
+        fn application(sent: &[(i64, u32)]) -> Vec<(i64, u32)> {
+            sent.iter()
+                .copied()
+                .filter(|(_, id)| *id != CLAIM_ID && *id != CANNOT_CLAIM_ID)
+                .collect()
+        }
+
+        #[test]
+        fn uncontested_claim_first_then_application_frames_after_250_ms() {
+            let mut n = node();
+            let sent = run(&mut n, 0.0, 1.0, &[]);
+            assert_eq!(sent[0], (0, CLAIM_ID));
+            assert_eq!(sent.iter().filter(|(_, id)| *id == CLAIM_ID).count(), 1);
+            let app = application(&sent);
+            let first = app.first().expect("heartbeats after the claim stood");
+            assert!(first.0 >= 250, "first application frame at {} ms", first.0);
+            assert!(app.iter().any(|(_, id)| *id == HEARTBEAT_ID));
+            assert!(n.address_lost().is_none() && n.fault().is_none());
+        }
+
+        #[test]
+        fn a_competing_lower_name_wins_the_node_sends_cannot_claim_and_nothing_else() {
+            let mut n = node();
+            let winner = Name::from_raw(CONTROLLER_NAME.raw() - 1);
+            let sent = run(&mut n, 0.0, 2.0, &[(0.1, claim(winner))]);
+            assert_eq!(sent, [(0, CLAIM_ID), (100, CANNOT_CLAIM_ID)]);
+            let fault = n.address_lost().unwrap();
+            assert_eq!(
+                fault,
+                Fault::AddressLost {
+                    address: CONTROLLER_ADDRESS,
+                    winner_name: winner.raw()
+                }
+            );
+            assert_eq!(n.fault(), Some(fault));
+            assert!(
+                n.shutdown(2.0).is_empty(),
+                "no shutdown frames without an address"
+            );
+            assert!(fault.to_string().contains("lost"), "{fault}");
+        }
+
+        #[test]
+        fn a_competing_higher_name_is_answered_and_the_node_keeps_going() {
+            let mut n = node();
+            let loser = Name::from_raw(CONTROLLER_NAME.raw() + 1);
+            let sent = run(&mut n, 0.0, 1.0, &[(0.5, claim(loser))]);
+            let claims: Vec<i64> = sent
+                .iter()
+                .filter(|(_, id)| *id == CLAIM_ID)
+                .map(|(t, _)| *t)
+                .collect();
+            assert_eq!(claims, [0, 500]);
+            assert!(application(&sent).iter().any(|(t, _)| *t > 500));
+            assert!(n.address_lost().is_none() && n.fault().is_none());
+        }
+
+        #[test]
+        fn a_late_claimant_with_a_lower_name_silences_a_running_node() {
+            let mut n = node();
+            let sent = run(&mut n, 0.0, 3.0, &[(2.0, claim(Name::from_raw(0)))]);
+            assert!(application(&sent).iter().any(|(t, _)| *t < 2000));
+            let after: Vec<(i64, u32)> = sent.into_iter().filter(|(t, _)| *t >= 2000).collect();
+            assert_eq!(after, [(2000, CANNOT_CLAIM_ID)]);
+            assert!(matches!(n.fault(), Some(Fault::AddressLost { .. })));
+        }
+
+        #[test]
+        fn a_request_for_address_claimed_is_answered_with_the_claim() {
+            let mut n = node();
+            let request = request_address_claimed(0xFF, 0x99).unwrap();
+            let sent = run(&mut n, 0.0, 1.0, &[(0.7, request)]);
+            let claims: Vec<i64> = sent
+                .iter()
+                .filter(|(_, id)| *id == CLAIM_ID)
+                .map(|(t, _)| *t)
+                .collect();
+            assert_eq!(claims, [0, 700]);
+            assert!(n.fault().is_none());
+        }
+
+        #[test]
+        fn a_listen_only_node_claims_nothing() {
+            let mut config = ControllerConfig::default();
+            config.safety.listen_only = true;
+            let mut n =
+                ControllerNode::new(&machine(), AutodigMaps::builtin().unwrap(), config).unwrap();
+            assert!(run(&mut n, 0.0, 0.5, &[]).is_empty());
+        }
     }
 }

@@ -179,12 +179,25 @@ pub enum Fault {
     /// The program is shutting down.
     #[error("shutdown")]
     Shutdown,
+    /// Another node claimed the controller's J1939 address with a lower NAME (J1939-81): the
+    /// controller sent Cannot Claim and may send nothing else, so it cannot command the machine.
+    #[error(
+        "J1939 address {address:#04X} lost to a node with a lower NAME {winner_name:#018X}: \
+         Cannot Claim sent, no more commands, heartbeats or status"
+    )]
+    AddressLost {
+        /// The address that was lost.
+        address: u8,
+        /// The winner's NAME.
+        winner_name: u64,
+    },
 }
 
 impl Fault {
     /// The fault code sent in `ControllerStatus.FaultReason` (0 is healthy): 1 stale sensor, 2 decode
     /// error, 3 unexpected frame, 4 joint limit, 5 e-stop, 6 gateway fault, 7 gateway mode, 8 arm
-    /// timeout, 9 bus fault, 10 control, 11 shutdown, 12 gateway frozen.
+    /// timeout, 9 bus fault, 10 control, 11 shutdown, 12 gateway frozen, 13 address lost (never on the
+    /// bus: the controller is silent then).
     pub const fn code(&self) -> u8 {
         match self {
             Fault::StaleSensor { .. } => 1,
@@ -199,12 +212,16 @@ impl Fault {
             Fault::Control(_) => 10,
             Fault::Shutdown => 11,
             Fault::GatewayFrozen { .. } => 12,
+            Fault::AddressLost { .. } => 13,
         }
     }
 
     /// Whether only [`Safety::reset`] clears it.
     pub const fn latches(&self) -> bool {
-        matches!(self, Fault::EStop | Fault::Shutdown)
+        matches!(
+            self,
+            Fault::EStop | Fault::Shutdown | Fault::AddressLost { .. }
+        )
     }
 }
 

@@ -46,7 +46,7 @@ pub mod scan;
 pub mod trace;
 pub mod transport;
 
-pub use gateway_core::{bus, dbc, frame, gateway, id, messages, secoc, time};
+pub use gateway_core::{address_claim, bus, dbc, frame, gateway, id, messages, secoc, time};
 
 pub use frame::{CanFrame, CanId, FrameKind};
 pub use id::{CONTROLLER_ADDRESS, GATEWAY_ADDRESS, J1939Id};

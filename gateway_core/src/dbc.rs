@@ -368,7 +368,7 @@ mod tests {
         assert_eq!(aux_valve_measured_boom::PGN, 65056);
         assert_eq!(joint_angles::PGN, 0xFF50);
         assert_eq!(controller_status::MESSAGE.default_id, 0x18FF_6227);
-        assert_eq!(MESSAGES.len(), 18);
+        assert_eq!(MESSAGES.len(), 20);
     }
 
     #[test]

@@ -49,9 +49,20 @@
 //!   outside [`GatewayConfig::setpoint_range_rad`]: `SETPOINT_OUT_OF_RANGE`.
 //! - A CAN error frame while armed: `BUS_ERROR`.
 //!
+//! # Address claim
+//!
+//! The gateway claims its address (`0x80`) with its NAME (J1939-81, [`crate::address_claim`]) at its
+//! first [`Gateway::tick`], and answers contests and requests through the same claimer. Its status
+//! ([`Gateway::status_frames`]) and the board's sensor frames go out only while
+//! [`Gateway::may_transmit`]: once the claim has stood for 250 ms. Losing the address to a lower NAME
+//! latches `ADDRESS_LOST` in any mode (valves neutral): the controller can no longer address the
+//! gateway, so nothing it sends is acted on again until a restart, and the gateway stays silent
+//! except for its Cannot Claim. Claim frames go out through [`Gateway::take_claim_frame`].
+//!
 //! # Frames it does not act on
 //!
-//! - **ignored** (expected, not counted on the bus): the controller's `ControllerStatus` (for traces,
+//! - **ignored** (expected, not counted on the bus): other nodes' address claims and requests not
+//!   for the gateway, every frame after the address was lost, the controller's `ControllerStatus` (for traces,
 //!   the gateway has no use for it) and neutral valve commands (block, zero flow) outside ArmedValve.
 //!   Neutral is what every other mode outputs anyway, and the controller sends neutral commands on any
 //!   disarm or fault without knowing whether the gateway already left ArmedValve (`controller::safety`),
@@ -71,6 +82,7 @@
 //! clamped to `max_command` and rate limited to `rate_limit_per_s`; the sign maps joint angle to
 //! cylinder direction (`docs/ARCHITECTURE.md`: stick and bucket extension lowers their angles).
 
+use crate::address_claim::{AddressClaimer, ClaimEvent, Name};
 use crate::frame::CanFrame;
 use crate::id::CONTROLLER_ADDRESS;
 use crate::messages::{
@@ -271,6 +283,8 @@ pub struct Gateway {
     unexpected: u16,
     rejected: u16,
     ignored: u64,
+    /// The J1939-81 address claim of the gateway's address.
+    claim: AddressClaimer,
 }
 
 impl Default for Gateway {
@@ -339,7 +353,33 @@ impl Gateway {
             unexpected: 0,
             rejected: 0,
             ignored: 0,
+            claim: AddressClaimer::gateway(),
         }
+    }
+
+    /// The same gateway with another NAME (a machine's provisioned serial number) for its address
+    /// claim. Call before the first tick.
+    pub fn with_name(mut self, name: Name) -> Self {
+        self.claim = AddressClaimer::new(name, self.claim.address());
+        self
+    }
+
+    /// The address claim (state, NAME, address).
+    pub fn address_claim(&self) -> &AddressClaimer {
+        &self.claim
+    }
+
+    /// True once the gateway's address claim has stood for 250 ms and was not lost: its status and
+    /// the board's sensor frames may be sent.
+    pub fn may_transmit(&self) -> bool {
+        self.claim.may_transmit()
+    }
+
+    /// The address-claim frame to send now (the claim at start, a re-claim after a contest, the
+    /// answer to a request, or Cannot Claim), if any. Send it before the period's other frames.
+    pub fn take_claim_frame(&mut self) -> Option<CanFrame> {
+        // Every NAME encodes (`AddressClaimer::take_frame`); an error would keep it queued.
+        self.claim.take_frame().ok().flatten()
     }
 
     /// The current mode.
@@ -386,7 +426,8 @@ impl Gateway {
     }
 
     /// Faults that latch in any mode, not only in the armed ones.
-    const LATCH_IN_ANY_MODE: u16 = GatewayFaults::E_STOP | GatewayFaults::CLOCK_FAULT;
+    const LATCH_IN_ANY_MODE: u16 =
+        GatewayFaults::E_STOP | GatewayFaults::CLOCK_FAULT | GatewayFaults::ADDRESS_LOST;
 
     /// Latches a fault: Faulted, valves neutral. Only in armed modes, except the e-stop and the clock.
     fn fault(&mut self, bits: u16) {
@@ -449,6 +490,20 @@ impl Gateway {
             ) => return self.unexpected(),
             Err(_) => return self.reject(),
         };
+        if let Some(event) = self.claim.on_message(decoded.id, &decoded.message, now) {
+            return match event {
+                ClaimEvent::Lost { .. } => {
+                    self.fault(GatewayFaults::ADDRESS_LOST);
+                    FrameVerdict::Accepted
+                }
+                ClaimEvent::Defended { .. } | ClaimEvent::Answered => FrameVerdict::Accepted,
+                ClaimEvent::Noted => self.ignore(),
+            };
+        }
+        if self.claim.lost().is_some() {
+            // Without its address the gateway cannot be commanded: nothing is acted on again.
+            return self.ignore();
+        }
         let from_controller = decoded.id.source_address() == CONTROLLER_ADDRESS;
         if from_controller
             && decoded.trailer.is_some()
@@ -581,6 +636,9 @@ impl Gateway {
     ) -> GatewayOutputs {
         let reading = now.into();
         let ok = self.clock_ok(reading);
+        if let Some(now) = ok {
+            self.claim.update(now);
+        }
         let dt_s = match ok {
             Some(now) => {
                 let dt_ns = self
@@ -1559,5 +1617,106 @@ mod tests {
                 prop_assert!(out.valve_commands.iter().all(|u| u.is_finite() && u.abs() <= 1.0));
             }
         }
+    }
+
+    fn claim(source: u8, name: Name) -> CanFrame {
+        Message::AddressClaimed(crate::messages::AddressClaimed { name })
+            .encode_from(source)
+            .unwrap()
+    }
+
+    #[test]
+    fn the_gateway_claims_its_address_and_reports_only_after_250_ms() {
+        let mut g = Gateway::default();
+        assert!(g.take_claim_frame().is_none());
+        g.tick(0.0, None);
+        let frame = g.take_claim_frame().unwrap();
+        assert_eq!(frame.id().raw(), 0x18EE_FF80);
+        assert_eq!(
+            frame.data(),
+            &crate::address_claim::GATEWAY_NAME.to_le_bytes()
+        );
+        g.tick(0.249, None);
+        assert!(!g.may_transmit());
+        g.tick(0.25, None);
+        assert!(g.may_transmit());
+        assert!(g.take_claim_frame().is_none());
+    }
+
+    #[test]
+    fn losing_the_address_neutralises_latches_and_silences_the_gateway() {
+        let (mut g, mut l) = armed();
+        g.tick(0.0, None);
+        g.take_claim_frame();
+        g.on_frame(&l.valve(&g, Valve::Boom, 0.5), 0.005);
+        assert_eq!(g.tick(0.01, None).valve_commands[0], 0.5);
+        // A late claimant with a lower NAME takes 0x80 while the gateway drives the boom.
+        let winner = Name::from_raw(crate::address_claim::GATEWAY_NAME.raw() - 1);
+        assert_eq!(
+            g.on_frame(&claim(GATEWAY_ADDRESS, winner), 0.012),
+            FrameVerdict::Accepted
+        );
+        let cannot = g.take_claim_frame().unwrap();
+        assert_eq!(cannot.id().raw(), 0x18EE_FFFE);
+        let out = g.tick(0.013, None);
+        assert_eq!(out.valve_commands, [0.0; VALVES]);
+        assert_eq!(g.mode(), GatewayMode::Faulted);
+        assert!(g.faults().contains(GatewayFaults::ADDRESS_LOST));
+        // Silent, and the controller's disarm and re-arm are not acted on.
+        g.tick(0.5, None);
+        assert!(!g.may_transmit());
+        assert!(g.status_frames::<CanFrame>().unwrap().is_none());
+        for (i, mode) in [RequestedMode::Disarm, RequestedMode::ArmValve]
+            .into_iter()
+            .enumerate()
+        {
+            let t = 0.51 + i as f64 * 0.01;
+            assert_eq!(
+                g.on_frame(&l.hb(&g, mode, 1 + i as u8), t),
+                FrameVerdict::Ignored
+            );
+            assert_eq!(g.tick(t, None).valve_commands, [0.0; VALVES]);
+        }
+        assert_eq!(g.mode(), GatewayMode::Faulted);
+    }
+
+    #[test]
+    fn a_competitor_with_a_higher_name_is_answered_and_the_gateway_keeps_going() {
+        let mut g = Gateway::default();
+        let mut l = Link::default();
+        g.tick(0.0, None);
+        g.take_claim_frame();
+        g.tick(0.3, None);
+        assert!(g.may_transmit());
+        let loser = Name::from_raw(crate::address_claim::GATEWAY_NAME.raw() + 1);
+        g.on_frame(&l.hb(&g, RequestedMode::ArmValve, 1), 0.301);
+        assert_eq!(g.mode(), GatewayMode::ArmedValve);
+        assert_eq!(
+            g.on_frame(&claim(GATEWAY_ADDRESS, loser), 0.302),
+            FrameVerdict::Accepted
+        );
+        assert_eq!(g.take_claim_frame().unwrap().id().raw(), 0x18EE_FF80);
+        assert!(g.may_transmit());
+        g.on_frame(&l.valve(&g, Valve::Boom, 0.5), 0.303);
+        assert_eq!(g.tick(0.304, None).valve_commands[0], 0.5);
+        assert!(g.faults().is_empty());
+    }
+
+    #[test]
+    fn a_request_for_address_claimed_gets_the_claim_and_other_claims_are_ignored() {
+        let mut g = Gateway::default();
+        g.tick(0.0, None);
+        g.take_claim_frame();
+        let request = crate::address_claim::request_address_claimed(GATEWAY_ADDRESS, 0x99).unwrap();
+        assert_eq!(g.on_frame(&request, 0.1), FrameVerdict::Accepted);
+        assert_eq!(g.take_claim_frame().unwrap().id().raw(), 0x18EE_FF80);
+        // The controller's claim and a stranger's: normal traffic, neither unexpected nor rejected.
+        for source in [CONTROLLER_ADDRESS, 0x99] {
+            let frame = claim(source, Name::from_raw(0));
+            assert_eq!(g.on_frame(&frame, 0.2), FrameVerdict::Ignored);
+        }
+        assert_eq!(g.frame_counts(), (0, 0));
+        g.tick(0.25, None);
+        assert!(g.may_transmit());
     }
 }
