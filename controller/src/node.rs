@@ -1218,6 +1218,14 @@ start = { kind = \"tip\", x_m = inf, z_m = 2.4, bucket_abs_deg = -55.0 }
             }
         }
 
+        /// When the node sent its Address Claimed, ms.
+        fn claim_times(sent: &[(i64, u32)]) -> Vec<i64> {
+            sent.iter()
+                .filter(|(_, id)| *id == CLAIM_ID)
+                .map(|(t, _)| *t)
+                .collect()
+        }
+
         fn application(sent: &[(i64, u32)]) -> Vec<(i64, u32)> {
             sent.iter()
                 .copied()
@@ -1265,11 +1273,7 @@ start = { kind = \"tip\", x_m = inf, z_m = 2.4, bucket_abs_deg = -55.0 }
             let mut n = node();
             let loser = Name::from_raw(CONTROLLER_NAME.raw() + 1);
             let sent = run(&mut n, 0.0, 1.0, &[(0.5, claim(loser))]);
-            let claims: Vec<i64> = sent
-                .iter()
-                .filter(|(_, id)| *id == CLAIM_ID)
-                .map(|(t, _)| *t)
-                .collect();
+            let claims = claim_times(&sent);
             assert_eq!(claims, [0, 500]);
             assert!(application(&sent).iter().any(|(t, _)| *t > 500));
             assert!(n.address_lost().is_none() && n.fault().is_none());
@@ -1290,11 +1294,7 @@ start = { kind = \"tip\", x_m = inf, z_m = 2.4, bucket_abs_deg = -55.0 }
             let mut n = node();
             let request = request_address_claimed(0xFF, 0x99).unwrap();
             let sent = run(&mut n, 0.0, 1.0, &[(0.7, request)]);
-            let claims: Vec<i64> = sent
-                .iter()
-                .filter(|(_, id)| *id == CLAIM_ID)
-                .map(|(t, _)| *t)
-                .collect();
+            let claims = claim_times(&sent);
             assert_eq!(claims, [0, 700]);
             assert!(n.fault().is_none());
         }

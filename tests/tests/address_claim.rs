@@ -98,6 +98,23 @@ fn assert_controller_stops_on_the_lost_claim(s: &mut Session) {
     );
 }
 
+/// Sends the competitor's claim, waits for the controller to stop on it, stops the session and
+/// returns the controller's and the competitor's frames from the candump log.
+fn contest_and_collect(s: &mut Session) -> (NodeFrames, NodeFrames) {
+    s.socket.write_frame(&competitor_claim()).unwrap();
+    assert_controller_stops_on_the_lost_claim(s);
+    // The gateway goes on; let candump see the silence.
+    std::thread::sleep(Duration::from_secs(1));
+    s.stop_sim_and_candump();
+    let (recs, _) = read_candump(&s.candump_log);
+    let competitor = frames_of(&recs, CONTROLLER_ADDRESS, COMPETITOR);
+    assert_eq!(competitor.claims.len(), 1, "{competitor:?}");
+    (
+        frames_of(&recs, CONTROLLER_ADDRESS, CONTROLLER_NAME),
+        competitor,
+    )
+}
+
 /// The controller's frames after its Cannot Claim: none may be there.
 fn assert_silent_after_cannot_claim(ctl: &NodeFrames, logs: &str) {
     assert_eq!(ctl.cannot_claims.len(), 1, "{ctl:?}\n{logs}");
@@ -162,15 +179,8 @@ fn a_competitor_with_a_lower_name_at_start_keeps_the_controller_silent() {
         "no Address Claimed from the controller\n{}",
         s.logs()
     );
-    s.socket.write_frame(&competitor_claim()).unwrap();
-    assert_controller_stops_on_the_lost_claim(&mut s);
-    std::thread::sleep(Duration::from_secs(1));
-    s.stop_sim_and_candump();
-    let (recs, _) = read_candump(&s.candump_log);
-    let ctl = frames_of(&recs, CONTROLLER_ADDRESS, CONTROLLER_NAME);
-    let competitor = frames_of(&recs, CONTROLLER_ADDRESS, COMPETITOR);
+    let (ctl, competitor) = contest_and_collect(&mut s);
     assert_eq!(ctl.claims.len(), 1, "{ctl:?}");
-    assert_eq!(competitor.claims.len(), 1, "{competitor:?}");
     let (claim, contest) = (ctl.claims[0], competitor.claims[0]);
     println!(
         "controller claim at {claim:.3} s, competitor {:.1} ms later, Cannot Claim {:.1} ms after \
@@ -194,14 +204,7 @@ fn a_late_claimant_with_a_lower_name_stops_a_running_controller() {
     let mut s = Session::start("address_claim_late", &[]);
     let status = s.wait_status(Duration::from_secs(90), |_| true);
     assert!(status.is_some(), "no ControllerStatus\n{}", s.logs());
-    s.socket.write_frame(&competitor_claim()).unwrap();
-    assert_controller_stops_on_the_lost_claim(&mut s);
-    std::thread::sleep(Duration::from_secs(1));
-    s.stop_sim_and_candump();
-    let (recs, _) = read_candump(&s.candump_log);
-    let ctl = frames_of(&recs, CONTROLLER_ADDRESS, CONTROLLER_NAME);
-    let competitor = frames_of(&recs, CONTROLLER_ADDRESS, COMPETITOR);
-    assert_eq!(competitor.claims.len(), 1, "{competitor:?}");
+    let (ctl, competitor) = contest_and_collect(&mut s);
     let contest = competitor.claims[0];
     let before = ctl.application.iter().filter(|t| **t < contest).count();
     println!(
