@@ -1,8 +1,9 @@
 //! `excavator-ctl discrepancy analyse`: the analysis of measured sessions end to end: read and
 //! prepare them ([`crate::session`]), check there is enough to name anything
 //! ([`crate::sufficiency`]), fit the candidate effects ([`crate::analyse`]), judge the held-out
-//! residuals against the reference ([`crate::reference`], [`crate::verdict`]), write the report and
-//! the augmented model ([`crate::report`]).
+//! residuals against the reference ([`crate::reference`], [`crate::verdict`]), update the twin
+//! ([`crate::twin`]), write the report, the augmented model and the simulator profile
+//! ([`crate::report`]).
 
 use std::path::PathBuf;
 
@@ -214,6 +215,23 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
         let after = structure(&test, &result.params, &result.augmentation);
         verdict::judge(&result, &after, r)
     });
+    let machine_text = match &args.machine {
+        Some(p) => {
+            std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?
+        }
+        None => planner::machine::DEFAULT_MACHINE_TOML.to_string(),
+    };
+    let held_out: Vec<&PreparedRecord> = records
+        .iter()
+        .filter(|rec| result.test_digs.contains(&rec.index))
+        .collect();
+    let twin = match crate::twin::update_twin(&machine_text, &result, &held_out) {
+        Ok(t) => Some(t),
+        Err(e) => {
+            warnings.push(format!("the twin was not updated: {e}"));
+            None
+        }
+    };
     for w in &warnings {
         tracing::warn!("{w}");
     }
@@ -225,6 +243,7 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
         reference,
         verdict,
         warnings,
+        twin,
     };
     report::write_outputs(&args.out, &analysis, &args.measured, args.replay_csv)?;
     Ok(analysis)

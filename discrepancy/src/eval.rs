@@ -316,6 +316,15 @@ impl SessionPlan {
 
     /// Generates the session unless a finished one is there.
     fn generate(&self) -> anyhow::Result<PathBuf> {
+        let summary = self.demo.out.join("summary.json");
+        // A machine plant change made before the plant had its own file changed the controller's
+        // machine too: such a session is not this case's.
+        if self.demo.plant_machine.is_some()
+            && std::fs::read_to_string(&summary).is_ok_and(|t| !t.contains("\"plant_machine\""))
+        {
+            std::fs::remove_dir_all(&self.demo.out)
+                .with_context(|| format!("removing {}", self.demo.out.display()))?;
+        }
         if !session_complete(&self.demo.out)? {
             run_session(&self.demo, &AtomicBool::new(false))
                 .with_context(|| format!("generating session {}", self.case))?;
@@ -324,7 +333,9 @@ impl SessionPlan {
     }
 }
 
-/// Writes the changed machine or bench file of a plant change and points the demo at it.
+/// Writes the changed machine or bench file of a plant change and points the demo at it: a
+/// machine change is the simulated machine's file alone (`demo --plant-machine`), the controller
+/// keeps the default machine file, as a real machine differs from the file its controller reads.
 fn apply_plant(
     plan: &mut SessionPlan,
     change: &PlantChange,
@@ -343,7 +354,7 @@ fn apply_plant(
     std::fs::write(&path, change.apply(base)?)
         .with_context(|| format!("writing {}", path.display()))?;
     match change.file {
-        PlantFile::Machine => plan.demo.machine = Some(path),
+        PlantFile::Machine => plan.demo.plant_machine = Some(path),
         PlantFile::Bench => plan.demo.bench = Some(path),
     }
     Ok(())

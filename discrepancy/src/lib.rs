@@ -28,6 +28,8 @@
 //! - [`sufficiency`]: whether the sessions hold enough completed digs and samples to name anything;
 //! - [`mod@reference`] and [`verdict`]: what "expected" is (the residual structure of sessions declared
 //!   healthy) and every signal judged against it: expected, named, partly explained, unexplained;
+//! - [`twin`]: the named effects and parameters as a simulator profile (machine file and effects),
+//!   and the simulator's gap to the held-out digs before and after;
 //! - [`report`]: `report.json`, `report.md`, the figures and `model.json` of an analysis;
 //! - [`analysis`], [`eval`], [`command`]: `excavator-ctl discrepancy analyse`, `eval` and `bench`, and
 //!   the subcommand dispatch.
@@ -49,6 +51,7 @@ pub mod signal;
 pub mod soil_replay;
 pub mod stats;
 pub mod sufficiency;
+pub mod twin;
 pub mod verdict;
 
 pub use effects::Candidate;
@@ -158,7 +161,7 @@ pub enum LoadTag {
 /// One 100 Hz sample of a measured trace, aligned at the resolver frame.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Sample {
-    /// Time, s.
+    /// Session time, s (a trace's timestamps through `lab::demo::trace_time_base`, the scans' time).
     pub time_s: f64,
     /// Valve commands `[boom, stick, bucket]` in force from this sample to the next, `[-1, 1]`.
     pub command: [f64; 3],

@@ -86,9 +86,9 @@ fn load_tag(status: &Status) -> LoadTag {
 /// leaves out its first 0.5 s for the same reason (`crate::greybox`).
 pub const POSITION_MODE_SETTLE_S: f64 = 0.5;
 
-/// Reads `trace.log` into samples tagged with the dig index, one per `JointAngles` frame, with the
-/// latest readings and the commands the controller sent in answer to them (in force until the next
-/// sample).
+/// Reads `trace.log` into samples tagged with the dig index, one per `JointAngles` frame at its
+/// session time (`lab::demo::trace_time_base`: the time of the scans), with the latest readings and
+/// the commands the controller sent in answer to them (in force until the next sample).
 ///
 /// Samples while the gateway runs its closed-loop position mode (`GatewayStatus` mode
 /// `ArmedPosition`, the controller sending `PositionSetpoint`s: the cleanup) and for
@@ -109,6 +109,7 @@ pub fn read_trace(path: &Path) -> anyhow::Result<Vec<(u16, Sample)>> {
     let mut status: Option<Status> = None;
     // Time the gateway was last seen in position mode.
     let mut position_mode_at = f64::NEG_INFINITY;
+    let mut time_base = lab::demo::trace_time_base(path)?;
     let push =
         |pending: &mut Option<Sample>, out: &mut Vec<(u16, Sample)>, cmd: &Sample, st: &Status| {
             if let Some(mut s) = pending.take() {
@@ -126,10 +127,10 @@ pub fn read_trace(path: &Path) -> anyhow::Result<Vec<(u16, Sample)>> {
         };
     for record in trace_tools::input::records_until_cut(path, reader) {
         let record = record.with_context(|| format!("reading {}", path.display()))?;
+        let t = time_base.session_s(record.timestamp_ns);
         let Ok(decoded) = Message::decode(&record.frame) else {
             continue;
         };
-        let t = record.timestamp_ns as f64 * 1e-9;
         match decoded.message {
             Message::JointAngles(a) => {
                 if let Some(st) = status {
@@ -459,11 +460,12 @@ mod tests {
         assert!((lane.height_at(6.0).expect("on") - 1.0).abs() < 1e-9);
     }
 
-    /// Writes `m` into the trace as received at `t_s`.
+    /// Writes `m` into the trace as received at `t_s` of virtual time, stamped as `demo` stamps it
+    /// (from the virtual clock's epoch).
     fn record(rec: &firmware_bridge::trace::Recorder, t_s: f64, m: &Message) {
         let frame = m.encode().expect("encode");
         rec.record(
-            (t_s * 1e9).round() as u64,
+            firmware_bridge::transport::TraceClock::Virtual.trace_ns((t_s * 1e9).round() as u64),
             firmware_bridge::trace::Direction::Receive,
             &frame,
         );
@@ -530,6 +532,13 @@ mod tests {
             );
         }
         rec.close().expect("close");
+        // The session's summary says the trace is in virtual time (from its epoch): the samples are
+        // in session time, as the scans.
+        std::fs::write(
+            dir.path().join("summary.json"),
+            r#"{"trace_clock": "virtual"}"#,
+        )
+        .expect("summary");
 
         let samples = read_trace(&path).expect("read");
         let times: Vec<f64> = samples.iter().map(|(_, s)| s.time_s).collect();

@@ -52,6 +52,9 @@ struct ReportJson<'a> {
     nominal_sigma: &'a [f64],
     kappa: &'a [f64],
     figures: Vec<String>,
+    /// The updated twin: the simulator profile written (`twin/machine.toml`, `twin/effects.toml`)
+    /// and the simulator's gap to the held-out digs before and after.
+    twin: Option<&'a crate::twin::TwinReport>,
 }
 
 /// A short text summary (printed by the command): the verdict against the reference first, the
@@ -78,6 +81,19 @@ pub fn summary_text(a: &Analysis) -> String {
             "named effect: {} = {:.4e} +- {:.2e} {} (held-out dBIC {:.0})",
             e.name, e.magnitude, e.uncertainty, e.unit, e.heldout_delta_bic
         );
+    }
+    if let Some((_, t)) = &a.twin {
+        let _ = writeln!(
+            s,
+            "twin: {} ({} samples); simulator gap nominal -> twin (after/before):",
+            t.demo_options, t.gap_before.samples
+        );
+        for (group, unit, before, after, ratio) in t.rows() {
+            let _ = writeln!(
+                s,
+                "  {group:<17} {before:>11.4e} -> {after:>11.4e} {unit} ({ratio:.2})"
+            );
+        }
     }
     let _ = writeln!(s, "held-out residual RMS (before -> after):");
     for m in &r.rms {
@@ -109,6 +125,54 @@ fn no_effect_line(a: &Analysis) -> &'static str {
         Some(_) => "no effect in the library explains the residuals beyond the reference (above)",
         None => "no candidate is significant (the residuals were not judged: no --reference)",
     }
+}
+
+/// The updated twin: the profile written and the simulator's gap before and after.
+fn twin_markdown(s: &mut String, a: &Analysis) {
+    let Some((_, t)) = &a.twin else {
+        return;
+    };
+    let _ = writeln!(s, "## The twin\n");
+    let _ = writeln!(
+        s,
+        "Simulator profile: `{}` (the machine file with the named parameters written in{}) and `{}`; \
+         run it with `excavator-ctl demo {}`.\n",
+        t.machine_file,
+        if t.parameters.is_empty() {
+            String::new()
+        } else {
+            format!(
+                ": {}",
+                t.parameters
+                    .iter()
+                    .map(|p| format!("{} = {:.4e} {}", p.name, p.value, p.unit))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        },
+        t.effects_file,
+        t.demo_options
+    );
+    let _ = writeln!(
+        s,
+        "The simulator re-run on the held-out digs' commands ({} windows of up to {} samples from the \
+         measured state, {} samples with the empty bucket in free air outside Autodig), RMS of its \
+         readings less the measured ones:\n",
+        t.gap_before.windows,
+        crate::twin::WINDOW_SAMPLES,
+        t.gap_before.samples
+    );
+    let _ = writeln!(
+        s,
+        "| group | unit | nominal plant | twin | after / before |\n|---|---|---|---|---|"
+    );
+    for (group, unit, before, after, ratio) in t.rows() {
+        let _ = writeln!(
+            s,
+            "| {group} | {unit} | {before:.4e} | {after:.4e} | {ratio:.2} |"
+        );
+    }
+    s.push('\n');
 }
 
 /// `100 (after - before) / before`, 0 when `before` is 0.
@@ -236,6 +300,7 @@ fn markdown(a: &Analysis, measured: &[PathBuf], figures: &[String]) -> String {
         );
     }
     ambiguous_markdown(&mut s, r);
+    twin_markdown(&mut s, a);
     let _ = writeln!(s, "## Held-out residual RMS, before and after\n");
     let _ = writeln!(
         s,
@@ -437,6 +502,14 @@ pub fn write_outputs(
         std::fs::write(out.join("reference.json"), reference.to_json()?)
             .context("writing reference.json")?;
     }
+    if let Some((profile, _)) = &a.twin {
+        let dir = out.join("twin");
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        std::fs::write(dir.join("machine.toml"), &profile.machine_toml)
+            .context("writing twin/machine.toml")?;
+        std::fs::write(dir.join("effects.toml"), profile.effects_toml())
+            .context("writing twin/effects.toml")?;
+    }
     let mut figures = Vec::new();
     let test: Vec<&PreparedRecord> = a
         .records
@@ -491,6 +564,7 @@ pub fn write_outputs(
         nominal_sigma: &r.sigma,
         kappa: &r.kappa,
         figures: figures.clone(),
+        twin: a.twin.as_ref().map(|(_, t)| t),
     };
     std::fs::write(
         out.join("report.json"),

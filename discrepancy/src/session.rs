@@ -26,6 +26,9 @@ pub struct Analysis {
     pub verdict: Option<crate::verdict::Verdict>,
     /// Data-sufficiency and other warnings.
     pub warnings: Vec<String>,
+    /// The updated twin: the simulator profile and its gap to the held-out digs (`None` when the
+    /// simulator could not be re-run on them: a warning says why).
+    pub twin: Option<(crate::twin::TwinProfile, crate::twin::TwinReport)>,
 }
 
 /// A session folder left out of an analysis (`report.json`'s `skipped_sessions`).

@@ -19,10 +19,7 @@ use std::time::Instant;
 const LINES: u64 = 1_000_000;
 const SMOKE_LINES: u64 = 2_000;
 const GENERATOR: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/benches/cantools_frames.py");
-const DBC: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../firmware_bridge/excavator.dbc"
-);
+const DBC: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../gateway_core/excavator.dbc");
 
 /// Runs `cmd` with stdout into `out`; returns its wall time, s.
 fn timed(mut cmd: Command, out: &Path) -> Result<f64, Box<dyn std::error::Error>> {

@@ -8,10 +8,14 @@
 
 #![allow(clippy::unwrap_used)] // helpers outside #[test] functions fail loudly on purpose
 
+mod common;
+
 use std::io::{BufRead as _, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::Duration;
+
+use common::have_or_skip;
 
 const CLIENT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/foxglove_client.py");
 const BROWSER: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/operator_page.py");
@@ -22,19 +26,6 @@ fn python_has(modules: &str) -> bool {
         .output()
         .is_ok_and(|o| o.status.success());
     have_or_skip(have, &format!("python3 with {modules}"))
-}
-
-/// `have`, or else a skip message, or a failure where the tools are required (CI,
-/// scripts/test-all, which installs them with scripts/install-test-tools).
-fn have_or_skip(have: bool, what: &str) -> bool {
-    if !have {
-        assert!(
-            std::env::var("EXCAVATOR_REQUIRE_TOOLS").as_deref() != Ok("1"),
-            "{what} is required (scripts/install-test-tools)"
-        );
-        println!("skip: no {what} (scripts/install-test-tools installs it)");
-    }
-    have
 }
 
 /// A running `excavator-ctl demo --live 127.0.0.1:0` and the addresses it printed.

@@ -15,8 +15,9 @@
 //!
 //! Outputs:
 //!
-//! - `trace.log`: `candump -L` of every frame on the bus (firmware_bridge's `Recorder`), flushed as the
-//!   session runs and closed at the end and on Ctrl-C;
+//! - `trace.log`: `candump -L` of every frame on the bus (firmware_bridge's `Recorder`), stamped with
+//!   the virtual time from the fixed epoch (`firmware_bridge::transport::VIRTUAL_EPOCH_UNIX_NS`),
+//!   flushed as the session runs and closed at the end and on Ctrl-C;
 //! - `scans/scan_NNNN.json`: the range scans the controller used (docs/scan-protocol.md format);
 //! - `summary.json`, `summary.md`: per dig weight, time, energy, swept volume (thesis 6.1) and totals;
 //! - `trajectories.svg`, `terrain_before.svg`, `terrain_after.svg`, `dig_stats.svg` ([`crate::plots`]);
@@ -34,6 +35,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use anyhow::Context as _;
 use clap::Args;
 use firmware_bridge::trace::{Direction, Recorder};
+use firmware_bridge::transport::{TraceClock, TraceTimeBase};
 use planner::autodig::AutodigMaps;
 use planner::cleanup::CleanupPlan;
 use serde::{Deserialize, Serialize};
@@ -107,6 +109,8 @@ const PROGRESS_EVERY_STEPS: u64 = 50;
 const FLUSH_EVERY_STEPS: u64 = 500;
 /// Virtual-time budget per dig, s: a session that takes longer stops (a stuck plan).
 const SIM_BUDGET_PER_DIG_S: f64 = 120.0;
+/// What stamps a demo trace: the virtual clock, written from its fixed epoch.
+const TRACE_CLOCK: TraceClock = TraceClock::Virtual;
 
 /// Arguments of `excavator-ctl demo`.
 #[derive(Debug, Clone, Args)]
@@ -117,9 +121,15 @@ pub struct DemoArgs {
     /// Seed of the simulator (sensor noise, random boulders); default: the bench file's.
     #[arg(long, value_name = "N")]
     pub seed: Option<u64>,
-    /// Machine file (default: the built-in config/machine.toml).
+    /// Machine file (default: the built-in config/machine.toml): the controller's, and the
+    /// simulated machine's unless `--plant-machine` is given.
     #[arg(long, value_name = "FILE")]
     pub machine: Option<PathBuf>,
+    /// Machine file of the simulated machine only (the plant: bores, masses, relief, ... and its
+    /// `[effects]` table); the controller keeps `--machine` (default: the built-in one). Makes
+    /// "measured" sessions of a machine that differs from its file.
+    #[arg(long, value_name = "FILE")]
+    pub plant_machine: Option<PathBuf>,
     /// Bench scenario file (default: the built-in config/bench_extended.toml for the planned and
     /// predefined strategies, config/bench.toml for the fixed plan).
     #[arg(long, value_name = "FILE")]
@@ -178,6 +188,7 @@ impl DemoArgs {
             digs: 10,
             seed: None,
             machine: None,
+            plant_machine: None,
             bench: None,
             effects: Vec::new(),
             soil_contact: None,
@@ -443,15 +454,48 @@ pub struct DemoSummary {
     pub soil_contact: SoilContactIntegration,
     /// The hidden effects given on the command line.
     pub effects: Vec<String>,
+    /// The simulated machine's own file (`--plant-machine`), when it is not the controller's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plant_machine: Option<PlantMachine>,
     /// What stamped the trace's frames: `virtual` (`demo`: session time since the fixed epoch of
     /// docs/demo-output.md), `kernel` (`run`: the socket's kernel receive timestamps) or
     /// `wall_at_read` (`run` without them); absent in summaries written before it was recorded.
     #[serde(default)]
-    pub trace_clock: Option<firmware_bridge::transport::TraceClock>,
+    pub trace_clock: Option<TraceClock>,
+    /// The CAN interface's link when `run` started (bitrate, state, `restart-ms`, listen-only; none
+    /// of them for a vcan); absent for `demo`, which has no interface.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub can_link: Option<firmware_bridge::transport::LinkStatus>,
     /// Per dig.
     pub digs: Vec<DigRecord>,
     /// Totals.
     pub totals: Totals,
+}
+
+/// The simulated machine's file of a session made with `--plant-machine` (`summary.json`
+/// `plant_machine`): which file, and its content's hash, so the session says which plant made it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PlantMachine {
+    /// The file as given.
+    pub path: String,
+    /// SHA-256 of its bytes, lower-case hex.
+    pub sha256: String,
+}
+
+impl PlantMachine {
+    /// The record of the file at `path`.
+    ///
+    /// # Errors
+    /// Reading the file.
+    pub fn of(path: &Path) -> anyhow::Result<Self> {
+        use sha2::Digest as _;
+        let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+        let digest = sha2::Sha256::digest(&bytes);
+        Ok(Self {
+            path: path.display().to_string(),
+            sha256: digest.iter().map(|b| format!("{b:02x}")).collect(),
+        })
+    }
 }
 
 impl DemoSummary {
@@ -466,6 +510,35 @@ impl DemoSummary {
         self.planning.max_ms = 0.0;
         self
     }
+}
+
+/// The session-time base of the trace at `trace` (its frames' session time for the scans and
+/// per-dig records beside it): the clock recorded in the `summary.json` of its folder, else, without
+/// a summary (a session still running or killed, a bare trace), the one its first frame shows
+/// ([`TraceTimeBase`]).
+///
+/// # Errors
+/// A `summary.json` beside the trace that cannot be read, or whose `trace_clock` is not a clock.
+pub fn trace_time_base(trace: &Path) -> anyhow::Result<TraceTimeBase> {
+    #[derive(Deserialize)]
+    struct Recorded {
+        #[serde(default)]
+        trace_clock: Option<TraceClock>,
+    }
+    let summary = trace
+        .parent()
+        .unwrap_or_else(|| Path::new("."))
+        .join("summary.json");
+    let clock = match std::fs::read_to_string(&summary) {
+        Ok(text) => {
+            serde_json::from_str::<Recorded>(&text)
+                .with_context(|| format!("{}: reading trace_clock", summary.display()))?
+                .trace_clock
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+        Err(e) => return Err(e).with_context(|| format!("reading {}", summary.display())),
+    };
+    Ok(TraceTimeBase::new(clock))
 }
 
 /// Runs `excavator-ctl demo`: the session on a blocking thread, Ctrl-C stops it cleanly (neutral
@@ -511,13 +584,22 @@ pub async fn run_observed(
 /// File, simulator and controller construction errors.
 pub fn setup(args: &DemoArgs) -> anyhow::Result<(SimConfig, ControllerConfig, AutodigMaps)> {
     let effects: Vec<&str> = args.effects.iter().map(String::as_str).collect();
+    // With `--plant-machine` the simulator is built from it (its `[effects]` table included); the
+    // controller's machine is `--machine`'s ([`controller_machine`]).
     let mut sim = SimConfig::load(
-        args.machine.as_deref(),
+        args.plant_machine.as_deref().or(args.machine.as_deref()),
         args.bench.as_deref(),
         args.seed,
         &effects,
     )
-    .context("simulator configuration")?;
+    .with_context(|| match &args.plant_machine {
+        Some(p) => format!("simulator configuration (--plant-machine {})", p.display()),
+        None => "simulator configuration".to_owned(),
+    })?;
+    if args.plant_machine.is_some() {
+        // The controller's file is checked before anything runs, as the plant's was.
+        controller_machine(args, &sim)?;
+    }
     if args.bench.is_none() && args.strategy != DemoStrategy::Fixed {
         let scenario =
             Scenario::from_toml_str_named(EXTENDED_BENCH_TOML, "config/bench_extended.toml")
@@ -601,6 +683,25 @@ pub fn setup(args: &DemoArgs) -> anyhow::Result<(SimConfig, ControllerConfig, Au
     Ok((sim, config, maps))
 }
 
+/// The controller's machine of a session: the simulator's, unless the simulated machine has a file
+/// of its own (`--plant-machine`); then `--machine` (or the built-in file), loaded and checked as
+/// the simulator loads a machine file (its `[effects]` table, a simulator setting, is not the
+/// controller's and is ignored).
+///
+/// # Errors
+/// Reading or validating the file (errors name the file, line and field).
+pub fn controller_machine(
+    args: &DemoArgs,
+    sim: &SimConfig,
+) -> anyhow::Result<planner::machine::MachineConfig> {
+    if args.plant_machine.is_none() {
+        return Ok(sim.machine.clone());
+    }
+    let own = SimConfig::load::<&str>(args.machine.as_deref(), None, None, &[])
+        .context("the controller's machine (--machine, or the built-in config/machine.toml)")?;
+    Ok(own.machine)
+}
+
 /// The planner settings of a session: `--planner` or the built-in file, with the desired floor at
 /// the bench's floor elevation (world z = base z: the machine stands on the ground plane).
 ///
@@ -642,8 +743,9 @@ pub fn build_session(
         controller::cycle::ScanGrid::default().max_gap_cells,
     )
     .context("terrain map")?;
+    let machine = controller_machine(args, sim)?;
     let mut session =
-        PlannedSession::new(&sim.machine, cfg, mapper, strategy).context("planned session")?;
+        PlannedSession::new(&machine, cfg, mapper, strategy).context("planned session")?;
     if let Some(p) = &args.hardness {
         let text = std::fs::read_to_string(p)
             .with_context(|| format!("reading the hardness regression {}", p.display()))?;
@@ -865,7 +967,24 @@ pub fn run_session_observed(
     let full_bucket_n = sim.machine.bucket.capacity_m3
         * sim.scenario.soil.density_kg_per_m3
         * planner::machine::GRAVITY_M_PER_S2;
+    // The harness builds the plant and a controller from `sim`; with `--plant-machine` the
+    // controller is the one of its own machine file, started before the first step.
+    let own_controller = match &args.plant_machine {
+        Some(_) => Some(
+            ControllerNode::new(
+                &controller_machine(args, &sim)?,
+                maps.clone(),
+                config.clone(),
+            )
+            .context("controller")?,
+        ),
+        None => None,
+    };
     let mut h = Harness::new(&sim, maps, config).context("controller")?;
+    if let Some(node) = own_controller {
+        h.kill_controller();
+        h.start_controller(node);
+    }
     let mut driver = match h.node_mut() {
         Some(node) => SessionDriver::new(session, predefined_joints, node),
         None => anyhow::bail!("no controller"),
@@ -873,6 +992,8 @@ pub fn run_session_observed(
     let trace_path = out.join("trace.log");
     let recorder = Recorder::create(&trace_path, "vcan0")
         .with_context(|| format!("creating {}", trace_path.display()))?;
+    // Virtual time from the fixed epoch (docs/demo-output.md), exact in integer nanoseconds.
+    let stamp = |virtual_ns| TRACE_CLOCK.trace_ns(virtual_ns);
     let terrain_before = h.machine.plant().world.terrain.clone();
 
     let progress = crate::console::session_bar(Some(args.digs), args.quiet);
@@ -894,10 +1015,10 @@ pub fn run_session_observed(
             }
         };
         for f in h.inbox() {
-            recorder.record(f.timestamp_ns, Direction::Receive, &f.frame);
+            recorder.record(stamp(f.timestamp_ns), Direction::Receive, &f.frame);
         }
         for f in &frames {
-            recorder.record(h.clock.now_ns(), Direction::Transmit, f);
+            recorder.record(stamp(h.clock.now_ns()), Direction::Transmit, f);
         }
         let time_s = h.time_s();
         let steps = h.steps();
@@ -971,12 +1092,12 @@ pub fn run_session_observed(
     let now = clock.now_s();
     let shutdown = h.node_mut().map(|n| n.shutdown(now));
     for f in shutdown.iter().flat_map(|o| o.iter()) {
-        recorder.record(clock.now_ns(), Direction::Transmit, f);
+        recorder.record(stamp(clock.now_ns()), Direction::Transmit, f);
         let _ = h.send_from_controller(std::slice::from_ref(f));
     }
     h.machine.advance(2.0 * PERIOD_S);
     for f in h.drain_controller_inbox() {
-        recorder.record(f.timestamp_ns, Direction::Receive, &f.frame);
+        recorder.record(stamp(f.timestamp_ns), Direction::Receive, &f.frame);
     }
     let trace = recorder.close();
     if let Some(p) = &progress {
@@ -1005,11 +1126,19 @@ pub fn run_session_observed(
             session_time_s: clock.now_s(),
             wall_time_s: wall.elapsed().as_secs_f64(),
             trace,
-            trace_clock: firmware_bridge::transport::TraceClock::Virtual,
+            trace_clock: TRACE_CLOCK,
         },
         node,
         session,
     );
+    let summary = DemoSummary {
+        plant_machine: args
+            .plant_machine
+            .as_deref()
+            .map(PlantMachine::of)
+            .transpose()?,
+        ..summary
+    };
     let plan: Vec<Action> = node.cycle().config().actions.clone();
     let after = machine.plant().world.terrain.clone();
     if let Some(s) = &session {
@@ -1215,7 +1344,7 @@ pub struct SessionEnd<'a> {
     /// The trace recorder's counts.
     pub trace: firmware_bridge::trace::RecorderStats,
     /// What stamped the trace.
-    pub trace_clock: firmware_bridge::transport::TraceClock,
+    pub trace_clock: TraceClock,
 }
 
 /// `summary.json` of a session: the records, their totals and Tables 3-5 figures.
@@ -1288,7 +1417,9 @@ pub fn session_summary(
         seed: end.seed,
         soil_contact: end.soil_contact,
         effects: end.effects,
+        plant_machine: None,
         trace_clock: Some(end.trace_clock),
+        can_link: None,
         digs: records,
         totals,
     }
@@ -1391,6 +1522,9 @@ pub fn summary_markdown(s: &DemoSummary) -> String {
         t.wall_time_s,
         if t.finished { "" } else { " (stopped early)" }
     );
+    if let Some(link) = &s.can_link {
+        let _ = writeln!(m, "CAN link at start: {link}.\n");
+    }
     if !s.strategy.is_empty() && s.strategy != "fixed" {
         m.push_str(&tables_markdown(s));
     }
@@ -1490,4 +1624,42 @@ pub fn tables_markdown(s: &DemoSummary) -> String {
     }
     m.push('\n');
     m
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The clock comes from the `summary.json` beside the trace; without one, from the first frame;
+    /// a summary whose clock is not one is an error naming the file.
+    #[test]
+    fn the_trace_time_base_follows_the_recorded_clock() {
+        let dir = tempfile::tempdir().unwrap();
+        let trace = dir.path().join("trace.log");
+        let summary = dir.path().join("summary.json");
+        let wall_ns = 1_790_000_000_000_000_000;
+        let mut bare = trace_time_base(&trace).unwrap();
+        assert_eq!(bare.clock(), None);
+        assert_eq!(
+            bare.session_ns(TRACE_CLOCK.trace_ns(20_000_000)),
+            20_000_000
+        );
+
+        std::fs::write(&summary, r#"{"seed": 1, "trace_clock": "kernel"}"#).unwrap();
+        let mut kernel = trace_time_base(&trace).unwrap();
+        assert_eq!(kernel.clock(), Some(TraceClock::Kernel));
+        assert_eq!(kernel.session_ns(wall_ns), 0);
+        assert_eq!(kernel.session_ns(wall_ns + 7), 7);
+
+        std::fs::write(&summary, r#"{"trace_clock": "virtual"}"#).unwrap();
+        let mut virt = trace_time_base(&trace).unwrap();
+        assert_eq!(virt.session_ns(TRACE_CLOCK.trace_ns(5)), 5);
+
+        std::fs::write(&summary, r#"{"trace_clock": "sundial"}"#).unwrap();
+        let err = format!("{:#}", trace_time_base(&trace).unwrap_err());
+        assert!(
+            err.contains("summary.json") && err.contains("sundial"),
+            "{err}"
+        );
+    }
 }

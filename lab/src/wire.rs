@@ -17,6 +17,11 @@
 //! stood after the normal arming handshake, appending to its trace and records. The run's log goes
 //! to the folder's `run.log` too ([`crate::session_log`]).
 //!
+//! Before it opens the bus, `run` reads the interface's link over netlink ([`check_link`]): it logs
+//! the bitrate, state, `restart-ms` and listen-only mode, records them in the summary, and refuses a
+//! down link or a listen-only one without `--listen-only`. `--config-dir DIR` (the package's
+//! /etc/excavator) supplies the configuration files no option names ([`CONFIG_DIR_FILES`]).
+//!
 //! The operator's commands come from the control socket (`excavator-ctl ctl`) and, when standard
 //! input is a terminal, from its keys ([`crate::keys`]); both through one [`OperatorPort`].
 
@@ -36,7 +41,7 @@ use controller::session::{NoObserver, ScanSource, SessionDriver, SessionEvent, S
 use controller::session_state::{SessionIdentity, fingerprint};
 use controller::state_file::StateFileError;
 use firmware_bridge::trace::Recorder;
-use firmware_bridge::transport::{Bus, SocketCanBus, TimeScale};
+use firmware_bridge::transport::{Bus, LinkStatus, SocketCanBus, TimeScale};
 use planner::autodig::AutodigMaps;
 use planner::machine::MachineConfig;
 use planner::plan::PlannerConfig;
@@ -108,7 +113,24 @@ pub struct RunArgs {
     /// folder, none without one).
     #[arg(long, value_name = "PATH")]
     pub control_socket: Option<PathBuf>,
+    /// The deployed configuration's folder (the package's /etc/excavator): machine.toml,
+    /// autodig_maps.toml, controller.toml, bench.toml, planner.toml, hardness_regression.toml and
+    /// key, each used when present; a file given by its own option wins, a missing one is the
+    /// built-in default.
+    #[arg(long, value_name = "DIR")]
+    pub config_dir: Option<PathBuf>,
 }
+
+/// The files `--config-dir` supplies, by name in the folder.
+pub const CONFIG_DIR_FILES: [&str; 7] = [
+    "machine.toml",
+    "autodig_maps.toml",
+    "controller.toml",
+    "bench.toml",
+    "planner.toml",
+    "hardness_regression.toml",
+    "key",
+];
 
 /// Arguments of `excavator-ctl ctl`.
 #[derive(Debug, Clone, Args)]
@@ -173,6 +195,53 @@ impl RunArgs {
         }
     }
 
+    /// The arguments with the files of `--config-dir` filled in where no option names one
+    /// ([`CONFIG_DIR_FILES`]); unchanged without `--config-dir`.
+    #[must_use]
+    pub fn with_config_dir(&self) -> Self {
+        let mut a = self.clone();
+        let Some(dir) = &self.config_dir else {
+            return a;
+        };
+        let [machine, maps, config, bench, planner, hardness, key] =
+            CONFIG_DIR_FILES.map(|name| Some(dir.join(name)).filter(|p| p.is_file()));
+        for (given, found) in [
+            (&mut a.machine, machine),
+            (&mut a.maps, maps),
+            (&mut a.config, config),
+            (&mut a.bench, bench),
+            (&mut a.planner, planner),
+            (&mut a.hardness, hardness),
+            (&mut a.key_file, key),
+        ] {
+            if given.is_none() {
+                *given = found;
+            }
+        }
+        a
+    }
+
+    /// One line naming the file of each configuration option, or `built-in`.
+    #[must_use]
+    pub fn config_files(&self) -> String {
+        let show = |p: &Option<PathBuf>| {
+            p.as_ref()
+                .map_or_else(|| "built-in".to_owned(), |p| p.display().to_string())
+        };
+        format!(
+            "machine {}, maps {}, controller {}, bench {}, planner {}, hardness {}, key {}",
+            show(&self.machine),
+            show(&self.maps),
+            show(&self.config),
+            show(&self.bench),
+            show(&self.planner),
+            show(&self.hardness),
+            self.key_file
+                .as_ref()
+                .map_or_else(|| "none".to_owned(), |p| p.display().to_string()),
+        )
+    }
+
     /// `demo`'s arguments for the same strategy, files and bench (one setup for both).
     fn demo_args(&self) -> DemoArgs {
         let out = self.resume.clone().or_else(|| self.out.clone());
@@ -195,6 +264,7 @@ impl RunArgs {
 /// Unreadable or invalid files, an inconsistent configuration, a planned strategy without a scan
 /// service.
 pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, RunSetup)> {
+    let args = &args.with_config_dir();
     let dargs = args.demo_args();
     let (sim, mut config, maps) = demo::setup(&dargs)?;
     let session = match args.strategy.session() {
@@ -267,6 +337,7 @@ pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, R
 /// # Errors
 /// An unreadable or invalid machine or bench file.
 pub fn machine(args: &RunArgs) -> anyhow::Result<MachineConfig> {
+    let args = &args.with_config_dir();
     let (sim, _, _) = demo::setup(&args.demo_args())?;
     machine_of(args, &sim)
 }
@@ -344,6 +415,7 @@ pub async fn run(args: RunArgs) -> anyhow::Result<()> {
 /// # Errors
 /// As [`run`].
 pub async fn run_observed(args: RunArgs, observer: &mut dyn SessionObserver) -> anyhow::Result<()> {
+    let link = check_link(&args)?;
     let mut bus = SocketCanBus::open(&args.iface)
         .with_context(|| format!("opening CAN interface {}", args.iface))?;
     let trace = match trace_path(&args)? {
@@ -361,6 +433,7 @@ pub async fn run_observed(args: RunArgs, observer: &mut dyn SessionObserver) -> 
     let console = RunConsole {
         keys: operator_terminal(),
         session_log: true,
+        link: Some(link),
     };
     run_on_observed(
         &bus,
@@ -373,7 +446,20 @@ pub async fn run_observed(args: RunArgs, observer: &mut dyn SessionObserver) -> 
     .await
 }
 
-/// What `run` does besides the session: the operator's keys and the session log.
+/// The link of `--iface` over netlink, refused when it is down, or in listen-only mode without
+/// `--listen-only` (the controller's own listen-only: it decodes, logs and records the trace but
+/// never transmits, so it never arms).
+///
+/// # Errors
+/// A missing interface (with the commands that create or configure it), a netlink failure, or the
+/// refusal, each one line.
+pub fn check_link(args: &RunArgs) -> anyhow::Result<LinkStatus> {
+    let link = LinkStatus::query(&args.iface)?;
+    link.check(args.listen_only)?;
+    Ok(link)
+}
+
+/// What `run` does besides the session: the operator's keys, the session log and the link.
 #[derive(Debug, Default)]
 pub struct RunConsole {
     /// The terminal whose keys are operator commands ([`crate::keys`]); `None`: no key reader.
@@ -381,6 +467,8 @@ pub struct RunConsole {
     /// Write the log to the session folder's `run.log` too ([`crate::session_log`]; the binary's
     /// subscriber carries its layer).
     pub session_log: bool,
+    /// The interface's link as [`check_link`] found it: logged, and recorded in the summary.
+    pub link: Option<LinkStatus>,
 }
 
 /// Standard input when it is a terminal (a person at the console), else `None`: no key reader for a
@@ -509,6 +597,15 @@ pub async fn run_on_observed<B: Bus>(
         }
         _ => None,
     };
+    if args.config_dir.is_some() {
+        tracing::info!("configuration: {}", args.with_config_dir().config_files());
+    }
+    if let Some(link) = &console.link {
+        tracing::info!(iface = %link.iface, "CAN link: {link}");
+        for w in link.warnings() {
+            tracing::warn!(iface = %link.iface, "CAN link: {w}");
+        }
+    }
     // The socket's and the keys' commands meet in this one port.
     let mut operator = controller::operator::OperatorPort::new();
     let socket_path = args
@@ -649,7 +746,7 @@ pub async fn run_on_observed<B: Bus>(
         (StopReason::Finished, Some(why)) => why.to_owned(),
         (StopReason::Finished, None) => "dig count reached".to_owned(),
     };
-    let summary = demo::session_summary(
+    let mut summary = demo::session_summary(
         log.records,
         SessionEnd {
             strategy: args.strategy,
@@ -671,6 +768,7 @@ pub async fn run_on_observed<B: Bus>(
         &node,
         driver.session(),
     );
+    summary.can_link = console.link;
     write_folder(out, &summary, &node, &driver, log.soil_samples)?;
     print!("{}", demo::summary_markdown(&summary));
     match saved {
@@ -716,4 +814,50 @@ fn write_folder(
     }
     demo::write_outputs(out, summary, None, &plan, &snapshots)?;
     demo::write_soil_samples(out, &soil)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser as _;
+
+    #[derive(clap::Parser)]
+    struct Cmd {
+        #[command(flatten)]
+        run: RunArgs,
+    }
+
+    fn args(extra: &[&str]) -> RunArgs {
+        let mut all = vec!["run", "--iface", "can0"];
+        all.extend_from_slice(extra);
+        Cmd::try_parse_from(all).unwrap().run
+    }
+
+    #[test]
+    fn config_dir_fills_what_no_option_names() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("machine.toml"), "").unwrap();
+        std::fs::write(dir.path().join("planner.toml"), "").unwrap();
+        let d = dir.path().to_str().unwrap();
+        let a = args(&["--config-dir", d, "--planner", "mine.toml"]).with_config_dir();
+        assert_eq!(a.machine, Some(dir.path().join("machine.toml")));
+        assert_eq!(a.planner, Some("mine.toml".into()), "an option wins");
+        assert_eq!(
+            (a.maps, a.config, a.key_file),
+            (None, None, None),
+            "built-in"
+        );
+        let line = args(&["--config-dir", d]).with_config_dir().config_files();
+        assert!(line.contains("machine.toml, maps built-in"), "{line}");
+        assert_eq!(args(&[]).with_config_dir().machine, None);
+    }
+
+    #[test]
+    fn config_dir_files_are_read_and_checked() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("machine.toml"), "not = [toml").unwrap();
+        let d = dir.path().to_str().unwrap();
+        let err = format!("{:#}", machine(&args(&["--config-dir", d])).unwrap_err());
+        assert!(err.contains("machine"), "{err}");
+    }
 }

@@ -90,6 +90,7 @@ fn demo_writes_all_outputs_with_the_documented_fields_for_two_digs() {
     );
     assert!(trace.lines().count() as u64 >= json["totals"]["trace_frames"].as_u64().unwrap());
     assert_clean_protocol(&out.join("trace.log"));
+    assert_epoch_stamps(&out.join("trace.log"), &summary);
     // The soil estimator's samples of the planned session, for `model soil-cv`.
     let soil: lab::session::SoilSamplesFile =
         serde_json::from_slice(&std::fs::read(out.join("soil_samples.json")).unwrap()).unwrap();
@@ -97,6 +98,31 @@ fn demo_writes_all_outputs_with_the_documented_fields_for_two_digs() {
     assert!(soil.digs.iter().flat_map(|d| &d.samples).all(|s| {
         s.geometry.depth_m > 0.0 && s.force.fx_n.is_finite() && s.force.fz_n.is_finite()
     }));
+}
+
+/// The trace is stamped with the virtual time from the fixed epoch, which `trace_time_base` (the
+/// reader's view of it) turns back into the session's time: the first frame within the first control
+/// steps, the last at the session's end.
+fn assert_epoch_stamps(trace: &Path, summary: &DemoSummary) {
+    use firmware_bridge::transport::{TraceClock, VIRTUAL_EPOCH_UNIX_NS};
+    assert_eq!(summary.trace_clock, Some(TraceClock::Virtual));
+    let records: Vec<_> = std::fs::read_to_string(trace)
+        .unwrap()
+        .lines()
+        .map(|l| firmware_bridge::trace::parse_line(l).unwrap())
+        .collect();
+    let mut base = lab::demo::trace_time_base(trace).unwrap();
+    let first = records.first().unwrap().timestamp_ns;
+    let last = records.last().unwrap().timestamp_ns;
+    assert!(first >= VIRTUAL_EPOCH_UNIX_NS, "first stamp {first} ns");
+    assert!(base.session_s(first) < 0.05, "{}", base.session_s(first));
+    assert_eq!(base.origin_ns(), Some(VIRTUAL_EPOCH_UNIX_NS));
+    let end_s = summary.totals.sim_time_s;
+    assert!(
+        (base.session_s(last) - end_s).abs() < 0.05,
+        "last frame at {} s of a {end_s} s session",
+        base.session_s(last)
+    );
 }
 
 /// A clean session's trace has no protocol error in `trace stats` (alive counters, checksums,
@@ -235,4 +261,64 @@ fn demo_stops_cleanly_when_asked() {
     assert!(!summary.totals.finished);
     assert!(dir.path().join("demo/trace.log").exists());
     assert!(dir.path().join("demo/summary.json").exists());
+}
+
+/// `--plant-machine`: the simulated machine is built from the file (a boom bore 20 % larger), the
+/// controller keeps the built-in machine; `summary.json` records the file and its hash; the
+/// session differs from the nominal one of the same seed; a bad file is an error naming it and
+/// the field.
+#[test]
+fn demo_plant_machine_changes_the_plant_and_not_the_controller() {
+    use sha2::Digest as _;
+    let dir = tempfile::tempdir().unwrap();
+    let nominal = planner::machine::MachineConfig::default_machine().unwrap();
+    let text =
+        planner::machine::DEFAULT_MACHINE_TOML.replacen("bore_m = 0.120", "bore_m = 0.144", 1);
+    let plant_file = dir.path().join("plant.toml");
+    std::fs::write(&plant_file, &text).unwrap();
+
+    let mut args = DemoArgs::new(dir.path().join("plant"));
+    args.digs = 1;
+    args.seed = Some(5);
+    args.plant_machine = Some(plant_file.clone());
+    let (sim, _, _) = lab::demo::setup(&args).unwrap();
+    assert_eq!(sim.machine.cylinders.boom.bore_m, 0.144, "the plant's file");
+    let controller = lab::demo::controller_machine(&args, &sim).unwrap();
+    assert_eq!(controller, nominal, "the controller keeps its own machine");
+
+    let changed = run_session(&args, &AtomicBool::new(false)).unwrap();
+    let recorded = changed.plant_machine.clone().unwrap();
+    assert_eq!(recorded.path, plant_file.display().to_string());
+    let hash: String = sha2::Sha256::digest(text.as_bytes())
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect();
+    assert_eq!(recorded.sha256, hash);
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("plant/summary.json")).unwrap())
+            .unwrap();
+    assert_eq!(json["plant_machine"]["sha256"], hash.as_str());
+
+    let mut plain = args.clone();
+    plain.plant_machine = None;
+    plain.out = dir.path().join("nominal");
+    let same_seed = run_session(&plain, &AtomicBool::new(false)).unwrap();
+    assert!(same_seed.plant_machine.is_none());
+    assert_ne!(
+        std::fs::read(dir.path().join("plant/trace.log")).unwrap(),
+        std::fs::read(dir.path().join("nominal/trace.log")).unwrap(),
+        "the larger boom bore changes the measured pressures"
+    );
+    assert_ne!(changed.digs[0].energy_kj, same_seed.digs[0].energy_kj);
+
+    std::fs::write(
+        &plant_file,
+        planner::machine::DEFAULT_MACHINE_TOML.replacen("bore_m = 0.120", "bore_m = -0.1", 1),
+    )
+    .unwrap();
+    let err = format!("{:#}", lab::demo::setup(&args).unwrap_err());
+    assert!(
+        err.contains(&plant_file.display().to_string()) && err.contains("bore_m"),
+        "{err}"
+    );
 }

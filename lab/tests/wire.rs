@@ -128,6 +128,7 @@ fn planned_run(
         out: Some(out.to_path_buf()),
         resume: None,
         control_socket: None,
+        config_dir: None,
     }
 }
 
@@ -372,6 +373,7 @@ fn fixed_args(config: &std::path::Path, digs: Option<u32>) -> RunArgs {
         out: None,
         resume: None,
         control_socket: None,
+        config_dir: None,
     }
 }
 
@@ -444,6 +446,7 @@ async fn the_operator_keys_at_a_terminal_estop_reset_and_stop_the_run() {
     let console = lab::wire::RunConsole {
         keys: Some(terminal),
         session_log: false,
+        link: None,
     };
     let slave = pty.slave;
     let operator = async {

@@ -94,6 +94,7 @@ fn run_serves_the_page_and_its_estop_reaches_the_run_loop() {
         out: None,
         resume: None,
         control_socket: None,
+        config_dir: None,
     };
     // The live view has its own runtime: started outside the session's.
     let mut stream = live::LiveStream::start(

@@ -74,6 +74,13 @@ fn the_planned_session_over_vcan_digs_cleans_up_tracks_back_and_matches_demo() {
         demo.stats.dig_mean_weight_n
     );
     assert_eq!(run.strategy, "planned");
+    // The socket gave the kernel's receive timestamps (SO_TIMESTAMPNS) over vcan, and the summary
+    // says so.
+    assert_eq!(
+        run.trace_clock,
+        Some(firmware_bridge::transport::TraceClock::Kernel),
+        "trace_clock of the run over {iface}"
+    );
     assert!(t.finished, "{t:?}");
     assert_eq!(t.digs, d.digs);
     // What the issue asks of the run itself: six actions or more, a dig, a cleanup, a track back.

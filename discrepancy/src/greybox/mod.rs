@@ -51,7 +51,7 @@ pub use crate::signal::{N_SIGNALS, Signal, SignalGroups};
 pub use hydraulics::{bypass_constant, steady_velocity};
 pub use params::{Augmentation, GreyBoxParams};
 pub use prefilter::{VELOCITY_PREFILTER_HALF, prefilter_velocities};
-pub use record::{PreparedRecord, WARMUP_SAMPLES};
+pub use record::{PreparedRecord, WARMUP_SAMPLES, warmed_up};
 pub use replay::replay;
 pub use soil::SoilTerms;
 pub use spool::spools;

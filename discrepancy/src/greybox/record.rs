@@ -29,7 +29,7 @@ const GAP_S: f64 = 0.05;
 /// m/s on the spool the gateway had opened, the replay's spools came out of the gap closed and
 /// predicted 0 to 0.14 m/s for 0.2 s: 25 samples that made nearly all of the stick velocity's
 /// residual sum of squares in that session.)
-fn warmed_up(samples: &[Sample]) -> Vec<bool> {
+pub fn warmed_up(samples: &[Sample]) -> Vec<bool> {
     let mut since = 0usize;
     samples
         .iter()

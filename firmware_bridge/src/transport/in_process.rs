@@ -231,7 +231,8 @@ pub struct InProcessNode {
 }
 
 impl InProcessNode {
-    /// Records every frame this node sends (` T`) and receives (` R`) to `recorder`.
+    /// Records every frame this node sends (` T`) and receives (` R`) to `recorder`, stamped as
+    /// [`TraceClock::trace_ns`] writes this bus clock's times (a virtual clock from its epoch).
     pub fn set_recorder(&mut self, recorder: Recorder) {
         self.recorder = Some(recorder);
     }
@@ -244,7 +245,11 @@ impl InProcessNode {
     pub fn send(&self, frame: CanFrame) -> Result<()> {
         let now = deliver(&self.shared, frame, Some(self.queue.node_id));
         if let Some(rec) = &self.recorder {
-            rec.record(now, Direction::Transmit, &frame);
+            rec.record(
+                self.trace_clock().trace_ns(now),
+                Direction::Transmit,
+                &frame,
+            );
         }
         Ok(())
     }
@@ -262,7 +267,8 @@ impl InProcessNode {
             }
         };
         if let (Some(f), Some(rec)) = (&got, &self.recorder) {
-            rec.record(f.timestamp_ns, Direction::Receive, &f.frame);
+            let at = self.trace_clock().trace_ns(f.timestamp_ns);
+            rec.record(at, Direction::Receive, &f.frame);
         }
         got
     }

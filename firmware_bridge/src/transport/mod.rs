@@ -10,16 +10,23 @@
 //!   methods it has a synchronous `send`/`try_recv` path for single-threaded virtual-time loops, and
 //!   optional fault injection ([`FaultInjection`]: latency in clock time, seeded loss).
 //!
+//! - [`link`]: the interface's link over netlink (up, bitrate, state, `restart-ms`, listen-only) and
+//!   whether a controller may start on it.
+//!
 //! Error frames received from the controller driver surface as [`Error::Fault`] with a [`BusFault`];
 //! they do not break the bus, so the caller decides (neutral valves) and keeps calling `recv`.
 
 mod clock;
 mod in_process;
+pub mod link;
 mod socketcan;
+mod trace_clock;
 
 pub use clock::{Clock, TimeScale, TimeScaleError, VirtualClock};
 pub use in_process::{FaultInjection, InProcessBus, InProcessNode};
+pub use link::{LinkRefusal, LinkStatus};
 pub use socketcan::{IdFilter, SendRetry, SocketCanBus, send_with_retry};
+pub use trace_clock::{TraceClock, TraceTimeBase, VIRTUAL_EPOCH_UNIX_NS};
 
 use std::future::Future;
 
@@ -144,7 +151,8 @@ pub enum Error {
     Fault(BusFault),
     /// The interface does not exist.
     #[error(
-        "CAN interface {iface:?} not found (create it, e.g. `ip link add dev {iface} type vcan && ip link set up {iface}`)"
+        "CAN interface {iface:?} not found ({})",
+        link::not_found_advice(iface)
     )]
     InterfaceNotFound {
         /// Interface name.
@@ -204,31 +212,6 @@ pub trait Bus: Send + Sync {
     /// What stamps the received frames (recorded with a session so a reader knows what the trace's
     /// timestamps mean).
     fn trace_clock(&self) -> TraceClock;
-}
-
-/// What stamped the frames of a trace (`trace_clock` in a session's `summary.json`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum TraceClock {
-    /// The kernel's receive timestamp of the socket (`SO_TIMESTAMPNS`, wall clock since the Unix
-    /// epoch): the time the frame reached the host, not when the program got to read it.
-    Kernel,
-    /// The wall clock (since the Unix epoch) when the program read the frame: the socket delivered
-    /// no kernel timestamp.
-    WallAtRead,
-    /// A simulation's virtual clock, offset by a fixed epoch (`demo`; docs/demo-output.md).
-    Virtual,
-}
-
-impl TraceClock {
-    /// The name in `summary.json`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Kernel => "kernel",
-            Self::WallAtRead => "wall_at_read",
-            Self::Virtual => "virtual",
-        }
-    }
 }
 
 #[cfg(test)]

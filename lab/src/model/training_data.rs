@@ -207,12 +207,13 @@ pub fn read_training_digs(
             }
         }
     };
+    let mut time_base = crate::demo::trace_time_base(path)?;
     for record in trace_tools::input::records_until_cut(path, reader) {
         let record = record.with_context(|| format!("reading {}", path.display()))?;
+        let t = time_base.session_s(record.timestamp_ns);
         let Ok(decoded) = Message::decode(&record.frame) else {
             continue;
         };
-        let t = record.timestamp_ns as f64 * 1e-9;
         match decoded.message {
             Message::JointAngles(a) => {
                 flush(&mut pending, &rates, &command, &head, &rod, &pump, &status);
