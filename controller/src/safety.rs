@@ -926,6 +926,65 @@ mod tests {
     use planner::kinematics::Kinematics;
     use planner::machine::MachineConfig;
 
+    /// `ControllerStatus.FaultReason`'s value table in `excavator.dbc` names each fault code by its
+    /// variant (and 0 `Healthy`), so cantools and candump readers see the same names as the log.
+    #[test]
+    fn fault_codes_are_the_dbc_value_table() {
+        let dbc = firmware_bridge::wire_dbc::WireDbc::parse(firmware_bridge::dbc::DBC_TEXT)
+            .expect("excavator.dbc parses");
+        let signal = dbc
+            .message("ControllerStatus")
+            .and_then(|m| m.signal("FaultReason"))
+            .expect("ControllerStatus.FaultReason");
+        let every_variant = [
+            Fault::StaleSensor {
+                signal: crate::estimate::Signal::JointAngles,
+                age_s: 0.1,
+            },
+            Fault::Decode {
+                id: 0x0CFF_5080,
+                error: DecodeError::RemoteFrame,
+            },
+            Fault::UnexpectedFrame {
+                id: 0x0CFF_5099,
+                source_address: 0x99,
+            },
+            Fault::JointLimit {
+                joint: planner::kinematics::Joint::Boom,
+                angle_rad: 2.0,
+            },
+            Fault::EStop,
+            Fault::GatewayFault(firmware_bridge::messages::GatewayFaults(1)),
+            Fault::GatewayMode {
+                expected: GatewayMode::ArmedValve,
+                reported: GatewayMode::Disarmed,
+            },
+            Fault::ArmTimeout(ArmMode::Valve),
+            Fault::Bus(BusFault::BusOff),
+            Fault::Control(ControlFault::Kinematics("test")),
+            Fault::Shutdown,
+            Fault::GatewayFrozen {
+                alive_counter: 3,
+                frozen_s: 0.5,
+            },
+            Fault::AddressLost {
+                address: 0x27,
+                winner_name: 0,
+            },
+        ];
+        let mut table = vec![(0, "Healthy".to_owned())];
+        for fault in every_variant {
+            let debug = format!("{fault:?}");
+            let variant: String = debug
+                .chars()
+                .take_while(char::is_ascii_alphanumeric)
+                .collect();
+            table.push((i64::from(fault.code()), variant));
+        }
+        table.sort();
+        assert_eq!(signal.value_table, table);
+    }
+
     const PERIOD_S: f64 = 0.01;
     /// A pose inside the default machine's limits.
     const Q: [f64; 3] = [0.3, -1.6, -0.9];

@@ -126,83 +126,46 @@ pub struct ScheduleEntry {
     pub rate_hz: f64,
 }
 
-/// The project's message schedule (`docs/protocol.md`): sensing and implement commands at 100 Hz,
-/// the rest slower. Position setpoints are counted although they replace the implement valve
-/// commands in position mode, so the figure is an upper bound.
-pub const SCHEDULE: &[ScheduleEntry] = &[
-    ScheduleEntry {
-        message: "AuxValveCommand_Boom",
-        rate_hz: 100.0,
-    },
-    ScheduleEntry {
-        message: "AuxValveCommand_Stick",
-        rate_hz: 100.0,
-    },
-    ScheduleEntry {
-        message: "AuxValveCommand_Bucket",
-        rate_hz: 100.0,
-    },
-    ScheduleEntry {
-        message: "AuxValveCommand_Swing",
-        rate_hz: 100.0,
-    },
-    ScheduleEntry {
-        message: "AuxValveCommand_LeftTrack",
-        rate_hz: 20.0,
-    },
-    ScheduleEntry {
-        message: "AuxValveCommand_RightTrack",
-        rate_hz: 20.0,
-    },
-    ScheduleEntry {
-        message: "PositionSetpoint",
-        rate_hz: 100.0,
-    },
-    ScheduleEntry {
-        message: "ControllerHeartbeat",
-        rate_hz: 20.0,
-    },
-    ScheduleEntry {
-        message: "JointAngles",
-        rate_hz: 100.0,
-    },
-    ScheduleEntry {
-        message: "JointRates",
-        rate_hz: 100.0,
-    },
-    ScheduleEntry {
-        message: "AuxValveMeasured_Boom",
-        rate_hz: 100.0,
-    },
-    ScheduleEntry {
-        message: "AuxValveMeasured_Stick",
-        rate_hz: 100.0,
-    },
-    ScheduleEntry {
-        message: "AuxValveMeasured_Bucket",
-        rate_hz: 100.0,
-    },
-    ScheduleEntry {
-        message: "PumpPressures",
-        rate_hz: 50.0,
-    },
-    ScheduleEntry {
-        message: "TrackOdometry",
-        rate_hz: 20.0,
-    },
-    ScheduleEntry {
-        message: "GatewayStatus",
-        rate_hz: 20.0,
-    },
-    ScheduleEntry {
-        message: "GatewaySession",
-        rate_hz: 20.0,
-    },
-    ScheduleEntry {
-        message: "ControllerStatus",
-        rate_hz: 20.0,
-    },
-];
+/// The project's message schedule: every periodic DBC message at the rate of its `GenMsgCycleTime`
+/// attribute (`docs/protocol.md`: sensing and implement commands at 100 Hz, the rest slower). Position
+/// setpoints are counted although they replace the implement valve commands in position mode, so the
+/// figure is an upper bound. The event messages (cycle time 0: J1939-81 Address Claimed and Request)
+/// are not in it: they go out at start, in a contest and on the operator's reset, a few frames each.
+pub const SCHEDULE: &[ScheduleEntry] = &SCHEDULE_FROM_DBC;
+
+/// How many DBC messages are periodic (`GenMsgCycleTime` > 0).
+const PERIODIC_MESSAGES: usize = {
+    let mut count = 0;
+    let mut i = 0;
+    while i < dbc::MESSAGES.len() {
+        if dbc::MESSAGES[i].cycle_time_ms > 0 {
+            count += 1;
+        }
+        i += 1;
+    }
+    count
+};
+
+const SCHEDULE_FROM_DBC: [ScheduleEntry; PERIODIC_MESSAGES] = {
+    let mut out = [ScheduleEntry {
+        message: "",
+        rate_hz: 0.0,
+    }; PERIODIC_MESSAGES];
+    let mut i = 0;
+    let mut n = 0;
+    while i < dbc::MESSAGES.len() {
+        let msg = &dbc::MESSAGES[i];
+        if msg.cycle_time_ms > 0 {
+            out[n] = ScheduleEntry {
+                message: msg.name,
+                rate_hz: 1000.0 / msg.cycle_time_ms as f64,
+            };
+            n += 1;
+        }
+        i += 1;
+    }
+    out
+};
 
 /// The DBC descriptor of a schedule row.
 pub fn descriptor(entry: &ScheduleEntry) -> Option<&'static MessageDesc> {

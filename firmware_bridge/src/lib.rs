@@ -30,6 +30,10 @@
 //!   nodes use to log everything they send and receive.
 //! - [`busload`]: exact stuffed bit counts per frame (CAN CRC-15) and the bus load of a schedule.
 //! - [`scan`]: the range-scan request and result that travel beside the CAN bus (JSON lines).
+//! - [`profile`]: a machine profile (TOML naming a gateway's DBC and the mapping of every canonical
+//!   signal onto it) and the translation between canonical and wire frames at the transport boundary.
+//! - [`wire_dbc`]: a DBC loaded at run time and its signal codec (Intel and Motorola, integers and
+//!   floats, 11- and 29-bit ids, multiplexing, value tables), for another gateway's messages.
 //!
 //! # Data flow
 //!
@@ -42,9 +46,11 @@
 //! The wire protocol itself is documented in `docs/protocol.md`.
 
 pub mod busload;
+pub mod profile;
 pub mod scan;
 pub mod trace;
 pub mod transport;
+pub mod wire_dbc;
 
 pub use gateway_core::{address_claim, bus, dbc, frame, gateway, id, messages, secoc, time};
 

@@ -42,6 +42,12 @@ use crate::time::Instant;
 pub const ADDRESS_CLAIMED_PGN: u32 = ac::PGN;
 /// PGN 59904 (`0xEA00`): Request.
 pub const REQUEST_PGN: u32 = dbc::request_pgn::PGN;
+/// Whether `pgn` is J1939 network management (Address Claimed, Request): the same on every J1939
+/// network, so a machine profile passes these frames through unchanged instead of mapping them.
+pub const fn is_network_management(pgn: u32) -> bool {
+    pgn == ADDRESS_CLAIMED_PGN || pgn == REQUEST_PGN
+}
+
 /// The null address: the source of Cannot Claim.
 pub const NULL_ADDRESS: u8 = 0xFE;
 /// How long a claim must stand uncontested before a node sends anything else: 250 ms (J1939-81).

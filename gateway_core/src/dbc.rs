@@ -58,6 +58,9 @@ pub struct MessageDesc {
     pub dlc: u8,
     /// Sending node in the DBC (`Controller` or `Gateway`).
     pub transmitter: &'static str,
+    /// Transmission period in the DBC (`GenMsgCycleTime`), ms; 0 for the event messages (Address
+    /// Claimed and Request, sent at start, in a contest and on request: never on a schedule).
+    pub cycle_time_ms: u16,
     /// Signals in DBC order.
     pub signals: &'static [SignalDesc],
 }

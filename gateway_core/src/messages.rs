@@ -37,6 +37,17 @@ macro_rules! signal_enum {
         }
 
         impl $name {
+            /// Every state, in the order of their raw values.
+            pub const ALL: &'static [Self] = &[Self::$first, $( Self::$variant, )*];
+
+            /// The state's name in the DBC's value table of its signal (a test checks the table).
+            pub const fn name(self) -> &'static str {
+                match self {
+                    Self::$first => stringify!($first),
+                    $( Self::$variant => stringify!($variant), )*
+                }
+            }
+
             fn from_raw(raw: i64) -> Self {
                 match raw {
                     $( $value => Self::$variant, )*

@@ -40,8 +40,9 @@ use controller::scan_client::{NoScans, ScanClient, ScanService};
 use controller::session::{NoObserver, ScanSource, SessionDriver, SessionEvent, SessionObserver};
 use controller::session_state::{SessionIdentity, fingerprint};
 use controller::state_file::StateFileError;
+use firmware_bridge::profile::Profile;
 use firmware_bridge::trace::Recorder;
-use firmware_bridge::transport::{Bus, LinkStatus, SocketCanBus, TimeScale};
+use firmware_bridge::transport::{Bus, LinkStatus, ProfileBus, SocketCanBus, TimeScale};
 use planner::autodig::AutodigMaps;
 use planner::machine::MachineConfig;
 use planner::plan::PlannerConfig;
@@ -119,6 +120,11 @@ pub struct RunArgs {
     /// built-in default.
     #[arg(long, value_name = "DIR")]
     pub config_dir: Option<PathBuf>,
+    /// Machine profile (TOML naming the gateway's DBC and the mapping, docs/machine-profile.md):
+    /// speak that gateway's messages on the bus; the trace records them. Default: the project's own
+    /// protocol (excavator.dbc).
+    #[arg(long, value_name = "FILE")]
+    pub profile: Option<PathBuf>,
 }
 
 /// The files `--config-dir` supplies, by name in the folder.
@@ -415,6 +421,13 @@ pub async fn run(args: RunArgs) -> anyhow::Result<()> {
 /// # Errors
 /// As [`run`].
 pub async fn run_observed(args: RunArgs, observer: &mut dyn SessionObserver) -> anyhow::Result<()> {
+    // A bad profile stops the run before it touches the bus.
+    let profile = args
+        .profile
+        .as_deref()
+        .map(Profile::load)
+        .transpose()?
+        .map(std::sync::Arc::new);
     let link = check_link(&args)?;
     let mut bus = SocketCanBus::open(&args.iface)
         .with_context(|| format!("opening CAN interface {}", args.iface))?;
@@ -435,7 +448,19 @@ pub async fn run_observed(args: RunArgs, observer: &mut dyn SessionObserver) -> 
         session_log: true,
         link: Some(link),
     };
-    run_on_observed(
+    let Some(profile) = profile else {
+        return run_on_observed(
+            &bus,
+            trace,
+            &args,
+            console,
+            controller::run::shutdown_signal(),
+            observer,
+        )
+        .await;
+    };
+    let bus = ProfileBus::new(bus, profile);
+    let result = run_on_observed(
         &bus,
         trace,
         &args,
@@ -443,7 +468,9 @@ pub async fn run_observed(args: RunArgs, observer: &mut dyn SessionObserver) -> 
         controller::run::shutdown_signal(),
         observer,
     )
-    .await
+    .await;
+    bus.log_stats();
+    result
 }
 
 /// The link of `--iface` over netlink, refused when it is down, or in listen-only mode without

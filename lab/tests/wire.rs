@@ -9,8 +9,11 @@
 
 use std::time::Duration;
 
+use std::sync::Arc;
+
+use firmware_bridge::profile::Profile;
 use firmware_bridge::trace::Recorder;
-use firmware_bridge::transport::{InProcessBus, TimeScale};
+use firmware_bridge::transport::{InProcessBus, ProfileBus, TimeScale};
 use lab::demo::{DemoArgs, DemoStrategy, DemoSummary};
 use lab::wire::RunArgs;
 use vcan_sim::node::MachineNode;
@@ -59,6 +62,15 @@ struct Simulator {
 }
 
 async fn simulator(out: &std::path::Path, time_scale: TimeScale) -> Simulator {
+    simulator_with(out, time_scale, None).await
+}
+
+/// As [`simulator`], speaking `profile`'s wire protocol on the bus when one is given.
+async fn simulator_with(
+    out: &std::path::Path,
+    time_scale: TimeScale,
+    profile: Option<Arc<Profile>>,
+) -> Simulator {
     let scan_addr = free_port();
     let (sim, _, _) = lab::demo::setup(&DemoArgs::planned(out.to_path_buf())).unwrap();
     let bus = InProcessBus::with_wall_clock("vcan0");
@@ -75,10 +87,16 @@ async fn simulator(out: &std::path::Path, time_scale: TimeScale) -> Simulator {
     let machine = MachineNode::new(sim.build().unwrap()).with_security(&key, rand_seed());
     let (stop, sim_stopped) = tokio::sync::oneshot::channel::<()>();
     let task = tokio::spawn(async move {
-        vcan_sim::realtime::run_on(&sim_node, machine, options, async {
+        let stopped = async {
             let _ = sim_stopped.await;
-        })
-        .await
+        };
+        match profile {
+            Some(p) => {
+                let bus = ProfileBus::new(sim_node, p);
+                vcan_sim::realtime::run_on(&bus, machine, options, stopped).await
+            }
+            None => vcan_sim::realtime::run_on(&sim_node, machine, options, stopped).await,
+        }
     });
     // The scan socket is bound by the simulator's task.
     tokio::time::sleep(Duration::from_millis(200)).await;
@@ -129,6 +147,7 @@ fn planned_run(
         resume: None,
         control_socket: None,
         config_dir: None,
+        profile: None,
     }
 }
 
@@ -151,6 +170,29 @@ fn recorded_controller(
     (ctl_node, trace)
 }
 
+/// Runs the controller on `bus` until its session ends, then stops `sim`; the simulator's summary.
+async fn run_to_the_end<B: firmware_bridge::Bus>(
+    bus: &B,
+    trace: lab::wire::SessionTrace,
+    args: &RunArgs,
+    sim: Simulator,
+) -> vcan_sim::realtime::RunSummary {
+    // A budget far above a session of two digs (~2 x 30 s at 2x); the test fails if it is what stops
+    // it.
+    let budget = tokio::time::sleep(Duration::from_secs(240));
+    lab::wire::run_on(
+        bus,
+        Some(trace),
+        args,
+        lab::wire::RunConsole::default(),
+        budget,
+    )
+    .await
+    .unwrap();
+    let _ = sim.stop.send(());
+    sim.task.await.unwrap().unwrap()
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_planned_session_runs_over_a_bus_in_scaled_real_time() {
     let dir = tempfile::tempdir().unwrap();
@@ -159,19 +201,7 @@ async fn the_planned_session_runs_over_a_bus_in_scaled_real_time() {
     let sim = simulator(&out, time_scale).await;
     let (ctl_node, trace) = recorded_controller(&sim, &out);
     let args = planned_run(&sim, 2, time_scale, &out);
-    // A budget far above the session's ~2 x 30 s at 2x; the test fails if it is what stops it.
-    let budget = tokio::time::sleep(Duration::from_secs(240));
-    lab::wire::run_on(
-        &ctl_node,
-        Some(trace),
-        &args,
-        lab::wire::RunConsole::default(),
-        budget,
-    )
-    .await
-    .unwrap();
-    let _ = sim.stop.send(());
-    let summary = sim.task.await.unwrap().unwrap();
+    let summary = run_to_the_end(&ctl_node, trace, &args, sim).await;
     assert!(summary.simulated_s > 10.0, "{summary:?}");
 
     let s: DemoSummary =
@@ -199,6 +229,58 @@ async fn the_planned_session_runs_over_a_bus_in_scaled_real_time() {
         assert!(out.join(f).is_file(), "{f} missing");
     }
     assert!(std::fs::read_dir(out.join("scans")).unwrap().count() >= 2);
+}
+
+/// The planned session with both ends on the example profile of another gateway
+/// (`examples/other_gateway.toml`): the bus carries only that gateway's 11-bit frames, the session
+/// digs, and the trace decodes through the profile.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_planned_session_runs_over_another_gateways_protocol() {
+    let example = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/other_gateway.toml"
+    );
+    let profile = Arc::new(Profile::load(std::path::Path::new(example)).unwrap());
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let time_scale = TimeScale::new(2.0).unwrap();
+    let sim = simulator_with(&out, time_scale, Some(profile.clone())).await;
+    let (ctl_node, trace) = recorded_controller(&sim, &out);
+    let ctl_bus = ProfileBus::new(ctl_node, profile.clone());
+    let args = planned_run(&sim, 1, time_scale, &out);
+    let summary = run_to_the_end(&ctl_bus, trace, &args, sim).await;
+    assert!(summary.simulated_s > 5.0, "{summary:?}");
+    assert_eq!(
+        ctl_bus.stats(),
+        Default::default(),
+        "every frame translated"
+    );
+
+    let s: DemoSummary =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    assert_ne!(s.end, "stopped", "the session ran out of its budget: {s:?}");
+    assert_eq!(s.totals.digs, 1, "{:?}", s.totals);
+    assert!(s.totals.finished);
+
+    // The trace holds the wire: the example gateway's 11-bit ids only, each one translating back.
+    let text = std::fs::read_to_string(out.join("trace.log")).unwrap();
+    let (mut frames, mut angles) = (0, 0);
+    for line in text.lines() {
+        let rec = firmware_bridge::trace::parse_line(line).unwrap();
+        assert!(!rec.frame.is_extended(), "{line}");
+        let canonical = profile.from_wire(&rec.frame).unwrap();
+        let decoded = firmware_bridge::Message::decode(&canonical);
+        if let Ok(d) = decoded
+            && matches!(d.message, firmware_bridge::Message::JointAngles(_))
+        {
+            angles += 1;
+        }
+        frames += 1;
+    }
+    assert!(
+        frames > 1000 && angles > 500,
+        "{frames} frames, {angles} joint angles"
+    );
 }
 
 /// Every `ControllerStatus` the controller sent, in trace order.
@@ -374,6 +456,7 @@ fn fixed_args(config: &std::path::Path, digs: Option<u32>) -> RunArgs {
         resume: None,
         control_socket: None,
         config_dir: None,
+        profile: None,
     }
 }
 

@@ -7,10 +7,11 @@
 //!
 //! - [`LiveArgs`]: the command-line options (`--live [ADDR]`, `--pace FACTOR`, `--live-queue N`).
 //! - [`stream`]: [`LiveStream`], a `controller::session::SessionObserver`. On the control loop it only
-//!   copies the estimate and status of each step into a bounded queue (dropped and counted when
-//!   full) and paces virtual time when asked; a publisher thread turns the queue into Foxglove
-//!   messages ([`trace_tools::view`], the schemas `trace convert --to mcap` writes too) on the
-//!   server's channels.
+//!   copies what the publisher needs of each step (plain values: the estimate's angles, pose,
+//!   pressures and tip, the status, the command) into a preallocated single-producer queue (dropped
+//!   and counted when full; no allocation, lock or system call) and paces virtual time when asked; a
+//!   publisher thread turns the queue into Foxglove messages ([`trace_tools::view`], the schemas
+//!   `trace convert --to mcap` writes too) on the server's channels.
 //! - [`page`]: the operator page (static assets in `live/page/`), served over HTTP on the port after
 //!   the WebSocket's: the publisher keeps its state, the page follows it as server-sent events and
 //!   sends the operator commands of the session's control path (`SessionObserver::operator_control`).
@@ -18,8 +19,8 @@
 //! # Data flow
 //!
 //! ```text
-//! control loop --SessionObserver::after_step--> Update (MachineState, status, command, events)
-//!     --bounded queue (try_send; full: dropped, counted)--> publisher thread --view::*--> channels
+//! control loop --SessionObserver::after_step--> Update (step record by value, rare events)
+//!     --rtrb ring buffer (push; full: dropped, counted)--> publisher thread --view::*--> channels
 //!     --foxglove WebSocket server (its own runtime, per-client backlog)--> Foxglove
 //!                   \--page state (at most 10 Hz)--> HTTP server (same runtime) --SSE--> the page
 //! the page --POST /command--> controller::operator::OperatorSender --> the control loop's port

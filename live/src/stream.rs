@@ -3,9 +3,11 @@
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::mpsc::{Receiver, SyncSender, TryRecvError, TrySendError};
 use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
+
+use crossbeam_utils::CachePadded;
+use rtrb::{Consumer, Producer};
 
 use foxglove::messages::{FrameTransforms, Grid, Log, SceneEntity, SceneUpdate, log::Level};
 use foxglove::{Channel, Context, WebSocketServer, WebSocketServerHandle};
@@ -15,7 +17,6 @@ use planner::terrain::TerrainGrid;
 
 use controller::cycle::DigStats;
 use controller::cycle::{Action, CycleCommand, Phase};
-use controller::estimate::MachineState;
 use controller::node::ControllerNode;
 use controller::operator::OperatorSender;
 use controller::planned::PlannedSession;
@@ -35,14 +36,15 @@ const LATCH_EVERY: Duration = Duration::from_secs(1);
 /// and about 0.2 s at the demo's virtual-time speed).
 const POLL: Duration = Duration::from_millis(5);
 
-/// One control step's view, copied on the control loop.
+/// One control step as the publisher needs it: plain values copied on the control loop (no
+/// allocation, no conversion); the publisher derives the messages and the page's state from it.
 #[derive(Debug, Clone, Copy)]
-struct StepView {
-    time_ns: u64,
-    state: MachineState,
+struct StepRecord {
+    time_s: f64,
+    estimate: view::EstimateSample,
     status: ControllerStatus,
+    /// The safety state (with the active fault, if any).
     safety: SafetyState,
-    fault: Option<Fault>,
     fault_count: u64,
     command: CycleCommand,
     action: Option<Action>,
@@ -50,10 +52,15 @@ struct StepView {
     stopping: bool,
 }
 
-/// What the control loop hands to the publisher.
+/// What the control loop hands to the publisher. A step is carried by value in the queue's
+/// preallocated slot, so handing it over allocates nothing; the other updates are rare.
+#[expect(
+    clippy::large_enum_variant,
+    reason = "the step, the common update, is carried by value so the control loop never allocates"
+)]
 #[derive(Debug)]
 enum Update {
-    Step(Box<StepView>),
+    Step(StepRecord),
     Terrain(u64, Box<TerrainGrid>),
     Scene(u64, Vec<SceneEntity>),
     Log(u64, Level, String),
@@ -67,15 +74,17 @@ enum Update {
     Finished(String),
 }
 
-/// Counts of a stream.
+/// Counts of a stream. `queued` and `dropped` are written by the control loop only (a plain store,
+/// no read-modify-write), `published` by the publisher only, each on a cache line of its own so that
+/// neither thread's count takes the line from the other.
 #[derive(Debug, Default)]
 pub struct LiveStats {
     /// Updates handed to the publisher.
-    pub queued: AtomicU64,
+    pub queued: CachePadded<AtomicU64>,
     /// Updates dropped because the queue was full (the publisher or the client was behind).
-    pub dropped: AtomicU64,
+    pub dropped: CachePadded<AtomicU64>,
     /// Foxglove messages the publisher logged on its channels.
-    pub published: AtomicU64,
+    pub published: CachePadded<AtomicU64>,
 }
 
 /// The publisher's channels.
@@ -112,17 +121,18 @@ struct Publisher {
 }
 
 impl Publisher {
-    /// Drains the queue every [`POLL`] rather than waiting on it: a sender never has to wake a
-    /// waiting receiver, so handing over an update costs the control loop no system call.
-    fn run(mut self, rx: &Receiver<Update>) {
+    /// Drains the queue every [`POLL`] rather than waiting on it: the control loop never has to wake
+    /// a waiting publisher, so handing over an update costs it no system call. Returns once the
+    /// stream has closed the queue and what it queued is published.
+    fn run(mut self, mut rx: Consumer<Update>) {
         let mut latched_at = Instant::now();
         loop {
-            loop {
-                match rx.try_recv() {
-                    Ok(update) => self.publish(update),
-                    Err(TryRecvError::Empty) => break,
-                    Err(TryRecvError::Disconnected) => return,
-                }
+            let closed = rx.is_abandoned();
+            while let Ok(update) = rx.pop() {
+                self.publish(update);
+            }
+            if closed {
+                return;
             }
             self.page.flush(false);
             if latched_at.elapsed() >= LATCH_EVERY {
@@ -140,15 +150,17 @@ impl Publisher {
     fn publish(&mut self, update: Update) {
         match update {
             Update::Step(step) => {
-                let t = step.time_ns;
+                let t = view::time_ns(step.time_s);
                 self.last_time_ns = t;
-                let st = &step.state;
-                let tf = view::machine_transforms(&self.kin, &st.joints, st.swing_rad, &st.pose, t);
+                let e = &step.estimate;
+                let tf = view::machine_transforms(&self.kin, &e.joints, e.swing_rad, &e.pose, t);
                 self.channels.tf.log_with_time(&tf, t);
                 self.channels.signals.log_with_time(&step_signals(&step), t);
                 self.count(2);
-                self.page
-                    .step(&page_step(&step), step.fault.map(|f| f.to_string()));
+                self.page.step(
+                    &page_step(&step),
+                    active_fault(step.safety).map(|f| f.to_string()),
+                );
             }
             Update::Terrain(t, grid) => {
                 self.page.terrain(&grid);
@@ -204,14 +216,21 @@ fn safety_name(s: SafetyState) -> &'static str {
     }
 }
 
+/// The active fault of a safety state (as `Safety::active_fault`).
+fn active_fault(s: SafetyState) -> Option<Fault> {
+    match s {
+        SafetyState::Faulted { fault, .. } => Some(fault),
+        _ => None,
+    }
+}
+
 /// The page's view of a step.
-fn page_step(step: &StepView) -> PageStep {
-    let st = &step.state;
-    let tip = st
-        .pose
-        .world_from_base(st.swing_rad, st.tip.x_m, st.tip.z_m);
+fn page_step(step: &StepRecord) -> PageStep {
+    let e = &step.estimate;
+    let [tip_x_m, tip_z_m] = e.tip_m;
+    let tip = e.pose.world_from_base(e.swing_rad, tip_x_m, tip_z_m);
     PageStep {
-        time_s: step.time_ns as f64 * 1e-9,
+        time_s: step.time_s,
         activity: step.status.activity,
         stage: step.status.stage,
         digs: step.status.dig_index,
@@ -220,7 +239,7 @@ fn page_step(step: &StepView) -> PageStep {
         paused: step.paused,
         stopping: step.stopping,
         action: step.action,
-        pose: [st.pose.x_m, st.pose.y_m, st.pose.heading_rad],
+        pose: [e.pose.x_m, e.pose.y_m, e.pose.heading_rad],
         tip_m: tip,
         valves: valve_fractions(step.command),
     }
@@ -237,12 +256,12 @@ fn valve_fractions(command: CycleCommand) -> [Option<f64>; 6] {
 }
 
 /// The `/signals` sample of a step: the estimate, the status the controller reports, its command.
-fn step_signals(step: &StepView) -> view::Signals {
-    let mut s = view::estimate_signals(&step.state);
+fn step_signals(step: &StepRecord) -> view::Signals {
+    let mut s = view::estimate_signals(&step.estimate);
     view::apply_status(&mut s, &step.status);
     s.valve_command = view::ValveCommands::from_array(valve_fractions(step.command));
     s.safety_state = Some(safety_name(step.safety).to_owned());
-    s.fault = step.fault.map(|f| f.to_string());
+    s.fault = active_fault(step.safety).map(|f| f.to_string());
     s.fault_count = Some(step.fault_count);
     s
 }
@@ -250,7 +269,10 @@ fn step_signals(step: &StepView) -> view::Signals {
 /// The live view of a session (crate docs): a Foxglove WebSocket server and the session observer
 /// that feeds it.
 pub struct LiveStream {
-    tx: Option<SyncSender<Update>>,
+    tx: Option<Producer<Update>>,
+    /// The counts of [`LiveStats`], kept here and stored there (this is their only writer).
+    queued: u64,
+    dropped: u64,
     stats: Arc<LiveStats>,
     pace: Option<f64>,
     wall_start: Option<(Instant, f64)>,
@@ -267,7 +289,6 @@ pub struct LiveStream {
     floor_sent: bool,
     kin: Kinematics,
     track_length_m: f64,
-    last_time_s: f64,
 }
 
 impl std::fmt::Debug for LiveStream {
@@ -351,7 +372,11 @@ impl LiveStream {
             }
         });
         let stats = Arc::new(LiveStats::default());
-        let (tx, rx) = std::sync::mpsc::sync_channel(args.live_queue);
+        let (mut tx, mut rx) = rtrb::RingBuffer::new(args.live_queue);
+        // Touch every slot once now, so that the control loop never takes a page fault on the
+        // queue's memory (it is allocated untouched).
+        while tx.push(Update::OperatorControl).is_ok() {}
+        while rx.pop().is_ok() {}
         let publisher = Publisher {
             channels: Channels::new(&ctx),
             kin: kin.clone(),
@@ -366,10 +391,12 @@ impl LiveStream {
             .spawn(move || {
                 // The context lives as long as the publisher logs on its channels.
                 let _ctx = ctx;
-                publisher.run(&rx);
+                publisher.run(rx);
             })?;
         Ok(Self {
             tx: Some(tx),
+            queued: 0,
+            dropped: 0,
             stats,
             pace: args.pace,
             wall_start: None,
@@ -386,7 +413,6 @@ impl LiveStream {
             floor_sent: false,
             kin,
             track_length_m: machine.tracks.length_m,
-            last_time_s: 0.0,
         })
     }
 
@@ -406,17 +432,17 @@ impl LiveStream {
     }
 
     /// Hands an update to the publisher without waiting: a full queue drops it (counted).
-    fn offer(&self, update: Update) {
-        let Some(tx) = &self.tx else {
+    #[inline]
+    fn offer(&mut self, update: Update) {
+        let Some(tx) = &mut self.tx else {
             return;
         };
-        match tx.try_send(update) {
-            Ok(()) => {
-                self.stats.queued.fetch_add(1, Ordering::Relaxed);
-            }
-            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
-                self.stats.dropped.fetch_add(1, Ordering::Relaxed);
-            }
+        if tx.push(update).is_ok() {
+            self.queued += 1;
+            self.stats.queued.store(self.queued, Ordering::Relaxed);
+        } else {
+            self.dropped += 1;
+            self.stats.dropped.store(self.dropped, Ordering::Relaxed);
         }
     }
 
@@ -432,8 +458,58 @@ impl LiveStream {
         }
     }
 
-    /// Session events as log lines and scene entities.
-    fn events(&self, t: u64, node: &ControllerNode, events: &[SessionEvent]) {
+    /// The machine's scene on the first step, the floor on the first step of a planned session.
+    #[cold]
+    #[inline(never)]
+    fn first_steps(
+        &mut self,
+        time_s: f64,
+        node: &ControllerNode,
+        session: Option<&PlannedSession>,
+    ) {
+        let t = view::time_ns(time_s);
+        if !self.scene_sent {
+            self.offer(Update::Scene(
+                t,
+                view::machine_entities(&self.kin, self.track_length_m, t),
+            ));
+            self.scene_sent = true;
+        }
+        if let Some(s) = session {
+            let pose: MachinePose = node.estimator().state().pose;
+            let floor_z_m = s.planner().config().floor_z_m;
+            self.offer(Update::Scene(
+                t,
+                vec![view::floor_entity(floor_z_m, [pose.x_m, pose.y_m], 30.0, t)],
+            ));
+            self.floor_sent = true;
+        }
+    }
+
+    /// A fault that came or went, as a log line.
+    #[cold]
+    #[inline(never)]
+    fn fault_changed(&mut self, time_s: f64, fault: Option<Fault>) {
+        let t = view::time_ns(time_s);
+        if let Some(f) = fault {
+            self.offer(Update::Log(t, Level::Error, format!("fault: {f}")));
+        } else {
+            self.offer(Update::Log(t, Level::Info, "fault cleared".to_owned()));
+        }
+        self.last_fault = fault;
+    }
+
+    /// Session events as log lines and scene entities, and the terrain map after a scan.
+    #[cold]
+    #[inline(never)]
+    fn events(
+        &mut self,
+        time_s: f64,
+        node: &ControllerNode,
+        session: Option<&PlannedSession>,
+        events: &[SessionEvent],
+    ) {
+        let t = view::time_ns(time_s);
         for event in events {
             match event {
                 SessionEvent::Scanned(scan) => self.offer(Update::Log(
@@ -499,6 +575,14 @@ impl LiveStream {
                 }
             }
         }
+        if events.iter().any(|e| matches!(e, SessionEvent::Scanned(_))) {
+            let terrain = session
+                .map(PlannedSession::terrain)
+                .or_else(|| node.cycle().terrain());
+            if let Some(grid) = terrain {
+                self.offer(Update::Terrain(t, Box::new(grid.clone())));
+            }
+        }
     }
 }
 
@@ -509,6 +593,8 @@ impl SessionObserver for LiveStream {
         }
     }
 
+    /// The steady state is one copy of the step into the queue; the rest (the first step's scene,
+    /// a fault that changed, session events) is rare and kept out of the common path.
     fn after_step(
         &mut self,
         time_s: f64,
@@ -516,56 +602,28 @@ impl SessionObserver for LiveStream {
         session: Option<&PlannedSession>,
         events: &[SessionEvent],
     ) {
-        let t = view::time_ns(time_s);
-        self.last_time_s = time_s;
-        if !self.scene_sent {
-            self.offer(Update::Scene(
-                t,
-                view::machine_entities(&self.kin, self.track_length_m, t),
-            ));
-            self.scene_sent = true;
-        }
-        if !self.floor_sent
-            && let Some(s) = session
-        {
-            let pose: MachinePose = node.estimator().state().pose;
-            let floor_z_m = s.planner().config().floor_z_m;
-            self.offer(Update::Scene(
-                t,
-                vec![view::floor_entity(floor_z_m, [pose.x_m, pose.y_m], 30.0, t)],
-            ));
-            self.floor_sent = true;
+        if !self.scene_sent || (!self.floor_sent && session.is_some()) {
+            self.first_steps(time_s, node, session);
         }
         let fault = node.fault();
         if fault != self.last_fault {
-            if let Some(f) = fault {
-                self.offer(Update::Log(t, Level::Error, format!("fault: {f}")));
-            } else {
-                self.offer(Update::Log(t, Level::Info, "fault cleared".to_owned()));
-            }
-            self.last_fault = fault;
+            self.fault_changed(time_s, fault);
         }
-        self.events(t, node, events);
-        if events.iter().any(|e| matches!(e, SessionEvent::Scanned(_))) {
-            let terrain = session
-                .map(PlannedSession::terrain)
-                .or_else(|| node.cycle().terrain());
-            if let Some(grid) = terrain {
-                self.offer(Update::Terrain(t, Box::new(grid.clone())));
-            }
+        if !events.is_empty() {
+            self.events(time_s, node, session, events);
         }
-        self.offer(Update::Step(Box::new(StepView {
-            time_ns: t,
-            state: *node.state(),
+        let safety = node.safety();
+        self.offer(Update::Step(StepRecord {
+            time_s,
+            estimate: view::EstimateSample::of(node.state()),
             status: node.bus_status(),
-            safety: node.safety().state(),
-            fault,
-            fault_count: node.safety().fault_count(),
+            safety: safety.state(),
+            fault_count: safety.fault_count(),
             command: node.last_command(),
             action: node.action().copied(),
             paused: node.cycle().paused(),
             stopping: node.cycle().stop_requested(),
-        })));
+        }));
         self.pace_to(time_s);
     }
 
@@ -590,7 +648,7 @@ impl SessionObserver for LiveStream {
 
 impl Drop for LiveStream {
     fn drop(&mut self) {
-        // Closing the queue ends the publisher once it has sent what is queued.
+        // Closing the queue ends the publisher once it has published what is queued.
         self.tx = None;
         if let Some(h) = self.publisher.take()
             && h.join().is_err()

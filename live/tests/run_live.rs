@@ -95,6 +95,7 @@ fn run_serves_the_page_and_its_estop_reaches_the_run_loop() {
         resume: None,
         control_socket: None,
         config_dir: None,
+        profile: None,
     };
     // The live view has its own runtime: started outside the session's.
     let mut stream = live::LiveStream::start(

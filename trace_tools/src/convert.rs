@@ -557,7 +557,7 @@ impl ViewWriter {
         }
         let tf = view::machine_transforms(&self.kin, &st.joints, st.swing_rad, &st.pose, t);
         self.write(writer, self.tf, t, &tf)?;
-        let mut signals = view::estimate_signals(&st);
+        let mut signals = view::estimate_signals(&view::EstimateSample::of(&st));
         signals.valve_command = view::ValveCommands::from_array(self.valves);
         if let Some(s) = &self.status {
             view::apply_status(&mut signals, s);

@@ -11,6 +11,10 @@
 //! invalid values); when [`Message::decode`] rejects the frame, its reason follows after `!!` (a bad
 //! heartbeat checksum, a wrong DLC, a signal a receiver would refuse). Frames that are not project
 //! messages say what they are (`unknown id`, `error frame: BusOff`, `remote frame`, ...).
+//!
+//! With `--profile FILE` (a machine profile, `docs/machine-profile.md`) the trace holds that
+//! gateway's wire frames: each line shows the wire frame as read and decodes the project's message it
+//! carries, in the project's units; a frame the profile does not map says so.
 
 use std::fmt::Write as _;
 use std::io::{self, BufRead, Write};
@@ -18,6 +22,7 @@ use std::io::{self, BufRead, Write};
 use anyhow::Context as _;
 use firmware_bridge::dbc;
 use firmware_bridge::frame::{CanFrame, CanId, FrameKind};
+use firmware_bridge::profile::Profile;
 use firmware_bridge::trace::{Direction, TraceRecord, format_frame};
 use firmware_bridge::transport::BusFault;
 use firmware_bridge::{J1939Id, Message};
@@ -52,6 +57,9 @@ pub struct DecodeArgs {
     /// shows frames live).
     #[arg(long)]
     pub line_buffered: bool,
+    /// Machine profile the trace was recorded with (`run --profile`, `excavator-sim --profile`).
+    #[arg(long, value_name = "FILE")]
+    pub profile: Option<std::path::PathBuf>,
 }
 
 /// What [`Decoder`] shows.
@@ -141,6 +149,7 @@ impl DecodeFilter {
 pub struct Decoder {
     filter: DecodeFilter,
     first_ns: Option<u64>,
+    profile: Option<std::sync::Arc<Profile>>,
 }
 
 impl Decoder {
@@ -149,7 +158,15 @@ impl Decoder {
         Self {
             filter,
             first_ns: None,
+            profile: None,
         }
+    }
+
+    /// Reads the frames as `profile`'s wire frames and decodes the project's messages they carry.
+    #[must_use]
+    pub fn with_profile(mut self, profile: std::sync::Arc<Profile>) -> Self {
+        self.profile = Some(profile).filter(|p| !p.is_identity());
+        self
     }
 
     /// Appends the decoded line for `rec` (without newline) to `out`; returns false (and appends
@@ -164,8 +181,18 @@ impl Decoder {
                 return false;
             }
         }
-        let frame = &rec.frame;
-        let known = signals::message_of(frame);
+        let wire = &rec.frame;
+        let (translated, unmapped) = match self.profile.as_deref().map(|p| p.from_wire(wire)) {
+            Some(Ok(canonical)) => (canonical, None),
+            Some(Err(e)) => (*wire, Some(e)),
+            None => (*wire, None),
+        };
+        let frame = &translated;
+        let known = if unmapped.is_some() {
+            None
+        } else {
+            signals::message_of(frame)
+        };
         if let Some(sa) = self.filter.source_address {
             match frame.id() {
                 CanId::Extended(id) if !frame.is_error() && (id & 0xFF) as u8 == sa => {}
@@ -183,7 +210,7 @@ impl Decoder {
         out.push_str(") ");
         out.push_str(&rec.interface);
         out.push(' ');
-        push_frame(frame, out);
+        push_frame(wire, out);
         match rec.direction {
             Some(Direction::Receive) => out.push_str(" R"),
             Some(Direction::Transmit) => out.push_str(" T"),
@@ -194,7 +221,12 @@ impl Decoder {
             Some((msg_index, desc)) => {
                 self.format_message(msg_index, desc, frame, out);
             }
-            None => describe_other(frame, out),
+            None => match (&unmapped, self.profile.as_deref()) {
+                (Some(e), Some(p)) => {
+                    let _ = write!(out, "not in profile {}: {e}", p.origin());
+                }
+                _ => describe_other(frame, out),
+            },
         }
         true
     }
@@ -443,7 +475,22 @@ pub fn decode_stream<R: BufRead>(
     diag: &mut dyn Write,
     line_flush: bool,
 ) -> anyhow::Result<DecodeSummary> {
-    let mut decoder = Decoder::new(filter);
+    decode_stream_with(input, Decoder::new(filter), strict, out, diag, line_flush)
+}
+
+/// As [`decode_stream`] with a given decoder (a profile's, [`Decoder::with_profile`]).
+///
+/// # Errors
+/// As [`decode_stream`].
+pub fn decode_stream_with<R: BufRead>(
+    input: R,
+    decoder: Decoder,
+    strict: bool,
+    out: &mut dyn Write,
+    diag: &mut dyn Write,
+    line_flush: bool,
+) -> anyhow::Result<DecodeSummary> {
+    let mut decoder = decoder;
     let mut line = String::with_capacity(256);
     let mut lines_out = 0u64;
     let mut pipe_closed = false;
@@ -491,14 +538,18 @@ pub fn run(args: &DecodeArgs) -> anyhow::Result<()> {
         args.from,
         args.to,
     )?;
+    let mut decoder = Decoder::new(filter);
+    if let Some(path) = &args.profile {
+        decoder = decoder.with_profile(std::sync::Arc::new(Profile::load(path)?));
+    }
     let reader = input::open(&args.input.file)?;
     let line_flush = args.line_buffered || input::is_stdin(&args.input.file);
     let stdout = io::stdout();
     let mut out = io::BufWriter::with_capacity(64 * 1024, stdout.lock());
     let mut diag = io::stderr();
-    decode_stream(
+    decode_stream_with(
         reader,
-        filter,
+        decoder,
         args.input.strict,
         &mut out,
         &mut diag,
@@ -638,6 +689,48 @@ mod tests {
             push_decimal(scaled, pow, decimals, &mut out);
             assert_eq!(out, text);
         }
+    }
+
+    #[test]
+    fn a_profile_decodes_the_wire_frames_as_the_project_messages() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../examples/other_gateway.toml"
+        );
+        let profile = std::sync::Arc::new(Profile::load(std::path::Path::new(path)).unwrap());
+        // The boom command of BOOM_HALF as the example gateway's ValveCmd (11-bit id 0x210).
+        let canonical = parse_line(BOOM_HALF).unwrap().frame;
+        let wire = profile.to_wire(&canonical).unwrap();
+        let mut wire_line = String::from("(1700000000.123456) vcan0 ");
+        push_frame(&wire, &mut wire_line);
+        assert!(wire_line.ends_with("210#0FF17D4E20FFFFFF"), "{wire_line}");
+        let text = format!("{wire_line} T\n(1700000000.200000) vcan0 7FF#00\n");
+        let mut out = Vec::new();
+        let decoder = Decoder::new(DecodeFilter::default()).with_profile(profile);
+        decode_stream_with(
+            text.as_bytes(),
+            decoder,
+            true,
+            &mut out,
+            &mut Vec::new(),
+            false,
+        )
+        .unwrap();
+        let out = String::from_utf8(out).unwrap();
+        let lines: Vec<&str> = out.lines().collect();
+        assert_eq!(
+            lines[0],
+            format!(
+                "{wire_line} T :: AuxValveCommand_Boom(PortFlowCommand: 50 %, FreshnessValue: 255, ValveState: Extend, FailSafeMode: Block, PortFlowCommandFine: 50 %, Authenticator: 16777215)"
+            )
+        );
+        assert!(
+            lines[1].ends_with(
+                &(":: not in profile ".to_owned() + path + ": unmapped frame Standard(2047)")
+            ),
+            "{}",
+            lines[1]
+        );
     }
 
     #[test]

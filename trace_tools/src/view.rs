@@ -521,13 +521,53 @@ pub fn finite(v: f64) -> Option<f64> {
     v.is_finite().then_some(v)
 }
 
+/// What the view shows of the controller's estimate (`controller::estimate::MachineState`): the
+/// angles, the pose, the pressures and the tip, as plain values. A live view copies this much on the
+/// control loop and leaves the messages to its publisher.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct EstimateSample {
+    /// Implement joint angles, rad.
+    pub joints: JointAngles,
+    /// Swing angle, rad.
+    pub swing_rad: f64,
+    /// The dead-reckoned world pose of the base.
+    pub pose: MachinePose,
+    /// Head-port pressures `[boom, stick, bucket]`, Pa.
+    pub head_pressure_pa: [f64; 3],
+    /// Rod-port pressures `[boom, stick, bucket]`, Pa.
+    pub rod_pressure_pa: [f64; 3],
+    /// Pump pressures `[pump1, pump2]`, Pa.
+    pub pump_pressure_pa: [f64; 2],
+    /// Bucket tip `[x, z]` in the base frame (forward kinematics), m.
+    pub tip_m: [f64; 2],
+    /// Whether the tip is valid for the current angles.
+    pub derived_valid: bool,
+}
+
+impl EstimateSample {
+    /// The sample of `state`.
+    #[must_use]
+    pub fn of(state: &controller::estimate::MachineState) -> Self {
+        Self {
+            joints: state.joints,
+            swing_rad: state.swing_rad,
+            pose: state.pose,
+            head_pressure_pa: state.head_pressure_pa,
+            rod_pressure_pa: state.rod_pressure_pa,
+            pump_pressure_pa: state.pump_pressure_pa,
+            tip_m: [state.tip.x_m, state.tip.z_m],
+            derived_valid: state.derived_valid,
+        }
+    }
+}
+
 /// The signals the controller's estimate gives: pressures, joint angles, tip.
 #[must_use]
-pub fn estimate_signals(state: &controller::estimate::MachineState) -> Signals {
-    let h = state.head_pressure_pa;
-    let r = state.rod_pressure_pa;
-    let p = state.pump_pressure_pa;
-    let q = state.joints;
+pub fn estimate_signals(e: &EstimateSample) -> Signals {
+    let h = e.head_pressure_pa;
+    let r = e.rod_pressure_pa;
+    let p = e.pump_pressure_pa;
+    let q = e.joints;
     Signals {
         pressure_pa: Pressures {
             boom_head: finite(h[0]),
@@ -543,11 +583,11 @@ pub fn estimate_signals(state: &controller::estimate::MachineState) -> Signals {
             boom: finite(q.boom_rad.to_degrees()),
             stick: finite(q.stick_rad.to_degrees()),
             bucket: finite(q.bucket_rad.to_degrees()),
-            swing: finite(state.swing_rad.to_degrees()),
+            swing: finite(e.swing_rad.to_degrees()),
         },
-        tip_m: state
+        tip_m: e
             .derived_valid
-            .then_some([state.tip.x_m, state.tip.z_m])
+            .then_some(e.tip_m)
             .filter(|t| t.iter().all(|v| v.is_finite())),
         ..Signals::default()
     }
@@ -628,7 +668,7 @@ mod tests {
     #[test]
     fn signals_match_their_schema() {
         let schema: serde_json::Value = serde_json::from_str(SIGNALS_SCHEMA).unwrap();
-        let mut s = estimate_signals(&controller::estimate::MachineState::default());
+        let mut s = estimate_signals(&EstimateSample::default());
         s.pressure_pa.pump1 = finite(f64::NAN);
         let mut buf = Vec::new();
         s.encode(&mut buf).unwrap();

@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! excavator-sim --iface vcan0 [--machine FILE] [--bench FILE] [--seed N] [--effect NAME=VALUE]...
-//!               [--state-log FILE] [--scan-socket ADDR]
+//!               [--state-log FILE] [--scan-socket ADDR] [--profile FILE]
 //! excavator-sim --list-effects [--json]
 //! excavator-sim bench [--seconds S] [--case TEXT] [--repeat N]
 //! ```
@@ -16,7 +16,7 @@ use firmware_bridge::secoc::SessionKey;
 use firmware_bridge::transport::TimeScale;
 use vcan_sim::node::MachineNode;
 use vcan_sim::plant::PHYSICS_DT_S;
-use vcan_sim::realtime::{RealtimeOptions, run};
+use vcan_sim::realtime::{RealtimeOptions, run, run_with_profile};
 use vcan_sim::{SimConfig, effects};
 
 #[derive(Debug, Parser)]
@@ -53,6 +53,10 @@ struct Cli {
     /// the same key. Without it the gateway checks freshness and session only (docs/protocol.md).
     #[arg(long)]
     key_file: Option<PathBuf>,
+    /// Machine profile (TOML naming the gateway's DBC and the mapping, docs/machine-profile.md): speak
+    /// that gateway's messages on the bus. Default: the project's own protocol (excavator.dbc).
+    #[arg(long, value_name = "FILE")]
+    profile: Option<PathBuf>,
     /// Simulated seconds per wall second, 0.1 to 20 (default 1, real time); the controller must run
     /// at the same scale (`excavator-ctl run --time-scale`).
     #[arg(long, value_name = "X", default_value_t = TimeScale::REAL_TIME)]
@@ -270,6 +274,12 @@ fn real_main() -> Result<()> {
         Some(path) => SessionKey::from_file(path)?,
         None => SessionKey::PUBLIC,
     };
+    let profile = cli
+        .profile
+        .as_deref()
+        .map(firmware_bridge::profile::Profile::load)
+        .transpose()?
+        .map(std::sync::Arc::new);
     // Every start is a new series of sessions, so no recording of an earlier run is accepted.
     let session_seed: u64 = rand::random();
     let node = MachineNode::new(config.build().context("building the machine")?)
@@ -291,7 +301,10 @@ fn real_main() -> Result<()> {
                 std::future::pending::<()>().await;
             }
         };
-        run(node, options, shutdown).await
+        match profile {
+            Some(profile) => run_with_profile(node, options, profile, shutdown).await,
+            None => run(node, options, shutdown).await,
+        }
     })?;
     tracing::info!(
         simulated_s = summary.simulated_s,

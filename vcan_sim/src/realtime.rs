@@ -21,7 +21,8 @@ use std::time::Duration;
 
 use tokio::time::Instant;
 
-use firmware_bridge::transport::{Bus, SocketCanBus, TimeScale};
+use firmware_bridge::profile::Profile;
+use firmware_bridge::transport::{Bus, ProfileBus, SocketCanBus, TimeScale};
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
 use tokio::net::TcpListener;
 use tokio::sync::{mpsc, oneshot};
@@ -122,6 +123,25 @@ pub async fn run(
     let bus = SocketCanBus::open(&options.iface)
         .map_err(|e| SimError::Bus(format!("{}: {e}", options.iface)))?;
     run_on(&bus, node, options, shutdown).await
+}
+
+/// As [`run`], speaking `profile`'s wire protocol on the interface: the gateway sees the project's
+/// messages, the bus (and any trace of it) carries the profile's (`docs/machine-profile.md`).
+///
+/// # Errors
+/// As [`run`].
+pub async fn run_with_profile(
+    node: MachineNode,
+    options: RealtimeOptions,
+    profile: std::sync::Arc<Profile>,
+    shutdown: impl Future<Output = ()>,
+) -> Result<RunSummary> {
+    let bus = SocketCanBus::open(&options.iface)
+        .map_err(|e| SimError::Bus(format!("{}: {e}", options.iface)))?;
+    let bus = ProfileBus::new(bus, profile);
+    let summary = run_on(&bus, node, options, shutdown).await;
+    bus.log_stats();
+    summary
 }
 
 /// As [`run`] on any bus (`options.iface` unused): the in-process bus of the lab's tests.

@@ -10,6 +10,9 @@
 //!   methods it has a synchronous `send`/`try_recv` path for single-threaded virtual-time loops, and
 //!   optional fault injection ([`FaultInjection`]: latency in clock time, seeded loss).
 //!
+//! - [`ProfileBus`]: any bus speaking a machine profile's wire protocol ([`crate::profile`]), seen
+//!   by the node above as the canonical protocol.
+//!
 //! - [`link`]: the interface's link over netlink (up, bitrate, state, `restart-ms`, listen-only) and
 //!   whether a controller may start on it.
 //!
@@ -19,12 +22,14 @@
 mod clock;
 mod in_process;
 pub mod link;
+mod profile_bus;
 mod socketcan;
 mod trace_clock;
 
 pub use clock::{Clock, TimeScale, TimeScaleError, VirtualClock};
 pub use in_process::{FaultInjection, InProcessBus, InProcessNode};
 pub use link::{LinkRefusal, LinkStatus};
+pub use profile_bus::{ProfileBus, ProfileStats};
 pub use socketcan::{IdFilter, SendRetry, SocketCanBus, send_with_retry};
 pub use trace_clock::{TraceClock, TraceTimeBase, VIRTUAL_EPOCH_UNIX_NS};
 

@@ -137,3 +137,15 @@ pub fn assert_same(got: &Message, want: &Message) {
         );
     }
 }
+
+/// Asserts two messages are the same variant with every signal value within `tolerance * (1 + |want|)`
+/// (a translation through coarser wire units).
+pub fn assert_close(got: &Message, want: &Message, tolerance: f64) {
+    assert_eq!(got.descriptor().name, want.descriptor().name);
+    for ((name, x), (_, y)) in got.signal_values().iter().zip(&want.signal_values()) {
+        assert!(
+            (x - y).abs() <= tolerance * (1.0 + y.abs()),
+            "{name}: {x} vs {y} ({got:?} vs {want:?})"
+        );
+    }
+}

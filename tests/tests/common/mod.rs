@@ -120,6 +120,11 @@ pub fn start_candump(iface: &str, socket: &CanSocket, log: &std::path::Path) -> 
 impl Session {
     /// Starts candump, the simulator and the controller (with `ctl_args` added to `run`).
     pub fn start(test: &str, ctl_args: &[&str]) -> Self {
+        Self::start_with(test, &[], ctl_args)
+    }
+
+    /// As [`Session::start`], with `sim_args` added to `excavator-sim`.
+    pub fn start_with(test: &str, sim_args: &[&str], ctl_args: &[&str]) -> Self {
         let iface = env::vcan_iface();
         let sim_bin = env::binary("excavator-sim");
         let dir = env::artifacts(test);
@@ -133,23 +138,20 @@ impl Session {
         let scan_addr = format!("127.0.0.1:{}", free_port());
         let key_dir = tempfile::tempdir().unwrap();
         let key_file = hil_tests::plan::write_key_file(key_dir.path());
-        let mut sim = Proc::spawn(
-            "excavator-sim",
-            &sim_bin,
-            &[
-                "--iface",
-                &iface,
-                "--seed",
-                "1",
-                "--state-log",
-                state_log.to_str().unwrap(),
-                "--scan-socket",
-                &scan_addr,
-                "--key-file",
-                key_file.to_str().unwrap(),
-            ],
-            &dir.join("sim.log"),
-        );
+        let mut args = vec![
+            "--iface",
+            &iface,
+            "--seed",
+            "1",
+            "--state-log",
+            state_log.to_str().unwrap(),
+            "--scan-socket",
+            &scan_addr,
+            "--key-file",
+            key_file.to_str().unwrap(),
+        ];
+        args.extend_from_slice(sim_args);
+        let mut sim = Proc::spawn("excavator-sim", &sim_bin, &args, &dir.join("sim.log"));
         assert!(
             sim.wait_for_log("scan socket listening", START_TIMEOUT),
             "excavator-sim did not start: {}",

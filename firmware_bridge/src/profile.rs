@@ -1,0 +1,914 @@
+//! A machine profile: which message and signal of a gateway's DBC carries each quantity the controller
+//! and the simulator exchange, loaded at run time, and the translation between the project's
+//! protocol and that gateway's frames.
+//!
+//! The controller and the simulator speak the project's protocol ([`crate::messages`], compiled from
+//! `excavator.dbc`: the *canonical* frames). A profile names another DBC (the *wire* protocol) and
+//! maps every signal of every canonical message to a wire signal, a constant, and a linear unit
+//! conversion. [`Profile::to_wire`] and [`Profile::from_wire`] translate frames at the transport
+//! boundary, so nothing above the bus changes and a trace of the bus shows the wire frames.
+//!
+//! ```text
+//! node --canonical frame--> Profile::to_wire --wire frame--> bus (trace records this)
+//! node <--canonical frame-- Profile::from_wire <--wire frame-- bus
+//! ```
+//!
+//! # Lossless where it must be
+//!
+//! The control frames (valve commands, position setpoint, heartbeat) carry a freshness value, an
+//! authenticator over the canonical frame's id and bytes, and the heartbeat an alive counter and a
+//! CRC over its canonical bytes ([`crate::secoc`]). The receiving end rebuilds the canonical frame
+//! from the wire frame and checks those, so each of their signals must come through unchanged: the
+//! profile must map it to a wire signal of at least as many bits and the same signedness whose raw
+//! grid is the canonical grid in the wire's units (`wire factor = factor * scale`,
+//! `wire offset = offset * scale + conversion offset`), or to a constant that the sender always
+//! uses. A profile that does not is refused at load. Sensor and status frames may lose resolution
+//! (degrees in hundredths, say); J1939 "not available" values map to the wire signal's
+//! all-ones (unsigned) or largest (signed) value and back.
+//!
+//! # The file
+//!
+//! ```toml
+//! dbc = "other_gateway.dbc"             # relative to this file
+//!
+//! [messages.JointAngles]                # a canonical message
+//! wire = "ArmAngles"                    # the wire message carrying it
+//! [messages.JointAngles.signals]
+//! BoomAngle = { signal = "BoomDeg", scale = 57.29577951308232 }   # wire = canonical * scale + offset
+//! ```
+//!
+//! A canonical signal left out maps to the wire signal of the same name with no conversion. Every
+//! canonical message must be mapped, except J1939 network management (Address Claimed, Request:
+//! [`crate::address_claim::is_network_management`]), which is the same on every J1939 network and
+//! whose source address is part of its meaning (a Cannot Claim comes from `0xFE`, a claim from
+//! whoever claims): those frames pass through unchanged in both directions and may not be mapped.
+//! `mux` picks the multiplexor value when the wire message is multiplexed. The format is documented
+//! in `docs/machine-profile.md`.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+use toml::Spanned;
+
+use crate::address_claim::is_network_management;
+use crate::dbc::{self, MessageDesc, SignalDesc};
+use crate::frame::{CanFrame, CanId, FrameKind};
+use crate::id::J1939Id;
+use crate::secoc;
+use crate::wire_dbc::{self, Mux, ValueKind, WireDbc, WireSignal};
+
+/// The shipped default profile (the project's own DBC, every signal unchanged).
+pub const DEFAULT_PROFILE_TEXT: &str = include_str!("../../profiles/default.toml");
+
+/// Why a profile could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum ProfileError {
+    /// A file could not be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The profile's DBC could not be loaded.
+    #[error("{path}: {source}")]
+    Dbc {
+        /// The DBC file.
+        path: PathBuf,
+        /// What is wrong with it.
+        source: wire_dbc::LoadError,
+    },
+    /// The profile is not valid TOML, or a mapping is missing or wrong.
+    #[error("{origin}{}: {message}", line.map(|l| format!(":{l}")).unwrap_or_default())]
+    Invalid {
+        /// The profile file.
+        origin: String,
+        /// The 1-based line the problem is on, when known.
+        line: Option<usize>,
+        /// What is missing or wrong, naming the quantity.
+        message: String,
+    },
+}
+
+/// Why a frame could not be translated. Each is counted by the caller as a rejected frame.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TranslateError {
+    /// A wire frame whose id (and multiplexor value) the profile maps to no canonical message.
+    #[error("unmapped frame {0:?}")]
+    Unmapped(CanId),
+    /// A frame of a known id with the wrong length or kind.
+    #[error("{message}: {actual} data bytes, expected {expected}")]
+    WrongLength {
+        /// The message name.
+        message: String,
+        /// The expected length.
+        expected: usize,
+        /// The length received.
+        actual: usize,
+    },
+    /// A canonical value that the wire signal cannot hold.
+    #[error("{quantity}: value {value} does not fit wire signal {signal}")]
+    NotRepresentable {
+        /// `Message.Signal` of the canonical protocol.
+        quantity: String,
+        /// The wire signal.
+        signal: String,
+        /// The value in wire units.
+        value: f64,
+    },
+    /// A canonical signal mapped to a constant carries another value.
+    #[error("{quantity}: raw {raw}, but the profile maps it to the constant {constant}")]
+    NotConstant {
+        /// `Message.Signal` of the canonical protocol.
+        quantity: String,
+        /// The raw value in the frame.
+        raw: i64,
+        /// The profile's constant.
+        constant: i64,
+    },
+}
+
+/// The profile file as written.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ProfileFile {
+    dbc: Spanned<String>,
+    messages: Spanned<BTreeMap<String, Spanned<MessageEntry>>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MessageEntry {
+    wire: Spanned<String>,
+    #[serde(default)]
+    mux: Option<Spanned<u64>>,
+    #[serde(default)]
+    signals: BTreeMap<String, Spanned<SignalEntry>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+enum SignalEntry {
+    Name(String),
+    Full(SignalMap),
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SignalMap {
+    signal: Option<String>,
+    scale: Option<f64>,
+    offset: Option<f64>,
+    constant: Option<i64>,
+}
+
+/// How one canonical signal travels.
+#[derive(Debug, Clone, PartialEq)]
+enum Target {
+    /// The raw integer unchanged (the grids coincide).
+    Raw { wire: usize },
+    /// Through the physical value: `wire = canonical * scale + offset`.
+    Physical {
+        wire: usize,
+        scale: f64,
+        offset: f64,
+    },
+    /// Not on the wire: always this raw value.
+    Constant(i64),
+}
+
+#[derive(Debug, Clone, PartialEq)]
+struct Field {
+    canonical: &'static SignalDesc,
+    target: Target,
+}
+
+/// One canonical message and where it travels.
+#[derive(Debug, Clone, PartialEq)]
+struct Route {
+    canonical: &'static MessageDesc,
+    wire: usize,
+    mux: Option<u64>,
+    fields: Vec<Field>,
+}
+
+/// A loaded machine profile.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Profile {
+    origin: String,
+    dbc_path: PathBuf,
+    wire: WireDbc,
+    /// One per canonical message, in [`dbc::MESSAGES`] order.
+    routes: Vec<Route>,
+    identity: bool,
+}
+
+fn line_of_offset(text: &str, offset: usize) -> usize {
+    text.get(..offset.min(text.len()))
+        .map_or(1, |head| head.matches('\n').count() + 1)
+}
+
+impl Profile {
+    /// The default profile: the project's own `excavator.dbc`, every signal unchanged.
+    ///
+    /// # Errors
+    /// Never in a correct build (the test suite loads it); the error is returned rather than assumed.
+    pub fn default_profile() -> Result<Self, ProfileError> {
+        Self::from_toml_str(
+            DEFAULT_PROFILE_TEXT,
+            "profiles/default.toml",
+            Path::new("excavator.dbc"),
+            dbc::DBC_TEXT,
+        )
+    }
+
+    /// Loads a profile file and the DBC it names (relative to the profile's folder).
+    ///
+    /// # Errors
+    /// [`ProfileError`] naming the file, the line and the missing or wrong quantity.
+    pub fn load(path: &Path) -> Result<Self, ProfileError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ProfileError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let origin = path.display().to_string();
+        let file = parse_file(&text, &origin)?;
+        let dbc_path = path
+            .parent()
+            .unwrap_or_else(|| Path::new(""))
+            .join(file.dbc.get_ref());
+        let dbc_text = std::fs::read_to_string(&dbc_path).map_err(|source| ProfileError::Io {
+            path: dbc_path.clone(),
+            source,
+        })?;
+        Self::build(&text, &origin, file, dbc_path, &dbc_text)
+    }
+
+    /// Loads a profile from its text and its DBC's text (`dbc_path` only names the DBC in errors).
+    ///
+    /// # Errors
+    /// [`ProfileError`] naming `origin`, the line and the missing or wrong quantity.
+    pub fn from_toml_str(
+        text: &str,
+        origin: &str,
+        dbc_path: &Path,
+        dbc_text: &str,
+    ) -> Result<Self, ProfileError> {
+        let file = parse_file(text, origin)?;
+        Self::build(text, origin, file, dbc_path.to_path_buf(), dbc_text)
+    }
+
+    fn build(
+        text: &str,
+        origin: &str,
+        file: ProfileFile,
+        dbc_path: PathBuf,
+        dbc_text: &str,
+    ) -> Result<Self, ProfileError> {
+        let wire = WireDbc::parse(dbc_text).map_err(|source| ProfileError::Dbc {
+            path: dbc_path.clone(),
+            source,
+        })?;
+        let invalid = |span: std::ops::Range<usize>, message: String| ProfileError::Invalid {
+            origin: origin.to_string(),
+            line: Some(line_of_offset(text, span.start)),
+            message,
+        };
+        let dbc_name = dbc_path.display().to_string();
+        let entries = file.messages.get_ref();
+        for (name, entry) in entries {
+            if let Some(m) = dbc::MESSAGES.iter().find(|m| m.name == name)
+                && is_network_management(m.pgn)
+            {
+                return Err(invalid(
+                    entry.span(),
+                    format!(
+                        "[messages.{name}]: J1939 network management (PGN {:#06X}) passes through \
+                         every profile unchanged and is not mapped",
+                        m.pgn
+                    ),
+                ));
+            }
+            if !dbc::MESSAGES.iter().any(|m| m.name == name) {
+                return Err(invalid(
+                    entry.span(),
+                    format!(
+                        "[messages.{name}]: no canonical message of that name (they are: {})",
+                        dbc::MESSAGES
+                            .iter()
+                            .map(|m| m.name)
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                ));
+            }
+        }
+        let mut routes = Vec::with_capacity(dbc::MESSAGES.len());
+        for canonical in dbc::MESSAGES
+            .iter()
+            .filter(|m| !is_network_management(m.pgn))
+        {
+            let Some(entry) = entries.get(canonical.name) else {
+                return Err(invalid(
+                    file.messages.span(),
+                    format!(
+                        "missing quantity: no [messages.{}] (signals {})",
+                        canonical.name,
+                        canonical
+                            .signals
+                            .iter()
+                            .map(|s| s.name)
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                ));
+            };
+            let e = entry.get_ref();
+            let wire_index = wire
+                .messages
+                .iter()
+                .position(|m| m.name == *e.wire.get_ref())
+                .ok_or_else(|| {
+                    invalid(
+                        e.wire.span(),
+                        format!(
+                            "{}: wire message {:?} is not in {dbc_name}",
+                            canonical.name,
+                            e.wire.get_ref()
+                        ),
+                    )
+                })?;
+            let wmsg = &wire.messages[wire_index];
+            let mux = e.mux.as_ref().map(|m| *m.get_ref());
+            match (wmsg.multiplexor, mux) {
+                (Some(_), None) => {
+                    return Err(invalid(
+                        entry.span(),
+                        format!(
+                            "{}: wire message {} is multiplexed; say which value with `mux = N`",
+                            canonical.name, wmsg.name
+                        ),
+                    ));
+                }
+                (None, Some(_)) => {
+                    return Err(invalid(
+                        entry.span(),
+                        format!(
+                            "{}: wire message {} has no multiplexor, remove `mux`",
+                            canonical.name, wmsg.name
+                        ),
+                    ));
+                }
+                (Some(i), Some(v)) => {
+                    let (_, hi) = wmsg.signals[i].raw_limits();
+                    if i128::from(v) > hi {
+                        return Err(invalid(
+                            entry.span(),
+                            format!(
+                                "{}: mux {v} does not fit multiplexor {}",
+                                canonical.name, wmsg.signals[i].name
+                            ),
+                        ));
+                    }
+                }
+                (None, None) => {}
+            }
+            if let Some(other) = routes
+                .iter()
+                .find(|r: &&Route| r.wire == wire_index && r.mux == mux)
+            {
+                return Err(invalid(
+                    entry.span(),
+                    format!(
+                        "{}: wire message {} (mux {mux:?}) already carries {}",
+                        canonical.name, wmsg.name, other.canonical.name
+                    ),
+                ));
+            }
+            for (sig_name, s) in &e.signals {
+                if !canonical.signals.iter().any(|c| c.name == sig_name) {
+                    return Err(invalid(
+                        s.span(),
+                        format!("{}.{sig_name}: no such canonical signal", canonical.name),
+                    ));
+                }
+            }
+            let secured = secoc::is_secured(canonical.pgn);
+            let mut fields = Vec::with_capacity(canonical.signals.len());
+            let mut used = Vec::new();
+            for csig in canonical.signals {
+                let quantity = format!("{}.{}", canonical.name, csig.name);
+                let spec = e.signals.get(csig.name);
+                let span = spec.map_or_else(|| entry.span(), Spanned::span);
+                let (wire_name, scale, offset, constant) = match spec.map(Spanned::get_ref) {
+                    None => (Some(csig.name.to_string()), 1.0, 0.0, None),
+                    Some(SignalEntry::Name(n)) => (Some(n.clone()), 1.0, 0.0, None),
+                    Some(SignalEntry::Full(m)) => (
+                        m.signal.clone(),
+                        m.scale.unwrap_or(1.0),
+                        m.offset.unwrap_or(0.0),
+                        m.constant,
+                    ),
+                };
+                let target = match (wire_name, constant) {
+                    (Some(_), Some(_)) | (None, None) => {
+                        return Err(invalid(
+                            span,
+                            format!("{quantity}: give either `signal` or `constant`"),
+                        ));
+                    }
+                    (None, Some(c)) => {
+                        if c < csig.raw_min || c > csig.raw_max {
+                            return Err(invalid(
+                                span,
+                                format!(
+                                    "{quantity}: constant {c} outside the raw range [{}, {}]",
+                                    csig.raw_min, csig.raw_max
+                                ),
+                            ));
+                        }
+                        Target::Constant(c)
+                    }
+                    (Some(wname), None) => {
+                        let Some(windex) = wmsg.signal_index(&wname) else {
+                            let how = if spec.is_none() {
+                                format!(
+                                    "missing quantity: {quantity} is not mapped and {} has no signal {wname}",
+                                    wmsg.name
+                                )
+                            } else {
+                                format!(
+                                    "{quantity}: wire message {} has no signal {wname}",
+                                    wmsg.name
+                                )
+                            };
+                            return Err(invalid(span, how));
+                        };
+                        let wsig = &wmsg.signals[windex];
+                        let present = match wsig.mux {
+                            Mux::Plain => true,
+                            Mux::Multiplexor => false,
+                            Mux::Multiplexed(v) => mux == Some(v),
+                        };
+                        if !present {
+                            return Err(invalid(
+                                span,
+                                format!(
+                                    "{quantity}: wire signal {wname} is not present in {} with mux {mux:?}",
+                                    wmsg.name
+                                ),
+                            ));
+                        }
+                        if used.contains(&windex) {
+                            return Err(invalid(
+                                span,
+                                format!(
+                                    "{quantity}: wire signal {wname} already carries another quantity"
+                                ),
+                            ));
+                        }
+                        used.push(windex);
+                        if !(scale.is_finite() && scale != 0.0 && offset.is_finite()) {
+                            return Err(invalid(
+                                span,
+                                format!(
+                                    "{quantity}: scale must be finite and non-zero, offset finite"
+                                ),
+                            ));
+                        }
+                        field_target(csig, wsig, windex, scale, offset, secured)
+                            .map_err(|why| invalid(span, format!("{quantity}: {why}")))?
+                    }
+                };
+                fields.push(Field {
+                    canonical: csig,
+                    target,
+                });
+            }
+            routes.push(Route {
+                canonical,
+                wire: wire_index,
+                mux,
+                fields,
+            });
+        }
+        let identity = routes.iter().all(|r| {
+            let w = &wire.messages[r.wire];
+            r.mux.is_none()
+                && w.id == CanId::Extended(r.canonical.default_id)
+                && w.size == usize::from(r.canonical.dlc)
+                && r.fields.iter().all(|f| match f.target {
+                    Target::Raw { wire } => {
+                        let ws = &w.signals[wire];
+                        ws.byte_order == wire_dbc::ByteOrder::Intel
+                            && ws.start_bit == f.canonical.start_bit
+                            && ws.len == f.canonical.len
+                    }
+                    _ => false,
+                })
+                && w.signals.len() == r.fields.len()
+        });
+        Ok(Self {
+            origin: origin.to_string(),
+            dbc_path,
+            wire,
+            routes,
+            identity,
+        })
+    }
+
+    /// The profile file it was loaded from.
+    pub fn origin(&self) -> &str {
+        &self.origin
+    }
+
+    /// The DBC of the wire protocol.
+    pub fn dbc_path(&self) -> &Path {
+        &self.dbc_path
+    }
+
+    /// The wire protocol.
+    pub fn wire(&self) -> &WireDbc {
+        &self.wire
+    }
+
+    /// True if the wire protocol is the canonical one bit for bit (the default profile): translation
+    /// returns every frame unchanged.
+    pub fn is_identity(&self) -> bool {
+        self.identity
+    }
+
+    /// The wire frame of a canonical frame (encoded by [`crate::messages`], sealed or not).
+    ///
+    /// # Errors
+    /// [`TranslateError`] for a frame that is not a canonical message, or a value the wire signal
+    /// cannot hold.
+    pub fn to_wire(&self, canonical: &CanFrame) -> Result<CanFrame, TranslateError> {
+        if self.identity || network_management(canonical) {
+            return Ok(*canonical);
+        }
+        let route = self.route_of_canonical(canonical)?;
+        let wmsg = &self.wire.messages[route.wire];
+        let data = canonical.data();
+        let mut bits = Vec::with_capacity(route.fields.len());
+        for field in &route.fields {
+            let c = field.canonical;
+            let raw = dbc::extract_raw(c, data).unwrap_or(0);
+            let quantity = || format!("{}.{}", route.canonical.name, c.name);
+            match field.target {
+                Target::Constant(constant) => {
+                    if raw != constant {
+                        return Err(TranslateError::NotConstant {
+                            quantity: quantity(),
+                            raw,
+                            constant,
+                        });
+                    }
+                }
+                Target::Raw { wire } => {
+                    let ws = &wmsg.signals[wire];
+                    let (lo, hi) = ws.raw_limits();
+                    let raw = i128::from(raw);
+                    let b = if raw < lo || raw > hi {
+                        not_available_bits(ws)
+                    } else {
+                        ws.bits_of_integer(raw)
+                    };
+                    bits.push((wire, b));
+                }
+                Target::Physical {
+                    wire,
+                    scale,
+                    offset,
+                } => {
+                    let ws = &wmsg.signals[wire];
+                    let b = if raw < c.raw_min || raw > c.raw_max {
+                        not_available_bits(ws)
+                    } else {
+                        let value = dbc::raw_to_physical(c, raw) * scale + offset;
+                        ws.bits_of(value, false)
+                            .map_err(|_| TranslateError::NotRepresentable {
+                                quantity: quantity(),
+                                signal: ws.name.clone(),
+                                value,
+                            })?
+                    };
+                    bits.push((wire, b));
+                }
+            }
+        }
+        let payload = wmsg.encode_bits(route.mux, &bits, 0xFF).map_err(|e| {
+            TranslateError::NotRepresentable {
+                quantity: route.canonical.name.to_string(),
+                signal: e.to_string(),
+                value: f64::NAN,
+            }
+        })?;
+        CanFrame::new_data(wmsg.id, &payload).map_err(|_| TranslateError::WrongLength {
+            message: wmsg.name.clone(),
+            expected: 8,
+            actual: payload.len(),
+        })
+    }
+
+    /// The canonical frame of a wire frame, with the canonical id of its message (the project's
+    /// source addresses).
+    ///
+    /// # Errors
+    /// [`TranslateError::Unmapped`] for a frame the profile does not map (count and reject it like any
+    /// unexpected frame), [`TranslateError::WrongLength`] for a mapped id of the wrong length.
+    pub fn from_wire(&self, wire: &CanFrame) -> Result<CanFrame, TranslateError> {
+        if self.identity || network_management(wire) {
+            return Ok(*wire);
+        }
+        if wire.kind() != FrameKind::Data {
+            return Err(TranslateError::Unmapped(wire.id()));
+        }
+        let Some(windex) = self.wire.message_index_by_id(wire.id()) else {
+            return Err(TranslateError::Unmapped(wire.id()));
+        };
+        let wmsg = &self.wire.messages[windex];
+        let data = wire.data();
+        if data.len() != wmsg.size {
+            return Err(TranslateError::WrongLength {
+                message: wmsg.name.clone(),
+                expected: wmsg.size,
+                actual: data.len(),
+            });
+        }
+        let mux = wmsg.multiplexor.map(|i| wmsg.signals[i].bits(data));
+        let Some(route) = self
+            .routes
+            .iter()
+            .find(|r| r.wire == windex && r.mux == mux)
+        else {
+            return Err(TranslateError::Unmapped(wire.id()));
+        };
+        let c_msg = route.canonical;
+        let mut out = [0xFFu8; 8];
+        let out_data = &mut out[..usize::from(c_msg.dlc)];
+        for field in &route.fields {
+            let c = field.canonical;
+            let raw = match field.target {
+                Target::Constant(constant) => constant,
+                Target::Raw { wire } => {
+                    let ws = &wmsg.signals[wire];
+                    let raw = ws.raw_integer(ws.bits(data));
+                    if fits(c, raw) {
+                        raw as i64
+                    } else {
+                        not_available_raw(c)
+                    }
+                }
+                Target::Physical {
+                    wire,
+                    scale,
+                    offset,
+                } => {
+                    let ws = &wmsg.signals[wire];
+                    let b = ws.bits(data);
+                    if b == not_available_bits(ws) {
+                        not_available_raw(c)
+                    } else {
+                        let value = (ws.physical(b) - offset) / scale;
+                        let raw = ((value - c.offset) / c.factor).round();
+                        if raw.is_finite() && fits(c, raw as i128) {
+                            raw as i64
+                        } else {
+                            not_available_raw(c)
+                        }
+                    }
+                }
+            };
+            // `fits` checked the raw value against the signal's bits.
+            let _ = dbc::insert_raw(c, raw, out_data);
+        }
+        CanFrame::new_data(CanId::Extended(c_msg.default_id), out_data).map_err(|_| {
+            TranslateError::WrongLength {
+                message: c_msg.name.to_string(),
+                expected: usize::from(c_msg.dlc),
+                actual: out_data.len(),
+            }
+        })
+    }
+
+    fn route_of_canonical(&self, frame: &CanFrame) -> Result<&Route, TranslateError> {
+        let CanId::Extended(raw) = frame.id() else {
+            return Err(TranslateError::Unmapped(frame.id()));
+        };
+        let pgn = J1939Id::from_raw(raw)
+            .map_err(|_| TranslateError::Unmapped(frame.id()))?
+            .pgn();
+        let route = self
+            .routes
+            .iter()
+            .find(|r| r.canonical.pgn == pgn)
+            .ok_or(TranslateError::Unmapped(frame.id()))?;
+        let expected = usize::from(route.canonical.dlc);
+        if frame.kind() != FrameKind::Data || frame.len() != expected {
+            return Err(TranslateError::WrongLength {
+                message: route.canonical.name.to_string(),
+                expected,
+                actual: frame.len(),
+            });
+        }
+        Ok(route)
+    }
+}
+
+/// Whether `frame` is a J1939 network-management data frame (29-bit id, Address Claimed or
+/// Request PGN), which every profile passes through unchanged.
+fn network_management(frame: &CanFrame) -> bool {
+    match frame.id() {
+        CanId::Extended(raw) if frame.kind() == FrameKind::Data => {
+            J1939Id::from_raw(raw).is_ok_and(|id| is_network_management(id.pgn()))
+        }
+        _ => false,
+    }
+}
+
+fn parse_file(text: &str, origin: &str) -> Result<ProfileFile, ProfileError> {
+    toml::from_str(text).map_err(|e| ProfileError::Invalid {
+        origin: origin.to_string(),
+        line: e.span().map(|s| line_of_offset(text, s.start)),
+        message: e.message().trim().to_string(),
+    })
+}
+
+/// True if `raw` fits the canonical signal's bits.
+fn fits(c: &SignalDesc, raw: i128) -> bool {
+    let len = u32::from(c.len);
+    if c.signed {
+        raw >= -(1i128 << (len - 1)) && raw < (1i128 << (len - 1))
+    } else {
+        raw >= 0 && raw < (1i128 << len)
+    }
+}
+
+/// The J1939 "not available" raw value of a canonical signal (`docs/protocol.md`).
+fn not_available_raw(c: &SignalDesc) -> i64 {
+    if c.signed {
+        (1i64 << (c.len - 1)) - 1
+    } else {
+        (1i64 << c.len) - 1
+    }
+}
+
+/// The "not available" bits of a wire signal: all ones unsigned, the largest value signed, NaN float.
+fn not_available_bits(ws: &WireSignal) -> u64 {
+    match ws.kind {
+        ValueKind::Float32 => u64::from(f32::NAN.to_bits()),
+        ValueKind::Float64 => f64::NAN.to_bits(),
+        _ => {
+            let (_, hi) = ws.raw_limits();
+            ws.bits_of_integer(hi)
+        }
+    }
+}
+
+/// How a canonical signal maps onto a wire signal; for a secured message only a lossless way.
+fn field_target(
+    c: &SignalDesc,
+    ws: &WireSignal,
+    wire: usize,
+    scale: f64,
+    offset: f64,
+    secured: bool,
+) -> Result<Target, String> {
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(b.abs()).max(1e-12);
+    let integer = matches!(ws.kind, ValueKind::Signed | ValueKind::Unsigned);
+    let same_grid = integer
+        && close(ws.factor, c.factor * scale)
+        && (close(ws.offset, c.offset * scale + offset)
+            || (ws.offset - (c.offset * scale + offset)).abs() <= 1e-12);
+    let wide_enough = ws.len >= c.len && (ws.kind == ValueKind::Signed) == c.signed;
+    if same_grid && (wide_enough || !secured) {
+        return Ok(Target::Raw { wire });
+    }
+    if secured {
+        return Err(format!(
+            "the frame is authenticated, so the value must travel unchanged: wire signal {} needs \
+             factor {} and offset {} in its units, at least {} bits, {} (it has factor {}, offset {}, \
+             {} bits, {:?})",
+            ws.name,
+            c.factor * scale,
+            c.offset * scale + offset,
+            c.len,
+            if c.signed { "signed" } else { "unsigned" },
+            ws.factor,
+            ws.offset,
+            ws.len,
+            ws.kind
+        ));
+    }
+    Ok(Target::Physical {
+        wire,
+        scale,
+        offset,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_default_profile_is_the_identity() {
+        let profile = Profile::default_profile().expect("the shipped default profile loads");
+        assert!(profile.is_identity());
+        let mapped = dbc::MESSAGES
+            .iter()
+            .filter(|m| !is_network_management(m.pgn))
+            .count();
+        assert_eq!(profile.routes.len(), mapped);
+    }
+
+    #[test]
+    fn network_management_passes_through_and_may_not_be_mapped() {
+        use crate::address_claim::{CONTROLLER_NAME, NULL_ADDRESS, request_address_claimed};
+        use crate::messages::{AddressClaimed, Message};
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/other_gateway.toml");
+        let profile = Profile::load(&path).expect("the example profile loads");
+        let claim = Message::AddressClaimed(AddressClaimed {
+            name: CONTROLLER_NAME,
+        });
+        for frame in [
+            claim.encode_from(0x27).expect("encodes"),
+            claim.encode_from(NULL_ADDRESS).expect("encodes"),
+            request_address_claimed(0xFF, 0x27).expect("encodes"),
+        ] {
+            assert_eq!(profile.to_wire(&frame), Ok(frame));
+            assert_eq!(profile.from_wire(&frame), Ok(frame));
+        }
+        let text = format!(
+            "{}\n[messages.AddressClaimed]\nwire = \"X\"\n",
+            DEFAULT_PROFILE_TEXT
+        );
+        let err =
+            Profile::from_toml_str(&text, "p.toml", Path::new("excavator.dbc"), dbc::DBC_TEXT)
+                .expect_err("mapping network management is refused");
+        assert!(err.to_string().contains("network management"), "{err}");
+    }
+
+    #[test]
+    fn the_default_mapping_translates_to_the_same_bytes_without_the_shortcut() {
+        use crate::messages::*;
+        let mut profile = Profile::default_profile().expect("loads");
+        profile.identity = false;
+        let mut sealer = secoc::Sealer::new(&secoc::SessionKey::PUBLIC);
+        sealer.set_session(7);
+        let mut messages: Vec<Message> = Valve::ALL
+            .into_iter()
+            .map(|v| {
+                Message::AuxValveCommand(
+                    AuxValveCommand::from_fraction(v, -0.37).expect("in range"),
+                )
+            })
+            .collect();
+        messages.extend([
+            Message::JointAngles(JointAngles {
+                boom_rad: 0.5,
+                stick_rad: -1.25,
+                bucket_rad: -3.1,
+                swing_rad: 0.0001,
+            }),
+            Message::TrackOdometry(TrackOdometry {
+                left_m: -12.3456,
+                right_m: 199_999.0,
+            }),
+            Message::ControllerHeartbeat(ControllerHeartbeat {
+                mode: RequestedMode::ArmPosition,
+                alive_counter: 14,
+            }),
+            Message::PositionSetpoint(PositionSetpoint {
+                boom_rad: 0.5,
+                stick_rad: -1.0,
+                bucket_rad: 0.6994,
+                swing_rad: -3.0,
+            }),
+            Message::GatewaySession(GatewaySession {
+                session_id: u32::MAX,
+            }),
+        ]);
+        for m in &messages {
+            let frame = sealer.seal(m).expect("seals");
+            assert_eq!(profile.to_wire(&frame), Ok(frame), "{m:?}");
+            assert_eq!(profile.from_wire(&frame), Ok(frame), "{m:?}");
+        }
+        // A "not available" raw value (0xFFFF fine flow) passes unchanged too.
+        let mut data = [0xFFu8; 8];
+        data[0] = 0x10;
+        let na = CanFrame::new_extended(dbc::aux_valve_command_boom::MESSAGE.default_id, &data)
+            .expect("valid");
+        assert_eq!(profile.to_wire(&na), Ok(na));
+    }
+
+    #[test]
+    fn lines_count_from_one() {
+        assert_eq!(line_of_offset("a\nb\nc", 0), 1);
+        assert_eq!(line_of_offset("a\nb\nc", 2), 2);
+        assert_eq!(line_of_offset("a\nb\nc", 99), 3);
+    }
+}

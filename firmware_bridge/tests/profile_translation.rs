@@ -1,0 +1,262 @@
+//! Machine profiles (`firmware_bridge::profile`): the shipped default and the example of another
+//! gateway load; every canonical message travels through the example's wire frames and back (the
+//! authenticated ones bit for bit, so the gateway's checks pass on the rebuilt frame); bad profiles
+//! are refused naming the file, the line and the quantity.
+
+mod common;
+
+use std::path::Path;
+
+use firmware_bridge::messages::*;
+use firmware_bridge::profile::{Profile, ProfileError, TranslateError};
+use firmware_bridge::secoc::{Sealer, SessionKey, Verifier};
+use firmware_bridge::{CanFrame, CanId};
+
+const EXAMPLE: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../examples/other_gateway.toml"
+);
+const EXAMPLE_DBC: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/other_gateway.dbc");
+const DEFAULT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../profiles/default.toml");
+const SESSION: u32 = 0x5EC0_0C01;
+
+fn example() -> Profile {
+    Profile::load(Path::new(EXAMPLE)).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// The sample messages as the controller and the gateway put them on the bus (control frames
+/// sealed).
+fn sealed_samples() -> Vec<(Message, CanFrame)> {
+    let mut sealer = Sealer::new(&SessionKey::PUBLIC);
+    sealer.set_session(SESSION);
+    common::sample_messages()
+        .into_iter()
+        .map(|m| {
+            let frame = sealer.seal(&m).expect("samples encode");
+            (m, frame)
+        })
+        .collect()
+}
+
+#[test]
+fn the_default_profile_file_is_the_identity() {
+    let profile = Profile::load(Path::new(DEFAULT)).unwrap_or_else(|e| panic!("{e}"));
+    assert!(profile.is_identity());
+    for (_, frame) in sealed_samples() {
+        assert_eq!(profile.to_wire(&frame), Ok(frame));
+        assert_eq!(profile.from_wire(&frame), Ok(frame));
+    }
+}
+
+#[test]
+fn every_canonical_message_travels_through_the_example_gateway() {
+    let profile = example();
+    assert!(!profile.is_identity());
+    let mut verifier = Verifier::new(&SessionKey::PUBLIC, SESSION);
+    let (mut exact, mut approximate) = (0, 0);
+    for (message, frame) in sealed_samples() {
+        if firmware_bridge::address_claim::is_network_management(message.descriptor().pgn) {
+            // J1939 network management is the same on every J1939 bus: it passes through.
+            assert_eq!(profile.to_wire(&frame), Ok(frame), "{message:?}");
+            assert_eq!(profile.from_wire(&frame), Ok(frame), "{message:?}");
+            continue;
+        }
+        let wire = match profile.to_wire(&frame) {
+            Ok(wire) => wire,
+            Err(TranslateError::NotConstant { quantity, .. }) => {
+                // The one sample with fail-safe Float: the example gateway has no such signal.
+                assert!(quantity.ends_with(".FailSafeMode"), "{quantity}");
+                continue;
+            }
+            Err(e) => panic!("{message:?}: {e}"),
+        };
+        assert!(
+            matches!(wire.id(), CanId::Standard(_)),
+            "{message:?} -> {wire:?}"
+        );
+        let back = profile
+            .from_wire(&wire)
+            .unwrap_or_else(|e| panic!("{wire:?}: {e}"));
+        let decoded = Message::decode(&back).unwrap_or_else(|e| panic!("{message:?}: {e}"));
+        if firmware_bridge::secoc::is_secured(message.descriptor().pgn) {
+            assert_eq!(back, frame, "{message:?} must come back bit for bit");
+            verifier
+                .verify(&decoded, &back)
+                .unwrap_or_else(|e| panic!("{message:?}: the rebuilt frame does not verify: {e}"));
+            exact += 1;
+        } else {
+            common::assert_close(&decoded.message, &message, 1e-3);
+            approximate += 1;
+        }
+    }
+    println!(
+        "{exact} control frames bit for bit, {approximate} sensor/status frames within resolution"
+    );
+    assert!(exact >= 8 && approximate >= 10);
+}
+
+#[test]
+fn the_example_degrees_and_bar_are_on_the_wire() {
+    let profile = example();
+    let wire_dbc = profile.wire();
+    let angles = Message::JointAngles(JointAngles {
+        boom_rad: std::f64::consts::FRAC_PI_2,
+        stick_rad: -1.0,
+        bucket_rad: 0.0,
+        swing_rad: 0.25,
+    })
+    .encode()
+    .expect("encodes");
+    let wire = profile.to_wire(&angles).expect("translates");
+    let msg = wire_dbc.message("ArmAngles").expect("in the DBC");
+    let values = msg.decode(wire.data()).expect("decodes");
+    assert!((values[0].physical - 90.0).abs() < 0.006, "{values:?}");
+    let measured = Message::AuxValveMeasured(AuxValveMeasured {
+        cylinder: Cylinder::Stick,
+        flow_percent: 50.0,
+        state: ValveState::Extend,
+        head_pressure_pa: 20.0e6,
+        rod_pressure_pa: 1.0e6,
+    })
+    .encode()
+    .expect("encodes");
+    let wire = profile.to_wire(&measured).expect("translates");
+    let msg = wire_dbc.message("ValveFeedback").expect("in the DBC");
+    let named: Vec<(String, f64)> = msg
+        .decode(wire.data())
+        .expect("decodes")
+        .iter()
+        .map(|v| (msg.signals[v.index].name.clone(), v.physical))
+        .collect();
+    assert!(named.contains(&("CylinderIndex".into(), 1.0)), "{named:?}");
+    assert!(named.contains(&("StickHead".into(), 200.0)), "{named:?}");
+    assert!(named.contains(&("StickFlow".into(), 0.5)), "{named:?}");
+}
+
+#[test]
+fn unmapped_wire_frames_are_rejected() {
+    let profile = example();
+    for frame in [
+        CanFrame::new_standard(0x7FF, &[0; 8]).expect("valid"),
+        // A ValveFeedback with a cylinder index no canonical message uses.
+        CanFrame::new_standard(0x220, &[0x30, 0, 0, 0, 0, 0, 0, 0]).expect("valid"),
+        // The project's own boom command id means nothing to this gateway.
+        CanFrame::new_extended(0x0CFE_3027, &[0; 8]).expect("valid"),
+    ] {
+        assert_eq!(
+            profile.from_wire(&frame),
+            Err(TranslateError::Unmapped(frame.id()))
+        );
+    }
+    let short = CanFrame::new_standard(0x301, &[0; 4]).expect("valid");
+    assert!(matches!(
+        profile.from_wire(&short),
+        Err(TranslateError::WrongLength { .. })
+    ));
+}
+
+/// Loads the example with `edit` applied to its text, expecting a refusal.
+fn refused(edit: impl Fn(&str) -> String) -> (String, Option<usize>) {
+    let text = edit(&std::fs::read_to_string(EXAMPLE).expect("example exists"));
+    let dbc = std::fs::read_to_string(EXAMPLE_DBC).expect("example DBC exists");
+    match Profile::from_toml_str(&text, "broken.toml", Path::new(EXAMPLE_DBC), &dbc) {
+        Ok(_) => panic!("the edited profile was accepted"),
+        Err(ProfileError::Invalid { line, message, .. }) => (message, line),
+        Err(e) => panic!("unexpected error kind: {e}"),
+    }
+}
+
+fn line_of(text_edit: impl Fn(&str) -> String, needle: &str) -> usize {
+    let text = text_edit(&std::fs::read_to_string(EXAMPLE).expect("example exists"));
+    text.lines()
+        .position(|l| l.contains(needle))
+        .expect("needle in the text")
+        + 1
+}
+
+#[test]
+fn an_incomplete_profile_names_the_missing_quantity_and_line() {
+    // A whole message left out.
+    let drop_session = |t: &str| {
+        t.replace("[messages.GatewaySession]\nwire = \"GwSession\"\n[messages.GatewaySession.signals]\nSessionId = \"Nonce\"\n", "")
+    };
+    let (message, line) = refused(drop_session);
+    assert!(
+        message.contains("missing quantity") && message.contains("GatewaySession"),
+        "{message}"
+    );
+    assert!(line.is_some());
+    // One signal left out whose name the wire message does not have.
+    let drop_signal = |t: &str| {
+        t.replace(
+            "BucketAngle = { signal = \"BucketDeg\", scale = 57.29577951308232 }\n",
+            "",
+        )
+    };
+    let (message, line) = refused(drop_signal);
+    assert!(message.contains("JointAngles.BucketAngle"), "{message}");
+    assert_eq!(line, Some(line_of(drop_signal, "[messages.JointAngles]")));
+}
+
+#[test]
+fn a_bad_profile_names_the_quantity_and_line() {
+    let typo = |t: &str| t.replace("\"StickDeg\"", "\"StikDeg\"");
+    let (message, line) = refused(typo);
+    assert!(
+        message.contains("JointAngles.StickAngle") && message.contains("StikDeg"),
+        "{message}"
+    );
+    assert_eq!(line, Some(line_of(typo, "StikDeg")));
+
+    // An authenticated frame may not lose resolution: the heartbeat's MAC in 16 bits.
+    let lossy = |t: &str| {
+        t.replace(
+            "Checksum = \"Crc\"",
+            "Checksum = { signal = \"Crc\", scale = 0.5 }",
+        )
+    };
+    let (message, line) = refused(lossy);
+    assert!(
+        message.contains("ControllerHeartbeat.Checksum") && message.contains("authenticated"),
+        "{message}"
+    );
+    assert_eq!(line, Some(line_of(lossy, "scale = 0.5")));
+
+    let no_mux = |t: &str| t.replacen("mux = 0\n", "", 1);
+    let (message, _) = refused(no_mux);
+    assert!(
+        message.contains("AuxValveCommand_Boom") && message.contains("mux"),
+        "{message}"
+    );
+
+    let twice = |t: &str| t.replacen("mux = 1\n", "mux = 0\n", 1);
+    let (message, _) = refused(twice);
+    assert!(message.contains("already carries"), "{message}");
+
+    let syntax = |t: &str| t.replacen("wire = \"ArmRates\"", "wire = ArmRates", 1);
+    let (_, line) = refused(syntax);
+    assert_eq!(line, Some(line_of(syntax, "wire = ArmRates")));
+
+    let unknown = |t: &str| format!("{t}\n[messages.JointAngels]\nwire = \"ArmAngles\"\n");
+    let (message, _) = refused(unknown);
+    assert!(message.contains("JointAngels"), "{message}");
+}
+
+#[test]
+fn errors_name_the_file() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("gw.toml");
+    std::fs::write(&path, "dbc = \"missing.dbc\"\n[messages]\n").expect("write");
+    let err = Profile::load(&path).expect_err("no DBC");
+    assert!(err.to_string().contains("missing.dbc"), "{err}");
+    std::fs::write(
+        dir.path().join("missing.dbc"),
+        "VERSION \"\"\nBO_ 1 X: 8 A\n SG_ S : 60|8@1+ (1,0) [0|0] \"\" B\n",
+    )
+    .expect("write");
+    let err = Profile::load(&path).expect_err("bad DBC");
+    assert!(
+        err.to_string().contains("missing.dbc") && err.to_string().contains("does not fit"),
+        "{err}"
+    );
+}
