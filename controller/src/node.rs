@@ -7,18 +7,29 @@
 //! pre-dig terrain section) and never panics.
 //!
 //! Before anything else the node claims the controller's address (`0x27`) with its NAME (J1939-81,
-//! [`firmware_bridge::address_claim`]): the first step sends Address Claimed, and until the claim has
-//! stood for 250 ms a step sends only claim frames (received frames still feed the estimator; the
-//! safety layer and the work cycle wait). A competing claim for `0x27` with a higher NAME is answered
-//! with our claim again; one with a lower NAME wins: the node sends Cannot Claim, raises
-//! [`Fault::AddressLost`] (latched) and from then on sends nothing else, not even the shutdown
-//! frames, since it may no longer use the address ([`ControllerNode::address_lost`]; `run` ends
-//! with that error). A Request for Address Claimed is answered with the claim. In listen-only mode
-//! the node claims nothing.
+//! [`firmware_bridge::address_claim`]; `[j1939]` of [`ControllerConfig`]): the first step sends
+//! Address Claimed, and until the claim has stood for 250 ms a step sends only claim frames (received
+//! frames still feed the estimator; the safety layer and the work cycle wait). A competing claim for
+//! `0x27` with a higher NAME is answered with our claim again; one with a lower NAME wins: the node
+//! sends Cannot Claim, raises [`Fault::AddressLost`] (latched) and sends nothing else, not even the
+//! shutdown frames, since it may no longer use the address ([`ControllerNode::address_lost`]). A
+//! Request for Address Claimed is answered with the claim (with Cannot Claim after a loss). In
+//! listen-only mode the node claims nothing.
+//!
+//! A claim for `0x27` or the gateway's `0x80` from a NAME other than the configured ones is an
+//! intrusion: logged, counted ([`FrameCounters::intrusions`]) and raised as
+//! [`Fault::AddressIntrusion`], latched when the intruder's NAME is lower than the owner's (the owner
+//! lost the address; for `0x80` the gateway falls silent). The operator's reset
+//! ([`ControllerNode::reset`]) recovers a lost address: the next step sends a Request for Address
+//! Claimed to global, then the controller's claim, and waits 250 ms again. A real owner of `0x27`
+//! answers and wins again (the fault stays); a transient claim does not, and the claim stands. The
+//! gateway answers the same request by claiming `0x80` again, and is armed through the usual
+//! handshake once its status is back.
 //!
 //! Per step, in order:
 //!
-//! 1. Received frames: address claims and requests go to the claim procedure; error frames are bus faults; frames from the gateway (`0x80`) feed the
+//! 1. Received frames: address claims and requests go to the claim procedure (claims for `0x27` and
+//!    `0x80` are checked against the configured NAMEs); error frames are bus faults; frames from the gateway (`0x80`) feed the
 //!    estimator; decode errors of protocol frames, frames from the gateway's address that the gateway
 //!    does not send, frames with the controller's own address (`0x27`) and protocol messages from other
 //!    addresses are faults. Other traffic (unknown PGNs from other nodes, 11-bit ids, remote and FD
@@ -36,7 +47,10 @@
 //!
 //! Its configuration, [`ControllerConfig`], and the checks of every parameter live in [`crate::config`].
 
-use firmware_bridge::address_claim::{AddressClaimer, ClaimEvent, Name};
+use firmware_bridge::address_claim::{
+    AddressClaimer, ClaimEvent, NULL_ADDRESS, Name, request_address_claimed,
+};
+use firmware_bridge::id::GLOBAL_ADDRESS;
 use firmware_bridge::messages::{
     Activity, AutodigStageCode, AuxValveCommand, ControllerStatus as StatusMessage, Message,
     PositionSetpoint, Valve,
@@ -152,6 +166,9 @@ pub struct FrameCounters {
     pub outbox_overflow: u64,
     /// Secured frames not sent because no gateway session was known yet.
     pub held_no_session: u64,
+    /// Address claims for the controller's or the gateway's address from an unexpected NAME (also
+    /// counted in `faulty`).
+    pub intrusions: u64,
 }
 
 /// The controller's status (sent on the bus as `ControllerStatus` at 20 Hz, with the fault code).
@@ -189,6 +206,13 @@ pub struct ControllerNode {
     claim: AddressClaimer,
     /// Whether the lost claim was reported to the safety layer.
     address_lost_raised: bool,
+    /// The NAME the gateway at `0x80` claims with.
+    gateway_name: Name,
+    /// A claim with a NAME lower than the gateway's took `0x80`, and the gateway's claim has not been
+    /// seen since.
+    gateway_address_lost: bool,
+    /// The operator's reset asked for the addresses to be claimed again (at the next step).
+    reclaim_requested: bool,
 }
 
 impl ControllerNode {
@@ -203,6 +227,7 @@ impl ControllerNode {
         config: ControllerConfig,
     ) -> Result<Self, ControllerError> {
         config.validate()?;
+        let (name, gateway_name) = config.j1939.names()?;
         let kin = Kinematics::new(machine)?;
         let relief = [machine.hydraulics.relief_pressure_pa; 3];
         let mut autodig = config.autodig;
@@ -244,8 +269,11 @@ impl ControllerNode {
             last_motion: None,
             last_command: CycleCommand::Neutral,
             status_alive: 15,
-            claim: AddressClaimer::controller(),
+            claim: AddressClaimer::controller_named(name),
             address_lost_raised: false,
+            gateway_name,
+            gateway_address_lost: false,
+            reclaim_requested: false,
             out: Outbox::new().map_err(|e| ControllerError::Config {
                 field: "outbox",
                 reason: e.to_string(),
@@ -260,19 +288,13 @@ impl ControllerNode {
         self.sealer = Sealer::new(key);
     }
 
-    /// Sets the NAME the node claims its address with (a machine's provisioned serial number; the
-    /// default is [`firmware_bridge::address_claim::CONTROLLER_NAME`]). Call before the first step.
-    pub fn set_name(&mut self, name: Name) {
-        self.claim = AddressClaimer::new(name, self.claim.address());
-    }
-
     /// The address claim (state, NAME, address).
     pub fn address_claim(&self) -> &AddressClaimer {
         &self.claim
     }
 
-    /// The fault when another node took the controller's address: the node then sends nothing and
-    /// its caller should stop with this error.
+    /// The fault while another node holds the controller's address: the node sends nothing until
+    /// the operator's reset claims it again ([`Self::reset`]).
     pub fn address_lost(&self) -> Option<Fault> {
         self.claim.lost().map(|by| Fault::AddressLost {
             address: self.claim.address(),
@@ -411,9 +433,66 @@ impl ControllerNode {
         self.cycle.on_fault(false);
     }
 
-    /// The operator's acknowledgement of an e-stop or a latched fault.
+    /// The operator's acknowledgement of an e-stop or a latched fault. When the controller's address
+    /// or the gateway's was lost, the next step also starts the recovery (module docs): a Request for
+    /// Address Claimed to global, then the controller's claim.
     pub fn reset(&mut self) {
         self.safety.reset();
+        if self.safety.state() != SafetyState::ListenOnly
+            && (self.claim.lost().is_some() || self.gateway_address_lost)
+        {
+            self.reclaim_requested = true;
+        }
+    }
+
+    /// Whether a claim for `0x80` with a NAME lower than the gateway's was seen and the gateway has
+    /// not claimed its address since.
+    pub fn gateway_address_lost(&self) -> bool {
+        self.gateway_address_lost
+    }
+
+    /// Checks a claim from `source` against the configured NAMEs: another NAME for `0x27` or `0x80`
+    /// is an intrusion (a lower one for `0x27` is [`Fault::AddressLost`], raised by the claim
+    /// procedure). Returns whether the frame was an intrusion.
+    fn check_claim(&mut self, source: u8, name: Name, time_s: f64) -> bool {
+        let owner = match source {
+            CONTROLLER_ADDRESS => self.claim.name(),
+            GATEWAY_ADDRESS => self.gateway_name,
+            _ => return false,
+        };
+        if name == owner {
+            if source == GATEWAY_ADDRESS && self.gateway_address_lost {
+                tracing::info!("the gateway claimed its address again");
+                self.gateway_address_lost = false;
+            }
+            return false;
+        }
+        let owner_lost = name < owner;
+        self.counters.intrusions += 1;
+        self.counters.faulty += 1;
+        tracing::error!(
+            address = format_args!("{source:#04X}"),
+            name = format_args!("{:#018X}", name.raw()),
+            expected = format_args!("{:#018X}", owner.raw()),
+            owner_lost,
+            "address claim from an unexpected NAME: intrusion"
+        );
+        if source == CONTROLLER_ADDRESS && owner_lost {
+            // The claim procedure loses the address and raises `AddressLost`.
+            return true;
+        }
+        if source == GATEWAY_ADDRESS && owner_lost {
+            self.gateway_address_lost = true;
+        }
+        self.raise(
+            time_s,
+            Fault::AddressIntrusion {
+                address: source,
+                name: name.raw(),
+                owner_lost,
+            },
+        );
+        true
     }
 
     /// True once after the work cycle asked for a range scan; answer with [`Self::provide_terrain`].
@@ -463,24 +542,33 @@ impl ControllerNode {
             Ok(decoded) => {
                 let sa = decoded.id.source_address();
                 let at = Instant::from_secs_f64(time_s).unwrap_or_default();
+                let intrusion = match decoded.message {
+                    Message::AddressClaimed(claimed) => self.check_claim(sa, claimed.name, time_s),
+                    _ => false,
+                };
                 if let Some(event) = self.claim.on_message(decoded.id, &decoded.message, at) {
+                    // An intrusion was counted as faulty by `check_claim`.
+                    let (consumed, ignored) = if intrusion {
+                        (0, 0)
+                    } else if matches!(event, ClaimEvent::Noted | ClaimEvent::Reclaimed { .. }) {
+                        (0, 1)
+                    } else {
+                        (1, 0)
+                    };
+                    self.counters.consumed += consumed;
+                    self.counters.ignored += ignored;
                     match event {
-                        ClaimEvent::Noted => self.counters.ignored += 1,
-                        ClaimEvent::Lost { competitor } => {
-                            self.counters.consumed += 1;
-                            tracing::error!(
-                                winner_name = format_args!("{:#018X}", competitor.raw()),
-                                "address claim lost: Cannot Claim, the controller goes silent"
-                            );
+                        ClaimEvent::Lost { competitor } => tracing::error!(
+                            winner_name = format_args!("{:#018X}", competitor.raw()),
+                            "address claim lost: Cannot Claim, the controller is silent until \
+                             the operator's reset"
+                        ),
+                        ClaimEvent::Defended { competitor } => tracing::warn!(
+                            competitor_name = format_args!("{:#018X}", competitor.raw()),
+                            "a node with a higher NAME claimed our address: claimed it again"
+                        ),
+                        ClaimEvent::Noted | ClaimEvent::Reclaimed { .. } | ClaimEvent::Answered => {
                         }
-                        ClaimEvent::Defended { competitor } => {
-                            self.counters.consumed += 1;
-                            tracing::warn!(
-                                competitor_name = format_args!("{:#018X}", competitor.raw()),
-                                "a node with a higher NAME claimed our address: claimed it again"
-                            );
-                        }
-                        ClaimEvent::Answered => self.counters.consumed += 1,
                     }
                 } else if let (GATEWAY_ADDRESS, Message::GatewaySession(session)) =
                     (sa, decoded.message)
@@ -692,7 +780,34 @@ impl ControllerNode {
         if self.safety.state() == SafetyState::ListenOnly {
             return true;
         }
-        if let Some(now) = Instant::from_secs_f64(now_s) {
+        let now = Instant::from_secs_f64(now_s);
+        if self.reclaim_requested
+            && let Some(now) = now
+        {
+            self.reclaim_requested = false;
+            // Without an address of its own the request comes from the null address (J1939-81).
+            let source = if self.claim.lost().is_some() {
+                NULL_ADDRESS
+            } else {
+                self.claim.address()
+            };
+            if let Ok(request) = request_address_claimed(GLOBAL_ADDRESS, source) {
+                self.push(request);
+            }
+            // A global request is answered by its sender too: our claim follows it.
+            if let Some(by) = self.claim.reclaim(now) {
+                tracing::warn!(
+                    lost_to = format_args!("{:#018X}", by.raw()),
+                    "operator reset: Request for Address Claimed sent, claiming 0x27 again"
+                );
+                self.address_lost_raised = false;
+            } else {
+                tracing::warn!(
+                    "operator reset: Request for Address Claimed sent for the gateway's address"
+                );
+            }
+        }
+        if let Some(now) = now {
             self.claim.update(now);
         }
         if let Ok(Some(frame)) = self.claim.take_frame() {
@@ -1157,8 +1272,9 @@ start = { kind = \"tip\", x_m = inf, z_m = 2.4, bucket_abs_deg = -55.0 }
 
     mod address_claim {
         use super::*;
-        use firmware_bridge::address_claim::{CONTROLLER_NAME, request_address_claimed};
+        use firmware_bridge::address_claim::{CONTROLLER_NAME, GATEWAY_NAME};
         use firmware_bridge::messages::{AddressClaimed, GatewaySession};
+        use firmware_bridge::name_config::NameConfig;
 
         const CLAIM_ID: u32 = 0x18EE_FF27;
         const CANNOT_CLAIM_ID: u32 = 0x18EE_FFFE;
@@ -1276,7 +1392,18 @@ start = { kind = \"tip\", x_m = inf, z_m = 2.4, bucket_abs_deg = -55.0 }
             let claims = claim_times(&sent);
             assert_eq!(claims, [0, 500]);
             assert!(application(&sent).iter().any(|(t, _)| *t > 500));
-            assert!(n.address_lost().is_none() && n.fault().is_none());
+            assert!(n.address_lost().is_none());
+            // Not the configured NAME: an intrusion, which clears like any fault event.
+            assert_eq!(
+                n.fault(),
+                Some(Fault::AddressIntrusion {
+                    address: CONTROLLER_ADDRESS,
+                    name: loser.raw(),
+                    owner_lost: false
+                })
+            );
+            assert!(!n.safety().needs_reset());
+            assert_eq!(n.counters().intrusions, 1);
         }
 
         #[test]
@@ -1297,6 +1424,169 @@ start = { kind = \"tip\", x_m = inf, z_m = 2.4, bucket_abs_deg = -55.0 }
             let claims = claim_times(&sent);
             assert_eq!(claims, [0, 700]);
             assert!(n.fault().is_none());
+        }
+
+        const REQUEST_FROM_NULL_ID: u32 = 0x18EA_FFFE;
+        const REQUEST_FROM_US_ID: u32 = 0x18EA_FF27;
+
+        fn claim_from(source: u8, name: Name) -> CanFrame {
+            Message::AddressClaimed(AddressClaimed { name })
+                .encode_from(source)
+                .unwrap()
+        }
+
+        /// A node that lost 0x27 to a transient claim (NAME 0) at 100 ms, run to 1 s.
+        fn lost_node() -> ControllerNode {
+            let mut n = node();
+            let sent = run(&mut n, 0.0, 1.0, &[(0.1, claim(Name::from_raw(0)))]);
+            assert_eq!(sent, [(0, CLAIM_ID), (100, CANNOT_CLAIM_ID)]);
+            assert!(n.safety().needs_reset());
+            assert_eq!(n.counters().intrusions, 1);
+            n
+        }
+
+        #[test]
+        fn after_a_transient_claim_the_operators_reset_reclaims_and_the_claim_stands() {
+            let mut n = lost_node();
+            n.reset();
+            let sent = run(&mut n, 1.0, 2.0, &[]);
+            // The request from the null address, then our claim, then 250 ms of nothing else.
+            assert_eq!(sent[..2], [(1000, REQUEST_FROM_NULL_ID), (1000, CLAIM_ID)]);
+            let app = application(&sent[2..]);
+            assert!(!app.is_empty(), "the controller stays silent: {sent:?}");
+            assert!(
+                app[0].0 >= 1250,
+                "first application frame at {} ms",
+                app[0].0
+            );
+            assert!(n.address_lost().is_none());
+            assert!(!n.safety().needs_reset());
+        }
+
+        #[test]
+        fn after_the_reset_the_real_owner_answers_and_wins_again() {
+            let mut n = lost_node();
+            n.reset();
+            // The owner answers our request with its claim.
+            let owner = claim(Name::from_raw(0));
+            let sent = run(&mut n, 1.0, 2.0, &[(1.02, owner)]);
+            assert_eq!(
+                sent,
+                [
+                    (1000, REQUEST_FROM_NULL_ID),
+                    (1000, CLAIM_ID),
+                    (1020, CANNOT_CLAIM_ID)
+                ]
+            );
+            assert!(matches!(n.fault(), Some(Fault::AddressLost { .. })));
+            assert!(n.safety().needs_reset(), "the new loss needs a new reset");
+        }
+
+        #[test]
+        fn an_unexpected_name_for_the_gateways_address_is_an_intrusion() {
+            let mut n = node();
+            let higher = Name::from_raw(GATEWAY_NAME.raw() + 1);
+            run(
+                &mut n,
+                0.0,
+                0.5,
+                &[(0.3, claim_from(GATEWAY_ADDRESS, higher))],
+            );
+            assert_eq!(n.counters().intrusions, 1);
+            assert_eq!(
+                n.fault(),
+                Some(Fault::AddressIntrusion {
+                    address: GATEWAY_ADDRESS,
+                    name: higher.raw(),
+                    owner_lost: false
+                })
+            );
+            assert_eq!(n.fault().map(|f| f.code()), Some(14));
+            // The gateway defends 0x80: no reset needed, nothing to claim again.
+            assert!(!n.safety().needs_reset() && !n.gateway_address_lost());
+
+            // A lower NAME takes 0x80 from the gateway: latched until the operator's reset.
+            let lower = Name::from_raw(GATEWAY_NAME.raw() - 1);
+            run(
+                &mut n,
+                0.5,
+                1.0,
+                &[(0.6, claim_from(GATEWAY_ADDRESS, lower))],
+            );
+            assert_eq!(n.counters().intrusions, 2);
+            assert!(n.safety().needs_reset() && n.gateway_address_lost());
+            n.reset();
+            let sent = run(&mut n, 1.0, 1.3, &[]);
+            // Our own address stands: the request comes from 0x27, with our claim as its answer.
+            assert_eq!(sent[..2], [(1000, REQUEST_FROM_US_ID), (1000, CLAIM_ID)]);
+            assert!(n.address_lost().is_none());
+            // The gateway's own claim (its configured NAME) ends the loss.
+            run(
+                &mut n,
+                1.3,
+                1.4,
+                &[(1.31, claim_from(GATEWAY_ADDRESS, GATEWAY_NAME))],
+            );
+            assert!(!n.gateway_address_lost());
+            assert_eq!(n.counters().intrusions, 2);
+        }
+
+        #[test]
+        fn the_names_come_from_the_config_and_the_expected_gateway_name_is_checked() {
+            let name = NameConfig {
+                identity_number: 77,
+                ..NameConfig::from(CONTROLLER_NAME)
+            };
+            let gateway = NameConfig {
+                identity_number: 78,
+                ..NameConfig::from(GATEWAY_NAME)
+            };
+            let mut config = ControllerConfig::default();
+            config.j1939.name = name;
+            config.j1939.gateway_name = gateway;
+            let mut n =
+                ControllerNode::new(&machine(), AutodigMaps::builtin().unwrap(), config).unwrap();
+            let ours = name.name().unwrap();
+            assert_eq!(n.address_claim().name(), ours);
+            // The project's default gateway NAME is not the configured one any more.
+            let sent = run(
+                &mut n,
+                0.0,
+                0.5,
+                &[(0.3, claim_from(GATEWAY_ADDRESS, GATEWAY_NAME))],
+            );
+            assert_eq!(sent[0], (0, CLAIM_ID));
+            assert_eq!(n.counters().intrusions, 1);
+            let mut n = node();
+            run(
+                &mut n,
+                0.0,
+                0.5,
+                &[(0.3, claim_from(GATEWAY_ADDRESS, GATEWAY_NAME))],
+            );
+            assert_eq!(n.counters().intrusions, 0);
+        }
+
+        #[test]
+        fn a_name_field_too_wide_is_refused_with_its_line() {
+            let text = "[j1939.name]\nidentity_number = 1\nmanufacturer_code = 0\n\
+                        ecu_instance = 9\nfunction_instance = 0\nfunction = 130\n\
+                        vehicle_system = 0\nvehicle_system_instance = 0\nindustry_group = 3\n\
+                        arbitrary_address_capable = false\n";
+            let err = ControllerConfig::from_toml_str_named(text, "c.toml").unwrap_err();
+            assert_eq!(
+                err.to_string(),
+                "c.toml:4: j1939.name.ecu_instance = 9: must fit 3 bits (0 to 7)"
+            );
+            let same = format!(
+                "[j1939.gateway_name]\n{}",
+                toml::to_string(&NameConfig::from(CONTROLLER_NAME)).unwrap()
+            );
+            let err = ControllerConfig::from_toml_str_named(&same, "c.toml").unwrap_err();
+            assert!(err.to_string().contains("must differ"), "{err}");
+            let partial = "[j1939.name]\nidentity_number = 5\n";
+            let err = ControllerConfig::from_toml_str_named(partial, "c.toml").unwrap_err();
+            assert!(err.to_string().contains("missing field"), "{err}");
         }
 
         #[test]

@@ -413,13 +413,6 @@ pub async fn run_session_loop<B: Bus>(
                 if let Err(e) = send_all(bus, node, &out, &mut stats, now).await {
                     break Err(e);
                 }
-                if let Some(fault) = node.address_lost() {
-                    // Cannot Claim went out with this step; the address is no longer ours to use.
-                    break Err(anyhow::Error::new(fault).context(format!(
-                        "stopped on {}: another node owns the controller's address",
-                        bus.interface()
-                    )));
-                }
                 match session.as_mut() {
                     Some(s) => {
                         let events = match s.driver.after_step(node, &mut *s.scans) {

@@ -41,7 +41,9 @@
 //! canonical message must be mapped, except J1939 network management (Address Claimed, Request:
 //! [`crate::address_claim::is_network_management`]), which is the same on every J1939 network and
 //! whose source address is part of its meaning (a Cannot Claim comes from `0xFE`, a claim from
-//! whoever claims): those frames pass through unchanged in both directions and may not be mapped.
+//! whoever claims): it may not be mapped. On a J1939 wire bus (the DBC's `ProtocolType` is `J1939`)
+//! those frames pass through unchanged in both directions; on any other there is no address to claim,
+//! so they are not sent ([`TranslateError::NotOnThisBus`]) and not taken from it.
 //! `mux` picks the multiplexor value when the wire message is multiplexed. The format is documented
 //! in `docs/machine-profile.md`.
 
@@ -98,6 +100,10 @@ pub enum TranslateError {
     /// A wire frame whose id (and multiplexor value) the profile maps to no canonical message.
     #[error("unmapped frame {0:?}")]
     Unmapped(CanId),
+    /// J1939 network management (an address claim, a request) for a wire bus that is not a J1939
+    /// network: there are no addresses to claim there, so it is not sent (not an error).
+    #[error("J1939 network management {0:?}: the wire bus is not J1939")]
+    NotOnThisBus(CanId),
     /// A frame of a known id with the wrong length or kind.
     #[error("{message}: {actual} data bytes, expected {expected}")]
     WrongLength {
@@ -546,8 +552,15 @@ impl Profile {
     /// [`TranslateError`] for a frame that is not a canonical message, or a value the wire signal
     /// cannot hold.
     pub fn to_wire(&self, canonical: &CanFrame) -> Result<CanFrame, TranslateError> {
-        if self.identity || network_management(canonical) {
+        if self.identity {
             return Ok(*canonical);
+        }
+        if network_management(canonical) {
+            return if self.wire.j1939 {
+                Ok(*canonical)
+            } else {
+                Err(TranslateError::NotOnThisBus(canonical.id()))
+            };
         }
         let route = self.route_of_canonical(canonical)?;
         let wmsg = &self.wire.messages[route.wire];
@@ -620,7 +633,7 @@ impl Profile {
     /// [`TranslateError::Unmapped`] for a frame the profile does not map (count and reject it like any
     /// unexpected frame), [`TranslateError::WrongLength`] for a mapped id of the wrong length.
     pub fn from_wire(&self, wire: &CanFrame) -> Result<CanFrame, TranslateError> {
-        if self.identity || network_management(wire) {
+        if self.identity || (self.wire.j1939 && network_management(wire)) {
             return Ok(*wire);
         }
         if wire.kind() != FrameKind::Data {
@@ -826,11 +839,15 @@ mod tests {
     }
 
     #[test]
-    fn network_management_passes_through_and_may_not_be_mapped() {
+    fn network_management_passes_a_j1939_bus_only_and_may_not_be_mapped() {
         use crate::address_claim::{CONTROLLER_NAME, NULL_ADDRESS, request_address_claimed};
         use crate::messages::{AddressClaimed, Message};
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/other_gateway.toml");
-        let profile = Profile::load(&path).expect("the example profile loads");
+        let other = Profile::load(&path).expect("the example profile loads");
+        assert!(!other.wire().j1939);
+        let mut j1939 = Profile::default_profile().expect("loads");
+        j1939.identity = false;
+        assert!(j1939.wire().j1939);
         let claim = Message::AddressClaimed(AddressClaimed {
             name: CONTROLLER_NAME,
         });
@@ -839,8 +856,16 @@ mod tests {
             claim.encode_from(NULL_ADDRESS).expect("encodes"),
             request_address_claimed(0xFF, 0x27).expect("encodes"),
         ] {
-            assert_eq!(profile.to_wire(&frame), Ok(frame));
-            assert_eq!(profile.from_wire(&frame), Ok(frame));
+            assert_eq!(j1939.to_wire(&frame), Ok(frame));
+            assert_eq!(j1939.from_wire(&frame), Ok(frame));
+            assert_eq!(
+                other.to_wire(&frame),
+                Err(TranslateError::NotOnThisBus(frame.id()))
+            );
+            assert_eq!(
+                other.from_wire(&frame),
+                Err(TranslateError::Unmapped(frame.id()))
+            );
         }
         let text = format!(
             "{}\n[messages.AddressClaimed]\nwire = \"X\"\n",

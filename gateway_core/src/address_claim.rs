@@ -26,6 +26,24 @@
 //!   claim, or with Cannot Claim once it has lost. J1939-81 lets a node delay Cannot Claim by a
 //!   pseudo-random 0-153 ms to spread answers; the project's two nodes answer at once.
 //!
+//! # Recovery after a loss
+//!
+//! A node that lost stays silent until it is told to try again; how depends on the node
+//! ([`AfterLoss`]):
+//!
+//! - The controller ([`AfterLoss::CannotClaim`], J1939-81 as written) answers requests with Cannot
+//!   Claim. The operator's reset calls [`AddressClaimer::reclaim`]: the node sends a Request for
+//!   Address Claimed to global ([`request_address_claimed`]), then its claim, and holds 250 ms again.
+//!   A real competitor answers the request (or our claim) with its lower NAME and wins again; a
+//!   transient claim (a frame from a faulty or foreign node that does not take part in the
+//!   procedure) does not answer, and the claim stands.
+//! - The gateway ([`AfterLoss::ReclaimOnRequest`], a deviation from J1939-81, which has a loser
+//!   answer with Cannot Claim) answers a Request for Address Claimed to global by claiming its address
+//!   again, with the same 250 ms hold. A fixed-address gateway has no other address to go to and no
+//!   operator at its panel, so without this only a power cycle would bring it back. It cannot steal
+//!   the bus from a real owner: the owner receives the same request, answers with its lower NAME and
+//!   wins again. A request addressed to the gateway's address is not for a gateway that lost it.
+//!
 //! Address claims are not authenticated (J1939 has no means to), so any node on the bus can take an
 //! address by claiming it with a lower NAME. That stops the machine (both nodes treat a lost claim as
 //! a fault with the valves neutral); it cannot make it move.
@@ -226,6 +244,16 @@ pub enum ClaimState {
     },
 }
 
+/// How a node that lost its address answers a Request for Address Claimed (module docs, "Recovery
+/// after a loss").
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AfterLoss {
+    /// With Cannot Claim (J1939-81); only [`AddressClaimer::reclaim`] tries the address again.
+    CannotClaim,
+    /// A request to global re-claims the address (the project's gateway).
+    ReclaimOnRequest,
+}
+
 /// What a received claim-procedure message did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ClaimEvent {
@@ -241,6 +269,12 @@ pub enum ClaimEvent {
     },
     /// A Request for Address Claimed for us: our claim (or Cannot Claim) queued.
     Answered,
+    /// A Request for Address Claimed to global after we had lost, with [`AfterLoss::ReclaimOnRequest`]:
+    /// our claim queued, the 250 ms hold starts again.
+    Reclaimed {
+        /// The NAME that had won the address.
+        from: Name,
+    },
     /// Nothing for us: another address's claim, a Cannot Claim, a request for another node or PGN,
     /// or a contest after we had already lost.
     Noted,
@@ -262,27 +296,51 @@ pub struct AddressClaimer {
     address: u8,
     state: ClaimState,
     pending: Option<Pending>,
+    after_loss: AfterLoss,
 }
 
 impl AddressClaimer {
-    /// A node called `name` that will claim `address`.
+    /// A node called `name` that will claim `address` and answers requests with Cannot Claim after
+    /// losing it ([`AfterLoss::CannotClaim`]).
     pub const fn new(name: Name, address: u8) -> Self {
         Self {
             name,
             address,
             state: ClaimState::Idle,
             pending: None,
+            after_loss: AfterLoss::CannotClaim,
         }
+    }
+
+    /// The same node answering requests after a loss as `after_loss` says.
+    pub const fn with_after_loss(mut self, after_loss: AfterLoss) -> Self {
+        self.after_loss = after_loss;
+        self
+    }
+
+    /// The controller called `name` at its address.
+    pub const fn controller_named(name: Name) -> Self {
+        Self::new(name, CONTROLLER_ADDRESS)
+    }
+
+    /// The gateway called `name` at its address, re-claiming on request after a loss.
+    pub const fn gateway_named(name: Name) -> Self {
+        Self::new(name, GATEWAY_ADDRESS).with_after_loss(AfterLoss::ReclaimOnRequest)
     }
 
     /// The controller with its default NAME and address.
     pub const fn controller() -> Self {
-        Self::new(CONTROLLER_NAME, CONTROLLER_ADDRESS)
+        Self::controller_named(CONTROLLER_NAME)
     }
 
-    /// The gateway with its default NAME and address.
+    /// The gateway with its default NAME and address, re-claiming on request after a loss.
     pub const fn gateway() -> Self {
-        Self::new(GATEWAY_NAME, GATEWAY_ADDRESS)
+        Self::gateway_named(GATEWAY_NAME)
+    }
+
+    /// How a loss is answered.
+    pub const fn after_loss(&self) -> AfterLoss {
+        self.after_loss
     }
 
     /// Our NAME.
@@ -306,7 +364,7 @@ impl AddressClaimer {
         matches!(self.state, ClaimState::Claimed)
     }
 
-    /// True once the address is lost (for good).
+    /// The winner's NAME while the address is lost (until a re-claim).
     pub const fn lost(&self) -> Option<Name> {
         match self.state {
             ClaimState::Lost { by } => Some(by),
@@ -320,6 +378,22 @@ impl AddressClaimer {
             self.state = ClaimState::Claiming { since: now };
             self.pending = Some(Pending::Claim);
         }
+    }
+
+    /// Claims the address again at `now` (module docs, "Recovery after a loss"): after a loss the
+    /// claim is queued and the 250 ms hold starts again; a standing or pending claim is only sent
+    /// again. The caller sends [`request_address_claimed`] to global first, so that a real owner
+    /// answers. Returns the NAME that had won, if the address was lost.
+    pub fn reclaim(&mut self, now: Instant) -> Option<Name> {
+        let lost = self.lost();
+        match self.state {
+            ClaimState::Lost { .. } | ClaimState::Idle => {
+                self.state = ClaimState::Claiming { since: now };
+            }
+            ClaimState::Claiming { .. } | ClaimState::Claimed => {}
+        }
+        self.pending = Some(Pending::Claim);
+        lost
     }
 
     /// Advances the procedure to `now`: starts it if idle, and a claim that has stood for
@@ -344,7 +418,7 @@ impl AddressClaimer {
     ) -> Option<ClaimEvent> {
         match *message {
             Message::AddressClaimed(claimed) => Some(self.on_claim(id, claimed.name, now)),
-            Message::RequestPgn(request) => Some(self.on_request(id, request)),
+            Message::RequestPgn(request) => Some(self.on_request(id, request, now)),
             _ => None,
         }
     }
@@ -369,20 +443,21 @@ impl AddressClaimer {
         ClaimEvent::Defended { competitor: theirs }
     }
 
-    fn on_request(&mut self, id: J1939Id, request: RequestPgn) -> ClaimEvent {
-        let to_us = match id.destination_address() {
-            Some(GLOBAL_ADDRESS) => true,
-            Some(da) => da == self.address && self.lost().is_none(),
-            None => false,
-        };
+    fn on_request(&mut self, id: J1939Id, request: RequestPgn, now: Instant) -> ClaimEvent {
+        let global = id.destination_address() == Some(GLOBAL_ADDRESS);
+        let to_us =
+            global || (id.destination_address() == Some(self.address) && self.lost().is_none());
         if !to_us || request.pgn != ADDRESS_CLAIMED_PGN || self.state == ClaimState::Idle {
             return ClaimEvent::Noted;
         }
-        self.pending = Some(if self.lost().is_some() {
-            Pending::CannotClaim
-        } else {
-            Pending::Claim
-        });
+        match (self.lost(), self.after_loss) {
+            (None, _) => self.pending = Some(Pending::Claim),
+            (Some(from), AfterLoss::ReclaimOnRequest) => {
+                self.reclaim(now);
+                return ClaimEvent::Reclaimed { from };
+            }
+            (Some(_), AfterLoss::CannotClaim) => self.pending = Some(Pending::CannotClaim),
+        }
         ClaimEvent::Answered
     }
 
@@ -649,6 +724,111 @@ mod tests {
         c.on_message(decoded.id, &decoded.message, T0);
         let frame = c.take_frame().unwrap().unwrap();
         assert_eq!(frame.id(), CanId::Extended(0x18EE_FFFE));
+    }
+
+    /// Loses `c`'s address to NAME 0 at `T0` + 10 ms and drops the Cannot Claim.
+    fn lose(c: &mut AddressClaimer) {
+        c.update(T0);
+        c.take_frame().unwrap();
+        let (id, msg) = claim_from(c.address(), Name::from_raw(0));
+        c.on_message(id, &msg, ms(T0, 10));
+        assert_eq!(c.take_frame().unwrap().unwrap().id().raw(), 0x18EE_FFFE);
+        c.update(ms(T0, 1000));
+        assert_eq!(c.lost(), Some(Name::from_raw(0)));
+    }
+
+    fn request(destination: u8) -> (J1939Id, Message) {
+        let decoded =
+            Message::decode(&request_address_claimed(destination, CONTROLLER_ADDRESS).unwrap())
+                .unwrap();
+        (decoded.id, decoded.message)
+    }
+
+    #[test]
+    fn a_reclaim_after_a_transient_claim_stands_250_ms_later() {
+        let mut c = AddressClaimer::controller();
+        lose(&mut c);
+        let at = ms(T0, 2000);
+        assert_eq!(c.reclaim(at), Some(Name::from_raw(0)));
+        let frame = c.take_frame().unwrap().unwrap();
+        assert_eq!(frame.id(), CanId::Extended(0x18EE_FF27));
+        assert_eq!(frame.data(), &CONTROLLER_NAME.to_le_bytes());
+        c.update(ms(at, 249));
+        assert!(!c.may_transmit() && c.lost().is_none());
+        c.update(ms(at, 250));
+        assert!(c.may_transmit());
+    }
+
+    #[test]
+    fn a_reclaim_loses_again_when_the_owner_answers() {
+        let mut c = AddressClaimer::controller();
+        lose(&mut c);
+        let at = ms(T0, 2000);
+        c.reclaim(at);
+        c.take_frame().unwrap();
+        // The owner answers the request (or our claim) with its lower NAME.
+        let (id, msg) = claim_from(CONTROLLER_ADDRESS, Name::from_raw(0));
+        assert_eq!(
+            c.on_message(id, &msg, ms(at, 5)),
+            Some(ClaimEvent::Lost {
+                competitor: Name::from_raw(0)
+            })
+        );
+        assert_eq!(c.take_frame().unwrap().unwrap().id().raw(), 0x18EE_FFFE);
+        c.update(ms(at, 300));
+        assert!(!c.may_transmit());
+    }
+
+    #[test]
+    fn a_reclaim_of_a_standing_claim_only_sends_it_again() {
+        let mut c = AddressClaimer::controller();
+        c.update(T0);
+        c.update(ms(T0, 300));
+        assert_eq!(c.reclaim(ms(T0, 400)), None);
+        assert!(c.may_transmit());
+        assert!(c.take_frame().unwrap().is_some());
+    }
+
+    #[test]
+    fn after_losing_the_gateway_reclaims_on_a_global_request_only() {
+        let mut g = AddressClaimer::gateway();
+        lose(&mut g);
+        // Addressed to 0x80: for the node that holds it now, not for us.
+        let (id, msg) = request(GATEWAY_ADDRESS);
+        assert_eq!(
+            g.on_message(id, &msg, ms(T0, 1500)),
+            Some(ClaimEvent::Noted)
+        );
+        assert_eq!(g.take_frame().unwrap(), None);
+        let (id, msg) = request(GLOBAL_ADDRESS);
+        let at = ms(T0, 2000);
+        assert_eq!(
+            g.on_message(id, &msg, at),
+            Some(ClaimEvent::Reclaimed {
+                from: Name::from_raw(0)
+            })
+        );
+        let frame = g.take_frame().unwrap().unwrap();
+        assert_eq!(frame.id(), CanId::Extended(0x18EE_FF80));
+        assert_eq!(frame.data(), &GATEWAY_NAME.to_le_bytes());
+        g.update(ms(at, 249));
+        assert!(!g.may_transmit());
+        g.update(ms(at, 250));
+        assert!(g.may_transmit());
+    }
+
+    #[test]
+    fn the_controller_answers_a_request_after_losing_with_cannot_claim_not_a_claim() {
+        let mut c = AddressClaimer::controller();
+        assert_eq!(c.after_loss(), AfterLoss::CannotClaim);
+        lose(&mut c);
+        let (id, msg) = request(GLOBAL_ADDRESS);
+        assert_eq!(
+            c.on_message(id, &msg, ms(T0, 2000)),
+            Some(ClaimEvent::Answered)
+        );
+        assert_eq!(c.take_frame().unwrap().unwrap().id().raw(), 0x18EE_FFFE);
+        assert!(c.lost().is_some());
     }
 
     #[test]

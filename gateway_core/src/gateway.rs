@@ -56,8 +56,14 @@
 //! ([`Gateway::status_frames`]) and the board's sensor frames go out only while
 //! [`Gateway::may_transmit`]: once the claim has stood for 250 ms. Losing the address to a lower NAME
 //! latches `ADDRESS_LOST` in any mode (valves neutral): the controller can no longer address the
-//! gateway, so nothing it sends is acted on again until a restart, and the gateway stays silent
-//! except for its Cannot Claim. Claim frames go out through [`Gateway::take_claim_frame`].
+//! gateway, so nothing it sends is acted on, and the gateway stays silent except for its Cannot
+//! Claim. A Request for Address Claimed to global (the controller sends one on the operator's reset)
+//! makes it claim its address again ([`crate::address_claim::AfterLoss::ReclaimOnRequest`], a
+//! deviation from J1939-81 documented there): a real owner answers the same request and wins again;
+//! after a transient claim the re-claim stands. Until it has stood 250 ms the gateway acts on nothing
+//! and sends nothing else; then it reports `Faulted` with `ADDRESS_LOST`, which the controller's
+//! `Disarm` acknowledges as any fault, and only a fresh arm request arms it: it never re-arms by
+//! itself. Claim frames go out through [`Gateway::take_claim_frame`].
 //!
 //! # Frames it does not act on
 //!
@@ -360,7 +366,7 @@ impl Gateway {
     /// The same gateway with another NAME (a machine's provisioned serial number) for its address
     /// claim. Call before the first tick.
     pub fn with_name(mut self, name: Name) -> Self {
-        self.claim = AddressClaimer::new(name, self.claim.address());
+        self.claim = AddressClaimer::gateway_named(name);
         self
     }
 
@@ -496,12 +502,20 @@ impl Gateway {
                     self.fault(GatewayFaults::ADDRESS_LOST);
                     FrameVerdict::Accepted
                 }
+                ClaimEvent::Reclaimed { .. } => {
+                    // The heartbeats it ignored meanwhile: a new sequence may start at any counter.
+                    self.last_alive = None;
+                    FrameVerdict::Accepted
+                }
                 ClaimEvent::Defended { .. } | ClaimEvent::Answered => FrameVerdict::Accepted,
                 ClaimEvent::Noted => self.ignore(),
             };
         }
-        if self.claim.lost().is_some() {
-            // Without its address the gateway cannot be commanded: nothing is acted on again.
+        if self.claim.lost().is_some()
+            || (self.faults.contains(GatewayFaults::ADDRESS_LOST) && !self.claim.may_transmit())
+        {
+            // Without its address the gateway cannot be commanded, and after a re-claim it acts on
+            // nothing until the claim has stood: `ADDRESS_LOST` stays latched until then.
             return self.ignore();
         }
         let from_controller = decoded.id.source_address() == CONTROLLER_ADDRESS;
@@ -778,7 +792,7 @@ impl Gateway {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::id::GATEWAY_ADDRESS;
+    use crate::id::{GATEWAY_ADDRESS, GLOBAL_ADDRESS};
     use crate::messages::{
         Activity, AutodigStageCode, AuxValveCommand, ControllerHeartbeat, ControllerStatus,
         JointAngles, PositionSetpoint, Valve,
@@ -1678,6 +1692,60 @@ mod tests {
             assert_eq!(g.tick(t, None).valve_commands, [0.0; VALVES]);
         }
         assert_eq!(g.mode(), GatewayMode::Faulted);
+    }
+
+    #[test]
+    fn after_a_lost_address_a_global_request_reclaims_it_and_the_gateway_stays_disarmed() {
+        let (mut g, mut l) = armed();
+        g.tick(0.0, None);
+        g.take_claim_frame();
+        g.tick(0.3, None);
+        let transient = Name::from_raw(0);
+        g.on_frame(&claim(GATEWAY_ADDRESS, transient), 0.31);
+        g.take_claim_frame();
+        g.tick(1.0, None);
+        // Addressed to 0x80, the request is for whoever holds it now.
+        let to_gateway =
+            crate::address_claim::request_address_claimed(GATEWAY_ADDRESS, CONTROLLER_ADDRESS)
+                .unwrap();
+        assert_eq!(g.on_frame(&to_gateway, 1.0), FrameVerdict::Ignored);
+        assert!(g.take_claim_frame().is_none());
+        // The controller's request to global after the operator's reset: the gateway claims again.
+        let request =
+            crate::address_claim::request_address_claimed(GLOBAL_ADDRESS, CONTROLLER_ADDRESS)
+                .unwrap();
+        assert_eq!(g.on_frame(&request, 1.0), FrameVerdict::Accepted);
+        assert_eq!(g.take_claim_frame().unwrap().id().raw(), 0x18EE_FF80);
+        assert!(g.address_claim().lost().is_none());
+        // For 250 ms: silent, and the controller's requests are not acted on.
+        let mut counter = 1;
+        let mut hb = |g: &Gateway, mode| {
+            counter += 1;
+            l.hb(g, mode, counter)
+        };
+        for t in [1.05, 1.1, 1.2, 1.249] {
+            assert_eq!(
+                g.on_frame(&hb(&g, RequestedMode::Disarm), t),
+                FrameVerdict::Ignored
+            );
+            assert_eq!(g.tick(t, None).valve_commands, [0.0; VALVES]);
+            assert!(!g.may_transmit());
+            assert!(g.status_frames::<CanFrame>().unwrap().is_none());
+        }
+        g.tick(1.25, None);
+        assert!(g.may_transmit());
+        assert_eq!(g.mode(), GatewayMode::Faulted);
+        assert!(g.faults().contains(GatewayFaults::ADDRESS_LOST));
+        // Never armed by itself: the controller's Disarm acknowledges, then its arm request arms.
+        g.on_frame(&hb(&g, RequestedMode::Disarm), 1.26);
+        g.tick(1.27, None);
+        assert_eq!(g.mode(), GatewayMode::Disarmed);
+        assert!(g.faults().is_empty());
+        g.on_frame(&hb(&g, RequestedMode::Disarm), 1.3);
+        assert_eq!(g.tick(1.31, None).valve_commands, [0.0; VALVES]);
+        assert_eq!(g.mode(), GatewayMode::Disarmed);
+        g.on_frame(&hb(&g, RequestedMode::ArmValve), 1.32);
+        assert_eq!(g.mode(), GatewayMode::ArmedValve);
     }
 
     #[test]

@@ -214,9 +214,9 @@ impl GatewayFaults {
     /// ([`crate::secoc`]).
     pub const AUTH_FAILURE: u16 = 1 << 9;
     /// Another node with a lower NAME claimed the gateway's address (J1939-81,
-    /// [`crate::address_claim`]): the gateway sent Cannot Claim, cannot receive commands any more and
-    /// sends nothing else; latched until restart. Never seen on the bus (the gateway is silent), but
-    /// kept in its status for local diagnostics.
+    /// [`crate::address_claim`]): the gateway sent Cannot Claim and acts on nothing and sends nothing
+    /// else until a Request for Address Claimed to global makes it claim again and that claim has
+    /// stood 250 ms; then its status reports the bit until the controller's `Disarm`.
     pub const ADDRESS_LOST: u16 = 1 << 10;
 
     /// True if every bit of `bits` is set.

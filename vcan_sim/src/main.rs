@@ -282,8 +282,9 @@ fn real_main() -> Result<()> {
         .map(std::sync::Arc::new);
     // Every start is a new series of sessions, so no recording of an earlier run is accepted.
     let session_seed: u64 = rand::random();
-    let node = MachineNode::new(config.build().context("building the machine")?)
+    let mut node = MachineNode::new(config.build().context("building the machine")?)
         .with_security(&key, session_seed);
+    node.set_gateway_name(config.gateway_name);
     let options = RealtimeOptions {
         iface,
         state_log: cli.state_log,

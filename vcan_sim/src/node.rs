@@ -10,10 +10,11 @@
 //! - every 50 ms (20 Hz): `TrackOdometry`, `GatewayStatus` and `GatewaySession`.
 //!
 //! Before any of these the gateway claims its address (J1939-81 Address Claimed at the first step,
-//! `firmware_bridge::address_claim`); sensor frames, odometry and status go out only once the claim
-//! has stood for 250 ms, and never again after the address was lost to a lower NAME (the gateway then
-//! holds the valves neutral with `ADDRESS_LOST` latched). Claim frames (a re-claim, the answer to a
-//! request, Cannot Claim) go out at the next step.
+//! `firmware_bridge::address_claim`, with the NAME of the machine file's `[gateway_name]`); sensor
+//! frames, odometry and status go out only once the claim has stood for 250 ms, and not after the
+//! address was lost to a lower NAME (the gateway then holds the valves neutral with `ADDRESS_LOST`
+//! latched) until a Request for Address Claimed to global made it claim again and that claim stood.
+//! Claim frames (a re-claim, the answer to a request, Cannot Claim) go out at the next step.
 //!
 //! Only sensor readings and the gateway status go out; nothing reveals the hidden effects.
 
@@ -78,6 +79,12 @@ impl MachineNode {
     /// As [`Self::with_security`] in place (before the first step: the gateway starts a new session).
     pub fn set_security(&mut self, key: &SessionKey, session_seed: u64) {
         self.gateway = std::mem::take(&mut self.gateway).with_security(key, session_seed);
+    }
+
+    /// Sets the gateway's J1939 NAME (the machine file's `[gateway_name]`, [`crate::SimConfig`]).
+    /// Call before the first step.
+    pub fn set_gateway_name(&mut self, name: firmware_bridge::address_claim::Name) {
+        self.gateway = std::mem::take(&mut self.gateway).with_name(name);
     }
 
     fn with(plant: Plant, gateway: Gateway) -> Self {
@@ -175,16 +182,29 @@ impl MachineNode {
         if let Some(frame) = self.gateway.take_claim_frame() {
             out.push(frame);
         }
-        if let Some(by) = self.gateway.address_claim().lost()
-            && !self.address_lost_logged
-        {
-            self.address_lost_logged = true;
-            tracing::error!(
-                address = self.gateway.address_claim().address(),
-                winner_name = format_args!("{:#018X}", by.raw()),
-                "gateway address lost to a node with a lower NAME: Cannot Claim sent, valves \
-                 neutral, no more sensor or status frames (restart to claim again)"
-            );
+        match (
+            self.gateway.address_claim().lost(),
+            self.address_lost_logged,
+        ) {
+            (Some(by), false) => {
+                self.address_lost_logged = true;
+                tracing::error!(
+                    address = self.gateway.address_claim().address(),
+                    winner_name = format_args!("{:#018X}", by.raw()),
+                    "gateway address lost to a node with a lower NAME: Cannot Claim sent, valves \
+                     neutral, no more sensor or status frames until a Request for Address Claimed \
+                     makes it claim again"
+                );
+            }
+            (None, true) => {
+                self.address_lost_logged = false;
+                tracing::warn!(
+                    address = self.gateway.address_claim().address(),
+                    "Request for Address Claimed: the gateway claims its address again (disarmed, \
+                     ADDRESS_LOST until the controller's Disarm)"
+                );
+            }
+            _ => {}
         }
         let transmit = self.gateway.may_transmit();
         if transmit
@@ -479,5 +499,41 @@ mod tests {
                 .contains(GatewayFaults::ADDRESS_LOST)
         );
         assert_eq!(node.valve_commands(), [0.0; 6]);
+
+        // The controller's Request for Address Claimed after the operator's reset: the gateway claims
+        // 0x80 again, stays silent 250 ms, then reports Faulted (ADDRESS_LOST) and stays disarmed.
+        let request = firmware_bridge::address_claim::request_address_claimed(
+            firmware_bridge::id::GLOBAL_ADDRESS,
+            firmware_bridge::address_claim::NULL_ADDRESS,
+        )
+        .unwrap();
+        node.on_frame(&request);
+        let mut out = Vec::new();
+        node.run_steps(steps_in(0.25) - 1, &mut out);
+        let ids: Vec<u32> = out.iter().map(|f| f.id().raw()).collect();
+        assert_eq!(ids, [0x18EE_FF80], "the re-claim, then nothing for 250 ms");
+        out.clear();
+        node.run_steps(steps_in(1.0), &mut out);
+        let status = out
+            .iter()
+            .find_map(|f| match Message::decode(f).map(|d| d.message) {
+                Ok(Message::GatewayStatus(s)) => Some(s),
+                _ => None,
+            })
+            .expect("status after the claim stood");
+        assert_eq!(status.mode, firmware_bridge::messages::GatewayMode::Faulted);
+        assert!(status.faults.contains(GatewayFaults::ADDRESS_LOST));
+        assert_eq!(node.valve_commands(), [0.0; 6]);
+    }
+
+    #[test]
+    fn the_gateway_claims_with_the_configured_name() {
+        use firmware_bridge::address_claim::{GATEWAY_NAME, Name};
+        let mut node = node_at(0.0);
+        let name = Name::from_raw(GATEWAY_NAME.raw() + 5);
+        node.set_gateway_name(name);
+        let mut out = Vec::new();
+        node.step(&mut out);
+        assert_eq!(out[0].data(), &name.to_le_bytes());
     }
 }

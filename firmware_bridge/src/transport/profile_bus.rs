@@ -83,6 +83,8 @@ impl<B: Bus> Bus for ProfileBus<B> {
     async fn send(&self, frame: CanFrame) -> Result<()> {
         match self.profile.to_wire(&frame) {
             Ok(wire) => self.inner.send(wire).await,
+            // An address claim for a bus without J1939 addresses: nothing to send, nothing wrong.
+            Err(crate::profile::TranslateError::NotOnThisBus(_)) => Ok(()),
             Err(e) => {
                 let n = count(&self.untranslatable_sent);
                 if n.is_power_of_two() {
