@@ -8,7 +8,8 @@
 //!
 //! Before anything else the node claims the controller's address (`0x27`) with its NAME (J1939-81,
 //! [`firmware_bridge::address_claim`]; `[j1939]` of [`ControllerConfig`]): the first step sends
-//! Address Claimed, and until the claim has stood for 250 ms a step sends only claim frames (received
+//! Address Claimed, and until the claim has stood for 250 ms (plus one control period: the step's
+//! frames leave after its computation) a step sends only claim frames (received
 //! frames still feed the estimator; the safety layer and the work cycle wait). A competing claim for
 //! `0x27` with a higher NAME is answered with our claim again; one with a lower NAME wins: the node
 //! sends Cannot Claim, raises [`Fault::AddressLost`] (latched) and sends nothing else, not even the
@@ -269,7 +270,11 @@ impl ControllerNode {
             last_motion: None,
             last_command: CycleCommand::Neutral,
             status_alive: 15,
-            claim: AddressClaimer::controller_named(name),
+            // The step's frames leave after its computation (and its logs): a period of margin
+            // keeps the claim's 250 ms on the wire when a step is late.
+            claim: AddressClaimer::controller_named(name).with_hold_margin(
+                i64::try_from(crate::run::CONTROL_PERIOD.as_nanos()).unwrap_or(0),
+            ),
             address_lost_raised: false,
             gateway_name,
             gateway_address_lost: false,

@@ -297,6 +297,8 @@ pub struct AddressClaimer {
     state: ClaimState,
     pending: Option<Pending>,
     after_loss: AfterLoss,
+    /// [`CLAIM_HOLD_NS`] plus the caller's margin.
+    hold_ns: i64,
 }
 
 impl AddressClaimer {
@@ -309,7 +311,23 @@ impl AddressClaimer {
             state: ClaimState::Idle,
             pending: None,
             after_loss: AfterLoss::CannotClaim,
+            hold_ns: CLAIM_HOLD_NS,
         }
+    }
+
+    /// The same node waiting `margin_ns` longer than [`CLAIM_HOLD_NS`] (at most one second more)
+    /// before its claim stands: a caller that stamps the claim with the start of a period and sends
+    /// it at the period's end passes its period, so the claim stands at least 250 ms on the wire.
+    pub const fn with_hold_margin(mut self, margin_ns: i64) -> Self {
+        let margin_ns = if margin_ns < 0 {
+            0
+        } else if margin_ns > 1_000_000_000 {
+            1_000_000_000
+        } else {
+            margin_ns
+        };
+        self.hold_ns = CLAIM_HOLD_NS + margin_ns;
+        self
     }
 
     /// The same node answering requests after a loss as `after_loss` says.
@@ -401,7 +419,7 @@ impl AddressClaimer {
     pub fn update(&mut self, now: Instant) -> ClaimState {
         self.start(now);
         if let ClaimState::Claiming { since } = self.state
-            && now.nanos_since(since) >= CLAIM_HOLD_NS
+            && now.nanos_since(since) >= self.hold_ns
         {
             self.state = ClaimState::Claimed;
         }
@@ -777,6 +795,16 @@ mod tests {
         assert_eq!(c.take_frame().unwrap().unwrap().id().raw(), 0x18EE_FFFE);
         c.update(ms(at, 300));
         assert!(!c.may_transmit());
+    }
+
+    #[test]
+    fn a_hold_margin_delays_the_claim_standing() {
+        let mut c = AddressClaimer::controller().with_hold_margin(10_000_000);
+        c.update(T0);
+        c.update(ms(T0, 259));
+        assert!(!c.may_transmit());
+        c.update(ms(T0, 260));
+        assert!(c.may_transmit());
     }
 
     #[test]
