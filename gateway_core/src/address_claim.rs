@@ -330,6 +330,11 @@ impl AddressClaimer {
         self
     }
 
+    /// How long a claim must stand before it is taken as won: [`CLAIM_HOLD_NS`] plus the margin.
+    pub const fn hold_ns(&self) -> i64 {
+        self.hold_ns
+    }
+
     /// The same node answering requests after a loss as `after_loss` says.
     pub const fn with_after_loss(mut self, after_loss: AfterLoss) -> Self {
         self.after_loss = after_loss;

@@ -366,7 +366,16 @@ impl Gateway {
     /// The same gateway with another NAME (a machine's provisioned serial number) for its address
     /// claim. Call before the first tick.
     pub fn with_name(mut self, name: Name) -> Self {
-        self.claim = AddressClaimer::gateway_named(name);
+        let margin_ns = self.claim.hold_ns() - crate::address_claim::CLAIM_HOLD_NS;
+        self.claim = AddressClaimer::gateway_named(name).with_hold_margin(margin_ns);
+        self
+    }
+
+    /// The same gateway waiting `margin_ns` longer than 250 ms before its claim stands
+    /// ([`AddressClaimer::with_hold_margin`]): for a board whose clock can run behind the bus by up
+    /// to that much when its claim leaves. Call before the first tick.
+    pub fn with_claim_hold_margin(mut self, margin_ns: i64) -> Self {
+        self.claim = self.claim.with_hold_margin(margin_ns);
         self
     }
 
@@ -1692,6 +1701,23 @@ mod tests {
             assert_eq!(g.tick(t, None).valve_commands, [0.0; VALVES]);
         }
         assert_eq!(g.mode(), GatewayMode::Faulted);
+    }
+
+    #[test]
+    fn a_claim_hold_margin_survives_a_name_change() {
+        use crate::address_claim::{AddressClaimer, CLAIM_HOLD_NS};
+        let other = AddressClaimer::controller().name();
+        for g in [
+            Gateway::default()
+                .with_claim_hold_margin(40_000_000)
+                .with_name(other),
+            Gateway::default()
+                .with_name(other)
+                .with_claim_hold_margin(40_000_000),
+        ] {
+            assert_eq!(g.address_claim().hold_ns(), CLAIM_HOLD_NS + 40_000_000);
+            assert_eq!(g.address_claim().name(), other);
+        }
     }
 
     #[test]

@@ -87,6 +87,12 @@ impl MachineNode {
         self.gateway = std::mem::take(&mut self.gateway).with_name(name);
     }
 
+    /// Makes the gateway hold its address claim `margin_ns` longer than 250 ms
+    /// ([`Gateway::with_claim_hold_margin`]). Call before the first step.
+    pub fn set_claim_hold_margin(&mut self, margin_ns: i64) {
+        self.gateway = std::mem::take(&mut self.gateway).with_claim_hold_margin(margin_ns);
+    }
+
     fn with(plant: Plant, gateway: Gateway) -> Self {
         Self {
             plant,
