@@ -3,7 +3,8 @@
 //! The output, `$OUT_DIR/dbc_generated.rs`, is included by `src/dbc.rs`. The typed messages in
 //! `src/messages.rs` encode and decode only through these descriptors, so the DBC and the code cannot
 //! disagree. The build fails with a clear message if the DBC uses something the codec does not support
-//! (big-endian signals, multiplexing, standard ids, more than 8 bytes).
+//! (big-endian signals, multiplexing, standard ids, more than 8 bytes) or leaves out a message's
+//! `GenMsgCycleTime` (0 only for the J1939-81 event messages).
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -50,7 +51,7 @@ fn main() {
             })
             .unwrap_or_else(|| format!("DBC message {}.", msg.name));
         let transmitter = msg.transmitter.clone().unwrap_or_default();
-        let cycle_time_ms = cycle_time_ms(&dbc, msg.id, &msg.name);
+        let cycle_time_ms = cycle_time_ms(&dbc, msg.id, &msg.name, pgn);
         writeln!(
             out,
             "/// `{}` (id `0x{id:08X}`, PGN {pgn} = `0x{pgn:04X}`, sent by {transmitter}): {}",
@@ -218,10 +219,14 @@ fn screaming(name: &str) -> String {
     snake(name).to_uppercase()
 }
 
-/// The message's `GenMsgCycleTime` attribute, ms: every message of the protocol is periodic, so a
-/// message without one (or with 0 or a value that is not a whole number of ms up to 65535) fails the
-/// build.
-fn cycle_time_ms(dbc: &Dbc, id: MessageId, name: &str) -> u16 {
+/// The message's `GenMsgCycleTime` attribute, ms. Every message must state it: a periodic message
+/// its period (1..=65535 ms), an event message 0 (the J1939 DBC convention for "not cyclic"). Only
+/// the J1939-81 network-management messages (Address Claimed, Request) are event messages: they go
+/// out at start, in a contest and on request, never on a schedule. Anything else with 0, a missing
+/// attribute or a value that is not a whole number of ms up to 65535 fails the build.
+fn cycle_time_ms(dbc: &Dbc, id: MessageId, name: &str, pgn: u32) -> u16 {
+    /// PGNs sent on events: Address Claimed (0xEE00) and Request (0xEA00).
+    const EVENT_PGNS: [u32; 2] = [0xEE00, 0xEA00];
     let value = dbc
         .attribute_values_message
         .iter()
@@ -233,8 +238,16 @@ fn cycle_time_ms(dbc: &Dbc, id: MessageId, name: &str) -> u16 {
         AttributeValue::Int(v) => i128::from(*v),
         other => panic!("message {name}: GenMsgCycleTime {other:?} is not an integer"),
     };
+    let event = EVENT_PGNS.contains(&pgn);
     match u16::try_from(ms) {
-        Ok(ms) if ms > 0 => ms,
-        _ => panic!("message {name}: GenMsgCycleTime {ms} is not in 1..=65535 ms"),
+        Ok(0) if event => 0,
+        Ok(0) => panic!(
+            "message {name}: GenMsgCycleTime 0 (event message) is only for Address Claimed and Request"
+        ),
+        Ok(ms) if !event => ms,
+        Ok(ms) => panic!(
+            "message {name}: an event message (J1939-81) must have GenMsgCycleTime 0, not {ms} ms"
+        ),
+        Err(_) => panic!("message {name}: GenMsgCycleTime {ms} is not in 0..=65535 ms"),
     }
 }

@@ -17,6 +17,8 @@ use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+use firmware_bridge::address_claim::{CONTROLLER_NAME, GATEWAY_NAME, Name};
+use firmware_bridge::name_config::NameConfig;
 use firmware_bridge::secoc::{KeyFileError, SessionKey};
 
 use crate::ControllerError;
@@ -46,6 +48,62 @@ pub struct ControllerConfig {
     pub autostart: bool,
     /// Authentication of the control path.
     pub security: SecurityConfig,
+    /// The J1939 NAMEs of the controller and of the gateway it expects.
+    pub j1939: J1939Config,
+}
+
+/// The `[j1939]` table: the controller's NAME (`[j1939.name]`) and the NAME the gateway at `0x80`
+/// must claim with (`[j1939.gateway_name]`), each a full [`NameConfig`] table (every field given,
+/// each within its width). A claim for `0x27` or `0x80` from any other NAME is an intrusion
+/// (`Fault::AddressIntrusion`). Defaults: the project's NAMEs
+/// ([`firmware_bridge::address_claim::CONTROLLER_NAME`], [`GATEWAY_NAME`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct J1939Config {
+    /// The controller's NAME.
+    pub name: NameConfig,
+    /// The gateway's NAME.
+    pub gateway_name: NameConfig,
+}
+
+impl Default for J1939Config {
+    fn default() -> Self {
+        Self {
+            name: NameConfig::from(CONTROLLER_NAME),
+            gateway_name: NameConfig::from(GATEWAY_NAME),
+        }
+    }
+}
+
+impl J1939Config {
+    /// The two NAMEs, `(controller, gateway)`: each field within its width, not arbitrary-address
+    /// capable, and different from each other (a NAME is unique on a J1939 network).
+    ///
+    /// # Errors
+    /// [`ParamError`] naming the field (`j1939.name.identity_number`).
+    pub fn names(&self) -> Result<(Name, Name), ParamError> {
+        let one = |key: &str, config: &NameConfig| {
+            config.name().map_err(|e| {
+                ParamError::new(
+                    "j1939",
+                    format!("{key}.{}", e.field),
+                    Some(e.value.to_string()),
+                    e.rule,
+                )
+            })
+        };
+        let controller = one("name", &self.name)?;
+        let gateway = one("gateway_name", &self.gateway_name)?;
+        if controller == gateway {
+            return Err(ParamError::new(
+                "j1939",
+                "gateway_name",
+                None,
+                "must differ from j1939.name (a NAME is unique on the network)",
+            ));
+        }
+        Ok((controller, gateway))
+    }
 }
 
 /// The `[security]` table: the machine's authentication key (docs/protocol.md, "Freshness and
@@ -109,6 +167,7 @@ impl Default for ControllerConfig {
             track_every_steps: 5,
             autostart: true,
             security: SecurityConfig::default(),
+            j1939: J1939Config::default(),
         }
     }
 }
@@ -127,6 +186,7 @@ impl ControllerConfig {
     pub fn validate(&self) -> Result<(), ParamError> {
         self.safety.validate()?;
         self.security.validate()?;
+        self.j1939.names()?;
         self.estimator.validate()?;
         self.cycle.validate()?;
         self.autodig.validate().map_err(|e| match e {
@@ -219,7 +279,7 @@ impl ControllerConfig {
 #[error("{}{}: {rule}", self.path(), value_suffix(self.value.as_deref()))]
 pub struct ParamError {
     /// The table of the controller config the value lives in (`safety`, `estimator`, `cycle`,
-    /// `autodig`, `cleanup`; empty for top-level keys).
+    /// `autodig`, `cleanup`, `j1939`; empty for top-level keys).
     pub section: &'static str,
     /// The key inside it as the file spells it, dotted through nested tables and array entries
     /// (`sensor_max_age_s`, `joint.kp`, `actions.2.swing_deg`).

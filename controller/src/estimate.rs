@@ -450,7 +450,9 @@ impl Estimator {
             | Message::PositionSetpoint(_)
             | Message::ControllerHeartbeat(_)
             | Message::GatewaySession(_)
-            | Message::ControllerStatus(_) => return false,
+            | Message::ControllerStatus(_)
+            | Message::AddressClaimed(_)
+            | Message::RequestPgn(_) => return false,
         };
         self.received_s[signal.slot()] = Some(time_s);
         true

@@ -6,9 +6,31 @@
 //! output is a fixed-capacity [`Outbox`]; the step allocates nothing except when a dig starts (the
 //! pre-dig terrain section) and never panics.
 //!
+//! Before anything else the node claims the controller's address (`0x27`) with its NAME (J1939-81,
+//! [`firmware_bridge::address_claim`]; `[j1939]` of [`ControllerConfig`]): the first step sends
+//! Address Claimed, and until the claim has stood for 250 ms (plus one control period: the step's
+//! frames leave after its computation) a step sends only claim frames (received
+//! frames still feed the estimator; the safety layer and the work cycle wait). A competing claim for
+//! `0x27` with a higher NAME is answered with our claim again; one with a lower NAME wins: the node
+//! sends Cannot Claim, raises [`Fault::AddressLost`] (latched) and sends nothing else, not even the
+//! shutdown frames, since it may no longer use the address ([`ControllerNode::address_lost`]). A
+//! Request for Address Claimed is answered with the claim (with Cannot Claim after a loss). In
+//! listen-only mode the node claims nothing.
+//!
+//! A claim for `0x27` or the gateway's `0x80` from a NAME other than the configured ones is an
+//! intrusion: logged, counted ([`FrameCounters::intrusions`]) and raised as
+//! [`Fault::AddressIntrusion`], latched when the intruder's NAME is lower than the owner's (the owner
+//! lost the address; for `0x80` the gateway falls silent). The operator's reset
+//! ([`ControllerNode::reset`]) recovers a lost address: the next step sends a Request for Address
+//! Claimed to global, then the controller's claim, and waits 250 ms again. A real owner of `0x27`
+//! answers and wins again (the fault stays); a transient claim does not, and the claim stands. The
+//! gateway answers the same request by claiming `0x80` again, and is armed through the usual
+//! handshake once its status is back.
+//!
 //! Per step, in order:
 //!
-//! 1. Received frames: error frames are bus faults; frames from the gateway (`0x80`) feed the
+//! 1. Received frames: address claims and requests go to the claim procedure (claims for `0x27` and
+//!    `0x80` are checked against the configured NAMEs); error frames are bus faults; frames from the gateway (`0x80`) feed the
 //!    estimator; decode errors of protocol frames, frames from the gateway's address that the gateway
 //!    does not send, frames with the controller's own address (`0x27`) and protocol messages from other
 //!    addresses are faults. Other traffic (unknown PGNs from other nodes, 11-bit ids, remote and FD
@@ -26,11 +48,16 @@
 //!
 //! Its configuration, [`ControllerConfig`], and the checks of every parameter live in [`crate::config`].
 
+use firmware_bridge::address_claim::{
+    AddressClaimer, ClaimEvent, NULL_ADDRESS, Name, request_address_claimed,
+};
+use firmware_bridge::id::GLOBAL_ADDRESS;
 use firmware_bridge::messages::{
     Activity, AutodigStageCode, AuxValveCommand, ControllerStatus as StatusMessage, Message,
     PositionSetpoint, Valve,
 };
 use firmware_bridge::secoc::{SealError, Sealer, SessionKey};
+use firmware_bridge::time::Instant;
 use firmware_bridge::transport::BusFault;
 use firmware_bridge::{
     CONTROLLER_ADDRESS, CanFrame, CanId, DecodeError, GATEWAY_ADDRESS, J1939Id, TimestampedFrame,
@@ -140,6 +167,9 @@ pub struct FrameCounters {
     pub outbox_overflow: u64,
     /// Secured frames not sent because no gateway session was known yet.
     pub held_no_session: u64,
+    /// Address claims for the controller's or the gateway's address from an unexpected NAME (also
+    /// counted in `faulty`).
+    pub intrusions: u64,
 }
 
 /// The controller's status (sent on the bus as `ControllerStatus` at 20 Hz, with the fault code).
@@ -173,6 +203,17 @@ pub struct ControllerNode {
     last_command: CycleCommand,
     status_alive: u8,
     out: Outbox,
+    /// The J1939-81 claim of the controller's address.
+    claim: AddressClaimer,
+    /// Whether the lost claim was reported to the safety layer.
+    address_lost_raised: bool,
+    /// The NAME the gateway at `0x80` claims with.
+    gateway_name: Name,
+    /// A claim with a NAME lower than the gateway's took `0x80`, and the gateway's claim has not been
+    /// seen since.
+    gateway_address_lost: bool,
+    /// The operator's reset asked for the addresses to be claimed again (at the next step).
+    reclaim_requested: bool,
 }
 
 impl ControllerNode {
@@ -187,6 +228,7 @@ impl ControllerNode {
         config: ControllerConfig,
     ) -> Result<Self, ControllerError> {
         config.validate()?;
+        let (name, gateway_name) = config.j1939.names()?;
         let kin = Kinematics::new(machine)?;
         let relief = [machine.hydraulics.relief_pressure_pa; 3];
         let mut autodig = config.autodig;
@@ -228,6 +270,15 @@ impl ControllerNode {
             last_motion: None,
             last_command: CycleCommand::Neutral,
             status_alive: 15,
+            // The step's frames leave after its computation (and its logs): a period of margin
+            // keeps the claim's 250 ms on the wire when a step is late.
+            claim: AddressClaimer::controller_named(name).with_hold_margin(
+                i64::try_from(crate::run::CONTROL_PERIOD.as_nanos()).unwrap_or(0),
+            ),
+            address_lost_raised: false,
+            gateway_name,
+            gateway_address_lost: false,
+            reclaim_requested: false,
             out: Outbox::new().map_err(|e| ControllerError::Config {
                 field: "outbox",
                 reason: e.to_string(),
@@ -240,6 +291,20 @@ impl ControllerNode {
     /// the first step: the session is learnt again from the gateway.
     pub fn set_key(&mut self, key: &SessionKey) {
         self.sealer = Sealer::new(key);
+    }
+
+    /// The address claim (state, NAME, address).
+    pub fn address_claim(&self) -> &AddressClaimer {
+        &self.claim
+    }
+
+    /// The fault while another node holds the controller's address: the node sends nothing until
+    /// the operator's reset claims it again ([`Self::reset`]).
+    pub fn address_lost(&self) -> Option<Fault> {
+        self.claim.lost().map(|by| Fault::AddressLost {
+            address: self.claim.address(),
+            winner_name: by.raw(),
+        })
     }
 
     /// The gateway session the node seals its frames for, once the gateway has announced one.
@@ -373,9 +438,66 @@ impl ControllerNode {
         self.cycle.on_fault(false);
     }
 
-    /// The operator's acknowledgement of an e-stop or a latched fault.
+    /// The operator's acknowledgement of an e-stop or a latched fault. When the controller's address
+    /// or the gateway's was lost, the next step also starts the recovery (module docs): a Request for
+    /// Address Claimed to global, then the controller's claim.
     pub fn reset(&mut self) {
         self.safety.reset();
+        if self.safety.state() != SafetyState::ListenOnly
+            && (self.claim.lost().is_some() || self.gateway_address_lost)
+        {
+            self.reclaim_requested = true;
+        }
+    }
+
+    /// Whether a claim for `0x80` with a NAME lower than the gateway's was seen and the gateway has
+    /// not claimed its address since.
+    pub fn gateway_address_lost(&self) -> bool {
+        self.gateway_address_lost
+    }
+
+    /// Checks a claim from `source` against the configured NAMEs: another NAME for `0x27` or `0x80`
+    /// is an intrusion (a lower one for `0x27` is [`Fault::AddressLost`], raised by the claim
+    /// procedure). Returns whether the frame was an intrusion.
+    fn check_claim(&mut self, source: u8, name: Name, time_s: f64) -> bool {
+        let owner = match source {
+            CONTROLLER_ADDRESS => self.claim.name(),
+            GATEWAY_ADDRESS => self.gateway_name,
+            _ => return false,
+        };
+        if name == owner {
+            if source == GATEWAY_ADDRESS && self.gateway_address_lost {
+                tracing::info!("the gateway claimed its address again");
+                self.gateway_address_lost = false;
+            }
+            return false;
+        }
+        let owner_lost = name < owner;
+        self.counters.intrusions += 1;
+        self.counters.faulty += 1;
+        tracing::error!(
+            address = format_args!("{source:#04X}"),
+            name = format_args!("{:#018X}", name.raw()),
+            expected = format_args!("{:#018X}", owner.raw()),
+            owner_lost,
+            "address claim from an unexpected NAME: intrusion"
+        );
+        if source == CONTROLLER_ADDRESS && owner_lost {
+            // The claim procedure loses the address and raises `AddressLost`.
+            return true;
+        }
+        if source == GATEWAY_ADDRESS && owner_lost {
+            self.gateway_address_lost = true;
+        }
+        self.raise(
+            time_s,
+            Fault::AddressIntrusion {
+                address: source,
+                name: name.raw(),
+                owner_lost,
+            },
+        );
+        true
     }
 
     /// True once after the work cycle asked for a range scan; answer with [`Self::provide_terrain`].
@@ -424,7 +546,38 @@ impl ControllerNode {
         match Message::decode(frame) {
             Ok(decoded) => {
                 let sa = decoded.id.source_address();
-                if let (GATEWAY_ADDRESS, Message::GatewaySession(session)) = (sa, decoded.message) {
+                let at = Instant::from_secs_f64(time_s).unwrap_or_default();
+                let intrusion = match decoded.message {
+                    Message::AddressClaimed(claimed) => self.check_claim(sa, claimed.name, time_s),
+                    _ => false,
+                };
+                if let Some(event) = self.claim.on_message(decoded.id, &decoded.message, at) {
+                    // An intrusion was counted as faulty by `check_claim`.
+                    let (consumed, ignored) = if intrusion {
+                        (0, 0)
+                    } else if matches!(event, ClaimEvent::Noted | ClaimEvent::Reclaimed { .. }) {
+                        (0, 1)
+                    } else {
+                        (1, 0)
+                    };
+                    self.counters.consumed += consumed;
+                    self.counters.ignored += ignored;
+                    match event {
+                        ClaimEvent::Lost { competitor } => tracing::error!(
+                            winner_name = format_args!("{:#018X}", competitor.raw()),
+                            "address claim lost: Cannot Claim, the controller is silent until \
+                             the operator's reset"
+                        ),
+                        ClaimEvent::Defended { competitor } => tracing::warn!(
+                            competitor_name = format_args!("{:#018X}", competitor.raw()),
+                            "a node with a higher NAME claimed our address: claimed it again"
+                        ),
+                        ClaimEvent::Noted | ClaimEvent::Reclaimed { .. } | ClaimEvent::Answered => {
+                        }
+                    }
+                } else if let (GATEWAY_ADDRESS, Message::GatewaySession(session)) =
+                    (sa, decoded.message)
+                {
                     if self.sealer.set_session(session.session_id) {
                         tracing::info!(session = session.session_id, "gateway session");
                     }
@@ -542,6 +695,9 @@ impl ControllerNode {
         }
         self.est.update();
         self.safety.observe(now_s, &self.est);
+        if !self.claim_allows_transmit(now_s) {
+            return self.out;
+        }
         if self.last_motion.is_some() && self.safety.motion().is_none() {
             // Motion stopped by the safety layer this step (stale data, gateway fault, ...).
             self.cycle.on_fault(false);
@@ -623,6 +779,55 @@ impl ControllerNode {
         self.out
     }
 
+    /// Runs the address claim for this step: queues its frame, raises the lost claim once, and says
+    /// whether application frames may follow. Listen-only nodes claim nothing and send nothing.
+    fn claim_allows_transmit(&mut self, now_s: f64) -> bool {
+        if self.safety.state() == SafetyState::ListenOnly {
+            return true;
+        }
+        let now = Instant::from_secs_f64(now_s);
+        if self.reclaim_requested
+            && let Some(now) = now
+        {
+            self.reclaim_requested = false;
+            // Without an address of its own the request comes from the null address (J1939-81).
+            let source = if self.claim.lost().is_some() {
+                NULL_ADDRESS
+            } else {
+                self.claim.address()
+            };
+            if let Ok(request) = request_address_claimed(GLOBAL_ADDRESS, source) {
+                self.push(request);
+            }
+            // A global request is answered by its sender too: our claim follows it.
+            if let Some(by) = self.claim.reclaim(now) {
+                tracing::warn!(
+                    lost_to = format_args!("{:#018X}", by.raw()),
+                    "operator reset: Request for Address Claimed sent, claiming 0x27 again"
+                );
+                self.address_lost_raised = false;
+            } else {
+                tracing::warn!(
+                    "operator reset: Request for Address Claimed sent for the gateway's address"
+                );
+            }
+        }
+        if let Some(now) = now {
+            self.claim.update(now);
+        }
+        if let Ok(Some(frame)) = self.claim.take_frame() {
+            self.push(frame);
+        }
+        if let Some(fault) = self.address_lost() {
+            if !self.address_lost_raised {
+                self.address_lost_raised = true;
+                self.raise(now_s, fault);
+            }
+            return false;
+        }
+        self.claim.may_transmit()
+    }
+
     /// The `ControllerStatus` message (20 Hz): activity, Autodig stage, dig number, hardness index,
     /// swept volume and fault code.
     fn status_message(&mut self) -> StatusMessage {
@@ -676,6 +881,15 @@ impl ControllerNode {
     /// listen-only mode.
     pub fn shutdown(&mut self, now_s: f64) -> Outbox {
         self.out.clear();
+        if self.safety.state() != SafetyState::ListenOnly && !self.claim.may_transmit() {
+            // Before the claim stands (or after it was lost) the address is not ours to use; nothing
+            // was armed.
+            self.safety.shutdown(now_s);
+            if let Ok(Some(frame)) = self.claim.take_frame() {
+                self.push(frame);
+            }
+            return self.out;
+        }
         self.safety.shutdown(now_s);
         let tick = self.safety.tick(now_s, None);
         if tick.send_neutral {
@@ -1059,5 +1273,334 @@ start = { kind = \"tip\", x_m = inf, z_m = 2.4, bucket_abs_deg = -55.0 }
                 .starts_with("/nonexistent/plan.toml: cannot read"),
             "{err}"
         );
+    }
+
+    mod address_claim {
+        use super::*;
+        use firmware_bridge::address_claim::{CONTROLLER_NAME, GATEWAY_NAME};
+        use firmware_bridge::messages::{AddressClaimed, GatewaySession};
+        use firmware_bridge::name_config::NameConfig;
+
+        const CLAIM_ID: u32 = 0x18EE_FF27;
+        const CANNOT_CLAIM_ID: u32 = 0x18EE_FFFE;
+        const HEARTBEAT_ID: u32 = 0x0CFF_6127;
+
+        fn node() -> ControllerNode {
+            ControllerNode::new(
+                &machine(),
+                AutodigMaps::builtin().unwrap(),
+                ControllerConfig::default(),
+            )
+            .unwrap()
+        }
+
+        fn at(time_s: f64, frame: CanFrame) -> TimestampedFrame {
+            TimestampedFrame {
+                timestamp_ns: (time_s * 1e9).round() as u64,
+                frame,
+            }
+        }
+
+        fn claim(name: Name) -> CanFrame {
+            Message::AddressClaimed(AddressClaimed { name })
+                .encode_from(CONTROLLER_ADDRESS)
+                .unwrap()
+        }
+
+        /// Steps `node` every 10 ms over `[from_s, to_s)` with the gateway's session nonce and the
+        /// `injected` frames at their times; returns what it sent, with the step times in ms.
+        fn run(
+            node: &mut ControllerNode,
+            from_s: f64,
+            to_s: f64,
+            injected: &[(f64, CanFrame)],
+        ) -> Vec<(i64, u32)> {
+            let session = Message::GatewaySession(GatewaySession { session_id: 7 })
+                .encode_from(GATEWAY_ADDRESS)
+                .unwrap();
+            let mut sent = Vec::new();
+            let mut k = 0;
+            loop {
+                let t = from_s + f64::from(k) * 0.01;
+                if t >= to_s - 1e-9 {
+                    return sent;
+                }
+                k += 1;
+                let mut inbox = vec![at(t, session)];
+                inbox.extend(
+                    injected
+                        .iter()
+                        .filter(|(ti, _)| (*ti - t).abs() < 0.005)
+                        .map(|(ti, f)| at(*ti, *f)),
+                );
+                for f in &node.step(t, &inbox) {
+                    sent.push(((t * 1e3).round() as i64, f.id().raw()));
+                }
+            }
+        }
+
+        /// When the node sent its Address Claimed, ms.
+        fn claim_times(sent: &[(i64, u32)]) -> Vec<i64> {
+            sent.iter()
+                .filter(|(_, id)| *id == CLAIM_ID)
+                .map(|(t, _)| *t)
+                .collect()
+        }
+
+        fn application(sent: &[(i64, u32)]) -> Vec<(i64, u32)> {
+            sent.iter()
+                .copied()
+                .filter(|(_, id)| *id != CLAIM_ID && *id != CANNOT_CLAIM_ID)
+                .collect()
+        }
+
+        #[test]
+        fn uncontested_claim_first_then_application_frames_after_250_ms() {
+            let mut n = node();
+            let sent = run(&mut n, 0.0, 1.0, &[]);
+            assert_eq!(sent[0], (0, CLAIM_ID));
+            assert_eq!(sent.iter().filter(|(_, id)| *id == CLAIM_ID).count(), 1);
+            let app = application(&sent);
+            let first = app.first().expect("heartbeats after the claim stood");
+            assert!(first.0 >= 250, "first application frame at {} ms", first.0);
+            assert!(app.iter().any(|(_, id)| *id == HEARTBEAT_ID));
+            assert!(n.address_lost().is_none() && n.fault().is_none());
+        }
+
+        #[test]
+        fn a_competing_lower_name_wins_the_node_sends_cannot_claim_and_nothing_else() {
+            let mut n = node();
+            let winner = Name::from_raw(CONTROLLER_NAME.raw() - 1);
+            let sent = run(&mut n, 0.0, 2.0, &[(0.1, claim(winner))]);
+            assert_eq!(sent, [(0, CLAIM_ID), (100, CANNOT_CLAIM_ID)]);
+            let fault = n.address_lost().unwrap();
+            assert_eq!(
+                fault,
+                Fault::AddressLost {
+                    address: CONTROLLER_ADDRESS,
+                    winner_name: winner.raw()
+                }
+            );
+            assert_eq!(n.fault(), Some(fault));
+            assert!(
+                n.shutdown(2.0).is_empty(),
+                "no shutdown frames without an address"
+            );
+            assert!(fault.to_string().contains("lost"), "{fault}");
+        }
+
+        #[test]
+        fn a_competing_higher_name_is_answered_and_the_node_keeps_going() {
+            let mut n = node();
+            let loser = Name::from_raw(CONTROLLER_NAME.raw() + 1);
+            let sent = run(&mut n, 0.0, 1.0, &[(0.5, claim(loser))]);
+            let claims = claim_times(&sent);
+            assert_eq!(claims, [0, 500]);
+            assert!(application(&sent).iter().any(|(t, _)| *t > 500));
+            assert!(n.address_lost().is_none());
+            // Not the configured NAME: an intrusion, which clears like any fault event.
+            assert_eq!(
+                n.fault(),
+                Some(Fault::AddressIntrusion {
+                    address: CONTROLLER_ADDRESS,
+                    name: loser.raw(),
+                    owner_lost: false
+                })
+            );
+            assert!(!n.safety().needs_reset());
+            assert_eq!(n.counters().intrusions, 1);
+        }
+
+        #[test]
+        fn a_late_claimant_with_a_lower_name_silences_a_running_node() {
+            let mut n = node();
+            let sent = run(&mut n, 0.0, 3.0, &[(2.0, claim(Name::from_raw(0)))]);
+            assert!(application(&sent).iter().any(|(t, _)| *t < 2000));
+            let after: Vec<(i64, u32)> = sent.into_iter().filter(|(t, _)| *t >= 2000).collect();
+            assert_eq!(after, [(2000, CANNOT_CLAIM_ID)]);
+            assert!(matches!(n.fault(), Some(Fault::AddressLost { .. })));
+        }
+
+        #[test]
+        fn a_request_for_address_claimed_is_answered_with_the_claim() {
+            let mut n = node();
+            let request = request_address_claimed(0xFF, 0x99).unwrap();
+            let sent = run(&mut n, 0.0, 1.0, &[(0.7, request)]);
+            let claims = claim_times(&sent);
+            assert_eq!(claims, [0, 700]);
+            assert!(n.fault().is_none());
+        }
+
+        const REQUEST_FROM_NULL_ID: u32 = 0x18EA_FFFE;
+        const REQUEST_FROM_US_ID: u32 = 0x18EA_FF27;
+
+        fn claim_from(source: u8, name: Name) -> CanFrame {
+            Message::AddressClaimed(AddressClaimed { name })
+                .encode_from(source)
+                .unwrap()
+        }
+
+        /// A node that lost 0x27 to a transient claim (NAME 0) at 100 ms, run to 1 s.
+        fn lost_node() -> ControllerNode {
+            let mut n = node();
+            let sent = run(&mut n, 0.0, 1.0, &[(0.1, claim(Name::from_raw(0)))]);
+            assert_eq!(sent, [(0, CLAIM_ID), (100, CANNOT_CLAIM_ID)]);
+            assert!(n.safety().needs_reset());
+            assert_eq!(n.counters().intrusions, 1);
+            n
+        }
+
+        #[test]
+        fn after_a_transient_claim_the_operators_reset_reclaims_and_the_claim_stands() {
+            let mut n = lost_node();
+            n.reset();
+            let sent = run(&mut n, 1.0, 2.0, &[]);
+            // The request from the null address, then our claim, then 250 ms of nothing else.
+            assert_eq!(sent[..2], [(1000, REQUEST_FROM_NULL_ID), (1000, CLAIM_ID)]);
+            let app = application(&sent[2..]);
+            assert!(!app.is_empty(), "the controller stays silent: {sent:?}");
+            assert!(
+                app[0].0 >= 1250,
+                "first application frame at {} ms",
+                app[0].0
+            );
+            assert!(n.address_lost().is_none());
+            assert!(!n.safety().needs_reset());
+        }
+
+        #[test]
+        fn after_the_reset_the_real_owner_answers_and_wins_again() {
+            let mut n = lost_node();
+            n.reset();
+            // The owner answers our request with its claim.
+            let owner = claim(Name::from_raw(0));
+            let sent = run(&mut n, 1.0, 2.0, &[(1.02, owner)]);
+            assert_eq!(
+                sent,
+                [
+                    (1000, REQUEST_FROM_NULL_ID),
+                    (1000, CLAIM_ID),
+                    (1020, CANNOT_CLAIM_ID)
+                ]
+            );
+            assert!(matches!(n.fault(), Some(Fault::AddressLost { .. })));
+            assert!(n.safety().needs_reset(), "the new loss needs a new reset");
+        }
+
+        #[test]
+        fn an_unexpected_name_for_the_gateways_address_is_an_intrusion() {
+            let mut n = node();
+            let higher = Name::from_raw(GATEWAY_NAME.raw() + 1);
+            run(
+                &mut n,
+                0.0,
+                0.5,
+                &[(0.3, claim_from(GATEWAY_ADDRESS, higher))],
+            );
+            assert_eq!(n.counters().intrusions, 1);
+            assert_eq!(
+                n.fault(),
+                Some(Fault::AddressIntrusion {
+                    address: GATEWAY_ADDRESS,
+                    name: higher.raw(),
+                    owner_lost: false
+                })
+            );
+            assert_eq!(n.fault().map(|f| f.code()), Some(14));
+            // The gateway defends 0x80: no reset needed, nothing to claim again.
+            assert!(!n.safety().needs_reset() && !n.gateway_address_lost());
+
+            // A lower NAME takes 0x80 from the gateway: latched until the operator's reset.
+            let lower = Name::from_raw(GATEWAY_NAME.raw() - 1);
+            run(
+                &mut n,
+                0.5,
+                1.0,
+                &[(0.6, claim_from(GATEWAY_ADDRESS, lower))],
+            );
+            assert_eq!(n.counters().intrusions, 2);
+            assert!(n.safety().needs_reset() && n.gateway_address_lost());
+            n.reset();
+            let sent = run(&mut n, 1.0, 1.3, &[]);
+            // Our own address stands: the request comes from 0x27, with our claim as its answer.
+            assert_eq!(sent[..2], [(1000, REQUEST_FROM_US_ID), (1000, CLAIM_ID)]);
+            assert!(n.address_lost().is_none());
+            // The gateway's own claim (its configured NAME) ends the loss.
+            run(
+                &mut n,
+                1.3,
+                1.4,
+                &[(1.31, claim_from(GATEWAY_ADDRESS, GATEWAY_NAME))],
+            );
+            assert!(!n.gateway_address_lost());
+            assert_eq!(n.counters().intrusions, 2);
+        }
+
+        #[test]
+        fn the_names_come_from_the_config_and_the_expected_gateway_name_is_checked() {
+            let name = NameConfig {
+                identity_number: 77,
+                ..NameConfig::from(CONTROLLER_NAME)
+            };
+            let gateway = NameConfig {
+                identity_number: 78,
+                ..NameConfig::from(GATEWAY_NAME)
+            };
+            let mut config = ControllerConfig::default();
+            config.j1939.name = name;
+            config.j1939.gateway_name = gateway;
+            let mut n =
+                ControllerNode::new(&machine(), AutodigMaps::builtin().unwrap(), config).unwrap();
+            let ours = name.name().unwrap();
+            assert_eq!(n.address_claim().name(), ours);
+            // The project's default gateway NAME is not the configured one any more.
+            let sent = run(
+                &mut n,
+                0.0,
+                0.5,
+                &[(0.3, claim_from(GATEWAY_ADDRESS, GATEWAY_NAME))],
+            );
+            assert_eq!(sent[0], (0, CLAIM_ID));
+            assert_eq!(n.counters().intrusions, 1);
+            let mut n = node();
+            run(
+                &mut n,
+                0.0,
+                0.5,
+                &[(0.3, claim_from(GATEWAY_ADDRESS, GATEWAY_NAME))],
+            );
+            assert_eq!(n.counters().intrusions, 0);
+        }
+
+        #[test]
+        fn a_name_field_too_wide_is_refused_with_its_line() {
+            let text = "[j1939.name]\nidentity_number = 1\nmanufacturer_code = 0\n\
+                        ecu_instance = 9\nfunction_instance = 0\nfunction = 130\n\
+                        vehicle_system = 0\nvehicle_system_instance = 0\nindustry_group = 3\n\
+                        arbitrary_address_capable = false\n";
+            let err = ControllerConfig::from_toml_str_named(text, "c.toml").unwrap_err();
+            assert_eq!(
+                err.to_string(),
+                "c.toml:4: j1939.name.ecu_instance = 9: must fit 3 bits (0 to 7)"
+            );
+            let same = format!(
+                "[j1939.gateway_name]\n{}",
+                toml::to_string(&NameConfig::from(CONTROLLER_NAME)).unwrap()
+            );
+            let err = ControllerConfig::from_toml_str_named(&same, "c.toml").unwrap_err();
+            assert!(err.to_string().contains("must differ"), "{err}");
+            let partial = "[j1939.name]\nidentity_number = 5\n";
+            let err = ControllerConfig::from_toml_str_named(partial, "c.toml").unwrap_err();
+            assert!(err.to_string().contains("missing field"), "{err}");
+        }
+
+        #[test]
+        fn a_listen_only_node_claims_nothing() {
+            let mut config = ControllerConfig::default();
+            config.safety.listen_only = true;
+            let mut n =
+                ControllerNode::new(&machine(), AutodigMaps::builtin().unwrap(), config).unwrap();
+            assert!(run(&mut n, 0.0, 0.5, &[]).is_empty());
+        }
     }
 }

@@ -180,12 +180,43 @@ pub enum Fault {
     /// The program is shutting down.
     #[error("shutdown")]
     Shutdown,
+    /// Another node claimed the controller's J1939 address with a lower NAME (J1939-81): the
+    /// controller sent Cannot Claim and may send nothing else, so it cannot command the machine
+    /// until the operator's reset claims the address again (`ControllerNode::reset`).
+    #[error(
+        "J1939 address {address:#04X} lost to a node with a lower NAME {winner_name:#018X}: \
+         Cannot Claim sent, no commands, heartbeats or status until the operator's reset"
+    )]
+    AddressLost {
+        /// The address that was lost.
+        address: u8,
+        /// The winner's NAME.
+        winner_name: u64,
+    },
+    /// A claim for the controller's or the gateway's address from a NAME that is not the configured
+    /// one (`[j1939]` of the controller config): a misconfigured or foreign node, or a forged frame.
+    /// When that NAME is lower than the owner's the owner lost the address (J1939-81): latched, and
+    /// the operator's reset asks for the address to be claimed again (`ControllerNode::reset`).
+    #[error(
+        "J1939 address {address:#04X} claimed by an unexpected NAME {name:#018X}{}",
+        if *owner_lost { ", lower than its owner's: the owner lost the address" } else { "" }
+    )]
+    AddressIntrusion {
+        /// The address claimed.
+        address: u8,
+        /// The intruder's NAME.
+        name: u64,
+        /// Whether the intruder's NAME wins over the owner's.
+        owner_lost: bool,
+    },
 }
 
 impl Fault {
     /// The fault code sent in `ControllerStatus.FaultReason` (0 is healthy): 1 stale sensor, 2 decode
     /// error, 3 unexpected frame, 4 joint limit, 5 e-stop, 6 gateway fault, 7 gateway mode, 8 arm
-    /// timeout, 9 bus fault, 10 control, 11 shutdown, 12 gateway frozen.
+    /// timeout, 9 bus fault, 10 control, 11 shutdown, 12 gateway frozen, 13 address lost (on the bus
+    /// only after the address was claimed again: the controller is silent meanwhile), 14 address
+    /// intrusion.
     pub const fn code(&self) -> u8 {
         match self {
             Fault::StaleSensor { .. } => 1,
@@ -200,12 +231,23 @@ impl Fault {
             Fault::Control(_) => 10,
             Fault::Shutdown => 11,
             Fault::GatewayFrozen { .. } => 12,
+            Fault::AddressLost { .. } => 13,
+            Fault::AddressIntrusion { .. } => 14,
         }
     }
 
     /// Whether only [`Safety::reset`] clears it.
     pub const fn latches(&self) -> bool {
-        matches!(self, Fault::EStop | Fault::Shutdown)
+        matches!(
+            self,
+            Fault::EStop
+                | Fault::Shutdown
+                | Fault::AddressLost { .. }
+                | Fault::AddressIntrusion {
+                    owner_lost: true,
+                    ..
+                }
+        )
     }
 }
 
@@ -568,7 +610,9 @@ impl Safety {
             self.last_event_s = self.last_event_s.max(now_s);
         }
         if fault.latches() {
+            // A reset given before this fault does not acknowledge it.
             self.needs_reset = true;
+            self.acked = false;
         }
         match self.state {
             SafetyState::ListenOnly => {
@@ -1019,6 +1063,15 @@ mod tests {
             Fault::GatewayFrozen {
                 alive_counter: 3,
                 frozen_s: 0.5,
+            },
+            Fault::AddressLost {
+                address: 0x27,
+                winner_name: 0,
+            },
+            Fault::AddressIntrusion {
+                address: 0x80,
+                name: 0,
+                owner_lost: true,
             },
         ];
         let mut table = vec![(0, "Healthy".to_owned())];

@@ -126,24 +126,42 @@ pub struct ScheduleEntry {
     pub rate_hz: f64,
 }
 
-/// The project's message schedule: every DBC message at the rate of its `GenMsgCycleTime` attribute
-/// (`docs/protocol.md`: sensing and implement commands at 100 Hz, the rest slower). Position
+/// The project's message schedule: every periodic DBC message at the rate of its `GenMsgCycleTime`
+/// attribute (`docs/protocol.md`: sensing and implement commands at 100 Hz, the rest slower). Position
 /// setpoints are counted although they replace the implement valve commands in position mode, so the
-/// figure is an upper bound.
+/// figure is an upper bound. The event messages (cycle time 0: J1939-81 Address Claimed and Request)
+/// are not in it: they go out at start, in a contest and on the operator's reset, a few frames each.
 pub const SCHEDULE: &[ScheduleEntry] = &SCHEDULE_FROM_DBC;
 
-const SCHEDULE_FROM_DBC: [ScheduleEntry; dbc::MESSAGES.len()] = {
+/// How many DBC messages are periodic (`GenMsgCycleTime` > 0).
+const PERIODIC_MESSAGES: usize = {
+    let mut count = 0;
+    let mut i = 0;
+    while i < dbc::MESSAGES.len() {
+        if dbc::MESSAGES[i].cycle_time_ms > 0 {
+            count += 1;
+        }
+        i += 1;
+    }
+    count
+};
+
+const SCHEDULE_FROM_DBC: [ScheduleEntry; PERIODIC_MESSAGES] = {
     let mut out = [ScheduleEntry {
         message: "",
         rate_hz: 0.0,
-    }; dbc::MESSAGES.len()];
+    }; PERIODIC_MESSAGES];
     let mut i = 0;
-    while i < out.len() {
+    let mut n = 0;
+    while i < dbc::MESSAGES.len() {
         let msg = &dbc::MESSAGES[i];
-        out[i] = ScheduleEntry {
-            message: msg.name,
-            rate_hz: 1000.0 / msg.cycle_time_ms as f64,
-        };
+        if msg.cycle_time_ms > 0 {
+            out[n] = ScheduleEntry {
+                message: msg.name,
+                rate_hz: 1000.0 / msg.cycle_time_ms as f64,
+            };
+            n += 1;
+        }
         i += 1;
     }
     out

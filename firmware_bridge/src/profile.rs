@@ -38,8 +38,14 @@
 //! ```
 //!
 //! A canonical signal left out maps to the wire signal of the same name with no conversion. Every
-//! canonical message must be mapped; `mux` picks the multiplexor value when the wire message is
-//! multiplexed. The format is documented in `docs/machine-profile.md`.
+//! canonical message must be mapped, except J1939 network management (Address Claimed, Request:
+//! [`crate::address_claim::is_network_management`]), which is the same on every J1939 network and
+//! whose source address is part of its meaning (a Cannot Claim comes from `0xFE`, a claim from
+//! whoever claims): it may not be mapped. On a J1939 wire bus (the DBC's `ProtocolType` is `J1939`)
+//! those frames pass through unchanged in both directions; on any other there is no address to claim,
+//! so they are not sent ([`TranslateError::NotOnThisBus`]) and not taken from it.
+//! `mux` picks the multiplexor value when the wire message is multiplexed. The format is documented
+//! in `docs/machine-profile.md`.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -47,6 +53,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use toml::Spanned;
 
+use crate::address_claim::is_network_management;
 use crate::dbc::{self, MessageDesc, SignalDesc};
 use crate::frame::{CanFrame, CanId, FrameKind};
 use crate::id::J1939Id;
@@ -93,6 +100,10 @@ pub enum TranslateError {
     /// A wire frame whose id (and multiplexor value) the profile maps to no canonical message.
     #[error("unmapped frame {0:?}")]
     Unmapped(CanId),
+    /// J1939 network management (an address claim, a request) for a wire bus that is not a J1939
+    /// network: there are no addresses to claim there, so it is not sent (not an error).
+    #[error("J1939 network management {0:?}: the wire bus is not J1939")]
+    NotOnThisBus(CanId),
     /// A frame of a known id with the wrong length or kind.
     #[error("{message}: {actual} data bytes, expected {expected}")]
     WrongLength {
@@ -399,6 +410,18 @@ impl Profile {
         let dbc_name = dbc_path.display().to_string();
         let entries = file.messages.get_ref();
         for (name, entry) in entries {
+            if let Some(m) = dbc::MESSAGES.iter().find(|m| m.name == name)
+                && is_network_management(m.pgn)
+            {
+                return Err(invalid(
+                    entry.span(),
+                    format!(
+                        "[messages.{name}]: J1939 network management (PGN {:#06X}) passes through \
+                         every profile unchanged and is not mapped",
+                        m.pgn
+                    ),
+                ));
+            }
             if !dbc::MESSAGES.iter().any(|m| m.name == name) {
                 return Err(invalid(
                     entry.span(),
@@ -415,7 +438,10 @@ impl Profile {
         }
         let mut routes = Vec::with_capacity(dbc::MESSAGES.len());
         let mut periods = Vec::with_capacity(dbc::MESSAGES.len());
-        for canonical in dbc::MESSAGES {
+        for canonical in dbc::MESSAGES
+            .iter()
+            .filter(|m| !is_network_management(m.pgn))
+        {
             let Some(entry) = entries.get(canonical.name) else {
                 return Err(invalid(
                     file.messages.span(),
@@ -700,6 +726,13 @@ impl Profile {
         if self.identity {
             return Ok(*canonical);
         }
+        if network_management(canonical) {
+            return if self.wire.j1939 {
+                Ok(*canonical)
+            } else {
+                Err(TranslateError::NotOnThisBus(canonical.id()))
+            };
+        }
         let route = self.route_of_canonical(canonical)?;
         let wmsg = &self.wire.messages[route.wire];
         let data = canonical.data();
@@ -768,7 +801,7 @@ impl Profile {
     /// [`TranslateError::Unmapped`] for a frame the profile does not map (count and reject it like any
     /// unexpected frame), [`TranslateError::WrongLength`] for a mapped id of the wrong length.
     pub fn from_wire(&self, wire: &CanFrame) -> Result<CanFrame, TranslateError> {
-        if self.identity {
+        if self.identity || (self.wire.j1939 && network_management(wire)) {
             return Ok(*wire);
         }
         if wire.kind() != FrameKind::Data {
@@ -994,6 +1027,17 @@ fn timing_of(
     Ok(timing)
 }
 
+/// Whether `frame` is a J1939 network-management data frame (29-bit id, Address Claimed or
+/// Request PGN), which every profile passes through unchanged.
+fn network_management(frame: &CanFrame) -> bool {
+    match frame.id() {
+        CanId::Extended(raw) if frame.kind() == FrameKind::Data => {
+            J1939Id::from_raw(raw).is_ok_and(|id| is_network_management(id.pgn()))
+        }
+        _ => false,
+    }
+}
+
 fn parse_file(text: &str, origin: &str) -> Result<ProfileFile, ProfileError> {
     toml::from_str(text).map_err(|e| ProfileError::Invalid {
         origin: origin.to_string(),
@@ -1106,7 +1150,50 @@ mod tests {
     fn the_default_profile_is_the_identity() {
         let profile = Profile::default_profile().expect("the shipped default profile loads");
         assert!(profile.is_identity());
-        assert_eq!(profile.routes.len(), dbc::MESSAGES.len());
+        let mapped = dbc::MESSAGES
+            .iter()
+            .filter(|m| !is_network_management(m.pgn))
+            .count();
+        assert_eq!(profile.routes.len(), mapped);
+    }
+
+    #[test]
+    fn network_management_passes_a_j1939_bus_only_and_may_not_be_mapped() {
+        use crate::address_claim::{CONTROLLER_NAME, NULL_ADDRESS, request_address_claimed};
+        use crate::messages::{AddressClaimed, Message};
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/other_gateway.toml");
+        let other = Profile::load(&path).expect("the example profile loads");
+        assert!(!other.wire().j1939);
+        let mut j1939 = Profile::default_profile().expect("loads");
+        j1939.identity = false;
+        assert!(j1939.wire().j1939);
+        let claim = Message::AddressClaimed(AddressClaimed {
+            name: CONTROLLER_NAME,
+        });
+        for frame in [
+            claim.encode_from(0x27).expect("encodes"),
+            claim.encode_from(NULL_ADDRESS).expect("encodes"),
+            request_address_claimed(0xFF, 0x27).expect("encodes"),
+        ] {
+            assert_eq!(j1939.to_wire(&frame), Ok(frame));
+            assert_eq!(j1939.from_wire(&frame), Ok(frame));
+            assert_eq!(
+                other.to_wire(&frame),
+                Err(TranslateError::NotOnThisBus(frame.id()))
+            );
+            assert_eq!(
+                other.from_wire(&frame),
+                Err(TranslateError::Unmapped(frame.id()))
+            );
+        }
+        let text = format!(
+            "{}\n[messages.AddressClaimed]\nwire = \"X\"\n",
+            DEFAULT_PROFILE_TEXT
+        );
+        let err =
+            Profile::from_toml_str(&text, "p.toml", Path::new("excavator.dbc"), dbc::DBC_TEXT)
+                .expect_err("mapping network management is refused");
+        assert!(err.to_string().contains("network management"), "{err}");
     }
 
     #[test]

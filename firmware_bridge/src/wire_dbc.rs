@@ -195,6 +195,8 @@ pub struct WireMessage {
 pub struct WireDbc {
     /// Messages in DBC order.
     pub messages: Vec<WireMessage>,
+    /// Whether the DBC describes a J1939 network (database attribute `ProtocolType` `J1939`).
+    pub j1939: bool,
 }
 
 fn num(v: &NumericValue) -> f64 {
@@ -250,7 +252,11 @@ impl WireDbc {
         for msg in &dbc.messages {
             messages.push(load_message(&dbc, msg)?);
         }
-        Ok(Self { messages })
+        let j1939 = dbc.attribute_values_database.iter().any(|a| {
+            a.name == "ProtocolType"
+                && matches!(&a.value, can_dbc::AttributeValue::String(v) if v == "J1939")
+        });
+        Ok(Self { messages, j1939 })
     }
 
     /// The message with this name.

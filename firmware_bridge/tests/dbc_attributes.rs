@@ -1,7 +1,8 @@
 //! `excavator.dbc` carries what J1939 tools expect of a DBC, and its value tables are the typed
 //! messages' states: `ProtocolType` J1939, every message a J1939 parameter group (`VFrameFormat`)
-//! with its period (`GenMsgCycleTime`, the bus-load schedule's rate), and a value table on every
-//! signal that has states, naming exactly the states the typed messages decode.
+//! with its period (`GenMsgCycleTime`, the bus-load schedule's rate; 0 for the J1939-81 event
+//! messages, which are not on the schedule), and a value table on every signal that has states,
+//! naming exactly the states the typed messages decode.
 
 use can_dbc::{AttributeValue, Dbc};
 use firmware_bridge::busload::SCHEDULE;
@@ -44,10 +45,22 @@ fn every_message_is_a_j1939_parameter_group_with_its_cycle_time() {
             .find(|d| d.name == msg.name)
             .expect("generated");
         assert_eq!(u64::from(desc.cycle_time_ms), cycle_ms, "{}", msg.name);
-        let scheduled = SCHEDULE
-            .iter()
-            .find(|e| e.message == msg.name)
-            .unwrap_or_else(|| panic!("{} not scheduled", msg.name));
+        let scheduled = SCHEDULE.iter().find(|e| e.message == msg.name);
+        if cycle_ms == 0 {
+            // An event message (J1939-81 network management): never on the schedule.
+            assert_eq!(scheduled, None, "{}", msg.name);
+            assert!(
+                [
+                    firmware_bridge::address_claim::ADDRESS_CLAIMED_PGN,
+                    firmware_bridge::address_claim::REQUEST_PGN
+                ]
+                .contains(&desc.pgn),
+                "{} has cycle time 0",
+                msg.name
+            );
+            continue;
+        }
+        let scheduled = scheduled.unwrap_or_else(|| panic!("{} not scheduled", msg.name));
         assert!(
             (scheduled.rate_hz * cycle_ms as f64 - 1000.0).abs() < 1e-9,
             "{}: {} Hz against {cycle_ms} ms",

@@ -7,7 +7,9 @@
 //! every tick:   gateway.poll(&mut can, now, MAX_FRAMES_PER_TICK)   (frames in)
 //!               let out = gateway.tick(now, resolvers.angles());   (watchdog, position loop)
 //!               valves.drive(out.valve_commands);
-//! every 50 ms:  for f in gateway.status_frames()? { can.transmit(&f) }   (status and session out)
+//!               if let Some(f) = gateway.take_claim_frame() { can.transmit(&f) }  (address claim)
+//! every 50 ms:  for f in gateway.status_frames()?.into_iter().flatten() { can.transmit(&f) }
+//!                                                   (status and session out, once the claim stands)
 //! ```
 //!
 //! A driver's receive error (overrun, bus-off, error passive, ...) is a bus error: while armed it
@@ -94,14 +96,20 @@ impl Gateway {
     }
 
     /// The two frames of the 20 Hz report, built by any [`embedded_can::Frame`] type: the status
-    /// (advancing its alive counter, [`Gateway::next_status`]) and the session nonce.
+    /// (advancing its alive counter, [`Gateway::next_status`]) and the session nonce. `None` (and the
+    /// counter unchanged) while the address claim does not stand ([`Gateway::may_transmit`]).
     ///
     /// # Errors
     /// [`StatusFrameError`]; the alive counter has advanced all the same.
-    pub fn status_frames<F: embedded_can::Frame>(&mut self) -> Result<[F; 2], StatusFrameError> {
+    pub fn status_frames<F: embedded_can::Frame>(
+        &mut self,
+    ) -> Result<Option<[F; 2]>, StatusFrameError> {
+        if !self.may_transmit() {
+            return Ok(None);
+        }
         let status = Message::GatewayStatus(self.next_status()).encode()?;
         let session = Message::GatewaySession(self.session()).encode()?;
-        Ok([to_frame(&status)?, to_frame(&session)?])
+        Ok(Some([to_frame(&status)?, to_frame(&session)?]))
     }
 }
 
@@ -200,8 +208,14 @@ mod tests {
         let mut g = Gateway::default();
         let mut can = Fifo::default();
         let mut sealer = Sealer::new(&SessionKey::PUBLIC);
+        // The address claim goes first; no report until it has stood for 250 ms.
+        g.tick(Instant::ZERO, None);
+        let claim = g.take_claim_frame().unwrap();
+        assert_eq!(claim.id().raw(), 0x18EE_FF80);
+        assert!(g.status_frames::<HalFrame>().unwrap().is_none());
+        g.tick(Instant::from_millis(250), None);
         // The controller learns the session from the status report.
-        let [_, session]: [HalFrame; 2] = g.status_frames().unwrap();
+        let [_, session]: [HalFrame; 2] = g.status_frames().unwrap().unwrap();
         let session = Message::decode(&CanFrame::from_frame(&session).unwrap()).unwrap();
         let Message::GatewaySession(s) = session.message else {
             panic!("not a session frame");
@@ -218,7 +232,7 @@ mod tests {
         ] {
             can.rx.push_back(Ok(hal(&sealer.seal(&m).unwrap())));
         }
-        let now = Instant::from_millis(1);
+        let now = Instant::from_millis(251);
         let counts = g.poll(&mut can, now, 16);
         assert_eq!(
             counts,
@@ -231,7 +245,7 @@ mod tests {
         assert_eq!(out.valve_commands[0], 0.5);
         assert_eq!(out.status.mode, GatewayMode::ArmedValve);
         // The report goes out through the driver and decodes.
-        for f in g.status_frames::<HalFrame>().unwrap() {
+        for f in g.status_frames::<HalFrame>().unwrap().into_iter().flatten() {
             embedded_can::nb::Can::transmit(&mut can, &f).unwrap();
         }
         let sent = Message::decode(&CanFrame::from_frame(&can.tx[0]).unwrap()).unwrap();
@@ -241,7 +255,7 @@ mod tests {
         assert_eq!(status.mode, GatewayMode::ArmedValve);
         // A receive overrun while armed is a bus error: neutral.
         can.rx.push_back(Err(Overrun));
-        let counts = g.poll(&mut can, Instant::from_millis(2), 16);
+        let counts = g.poll(&mut can, Instant::from_millis(252), 16);
         assert_eq!(
             counts,
             PollCounts {
@@ -249,7 +263,7 @@ mod tests {
                 errors: 1
             }
         );
-        let out = g.tick(Instant::from_millis(2), None);
+        let out = g.tick(Instant::from_millis(252), None);
         assert_eq!(out.valve_commands, [0.0; VALVES]);
         assert!(out.status.faults.contains(GatewayFaults::BUS_ERROR));
     }

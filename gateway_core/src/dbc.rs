@@ -58,7 +58,8 @@ pub struct MessageDesc {
     pub dlc: u8,
     /// Sending node in the DBC (`Controller` or `Gateway`).
     pub transmitter: &'static str,
-    /// Transmission period in the DBC (`GenMsgCycleTime`), ms.
+    /// Transmission period in the DBC (`GenMsgCycleTime`), ms; 0 for the event messages (Address
+    /// Claimed and Request, sent at start, in a contest and on request: never on a schedule).
     pub cycle_time_ms: u16,
     /// Signals in DBC order.
     pub signals: &'static [SignalDesc],
@@ -370,7 +371,7 @@ mod tests {
         assert_eq!(aux_valve_measured_boom::PGN, 65056);
         assert_eq!(joint_angles::PGN, 0xFF50);
         assert_eq!(controller_status::MESSAGE.default_id, 0x18FF_6227);
-        assert_eq!(MESSAGES.len(), 18);
+        assert_eq!(MESSAGES.len(), 20);
     }
 
     #[test]

@@ -49,9 +49,26 @@
 //!   outside [`GatewayConfig::setpoint_range_rad`]: `SETPOINT_OUT_OF_RANGE`.
 //! - A CAN error frame while armed: `BUS_ERROR`.
 //!
+//! # Address claim
+//!
+//! The gateway claims its address (`0x80`) with its NAME (J1939-81, [`crate::address_claim`]) at its
+//! first [`Gateway::tick`], and answers contests and requests through the same claimer. Its status
+//! ([`Gateway::status_frames`]) and the board's sensor frames go out only while
+//! [`Gateway::may_transmit`]: once the claim has stood for 250 ms. Losing the address to a lower NAME
+//! latches `ADDRESS_LOST` in any mode (valves neutral): the controller can no longer address the
+//! gateway, so nothing it sends is acted on, and the gateway stays silent except for its Cannot
+//! Claim. A Request for Address Claimed to global (the controller sends one on the operator's reset)
+//! makes it claim its address again ([`crate::address_claim::AfterLoss::ReclaimOnRequest`], a
+//! deviation from J1939-81 documented there): a real owner answers the same request and wins again;
+//! after a transient claim the re-claim stands. Until it has stood 250 ms the gateway acts on nothing
+//! and sends nothing else; then it reports `Faulted` with `ADDRESS_LOST`, which the controller's
+//! `Disarm` acknowledges as any fault, and only a fresh arm request arms it: it never re-arms by
+//! itself. Claim frames go out through [`Gateway::take_claim_frame`].
+//!
 //! # Frames it does not act on
 //!
-//! - **ignored** (expected, not counted on the bus): the controller's `ControllerStatus` (for traces,
+//! - **ignored** (expected, not counted on the bus): other nodes' address claims and requests not
+//!   for the gateway, every frame after the address was lost, the controller's `ControllerStatus` (for traces,
 //!   the gateway has no use for it) and neutral valve commands (block, zero flow) outside ArmedValve.
 //!   Neutral is what every other mode outputs anyway, and the controller sends neutral commands on any
 //!   disarm or fault without knowing whether the gateway already left ArmedValve (`controller::safety`),
@@ -71,6 +88,7 @@
 //! clamped to `max_command` and rate limited to `rate_limit_per_s`; the sign maps joint angle to
 //! cylinder direction (`docs/ARCHITECTURE.md`: stick and bucket extension lowers their angles).
 
+use crate::address_claim::{AddressClaimer, ClaimEvent, Name};
 use crate::frame::CanFrame;
 use crate::id::CONTROLLER_ADDRESS;
 use crate::messages::{
@@ -271,6 +289,8 @@ pub struct Gateway {
     unexpected: u16,
     rejected: u16,
     ignored: u64,
+    /// The J1939-81 address claim of the gateway's address.
+    claim: AddressClaimer,
 }
 
 impl Default for Gateway {
@@ -339,7 +359,42 @@ impl Gateway {
             unexpected: 0,
             rejected: 0,
             ignored: 0,
+            claim: AddressClaimer::gateway(),
         }
+    }
+
+    /// The same gateway with another NAME (a machine's provisioned serial number) for its address
+    /// claim. Call before the first tick.
+    pub fn with_name(mut self, name: Name) -> Self {
+        let margin_ns = self.claim.hold_ns() - crate::address_claim::CLAIM_HOLD_NS;
+        self.claim = AddressClaimer::gateway_named(name).with_hold_margin(margin_ns);
+        self
+    }
+
+    /// The same gateway waiting `margin_ns` longer than 250 ms before its claim stands
+    /// ([`AddressClaimer::with_hold_margin`]): for a board whose clock can run behind the bus by up
+    /// to that much when its claim leaves. Call before the first tick.
+    pub fn with_claim_hold_margin(mut self, margin_ns: i64) -> Self {
+        self.claim = self.claim.with_hold_margin(margin_ns);
+        self
+    }
+
+    /// The address claim (state, NAME, address).
+    pub fn address_claim(&self) -> &AddressClaimer {
+        &self.claim
+    }
+
+    /// True once the gateway's address claim has stood for 250 ms and was not lost: its status and
+    /// the board's sensor frames may be sent.
+    pub fn may_transmit(&self) -> bool {
+        self.claim.may_transmit()
+    }
+
+    /// The address-claim frame to send now (the claim at start, a re-claim after a contest, the
+    /// answer to a request, or Cannot Claim), if any. Send it before the period's other frames.
+    pub fn take_claim_frame(&mut self) -> Option<CanFrame> {
+        // Every NAME encodes (`AddressClaimer::take_frame`); an error would keep it queued.
+        self.claim.take_frame().ok().flatten()
     }
 
     /// The current mode.
@@ -386,7 +441,8 @@ impl Gateway {
     }
 
     /// Faults that latch in any mode, not only in the armed ones.
-    const LATCH_IN_ANY_MODE: u16 = GatewayFaults::E_STOP | GatewayFaults::CLOCK_FAULT;
+    const LATCH_IN_ANY_MODE: u16 =
+        GatewayFaults::E_STOP | GatewayFaults::CLOCK_FAULT | GatewayFaults::ADDRESS_LOST;
 
     /// Latches a fault: Faulted, valves neutral. Only in armed modes, except the e-stop and the clock.
     fn fault(&mut self, bits: u16) {
@@ -449,6 +505,28 @@ impl Gateway {
             ) => return self.unexpected(),
             Err(_) => return self.reject(),
         };
+        if let Some(event) = self.claim.on_message(decoded.id, &decoded.message, now) {
+            return match event {
+                ClaimEvent::Lost { .. } => {
+                    self.fault(GatewayFaults::ADDRESS_LOST);
+                    FrameVerdict::Accepted
+                }
+                ClaimEvent::Reclaimed { .. } => {
+                    // The heartbeats it ignored meanwhile: a new sequence may start at any counter.
+                    self.last_alive = None;
+                    FrameVerdict::Accepted
+                }
+                ClaimEvent::Defended { .. } | ClaimEvent::Answered => FrameVerdict::Accepted,
+                ClaimEvent::Noted => self.ignore(),
+            };
+        }
+        if self.claim.lost().is_some()
+            || (self.faults.contains(GatewayFaults::ADDRESS_LOST) && !self.claim.may_transmit())
+        {
+            // Without its address the gateway cannot be commanded, and after a re-claim it acts on
+            // nothing until the claim has stood: `ADDRESS_LOST` stays latched until then.
+            return self.ignore();
+        }
         let from_controller = decoded.id.source_address() == CONTROLLER_ADDRESS;
         if from_controller
             && decoded.trailer.is_some()
@@ -581,6 +659,9 @@ impl Gateway {
     ) -> GatewayOutputs {
         let reading = now.into();
         let ok = self.clock_ok(reading);
+        if let Some(now) = ok {
+            self.claim.update(now);
+        }
         let dt_s = match ok {
             Some(now) => {
                 let dt_ns = self
@@ -720,7 +801,7 @@ impl Gateway {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::id::GATEWAY_ADDRESS;
+    use crate::id::{GATEWAY_ADDRESS, GLOBAL_ADDRESS};
     use crate::messages::{
         Activity, AutodigStageCode, AuxValveCommand, ControllerHeartbeat, ControllerStatus,
         JointAngles, PositionSetpoint, Valve,
@@ -1559,5 +1640,177 @@ mod tests {
                 prop_assert!(out.valve_commands.iter().all(|u| u.is_finite() && u.abs() <= 1.0));
             }
         }
+    }
+
+    fn claim(source: u8, name: Name) -> CanFrame {
+        Message::AddressClaimed(crate::messages::AddressClaimed { name })
+            .encode_from(source)
+            .unwrap()
+    }
+
+    #[test]
+    fn the_gateway_claims_its_address_and_reports_only_after_250_ms() {
+        let mut g = Gateway::default();
+        assert!(g.take_claim_frame().is_none());
+        g.tick(0.0, None);
+        let frame = g.take_claim_frame().unwrap();
+        assert_eq!(frame.id().raw(), 0x18EE_FF80);
+        assert_eq!(
+            frame.data(),
+            &crate::address_claim::GATEWAY_NAME.to_le_bytes()
+        );
+        g.tick(0.249, None);
+        assert!(!g.may_transmit());
+        g.tick(0.25, None);
+        assert!(g.may_transmit());
+        assert!(g.take_claim_frame().is_none());
+    }
+
+    #[test]
+    fn losing_the_address_neutralises_latches_and_silences_the_gateway() {
+        let (mut g, mut l) = armed();
+        g.tick(0.0, None);
+        g.take_claim_frame();
+        g.on_frame(&l.valve(&g, Valve::Boom, 0.5), 0.005);
+        assert_eq!(g.tick(0.01, None).valve_commands[0], 0.5);
+        // A late claimant with a lower NAME takes 0x80 while the gateway drives the boom.
+        let winner = Name::from_raw(crate::address_claim::GATEWAY_NAME.raw() - 1);
+        assert_eq!(
+            g.on_frame(&claim(GATEWAY_ADDRESS, winner), 0.012),
+            FrameVerdict::Accepted
+        );
+        let cannot = g.take_claim_frame().unwrap();
+        assert_eq!(cannot.id().raw(), 0x18EE_FFFE);
+        let out = g.tick(0.013, None);
+        assert_eq!(out.valve_commands, [0.0; VALVES]);
+        assert_eq!(g.mode(), GatewayMode::Faulted);
+        assert!(g.faults().contains(GatewayFaults::ADDRESS_LOST));
+        // Silent, and the controller's disarm and re-arm are not acted on.
+        g.tick(0.5, None);
+        assert!(!g.may_transmit());
+        assert!(g.status_frames::<CanFrame>().unwrap().is_none());
+        for (i, mode) in [RequestedMode::Disarm, RequestedMode::ArmValve]
+            .into_iter()
+            .enumerate()
+        {
+            let t = 0.51 + i as f64 * 0.01;
+            assert_eq!(
+                g.on_frame(&l.hb(&g, mode, 1 + i as u8), t),
+                FrameVerdict::Ignored
+            );
+            assert_eq!(g.tick(t, None).valve_commands, [0.0; VALVES]);
+        }
+        assert_eq!(g.mode(), GatewayMode::Faulted);
+    }
+
+    #[test]
+    fn a_claim_hold_margin_survives_a_name_change() {
+        use crate::address_claim::{AddressClaimer, CLAIM_HOLD_NS};
+        let other = AddressClaimer::controller().name();
+        for g in [
+            Gateway::default()
+                .with_claim_hold_margin(40_000_000)
+                .with_name(other),
+            Gateway::default()
+                .with_name(other)
+                .with_claim_hold_margin(40_000_000),
+        ] {
+            assert_eq!(g.address_claim().hold_ns(), CLAIM_HOLD_NS + 40_000_000);
+            assert_eq!(g.address_claim().name(), other);
+        }
+    }
+
+    #[test]
+    fn after_a_lost_address_a_global_request_reclaims_it_and_the_gateway_stays_disarmed() {
+        let (mut g, mut l) = armed();
+        g.tick(0.0, None);
+        g.take_claim_frame();
+        g.tick(0.3, None);
+        let transient = Name::from_raw(0);
+        g.on_frame(&claim(GATEWAY_ADDRESS, transient), 0.31);
+        g.take_claim_frame();
+        g.tick(1.0, None);
+        // Addressed to 0x80, the request is for whoever holds it now.
+        let to_gateway =
+            crate::address_claim::request_address_claimed(GATEWAY_ADDRESS, CONTROLLER_ADDRESS)
+                .unwrap();
+        assert_eq!(g.on_frame(&to_gateway, 1.0), FrameVerdict::Ignored);
+        assert!(g.take_claim_frame().is_none());
+        // The controller's request to global after the operator's reset: the gateway claims again.
+        let request =
+            crate::address_claim::request_address_claimed(GLOBAL_ADDRESS, CONTROLLER_ADDRESS)
+                .unwrap();
+        assert_eq!(g.on_frame(&request, 1.0), FrameVerdict::Accepted);
+        assert_eq!(g.take_claim_frame().unwrap().id().raw(), 0x18EE_FF80);
+        assert!(g.address_claim().lost().is_none());
+        // For 250 ms: silent, and the controller's requests are not acted on.
+        let mut counter = 1;
+        let mut hb = |g: &Gateway, mode| {
+            counter += 1;
+            l.hb(g, mode, counter)
+        };
+        for t in [1.05, 1.1, 1.2, 1.249] {
+            assert_eq!(
+                g.on_frame(&hb(&g, RequestedMode::Disarm), t),
+                FrameVerdict::Ignored
+            );
+            assert_eq!(g.tick(t, None).valve_commands, [0.0; VALVES]);
+            assert!(!g.may_transmit());
+            assert!(g.status_frames::<CanFrame>().unwrap().is_none());
+        }
+        g.tick(1.25, None);
+        assert!(g.may_transmit());
+        assert_eq!(g.mode(), GatewayMode::Faulted);
+        assert!(g.faults().contains(GatewayFaults::ADDRESS_LOST));
+        // Never armed by itself: the controller's Disarm acknowledges, then its arm request arms.
+        g.on_frame(&hb(&g, RequestedMode::Disarm), 1.26);
+        g.tick(1.27, None);
+        assert_eq!(g.mode(), GatewayMode::Disarmed);
+        assert!(g.faults().is_empty());
+        g.on_frame(&hb(&g, RequestedMode::Disarm), 1.3);
+        assert_eq!(g.tick(1.31, None).valve_commands, [0.0; VALVES]);
+        assert_eq!(g.mode(), GatewayMode::Disarmed);
+        g.on_frame(&hb(&g, RequestedMode::ArmValve), 1.32);
+        assert_eq!(g.mode(), GatewayMode::ArmedValve);
+    }
+
+    #[test]
+    fn a_competitor_with_a_higher_name_is_answered_and_the_gateway_keeps_going() {
+        let mut g = Gateway::default();
+        let mut l = Link::default();
+        g.tick(0.0, None);
+        g.take_claim_frame();
+        g.tick(0.3, None);
+        assert!(g.may_transmit());
+        let loser = Name::from_raw(crate::address_claim::GATEWAY_NAME.raw() + 1);
+        g.on_frame(&l.hb(&g, RequestedMode::ArmValve, 1), 0.301);
+        assert_eq!(g.mode(), GatewayMode::ArmedValve);
+        assert_eq!(
+            g.on_frame(&claim(GATEWAY_ADDRESS, loser), 0.302),
+            FrameVerdict::Accepted
+        );
+        assert_eq!(g.take_claim_frame().unwrap().id().raw(), 0x18EE_FF80);
+        assert!(g.may_transmit());
+        g.on_frame(&l.valve(&g, Valve::Boom, 0.5), 0.303);
+        assert_eq!(g.tick(0.304, None).valve_commands[0], 0.5);
+        assert!(g.faults().is_empty());
+    }
+
+    #[test]
+    fn a_request_for_address_claimed_gets_the_claim_and_other_claims_are_ignored() {
+        let mut g = Gateway::default();
+        g.tick(0.0, None);
+        g.take_claim_frame();
+        let request = crate::address_claim::request_address_claimed(GATEWAY_ADDRESS, 0x99).unwrap();
+        assert_eq!(g.on_frame(&request, 0.1), FrameVerdict::Accepted);
+        assert_eq!(g.take_claim_frame().unwrap().id().raw(), 0x18EE_FF80);
+        // The controller's claim and a stranger's: normal traffic, neither unexpected nor rejected.
+        for source in [CONTROLLER_ADDRESS, 0x99] {
+            let frame = claim(source, Name::from_raw(0));
+            assert_eq!(g.on_frame(&frame, 0.2), FrameVerdict::Ignored);
+        }
+        assert_eq!(g.frame_counts(), (0, 0));
+        g.tick(0.25, None);
+        assert!(g.may_transmit());
     }
 }

@@ -14,6 +14,8 @@
 //! - [`messages`]: the typed [`Message`] enum (`Message::AuxValveCommand`, `Message::JointAngles`, ...)
 //!   with `encode` to and `decode` from frames, through the DBC descriptors only; the heartbeat's
 //!   CRC-8 SAE J1850 (the `crc` crate).
+//! - [`address_claim`]: the J1939-81 NAME and address claim that every node runs before it sends
+//!   anything else (250 ms uncontested; a lost claim silences the node).
 //! - [`secoc`]: freshness and authentication of the controller's control frames (session nonce,
 //!   per-id counters, truncated AES-CMAC): [`secoc::Sealer`] on the controller, [`secoc::Verifier`] in
 //!   the gateway.
@@ -43,6 +45,7 @@
 #[cfg(any(test, feature = "std"))]
 extern crate std;
 
+pub mod address_claim;
 pub mod bus;
 pub mod dbc;
 pub mod frame;

@@ -7,6 +7,7 @@
 //! Decoding ([`Message::decode`]) never panics and returns a small `Copy` [`DecodeError`]; encoding
 //! ([`Message::encode`]) rejects out-of-range values with an [`EncodeError`] instead of clamping them.
 
+use crate::address_claim::Name;
 use crate::dbc::{self, MessageDesc, SignalDesc};
 use crate::frame::{CanFrame, CanId, FrameKind};
 use crate::id::J1939Id;
@@ -212,6 +213,11 @@ impl GatewayFaults {
     /// counter: replayed, recorded in another session, from a second sender, or without the key
     /// ([`crate::secoc`]).
     pub const AUTH_FAILURE: u16 = 1 << 9;
+    /// Another node with a lower NAME claimed the gateway's address (J1939-81,
+    /// [`crate::address_claim`]): the gateway sent Cannot Claim and acts on nothing and sends nothing
+    /// else until a Request for Address Claimed to global makes it claim again and that claim has
+    /// stood 250 ms; then its status reports the bit until the controller's `Disarm`.
+    pub const ADDRESS_LOST: u16 = 1 << 10;
 
     /// True if every bit of `bits` is set.
     pub const fn contains(self, bits: u16) -> bool {
@@ -565,6 +571,22 @@ pub struct ControllerStatus {
     pub alive_counter: u8,
 }
 
+/// J1939-81 Address Claimed (PGN 60928): the sender's NAME. From the null address
+/// ([`crate::address_claim::NULL_ADDRESS`]) it is Cannot Claim. See [`crate::address_claim`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct AddressClaimed {
+    /// The sender's NAME.
+    pub name: Name,
+}
+
+/// J1939-21 Request (PGN 59904): asks the destination (or every node, to global) to send a PGN.
+/// The project's nodes answer a request for Address Claimed (PGN 60928).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RequestPgn {
+    /// The requested PGN (18 bits).
+    pub pgn: u32,
+}
+
 /// Every message of the protocol. Variant names are the names in `docs/protocol.md`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Message {
@@ -590,6 +612,10 @@ pub enum Message {
     ControllerHeartbeat(ControllerHeartbeat),
     /// Controller status (activity, Autodig stage).
     ControllerStatus(ControllerStatus),
+    /// J1939-81 Address Claimed (or Cannot Claim, from the null address).
+    AddressClaimed(AddressClaimed),
+    /// J1939-21 Request.
+    RequestPgn(RequestPgn),
 }
 
 /// A decoded frame: the J1939 id (so receivers can check the source address), the message, and the
@@ -606,8 +632,9 @@ pub struct Decoded {
     pub trailer: Option<Trailer>,
 }
 
-/// Most signals of one message (the controller status has seven); a test checks the DBC against it.
-pub const MAX_SIGNALS: usize = 7;
+/// Most signals of one message (Address Claimed has ten: the NAME's fields); a test checks the DBC
+/// against it.
+pub const MAX_SIGNALS: usize = 10;
 
 /// A message's values by DBC signal name ([`Message::signal_values`]), held inline: at most
 /// [`MAX_SIGNALS`] pairs, no heap. Dereferences to the slice of pairs.
@@ -793,6 +820,8 @@ impl Message {
             Self::PositionSetpoint(_) => &dbc::position_setpoint::MESSAGE,
             Self::ControllerHeartbeat(_) => &dbc::controller_heartbeat::MESSAGE,
             Self::ControllerStatus(_) => &dbc::controller_status::MESSAGE,
+            Self::AddressClaimed(_) => &dbc::address_claimed::MESSAGE,
+            Self::RequestPgn(_) => &dbc::request_pgn::MESSAGE,
         }
     }
 
@@ -815,7 +844,11 @@ impl Message {
         self.encode_with_id(J1939Id::from_raw(desc.default_id)?.with_source_address(source_address))
     }
 
-    fn encode_with_id(&self, id: J1939Id) -> Result<CanFrame, EncodeError> {
+    /// Encodes with an explicit id: a PDU1 message to one destination (a request), say.
+    ///
+    /// # Errors
+    /// As [`Message::encode`].
+    pub fn encode_with_id(&self, id: J1939Id) -> Result<CanFrame, EncodeError> {
         let desc = self.descriptor();
         // Unused bits are 1, the J1939 convention for reserved bits.
         let mut data = [0xFFu8; 8];
@@ -910,6 +943,17 @@ impl Message {
                 put(&s::SWEPT_VOLUME, m.swept_volume_m3, d)?;
                 dbc::encode_raw(&s::FAULT_REASON, i64::from(m.fault_reason), d)?;
                 dbc::encode_raw(&s::ALIVE_COUNTER, i64::from(m.alive_counter), d)?;
+            }
+            Self::AddressClaimed(m) => {
+                // The NAME's fields are the message's signals; they cover all 64 bits.
+                let name = m.name.to_le_bytes();
+                for sig in dbc::address_claimed::SIGNALS {
+                    let raw = dbc::extract_raw(sig, &name).unwrap_or(0);
+                    dbc::encode_raw(sig, raw, d)?;
+                }
+            }
+            Self::RequestPgn(m) => {
+                dbc::encode_raw(&dbc::request_pgn::REQUESTED_PGN, i64::from(m.pgn), d)?;
             }
         }
         Ok(())
@@ -1070,6 +1114,28 @@ impl Message {
                     alive_counter: raw_u8(&s::ALIVE_COUNTER, d)?,
                 })
             }
+            dbc::address_claimed::PGN => {
+                // Every raw value of the NAME's fields is valid; check them through the codec all
+                // the same, and take the NAME from the bytes they cover.
+                for sig in dbc::address_claimed::SIGNALS {
+                    raw(sig, d)?;
+                }
+                let mut bytes = [0u8; 8];
+                let n = d.len().min(8);
+                bytes[..n].copy_from_slice(&d[..n]);
+                Self::AddressClaimed(AddressClaimed {
+                    name: Name::from_le_bytes(bytes),
+                })
+            }
+            dbc::request_pgn::PGN => {
+                let pgn = raw(&dbc::request_pgn::REQUESTED_PGN, d)?;
+                Self::RequestPgn(RequestPgn {
+                    pgn: u32::try_from(pgn).map_err(|_| DecodeError::OutOfRange {
+                        signal: dbc::request_pgn::REQUESTED_PGN.name,
+                        raw: pgn,
+                    })?,
+                })
+            }
             _ => return Err(unknown),
         })
     }
@@ -1155,6 +1221,31 @@ impl Message {
                 ("FaultReason", f64::from(m.fault_reason)),
                 ("AliveCounter", f64::from(m.alive_counter)),
             ]),
+            Self::AddressClaimed(m) => {
+                let f = m.name.fields();
+                let reserved =
+                    dbc::extract_raw(&dbc::address_claimed::RESERVED, &m.name.to_le_bytes())
+                        .unwrap_or(0);
+                SignalValues::of(&[
+                    ("IdentityNumber", f64::from(f.identity_number)),
+                    ("ManufacturerCode", f64::from(f.manufacturer_code)),
+                    ("EcuInstance", f64::from(f.ecu_instance)),
+                    ("FunctionInstance", f64::from(f.function_instance)),
+                    ("Function", f64::from(f.function)),
+                    ("Reserved", reserved as f64),
+                    ("VehicleSystem", f64::from(f.vehicle_system)),
+                    (
+                        "VehicleSystemInstance",
+                        f64::from(f.vehicle_system_instance),
+                    ),
+                    ("IndustryGroup", f64::from(f.industry_group)),
+                    (
+                        "ArbitraryAddressCapable",
+                        f64::from(u8::from(f.arbitrary_address_capable)),
+                    ),
+                ])
+            }
+            Self::RequestPgn(m) => SignalValues::of(&[("RequestedPgn", f64::from(m.pgn))]),
         }
     }
 }

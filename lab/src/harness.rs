@@ -160,6 +160,7 @@ impl Harness {
             .clone()
             .unwrap_or_else(|| session_key(sim.scenario.seed));
         machine.node_mut().set_security(&key, sim.scenario.seed);
+        machine.node_mut().set_gateway_name(sim.gateway_name);
         let mut node = ControllerNode::new(&sim.machine, maps, config)?;
         node.set_key(&key);
         Ok(Self {

@@ -155,3 +155,27 @@ pub fn strip_ansi(text: &str) -> String {
     }
     out
 }
+
+/// One request on `excavator-ctl run`'s control socket (docs/controller.md, "Operator control"),
+/// asserted to succeed; the reply.
+///
+/// # Panics
+/// When the socket cannot be reached, the reply is not JSON or not `ok`.
+pub fn operator(socket: &Path, cmd: &str) -> serde_json::Value {
+    use std::io::{BufRead as _, Write as _};
+    let mut stream = std::os::unix::net::UnixStream::connect(socket)
+        .unwrap_or_else(|e| panic!("cannot connect to {}: {e}", socket.display()));
+    stream
+        .set_read_timeout(Some(Duration::from_secs(10)))
+        .unwrap_or_else(|e| panic!("{e}"));
+    writeln!(stream, r#"{{"cmd": "{cmd}", "reason": "HIL test"}}"#)
+        .unwrap_or_else(|e| panic!("{cmd}: {e}"));
+    let mut line = String::new();
+    std::io::BufReader::new(stream)
+        .read_line(&mut line)
+        .unwrap_or_else(|e| panic!("{cmd}: {e}"));
+    let reply: serde_json::Value =
+        serde_json::from_str(&line).unwrap_or_else(|e| panic!("reply to {cmd} {line:?}: {e}"));
+    assert_eq!(reply["ok"], true, "{cmd}: {reply}");
+    reply
+}

@@ -17,7 +17,6 @@
 
 mod common;
 
-use std::io::{BufRead as _, Write as _};
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -33,6 +32,7 @@ use hil_tests::analysis::{
 };
 use hil_tests::env;
 use hil_tests::planned::{PlannedSim, path_str, read_summary};
+use hil_tests::process::operator;
 use socketcan::Socket as _;
 
 /// Dig and cleanup actions of the session (dig, cleanup, cleanup and a track back on the planned
@@ -51,24 +51,6 @@ const REST_AFTER_FRAMES: usize = 150;
 const REST_MOTION_RAD: f64 = 0.02;
 /// Far above the session's ~80 s in real time, for a TCG VM.
 const SESSION_TIMEOUT: Duration = Duration::from_secs(600);
-
-/// One request on the control socket (docs/controller.md, "Operator control"); the reply.
-fn operator(socket: &Path, cmd: &str) -> serde_json::Value {
-    let mut stream = std::os::unix::net::UnixStream::connect(socket)
-        .unwrap_or_else(|e| panic!("cannot connect to {}: {e}", socket.display()));
-    stream
-        .set_read_timeout(Some(Duration::from_secs(10)))
-        .unwrap();
-    writeln!(stream, r#"{{"cmd": "{cmd}", "reason": "HIL test"}}"#).unwrap();
-    let mut line = String::new();
-    std::io::BufReader::new(stream)
-        .read_line(&mut line)
-        .unwrap();
-    let reply: serde_json::Value =
-        serde_json::from_str(&line).unwrap_or_else(|e| panic!("reply to {cmd} {line:?}: {e}"));
-    assert_eq!(reply["ok"], true, "{cmd}: {reply}");
-    reply
-}
 
 /// Waits until the controller reports Autodig in the soil (Pre-Dig or Dig) and then commands a
 /// valve to move (armed, not in a fault of its own), 300 ms into the dig at least.

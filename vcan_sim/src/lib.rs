@@ -28,6 +28,8 @@
 
 use std::path::Path;
 
+use firmware_bridge::address_claim::{GATEWAY_NAME, Name};
+use firmware_bridge::name_config::NameConfig;
 use planner::machine::{ConfigError, MachineConfig};
 
 pub mod effects;
@@ -90,31 +92,77 @@ pub struct SimConfig {
     pub scenario: Scenario,
     /// Hidden effects (machine file, then scenario file, then command line).
     pub effects: EffectSet,
+    /// The gateway's J1939 NAME: the machine file's `[gateway_name]` table (every field of a
+    /// [`NameConfig`], each within its width), [`GATEWAY_NAME`] without one. The controller expects
+    /// it (`[j1939.gateway_name]` of its config).
+    pub gateway_name: Name,
 }
 
-/// Splits an `[effects]` table out of machine-file text, keeping line numbers (its lines become blank
-/// in the returned machine text). Returns `(machine text, effects text)`.
-fn split_effects(text: &str) -> (String, String) {
+/// The machine file's tables that are simulator settings, not the machine's (the controller ignores
+/// them): hidden effects and the gateway's NAME.
+const SIMULATOR_TABLES: [&str; 2] = ["effects", "gateway_name"];
+
+/// Splits the [`SIMULATOR_TABLES`] out of machine-file text, keeping line numbers (their lines
+/// become blank in the returned machine text, and every other line is blank in theirs). Returns
+/// `(machine text, [effects text, gateway name text])`.
+fn split_simulator_tables(text: &str) -> (String, [String; 2]) {
     let mut machine = String::with_capacity(text.len());
-    let mut effects = String::new();
-    let mut in_effects = false;
+    let mut tables = [String::new(), String::new()];
+    let mut current: Option<usize> = None;
     for line in text.lines() {
         let t = line.trim();
         if t.starts_with('[') {
-            in_effects = t.trim_start_matches('[').trim_end_matches(']').trim() == "effects";
+            let header = t.trim_start_matches('[').trim_end_matches(']').trim();
+            current = SIMULATOR_TABLES.iter().position(|name| *name == header);
         }
-        if in_effects {
-            effects.push_str(line);
-            machine.push('\n');
-        } else {
+        for (i, table) in tables.iter_mut().enumerate() {
+            if current == Some(i) {
+                table.push_str(line);
+            }
+            table.push('\n');
+        }
+        if current.is_none() {
             machine.push_str(line);
-            machine.push('\n');
         }
-        if in_effects {
-            effects.push('\n');
-        }
+        machine.push('\n');
     }
-    (machine, effects)
+    (machine, tables)
+}
+
+/// The `[gateway_name]` table of a machine file ([`GATEWAY_NAME`] without one), checked field by
+/// field.
+fn gateway_name_from_table(text: &str, origin: &str) -> Result<Name> {
+    #[derive(serde::Deserialize)]
+    struct Wrapper {
+        gateway_name: Option<NameConfig>,
+    }
+    let invalid = |line: Option<usize>, field: String, reason: String| {
+        SimError::Machine(ConfigError::Invalid {
+            origin: origin.to_owned(),
+            line,
+            field,
+            reason,
+        })
+    };
+    let w: Wrapper = toml::from_str(text).map_err(|e| {
+        invalid(
+            e.span()
+                .map(|s| planner::toml_lines::line_of_offset(text, s.start)),
+            "gateway_name".to_owned(),
+            e.message().trim().to_owned(),
+        )
+    })?;
+    match w.gateway_name {
+        None => Ok(GATEWAY_NAME),
+        Some(config) => config.name().map_err(|e| {
+            let field = format!("gateway_name.{}", e.field);
+            invalid(
+                planner::toml_lines::line_of_field(text, &field),
+                field,
+                format!("{}: {}", e.value, e.rule),
+            )
+        }),
+    }
 }
 
 fn effects_from_table(text: &str, origin: &str) -> Result<EffectSet> {
@@ -169,6 +217,7 @@ impl SimConfig {
         seed: Option<u64>,
         effect_args: &[S],
     ) -> Result<Self> {
+        let mut gateway_name = GATEWAY_NAME;
         let (machine, mut effects) = match machine {
             Some(path) => {
                 let origin = path.display().to_string();
@@ -176,9 +225,10 @@ impl SimConfig {
                     context: format!("reading {origin}"),
                     source,
                 })?;
-                let (machine_text, effects_text) = split_effects(&text);
+                let (machine_text, [effects_text, name_text]) = split_simulator_tables(&text);
                 let cfg = MachineConfig::from_toml_str_named(&machine_text, &origin)?;
                 check_transport_delay(&cfg, &machine_text, &origin)?;
+                gateway_name = gateway_name_from_table(&name_text, &origin)?;
                 (cfg, effects_from_table(&effects_text, &origin)?)
             }
             None => (MachineConfig::default_machine()?, EffectSet::nominal()),
@@ -207,6 +257,7 @@ impl SimConfig {
             machine,
             scenario,
             effects,
+            gateway_name,
         };
         config.validate()?;
         Ok(config)
@@ -237,11 +288,60 @@ mod tests {
     #[test]
     fn machine_file_effects_table_is_split_out_keeping_lines() {
         let text = "a = 1\n[effects]\nvalve_deadband = 0.1\n[b]\nc = 2\n";
-        let (m, e) = split_effects(text);
+        let (m, [e, n]) = split_simulator_tables(text);
         assert_eq!(m.lines().count(), 5);
         assert!(!m.contains("valve_deadband") && m.contains("[b]"));
         let set = effects_from_table(&e, "m.toml").unwrap();
         assert_eq!(set.get(effects::Effect::ValveDeadband), 0.1);
+        assert_eq!(gateway_name_from_table(&n, "m.toml").unwrap(), GATEWAY_NAME);
+    }
+
+    /// The default machine file with a `[gateway_name]` table whose `field` is `value`.
+    fn machine_with_gateway_name(dir: &Path, field: &str, value: &str) -> std::path::PathBuf {
+        let mut table = toml::to_string(&NameConfig::from(GATEWAY_NAME)).unwrap();
+        let old = table
+            .lines()
+            .find(|l| l.starts_with(&format!("{field} =")))
+            .unwrap()
+            .to_owned();
+        table = table.replace(&old, &format!("{field} = {value}"));
+        let path = dir.join("m.toml");
+        let text = format!(
+            "{}\n[gateway_name]\n{table}",
+            planner::machine::DEFAULT_MACHINE_TOML
+        );
+        std::fs::write(&path, text).unwrap();
+        path
+    }
+
+    #[test]
+    fn the_gateway_name_comes_from_the_machine_file_and_is_checked() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = machine_with_gateway_name(dir.path(), "identity_number", "99");
+        let cfg = SimConfig::load::<&str>(Some(&path), None, None, &[]).unwrap();
+        assert_eq!(cfg.gateway_name.fields().identity_number, 99);
+        assert_eq!(
+            SimConfig::load::<&str>(None, None, None, &[])
+                .unwrap()
+                .gateway_name,
+            GATEWAY_NAME
+        );
+        let path = machine_with_gateway_name(dir.path(), "vehicle_system", "200");
+        let msg = SimConfig::load::<&str>(Some(&path), None, None, &[])
+            .unwrap_err()
+            .to_string();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let line = text
+            .lines()
+            .position(|l| l.starts_with("vehicle_system ="))
+            .unwrap()
+            + 1;
+        assert!(
+            msg.starts_with(&format!("{}:{line}:", path.display()))
+                && msg.contains("gateway_name.vehicle_system")
+                && msg.contains("7 bits"),
+            "{msg}"
+        );
     }
 
     #[test]

@@ -284,12 +284,13 @@ fn real_main() -> Result<()> {
     let session_seed: u64 = rand::random();
     let plant = config.build().context("building the machine")?;
     // A profile's gateway sends at its periods and keeps its watchdogs.
-    let node = match &profile {
+    let mut node = match &profile {
         Some(p) => MachineNode::with_timing(plant, &p.timing())
             .with_context(|| format!("{}: the gateway's timeouts", p.origin()))?,
         None => MachineNode::new(plant),
     }
     .with_security(&key, session_seed);
+    node.set_gateway_name(config.gateway_name);
     let options = RealtimeOptions {
         iface,
         state_log: cli.state_log,

@@ -12,6 +12,13 @@
 //! A machine profile's gateway ([`MachineNode::with_timing`]) sends at the profile's periods and
 //! keeps its watchdogs ([`Schedule`]).
 //!
+//! Before any of these the gateway claims its address (J1939-81 Address Claimed at the first step,
+//! `firmware_bridge::address_claim`, with the NAME of the machine file's `[gateway_name]`); sensor
+//! frames, odometry and status go out only once the claim has stood for 250 ms, and not after the
+//! address was lost to a lower NAME (the gateway then holds the valves neutral with `ADDRESS_LOST`
+//! latched) until a Request for Address Claimed to global made it claim again and that claim stood.
+//! Claim frames (a re-claim, the answer to a request, Cannot Claim) go out at the next step.
+//!
 //! Only sensor readings and the gateway status go out; nothing reveals the hidden effects.
 
 use firmware_bridge::CanFrame;
@@ -85,6 +92,8 @@ pub struct MachineNode {
     encode_errors: u64,
     /// Whether the machine stands outside the simulated terrain map (warned once on leaving).
     off_map: bool,
+    /// Whether the lost address claim has been logged.
+    address_lost_logged: bool,
 }
 
 impl MachineNode {
@@ -135,6 +144,18 @@ impl MachineNode {
         self.schedule
     }
 
+    /// Sets the gateway's J1939 NAME (the machine file's `[gateway_name]`, [`crate::SimConfig`]).
+    /// Call before the first step.
+    pub fn set_gateway_name(&mut self, name: firmware_bridge::address_claim::Name) {
+        self.gateway = std::mem::take(&mut self.gateway).with_name(name);
+    }
+
+    /// Makes the gateway hold its address claim `margin_ns` longer than 250 ms
+    /// ([`Gateway::with_claim_hold_margin`]). Call before the first step.
+    pub fn set_claim_hold_margin(&mut self, margin_ns: i64) {
+        self.gateway = std::mem::take(&mut self.gateway).with_claim_hold_margin(margin_ns);
+    }
+
     fn with(plant: Plant, gateway: Gateway) -> Self {
         Self {
             plant,
@@ -145,6 +166,7 @@ impl MachineNode {
             valve_commands: [0.0; 6],
             encode_errors: 0,
             off_map: false,
+            address_lost_logged: false,
         }
     }
 
@@ -227,13 +249,41 @@ impl MachineNode {
         self.valve_commands = outputs.valve_commands;
         self.plant.step(outputs.valve_commands);
         self.steps += 1;
+        if let Some(frame) = self.gateway.take_claim_frame() {
+            out.push(frame);
+        }
+        match (
+            self.gateway.address_claim().lost(),
+            self.address_lost_logged,
+        ) {
+            (Some(by), false) => {
+                self.address_lost_logged = true;
+                tracing::error!(
+                    address = self.gateway.address_claim().address(),
+                    winner_name = format_args!("{:#018X}", by.raw()),
+                    "gateway address lost to a node with a lower NAME: Cannot Claim sent, valves \
+                     neutral, no more sensor or status frames until a Request for Address Claimed \
+                     makes it claim again"
+                );
+            }
+            (None, true) => {
+                self.address_lost_logged = false;
+                tracing::warn!(
+                    address = self.gateway.address_claim().address(),
+                    "Request for Address Claimed: the gateway claims its address again (disarmed, \
+                     ADDRESS_LOST until the controller's Disarm)"
+                );
+            }
+            _ => {}
+        }
+        let transmit = self.gateway.may_transmit();
         let Schedule {
             sensor,
             pump,
             odometry,
             status,
         } = self.schedule;
-        if let Some(r) = self.readings {
+        if transmit && let Some(r) = self.readings {
             if self.steps.is_multiple_of(sensor) {
                 self.sensor_frames(&r, out);
             }
@@ -241,10 +291,10 @@ impl MachineNode {
                 self.push(pump_message(&r), out);
             }
         }
-        if self.steps.is_multiple_of(status) {
+        if transmit && self.steps.is_multiple_of(status) {
             // Status and session nonce, built by the gateway core as on the machine.
             match self.gateway.status_frames::<CanFrame>() {
-                Ok(frames) => out.extend(frames),
+                Ok(frames) => out.extend(frames.into_iter().flatten()),
                 Err(_) => self.encode_errors += 1,
             }
         }
@@ -265,6 +315,9 @@ impl MachineNode {
                 );
             }
             self.off_map = off_map;
+            if !transmit {
+                return;
+            }
             let odo = |v: f64| v.clamp(-199_999.0, 199_999.0);
             self.push(
                 Message::TrackOdometry(TrackOdometry {
@@ -383,6 +436,16 @@ mod tests {
         MachineNode::new(cfg.build().expect("plant"))
     }
 
+    /// A node whose address claim has stood (its sensor frames go out from the next step on).
+    fn claimed_node_at(start_x_m: f64) -> MachineNode {
+        let mut node = node_at(start_x_m);
+        let mut out = Vec::new();
+        while !node.gateway().may_transmit() {
+            node.step(&mut out);
+        }
+        node
+    }
+
     /// Steps one odometry period (when the map check runs) and reports whether the node is off its map.
     fn off_map_after_one_odometry_period(start_x_m: f64) -> bool {
         let mut node = node_at(start_x_m);
@@ -393,7 +456,12 @@ mod tests {
 
     #[test]
     fn every_sensor_sample_is_sent_as_one_joint_angles_frame_a_period_later() {
-        let mut node = node_at(0.0);
+        let mut node = claimed_node_at(0.0);
+        // The claim stood in the middle of a sensor period: finish it.
+        let mut out = Vec::new();
+        while !node.samples_sensors_next() {
+            node.step(&mut out);
+        }
         let (mut samples, mut frames) = (0, 0);
         let mut out = Vec::new();
         for step in 0..10 * SENSOR_PERIOD_STEPS {
@@ -433,7 +501,7 @@ mod tests {
     #[test]
     fn transmit_rates_are_the_documented_schedule() {
         const SECONDS: u64 = 2;
-        let mut node = node_at(0.0);
+        let mut node = claimed_node_at(0.0);
         let mut out = Vec::new();
         node.run_steps(SECONDS * steps_in(1.0), &mut out);
         for entry in firmware_bridge::busload::SCHEDULE {
@@ -456,7 +524,7 @@ mod tests {
     /// (`excavator-ctl trace stats` counted 1554 errors in 1555 frames).
     #[test]
     fn status_frames_carry_consecutive_alive_counters() {
-        let mut node = node_at(0.0);
+        let mut node = claimed_node_at(0.0);
         let mut out = Vec::new();
         node.run_steps(60 * STATUS_PERIOD_STEPS, &mut out);
         let counters: Vec<u8> = out
@@ -473,5 +541,74 @@ mod tests {
                 "{counters:?}"
             );
         }
+    }
+
+    #[test]
+    fn the_gateway_claims_first_and_sends_nothing_else_for_250_ms() {
+        let mut node = node_at(0.0);
+        let mut out = Vec::new();
+        node.run_steps(steps_in(0.25), &mut out);
+        let ids: Vec<u32> = out.iter().map(|f| f.id().raw()).collect();
+        assert_eq!(ids, [0x18EE_FF80]);
+        node.run_steps(steps_in(0.05), &mut out);
+        assert!(out.len() > 10, "{} frames", out.len());
+    }
+
+    #[test]
+    fn a_lost_address_stops_the_gateways_frames_and_holds_the_valves_neutral() {
+        use firmware_bridge::address_claim::{GATEWAY_NAME, Name};
+        use firmware_bridge::messages::{AddressClaimed, GatewayFaults};
+        let mut node = claimed_node_at(0.0);
+        let winner = Name::from_raw(GATEWAY_NAME.raw() - 1);
+        let claim = Message::AddressClaimed(AddressClaimed { name: winner })
+            .encode_from(firmware_bridge::GATEWAY_ADDRESS)
+            .unwrap();
+        node.on_frame(&claim);
+        let mut out = Vec::new();
+        node.run_steps(steps_in(1.0), &mut out);
+        let ids: Vec<u32> = out.iter().map(|f| f.id().raw()).collect();
+        assert_eq!(ids, [0x18EE_FFFE], "only Cannot Claim");
+        assert!(
+            node.gateway()
+                .faults()
+                .contains(GatewayFaults::ADDRESS_LOST)
+        );
+        assert_eq!(node.valve_commands(), [0.0; 6]);
+
+        // The controller's Request for Address Claimed after the operator's reset: the gateway claims
+        // 0x80 again, stays silent 250 ms, then reports Faulted (ADDRESS_LOST) and stays disarmed.
+        let request = firmware_bridge::address_claim::request_address_claimed(
+            firmware_bridge::id::GLOBAL_ADDRESS,
+            firmware_bridge::address_claim::NULL_ADDRESS,
+        )
+        .unwrap();
+        node.on_frame(&request);
+        let mut out = Vec::new();
+        node.run_steps(steps_in(0.25) - 1, &mut out);
+        let ids: Vec<u32> = out.iter().map(|f| f.id().raw()).collect();
+        assert_eq!(ids, [0x18EE_FF80], "the re-claim, then nothing for 250 ms");
+        out.clear();
+        node.run_steps(steps_in(1.0), &mut out);
+        let status = out
+            .iter()
+            .find_map(|f| match Message::decode(f).map(|d| d.message) {
+                Ok(Message::GatewayStatus(s)) => Some(s),
+                _ => None,
+            })
+            .expect("status after the claim stood");
+        assert_eq!(status.mode, firmware_bridge::messages::GatewayMode::Faulted);
+        assert!(status.faults.contains(GatewayFaults::ADDRESS_LOST));
+        assert_eq!(node.valve_commands(), [0.0; 6]);
+    }
+
+    #[test]
+    fn the_gateway_claims_with_the_configured_name() {
+        use firmware_bridge::address_claim::{GATEWAY_NAME, Name};
+        let mut node = node_at(0.0);
+        let name = Name::from_raw(GATEWAY_NAME.raw() + 5);
+        node.set_gateway_name(name);
+        let mut out = Vec::new();
+        node.step(&mut out);
+        assert_eq!(out[0].data(), &name.to_le_bytes());
     }
 }

@@ -69,6 +69,10 @@ pub struct RunSummary {
 /// the gateway's 100 ms watchdog. Longer stalls slip simulated time (module docs).
 pub const MAX_CATCH_UP_STEPS: u64 = 30;
 
+/// How far the wire can run ahead of simulated time when a frame leaves: the catch-up
+/// ([`MAX_CATCH_UP_STEPS`] steps of 1 ms) and one 10 ms loop period, ns.
+const CLAIM_LAG_MARGIN_NS: i64 = (MAX_CATCH_UP_STEPS as i64 + 10) * 1_000_000;
+
 type ScanJob = (ScanRequest, oneshot::Sender<Scan>);
 
 /// Serves scan requests: one JSON object per line in, one JSON line out.
@@ -154,6 +158,11 @@ pub async fn run_on<B: Bus>(
     options: RealtimeOptions,
     shutdown: impl Future<Output = ()>,
 ) -> Result<RunSummary> {
+    // A frame leaves at the wake-up that simulates its step, up to the catch-up plus one loop period
+    // after that step's simulated time; the gateway stamps its address claim with the step's time, so
+    // it holds the claim that much longer to keep 250 ms between the claim and its first other frame
+    // on the wire.
+    node.set_claim_hold_margin(CLAIM_LAG_MARGIN_NS);
     let mut log = match &options.state_log {
         Some(path) => Some(std::io::BufWriter::new(
             std::fs::File::create(path).map_err(|source| SimError::Io {

@@ -200,7 +200,8 @@ fn embedded_machine_is_deterministic_for_a_seed() {
         let controller = bus.attach();
         let cfg = SimConfig::load(None, None, Some(42), &["resolver_offset=0.01"]).unwrap();
         let mut machine = EmbeddedMachine::new(cfg.build().unwrap(), bus.attach(), Some(clock));
-        machine.advance(0.5);
+        // Past the gateway's 250 ms address claim, half a second of sensor frames.
+        machine.advance(0.75);
         let mut out = Vec::new();
         while let Some(f) = controller.try_recv() {
             out.push((f.timestamp_ns, f.frame));

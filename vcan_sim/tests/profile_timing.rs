@@ -1,6 +1,6 @@
 //! A machine profile's gateway (`MachineNode::with_timing`): the simulated gateway sends at the
 //! periods of the example profile's DBC (`examples/other_gateway.toml`: angles every 20 ms, pumps
-//! every 40 ms, status and odometry every 100 ms) and its heartbeat watchdog is the profile's; the
+//! every 40 ms, status and odometry every 100 ms, once its address claim stands) and its heartbeat watchdog is the profile's; the
 //! project's timing is the default node's, frame for frame.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -40,7 +40,7 @@ fn count(frames: &[CanFrame], pick: fn(&Message) -> bool) -> usize {
 #[test]
 fn the_gateway_sends_at_the_profiles_periods() {
     let profile = Profile::load(std::path::Path::new(EXAMPLE)).unwrap();
-    let node = MachineNode::with_timing(plant(), &profile.timing()).unwrap();
+    let mut node = MachineNode::with_timing(plant(), &profile.timing()).unwrap();
     assert_eq!(
         node.schedule(),
         Schedule {
@@ -50,7 +50,11 @@ fn the_gateway_sends_at_the_profiles_periods() {
             status: 100
         }
     );
-    let frames = run(node, 2000);
+    // Past the address claim's 250 ms hold (nothing but the claim before it), then 2 s.
+    let mut frames = Vec::new();
+    node.run_steps(300, &mut frames);
+    frames.clear();
+    node.run_steps(2000, &mut frames);
     assert_eq!(
         count(&frames, |m| matches!(m, Message::JointAngles(_))),
         100

@@ -95,6 +95,8 @@ impl ProfileLink {
     ) -> Option<CanFrame> {
         match translated {
             Ok(frame) => Some(frame),
+            // An address claim for a bus without J1939 addresses: nothing to send, nothing wrong.
+            Err(TranslateError::NotOnThisBus(_)) => None,
             Err(e) => {
                 let n = counter.fetch_add(1, Ordering::Relaxed) + 1;
                 if n.is_power_of_two() {
@@ -223,7 +225,7 @@ mod tests {
         assert_eq!(controller.stats().unmapped_received, 1);
 
         // A canonical frame the profile cannot carry is counted, not sent.
-        let foreign = CanFrame::new_extended(0x18EA_0027, &[0; 3]).expect("valid");
+        let foreign = CanFrame::new_extended(0x18FF_AA27, &[0; 8]).expect("valid");
         controller.send(foreign).await.expect("not an error");
         assert_eq!(controller.stats().untranslatable_sent, 1);
     }

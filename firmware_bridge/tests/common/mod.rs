@@ -89,6 +89,12 @@ pub fn sample_messages() -> Vec<Message> {
         fault_reason: 17,
         alive_counter: 9,
     }));
+    out.push(Message::AddressClaimed(AddressClaimed {
+        name: firmware_bridge::address_claim::CONTROLLER_NAME,
+    }));
+    out.push(Message::RequestPgn(RequestPgn {
+        pgn: firmware_bridge::address_claim::ADDRESS_CLAIMED_PGN,
+    }));
     out
 }
 
