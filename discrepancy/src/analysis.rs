@@ -211,7 +211,7 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
         );
         bar
     });
-    let result = analyse(&records, &model.params, &config, &mut |done, total| {
+    let mut result = analyse(&records, &model.params, &config, &mut |done, total| {
         if let Some(b) = &bar {
             b.set_length(total as u64);
             b.set_position(done as u64);
@@ -221,14 +221,40 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
         b.finish_and_clear();
     }
     warnings.extend(sufficiency::signal_warnings(&result));
-    let verdict = reference.as_ref().map(|r| {
+    let judge = |result: &crate::AnalysisResult, r: &Reference| {
         let test: Vec<&PreparedRecord> = records
             .iter()
             .filter(|rec| result.test_digs.contains(&rec.index))
             .collect();
         let after = structure(&test, &result.params, &result.augmentation);
-        verdict::judge(&result, &after, r)
-    });
+        verdict::judge(result, &after, r)
+    };
+    let mut verdict = reference.as_ref().map(|r| judge(&result, r));
+    // Named means a residual beyond the reference brought back to it: where every judged signal is
+    // within the reference with the starting model, a candidate that lowers it further fits noise.
+    if let (Some(r), Some(v)) = (&reference, &verdict)
+        && v.nothing_beyond_before()
+        && !(result.named_effects.is_empty() && result.ambiguous.is_empty())
+    {
+        let fitted: Vec<String> = result
+            .named_effects
+            .iter()
+            .map(|e| e.name.clone())
+            .chain(
+                result
+                    .ambiguous
+                    .iter()
+                    .flat_map(|a| a.candidates.iter().map(|c| c.name.clone())),
+            )
+            .collect();
+        warnings.push(format!(
+            "not named: {} (every signal is within the reference with the starting model; what \
+             these candidates lower is at the level the reference expects)",
+            fitted.join(", ")
+        ));
+        result.name_nothing(&model.params, config.base);
+        verdict = Some(judge(&result, r));
+    }
     let machine_text = match &args.machine {
         Some(p) => {
             std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?

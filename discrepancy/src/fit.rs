@@ -232,6 +232,25 @@ pub struct AnalysisResult {
     pub kappa: Vec<f64>,
 }
 
+impl AnalysisResult {
+    /// The same analysis with nothing named: the starting model (`params`, `base`) kept, so every
+    /// held-out RMS after is the one before. For a session whose residuals the reference already
+    /// expects, where a candidate that lowers them further fits noise, not a missing effect.
+    pub fn name_nothing(&mut self, params: &GreyBoxParams, base: Augmentation) {
+        self.named_effects.clear();
+        self.ambiguous.clear();
+        self.augmentation = base;
+        self.params = params.clone();
+        for r in &mut self.rms {
+            r.after = r.before;
+            for stage in &mut r.per_stage {
+                stage.3 = stage.2;
+            }
+            r.acted = (0, 0.0, 0.0);
+        }
+    }
+}
+
 /// A candidate acts on a sample's signal where it moves the prediction by more than this fraction
 /// of the signal's residual spread; its explained share is taken over those samples.
 const ACTED_FRACTION: f64 = 0.1;

@@ -23,9 +23,10 @@ use crate::{DiscrepancyError, Result, StageTag, stats};
 pub const REFERENCE_FORMAT: &str = "excavator-discrepancy-reference";
 
 /// A ratio to the reference below this is never called beyond it, whatever the reference's own
-/// spread: two healthy sessions of the same machine on different ground differ by up to about this
-/// much (clean simulated sessions at different seeds, docs/discrepancy.md).
-pub const MIN_TOLERANCE: f64 = 1.5;
+/// spread: healthy sessions of the same machine on different ground differ by up to about 1.6x in
+/// the payload and soil-force residuals (clean simulated sessions at different seeds,
+/// docs/discrepancy.md), more than the spread of one reference's digs shows.
+pub const MIN_TOLERANCE: f64 = 2.0;
 
 /// Quantile of the bootstrap RMS ratio taken as the tolerance.
 pub const TOLERANCE_QUANTILE: f64 = 0.99;
@@ -430,7 +431,7 @@ mod tests {
                 (100, 0.1),
                 (100, 0.2),
                 (100, 0.3),
-                (100, 4.0),
+                (100, 9.0),
                 (100, 0.2),
                 (100, 1.2),
             ],
@@ -449,7 +450,7 @@ mod tests {
         assert_eq!(r.tolerance(Signal::StickVelocity, 4), MIN_TOLERANCE);
         let one = r.tolerance(Signal::BoomVelocity, 1);
         let eight = r.tolerance(Signal::BoomVelocity, 8);
-        assert!(one > 1.9 && one > eight, "{one} {eight}");
+        assert!(one > 2.9 && one > eight, "{one} {eight}");
     }
 
     #[test]

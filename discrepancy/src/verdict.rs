@@ -377,6 +377,17 @@ pub fn judge(result: &AnalysisResult, after: &[SignalStructure], reference: &Ref
     }
 }
 
+impl Verdict {
+    /// True when no judged signal was beyond the reference with the starting model (before any
+    /// named effect): nothing for a candidate to explain.
+    pub fn nothing_beyond_before(&self) -> bool {
+        self.signals
+            .iter()
+            .filter(|s| s.outcome != Outcome::NotJudged)
+            .all(|s| s.ratio_before <= s.tolerance)
+    }
+}
+
 /// The verdict as text: the session's outcome, then one line per signal beyond the reference and
 /// per named effect that leaves residue.
 pub fn verdict_text(v: &Verdict) -> String {
@@ -489,6 +500,19 @@ mod tests {
     /// like noise to the fit, is "unexplained", with its stage and its correlation with the
     /// measured speed; the same with a named effect that brings it back is "named"; one that
     /// halves it only is "partly explained"; clean signals stay "expected".
+    /// A session whose residuals are all at the reference's level has nothing for a candidate to
+    /// explain, whatever the fit named.
+    #[test]
+    fn a_session_within_the_reference_has_nothing_beyond_before() {
+        let rms: Vec<SignalRms> = Signal::ALL.iter().map(|s| rms_of(*s, 1.2, 1.0)).collect();
+        let after: Vec<SignalStructure> = Signal::ALL
+            .iter()
+            .map(|s| structure_of(*s, 1.0, 0.05))
+            .collect();
+        let v = judge(&result(rms, &["transport_delay"]), &after, &reference());
+        assert!(v.nothing_beyond_before(), "{v:?}");
+    }
+
     #[test]
     fn residuals_are_judged_against_the_reference_not_against_themselves() {
         let reference = reference();
@@ -539,6 +563,7 @@ mod tests {
             &after_of(1.1),
             &reference,
         );
+        assert!(!v.nothing_beyond_before());
         assert_eq!(v.outcome, Outcome::Named);
         assert_eq!(v.signals[boom].outcome, Outcome::Named);
         assert_eq!(v.named[0].outcome, Outcome::Named);
