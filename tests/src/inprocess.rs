@@ -11,6 +11,7 @@ use lab::harness::{Harness, HarnessOptions};
 use planner::autodig::AutodigMaps;
 use vcan_sim::SimConfig;
 use vcan_sim::embedded::EmbeddedMachine;
+use vcan_sim::scenario::SoilContactIntegration;
 
 use crate::analysis::{Rec, StateSample};
 
@@ -45,8 +46,21 @@ impl Session {
     /// # Panics
     /// When the built-in machine, bench or maps do not load, or `config` is invalid.
     pub fn new(config: controller::node::ControllerConfig, seed: u64) -> Self {
-        let sim = SimConfig::load::<&str>(None, None, Some(seed), &[])
+        Self::with_soil_contact(config, seed, SoilContactIntegration::default())
+    }
+
+    /// [`Session::new`] with the plant integrating the soil's force as `contact` says.
+    ///
+    /// # Panics
+    /// As [`Session::new`].
+    pub fn with_soil_contact(
+        config: controller::node::ControllerConfig,
+        seed: u64,
+        contact: SoilContactIntegration,
+    ) -> Self {
+        let mut sim = SimConfig::load::<&str>(None, None, Some(seed), &[])
             .unwrap_or_else(|e| panic!("simulator config: {e}"));
+        sim.scenario.soil_contact = contact;
         let maps = AutodigMaps::builtin().unwrap_or_else(|e| panic!("Autodig maps: {e}"));
         let h = Harness::with_options(
             &sim,
