@@ -327,7 +327,8 @@ fn demo_plant_machine_changes_the_plant_and_not_the_controller() {
 
 /// `--profile`: the demo's controller and simulated gateway speak another gateway's protocol
 /// (`examples/other_gateway.toml`) on the in-process bus, at its rates: the session digs, the trace
-/// holds only that gateway's 11-bit frames (each translating back), its angles come every 20 ms,
+/// holds only that gateway's 11-bit frames (each translating back), its angles come every 20 ms
+/// after the gateway's 250 ms address-claim hold,
 /// and `summary.json` records the profile and its hash. The default profile gives the trace of no
 /// profile, byte for byte.
 #[test]
@@ -358,8 +359,9 @@ fn demo_speaks_a_machine_profile_on_the_bus() {
         "other gateway: {frames} frames, {angles} joint angles, {heartbeats} heartbeats in {:.2} s",
         summary.totals.sim_time_s
     );
-    // One angle frame per 20 ms of the session.
-    let expected = summary.totals.sim_time_s / 0.02;
+    // One angle frame per 20 ms of the session once the gateway's address claim has stood.
+    let hold_s = firmware_bridge::address_claim::CLAIM_HOLD_NS as f64 * 1e-9;
+    let expected = (summary.totals.sim_time_s - hold_s) / 0.02;
     assert!(
         (f64::from(angles) - expected).abs() <= 2.0,
         "{angles} joint angles in {} s",
