@@ -91,7 +91,10 @@ fn table1_read_to_the_horizontal_perception_is_more_consistent() {
         rows.iter().map(|(_, p, w)| (p.clone(), w.clone())).unzip();
     assert!(plain[0].payload_kg < plain[1].payload_kg, "{rows:?}");
     // The two farther starts both fill the bucket (2550 kg, up to rounding).
-    assert!(plain[1].payload_kg <= plain[2].payload_kg + 1e-6, "{rows:?}");
+    assert!(
+        plain[1].payload_kg <= plain[2].payload_kg + 1e-6,
+        "{rows:?}"
+    );
     // The two nearer starts may end in the same 10 ms step (4.22 s each at seed 1).
     assert!(plain[0].time_s <= plain[1].time_s, "{rows:?}");
     assert!(plain[1].time_s < plain[2].time_s, "{rows:?}");
