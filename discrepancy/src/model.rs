@@ -42,6 +42,10 @@ pub struct AugmentedModel {
     pub params: GreyBoxParams,
     /// The effects added to them (empty for the nominal model).
     pub effects: Vec<ModelEffect>,
+    /// The command that calibrated it and the plant version of its data (`excavator-ctl
+    /// calibrate`); absent in models an analysis writes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub origin: Option<planner::origin::ArtefactOrigin>,
 }
 
 impl AugmentedModel {
@@ -61,7 +65,15 @@ impl AugmentedModel {
             provenance,
             params,
             effects,
+            origin: None,
         }
+    }
+
+    /// The model with its origin recorded.
+    #[must_use]
+    pub fn with_origin(mut self, origin: planner::origin::ArtefactOrigin) -> Self {
+        self.origin = Some(origin);
+        self
     }
 
     /// Parses and checks a model file (format, version, parameters, effect names and ranges).

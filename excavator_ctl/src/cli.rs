@@ -47,6 +47,11 @@ pub enum Command {
     /// (docs/discrepancy.md).
     #[command(subcommand)]
     Discrepancy(discrepancy::command::DiscrepancyArgs),
+    /// Rebuild every shipped artefact fitted on the simulated plant (actuator networks, hardness
+    /// regression, the discrepancy workflow's nominal model) from the simulator and a seed, with a
+    /// calibration report; --install copies them into a config folder (docs/models.md,
+    /// "Calibration"). Long: not part of CI.
+    Calibrate(calibration::CalibrateArgs),
 }
 
 /// Arguments of `excavator-ctl demo`: the session's and the live view's.

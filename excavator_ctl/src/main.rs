@@ -93,6 +93,10 @@ fn main() -> std::process::ExitCode {
         Command::Trace { cmd } => runtime.block_on(trace_tools::run(cmd)),
         Command::Model { cmd } => lab::model::run(cmd),
         Command::Discrepancy(args) => discrepancy::command::run(args),
+        Command::Calibrate(args) => calibration::run(&args).map(|report| {
+            println!("{}", calibration::report_markdown(&report));
+            println!("wrote {}", args.out.display());
+        }),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

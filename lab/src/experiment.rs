@@ -1590,24 +1590,40 @@ fn results_report(args: &ResultsArgs) -> anyhow::Result<String> {
 /// Dig model, sweep or fit errors; I/O.
 pub fn hardness_fit(out: &std::path::Path) -> anyhow::Result<planner::plan::hardness::HardnessFit> {
     use anyhow::Context as _;
-    use planner::plan::hardness::{default_sweep, fit_hardness_regression};
     let model = planner::dig_model::DigModel::nominal().context("nominal dig model")?;
+    hardness_fit_with(&model, out, "excavator-ctl experiment hardness-fit", None)
+}
+
+/// As [`hardness_fit`] with the dig model `model` (`source` names it in the file's header); with
+/// `origin` the regression records it (`[origin]`, as `excavator-ctl calibrate` writes it).
+///
+/// # Errors
+/// As [`hardness_fit`].
+pub fn hardness_fit_with<A: planner::dig_model::ActuatorDynamics + Clone>(
+    model: &planner::dig_model::DigModel<A>,
+    out: &std::path::Path,
+    source: &str,
+    origin: Option<planner::origin::ArtefactOrigin>,
+) -> anyhow::Result<planner::plan::hardness::HardnessFit> {
+    use anyhow::Context as _;
+    use planner::plan::hardness::{default_sweep, fit_hardness_regression};
     let sweep = default_sweep()?;
     let planner_cfg = planner::plan::PlannerConfig::nominal()?;
     let mut quality = planner_cfg.quality;
     if quality.v_max_m3 <= 0.0 {
         quality.v_max_m3 = model.config().autodig.perception.bucket_capacity_m3;
     }
-    let fit = fit_hardness_regression(&model, &sweep, &quality)?;
+    let mut fit = fit_hardness_regression(model, &sweep, &quality)?;
+    fit.regression.origin = origin;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let header = format!(
         "Autodig soil hardness index from the average soil force (thesis 5.2, Eq. 25, Fig. 53):\n\
          index = intercept + slope_per_kn x |F(Gamma_typical)| / 1 kN, clamped to [min_index, max_index].\n\
-         Fitted by `excavator-ctl experiment hardness-fit` (planner::plan::hardness::fit_hardness_regression\n\
-         on default_sweep(): {} soils x {} terrains x {} indices, nominal dig model, config/planner.toml quality).",
+         Fitted by `{source}` (planner::plan::hardness::fit_hardness_regression\n\
+         on default_sweep(): {} soils x {} terrains x {} indices, config/planner.toml quality).",
         sweep.soils.len(),
         sweep.terrains.len(),
-        sweep.indices.len()
+        sweep.indices.len(),
     );
     let path = out.join("hardness_regression.toml");
     std::fs::write(&path, fit.regression.to_toml(&header))

@@ -38,6 +38,7 @@ mod input_check;
 pub mod kinematics;
 mod linkage;
 pub mod machine;
+pub mod origin;
 mod par;
 pub mod plan;
 pub mod soil;

@@ -47,6 +47,14 @@ use effects::{EffectError, EffectSet};
 use plant::{Plant, PlantError};
 use scenario::{Scenario, ScenarioError};
 
+/// The version of the default plant: what every artefact fitted on the simulator (the actuator
+/// networks, the hardness regression, the discrepancy workflow's nominal model) was calibrated on,
+/// and records (`excavator-ctl calibrate`, docs/simulator.md "Plant version"). Its default soil
+/// contact integration and a revision. `tests/plant_version.rs` pins the plant's behaviour for this
+/// version: a change to the physics that moves it fails there until the version is bumped, and a bump
+/// fails the check of the shipped artefacts until they are calibrated again.
+pub const PLANT_VERSION: &str = "held-1";
+
 /// Errors of the simulator library.
 #[derive(Debug, thiserror::Error)]
 pub enum SimError {

@@ -46,8 +46,8 @@ pub struct EvaluateArgs {
     /// (with `--forces statics`: the networks as the dig model runs them).
     #[arg(long)]
     pub zero_rate: bool,
-    /// The target velocity signal.
-    #[arg(long, value_enum, default_value_t = VelocitySource::Rates)]
+    /// The target velocity signal (default: `model train`'s).
+    #[arg(long, value_enum, default_value_t = VelocitySource::Angles)]
     pub velocity: VelocitySource,
     /// The force inputs.
     #[arg(long, value_enum, default_value_t = ForceSource::Measured)]
@@ -147,6 +147,24 @@ fn print_breakdown(model: &ActuatorModel, digs: &[TraceDig]) -> anyhow::Result<(
         peaks[0][0], peaks[1][0], peaks[2][0], peaks[0][1], peaks[1][1], peaks[2][1]
     );
     Ok(())
+}
+
+/// The free-running error of `model` on every dig of `traces` with velocities from `velocity` and
+/// the measured forces (the figure `model evaluate --all` prints).
+///
+/// # Errors
+/// Reading the traces; the model's errors (a trace without digs included).
+pub fn evaluate_traces(
+    traces: &[PathBuf],
+    model: &ActuatorModel,
+    machine: &planner::machine::MachineConfig,
+    velocity: VelocitySource,
+) -> anyhow::Result<planner::actuator::EvaluationReport> {
+    let digs: Vec<ActuatorDig> = load_trace_digs(traces, machine, ForceSource::Measured)?
+        .iter()
+        .map(|d| d.to_actuator_dig(velocity))
+        .collect();
+    Ok(model.evaluate(&digs)?)
 }
 
 /// Runs `model evaluate`.

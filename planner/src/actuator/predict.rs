@@ -53,6 +53,9 @@ pub struct TrainingSummary {
     pub digs: [usize; 3],
     /// Held-out test error, percent of peak speed, `[boom, stick, bucket]`.
     pub test_mae_percent_of_peak: [f64; 3],
+    /// The command that made the model and the plant version of its data.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub origin: Option<crate::origin::ArtefactOrigin>,
 }
 
 /// The trained actuator model: three recurrent networks (Fig. 17). Immutable and `Send + Sync`.
@@ -143,6 +146,16 @@ impl ActuatorModel {
     #[must_use]
     pub fn training_summary(&self) -> Option<&TrainingSummary> {
         self.training.as_ref()
+    }
+
+    /// The model with its origin recorded in the training summary (a model without a summary, not
+    /// made by [`train`](super::train()), gets none).
+    #[must_use]
+    pub fn with_origin(mut self, origin: crate::origin::ArtefactOrigin) -> Self {
+        if let Some(t) = self.training.as_mut() {
+            t.origin = Some(origin);
+        }
+        self
     }
 
     /// A fresh state: the machine moving at `velocity_m_per_s` with `command` issued for the whole

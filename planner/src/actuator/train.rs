@@ -960,6 +960,7 @@ pub fn train(
         seed: config.seed,
         digs: [train_digs.len(), validation_digs.len(), test_digs.len()],
         test_mae_percent_of_peak: test.cylinders.map(|c| c.mae_percent_of_peak),
+        origin: None,
     });
     let report = TrainReport {
         train_digs: train_digs.to_vec(),

@@ -47,7 +47,7 @@ pub fn average_soil_force_n(model: &EmpiricalSoilModel) -> Result<f64> {
 
 /// `index = intercept + slope x average soil force`, clamped to the maps' range (Fig. 53's dashed
 /// line).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct HardnessRegression {
     /// `a`.
@@ -64,6 +64,9 @@ pub struct HardnessRegression {
     /// Cases the fit used (information only).
     #[serde(default)]
     pub cases: usize,
+    /// The command that made it and the plant version of its data (`[origin]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub origin: Option<crate::origin::ArtefactOrigin>,
 }
 
 impl HardnessRegression {
@@ -148,6 +151,13 @@ impl HardnessRegression {
             self.r_squared,
             self.cases
         ));
+        if let Some(o) = &self.origin {
+            let quoted = |v: &str| toml::Value::String(v.to_owned()).to_string();
+            s.push_str(&format!("\n[origin]\nmade_by = {}\n", quoted(&o.made_by)));
+            if let Some(v) = &o.plant_version {
+                s.push_str(&format!("plant_version = {}\n", quoted(v)));
+            }
+        }
         s
     }
 }
@@ -339,6 +349,7 @@ pub fn fit_hardness_regression<A: ActuatorDynamics + Clone>(
             max_index: hi,
             r_squared: r2,
             cases: points.len(),
+            origin: None,
         },
         points,
     })
@@ -432,6 +443,10 @@ mod tests {
             max_index: 5.0,
             r_squared: 0.0,
             cases: 0,
+            origin: Some(crate::origin::ArtefactOrigin::new(
+                "excavator-ctl calibrate --seed \"1\"",
+                Some("held-1"),
+            )),
         };
         assert!((r.index_for_force(20e3) - 2.0).abs() < 1e-12);
         assert_eq!(r.index_for_force(1e9), 5.0);
@@ -443,12 +458,9 @@ mod tests {
         };
         assert!(average_soil_force_n(&bad).is_err());
         let text = r.to_toml("test");
-        assert_eq!(
-            HardnessRegression::from_toml_str(&text)
-                .expect("round trip")
-                .slope_per_kn,
-            0.05
-        );
+        let back = HardnessRegression::from_toml_str(&text).expect("round trip");
+        assert_eq!(back.slope_per_kn, 0.05);
+        assert_eq!(back.origin, r.origin);
         assert!(HardnessRegression::from_toml_str("intercept = 1").is_err());
     }
 
