@@ -196,8 +196,8 @@ pub fn data_shortfall(digs: usize) -> Option<String> {
             "warning: {digs} digs is too little data for these networks: the shipped ones were trained \
              on {SHIPPED_TRAINING_DIGS} digs, and below {RECOMMENDED_MIN_DIGS} the held-out error \
              rises well above theirs (docs/models.md, \"How much data\"). Record about \
-             {} more digs (`demo --digs N --trace`, `model generate-data`, or `run --trace` on the \
-             machine) and train on all of them.",
+             {} more digs (the `trace.log` of `demo --digs N`, `model generate-data`, or `run \
+             --trace` on the machine) and train on all of them.",
             RECOMMENDED_MIN_DIGS - digs
         )
     })
