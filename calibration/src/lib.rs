@@ -55,8 +55,8 @@ pub struct CalibrateArgs {
     /// Fresh sessions the networks are measured on.
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=100))]
     pub eval_sessions: u32,
-    /// Digs per fresh session.
-    #[arg(long, default_value_t = 12, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    /// Digs per fresh session (at least 3: `model evaluate` reads no fewer).
+    #[arg(long, default_value_t = 12, value_parser = clap::value_parser!(u32).range(3..=1000))]
     pub eval_digs: u32,
     /// Healthy sessions the grey-box model is calibrated on.
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=100))]
