@@ -19,10 +19,9 @@
 //! data each came from, their error figures and the wall time of every step. `--install DIR` copies
 //! the artefacts into a config folder (the repository's `config/`).
 //!
-//! Not rebuilt, because nothing in them is fitted on the plant: the Autodig maps
-//! (`config/autodig_maps.toml`, the thesis's Figs. 10 and 11 as read, shaped by hand) and the dig
-//! model's soil and bearing parameters (`config/dig_model.toml`, the default bench's soil as the
-//! simulator defines it).
+//! Not rebuilt: the Autodig maps (`config/autodig_maps.toml`, the thesis's Figs. 10 and 11 as read,
+//! shaped by hand) and the dig model's soil and bearing parameters (`config/dig_model.toml`, chosen
+//! with `excavator-ctl model compare`; docs/models.md, "The nominal model").
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -564,10 +563,9 @@ pub fn report_markdown(r: &CalibrationReport) -> String {
     }
     let _ = writeln!(
         s,
-        "\nNot rebuilt (nothing in them is fitted on the plant): the Autodig maps \
-         (`config/autodig_maps.toml`, the thesis's Figs. 10-11 as read) and the dig model's soil and \
-         bearing parameters (`config/dig_model.toml`, the default bench's soil as the simulator \
-         defines it)."
+        "\nNot rebuilt: the Autodig maps (`config/autodig_maps.toml`, the thesis's Figs. 10-11 as \
+         read) and the dig model's soil and bearing parameters (`config/dig_model.toml`, chosen with \
+         `excavator-ctl model compare`; docs/models.md, \"The nominal model\")."
     );
     s
 }

@@ -46,9 +46,9 @@ pub struct EvalArgs {
     /// Output folder (sessions/, reports/, eval.json, eval.md).
     #[arg(long, default_value = "out/discrepancy-eval", value_name = "DIR")]
     pub out: PathBuf,
-    /// Generate the sessions on the simulator with this soil-contact integration (default `held`,
-    /// the plant the nominal model is calibrated on; `implicit`: a plant without the contact
-    /// chatter, which the nominal model has never seen; docs/simulator.md).
+    /// Generate the sessions on the simulator with this soil-contact integration (default: the
+    /// default plant's, `implicit`, which the nominal model is calibrated on; `held`: plant version
+    /// `held-1`, with the contact chatter; docs/simulator.md).
     #[arg(long, value_enum, value_name = "HOW")]
     pub soil_contact: Option<SoilContact>,
     /// The action source of the generated sessions (default: `planned`, the session `demo` runs,
@@ -298,14 +298,19 @@ impl SessionPlan {
     ) -> Self {
         let mut case = base.to_string();
         // Sessions of another plant or strategy must not be reused for this one.
-        if soil_contact == Some(SoilContact::Implicit) {
-            case.push_str("_implicit");
+        if soil_contact == Some(SoilContact::Held) {
+            case.push_str("_held");
         }
         if strategy != DemoStrategy::Fixed {
             case.push('_');
             case.push_str(strategy.name());
         }
-        let mut demo = DemoArgs::new(out.join("sessions").join(&case));
+        // Nor sessions of an earlier plant version.
+        let mut demo = DemoArgs::new(
+            out.join("sessions")
+                .join(vcan_sim::PLANT_VERSION)
+                .join(&case),
+        );
         demo.digs = digs;
         demo.seed = Some(seed);
         demo.quiet = true;

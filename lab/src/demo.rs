@@ -139,7 +139,7 @@ pub struct DemoArgs {
     #[arg(long = "effect", value_name = "NAME=VALUE")]
     pub effects: Vec<String>,
     /// How the simulator integrates the soil's force (default: the bench file's `soil_contact`,
-    /// `held` when absent; docs/simulator.md, "Soil contact integration").
+    /// `implicit` when absent; docs/simulator.md, "Soil contact integration").
     #[arg(long, value_enum, value_name = "HOW")]
     pub soil_contact: Option<SoilContact>,
     /// Output folder.
@@ -253,9 +253,10 @@ pub use crate::session::TipPoint;
 /// `--soil-contact`: [`vcan_sim::scenario::SoilContactIntegration`] on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum SoilContact {
-    /// The force of each 5 ms contact update held until the next (the default plant).
+    /// The force of each 5 ms contact update held until the next (plant version `held-1`).
     Held,
-    /// The force as a function of the tip velocity at every 1 ms step, taken implicitly.
+    /// The force as a function of the tip velocity at every 1 ms step, taken implicitly (the
+    /// default plant).
     Implicit,
 }
 
@@ -457,7 +458,7 @@ pub struct DemoSummary {
     pub seed: u64,
     /// The simulator's soil-contact integration, `held` or `implicit` (docs/simulator.md; `held` in
     /// summaries written before it was recorded).
-    #[serde(default)]
+    #[serde(default = "held")]
     pub soil_contact: SoilContactIntegration,
     /// The hidden effects given on the command line.
     pub effects: Vec<String>,
@@ -520,6 +521,11 @@ impl DemoSummary {
         self.planning.max_ms = 0.0;
         self
     }
+}
+
+/// The soil contact of a summary written before it was recorded: the plant was `held` then.
+fn held() -> SoilContactIntegration {
+    SoilContactIntegration::Held
 }
 
 /// The session-time base of the trace at `trace` (its frames' session time for the scans and

@@ -102,9 +102,9 @@ pub struct SimArgs {
     /// Autodig maps (default: the built-in config/autodig_maps.toml).
     #[arg(long, value_name = "FILE")]
     pub maps: Option<PathBuf>,
-    /// How the simulator integrates the soil's force (`held`, the calibrated plant, or `implicit`,
-    /// without the contact chatter; docs/simulator.md).
-    #[arg(long, value_enum, default_value_t = SoilContact::Held)]
+    /// How the simulator integrates the soil's force (`implicit`, the default plant, or `held`, plant
+    /// version `held-1` with its contact chatter; docs/simulator.md).
+    #[arg(long, value_enum, default_value_t = SoilContact::Implicit)]
     pub soil_contact: SoilContact,
 }
 
@@ -605,7 +605,7 @@ pub fn table1(seeds: u64, reading: StickAngleReading) -> anyhow::Result<Vec<(f64
     table1_with(
         seeds,
         &AutodigMaps::builtin()?,
-        SoilContactIntegration::Held,
+        SoilContactIntegration::default(),
         reading,
     )
 }
@@ -675,7 +675,7 @@ pub fn table2(seeds: u64) -> anyhow::Result<Vec<(f64, Mean)>> {
         &AutodigMaps::builtin()?,
         TABLE2_BASE_SCALE,
         Table2Scaling::Soil,
-        SoilContactIntegration::Held,
+        SoilContactIntegration::default(),
     )
 }
 
@@ -731,21 +731,13 @@ fn default_start() -> StartPose {
 
 /// The soft and hard soils of Fig. 52 (cohesion, Pa): the default bench's soil and twice its cohesion.
 ///
-/// The hard soil was 60 kPa: there the Boom-Down contact alone already loads all three cylinders to
-/// relief (boom rod 37 MPa pressing down while the soil lifts the boom from 36 to 43 deg), the edge
-/// leaves the ground within 0.3 s of Dig whatever the maps command, and both indices fill a quarter of
-/// the bucket (seed 1: index 1 26 %, index 5 24 %): a soil the simulated machine cannot dig, where no
-/// hardness index can show its effect. Measured over cohesion with the maps before the Dig-map retune
-/// (docs/autodig.md; seed 1, fill of index 1 / 3 / 5):
-/// 8 kPa 85/100/100 %, 16 kPa 61/75/100 %, 20 kPa 63/-/95 %, 24 kPa 62/(dump timeout)/83 %,
-/// 32 kPa 61/66/69 %, 40 kPa 43/44/44 %, 50 kPa 32/32/26 %. The index matters between the default
-/// soil and about three times its cohesion.
-///
-/// With the retuned maps (at ca9b67c, seeds 1-3, fill of index 1 / index 5): 16 kPa 75-85 / 100 %,
-/// 20 kPa 80-83 / 91-96 %, 24 kPa 73-74 / 82-85 %, 28 kPa 68 / 75-77 %, 32 kPa 62-63 / 67-69 %. A
-/// harder soil does not bring index 1 to the thesis's half while index 5 stays full: from 20 kPa
-/// index 5 stops filling first, so the hard soil stays at 16 kPa.
-pub const FIG52_SOILS: [(&str, f64); 2] = [("soft", 8_000.0), ("hard", 16_000.0)];
+/// The default bench's 5 kPa is the nominal soil of the default (implicit) plant
+/// (docs/simulator.md, "Soil contact integration"). The index matters between the default soil and
+/// about three times its cohesion; much harder, the Boom-Down contact alone loads all three cylinders
+/// to relief and both indices fill a quarter of the bucket. On the implicit plant (seeds 1-3, fill of
+/// index 1 / index 5): soft 4 kPa 99 / 95 %, hard 8 kPa 73 / 100 %; soft 5 kPa 98 / 88 %, hard 10
+/// kPa 55 / 91 %; soft 6 kPa 96 / 86 %, hard 12 kPa 44 / 76 %.
+pub const FIG52_SOILS: [(&str, f64); 2] = [("soft", 5_000.0), ("hard", 10_000.0)];
 
 /// Fig. 52 rows: `(soil, hardness index, mean)`.
 ///
@@ -755,7 +747,7 @@ pub fn fig52(seeds: u64) -> anyhow::Result<Vec<(&'static str, f64, Mean)>> {
     fig52_with(
         seeds,
         &AutodigMaps::builtin()?,
-        SoilContactIntegration::Held,
+        SoilContactIntegration::default(),
         FIG52_SOILS,
     )
 }
@@ -984,9 +976,9 @@ pub fn report(args: &ExperimentArgs) -> anyhow::Result<String> {
 
 /// The line that says the simulator runs without its contact chatter, if it does.
 fn contact_note(sim: &SimArgs) -> &'static str {
-    if sim.soil_contact == SoilContact::Implicit {
-        "Simulator soil contact: implicit (no contact chatter; the maps and soils are calibrated on \
-         the held plant)\n\n"
+    if sim.soil_contact == SoilContact::Held {
+        "Simulator soil contact: held (plant version held-1, with its contact chatter; the shipped \
+         calibrations are fitted on the default, implicit plant)\n\n"
     } else {
         ""
     }
@@ -1455,7 +1447,7 @@ pub fn results_page(args: &ResultsArgs) -> anyhow::Result<String> {
             sim: SimArgs {
                 runs,
                 maps: None,
-                soil_contact: SoilContact::Held,
+                soil_contact: SoilContact::Implicit,
             },
             soils: Fig52Soils {
                 soft_cohesion_kpa: FIG52_SOILS[0].1 / 1e3,

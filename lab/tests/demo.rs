@@ -37,7 +37,10 @@ fn demo_writes_all_outputs_with_the_documented_fields_for_two_digs() {
         serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
     let digs = json["digs"].as_array().unwrap();
     assert_eq!(digs.len(), 2);
-    assert_eq!(json["soil_contact"], "held", "the plant the session ran on");
+    assert_eq!(
+        json["soil_contact"], "implicit",
+        "the plant the session ran on"
+    );
     for d in digs {
         for k in [
             "index",

@@ -303,7 +303,7 @@ pub struct Scenario {
     /// weighs the same. Thesis 4.4, Table 2: "the force output of the analytical model was multiplied
     /// by the force factor". `None` (the default): 1.
     pub soil_force_factor: Option<f64>,
-    /// How the plant integrates the soil's force (`soil_contact = "implicit"`); `held` when absent.
+    /// How the plant integrates the soil's force (`soil_contact = "held"`); `implicit` when absent.
     pub soil_contact: SoilContactIntegration,
 }
 
@@ -312,15 +312,15 @@ pub struct Scenario {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SoilContactIntegration {
-    /// The force at the tip velocity of each 5 ms contact update, held until the next: the plant the
-    /// shipped maps, nominal models and figures are calibrated on. Where the soil's resistance exceeds
+    /// The force at the tip velocity of each 5 ms contact update, held until the next: the plant of
+    /// plant version `held-1`, kept to reproduce results made on it. Where the soil's resistance exceeds
     /// what the cylinders hold (harder soil, a force factor of 2 or more) its steep mobilisation near
     /// rest (about force / 1 cm/s) held against the oil column makes it chatter.
-    #[default]
     Held,
     /// The force as a function of the tip velocity, evaluated at every 1 ms physics step and its
     /// velocity gradient taken implicitly by the hydraulics (one 3x3 solve): no chatter; the soil
     /// resists steadily, so the same soil digs harder than with `held`.
+    #[default]
     Implicit,
 }
 
@@ -570,16 +570,16 @@ mod tests {
         assert!(s.effect_set().unwrap().active().is_empty());
     }
 
-    /// `soil_contact` picks the plant's soil-force integration; absent it is `held`, and a value
-    /// that is neither is an error naming the key.
+    /// `soil_contact` picks the plant's soil-force integration; absent it is `implicit`, and a
+    /// value that is neither is an error naming the key.
     #[test]
-    fn soil_contact_parses_with_held_as_default() {
+    fn soil_contact_parses_with_implicit_as_default() {
         assert_eq!(
             Scenario::default_bench().unwrap().soil_contact,
-            SoilContactIntegration::Held
+            SoilContactIntegration::Implicit
         );
-        let s = Scenario::from_toml_str_named("soil_contact = \"implicit\"\n", "b.toml").unwrap();
-        assert_eq!(s.soil_contact, SoilContactIntegration::Implicit);
+        let s = Scenario::from_toml_str_named("soil_contact = \"held\"\n", "b.toml").unwrap();
+        assert_eq!(s.soil_contact, SoilContactIntegration::Held);
         let msg = Scenario::from_toml_str_named("soil_contact = \"smooth\"\n", "b.toml")
             .unwrap_err()
             .to_string();
@@ -630,7 +630,13 @@ mod tests {
 
     #[test]
     fn native_soil_is_off_unless_declared_and_validated() {
-        assert_eq!(Scenario::default_bench().unwrap().native_soil, None);
+        assert_eq!(
+            Scenario::from_toml_str_named("", "b.toml")
+                .unwrap()
+                .native_soil,
+            None
+        );
+        assert!(Scenario::default_bench().unwrap().native_soil.is_some());
         let text = "[bench]\nfloor_elevation_m = -2.0\n[native_soil]\ncohesion_pa = 40000.0\n";
         let s = Scenario::from_toml_str_named(text, "b.toml").unwrap();
         let native = s.native_soil.unwrap();

@@ -25,7 +25,7 @@ use super::start::{ModelStartArgs, default_section, default_site, predicted_tip_
 use crate::plots::{TipCurve, write_tip_paths};
 use crate::thesis::{FULL_FILL, Fig52Checks, HALF_FILL, THESIS_SOFT_COST, pct, write_checks};
 
-/// The cohesions of the printed sweep, Pa (the default bench's soil is 8 kPa).
+/// The cohesions of the printed sweep, Pa (the dig model's soil, config/dig_model.toml, is 8 kPa).
 pub const SWEEP_COHESION_PA: [f64; 7] = [4e3, 6e3, 8e3, 12e3, 16e3, 24e3, 32e3];
 /// The two Autodig soil hardness indices compared (the ends of the maps' range).
 pub const INDICES: [f64; 2] = [1.0, 5.0];
