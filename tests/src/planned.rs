@@ -21,12 +21,11 @@ pub const START_TIMEOUT: Duration = Duration::from_secs(60);
 
 /// The extended bench (config/bench_extended.toml) with its crest 4.5 m out instead of 4 m and a
 /// 1.2 m cut instead of 2 m: less material within reach, so the planner cleans up and tracks back
-/// within the first actions. `excavator-ctl demo --strategy planned --digs 5` on it, seeds 1 to 7
-/// alike: dig, cleanup, cleanup, track back, dig, dig (about 145 s of session time); every dig about
-/// a full bucket (25 kN) except, on seeds 1 and 6, one of 12 and 22 kN, so [`SEED`] is 2. On the
-/// unchanged bench the first track back comes after eight digs and there is no cleanup in twelve; a
-/// 1 m cut chose differently from seed to seed (dig or cleanup after the first track back), so a
-/// session over the bus, whose timing differs, could not be compared with `demo` there.
+/// within the first actions. `excavator-ctl demo --strategy planned --digs 5` on it, seeds 1 to 7: a
+/// dig, then a cleanup, then digs or more cleanups, one track back (two on seed 4), 164-190 s of
+/// session time; every dig about a full bucket (24-25 kN). Seeds 1, 2, 4 and 6 take one cleanup, 3,
+/// 5 and 7 two or three of a few hundred newtons; [`SEED`] is 2 (dig, cleanup of 20 kN, three digs).
+/// On the unchanged bench there is no cleanup nor track back in the first twelve digs.
 pub fn bench_toml() -> String {
     let mut text = lab::demo::EXTENDED_BENCH_TOML.to_owned();
     for (from, to) in [

@@ -35,8 +35,7 @@ use hil_tests::planned::{PlannedSim, path_str, read_summary};
 use hil_tests::process::operator;
 use socketcan::Socket as _;
 
-/// Dig and cleanup actions of the session (dig, cleanup, cleanup and a track back on the planned
-/// bench).
+/// Dig and cleanup actions of the session (dig, cleanup, dig and a track back on the planned bench).
 const DIGS: u32 = 3;
 /// The e-stop must latch (neutral valves, the heartbeat requesting EStop) within this long of the
 /// request, wall s: the request crosses the control socket and the connection task, which share
