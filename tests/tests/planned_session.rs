@@ -99,7 +99,10 @@ fn the_planned_session_over_vcan_digs_cleans_up_tracks_back_and_matches_demo() {
         (rw - dw).abs() <= DIG_WEIGHT_TOLERANCE * dw,
         "mean dig weight {rw:.0} vs {dw:.0} N"
     );
-    let one_action_n = (dw - demo.stats.cleanup_mean_weight_n).abs() / d.digs as f64;
+    // The counts may differ by one action (above): a dig for a cleanup, which brings anything from a
+    // few hundred newtons (a floor pass) to a full bucket, so one action moves the mean by up to one
+    // dig's weight over the actions.
+    let one_action_n = dw / d.digs as f64;
     let allowed = one_action_n + 0.1 * d.mean_weight_n;
     assert!(
         (t.mean_weight_n - d.mean_weight_n).abs() <= allowed,
