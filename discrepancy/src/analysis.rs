@@ -13,7 +13,7 @@ use clap::Args;
 
 use crate::greybox::PreparedRecord;
 use crate::model::ModelEffect;
-use crate::reference::{Reference, structure};
+use crate::reference::{ParameterCalibration, Reference, structure};
 use crate::session::{Analysis, load_machine, load_model, prepare_readable_sessions};
 use crate::{AnalysisConfig, AugmentedModel, analyse, report, sufficiency, verdict};
 
@@ -91,12 +91,27 @@ pub fn load_reference(
     }
     let records = crate::session::prepare_sessions(paths, machine, model)
         .context("reading the reference sessions")?;
+    let library = crate::parameters::ParameterLibrary::derive(machine)?;
     let config = AnalysisConfig {
         base: model.augmentation()?,
+        parameters: Some(library.clone()),
         ..AnalysisConfig::default()
     };
     let fit = analyse(&records, &model.params, &config, &mut |_, _| {})
         .context("calibrating on the reference sessions")?;
+    let parameter_calibration = fit
+        .named_effects
+        .iter()
+        .filter(|e| e.kind == "parameter")
+        .filter_map(|e| {
+            let nominal = library.parameters[library.find(&e.name)?].nominal;
+            Some(ParameterCalibration {
+                key: e.name.clone(),
+                value: e.magnitude,
+                factor: e.magnitude / nominal,
+            })
+        })
+        .collect();
     // The calibration is what the model carries after the fit: the named effects, and of an
     // ambiguous pair the one the model carries (a healthy machine's few ms of delay or lag, which
     // the reference's healthy sessions cannot tell apart, are still its calibration: without it
@@ -121,28 +136,56 @@ pub fn load_reference(
         .collect();
     let reference = Reference::from_records(
         &records,
-        &model.params,
+        &fit.params,
         &fit.augmentation,
         paths.iter().map(|p| p.display().to_string()).collect(),
         model.provenance.clone(),
         calibration,
+        parameter_calibration,
     )
     .context("the reference sessions")?;
     Ok(Some(reference))
 }
 
-/// `model` with the reference's calibration added (itself when there is none).
+/// `model` with the reference's calibration added (itself when there is none): its effects, and
+/// its machine-file parameters applied to the grey-box parameters as the factors they were fitted
+/// with on `machine`'s file.
 ///
 /// # Errors
-/// A calibration effect the library does not know, or out of its range.
-pub fn calibrated(model: AugmentedModel, reference: &Reference) -> anyhow::Result<AugmentedModel> {
-    if reference.calibration.is_empty() {
+/// A calibration effect the library does not know, or out of its range; a calibrated parameter
+/// that is no candidate of `machine`'s file, or a factor outside the fit's range.
+pub fn calibrated(
+    model: AugmentedModel,
+    reference: &Reference,
+    machine: &planner::machine::MachineConfig,
+) -> anyhow::Result<AugmentedModel> {
+    if reference.calibration.is_empty() && reference.parameter_calibration.is_empty() {
         return Ok(model);
+    }
+    let mut params = model.params.clone();
+    if !reference.parameter_calibration.is_empty() {
+        let library = crate::parameters::ParameterLibrary::derive(machine)?;
+        let (lo, hi) = crate::parameters::FACTOR_RANGE;
+        for p in &reference.parameter_calibration {
+            let i = library.find(&p.key).with_context(|| {
+                format!(
+                    "the reference calibrates {}, which is no parameter of the machine file",
+                    p.key
+                )
+            })?;
+            anyhow::ensure!(
+                p.factor.is_finite() && (lo..=hi).contains(&p.factor),
+                "the reference calibrates {} by a factor of {} (outside {lo}-{hi})",
+                p.key,
+                p.factor
+            );
+            params = library.apply(&params, i, p.factor)?;
+        }
     }
     let mut effects = model.effects.clone();
     effects.extend(reference.calibration.iter().cloned());
     let out = AugmentedModel::new(
-        model.params,
+        params,
         effects,
         format!(
             "{}; calibrated on the reference sessions ({}): {}",
@@ -152,6 +195,12 @@ pub fn calibrated(model: AugmentedModel, reference: &Reference) -> anyhow::Resul
                 .calibration
                 .iter()
                 .map(|e| format!("{} = {:.4e}", e.name, e.magnitude))
+                .chain(
+                    reference
+                        .parameter_calibration
+                        .iter()
+                        .map(|p| format!("{} = {:.4e} (x{:.3})", p.key, p.value, p.factor))
+                )
                 .collect::<Vec<_>>()
                 .join(", ")
         ),
@@ -181,7 +230,7 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
         ));
     }
     let model = match &reference {
-        Some(r) => calibrated(model, r)?,
+        Some(r) => calibrated(model, r, &machine)?,
         None => model,
     };
     if reference.is_none() {
@@ -191,7 +240,7 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
                 .to_string(),
         );
     }
-    let config = AnalysisConfig {
+    let mut config = AnalysisConfig {
         base: model.augmentation()?,
         refit: reference
             .iter()
@@ -201,6 +250,26 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
         parameters: Some(crate::parameters::ParameterLibrary::derive(&machine)?),
         ..AnalysisConfig::default()
     };
+    let judge = |result: &crate::AnalysisResult, r: &Reference| {
+        let test: Vec<&PreparedRecord> = records
+            .iter()
+            .filter(|rec| result.test_digs.contains(&rec.index))
+            .collect();
+        let after = structure(&test, &result.params, &result.augmentation);
+        verdict::judge(result, &after, r)
+    };
+    if let Some(r) = &reference {
+        config.eligible = Some(eligible_signals(&records, &model, &config, |p| {
+            judge(p, r)
+        })?);
+        if config.eligible.is_some_and(|e| !e.contains(&true)) {
+            warnings.push(
+                "no candidate fitted: every judged signal is within the reference with the \
+                 starting model, so there is nothing for a candidate to explain"
+                    .to_string(),
+            );
+        }
+    }
     let bar = (!args.quiet && std::io::IsTerminal::is_terminal(&std::io::stdout())).then(|| {
         let bar = indicatif::ProgressBar::new(1);
         bar.set_style(
@@ -211,7 +280,7 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
         );
         bar
     });
-    let mut result = analyse(&records, &model.params, &config, &mut |done, total| {
+    let result = analyse(&records, &model.params, &config, &mut |done, total| {
         if let Some(b) = &bar {
             b.set_length(total as u64);
             b.set_position(done as u64);
@@ -221,40 +290,7 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
         b.finish_and_clear();
     }
     warnings.extend(sufficiency::signal_warnings(&result));
-    let judge = |result: &crate::AnalysisResult, r: &Reference| {
-        let test: Vec<&PreparedRecord> = records
-            .iter()
-            .filter(|rec| result.test_digs.contains(&rec.index))
-            .collect();
-        let after = structure(&test, &result.params, &result.augmentation);
-        verdict::judge(result, &after, r)
-    };
-    let mut verdict = reference.as_ref().map(|r| judge(&result, r));
-    // Named means a residual beyond the reference brought back to it: where every judged signal is
-    // within the reference with the starting model, a candidate that lowers it further fits noise.
-    if let (Some(r), Some(v)) = (&reference, &verdict)
-        && v.nothing_beyond_before()
-        && !(result.named_effects.is_empty() && result.ambiguous.is_empty())
-    {
-        let fitted: Vec<String> = result
-            .named_effects
-            .iter()
-            .map(|e| e.name.clone())
-            .chain(
-                result
-                    .ambiguous
-                    .iter()
-                    .flat_map(|a| a.candidates.iter().map(|c| c.name.clone())),
-            )
-            .collect();
-        warnings.push(format!(
-            "not named: {} (every signal is within the reference with the starting model; what \
-             these candidates lower is at the level the reference expects)",
-            fitted.join(", ")
-        ));
-        result.name_nothing(&model.params, config.base);
-        verdict = Some(judge(&result, r));
-    }
+    let verdict = reference.as_ref().map(|r| judge(&result, r));
     let machine_text = match &args.machine {
         Some(p) => {
             std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?
@@ -305,4 +341,36 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
     };
     report::write_outputs(&args.out, &analysis, &args.measured, args.replay_csv)?;
     Ok(analysis)
+}
+
+/// The signals a candidate may be named for, judged against the reference with the starting
+/// model alone (`judge` of an analysis that fits nothing): those beyond the reference's tolerance,
+/// and those it cannot judge (too few samples); none when no judged signal is beyond it. Named
+/// means a residual beyond the reference brought back to it: a candidate that lowers only what
+/// the reference expects fits noise (a 2 ms transport delay on a clean session) or stands in for
+/// another's residual (a stiffer bulk modulus fitted on the velocities of a session whose weighed
+/// payload shows denser soil).
+///
+/// # Errors
+/// As [`analyse`].
+fn eligible_signals(
+    records: &[PreparedRecord],
+    model: &AugmentedModel,
+    config: &AnalysisConfig,
+    judge: impl Fn(&crate::AnalysisResult) -> crate::verdict::Verdict,
+) -> anyhow::Result<[bool; crate::greybox::N_SIGNALS]> {
+    let probe_config = AnalysisConfig {
+        candidates: Vec::new(),
+        parameters: None,
+        ..config.clone()
+    };
+    let probe = analyse(records, &model.params, &probe_config, &mut |_, _| {})?;
+    let v = judge(&probe);
+    let any_beyond = !v.nothing_beyond_before();
+    let mut eligible = [false; crate::greybox::N_SIGNALS];
+    for (sig, s) in crate::greybox::Signal::ALL.iter().zip(&v.signals) {
+        let not_judged = s.outcome == crate::verdict::Outcome::NotJudged;
+        eligible[sig.index()] = any_beyond && (not_judged || s.ratio_before > s.tolerance);
+    }
+    Ok(eligible)
 }

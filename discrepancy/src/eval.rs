@@ -66,6 +66,14 @@ pub struct EvalArgs {
     /// Leave out the effect-library cases (plant changes and effect-free sessions only).
     #[arg(long)]
     pub no_effects: bool,
+    /// Leave out the pairs of effects hidden together ([`PAIRS`]).
+    #[arg(long)]
+    pub no_pairs: bool,
+    /// Also time one analysis (`discrepancy bench`, its sessions under `OUT/bench`) and write both
+    /// as a generated results page to this file (e.g. docs/discrepancy-results.md), with the
+    /// command line, the date and the commit.
+    #[arg(long, value_name = "FILE")]
+    pub results: Option<PathBuf>,
 }
 
 impl EvalArgs {
@@ -83,6 +91,8 @@ impl EvalArgs {
             plant: Vec::new(),
             reference_sessions: 2,
             no_effects: false,
+            no_pairs: false,
+            results: None,
         }
     }
 
@@ -119,6 +129,8 @@ pub enum Hidden {
     None,
     /// An effect of the library at a magnitude.
     Effect(Candidate, f64),
+    /// Two effects of the library hidden together.
+    Pair([(Candidate, f64); 2]),
     /// A plant change outside the library.
     Plant(PlantChange),
 }
@@ -129,6 +141,7 @@ impl Hidden {
         match self {
             Hidden::None => "none",
             Hidden::Effect(..) => "effect",
+            Hidden::Pair(_) => "pair",
             Hidden::Plant(_) => "plant",
         }
     }
@@ -146,6 +159,7 @@ impl Hidden {
         match self {
             Hidden::None => "none".into(),
             Hidden::Effect(c, _) => c.name().into(),
+            Hidden::Pair([(a, _), (b, _)]) => format!("{}+{}", a.name(), b.name()),
             Hidden::Plant(p) => p.to_string(),
         }
     }
@@ -182,6 +196,89 @@ pub fn magnitudes(c: Candidate) -> [f64; 2] {
         Candidate::ResolverOffset => [0.01, -0.015],
         Candidate::SoilCohesion => [10_000.0, 40_000.0],
         Candidate::SoilDensity => [200.0, 600.0],
+    }
+}
+
+/// The pairs of effects the evaluation hides together: effects on different signal families, and
+/// the confusable ones the issue named (a delay with a lag; a pressure offset with a friction,
+/// both on the forces).
+pub const PAIRS: [[(Candidate, f64); 2]; 6] = [
+    [
+        (Candidate::TransportDelay, 0.05),
+        (Candidate::HydraulicLag, 0.1),
+    ],
+    [
+        (Candidate::PumpSaturation, 0.3),
+        (Candidate::CoulombFriction, 10_000.0),
+    ],
+    [
+        (Candidate::PressureSensorOffset, -5.0e5),
+        (Candidate::ViscousFriction, 4.0e5),
+    ],
+    [
+        (Candidate::ValveDeadband, 0.05),
+        (Candidate::SoilDensity, 400.0),
+    ],
+    [
+        (Candidate::FlowSharing, 0.6),
+        (Candidate::InternalLeakage, 1.0e-11),
+    ],
+    [
+        (Candidate::HydraulicLag, 0.1),
+        (Candidate::ResolverOffset, -0.015),
+    ],
+];
+
+/// How a pair of hidden effects was reported.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PairOutcome {
+    /// Both named, each within 25 % of its magnitude.
+    Both,
+    /// Reported as an ambiguous pair of the two (neither named, both fits given).
+    Ambiguous,
+    /// One of them named within 25 %, the other not (or off by more).
+    One,
+    /// Neither named.
+    Neither,
+}
+
+impl PairOutcome {
+    /// Name for tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            PairOutcome::Both => "both",
+            PairOutcome::Ambiguous => "ambiguous",
+            PairOutcome::One => "one",
+            PairOutcome::Neither => "neither",
+        }
+    }
+}
+
+/// The outcome of a pair from what the analysis named and reported ambiguous.
+fn pair_outcome(
+    pair: &[(Candidate, f64); 2],
+    named: &[crate::NamedEffect],
+    ambiguous: &[[String; 2]],
+) -> PairOutcome {
+    let within = |(c, v): &(Candidate, f64)| {
+        named
+            .iter()
+            .any(|e| e.name == c.name() && ((e.magnitude - v) / v.abs()).abs() <= 0.25)
+    };
+    let found = pair.iter().filter(|p| within(p)).count();
+    let names = pair.map(|(c, _)| c.name());
+    if found == 2 {
+        PairOutcome::Both
+    } else if ambiguous
+        .iter()
+        .any(|a| a.contains(&names[0].to_string()) && a.contains(&names[1].to_string()))
+    {
+        PairOutcome::Ambiguous
+    } else if found == 1 {
+        PairOutcome::One
+    } else {
+        PairOutcome::Neither
     }
 }
 
@@ -226,6 +323,8 @@ pub struct CaseResult {
     pub max_ratio: Option<(f64, f64)>,
     /// Data-sufficiency warnings of the analysis.
     pub warnings: usize,
+    /// For a pair of hidden effects, how it was reported.
+    pub pair: Option<PairOutcome>,
 }
 
 impl CaseResult {
@@ -250,6 +349,7 @@ impl CaseResult {
             unexplained: Vec::new(),
             max_ratio: None,
             warnings: 0,
+            pair: None,
         }
     }
 }
@@ -355,7 +455,9 @@ fn apply_plant(
     };
     let dir = out.join("plant");
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    let path = dir.join(format!("{}_{name}.toml", change.slug()));
+    // One file per case: the seeds of a change run in parallel, and a file written while another
+    // case reads it is a truncated file.
+    let path = dir.join(format!("{}_{name}.toml", plan.case));
     std::fs::write(&path, change.apply(base)?)
         .with_context(|| format!("writing {}", path.display()))?;
     match change.file {
@@ -375,12 +477,21 @@ fn run_case(
     let out = &args.out;
     let base = match hidden {
         Hidden::Effect(c, v) => format!("{}_{v}_s{seed}", c.name()),
+        Hidden::Pair([(a, va), (b, vb)]) => {
+            format!("{}_{va}+{}_{vb}_s{seed}", a.name(), b.name())
+        }
         Hidden::Plant(p) => format!("plant_{}_s{seed}", p.slug()),
         Hidden::None => format!("none_s{seed}"),
     };
     let mut plan = SessionPlan::new(out, &base, seed, digs, args.soil_contact, args.strategy());
     match hidden {
         Hidden::Effect(c, v) => plan.demo.effects = vec![format!("{}={v}", c.name())],
+        Hidden::Pair(pair) => {
+            plan.demo.effects = pair
+                .iter()
+                .map(|(c, v)| format!("{}={v}", c.name()))
+                .collect();
+        }
         Hidden::Plant(p) => apply_plant(&mut plan, p, out)?,
         Hidden::None => {}
     }
@@ -430,6 +541,10 @@ fn run_case(
     if let Hidden::Plant(p) = hidden {
         magnitude_error_percent = parameter_error_percent(p, &r.named_effects);
     }
+    let pair = match hidden {
+        Hidden::Pair(p) => Some(pair_outcome(p, &r.named_effects, &ambiguous)),
+        _ => None,
+    };
     let verdict = analysis.verdict.as_ref();
     let max_ratio = verdict.and_then(|v| {
         v.signals
@@ -466,6 +581,7 @@ fn run_case(
         }),
         max_ratio,
         warnings: analysis.warnings.len(),
+        pair,
     })
 }
 
@@ -513,7 +629,7 @@ pub fn outcome_text(results: &[CaseResult]) -> String {
         let _ = write!(s, "{:>18}", o.name());
     }
     let _ = writeln!(s, "{:>8}", "error");
-    for kind in ["effect", "plant", "none"] {
+    for kind in ["effect", "pair", "plant", "none"] {
         let cases: Vec<&CaseResult> = results.iter().filter(|c| c.kind == kind).collect();
         if cases.is_empty() {
             continue;
@@ -624,6 +740,61 @@ pub fn outcome_text(results: &[CaseResult]) -> String {
                 .join(", ")
         );
     }
+    s
+}
+
+/// The pairs of hidden effects: each case's outcome, what was named, and the share reported right
+/// (both named within 25 %, or reported as ambiguous).
+pub fn pairs_text(results: &[CaseResult]) -> String {
+    use std::fmt::Write as _;
+    let pairs: Vec<&CaseResult> = results.iter().filter(|c| c.kind == "pair").collect();
+    let mut s = String::new();
+    if pairs.is_empty() {
+        return s;
+    }
+    let _ = writeln!(
+        s,
+        "\npairs of hidden effects (both: each named within 25 %; ambiguous: reported as a pair that cannot be told apart)"
+    );
+    for c in &pairs {
+        let _ = writeln!(
+            s,
+            "{:<60} {:<10} named {}{}",
+            c.case,
+            c.pair.map_or("error", PairOutcome::name),
+            if c.named_all.is_empty() {
+                "nothing".to_string()
+            } else {
+                c.named_all
+                    .iter()
+                    .map(|(n, m, _)| format!("{n}={m:.3e}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            },
+            if c.ambiguous.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    "; ambiguous {}",
+                    c.ambiguous
+                        .iter()
+                        .map(|[a, b]| format!("{a}|{b}"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
+            }
+        );
+    }
+    let right = pairs
+        .iter()
+        .filter(|c| matches!(c.pair, Some(PairOutcome::Both | PairOutcome::Ambiguous)))
+        .count();
+    let _ = writeln!(
+        s,
+        "pairs reported right (both named within 25 % or ambiguous): {right}/{} ({:.0} %, target >= 90 %)",
+        pairs.len(),
+        100.0 * right as f64 / pairs.len() as f64
+    );
     s
 }
 
@@ -796,6 +967,11 @@ pub fn cases(args: &EvalArgs) -> anyhow::Result<Vec<(Hidden, u64)>> {
         for p in &plant {
             out.push((Hidden::Plant(p.clone()), 400 + seed));
         }
+        if !args.no_pairs && !args.no_effects && args.only.is_empty() {
+            for pair in PAIRS {
+                out.push((Hidden::Pair(pair), 600 + seed));
+            }
+        }
     }
     for seed in 0..args.nominal_sessions {
         out.push((Hidden::None, 200 + seed));
@@ -847,7 +1023,7 @@ fn reference_file(args: &EvalArgs, digs: u32) -> anyhow::Result<Option<PathBuf>>
 /// # Errors
 /// A session that cannot be generated or analysed; writing the outputs.
 pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
-    let digs = args.digs.unwrap_or(if args.quick { 4 } else { 8 });
+    let digs = args.digs.unwrap_or(if args.quick { 4 } else { 16 });
     let list = cases(args)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
@@ -870,7 +1046,12 @@ pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
         })
         .collect();
     bar.finish_and_clear();
-    let text = format!("{}{}", confusion_text(&results), outcome_text(&results));
+    let text = format!(
+        "{}{}{}",
+        confusion_text(&results),
+        pairs_text(&results),
+        outcome_text(&results)
+    );
     print!("{text}");
     println!(
         "{} cases in {:.0} s (generation and analysis, {} rayon threads)",
@@ -885,7 +1066,38 @@ pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
     .context("writing eval.json")?;
     std::fs::write(args.out.join("eval.md"), format!("```\n{text}```\n"))
         .context("writing eval.md")?;
+    if let Some(page) = &args.results {
+        let bench = bench_text(&BenchArgs {
+            digs: 16,
+            out: args.out.join("bench"),
+        })?;
+        print!("{bench}");
+        let command = std::iter::once("excavator-ctl".to_string())
+            .chain(std::env::args().skip(1))
+            .collect::<Vec<_>>()
+            .join(" ");
+        std::fs::write(page, results_page(&command, digs, &text, &bench))
+            .with_context(|| format!("writing {}", page.display()))?;
+    }
     Ok(())
+}
+
+/// The generated results page of the workflow: the evaluation's tables and the timing of one
+/// analysis, under the command that made them.
+fn results_page(command: &str, digs: u32, eval: &str, bench: &str) -> String {
+    let provenance = lab::results::Provenance::now();
+    format!(
+        "Generated by `{command}`; do not edit.\n\n# Discrepancy workflow: results\n\n\
+         Made on {} at commit {}, plant `{}`. Sessions generated fresh by the in-process demo \
+         ({digs} digs each, the default planned bench unless the command says otherwise), each \
+         analysed from its folder against the `reference.json` of healthy sessions at seeds 300 \
+         and on; what the tables mean is in [discrepancy.md](discrepancy.md) (Evaluation).\n\n\
+         ## Evaluation\n\n```\n{eval}```\n\n## One analysis, timed (`discrepancy bench`)\n\n\
+         ```\n{bench}```\n",
+        provenance.date,
+        provenance.commit,
+        vcan_sim::PLANT_VERSION,
+    )
 }
 
 /// Times `discrepancy analyse` of one session of `args.digs` digs on one core, as a user runs it:
@@ -899,6 +1111,17 @@ pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
 /// # Errors
 /// Generating or analysing the sessions.
 pub fn run_bench(args: &BenchArgs) -> anyhow::Result<()> {
+    print!("{}", bench_text(args)?);
+    Ok(())
+}
+
+/// [`run_bench`]'s measurement, as the text it prints.
+///
+/// # Errors
+/// As [`run_bench`].
+pub fn bench_text(args: &BenchArgs) -> anyhow::Result<String> {
+    use std::fmt::Write as _;
+    let mut text = String::new();
     let generate = |dir: PathBuf, seed: u64, effects: Vec<String>| -> anyhow::Result<PathBuf> {
         if !session_complete(&dir)? {
             let mut demo = DemoArgs::new(dir.clone());
@@ -952,18 +1175,21 @@ pub fn run_bench(args: &BenchArgs) -> anyhow::Result<()> {
         })
     })?;
     let cpu_text = |c: Option<f64>| c.map_or_else(|| "n/a".to_string(), |c| format!("{c:.2} s"));
-    println!(
+    let _ = writeln!(
+        text,
         "discrepancy bench: one analysis of {} digs against a reference.json, one core: wall {wall:.2} s, CPU {} (target < 10 s)",
         args.digs,
         cpu_text(cpu)
     );
-    println!(
+    let _ = writeln!(
+        text,
         "  (the reference from {} healthy digs, once: wall {ref_wall:.2} s, CPU {})",
         args.digs,
         cpu_text(ref_cpu)
     );
     if let Some(a) = &outcome {
-        println!(
+        let _ = writeln!(
+            text,
             "  named {:?}, ambiguous {}, outcome {}",
             a.result
                 .named_effects
@@ -976,12 +1202,13 @@ pub fn run_bench(args: &BenchArgs) -> anyhow::Result<()> {
                 .map_or("not judged", |v| v.outcome.name())
         );
     }
-    println!(
+    let _ = writeln!(
+        text,
         "CPU time is what one unshared core would take; the wall time grows with the machine's load"
     );
     let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
-    println!("load average: {}", load.trim());
-    Ok(())
+    let _ = writeln!(text, "load average: {}", load.trim());
+    Ok(text)
 }
 
 /// CPU time (user + system) of this process so far, s, from `/proc/self/stat` (Linux; `None`
@@ -1025,13 +1252,44 @@ mod tests {
     /// hides it as `--effect NAME=VALUE`).
     #[test]
     fn the_evaluation_magnitudes_are_in_the_simulators_ranges() {
-        for c in Candidate::ALL {
-            for m in magnitudes(c) {
-                let mut set = vcan_sim::effects::EffectSet::nominal();
-                if let Err(e) = set.apply_arg(&format!("{}={m}", c.name())) {
-                    panic!("{e}");
-                }
+        let pairs = PAIRS.iter().flatten().copied();
+        let singles = Candidate::ALL
+            .iter()
+            .flat_map(|c| magnitudes(*c).map(|m| (*c, m)));
+        for (c, m) in singles.chain(pairs) {
+            let mut set = vcan_sim::effects::EffectSet::nominal();
+            if let Err(e) = set.apply_arg(&format!("{}={m}", c.name())) {
+                panic!("{e}");
             }
         }
+    }
+
+    /// A pair is right when both are named within 25 % or the two are reported ambiguous; one
+    /// named with the other's magnitude folded in is not.
+    #[test]
+    fn a_pair_is_right_both_named_or_ambiguous_not_one_with_the_others_share() {
+        let named = |list: &[(&str, f64)]| -> Vec<crate::NamedEffect> {
+            list.iter()
+                .map(|(n, m)| crate::NamedEffect {
+                    name: (*n).to_string(),
+                    kind: "effect",
+                    magnitude: *m,
+                    uncertainty: 0.0,
+                    unit: "s",
+                    description: String::new(),
+                    heldout_delta_bic: 100.0,
+                    fitted_jointly_with: None,
+                })
+                .collect()
+        };
+        let pair = PAIRS[0];
+        let both = named(&[("transport_delay", 0.055), ("hydraulic_lag", 0.09)]);
+        assert_eq!(pair_outcome(&pair, &both, &[]), PairOutcome::Both);
+        let lumped = named(&[("transport_delay", 0.138)]);
+        assert_eq!(pair_outcome(&pair, &lumped, &[]), PairOutcome::Neither);
+        let one = named(&[("transport_delay", 0.05)]);
+        assert_eq!(pair_outcome(&pair, &one, &[]), PairOutcome::One);
+        let ambiguous = [["hydraulic_lag".to_string(), "transport_delay".to_string()]];
+        assert_eq!(pair_outcome(&pair, &[], &ambiguous), PairOutcome::Ambiguous);
     }
 }

@@ -68,6 +68,11 @@ pub struct AnalysisConfig {
     /// without it.
     #[serde(skip)]
     pub parameters: Option<ParameterLibrary>,
+    /// The signals a candidate may be named for: one acting on none of them is not tried. Judged
+    /// against a reference, the signals beyond it with the starting model (and those it cannot
+    /// judge): a candidate that only lowers residuals the reference expects fits noise, or stands
+    /// in for what another candidate explains elsewhere. `None`: every signal.
+    pub eligible: Option<[bool; N_SIGNALS]>,
 }
 
 impl Default for AnalysisConfig {
@@ -84,6 +89,7 @@ impl Default for AnalysisConfig {
             base: Augmentation::nominal(),
             refit: Vec::new(),
             parameters: None,
+            eligible: None,
         }
     }
 }
@@ -230,25 +236,6 @@ pub struct AnalysisResult {
     pub sigma: Vec<f64>,
     /// Decorrelation factor per signal (samples per independent sample).
     pub kappa: Vec<f64>,
-}
-
-impl AnalysisResult {
-    /// The same analysis with nothing named: the starting model (`params`, `base`) kept, so every
-    /// held-out RMS after is the one before. For a session whose residuals the reference already
-    /// expects, where a candidate that lowers them further fits noise, not a missing effect.
-    pub fn name_nothing(&mut self, params: &GreyBoxParams, base: Augmentation) {
-        self.named_effects.clear();
-        self.ambiguous.clear();
-        self.augmentation = base;
-        self.params = params.clone();
-        for r in &mut self.rms {
-            r.after = r.before;
-            for stage in &mut r.per_stage {
-                stage.3 = stage.2;
-            }
-            r.acted = (0, 0.0, 0.0);
-        }
-    }
 }
 
 /// A candidate acts on a sample's signal where it moves the prediction by more than this fraction
@@ -766,6 +753,11 @@ pub fn analyse(
                 .iter()
                 .flat_map(|l| (0..l.parameters.len()).map(Trial::Parameter)),
         )
+        .filter(|t| {
+            config
+                .eligible
+                .is_none_or(|e| (0..N_SIGNALS).any(|j| e[j] && groups_contain(t.groups(), j)))
+        })
         .collect();
     let n_trials = remaining.len();
     let total = n_trials * (config.max_effects + 1).min(n_trials + 1);
@@ -1593,5 +1585,48 @@ mod parameter_tests {
             "{named:?}"
         );
         assert!((result.params.meter_in_k[0] / params.meter_in_k[0] - 0.85).abs() < 0.02);
+    }
+
+    /// A candidate acting on none of the eligible signals is not tried: the drifted discharge
+    /// coefficient moves the velocities and pump pressures, so with only the weighed payload
+    /// eligible (the one signal a reference found beyond it) nothing is named, and with the
+    /// velocities eligible it is.
+    #[test]
+    fn a_candidate_acting_on_no_eligible_signal_is_not_named() {
+        let (records, params, library) = drifted_records();
+        let only = |signals: &[Signal]| {
+            let mut e = [false; N_SIGNALS];
+            for s in signals {
+                e[s.index()] = true;
+            }
+            e
+        };
+        let config = AnalysisConfig {
+            candidates: Vec::new(),
+            parameters: Some(library),
+            max_effects: 1,
+            eligible: Some(only(&[Signal::PayloadMass])),
+            ..AnalysisConfig::default()
+        };
+        let result = analyse(&records, &params, &config, &mut |_, _| {}).unwrap();
+        assert!(
+            result.named_effects.is_empty(),
+            "{:?}",
+            result.named_effects
+        );
+        assert!(
+            result.rounds.iter().all(|r| r.is_empty()),
+            "{:?}",
+            result.rounds
+        );
+        let config = AnalysisConfig {
+            eligible: Some(only(&[Signal::StickVelocity])),
+            ..config
+        };
+        let result = analyse(&records, &params, &config, &mut |_, _| {}).unwrap();
+        assert_eq!(
+            result.named_effects.first().map(|e| e.name.as_str()),
+            Some("hydraulics.valve_discharge_coefficient")
+        );
     }
 }

@@ -159,6 +159,10 @@ pub enum LoadTag {
     /// (briefly lifted if the ground carried it) while the controller averages its static payload
     /// estimate.
     Weighing,
+    /// An empty bucket outside Autodig within [`read::GROUND_CLEARANCE_M`] of the ground the last
+    /// scan saw: it may rest on the ground or drag through a pile, which then carries part of the
+    /// links' weight or pushes on the bucket, so its cylinder forces are not free-air forces.
+    NearGround,
 }
 
 /// One 100 Hz sample of a measured trace, aligned at the resolver frame.
@@ -190,6 +194,8 @@ pub struct Sample {
     pub load: LoadTag,
     /// Swept volume the controller reported for this dig so far, m^3 (0 outside Autodig).
     pub swept_volume_m3: f64,
+    /// The controller reported the Track activity: the machine base moves.
+    pub tracking: bool,
 }
 
 /// One work cycle of a measured trace (the samples of one dig index: approach, Autodig, swing to the

@@ -11,6 +11,7 @@ use crate::{DigRecord, LoadTag, Sample, StageTag};
 use anyhow::Context as _;
 use firmware_bridge::messages::{Activity, AutodigStageCode, GatewayMode, Message};
 use firmware_bridge::trace::{ReadMode, TraceReader};
+use planner::kinematics::{JointAngles, Kinematics, MachinePose};
 use planner::machine::MachineConfig;
 use planner::terrain::SectionProfile;
 use serde::Deserialize;
@@ -117,6 +118,7 @@ pub fn read_trace(path: &Path) -> anyhow::Result<Vec<(u16, Sample)>> {
                 s.swing_command = cmd.swing_command;
                 s.stage = stage_tag(st.stage);
                 s.load = load_tag(st);
+                s.tracking = st.activity == Activity::Track;
                 s.swept_volume_m3 = if s.stage == StageTag::Outside {
                     0.0
                 } else {
@@ -292,12 +294,8 @@ pub fn scan_section_beside(
     lateral_m: f64,
     half_width_m: f64,
 ) -> Option<SectionProfile> {
-    let mount = scan.sensor.heading_rad + machine.sensor.bearing_rad;
     let h = plane_azimuth_rad;
-    let origin = [
-        scan.sensor.x_m - machine.sensor.radial_offset_m * mount.cos(),
-        scan.sensor.y_m - machine.sensor.radial_offset_m * mount.sin(),
-    ];
+    let origin = machine_origin(scan, machine);
     const STEP_M: f64 = 0.1;
     const R0_M: f64 = 1.0;
     const BINS: usize = 130;
@@ -347,6 +345,111 @@ pub fn scan_section_beside(
     SectionProfile::new(R0_M + first as f64 * STEP_M, STEP_M, values).ok()
 }
 
+/// The machine's position (its swing axis, world `[x, y]`) during a scan: the sensor's, less its
+/// mount's radial offset along the mount's bearing (machine file `[sensor]`).
+fn machine_origin(scan: &ScanFile, machine: &MachineConfig) -> [f64; 2] {
+    let mount = scan.sensor.heading_rad + machine.sensor.bearing_rad;
+    [
+        scan.sensor.x_m - machine.sensor.radial_offset_m * mount.cos(),
+        scan.sensor.y_m - machine.sensor.radial_offset_m * mount.sin(),
+    ]
+}
+
+/// Clearance above the scanned ground below which an empty bucket may touch it, m: the bucket's
+/// pin-to-tip chord is checked, and its shell bulges up to about 0.3 m below the chord.
+pub const GROUND_CLEARANCE_M: f64 = 0.4;
+
+/// Cell of the ground map, m.
+const GROUND_CELL_M: f64 = 0.25;
+
+/// Distance around a point of the bucket within which the ground is searched, m: half the bucket
+/// width and a cell.
+const GROUND_SEARCH_M: f64 = 0.9;
+
+/// The ground a scan saw: the highest hit per cell of [`GROUND_CELL_M`] (world frame).
+struct GroundMap {
+    cells: std::collections::HashMap<(i64, i64), f64>,
+}
+
+impl GroundMap {
+    fn new(scan: &ScanFile) -> Self {
+        let mut cells = std::collections::HashMap::new();
+        for p in scan
+            .points
+            .iter()
+            .filter(|p| p.iter().all(|v| v.is_finite()))
+        {
+            let key = (
+                (p[0] / GROUND_CELL_M).floor() as i64,
+                (p[1] / GROUND_CELL_M).floor() as i64,
+            );
+            let h = cells.entry(key).or_insert(f64::NEG_INFINITY);
+            *h = h.max(p[2]);
+        }
+        Self { cells }
+    }
+
+    /// The highest ground within [`GROUND_SEARCH_M`] of world `[x, y]` (`None`: not scanned there).
+    fn height_near(&self, xy: [f64; 2]) -> Option<f64> {
+        let r = (GROUND_SEARCH_M / GROUND_CELL_M).ceil() as i64;
+        let (cx, cy) = (
+            (xy[0] / GROUND_CELL_M).floor() as i64,
+            (xy[1] / GROUND_CELL_M).floor() as i64,
+        );
+        (-r..=r)
+            .flat_map(|i| (-r..=r).map(move |j| (cx + i, cy + j)))
+            .filter_map(|k| self.cells.get(&k).copied())
+            .reduce(f64::max)
+    }
+}
+
+/// Marks the empty-bucket samples outside Autodig whose bucket (pin, middle of the chord and tip)
+/// comes within [`GROUND_CLEARANCE_M`] of the ground of `scan` as [`LoadTag::NearGround`]: the
+/// base at the scan's position with heading `base_heading_rad`, from the record's last Track
+/// sample on (before it the base stood elsewhere).
+fn mark_near_ground(
+    samples: &mut [Sample],
+    scan: &ScanFile,
+    machine: &MachineConfig,
+    kin: &Kinematics,
+    base_heading_rad: f64,
+) {
+    let ground = GroundMap::new(scan);
+    let origin = machine_origin(scan, machine);
+    let pose = MachinePose {
+        x_m: origin[0],
+        y_m: origin[1],
+        heading_rad: base_heading_rad,
+    };
+    let from = samples
+        .iter()
+        .rposition(|s| s.tracking)
+        .map_or(0, |k| k + 1);
+    for s in &mut samples[from..] {
+        if s.load != LoadTag::EmptyFreeAir || s.stage != StageTag::Outside {
+            continue;
+        }
+        let p = kin.linkage_points(&JointAngles {
+            boom_rad: s.angles_rad[0],
+            stick_rad: s.angles_rad[1],
+            bucket_rad: s.angles_rad[2],
+        });
+        let mid = [
+            0.5 * (p.bucket_pin[0] + p.tip[0]),
+            0.5 * (p.bucket_pin[1] + p.tip[1]),
+        ];
+        let near = [p.bucket_pin, mid, p.tip].iter().any(|b| {
+            let w = pose.world_from_base(s.swing_rad, b[0], b[1]);
+            ground
+                .height_near([w[0], w[1]])
+                .is_some_and(|g| w[2] - g < GROUND_CLEARANCE_M)
+        });
+        if near {
+            s.load = LoadTag::NearGround;
+        }
+    }
+}
+
 /// Swing angle at time `t_s`: the sample nearest in time (samples in time order).
 fn swing_at(samples: &[(u16, Sample)], t_s: f64) -> Option<f64> {
     let k = samples.partition_point(|(_, s)| s.time_s < t_s);
@@ -371,6 +474,7 @@ fn swing_at(samples: &[(u16, Sample)], t_s: f64) -> Option<f64> {
 /// Reading the trace or the scans.
 pub fn read_session(dir: &Path, machine: &MachineConfig) -> anyhow::Result<Vec<DigRecord>> {
     let samples = read_trace(&dir.join("trace.log"))?;
+    let kin = Kinematics::new(machine)?;
     let scans = read_scans(dir)?;
     let scan_swing: Vec<Option<f64>> = scans.iter().map(|s| swing_at(&samples, s.time_s)).collect();
     let mut records: Vec<DigRecord> = Vec::new();
@@ -409,6 +513,7 @@ pub fn read_session(dir: &Path, machine: &MachineConfig) -> anyhow::Result<Vec<D
                         scan_section_beside(s, machine, azimuth, o, w).map(|l| (o, l))
                     })
                     .collect();
+                mark_near_ground(&mut r.samples, s, machine, &kin, base_heading);
             }
         }
     }
@@ -458,6 +563,83 @@ mod tests {
         // The trench itself, as a lane beside the plane.
         let lane = scan_section_beside(&scan, &machine, 0.0, 0.42, 0.1).expect("lane");
         assert!((lane.height_at(6.0).expect("on") - 1.0).abs() < 1e-9);
+    }
+
+    /// An empty bucket outside Autodig whose tip comes within the clearance of a scanned pile is
+    /// near the ground, the same bucket high above it is in free air; samples before the record's
+    /// last Track sample (the base stood elsewhere) and in the Autodig stages are left as they are.
+    #[test]
+    fn an_empty_bucket_low_over_the_scanned_ground_is_near_it() {
+        let machine = MachineConfig::default_machine().expect("machine");
+        let kin = Kinematics::new(&machine).expect("kinematics");
+        let sensor = ScanSensor {
+            x_m: 0.0,
+            y_m: 0.0,
+            z_m: 3.0,
+            heading_rad: 0.0,
+        };
+        let origin = machine_origin(
+            &ScanFile {
+                time_s: 0.0,
+                sensor,
+                points: Vec::new(),
+            },
+            &machine,
+        );
+        let angles_rad = [0.2, -1.6, -1.2];
+        let tip = kin.forward(&JointAngles {
+            boom_rad: angles_rad[0],
+            stick_rad: angles_rad[1],
+            bucket_rad: angles_rad[2],
+        });
+        // A pile 0.2 m below the tip around it, flat ground 3 m below elsewhere.
+        let mut points = Vec::new();
+        for i in -40..40 {
+            for j in -40..40 {
+                let (x, y) = (
+                    origin[0] + 0.1 * f64::from(i) + 5.0,
+                    origin[1] + 0.1 * f64::from(j),
+                );
+                let on_pile = (x - origin[0] - tip.x_m).abs() < 0.5 && y.abs() < 0.5;
+                let z = if on_pile {
+                    tip.z_m - 0.2
+                } else {
+                    tip.z_m - 3.0
+                };
+                points.push([x, y, z]);
+            }
+        }
+        let scan = ScanFile {
+            time_s: 0.0,
+            sensor,
+            points,
+        };
+        let sample = |swing_rad: f64, stage: StageTag, tracking: bool| Sample {
+            angles_rad,
+            swing_rad,
+            stage,
+            tracking,
+            ..Sample::default()
+        };
+        let mut samples = vec![
+            sample(0.0, StageTag::Outside, false),
+            sample(0.0, StageTag::Outside, true),
+            sample(0.0, StageTag::Outside, false),
+            sample(1.2, StageTag::Outside, false),
+            sample(0.0, StageTag::BoomDown, false),
+        ];
+        mark_near_ground(&mut samples, &scan, &machine, &kin, 0.0);
+        let loads: Vec<LoadTag> = samples.iter().map(|s| s.load).collect();
+        assert_eq!(
+            loads,
+            [
+                LoadTag::EmptyFreeAir,
+                LoadTag::EmptyFreeAir,
+                LoadTag::NearGround,
+                LoadTag::EmptyFreeAir,
+                LoadTag::EmptyFreeAir,
+            ]
+        );
     }
 
     /// Writes `m` into the trace as received at `t_s` of virtual time, stamped as `demo` stamps it

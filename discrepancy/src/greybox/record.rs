@@ -28,6 +28,48 @@ const GAP_S: f64 = 0.05;
 /// (Effect-free session none_s200: in the Dig stage that followed a cleanup the stick moved at 0.22
 /// m/s on the spool the gateway had opened, the replay's spools came out of the gap closed and
 /// predicted 0 to 0.14 m/s for 0.2 s: 25 samples that made nearly all of the stick velocity's
+
+/// A chamber above this fraction of the main relief's cracking pressure, under a command beyond the
+/// spool overlap, means the cylinder pushes against something (for the boom, its rod: its heads
+/// carry the links' weight, up to the relief for a heavy boom lifting).
+const PRESSING_RELIEF_FRACTION: f64 = 0.9;
+
+/// The samples at which some cylinder pushes against an obstacle (the ground, a pile, its own
+/// stop): from a chamber above [`PRESSING_RELIEF_FRACTION`] of the relief under a command beyond
+/// the spool overlap, for as long as that command keeps its direction (the push goes on after the
+/// pressure falls back while the bucket digs in or the ground gives way: effect-free session
+/// seed 505 of the planned bench, the bucket opened onto the ground at 37 MPa and went on at
+/// 20-28 MPa for a second, a bucket-force residual of 144 kN that made the session 8x its
+/// reference). The cylinder forces are no free-air forces there.
+fn pressing(samples: &[Sample], params: &GreyBoxParams) -> Vec<bool> {
+    let limit_pa = PRESSING_RELIEF_FRACTION * params.relief_pa;
+    let mut direction = [0.0f64; 3];
+    samples
+        .iter()
+        .map(|s| {
+            for i in 0..3 {
+                let u = s.command[i];
+                let open = u.abs() > params.overlap;
+                if !open || u.signum() != direction[i] {
+                    direction[i] = 0.0;
+                }
+                // The boom's heads carry the links' weight: near the relief while it lifts, they
+                // say the load is heavy (a heavier boom), not that something is in the way; its rod
+                // pushes the bucket down onto something.
+                let pushing_pa = if i == 0 {
+                    s.rod_pa[i]
+                } else {
+                    s.head_pa[i].max(s.rod_pa[i])
+                };
+                if open && pushing_pa > limit_pa {
+                    direction[i] = u.signum();
+                }
+            }
+            direction.iter().any(|d| *d != 0.0)
+        })
+        .collect()
+}
+
 /// residual sum of squares in that session.)
 pub fn warmed_up(samples: &[Sample]) -> Vec<bool> {
     let mut since = 0usize;
@@ -216,9 +258,10 @@ impl PreparedRecord {
         }
         // Samples where a resolver rate disagrees with the angle's own derivative (a link held at an
         // end stop or a bad sensor) are left out; so are the cylinder forces while some cylinder is
-        // stalled under a large command (the bucket pushing on the ground or an obstacle).
+        // stalled under a large command or pushes with its relief pressure (the bucket pushing on
+        // the ground or an obstacle).
         let mut consistent = vec![[true; 3]; n];
-        let mut stalled = vec![false; n];
+        let mut stalled = pressing(&record.samples, params);
         for k in 2..n.saturating_sub(2) {
             let dt = record.samples[k + 2].time_s - record.samples[k - 2].time_s;
             for i in 0..3 {
@@ -599,6 +642,36 @@ mod tests {
             let since = if k < 200 { k } else { k - 200 };
             assert_eq!(*w, since >= WARMUP_SAMPLES, "sample {k}");
         }
+    }
+
+    /// A bucket opened onto the ground: its rod reaches the relief under the opening command, and
+    /// the push lasts while that command holds its direction, after the pressure falls back; it ends
+    /// when the valve closes or the command turns.
+    #[test]
+    fn a_push_from_the_relief_lasts_while_the_command_keeps_its_direction() {
+        let params = crate::AugmentedModel::nominal().unwrap().params;
+        let sample = |u: f64, rod_pa: f64| {
+            let mut s = crate::Sample::default();
+            s.command[2] = u;
+            s.rod_pa[2] = rod_pa;
+            s.head_pa[0] = 0.95 * params.relief_pa; // the boom lifting heavy links: no push
+            s
+        };
+        let relief = params.relief_pa;
+        let samples = [
+            sample(-0.2, 5.0e6),
+            sample(-0.2, 0.95 * relief),
+            sample(-0.2, 0.6 * relief),
+            sample(-0.25, 0.7 * relief),
+            sample(0.0, 0.7 * relief),
+            sample(-0.2, 0.7 * relief),
+            sample(-0.2, 0.95 * relief),
+            sample(0.3, 0.7 * relief),
+        ];
+        assert_eq!(
+            pressing(&samples, &params),
+            [false, true, true, true, false, false, true, false]
+        );
     }
 
     /// A bucket pressing into the soil with its head at the pump pressure and its rod at tank is
