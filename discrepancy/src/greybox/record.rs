@@ -24,11 +24,6 @@ pub const WARMUP_SAMPLES: usize = 50;
 /// integration ([`super::spools`]) steps over it as one sample and comes out of it with the state before it.
 const GAP_S: f64 = 0.05;
 
-/// Whether each sample is at least [`WARMUP_SAMPLES`] past the start of its record or the last gap.
-/// (Effect-free session none_s200: in the Dig stage that followed a cleanup the stick moved at 0.22
-/// m/s on the spool the gateway had opened, the replay's spools came out of the gap closed and
-/// predicted 0 to 0.14 m/s for 0.2 s: 25 samples that made nearly all of the stick velocity's
-
 /// A chamber above this fraction of the main relief's cracking pressure, under a command beyond the
 /// spool overlap, means the cylinder pushes against something (for the boom, its rod: its heads
 /// carry the links' weight, up to the relief for a heavy boom lifting).
@@ -70,6 +65,10 @@ fn pressing(samples: &[Sample], params: &GreyBoxParams) -> Vec<bool> {
         .collect()
 }
 
+/// Whether each sample is at least [`WARMUP_SAMPLES`] past the start of its record or the last gap.
+/// (Effect-free session none_s200: in the Dig stage that followed a cleanup the stick moved at 0.22
+/// m/s on the spool the gateway had opened, the replay's spools came out of the gap closed and
+/// predicted 0 to 0.14 m/s for 0.2 s: 25 samples that made nearly all of the stick velocity's
 /// residual sum of squares in that session.)
 pub fn warmed_up(samples: &[Sample]) -> Vec<bool> {
     let mut since = 0usize;
