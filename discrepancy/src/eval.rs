@@ -66,7 +66,7 @@ pub struct EvalArgs {
     /// Leave out the effect-library cases (plant changes and effect-free sessions only).
     #[arg(long)]
     pub no_effects: bool,
-    /// Leave out the pairs of effects hidden together ([`PAIRS`]).
+    /// Leave out the pairs of effects hidden together.
     #[arg(long)]
     pub no_pairs: bool,
     /// Also time one analysis (`discrepancy bench`, its sessions under `OUT/bench`) and write both
