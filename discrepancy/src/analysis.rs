@@ -374,3 +374,37 @@ fn eligible_signals(
     }
     Ok(eligible)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A reference file's parameter calibration is applied as its factor, and one naming a key
+    /// that is no parameter of the machine file, or a factor outside the fit's range (NaN
+    /// included), is a clear error naming the key, not a panic or a silently bent model.
+    #[test]
+    fn a_reference_parameter_calibration_is_applied_or_refused_by_name() {
+        let machine = planner::machine::MachineConfig::default_machine().unwrap();
+        let model = AugmentedModel::nominal().unwrap();
+        let with = |key: &str, factor: f64| {
+            let mut r = Reference::healthy_fixture(Vec::new());
+            r.parameter_calibration = vec![ParameterCalibration {
+                key: key.to_string(),
+                value: factor,
+                factor,
+            }];
+            calibrated(model.clone(), &r, &machine)
+        };
+        let stiffer = with("hydraulics.bulk_modulus_pa", 1.1).unwrap();
+        assert_ne!(stiffer.params, model.params);
+        assert!(stiffer.provenance.contains("hydraulics.bulk_modulus_pa"));
+        for (key, factor) in [
+            ("hydraulics.no_such_key", 1.1),
+            ("hydraulics.bulk_modulus_pa", f64::NAN),
+            ("hydraulics.bulk_modulus_pa", 5.0),
+        ] {
+            let e = format!("{:#}", with(key, factor).unwrap_err());
+            assert!(e.contains(key), "{e}");
+        }
+    }
+}
