@@ -1198,6 +1198,17 @@ fn resolve_confusable(
     if !(ds.significant && ds.train_chi2_drop >= AMBIGUOUS_SHARE * s.train_chi2_drop) {
         return Resolution::Alone;
     }
+    // The held-out digs tell them apart when the partner alone leaves clearly more than `c` alone,
+    // under one noise model (the joint fit's): their own held-out gains are each under the noise it
+    // leaves, and differ through that too. (A 0.03 s transport delay: the lag alone leaves a
+    // held-out chi-square thousands above the delay's, and the joint fit puts the lag at zero.)
+    let Some((a_other, p_other)) = d.at(yd, aug, params, library) else {
+        return Resolution::Alone;
+    };
+    let test_other = test_eval.sse_with(&a_other, p_other.as_ref(), groups);
+    if chi2(&w, &test_other) - chi2(&w, &test_one) > config.strong_delta_bic {
+        return Resolution::Alone;
+    }
     let entry = |t: Trial, alone: &CandidateScore, joint: (f64, f64)| {
         let (kind, value, unc, unit) = t.reported(alone.magnitude, alone.uncertainty, library);
         let (_, joint_value, joint_unc, _) = t.reported(joint.0, joint.1, library);

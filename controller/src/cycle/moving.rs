@@ -63,7 +63,7 @@ impl WorkCycle {
         let dt_s = self.stall_step_s(now_s);
         let max = self.config.joint.max_command;
         for (i, cmd) in implement.iter_mut().enumerate() {
-            *cmd = self.escalate_joint(i, (now_s, dt_s), *cmd, error_rad[i], max);
+            *cmd = self.escalate_joint(i, (now_s, dt_s), (*cmd, error_rad[i]), max, true);
         }
     }
 
@@ -78,13 +78,16 @@ impl WorkCycle {
 
     /// One joint's stall escalation ([`Self::escalate_stalled`]): joint `i` of the stall state
     /// (boom, stick, bucket, swing), its P-controller command `cmd` and error; the command to send.
+    /// `hold`: the extra command is held while the joint progresses (the implement); otherwise it
+    /// only breaks the joint away and starts from zero at each progress (the swing: its inertia
+    /// carried a held extra command past the target, and the swing hunted around it).
     fn escalate_joint(
         &mut self,
         i: usize,
         (now_s, dt_s): (f64, f64),
-        cmd: f64,
-        error_rad: f64,
+        (cmd, error_rad): (f64, f64),
         max: f64,
+        hold: bool,
     ) -> f64 {
         let err = error_rad.abs();
         let boost = &mut self.stall_boost[i];
@@ -98,6 +101,9 @@ impl WorkCycle {
         {
             self.stall_best_rad[i] = err;
             self.stall_progress_s[i] = now_s;
+            if !hold {
+                *boost = 0.0;
+            }
         }
         let magnitude = if now_s - self.stall_progress_s[i] > STALL_WAIT_S {
             (boost.abs() + STALL_BOOST_PER_S * dt_s).min(max)
@@ -109,7 +115,8 @@ impl WorkCycle {
     }
 
     /// The swing's damped P-controller toward `target_rad`, stall-escalated as the implement
-    /// ([`Self::escalate_stalled`]): the command and whether the swing is within its tolerance.
+    /// ([`Self::escalate_stalled`]) but only to break away (the extra command starts from zero at
+    /// each progress): the command and whether the swing is within its tolerance.
     pub(super) fn swing_toward(
         &mut self,
         now_s: f64,
@@ -122,7 +129,7 @@ impl WorkCycle {
         let dt_s = self.swing_step_s(now_s);
         let max = self.config.swing.max_command;
         (
-            self.escalate_joint(SWING, (now_s, dt_s), cmd, err, max),
+            self.escalate_joint(SWING, (now_s, dt_s), (cmd, err), max, false),
             err.abs() <= self.config.swing.tolerance,
         )
     }
@@ -529,6 +536,15 @@ mod tests {
         let expected = swing.min_command + STALL_BOOST_PER_S * (2.0 - STALL_WAIT_S);
         assert!(last < 0.0, "still toward the target: {last}");
         assert!((last.abs() - expected).abs() < 0.02, "{last} vs {expected}");
+        // Progress (0.5 deg closer): the swing has broken away, and the extra command starts from
+        // zero again (a held one carried the swing past its target).
+        t += 0.01;
+        let e = est_at([boom, stick, bucket, 0.1 - 0.009], 0.0, t);
+        let moving = match c.step(t, &e, Some(ArmMode::Valve)).unwrap().command {
+            CycleCommand::Valves(v) => v[3],
+            other => panic!("expected valve commands, got {other:?}"),
+        };
+        assert!(moving.abs() < last.abs() - 0.2, "{moving} after {last}");
         // Held (the boom lifting): the escalation starts afresh.
         let (held, _) = c.hold_swing();
         assert_eq!(held, 0.0);
