@@ -9,9 +9,6 @@ use crate::safety::ControlFault;
 use super::action::Action;
 use super::{CycleCommand, JOINT_SIGN, RELIEF_RELIFT_FRACTION, STALL_PROGRESS_RAD, WorkCycle};
 
-/// The swing's index in the stall state (after boom, stick and bucket).
-const SWING: usize = 3;
-
 /// MoveToDig stall escalation: how long a joint may make no progress before its command grows, s.
 pub(super) const STALL_WAIT_S: f64 = 0.5;
 
@@ -53,102 +50,53 @@ impl WorkCycle {
         (cmd, err.iter().all(|e| e.abs() <= g.tolerance))
     }
 
-    /// Stall escalation of the move's P-controllers: the command of a joint that is commanded but
+    /// Stall escalation of the move's P-controller: the command of a joint that is commanded but
     /// has not come [`STALL_PROGRESS_RAD`] closer to its target for [`STALL_WAIT_S`] grows by
     /// [`STALL_BOOST_PER_S`] (up to `max_command`), and is held while the joint makes progress; a
-    /// joint that reaches its tolerance or reverses starts from zero again. A valve's dead band
-    /// (spool overlap) stops a joint whose P-controller has come down to its minimum command short
-    /// of the tolerance; this opens the valve past it.
+    /// joint that reaches its tolerance or reverses starts from zero again.
     fn escalate_stalled(&mut self, now_s: f64, implement: &mut [f64; 3], error_rad: [f64; 3]) {
-        let dt_s = self.stall_step_s(now_s);
-        let max = self.config.joint.max_command;
-        for (i, cmd) in implement.iter_mut().enumerate() {
-            *cmd = self.escalate_joint(i, (now_s, dt_s), (*cmd, error_rad[i]), max, true);
-        }
-    }
-
-    /// The time since the last step of a stall-escalated move (0 at its first, at most 0.1 s).
-    fn stall_step_s(&mut self, now_s: f64) -> f64 {
         let dt_s = self
             .last_move_s
             .map_or(0.0, |t| (now_s - t).clamp(0.0, 0.1));
         self.last_move_s = Some(now_s);
-        dt_s
-    }
-
-    /// One joint's stall escalation ([`Self::escalate_stalled`]): joint `i` of the stall state
-    /// (boom, stick, bucket, swing), its P-controller command `cmd` and error; the command to send.
-    /// `hold`: the extra command is held while the joint progresses (the implement); otherwise it
-    /// only breaks the joint away and starts from zero at each progress (the swing: its inertia
-    /// carried a held extra command past the target, and the swing hunted around it).
-    fn escalate_joint(
-        &mut self,
-        i: usize,
-        (now_s, dt_s): (f64, f64),
-        (cmd, error_rad): (f64, f64),
-        max: f64,
-        hold: bool,
-    ) -> f64 {
-        let err = error_rad.abs();
-        let boost = &mut self.stall_boost[i];
-        // Restart when the joint is not commanded or the command reverses.
-        if cmd == 0.0 || !err.is_finite() || (*boost != 0.0 && boost.signum() != cmd.signum()) {
-            *boost = 0.0;
-            self.stall_best_rad[i] = f64::INFINITY;
-            return cmd;
-        }
-        if !self.stall_best_rad[i].is_finite() || err < self.stall_best_rad[i] - STALL_PROGRESS_RAD
-        {
-            self.stall_best_rad[i] = err;
-            self.stall_progress_s[i] = now_s;
-            if !hold {
+        let max = self.config.joint.max_command;
+        for (i, cmd) in implement.iter_mut().enumerate() {
+            let err = error_rad[i].abs();
+            let boost = &mut self.stall_boost[i];
+            // Restart when the joint is not commanded or the command reverses.
+            if *cmd == 0.0 || !err.is_finite() || (*boost != 0.0 && boost.signum() != cmd.signum())
+            {
                 *boost = 0.0;
+                self.stall_best_rad[i] = f64::INFINITY;
+                continue;
             }
+            if !self.stall_best_rad[i].is_finite()
+                || err < self.stall_best_rad[i] - STALL_PROGRESS_RAD
+            {
+                self.stall_best_rad[i] = err;
+                self.stall_progress_s[i] = now_s;
+            }
+            let magnitude = if now_s - self.stall_progress_s[i] > STALL_WAIT_S {
+                (boost.abs() + STALL_BOOST_PER_S * dt_s).min(max)
+            } else {
+                boost.abs()
+            };
+            *boost = magnitude.copysign(*cmd);
+            *cmd = (cmd.abs() + magnitude).min(max).copysign(*cmd);
         }
-        let magnitude = if now_s - self.stall_progress_s[i] > STALL_WAIT_S {
-            (boost.abs() + STALL_BOOST_PER_S * dt_s).min(max)
-        } else {
-            boost.abs()
-        };
-        *boost = magnitude.copysign(cmd);
-        (cmd.abs() + magnitude).min(max).copysign(cmd)
     }
 
-    /// The swing's damped P-controller toward `target_rad`, stall-escalated as the implement
-    /// ([`Self::escalate_stalled`]) but only to break away (the extra command starts from zero at
-    /// each progress): the command and whether the swing is within its tolerance.
     pub(super) fn swing_toward(
-        &mut self,
-        now_s: f64,
+        &self,
         swing_rad: f64,
         rate_rad_per_s: f64,
         target_rad: f64,
     ) -> (f64, bool) {
         let err = wrap_angle(target_rad - swing_rad);
-        let cmd = self.config.swing.command_damped(err, rate_rad_per_s);
-        let dt_s = self.swing_step_s(now_s);
-        let max = self.config.swing.max_command;
         (
-            self.escalate_joint(SWING, (now_s, dt_s), (cmd, err), max, false),
+            self.config.swing.command_damped(err, rate_rad_per_s),
             err.abs() <= self.config.swing.tolerance,
         )
-    }
-
-    /// The swing held (not commanded while the boom lifts): its stall escalation starts afresh.
-    pub(super) fn hold_swing(&mut self) -> (f64, bool) {
-        self.stall_boost[SWING] = 0.0;
-        self.stall_best_rad[SWING] = f64::INFINITY;
-        self.last_swing_s = None;
-        (0.0, false)
-    }
-
-    /// The time since the swing's last stall-escalated step (0 at its first, at most 0.1 s).
-    fn swing_step_s(&mut self, now_s: f64) -> f64 {
-        let dt_s = self
-            .last_swing_s
-            .map_or(0.0, |t| (now_s - t).clamp(0.0, 0.1));
-        self.last_swing_s = Some(now_s);
-        dt_s
     }
 
     pub(super) fn step_move_to_dig(
@@ -269,8 +217,8 @@ impl WorkCycle {
         let boom_clear =
             !low && s.joints.boom_rad >= target.boom_rad - 3.0 * self.config.joint.tolerance;
         let (swing, swing_done) = match action.swing_rad() {
-            Some(t) if boom_clear => self.swing_toward(now_s, s.swing_rad, s.rates_rad_per_s[3], t),
-            Some(_) => self.hold_swing(),
+            Some(t) if boom_clear => self.swing_toward(s.swing_rad, s.rates_rad_per_s[3], t),
+            Some(_) => (0.0, false),
             None => (0.0, true),
         };
         // Blocked: a commanded cylinder pushing at relief (the port its valve command pressurises:
@@ -434,7 +382,7 @@ mod tests {
 
     #[test]
     fn p_controllers_have_the_documented_signs() {
-        let mut c = cycle(CycleConfig::default());
+        let c = cycle(CycleConfig::default());
         let q = JointAngles {
             boom_rad: 0.0,
             stick_rad: -1.0,
@@ -449,9 +397,9 @@ mod tests {
         assert!(!done);
         // Boom up = extend; stick angle down = extend; bucket angle up (open) = retract.
         assert!(cmd[0] > 0.0 && cmd[1] > 0.0 && cmd[2] < 0.0, "{cmd:?}");
-        let (s, _) = c.swing_toward(0.0, 0.0, 0.0, -1.0);
+        let (s, _) = c.swing_toward(0.0, 0.0, -1.0);
         assert!((-0.7..0.0).contains(&s));
-        let (s, _) = c.swing_toward(0.0, 3.0, 0.0, -3.0);
+        let (s, _) = c.swing_toward(3.0, 0.0, -3.0);
         assert!(s > 0.0, "wraps the short way");
     }
 
@@ -505,50 +453,6 @@ mod tests {
             assert!(now <= last + 1e-9 && now > 0.5, "{now} vs {last}");
             last = now;
         }
-    }
-
-    /// A swing stopped short of its target at the P-controller's minimum command (a valve dead band
-    /// as wide as that minimum) opens its valve further, as a stalled implement joint does.
-    #[test]
-    fn a_stalled_swing_opens_its_valve_further() {
-        let (boom, stick, bucket) = (0.2, -1.3, -0.5);
-        let mut c = moving_to(boom, stick, bucket);
-        // 0.1 rad (5.7 deg) left of the dig's swing angle (0), not moving.
-        let swing_command = |c: &mut WorkCycle, t: f64| {
-            let e = est_at([boom, stick, bucket, 0.1], 0.0, t);
-            match c.step(t, &e, Some(ArmMode::Valve)).unwrap().command {
-                CycleCommand::Valves(v) => v[3],
-                other => panic!("expected valve commands, got {other:?}"),
-            }
-        };
-        let swing = CycleConfig::default().swing;
-        let first = swing_command(&mut c, 0.0);
-        assert!(
-            first < 0.0 && (first.abs() - swing.min_command).abs() < 1e-9,
-            "P-controller minimum: {first}"
-        );
-        let mut t = 0.0;
-        let mut last = first;
-        while t < 2.0 {
-            t += 0.01;
-            last = swing_command(&mut c, t);
-        }
-        let expected = swing.min_command + STALL_BOOST_PER_S * (2.0 - STALL_WAIT_S);
-        assert!(last < 0.0, "still toward the target: {last}");
-        assert!((last.abs() - expected).abs() < 0.02, "{last} vs {expected}");
-        // Progress (0.5 deg closer): the swing has broken away, and the extra command starts from
-        // zero again (a held one carried the swing past its target).
-        t += 0.01;
-        let e = est_at([boom, stick, bucket, 0.1 - 0.009], 0.0, t);
-        let moving = match c.step(t, &e, Some(ArmMode::Valve)).unwrap().command {
-            CycleCommand::Valves(v) => v[3],
-            other => panic!("expected valve commands, got {other:?}"),
-        };
-        assert!(moving.abs() < last.abs() - 0.2, "{moving} after {last}");
-        // Held (the boom lifting): the escalation starts afresh.
-        let (held, _) = c.hold_swing();
-        assert_eq!(held, 0.0);
-        assert_eq!(c.stall_boost[SWING], 0.0);
     }
 
     #[test]

@@ -110,9 +110,9 @@ impl WorkCycle {
             0.0
         };
         let (swing, swing_done) = if boom_clear {
-            self.swing_toward(now_s, s.swing_rad, s.rates_rad_per_s[3], target_rad)
+            self.swing_toward(s.swing_rad, s.rates_rad_per_s[3], target_rad)
         } else {
-            self.hold_swing()
+            (0.0, false)
         };
         let rate_small = s.rates_rad_per_s[3].abs() < 0.1;
         if self.settled(swing_done && rate_small, now_s) {
