@@ -98,10 +98,9 @@ pub fn load_reference(
         .context("reading the reference sessions")?;
     let library = crate::parameters::ParameterLibrary::derive(machine)?;
     // Calibration takes what the healthy sessions support on the held-out digs (dBIC), however
-    // small a share of their residual it explains: a healthy machine's 3 ms of delay explains
-    // 13 % on the samples it acts on, below the naming threshold, and left out of the
-    // calibration it was named in most effect-free sessions measured against it (16 digs each
-    // reach the threshold where the reference's 32 did not).
+    // small a share of their residual it explains: a healthy machine's few ms of delay can
+    // explain less than the naming threshold on the reference yet more on a session measured
+    // against it, where, left out of the calibration, it would be named.
     let config = AnalysisConfig {
         base: model.augmentation()?,
         parameters: Some(library.clone()),
@@ -271,9 +270,7 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
         verdict::judge(result, &after, r)
     };
     if let Some(r) = &reference {
-        config.eligible = Some(eligible_signals(&records, &model, &config, |p| {
-            judge(p, r)
-        })?);
+        config.eligible = eligible_signals(&records, &model, &config, |p| judge(p, r))?;
     }
     let bar = (!args.quiet && std::io::IsTerminal::is_terminal(&std::io::stdout())).then(|| {
         let bar = indicatif::ProgressBar::new(1);
@@ -353,7 +350,7 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
 /// reference's tolerance: those beyond it and those it cannot judge (too few samples). A candidate
 /// that lowers only what the reference expects there stands in for another's residual (a stiffer
 /// bulk modulus fitted on the velocities of a session whose weighed payload shows denser soil).
-/// When none is beyond: every signal, and a candidate is named on its own held-out evidence only
+/// When none is beyond: `None`, every signal, and a candidate is named on its own held-out evidence only
 /// (significance and explained share, as always). The RMS ratio to the reference is an omnibus
 /// test of every sample; a candidate's fit tests one physical hypothesis on the samples where it
 /// acts, and finds effects the ratio cannot (a flow sharing of 0.3, a 3e-12 leakage, 200 kg/m^3
@@ -367,7 +364,7 @@ fn eligible_signals(
     model: &AugmentedModel,
     config: &AnalysisConfig,
     judge: impl Fn(&crate::AnalysisResult) -> crate::verdict::Verdict,
-) -> anyhow::Result<[bool; crate::greybox::N_SIGNALS]> {
+) -> anyhow::Result<Option<[bool; crate::greybox::N_SIGNALS]>> {
     let probe_config = AnalysisConfig {
         candidates: Vec::new(),
         parameters: None,
@@ -376,14 +373,14 @@ fn eligible_signals(
     let probe = analyse(records, &model.params, &probe_config, &mut |_, _| {})?;
     let v = judge(&probe);
     if v.nothing_beyond_before() {
-        return Ok([true; crate::greybox::N_SIGNALS]);
+        return Ok(None);
     }
     let mut eligible = [false; crate::greybox::N_SIGNALS];
     for (sig, s) in crate::greybox::Signal::ALL.iter().zip(&v.signals) {
         let not_judged = s.outcome == crate::verdict::Outcome::NotJudged;
         eligible[sig.index()] = not_judged || s.ratio_before > s.tolerance;
     }
-    Ok(eligible)
+    Ok(Some(eligible))
 }
 
 #[cfg(test)]

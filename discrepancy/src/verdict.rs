@@ -379,7 +379,7 @@ pub fn judge(result: &AnalysisResult, after: &[SignalStructure], reference: &Ref
 
 impl Verdict {
     /// True when no judged signal was beyond the reference with the starting model (before any
-    /// named effect): nothing for a candidate to explain.
+    /// named effect): a candidate is then named on its own held-out evidence alone.
     pub fn nothing_beyond_before(&self) -> bool {
         self.signals
             .iter()
@@ -500,8 +500,8 @@ mod tests {
     /// like noise to the fit, is "unexplained", with its stage and its correlation with the
     /// measured speed; the same with a named effect that brings it back is "named"; one that
     /// halves it only is "partly explained"; clean signals stay "expected".
-    /// A session whose residuals are all at the reference's level has nothing for a candidate to
-    /// explain, whatever the fit named.
+    /// A session whose residuals are all at the reference's level has nothing beyond it before
+    /// the named effects, whatever the fit named.
     #[test]
     fn a_session_within_the_reference_has_nothing_beyond_before() {
         let rms: Vec<SignalRms> = Signal::ALL.iter().map(|s| rms_of(*s, 1.2, 1.0)).collect();
