@@ -32,17 +32,15 @@ use socketcan::Socket;
 const WATCHDOG_S: f64 = 0.100;
 /// The gateway reports its status every 50 ms.
 const STATUS_PERIOD_S: f64 = 0.050;
-/// Most a joint may move from 2.5 s (simulation time) after the kill on, rad (resolver noise is
-/// 2e-4 rad; mid-dig the joints coast in the soil for about 1.5 s of simulation time).
-const REST_MOTION_RAD: f64 = 0.005;
 /// Angle frames (100 Hz in simulation time) after the last heartbeat before the rest check: 2.5 s.
 const REST_AFTER_FRAMES: usize = 250;
-/// Most a joint may move during the replay of a trace, rad. The controller was stopped mid-dig, and
-/// with the valves closed the soil still holds the bucket: on the default (implicit) plant it creeps
-/// under that load, 6.5 mrad in the 5.5 s replay (measured in the VM). A replayed valve command that
-/// the gateway drove would move a joint by tenths of a radian in that time (a 100 % boom command
-/// raises the boom at well over 0.1 rad/s).
-const REPLAY_MOTION_RAD: f64 = 0.02;
+/// Most a joint may move once at rest with the valves closed, rad. The controller was stopped
+/// mid-dig, and the soil still holds the bucket: on the default (implicit) plant the bucket creeps
+/// under that load and the swing rocks with it (docs/simulator.md, known issues), 5.7 mrad (swing,
+/// kill test) and 6.5 mrad (replay test) measured in the VM. A valve the gateway drove would move a
+/// joint by tenths of a radian in that time (a 100 % boom command raises the boom at well over
+/// 0.1 rad/s); whether a valve passes flow is checked directly on the gateway's valve frames.
+const REST_MOTION_RAD: f64 = 0.02;
 
 /// Scheduling jitter allowance for one frame's timestamp.
 fn jitter_s() -> f64 {
@@ -171,6 +169,24 @@ fn killed_controller_gateway_neutralises_valves_within_100_ms() {
     assert_ne!(
         heartbeats(&recs).last().map(|h| h.1.mode),
         Some(firmware_bridge::messages::RequestedMode::Disarm)
+    );
+    // Every valve blocked from the fault on, as the gateway measures them (100 Hz): one period for
+    // the neutral command to reach the valves.
+    let driven: Vec<f64> = messages_from(&recs, GATEWAY_ADDRESS)
+        .filter_map(|(t, m)| match m {
+            Message::AuxValveMeasured(v)
+                if t > t_fault + 0.010 + jitter_s() && v.state != ValveState::Block =>
+            {
+                Some(t - t_fault)
+            }
+            _ => None,
+        })
+        .collect();
+    assert!(
+        driven.is_empty(),
+        "{} valve frames not blocked after the fault, the first {:?} s after it",
+        driven.len(),
+        driven.first()
     );
     // No motion after the coast-down, counted in the simulator's time: it sends the angles every
     // 10 ms of simulation time, so the frames after the 250th past the last heartbeat are from 2.5 s
@@ -365,7 +381,7 @@ fn replayed_controller_trace_with_the_controller_dead_does_not_arm_the_gateway()
     assert_rejected_at_least(&before, &after, 20);
     assert!(angles.len() > 100, "{} angle frames", angles.len());
     assert!(
-        moved < REPLAY_MOTION_RAD,
+        moved < REST_MOTION_RAD,
         "a joint moved {moved} rad during the replay"
     );
 }
