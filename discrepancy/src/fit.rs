@@ -692,6 +692,41 @@ fn weights_of(sigma: &[f64], kappa: &[f64], n: &[usize; N_SIGNALS]) -> [f64; N_S
     inv_var
 }
 
+/// The signals a record has samples of, one bit per signal.
+fn signals_present(record: &PreparedRecord) -> u16 {
+    (0..N_SIGNALS)
+        .filter(|&j| record.measured.iter().any(|m| m[j].is_finite()))
+        .fold(0, |bits, j| bits | 1 << j)
+}
+
+/// Splits the records (in dig order) into training and held-out digs, alternating within each set
+/// of records that carry the same signals: a sparse signal (the end-stop angles, seen only in the
+/// digs that pressed a link against its stop) then has records in both halves whenever it is in
+/// two, instead of wherever the dig order put them. Records that all carry the same signals
+/// alternate by dig index. Each half is returned in dig order.
+fn split<'a>(order: &[&'a PreparedRecord]) -> (Vec<&'a PreparedRecord>, Vec<&'a PreparedRecord>) {
+    let keys: Vec<u16> = order.iter().map(|r| signals_present(r)).collect();
+    let size = |key: u16| keys.iter().filter(|k| **k == key).count();
+    // Stable: dig order within a stratum; the largest stratum (usually the only one) first.
+    let mut ranked: Vec<(usize, u16, &'a PreparedRecord)> = keys
+        .iter()
+        .zip(order)
+        .map(|(k, r)| (usize::MAX - size(*k), *k, *r))
+        .collect();
+    ranked.sort_by_key(|(rank, key, _)| (*rank, *key));
+    let (mut train, mut test): (Vec<_>, Vec<_>) = (Vec::new(), Vec::new());
+    for (i, (_, _, r)) in ranked.into_iter().enumerate() {
+        if i % 2 == 0 {
+            train.push(r);
+        } else {
+            test.push(r);
+        }
+    }
+    train.sort_by_key(|r| r.index);
+    test.sort_by_key(|r| r.index);
+    (train, test)
+}
+
 /// Runs the workflow on prepared records: split, nominal residuals, localisation, forward selection,
 /// before/after RMS. `progress(done, total)` is called after every candidate fit.
 ///
@@ -711,8 +746,7 @@ pub fn analyse(
     }
     let mut order: Vec<&PreparedRecord> = records.iter().collect();
     order.sort_by_key(|r| r.index);
-    let train: Vec<&PreparedRecord> = order.iter().step_by(2).copied().collect();
-    let test: Vec<&PreparedRecord> = order.iter().skip(1).step_by(2).copied().collect();
+    let (train, test) = split(&order);
 
     let nominal = config.base;
     let mut train_eval = Evaluator::new(train.clone(), params, &nominal);
@@ -1492,6 +1526,42 @@ mod parameter_tests {
             records.push(rec);
         }
         (records, params)
+    }
+
+    #[test]
+    fn a_signal_seen_in_two_digs_is_split_between_training_and_held_out() {
+        let (mut records, _) =
+            synthetic_records(sine_command, |p| (p.clone(), Augmentation::nominal()));
+        // End-stop samples in digs 1 and 3 only: alternating by dig index would hold both out.
+        for index in [1, 3] {
+            for m in records[index].measured.iter_mut().take(50) {
+                m[Signal::StopAngle.index()] = 0.0;
+            }
+        }
+        let order: Vec<&PreparedRecord> = records.iter().collect();
+        let (train, test) = split(&order);
+        let digs = |half: &[&PreparedRecord]| half.iter().map(|r| r.index).collect::<Vec<_>>();
+        assert_eq!(train.len() + test.len(), records.len());
+        assert_eq!(train.len(), test.len());
+        let with_stop = |half: &[&PreparedRecord]| {
+            half.iter()
+                .filter(|r| signals_present(r) & 1 << Signal::StopAngle.index() != 0)
+                .count()
+        };
+        assert_eq!(
+            (with_stop(&train), with_stop(&test)),
+            (1, 1),
+            "training {:?}, held out {:?}",
+            digs(&train),
+            digs(&test)
+        );
+        // Without the sparse signal, the split alternates by dig index.
+        let (mut plain, _) =
+            synthetic_records(sine_command, |p| (p.clone(), Augmentation::nominal()));
+        plain.truncate(5);
+        let order: Vec<&PreparedRecord> = plain.iter().collect();
+        let (train, test) = split(&order);
+        assert_eq!((digs(&train), digs(&test)), (vec![0, 2, 4], vec![1, 3]));
     }
 
     /// A slow sinusoidal command on the three valves.

@@ -182,6 +182,10 @@ pub struct SignalStructure {
     pub per_stage: Vec<Level>,
     /// Per dig: `(samples, mean square residual)`.
     pub per_dig: Vec<(usize, f64)>,
+    /// Per dig, the same digs: mean residual (empty in a reference written before it was kept; no
+    /// bias is then judged).
+    #[serde(default)]
+    pub per_dig_mean: Vec<f64>,
     /// Ljung-Box `Q(20)` (mean over digs).
     pub ljung_box_q: f64,
     /// Largest cross-correlation with the command over lags -30..=30 samples, and its lag.
@@ -201,11 +205,13 @@ pub fn structure(
     let mut overall = [(0usize, 0.0f64); N_SIGNALS];
     let mut stage = vec![[(0usize, 0.0f64); N_SIGNALS]; n_stages];
     let mut per_dig: Vec<Vec<(usize, f64)>> = vec![Vec::new(); N_SIGNALS];
+    let mut per_dig_mean: Vec<Vec<f64>> = vec![Vec::new(); N_SIGNALS];
     let mut corr = vec![[CorrAcc::default(); Regressor::ALL.len()]; N_SIGNALS];
     let mut pred = Vec::new();
     for rec in records {
         replay(rec, params, aug, SignalGroups::ALL, &mut pred);
         let mut dig = [(0usize, 0.0f64); N_SIGNALS];
+        let mut dig_sum = [0.0f64; N_SIGNALS];
         for (k, (m, p)) in rec.measured.iter().zip(&pred).enumerate() {
             let st = StageTag::ALL
                 .iter()
@@ -221,6 +227,7 @@ pub fn structure(
                     acc.0 += 1;
                     acc.1 += r * r;
                 }
+                dig_sum[j] += r;
                 for (g, reg) in Regressor::ALL.iter().enumerate() {
                     let x = reg.value(sig, rec, k);
                     if x.is_finite() {
@@ -232,6 +239,7 @@ pub fn structure(
         for j in 0..N_SIGNALS {
             if dig[j].0 > 0 {
                 per_dig[j].push((dig[j].0, dig[j].1 / dig[j].0 as f64));
+                per_dig_mean[j].push(dig_sum[j] / dig[j].0 as f64);
             }
         }
     }
@@ -257,6 +265,7 @@ pub fn structure(
                     .map(|(i, t)| level(t.name(), stage[i][j]))
                     .collect(),
                 per_dig: std::mem::take(&mut per_dig[j]),
+                per_dig_mean: std::mem::take(&mut per_dig_mean[j]),
                 ljung_box_q: loc.ljung_box_q,
                 input_cross_correlation: loc.input_cross_correlation,
                 correlations: corr[j].iter().map(CorrAcc::value).collect(),
@@ -364,10 +373,13 @@ impl Reference {
             let bad = !(s.overall.rms.is_finite() && s.overall.rms >= 0.0)
                 || s.per_dig
                     .iter()
-                    .any(|(_, ms)| !(ms.is_finite() && *ms >= 0.0));
+                    .any(|(_, ms)| !(ms.is_finite() && *ms >= 0.0))
+                || s.per_dig_mean.iter().any(|m| !m.is_finite())
+                || !(s.per_dig_mean.is_empty() || s.per_dig_mean.len() == s.per_dig.len());
             if bad {
                 return Err(DiscrepancyError::Invalid(format!(
-                    "reference file: signal {}: a residual level is not a finite non-negative number",
+                    "reference file: signal {}: a residual level is not a finite non-negative \
+                     number, or the per-dig means do not match the per-dig levels",
                     s.signal
                 )));
             }
@@ -420,6 +432,50 @@ impl Reference {
     }
 }
 
+impl Reference {
+    /// The band of the mean residual over `digs` digs of a healthy machine: the
+    /// `(1 - TOLERANCE_QUANTILE) / 2` and `(1 + TOLERANCE_QUANTILE) / 2` quantiles of the
+    /// sample-weighted mean residual of `digs` reference digs drawn with replacement. `None` when
+    /// the reference keeps no per-dig means or has fewer than two digs.
+    pub fn bias_band(&self, sig: Signal, digs: usize) -> Option<(f64, f64)> {
+        let s = &self.signals[sig.index()];
+        if s.per_dig.len() < 2 || s.per_dig_mean.len() != s.per_dig.len() || digs == 0 {
+            return None;
+        }
+        let mut rng = ChaCha8Rng::seed_from_u64(0xB1A5 + sig.index() as u64);
+        let mut means: Vec<f64> = (0..BOOTSTRAP_DRAWS)
+            .map(|_| {
+                let (mut n, mut sum) = (0usize, 0.0);
+                for _ in 0..digs {
+                    let i = rng.random_range(0..s.per_dig.len());
+                    n += s.per_dig[i].0;
+                    sum += s.per_dig_mean[i] * s.per_dig[i].0 as f64;
+                }
+                sum / n.max(1) as f64
+            })
+            .collect();
+        means.sort_by(f64::total_cmp);
+        let at = |q: f64| means[((q * means.len() as f64) as usize).min(means.len() - 1)];
+        Some((
+            at((1.0 - TOLERANCE_QUANTILE) / 2.0),
+            at((1.0 + TOLERANCE_QUANTILE) / 2.0),
+        ))
+    }
+}
+
+/// The sample-weighted mean residual over the digs of `s`, `None` without per-dig means.
+pub fn mean_residual(s: &SignalStructure) -> Option<f64> {
+    let n: usize = s.per_dig.iter().map(|(n, _)| n).sum();
+    (n > 0 && s.per_dig_mean.len() == s.per_dig.len()).then(|| {
+        s.per_dig
+            .iter()
+            .zip(&s.per_dig_mean)
+            .map(|((n, _), m)| m * *n as f64)
+            .sum::<f64>()
+            / n as f64
+    })
+}
+
 #[cfg(test)]
 impl Reference {
     /// A reference of four healthy digs with `signals`, for tests.
@@ -450,6 +506,7 @@ mod tests {
                 rms,
             },
             per_stage: Vec::new(),
+            per_dig_mean: Vec::new(),
             per_dig,
             ljung_box_q: 0.0,
             input_cross_correlation: (0.0, 0),

@@ -92,6 +92,13 @@ pub struct SignalVerdict {
     pub structure: Vec<Structure>,
     /// Ljung-Box `Q(20)` of the held-out residual over the reference's.
     pub whiteness_ratio: f64,
+    /// Mean held-out residual with the named effects (a one-signed shift the RMS ratio may hide
+    /// under a large healthy spread, e.g. the soil force of a more cohesive soil).
+    pub mean_residual: Option<f64>,
+    /// The band of that mean on as many digs of the reference ([`Reference::bias_band`]).
+    pub bias_band: Option<(f64, f64)>,
+    /// Whether the mean is outside the band (judged signals only).
+    pub bias_beyond: bool,
     /// Named effects acting on the signal.
     pub named: Vec<String>,
     /// The outcome.
@@ -238,6 +245,10 @@ fn judge_signal(
     } else {
         0.0
     };
+    let mean_residual = crate::reference::mean_residual(after);
+    let bias_band = reference.bias_band(sig, after.per_dig.len());
+    let bias_beyond = judged
+        && matches!((mean_residual, bias_band), (Some(m), Some((lo, hi))) if m < lo || m > hi);
     let beyond = ratio_after > tolerance;
     let outcome = match (judged, beyond, named.is_empty()) {
         (false, _, _) => Outcome::NotJudged,
@@ -277,6 +288,13 @@ fn judge_signal(
         if whiteness_ratio > WHITENESS_FACTOR {
             let _ = write!(note, ", whiteness Q {whiteness_ratio:.1}x the reference's");
         }
+        if let (true, Some(m), Some((lo, hi))) = (bias_beyond, mean_residual, bias_band) {
+            let _ = write!(
+                note,
+                ", mean {m:.3e} {} outside the reference's {lo:.3e}..{hi:.3e}",
+                sig.unit()
+            );
+        }
         match outcome {
             Outcome::Unexplained => note.push_str(": no effect in the library explains it"),
             Outcome::PartlyExplained => {
@@ -305,6 +323,9 @@ fn judge_signal(
         stages,
         structure,
         whiteness_ratio,
+        mean_residual,
+        bias_band,
+        bias_beyond,
         named,
         outcome,
         note,
@@ -437,6 +458,7 @@ mod tests {
             overall: level("all", rms),
             per_stage: vec![level("dig", rms), level("outside_autodig", rms)],
             per_dig: vec![(250, rms * rms); 4],
+            per_dig_mean: vec![0.0; 4],
             ljung_box_q: 100.0,
             input_cross_correlation: (0.05, 0),
             correlations,
