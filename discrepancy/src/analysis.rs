@@ -347,10 +347,10 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
 
 /// The signals a candidate may be named for, judged against the reference with the starting
 /// model alone (`judge` of an analysis that fits nothing). When some judged signal is beyond the
-/// reference's tolerance: those beyond it, those whose mean residual is outside the reference's
-/// band (a one-signed shift under a large healthy spread: the soil force of a more cohesive soil,
-/// 10-35 kN above the model in every dig, inside the tolerance of an RMS that scatters 30-60 kN
-/// both ways), and those it cannot judge (too few samples). A candidate
+/// reference's tolerance: those beyond it and those it cannot judge (too few samples). A mean
+/// residual outside the reference's band ([`crate::verdict::SignalVerdict::bias_beyond`]) is
+/// reported, not made eligible: a 20 % heavier stick shifts the weighed payload, and soil density
+/// then stands in for it. A candidate
 /// that lowers only what the reference expects there stands in for another's residual (a stiffer
 /// bulk modulus fitted on the velocities of a session whose weighed payload shows denser soil).
 /// When none is beyond: `None`, every signal, and a candidate is named on its own held-out evidence only
@@ -381,7 +381,7 @@ fn eligible_signals(
     let mut eligible = [false; crate::greybox::N_SIGNALS];
     for (sig, s) in crate::greybox::Signal::ALL.iter().zip(&v.signals) {
         let not_judged = s.outcome == crate::verdict::Outcome::NotJudged;
-        eligible[sig.index()] = not_judged || s.ratio_before > s.tolerance || s.bias_beyond;
+        eligible[sig.index()] = not_judged || s.ratio_before > s.tolerance;
     }
     Ok(Some(eligible))
 }
