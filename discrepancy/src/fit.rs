@@ -700,12 +700,17 @@ fn signals_present(record: &PreparedRecord) -> u16 {
 }
 
 /// Splits the records (in dig order) into training and held-out digs, alternating within each set
-/// of records that carry the same signals: a sparse signal (the end-stop angles, seen only in the
-/// digs that pressed a link against its stop) then has records in both halves whenever it is in
-/// two, instead of wherever the dig order put them. Records that all carry the same signals
-/// alternate by dig index. Each half is returned in dig order.
+/// of records that carry the same sparse signals (signals in at most half of the records): a sparse
+/// signal, such as the end-stop angles seen only in the digs that pressed a link against its stop,
+/// then has records in both halves whenever it is in two, instead of wherever the dig order put
+/// them. Records that carry no sparse signal alternate by dig index. Each half is returned in dig
+/// order.
 fn split<'a>(order: &[&'a PreparedRecord]) -> (Vec<&'a PreparedRecord>, Vec<&'a PreparedRecord>) {
-    let keys: Vec<u16> = order.iter().map(|r| signals_present(r)).collect();
+    let present: Vec<u16> = order.iter().map(|r| signals_present(r)).collect();
+    let sparse = (0..N_SIGNALS)
+        .filter(|&j| 2 * present.iter().filter(|p| *p & 1 << j != 0).count() <= order.len())
+        .fold(0u16, |bits, j| bits | 1 << j);
+    let keys: Vec<u16> = present.iter().map(|p| p & sparse).collect();
     let size = |key: u16| keys.iter().filter(|k| **k == key).count();
     // Stable: dig order within a stratum; the largest stratum (usually the only one) first.
     let mut ranked: Vec<(usize, u16, &'a PreparedRecord)> = keys
