@@ -692,43 +692,62 @@ fn weights_of(sigma: &[f64], kappa: &[f64], n: &[usize; N_SIGNALS]) -> [f64; N_S
     inv_var
 }
 
-/// The signals a record has samples of, one bit per signal.
-fn signals_present(record: &PreparedRecord) -> u16 {
-    (0..N_SIGNALS)
-        .filter(|&j| record.measured.iter().any(|m| m[j].is_finite()))
-        .fold(0, |bits, j| bits | 1 << j)
-}
-
-/// Splits the records (in dig order) into training and held-out digs, alternating within each set
-/// of records that carry the same sparse signals (signals in at most half of the records): a sparse
-/// signal, such as the end-stop angles seen only in the digs that pressed a link against its stop,
-/// then has records in both halves whenever it is in two, instead of wherever the dig order put
-/// them. Records that carry no sparse signal alternate by dig index. Each half is returned in dig
-/// order.
-fn split<'a>(order: &[&'a PreparedRecord]) -> (Vec<&'a PreparedRecord>, Vec<&'a PreparedRecord>) {
-    let present: Vec<u16> = order.iter().map(|r| signals_present(r)).collect();
-    let sparse = (0..N_SIGNALS)
-        .filter(|&j| 2 * present.iter().filter(|p| *p & 1 << j != 0).count() <= order.len())
-        .fold(0u16, |bits, j| bits | 1 << j);
-    let keys: Vec<u16> = present.iter().map(|p| p & sparse).collect();
-    let size = |key: u16| keys.iter().filter(|k| **k == key).count();
-    // Stable: dig order within a stratum; the largest stratum (usually the only one) first.
-    let mut ranked: Vec<(usize, u16, &'a PreparedRecord)> = keys
-        .iter()
-        .zip(order)
-        .map(|(k, r)| (usize::MAX - size(*k), *k, *r))
-        .collect();
-    ranked.sort_by_key(|(rank, key, _)| (*rank, *key));
-    let (mut train, mut test): (Vec<_>, Vec<_>) = (Vec::new(), Vec::new());
-    for (i, (_, _, r)) in ranked.into_iter().enumerate() {
-        if i % 2 == 0 {
-            train.push(r);
-        } else {
-            test.push(r);
+/// Samples of each signal in a record.
+fn signal_samples(record: &PreparedRecord) -> [usize; N_SIGNALS] {
+    let mut n = [0; N_SIGNALS];
+    for m in &record.measured {
+        for (j, v) in m.iter().enumerate() {
+            n[j] += usize::from(v.is_finite());
         }
     }
-    train.sort_by_key(|r| r.index);
-    test.sort_by_key(|r| r.index);
+    n
+}
+
+/// Splits the records (in dig order) into training and held-out digs, balancing every signal's
+/// samples between the two: each record, in dig order, goes to the half that leaves the signals it
+/// carries least unequally shared (the largest difference of a signal's share of samples between
+/// the halves, over the signals with samples so far; ties to the half with fewer records). Dense
+/// signals alternate the digs; a sparse one gets samples on both sides whenever two digs carry it
+/// (the end-stop angles, seen only in the digs that pressed a link against its stop; the free-air
+/// force of a link with a few samples per dig) instead of wherever the dig order put them. Each
+/// half is returned in dig order.
+fn split<'a>(order: &[&'a PreparedRecord]) -> (Vec<&'a PreparedRecord>, Vec<&'a PreparedRecord>) {
+    let samples: Vec<[usize; N_SIGNALS]> = order.iter().map(|r| signal_samples(r)).collect();
+    let mut total = [0usize; N_SIGNALS];
+    for n in &samples {
+        for j in 0..N_SIGNALS {
+            total[j] += n[j];
+        }
+    }
+    // Samples of each signal placed in (training, held out) so far.
+    let mut placed = [[0usize; N_SIGNALS]; 2];
+    let mut halves: [Vec<&'a PreparedRecord>; 2] = [Vec::new(), Vec::new()];
+    for (r, n) in order.iter().zip(&samples) {
+        // The largest share difference of the record's signals with the record in half `h`.
+        let imbalance = |h: usize| -> f64 {
+            (0..N_SIGNALS)
+                .filter(|&j| n[j] > 0)
+                .map(|j| {
+                    let mine = (placed[h][j] + n[j]) as f64;
+                    let other = placed[1 - h][j] as f64;
+                    (mine - other).abs() / total[j] as f64
+                })
+                .fold(0.0, f64::max)
+        };
+        let (train, test) = (imbalance(0), imbalance(1));
+        let half = if train < test {
+            0
+        } else if test < train {
+            1
+        } else {
+            usize::from(halves[0].len() > halves[1].len())
+        };
+        for j in 0..N_SIGNALS {
+            placed[half][j] += n[j];
+        }
+        halves[half].push(*r);
+    }
+    let [train, test] = halves;
     (train, test)
 }
 
@@ -1550,7 +1569,7 @@ mod parameter_tests {
         assert_eq!(train.len(), test.len());
         let with_stop = |half: &[&PreparedRecord]| {
             half.iter()
-                .filter(|r| signals_present(r) & 1 << Signal::StopAngle.index() != 0)
+                .filter(|r| signal_samples(r)[Signal::StopAngle.index()] > 0)
                 .count()
         };
         assert_eq!(
