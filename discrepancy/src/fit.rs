@@ -692,65 +692,6 @@ fn weights_of(sigma: &[f64], kappa: &[f64], n: &[usize; N_SIGNALS]) -> [f64; N_S
     inv_var
 }
 
-/// Samples of each signal in a record.
-fn signal_samples(record: &PreparedRecord) -> [usize; N_SIGNALS] {
-    let mut n = [0; N_SIGNALS];
-    for m in &record.measured {
-        for (j, v) in m.iter().enumerate() {
-            n[j] += usize::from(v.is_finite());
-        }
-    }
-    n
-}
-
-/// Splits the records (in dig order) into training and held-out digs, balancing every signal's
-/// samples between the two: each record, in dig order, goes to the half that leaves the signals it
-/// carries least unequally shared (the largest difference of a signal's share of samples between
-/// the halves, over the signals with samples so far; ties to the half with fewer records). Dense
-/// signals alternate the digs; a sparse one gets samples on both sides whenever two digs carry it
-/// (the end-stop angles, seen only in the digs that pressed a link against its stop; the free-air
-/// force of a link with a few samples per dig) instead of wherever the dig order put them. Each
-/// half is returned in dig order.
-fn split<'a>(order: &[&'a PreparedRecord]) -> (Vec<&'a PreparedRecord>, Vec<&'a PreparedRecord>) {
-    let samples: Vec<[usize; N_SIGNALS]> = order.iter().map(|r| signal_samples(r)).collect();
-    let mut total = [0usize; N_SIGNALS];
-    for n in &samples {
-        for j in 0..N_SIGNALS {
-            total[j] += n[j];
-        }
-    }
-    // Samples of each signal placed in (training, held out) so far.
-    let mut placed = [[0usize; N_SIGNALS]; 2];
-    let mut halves: [Vec<&'a PreparedRecord>; 2] = [Vec::new(), Vec::new()];
-    for (r, n) in order.iter().zip(&samples) {
-        // The largest share difference of the record's signals with the record in half `h`.
-        let imbalance = |h: usize| -> f64 {
-            (0..N_SIGNALS)
-                .filter(|&j| n[j] > 0)
-                .map(|j| {
-                    let mine = (placed[h][j] + n[j]) as f64;
-                    let other = placed[1 - h][j] as f64;
-                    (mine - other).abs() / total[j] as f64
-                })
-                .fold(0.0, f64::max)
-        };
-        let (train, test) = (imbalance(0), imbalance(1));
-        let half = if train < test {
-            0
-        } else if test < train {
-            1
-        } else {
-            usize::from(halves[0].len() > halves[1].len())
-        };
-        for j in 0..N_SIGNALS {
-            placed[half][j] += n[j];
-        }
-        halves[half].push(*r);
-    }
-    let [train, test] = halves;
-    (train, test)
-}
-
 /// Runs the workflow on prepared records: split, nominal residuals, localisation, forward selection,
 /// before/after RMS. `progress(done, total)` is called after every candidate fit.
 ///
@@ -770,7 +711,8 @@ pub fn analyse(
     }
     let mut order: Vec<&PreparedRecord> = records.iter().collect();
     order.sort_by_key(|r| r.index);
-    let (train, test) = split(&order);
+    let train: Vec<&PreparedRecord> = order.iter().step_by(2).copied().collect();
+    let test: Vec<&PreparedRecord> = order.iter().skip(1).step_by(2).copied().collect();
 
     let nominal = config.base;
     let mut train_eval = Evaluator::new(train.clone(), params, &nominal);
@@ -1550,42 +1492,6 @@ mod parameter_tests {
             records.push(rec);
         }
         (records, params)
-    }
-
-    #[test]
-    fn a_signal_seen_in_two_digs_is_split_between_training_and_held_out() {
-        let (mut records, _) =
-            synthetic_records(sine_command, |p| (p.clone(), Augmentation::nominal()));
-        // End-stop samples in digs 1 and 3 only: alternating by dig index would hold both out.
-        for index in [1, 3] {
-            for m in records[index].measured.iter_mut().take(50) {
-                m[Signal::StopAngle.index()] = 0.0;
-            }
-        }
-        let order: Vec<&PreparedRecord> = records.iter().collect();
-        let (train, test) = split(&order);
-        let digs = |half: &[&PreparedRecord]| half.iter().map(|r| r.index).collect::<Vec<_>>();
-        assert_eq!(train.len() + test.len(), records.len());
-        assert_eq!(train.len(), test.len());
-        let with_stop = |half: &[&PreparedRecord]| {
-            half.iter()
-                .filter(|r| signal_samples(r)[Signal::StopAngle.index()] > 0)
-                .count()
-        };
-        assert_eq!(
-            (with_stop(&train), with_stop(&test)),
-            (1, 1),
-            "training {:?}, held out {:?}",
-            digs(&train),
-            digs(&test)
-        );
-        // Without the sparse signal, the split alternates by dig index.
-        let (mut plain, _) =
-            synthetic_records(sine_command, |p| (p.clone(), Augmentation::nominal()));
-        plain.truncate(5);
-        let order: Vec<&PreparedRecord> = plain.iter().collect();
-        let (train, test) = split(&order);
-        assert_eq!((digs(&train), digs(&test)), (vec![0, 2, 4], vec![1, 3]));
     }
 
     /// A slow sinusoidal command on the three valves.
