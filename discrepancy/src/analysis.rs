@@ -347,12 +347,12 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
 
 /// The signals a candidate may be named for, judged against the reference with the starting
 /// model alone (`judge` of an analysis that fits nothing). When some judged signal is beyond the
-/// reference's tolerance: those beyond it and those it cannot judge (too few samples). A mean
-/// residual outside the reference's band ([`crate::verdict::SignalVerdict::bias_beyond`]) is
-/// reported, not made eligible: a 20 % heavier stick shifts the weighed payload, and soil density
-/// then stands in for it. A candidate
+/// reference's tolerance: those beyond it and those it cannot judge (too few samples). A candidate
 /// that lowers only what the reference expects there stands in for another's residual (a stiffer
-/// bulk modulus fitted on the velocities of a session whose weighed payload shows denser soil).
+/// bulk modulus fitted on the velocities of a session whose weighed payload shows denser soil). A
+/// mean residual outside the reference's band ([`crate::verdict::SignalVerdict::bias_beyond`]) is
+/// reported, not made eligible: a 20 % heavier stick shifts the weighed payload, and soil density
+/// then stands in for it.
 /// When none is beyond: `None`, every signal, and a candidate is named on its own held-out evidence only
 /// (significance and explained share, as always). The RMS ratio to the reference is an omnibus
 /// test of every sample; a candidate's fit tests one physical hypothesis on the samples where it

@@ -578,5 +578,37 @@ mod tests {
         let e = Reference::from_json(&text).unwrap_err();
         assert!(e.to_string().contains("finite non-negative"), "{e}");
         assert!(Reference::from_json("{").is_err());
+        // Per-dig means: one per dig and finite, or none (a reference written before they were
+        // kept, which judges no bias).
+        let mut means = r.clone();
+        means.signals[0].per_dig_mean = vec![0.5, 0.25];
+        let e = Reference::from_json(&means.to_json().unwrap()).unwrap_err();
+        assert!(e.to_string().contains("per-dig means"), "{e}");
+        means.signals[0].per_dig_mean = vec![f64::NAN];
+        assert!(Reference::from_json(&means.to_json().unwrap()).is_err());
+        let old = r.to_json().unwrap().replace("\"per_dig_mean\": [],", "");
+        assert!(!old.contains("per_dig_mean"));
+        let back = Reference::from_json(&old).unwrap();
+        assert_eq!(back.bias_band(Signal::BoomVelocity, 4), None);
+    }
+
+    /// The bias band holds the mean of as many healthy digs, and is narrower for more of them; a
+    /// session whose digs all sit above every healthy dig's mean is outside it.
+    #[test]
+    fn the_bias_band_holds_healthy_means_and_not_a_one_signed_shift() {
+        let mut s = signal(1.0, vec![(100, 1.0); 8]);
+        s.per_dig_mean = vec![-0.6, 0.4, -0.2, 0.5, 0.1, -0.4, 0.3, -0.1];
+        let r = reference(vec![s; N_SIGNALS]);
+        let (lo1, hi1) = r.bias_band(Signal::SoilForceX, 1).unwrap();
+        let (lo8, hi8) = r.bias_band(Signal::SoilForceX, 8).unwrap();
+        assert!(lo1 <= -0.4 && hi1 >= 0.4, "{lo1} {hi1}");
+        assert!(hi8 - lo8 < hi1 - lo1, "{lo8}..{hi8} against {lo1}..{hi1}");
+        assert!(lo8 < 0.0 && hi8 > 0.0);
+        let mut shifted = signal(1.0, vec![(100, 1.0); 8]);
+        shifted.per_dig_mean = vec![0.7; 8];
+        let m = mean_residual(&shifted).unwrap();
+        assert!((m - 0.7).abs() < 1e-12 && m > hi8);
+        shifted.per_dig_mean.clear();
+        assert_eq!(mean_residual(&shifted), None);
     }
 }
