@@ -28,17 +28,23 @@ def fail(why):
 
 
 class Page:
-    """One page target of the browser."""
+    """One page target of the browser. Every reply is awaited up to the run's deadline, not a
+    fixed time: on a loaded machine the page's main thread can hold an evaluation back for tens of
+    seconds (once 30 s in CI with both cores busy)."""
 
-    def __init__(self, ws_url):
+    def __init__(self, ws_url, deadline):
         self.ws = connect(ws_url, max_size=64 * 1024 * 1024, open_timeout=20)
         self.next_id = 0
+        self.deadline = deadline
 
     def call(self, method, **params):
         self.next_id += 1
         self.ws.send(json.dumps({"id": self.next_id, "method": method, "params": params}))
         while True:
-            msg = json.loads(self.ws.recv(timeout=30))
+            try:
+                msg = json.loads(self.ws.recv(timeout=max(1.0, self.deadline - time.monotonic())))
+            except TimeoutError:
+                fail(f"{method}: no reply from the browser by the deadline")
             if msg.get("id") == self.next_id:
                 if "error" in msg:
                     fail(f"{method}: {msg['error']}")
@@ -79,7 +85,7 @@ def main():
         port = open(port_file).read().split()[0]
         targets = json.load(urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list"))
         target = next(t for t in targets if t["type"] == "page")
-        page = Page(target["webSocketDebuggerUrl"])
+        page = Page(target["webSocketDebuggerUrl"], deadline)
         page.call("Page.enable")
         page.call("Runtime.enable")
         page.call("Page.navigate", url=url)
