@@ -414,25 +414,18 @@ impl Reference {
         if s.per_dig.len() < 2 || s.overall.rms <= 0.0 || digs == 0 {
             return min_tolerance(sig);
         }
-        let mut rng = ChaCha8Rng::seed_from_u64(0x5EED + sig.index() as u64);
-        let mut ratios: Vec<f64> = (0..BOOTSTRAP_DRAWS)
-            .map(|_| {
-                let (mut n, mut sq) = (0usize, 0.0);
-                for _ in 0..digs {
-                    let (dn, ms) = s.per_dig[rng.random_range(0..s.per_dig.len())];
-                    n += dn;
-                    sq += ms * dn as f64;
-                }
-                (sq / n.max(1) as f64).sqrt() / s.overall.rms
-            })
-            .collect();
-        ratios.sort_by(f64::total_cmp);
-        let q = ratios[((TOLERANCE_QUANTILE * ratios.len() as f64) as usize).min(ratios.len() - 1)];
-        q.max(min_tolerance(sig))
+        let ratios = bootstrap(s.per_dig.len(), digs, 0x5EED + sig.index() as u64, |draw| {
+            let (mut n, mut sq) = (0usize, 0.0);
+            for &i in draw {
+                let (dn, ms) = s.per_dig[i];
+                n += dn;
+                sq += ms * dn as f64;
+            }
+            (sq / n.max(1) as f64).sqrt() / s.overall.rms
+        });
+        quantile(&ratios, TOLERANCE_QUANTILE).max(min_tolerance(sig))
     }
-}
 
-impl Reference {
     /// The band of the mean residual over `digs` digs of a healthy machine: the
     /// `(1 - TOLERANCE_QUANTILE) / 2` and `(1 + TOLERANCE_QUANTILE) / 2` quantiles of the
     /// sample-weighted mean residual of `digs` reference digs drawn with replacement. `None` when
@@ -442,25 +435,41 @@ impl Reference {
         if s.per_dig.len() < 2 || s.per_dig_mean.len() != s.per_dig.len() || digs == 0 {
             return None;
         }
-        let mut rng = ChaCha8Rng::seed_from_u64(0xB1A5 + sig.index() as u64);
-        let mut means: Vec<f64> = (0..BOOTSTRAP_DRAWS)
-            .map(|_| {
-                let (mut n, mut sum) = (0usize, 0.0);
-                for _ in 0..digs {
-                    let i = rng.random_range(0..s.per_dig.len());
-                    n += s.per_dig[i].0;
-                    sum += s.per_dig_mean[i] * s.per_dig[i].0 as f64;
-                }
-                sum / n.max(1) as f64
-            })
-            .collect();
-        means.sort_by(f64::total_cmp);
-        let at = |q: f64| means[((q * means.len() as f64) as usize).min(means.len() - 1)];
+        let means = bootstrap(s.per_dig.len(), digs, 0xB1A5 + sig.index() as u64, |draw| {
+            let (mut n, mut sum) = (0usize, 0.0);
+            for &i in draw {
+                n += s.per_dig[i].0;
+                sum += s.per_dig_mean[i] * s.per_dig[i].0 as f64;
+            }
+            sum / n.max(1) as f64
+        });
         Some((
-            at((1.0 - TOLERANCE_QUANTILE) / 2.0),
-            at((1.0 + TOLERANCE_QUANTILE) / 2.0),
+            quantile(&means, (1.0 - TOLERANCE_QUANTILE) / 2.0),
+            quantile(&means, (1.0 + TOLERANCE_QUANTILE) / 2.0),
         ))
     }
+}
+
+/// [`BOOTSTRAP_DRAWS`] values of `stat` over `digs` indices into `dig_count` reference digs drawn
+/// with replacement (seeded), sorted.
+fn bootstrap(dig_count: usize, digs: usize, seed: u64, stat: impl Fn(&[usize]) -> f64) -> Vec<f64> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut draw = vec![0; digs];
+    let mut values: Vec<f64> = (0..BOOTSTRAP_DRAWS)
+        .map(|_| {
+            for i in draw.iter_mut() {
+                *i = rng.random_range(0..dig_count);
+            }
+            stat(&draw)
+        })
+        .collect();
+    values.sort_by(f64::total_cmp);
+    values
+}
+
+/// The `q` quantile of sorted, non-empty `values`.
+fn quantile(values: &[f64], q: f64) -> f64 {
+    values[((q * values.len() as f64) as usize).min(values.len() - 1)]
 }
 
 /// The sample-weighted mean residual over the digs of `s`, `None` without per-dig means.
