@@ -174,12 +174,12 @@ pub struct WorkCycle {
     last_now_s: f64,
     /// MoveToDig: the tip has been lifted to the start height once (lift-first is not re-entered).
     lifted: bool,
-    /// MoveToDig stall escalation per implement joint: the extra command magnitude
+    /// Stall escalation per joint (boom, stick, bucket, swing): the extra command magnitude
     /// ([`STALL_BOOST_PER_S`](moving::STALL_BOOST_PER_S)), the smallest error so far and when it last shrank
     /// ([`STALL_PROGRESS_RAD`]); and the time of the last move step.
-    stall_boost: [f64; 3],
-    stall_best_rad: [f64; 3],
-    stall_progress_s: [f64; 3],
+    stall_boost: [f64; 4],
+    stall_best_rad: [f64; 4],
+    stall_progress_s: [f64; 4],
     /// Dump: since when the bucket's opening port has been near relief ([`RELIEF_RELIFT_FRACTION`]);
     /// MoveToDig: since when a commanded implement cylinder's port has been near relief
     /// ([`MOVE_BLOCKED_S`](moving::MOVE_BLOCKED_S)).
@@ -256,9 +256,9 @@ impl WorkCycle {
             track_target_m: 0.0,
             last_now_s: 0.0,
             lifted: false,
-            stall_boost: [0.0; 3],
-            stall_best_rad: [f64::INFINITY; 3],
-            stall_progress_s: [0.0; 3],
+            stall_boost: [0.0; 4],
+            stall_best_rad: [f64::INFINITY; 4],
+            stall_progress_s: [0.0; 4],
             relief_since_s: None,
             last_move_s: None,
             move_best_m: f64::INFINITY,
@@ -485,8 +485,8 @@ impl WorkCycle {
         self.phase_since_s = now_s;
         self.settle_since_s = None;
         self.lifted = false;
-        self.stall_boost = [0.0; 3];
-        self.stall_best_rad = [f64::INFINITY; 3];
+        self.stall_boost = [0.0; 4];
+        self.stall_best_rad = [f64::INFINITY; 4];
         self.relief_since_s = None;
         self.last_move_s = None;
         self.move_best_m = f64::INFINITY;

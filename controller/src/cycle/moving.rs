@@ -50,40 +50,74 @@ impl WorkCycle {
         (cmd, err.iter().all(|e| e.abs() <= g.tolerance))
     }
 
-    /// Stall escalation of the move's P-controller: the command of a joint that is commanded but
-    /// has not come [`STALL_PROGRESS_RAD`] closer to its target for [`STALL_WAIT_S`] grows by
-    /// [`STALL_BOOST_PER_S`] (up to `max_command`), and is held while the joint makes progress; a
-    /// joint that reaches its tolerance or reverses starts from zero again.
-    fn escalate_stalled(&mut self, now_s: f64, implement: &mut [f64; 3], error_rad: [f64; 3]) {
+    /// The time since the last step of a move with stall escalation (at most 0.1 s), s.
+    pub(super) fn stall_step_s(&mut self, now_s: f64) -> f64 {
         let dt_s = self
             .last_move_s
             .map_or(0.0, |t| (now_s - t).clamp(0.0, 0.1));
         self.last_move_s = Some(now_s);
-        let max = self.config.joint.max_command;
-        for (i, cmd) in implement.iter_mut().enumerate() {
-            let err = error_rad[i].abs();
-            let boost = &mut self.stall_boost[i];
-            // Restart when the joint is not commanded or the command reverses.
-            if *cmd == 0.0 || !err.is_finite() || (*boost != 0.0 && boost.signum() != cmd.signum())
-            {
-                *boost = 0.0;
-                self.stall_best_rad[i] = f64::INFINITY;
-                continue;
-            }
-            if !self.stall_best_rad[i].is_finite()
-                || err < self.stall_best_rad[i] - STALL_PROGRESS_RAD
-            {
-                self.stall_best_rad[i] = err;
-                self.stall_progress_s[i] = now_s;
-            }
-            let magnitude = if now_s - self.stall_progress_s[i] > STALL_WAIT_S {
-                (boost.abs() + STALL_BOOST_PER_S * dt_s).min(max)
-            } else {
-                boost.abs()
-            };
-            *boost = magnitude.copysign(*cmd);
-            *cmd = (cmd.abs() + magnitude).min(max).copysign(*cmd);
+        dt_s
+    }
+
+    /// Stall escalation of a P-controller (the implement joints in MoveToDig, the swing in
+    /// MoveToDig and the swings to and from the dump): the command of joint `i` (boom, stick,
+    /// bucket, swing) that is commanded but has not come [`STALL_PROGRESS_RAD`] closer to its
+    /// target for [`STALL_WAIT_S`] grows by [`STALL_BOOST_PER_S`] (up to `max`), and is held while
+    /// the joint makes progress; a joint that reaches its tolerance or reverses starts from zero
+    /// again. A valve whose dead band swallows the P-controller's last degrees (a swing resting
+    /// 7 deg short of the dig, its boom waiting for it) opens until the joint moves.
+    pub(super) fn escalate_stalled(
+        &mut self,
+        now_s: f64,
+        dt_s: f64,
+        i: usize,
+        cmd: &mut f64,
+        error_rad: f64,
+        max: f64,
+    ) {
+        let err = error_rad.abs();
+        let boost = &mut self.stall_boost[i];
+        // Restart when the joint is not commanded or the command reverses.
+        if *cmd == 0.0 || !err.is_finite() || (*boost != 0.0 && boost.signum() != cmd.signum()) {
+            *boost = 0.0;
+            self.stall_best_rad[i] = f64::INFINITY;
+            return;
         }
+        if !self.stall_best_rad[i].is_finite() || err < self.stall_best_rad[i] - STALL_PROGRESS_RAD
+        {
+            self.stall_best_rad[i] = err;
+            self.stall_progress_s[i] = now_s;
+        }
+        let magnitude = if now_s - self.stall_progress_s[i] > STALL_WAIT_S {
+            (boost.abs() + STALL_BOOST_PER_S * dt_s).min(max)
+        } else {
+            boost.abs()
+        };
+        *boost = magnitude.copysign(*cmd);
+        *cmd = (cmd.abs() + magnitude).min(max).copysign(*cmd);
+    }
+
+    /// [`Self::swing_toward`] with stall escalation (joint 3).
+    pub(super) fn swing_toward_escalated(
+        &mut self,
+        now_s: f64,
+        dt_s: f64,
+        swing_rad: f64,
+        rate_rad_per_s: f64,
+        target_rad: f64,
+    ) -> (f64, bool) {
+        let (mut swing, done) = self.swing_toward(swing_rad, rate_rad_per_s, target_rad);
+        let max = self.config.swing.max_command;
+        let err = wrap_angle(target_rad - swing_rad);
+        if swing.signum() == err.signum() {
+            self.escalate_stalled(now_s, dt_s, 3, &mut swing, err, max);
+        } else {
+            // Braking (the damping term outweighs the error): nothing to escalate, and the next
+            // push toward the target starts from zero.
+            self.stall_boost[3] = 0.0;
+            self.stall_best_rad[3] = f64::INFINITY;
+        }
+        (swing, done)
     }
 
     pub(super) fn swing_toward(
@@ -205,19 +239,22 @@ impl WorkCycle {
             // it toward the start).
             implement[0] = 0.0;
         }
-        self.escalate_stalled(
-            now_s,
-            &mut implement,
-            [
-                target.boom_rad - s.joints.boom_rad,
-                target.stick_rad - s.joints.stick_rad,
-                target.bucket_rad - s.joints.bucket_rad,
-            ],
-        );
+        let dt_s = self.stall_step_s(now_s);
+        let max = self.config.joint.max_command;
+        let error_rad = [
+            target.boom_rad - s.joints.boom_rad,
+            target.stick_rad - s.joints.stick_rad,
+            target.bucket_rad - s.joints.bucket_rad,
+        ];
+        for (i, cmd) in implement.iter_mut().enumerate() {
+            self.escalate_stalled(now_s, dt_s, i, cmd, error_rad[i], max);
+        }
         let boom_clear =
             !low && s.joints.boom_rad >= target.boom_rad - 3.0 * self.config.joint.tolerance;
         let (swing, swing_done) = match action.swing_rad() {
-            Some(t) if boom_clear => self.swing_toward(s.swing_rad, s.rates_rad_per_s[3], t),
+            Some(t) if boom_clear => {
+                self.swing_toward_escalated(now_s, dt_s, s.swing_rad, s.rates_rad_per_s[3], t)
+            }
             Some(_) => (0.0, false),
             None => (0.0, true),
         };
@@ -453,6 +490,44 @@ mod tests {
             assert!(now <= last + 1e-9 && now > 0.5, "{now} vs {last}");
             last = now;
         }
+    }
+
+    #[test]
+    fn a_swing_stalled_short_of_the_dig_opens_its_valve_further() {
+        // The implement at its start, the swing 0.12 rad (7 deg) short and not moving (its command
+        // inside a valve's dead band): the swing command grows as a stalled joint's does, so the
+        // boom, which comes down only after the swing, is not left waiting for the time-out.
+        let (boom, stick, bucket) = (0.2, -1.3, -0.5);
+        let mut c = moving_to(boom, stick, bucket);
+        let swing_command = |c: &mut WorkCycle, t: f64| {
+            let e = est_at([boom, stick, bucket, -0.12], 0.0, t);
+            match c.step(t, &e, Some(ArmMode::Valve)).unwrap().command {
+                CycleCommand::Valves(v) => v[3],
+                other => panic!("expected valve commands, got {other:?}"),
+            }
+        };
+        let first = swing_command(&mut c, 0.0);
+        let p_command = CycleConfig::default().swing.command(0.12);
+        assert!((first - p_command).abs() < 1e-9, "{first} vs {p_command}");
+        let mut t = 0.0;
+        let mut last = first;
+        while t < 2.0 {
+            t += 0.01;
+            last = swing_command(&mut c, t);
+        }
+        let expected = p_command + STALL_BOOST_PER_S * (2.0 - STALL_WAIT_S);
+        assert!(
+            last > 0.0 && (last - expected).abs() < 0.02,
+            "{last} vs {expected}"
+        );
+        // Braking (moving fast toward the target, the damping term outweighs the error): the
+        // escalation does not push the brake harder.
+        let (brake, _) = c.swing_toward_escalated(t + 0.01, 0.01, -0.12, 0.5, 0.0);
+        let plain = c.swing_toward(-0.12, 0.5, 0.0).0;
+        assert!(
+            brake < 0.0 && (brake - plain).abs() < 1e-12,
+            "{brake} vs {plain}"
+        );
     }
 
     #[test]

@@ -109,8 +109,9 @@ impl WorkCycle {
         } else {
             0.0
         };
+        let dt_s = self.stall_step_s(now_s);
         let (swing, swing_done) = if boom_clear {
-            self.swing_toward(s.swing_rad, s.rates_rad_per_s[3], target_rad)
+            self.swing_toward_escalated(now_s, dt_s, s.swing_rad, s.rates_rad_per_s[3], target_rad)
         } else {
             (0.0, false)
         };
