@@ -12,10 +12,14 @@
 //! threshold is the largest of a few whose ensemble's equation explains the training digs about
 //! as well as the best one's ([`TermConfig::parsimony`]): the sparsest equation that does. A term's
 //! **inclusion probability** is the share of the ensemble's models that keep it; the terms kept at
-//! least [`TermConfig::min_inclusion`] of the time make the suggestion, with the ensemble median
-//! of each coefficient ("bragging") and the ensemble spread as its uncertainty. The suggestion is
-//! scored on the held-out digs: the share of their residual mean square it removes. Below
-//! [`TermConfig::min_explained`] nothing is suggested.
+//! least [`TermConfig::min_inclusion`] of the time make the suggestion. The ensemble chooses the
+//! terms, and their coefficients are the least-squares fit on all training digs with those terms
+//! alone. The spread of that fit over the same resamples is each coefficient's uncertainty. Taking
+//! each coefficient's ensemble median ("bragging") instead gives an incoherent equation when
+//! terms are nearly collinear: a constant with the cosine and sine of a link angle that varies little.
+//! Each model of the ensemble shares the load among them differently, and the medians do not add up
+//! to any one model's sum. The suggestion is scored on the held-out digs: the share of their residual
+//! mean square it removes. Below [`TermConfig::min_explained`] nothing is suggested.
 //!
 //! The library per signal (values in the units printed): the valve command of the signal's
 //! cylinder and the same 50 ms and 150 ms earlier, its pump's pressure and its head-rod pressure
@@ -335,33 +339,22 @@ fn standardisation(g: &DigGram) -> (Vec<f64>, Vec<bool>) {
     (scale, active)
 }
 
-/// The ensemble's fit: per regressor its inclusion probability, the median coefficient and the
-/// coefficients' standard deviation over the ensemble.
+/// The ensemble's fit: per regressor its inclusion probability; the equation on the regressors
+/// kept in at least [`TermConfig::min_inclusion`] of the models, and each coefficient's standard
+/// deviation over the resamples.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EnsembleFit {
     /// The STLSQ threshold chosen.
     pub threshold: f64,
-    /// Share of the training residual's mean square its equation ([`EnsembleFit::equation`])
-    /// removes.
+    /// Share of the training residual's mean square [`EnsembleFit::equation`] removes.
     pub train_explained: f64,
     /// Share of the ensemble's models that include each regressor.
     pub inclusion: Vec<f64>,
-    /// Median coefficient over the ensemble (zeros included).
-    pub median: Vec<f64>,
-    /// Standard deviation of the coefficient over the ensemble.
+    /// The equation: least squares on all training digs with the kept regressors alone (zero for
+    /// the others).
+    pub equation: Vec<f64>,
+    /// Standard deviation of each coefficient of that least-squares fit over the resamples.
     pub spread: Vec<f64>,
-}
-
-impl EnsembleFit {
-    /// The equation: the median coefficient of every regressor kept in at least `min_inclusion`
-    /// of the models, zero for the others.
-    pub fn equation(&self, min_inclusion: f64) -> Vec<f64> {
-        self.inclusion
-            .iter()
-            .zip(&self.median)
-            .map(|(p, m)| if *p >= min_inclusion { *m } else { 0.0 })
-            .collect()
-    }
 }
 
 /// E-SINDy on per-dig equations (first regressor the constant): for each threshold of
@@ -383,16 +376,21 @@ pub fn ensemble_fit(digs: &[DigGram], config: &TermConfig) -> Option<EnsembleFit
             c
         })
         .collect();
+    // A resample's equations summed.
+    let resample = |c: &[usize]| {
+        let mut g = DigGram::new(p);
+        for (d, n) in digs.iter().zip(c).filter(|(_, n)| **n > 0) {
+            g.add_scaled(d, *n as f64);
+        }
+        g
+    };
     let ensembles: Vec<(f64, Vec<Vec<f64>>)> = config
         .thresholds
         .iter()
         .map(|threshold| {
             let mut coefficients = vec![Vec::with_capacity(draws); p];
             for c in &counts {
-                let mut g = DigGram::new(p);
-                for (d, n) in digs.iter().zip(c).filter(|(_, n)| **n > 0) {
-                    g.add_scaled(d, *n as f64);
-                }
+                let g = resample(c);
                 let (scale, varies) = standardisation(&g);
                 let usable: Vec<bool> = active.iter().zip(&varies).map(|(a, v)| *a && *v).collect();
                 let xi = stlsq(&g, &scale, &usable, *threshold);
@@ -403,46 +401,33 @@ pub fn ensemble_fit(digs: &[DigGram], config: &TermConfig) -> Option<EnsembleFit
             (*threshold, coefficients)
         })
         .collect();
-    let median = |v: &[f64]| {
-        let mut s = v.to_vec();
-        s.sort_by(f64::total_cmp);
-        let m = s.len() / 2;
-        if s.len() % 2 == 1 {
-            s[m]
-        } else {
-            0.5 * (s[m - 1] + s[m])
-        }
-    };
-    let fits: Vec<EnsembleFit> = ensembles
+    // Each ensemble's terms (those it agrees on), refitted on all the training digs and scored
+    // there; the sparsest that explains about as much as the best.
+    let mut fits: Vec<EnsembleFit> = ensembles
         .into_iter()
-        .map(|(threshold, coefficients)| EnsembleFit {
-            threshold,
-            train_explained: 0.0,
-            inclusion: coefficients
+        .map(|(threshold, coefficients)| {
+            let inclusion: Vec<f64> = coefficients
                 .iter()
                 .map(|c| c.iter().filter(|x| **x != 0.0).count() as f64 / draws as f64)
-                .collect(),
-            median: coefficients.iter().map(|c| median(c)).collect(),
-            spread: coefficients
-                .iter()
-                .map(|c| {
-                    let m = c.iter().sum::<f64>() / c.len() as f64;
-                    (c.iter().map(|x| (x - m).powi(2)).sum::<f64>() / c.len() as f64).sqrt()
-                })
-                .collect(),
+                .collect();
+            let support: Vec<usize> = (0..p)
+                .filter(|j| inclusion[*j] >= config.min_inclusion)
+                .collect();
+            let equation = solve_on(&all, &support);
+            let train_explained = if all.yy > 0.0 {
+                1.0 - all.sse(&equation) / all.yy
+            } else {
+                0.0
+            };
+            EnsembleFit {
+                threshold,
+                train_explained,
+                inclusion,
+                equation: equation.iter().copied().collect(),
+                spread: vec![0.0; p],
+            }
         })
         .collect();
-    // Each ensemble's equation (the terms it agrees on) scored on all the training digs; the
-    // sparsest that explains about as much as the best.
-    let mut fits = fits;
-    for f in &mut fits {
-        let xi = DVector::from_vec(f.equation(config.min_inclusion));
-        f.train_explained = if all.yy > 0.0 {
-            1.0 - all.sse(&xi) / all.yy
-        } else {
-            0.0
-        };
-    }
     let best = fits
         .iter()
         .map(|f| f.train_explained)
@@ -450,7 +435,19 @@ pub fn ensemble_fit(digs: &[DigGram], config: &TermConfig) -> Option<EnsembleFit
     let choice = fits
         .iter()
         .rposition(|f| f.train_explained >= config.parsimony * best)?;
-    fits.into_iter().nth(choice)
+    let mut fit = fits.swap_remove(choice);
+    // The uncertainty: the same least squares on every resample.
+    let support: Vec<usize> = (0..p).filter(|j| fit.equation[*j] != 0.0).collect();
+    let refits: Vec<DVector<f64>> = counts
+        .iter()
+        .map(|c| solve_on(&resample(c), &support))
+        .collect();
+    for j in support {
+        let m = refits.iter().map(|x| x[j]).sum::<f64>() / draws as f64;
+        fit.spread[j] =
+            (refits.iter().map(|x| (x[j] - m).powi(2)).sum::<f64>() / draws as f64).sqrt();
+    }
+    Some(fit)
 }
 
 /// One term of a suggestion.
@@ -460,7 +457,7 @@ pub struct Term {
     pub regressor: String,
     /// Its unit (`1`: dimensionless).
     pub regressor_unit: &'static str,
-    /// Coefficient (ensemble median).
+    /// Coefficient (least squares on the training digs with the kept terms).
     pub coefficient: f64,
     /// Its unit (the residual's per the regressor's).
     pub unit: String,
@@ -589,7 +586,7 @@ pub fn suggest(
             continue;
         };
         let p = lib.len();
-        let xi = DVector::from_vec(fit.equation(config.min_inclusion));
+        let xi = DVector::from_vec(fit.equation.clone());
         let keep: Vec<usize> = (0..p).filter(|j| xi[*j] != 0.0).collect();
         if keep.is_empty() {
             continue;
@@ -698,9 +695,9 @@ mod tests {
         for (j, c) in TRUE_TERMS {
             assert!(fit.inclusion[j] > 0.95, "{fit:?}");
             assert!(
-                (fit.median[j] - c).abs() < 0.1 * c.abs(),
+                (fit.equation[j] - c).abs() < 0.1 * c.abs(),
                 "term {j}: {} against {c}",
-                fit.median[j]
+                fit.equation[j]
             );
         }
         for j in (0..P).filter(|j| TRUE_TERMS.iter().all(|(t, _)| t != j)) {
@@ -708,13 +705,42 @@ mod tests {
         }
         // Held out: the suggestion removes the residual but the noise.
         let held = DigGram::sum(&synthetic_digs(8, &TRUE_TERMS), P);
-        let xi = DVector::from_vec(fit.median.clone());
+        let xi = DVector::from_vec(fit.equation.clone());
         let explained = 1.0 - held.sse(&xi) / held.yy;
         let expected = 1.0 - NOISE.powi(2) / (0.031f64.powi(2) + 0.012f64.powi(2) + NOISE.powi(2));
         assert!(
             (explained - expected).abs() < 0.02,
             "{explained} vs {expected}"
         );
+    }
+
+    /// A constant residual (a heavier link's gravity over the few poses it is seen in) with the
+    /// cosine and sine of an angle that varies by 0.2 rad: nearly collinear with the constant.
+    fn collinear_digs(seed: u64) -> Vec<DigGram> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        (0..8)
+            .map(|_| {
+                let mut g = DigGram::new(4);
+                let centre: f64 = rng.random_range(0.3..0.5);
+                for _ in 0..200 {
+                    let a = centre + rng.random_range(-0.1..0.1);
+                    let y = 20.0 + rng.random_range(-3.0..3.0);
+                    g.add(&[1.0, a.cos(), a.sin(), rng.random_range(-1.0..1.0)], y);
+                }
+                g
+            })
+            .collect()
+    }
+
+    #[test]
+    fn nearly_collinear_terms_give_one_coherent_equation() {
+        let fit = ensemble_fit(&collinear_digs(3), &TermConfig::default()).unwrap();
+        let xi = DVector::from_vec(fit.equation.clone());
+        let held = DigGram::sum(&collinear_digs(4), 4);
+        // Noise uniform in +-3 about 20: a perfect equation removes all but 3 / (400 + 3).
+        let explained = 1.0 - held.sse(&xi) / held.yy;
+        assert!(explained > 0.98, "{explained}: {fit:?}");
+        assert!(fit.inclusion[3] < 0.2, "{fit:?}");
     }
 
     #[test]
