@@ -29,6 +29,11 @@ const GAP_S: f64 = 0.05;
 /// carry the links' weight, up to the relief for a heavy boom lifting).
 const PRESSING_RELIEF_FRACTION: f64 = 0.9;
 
+/// A lowering boom whose cylinder force is below this fraction of the links' weight on it rests
+/// the bucket on something (a lighter boom of the parameter changes, 5-25 %, stays far above; at
+/// half the weight, the dips of a lowering's start left out 15 % of the boom's free-air samples).
+const BOOM_GROUND_FRACTION: f64 = 0.25;
+
 /// The samples at which some cylinder pushes against an obstacle (the ground, a pile, its own
 /// stop): from a chamber above [`PRESSING_RELIEF_FRACTION`] of the relief under a command beyond
 /// the spool overlap, for as long as that command keeps its direction (the push goes on after the
@@ -36,12 +41,23 @@ const PRESSING_RELIEF_FRACTION: f64 = 0.9;
 /// seed 505 of the planned bench, the bucket opened onto the ground at 37 MPa and went on at
 /// 20-28 MPa for a second, a bucket-force residual of 144 kN that made the session 8x its
 /// reference). The cylinder forces are no free-air forces there.
-fn pressing(samples: &[Sample], params: &GreyBoxParams) -> Vec<bool> {
+///
+/// The boom also pushes when, lowering, its cylinder force (Eq. A20) falls below
+/// [`BOOM_GROUND_FRACTION`] of the links' weight on it (`boom_gravity_n`, Eq. A4, per sample): in
+/// free air the steadily lowering boom's force holds that weight up; far below it, the ground
+/// carries the bucket, at any pressure. That sample alone is left out, not the rest of the
+/// lowering: the force also dips as a lowering starts and the links accelerate down, and a latch
+/// left out half the boom's free-air samples. (Effect-free session none_s202 of the planned bench: the
+/// boom lowered the bucket onto the bench at 3.8 MPa head and 4.2 MPa rod, and 13 samples 80-280
+/// kN below the model made the session 11x its reference in the boom force.)
+fn pressing(samples: &[Sample], params: &GreyBoxParams, boom_gravity_n: &[f64]) -> Vec<bool> {
     let limit_pa = PRESSING_RELIEF_FRACTION * params.relief_pa;
     let mut direction = [0.0f64; 3];
     samples
         .iter()
-        .map(|s| {
+        .zip(boom_gravity_n)
+        .map(|(s, gravity_n)| {
+            let mut on_ground = false;
             for i in 0..3 {
                 let u = s.command[i];
                 let open = u.abs() > params.overlap;
@@ -56,11 +72,17 @@ fn pressing(samples: &[Sample], params: &GreyBoxParams) -> Vec<bool> {
                 } else {
                     s.head_pa[i].max(s.rod_pa[i])
                 };
+                let boom_on_ground = i == 0
+                    && u < 0.0
+                    && *gravity_n > 0.0
+                    && s.head_pa[0] * params.head_area_m2[0] - s.rod_pa[0] * params.rod_area_m2[0]
+                        < BOOM_GROUND_FRACTION * gravity_n;
                 if open && pushing_pa > limit_pa {
                     direction[i] = u.signum();
                 }
+                on_ground |= open && boom_on_ground;
             }
-            direction.iter().any(|d| *d != 0.0)
+            on_ground || direction.iter().any(|d| *d != 0.0)
         })
         .collect()
 }
@@ -260,7 +282,8 @@ impl PreparedRecord {
         // stalled under a large command or pushes with its relief pressure (the bucket pushing on
         // the ground or an obstacle).
         let mut consistent = vec![[true; 3]; n];
-        let mut stalled = pressing(&record.samples, params);
+        let boom_gravity_n: Vec<f64> = gravity_force.iter().map(|g| g[0]).collect();
+        let mut stalled = pressing(&record.samples, params, &boom_gravity_n);
         for k in 2..n.saturating_sub(2) {
             let dt = record.samples[k + 2].time_s - record.samples[k - 2].time_s;
             for i in 0..3 {
@@ -668,8 +691,35 @@ mod tests {
             sample(0.3, 0.7 * relief),
         ];
         assert_eq!(
-            pressing(&samples, &params),
+            pressing(&samples, &params, &[f64::NAN; 8]),
             [false, true, true, true, false, false, true, false]
+        );
+    }
+
+    /// A lowering boom whose force falls below a quarter of the links' weight on it rests the
+    /// bucket on the ground, at any pressure (that sample only); lifting, or lowering while it
+    /// holds the weight, it does not.
+    #[test]
+    fn a_lowering_boom_that_stops_holding_its_links_rests_on_the_ground() {
+        let params = crate::AugmentedModel::nominal().unwrap().params;
+        let gravity_n = 200e3;
+        let sample = |u: f64, force_n: f64| {
+            let mut s = crate::Sample::default();
+            s.command[0] = u;
+            s.rod_pa[0] = 4.0e6;
+            s.head_pa[0] = (force_n + s.rod_pa[0] * params.rod_area_m2[0]) / params.head_area_m2[0];
+            s
+        };
+        let samples = [
+            sample(-0.3, 190e3),
+            sample(-0.3, 20e3),
+            sample(-0.3, 150e3),
+            sample(0.3, 20e3),
+            sample(-0.3, -10e3),
+        ];
+        assert_eq!(
+            pressing(&samples, &params, &[gravity_n; 5]),
+            [false, true, false, false, true]
         );
     }
 
