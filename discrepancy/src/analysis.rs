@@ -413,14 +413,16 @@ fn eligible_signals(
             links_biased.join(", ")
         )
     });
+    let nothing_beyond = v.nothing_beyond_before();
+    if nothing_beyond && warning.is_none() {
+        return Ok((None, None));
+    }
     let mut eligible = [true; crate::greybox::N_SIGNALS];
-    if !v.nothing_beyond_before() {
+    if !nothing_beyond {
         for (sig, s) in Signal::ALL.iter().zip(&v.signals) {
             let not_judged = s.outcome == crate::verdict::Outcome::NotJudged;
             eligible[sig.index()] = not_judged || s.ratio_before > s.tolerance;
         }
-    } else if warning.is_none() {
-        return Ok((None, None));
     }
     if warning.is_some() {
         eligible[Signal::PayloadMass.index()] = false;

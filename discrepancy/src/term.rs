@@ -437,7 +437,9 @@ pub fn ensemble_fit(digs: &[DigGram], config: &TermConfig) -> Option<EnsembleFit
         .rposition(|f| f.train_explained >= config.parsimony * best)?;
     let mut fit = fits.swap_remove(choice);
     // The uncertainty: the same least squares on every resample.
-    let support: Vec<usize> = (0..p).filter(|j| fit.equation[*j] != 0.0).collect();
+    let support: Vec<usize> = (0..p)
+        .filter(|j| fit.inclusion[*j] >= config.min_inclusion)
+        .collect();
     let refits: Vec<DVector<f64>> = counts
         .iter()
         .map(|c| solve_on(&resample(c), &support))

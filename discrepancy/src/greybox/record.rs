@@ -57,7 +57,10 @@ fn pressing(samples: &[Sample], params: &GreyBoxParams, boom_gravity_n: &[f64]) 
         .iter()
         .zip(boom_gravity_n)
         .map(|(s, gravity_n)| {
-            let mut on_ground = false;
+            let on_ground = s.command[0] < -params.overlap
+                && *gravity_n > 0.0
+                && s.head_pa[0] * params.head_area_m2[0] - s.rod_pa[0] * params.rod_area_m2[0]
+                    < BOOM_GROUND_FRACTION * gravity_n;
             for i in 0..3 {
                 let u = s.command[i];
                 let open = u.abs() > params.overlap;
@@ -72,15 +75,9 @@ fn pressing(samples: &[Sample], params: &GreyBoxParams, boom_gravity_n: &[f64]) 
                 } else {
                     s.head_pa[i].max(s.rod_pa[i])
                 };
-                let boom_on_ground = i == 0
-                    && u < 0.0
-                    && *gravity_n > 0.0
-                    && s.head_pa[0] * params.head_area_m2[0] - s.rod_pa[0] * params.rod_area_m2[0]
-                        < BOOM_GROUND_FRACTION * gravity_n;
                 if open && pushing_pa > limit_pa {
                     direction[i] = u.signum();
                 }
-                on_ground |= open && boom_on_ground;
             }
             on_ground || direction.iter().any(|d| *d != 0.0)
         })
