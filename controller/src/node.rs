@@ -1106,12 +1106,13 @@ mod tests {
 
     #[test]
     fn cycle_config_refuses_nan_negative_and_infinite_values() {
-        let fields: [Field<CycleConfig>; 15] = [
+        let fields: [Field<CycleConfig>; 16] = [
             ("dump_swing_deg", |c| &mut c.dump_swing_rad),
             ("home_swing_deg", |c| &mut c.home_swing_rad),
             ("carry_boom_deg", |c| &mut c.carry_boom_rad),
             ("carry_tip_z_m", |c| &mut c.carry_tip_z_m),
             ("dump_bucket_deg", |c| &mut c.dump_bucket_rad),
+            ("dump_bucket_abs_deg", |c| &mut c.dump_bucket_abs_rad),
             ("dump_hold_s", |c| &mut c.dump_hold_s),
             ("settle_s", |c| &mut c.settle_s),
             ("move_timeout_s", |c| &mut c.move_timeout_s),

@@ -693,7 +693,7 @@ fn replay_csv(
 ) -> anyhow::Result<String> {
     let (p_old, p_new) = replay_old_new(rec, old, new, r)?;
     let mut s = String::from(
-        "time_s,stage,load,u_boom,u_stick,u_bucket,u_swing,head_boom,rod_boom,head_stick,rod_stick,head_bucket,rod_bucket,pump1,pump2",
+        "time_s,stage,load,u_boom,u_stick,u_bucket,u_swing,head_boom,rod_boom,head_stick,rod_stick,head_bucket,rod_bucket,pump1,pump2,angle_boom_rad,angle_stick_rad,angle_bucket_rad,swing_rad,swing_rate_rad_per_s",
     );
     for sig in Signal::ALL {
         let _ = write!(s, ",{0}_measured,{0}_nominal,{0}_augmented", sig.name());
@@ -725,6 +725,10 @@ fn replay_csv(
             let _ = write!(s, ",{:.0},{:.0}", smp.head_pa[i], smp.rod_pa[i]);
         }
         let _ = write!(s, ",{:.0},{:.0}", smp.pump_pa[0], smp.pump_pa[1]);
+        for a in smp.angles_rad {
+            let _ = write!(s, ",{a:.5}");
+        }
+        let _ = write!(s, ",{:.5},{:.5}", smp.swing_rad, smp.swing_rate_rad_per_s);
         for j in 0..N_SIGNALS {
             let _ = write!(
                 s,

@@ -159,21 +159,8 @@ impl CutSection {
     /// repose around the edge's position `tip` (`[r, z]`) where it left the lip, in lumps
     /// ([`SPILL_LUMP_M3`], [`SPILL_LUMP_AGE_S`]). `in_soil` as [`Self::motion`]'s depth > 0.
     pub fn spill(&mut self, tip: [f64; 2], bucket_abs_rad: f64, in_soil: bool, dt_s: f64) {
-        // The opening faces bucket_abs - 90 degrees; it holds while that points up.
-        let opening_up = (bucket_abs_rad - std::f64::consts::FRAC_PI_2).sin();
-        let retention = if in_soil {
-            1.0
-        } else {
-            ((opening_up + RETENTION_OFFSET) / RETENTION_SPAN).clamp(0.0, 1.0)
-        };
-        let holdable = self.capacity_m3 * retention;
-        if self.content_m3 > holdable {
-            let out = if in_soil {
-                self.content_m3 - holdable
-            } else {
-                (self.content_m3 - holdable).min(POUR_RATE_M3_PER_S * dt_s.max(0.0))
-            };
-            self.content_m3 -= out;
+        let out = self.pour(bucket_abs_rad, in_soil, dt_s);
+        if out > 0.0 {
             self.pending_m3 += out;
             self.pending_at_m = tip[0];
         }
@@ -189,6 +176,29 @@ impl CutSection {
             self.pending_m3 = 0.0;
             self.pending_age_s = 0.0;
         }
+    }
+
+    /// What the bucket cannot hold leaves it, as in [`Self::spill`], without piling it up on the
+    /// section (the soil poured out in the air, away from the cut): returns that volume, m^3.
+    pub fn pour(&mut self, bucket_abs_rad: f64, in_soil: bool, dt_s: f64) -> f64 {
+        // The opening faces bucket_abs - 90 degrees; it holds while that points up.
+        let opening_up = (bucket_abs_rad - std::f64::consts::FRAC_PI_2).sin();
+        let retention = if in_soil {
+            1.0
+        } else {
+            ((opening_up + RETENTION_OFFSET) / RETENTION_SPAN).clamp(0.0, 1.0)
+        };
+        let holdable = self.capacity_m3 * retention;
+        if self.content_m3 <= holdable {
+            return 0.0;
+        }
+        let out = if in_soil {
+            self.content_m3 - holdable
+        } else {
+            (self.content_m3 - holdable).min(POUR_RATE_M3_PER_S * dt_s.max(0.0))
+        };
+        self.content_m3 -= out;
+        out
     }
 
     /// Piles `volume_m3` up as a cone at the angle of repose centred on the plane at `r_m`: every
@@ -386,6 +396,23 @@ mod tests {
         let held = s.content_m3();
         s.spill([6.0, 3.0], -std::f64::consts::PI, false, 0.01);
         assert!((s.content_m3() - held).abs() < 1e-12);
+    }
+
+    /// Pouring lets out what the bucket cannot hold as `spill` does, but piles nothing up.
+    #[test]
+    fn a_bucket_tipped_in_the_air_pours_out_without_a_pile() {
+        let mut s = CutSection::new(&flat(1.0), &[], 1.3, 0.5, 37f64.to_radians()).expect("grid");
+        drag(&mut s, 8.0, 6.0, 0.7);
+        let before: f64 = s.grid.heights_mut().iter().sum();
+        // In the soil: down to the capacity at once.
+        let out = s.pour(-2.0, true, 0.01);
+        assert!((s.content_m3() - 0.5).abs() < 1e-12 && out > 0.1, "{out}");
+        // Opening up: it holds; opening down: it pours at the pour rate.
+        assert_eq!(s.pour(-std::f64::consts::PI, false, 0.01), 0.0);
+        let out = s.pour(0.0, false, 0.01);
+        assert!((out - POUR_RATE_M3_PER_S * 0.01).abs() < 1e-12, "{out}");
+        let after: f64 = s.grid.heights_mut().iter().sum();
+        assert_eq!(before, after);
     }
 
     #[test]

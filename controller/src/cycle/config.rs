@@ -34,6 +34,13 @@ pub struct CycleConfig {
     /// Bucket joint angle (relative to the stick) that empties the bucket, degrees in files. Default 20.
     #[serde(rename = "dump_bucket_deg", with = "planner::machine::degrees")]
     pub dump_bucket_rad: f64,
+    /// Bucket angle to the horizontal (the thesis's rho, `boom + stick + bucket`) at or above which
+    /// the bucket empties, degrees in files: the opening then faces at least 45 degrees below the
+    /// horizontal, steeper than a soil's angle of repose. A dump that reaches `dump_bucket_deg`
+    /// below it (the stick folded in at the end of a dig) extends the stick until the bucket gets
+    /// there or the stick reaches its limit. Default -45.
+    #[serde(rename = "dump_bucket_abs_deg", with = "planner::machine::degrees")]
+    pub dump_bucket_abs_rad: f64,
     /// Hold the dump pose this long, s. Default 1.0.
     pub dump_hold_s: f64,
     /// Implement P-controllers (error in rad). Default kp 2, max 0.8, tolerance 0.03 rad.
@@ -98,6 +105,7 @@ impl Default for CycleConfig {
             carry_boom_rad: 42.0_f64.to_radians(),
             carry_tip_z_m: 2.8,
             dump_bucket_rad: 20.0_f64.to_radians(),
+            dump_bucket_abs_rad: (-45.0_f64).to_radians(),
             dump_hold_s: 1.0,
             joint: PGain {
                 kp: 2.0,
@@ -169,6 +177,12 @@ impl CycleConfig {
             "dump_bucket_deg",
             self.dump_bucket_rad,
             Limits::closed(-180.0, 180.0, "deg"),
+        )?;
+        check_deg(
+            S,
+            "dump_bucket_abs_deg",
+            self.dump_bucket_abs_rad,
+            Limits::closed(-90.0, 90.0, "deg"),
         )?;
         let height = Limits::closed(-20.0, 20.0, "m");
         check(S, "carry_tip_z_m", self.carry_tip_z_m, height, "")?;

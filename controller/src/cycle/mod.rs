@@ -184,6 +184,8 @@ pub struct WorkCycle {
     /// MoveToDig: since when a commanded implement cylinder's port has been near relief
     /// ([`MOVE_BLOCKED_S`](moving::MOVE_BLOCKED_S)).
     relief_since_s: Option<f64>,
+    /// MoveToDig: when some cylinder was last at relief ([`moving::MOVE_RELIEF_GAP_S`]), s.
+    relief_seen_s: f64,
     last_move_s: Option<f64>,
     /// MoveToDig close enough: the tip's least distance to the start's tip so far and when it last
     /// shrank by 1 cm.
@@ -260,6 +262,7 @@ impl WorkCycle {
             stall_best_rad: [f64::INFINITY; 4],
             stall_progress_s: [0.0; 4],
             relief_since_s: None,
+            relief_seen_s: f64::NEG_INFINITY,
             last_move_s: None,
             move_best_m: f64::INFINITY,
             move_progress_s: 0.0,
@@ -488,6 +491,7 @@ impl WorkCycle {
         self.stall_boost = [0.0; 4];
         self.stall_best_rad = [f64::INFINITY; 4];
         self.relief_since_s = None;
+        self.relief_seen_s = f64::NEG_INFINITY;
         self.last_move_s = None;
         self.move_best_m = f64::INFINITY;
         self.move_progress_s = now_s;

@@ -35,6 +35,11 @@ pub(super) const MOVE_CLOSE_ENOUGH_SWING_RAD: f64 = 0.035;
 /// show): the move is abandoned then, not at its time-out, s.
 pub(super) const MOVE_BLOCKED_S: f64 = 2.0;
 
+/// MoveToDig blocked: relief episodes this close together count as one push, s. A bucket held in
+/// the ground alternates between pushing at relief under its own command and being pushed to
+/// relief against its closed valve while the boom tries to lift it free, a second apart.
+pub(super) const MOVE_RELIEF_GAP_S: f64 = 1.0;
+
 /// MoveToDig: spacing of the terrain heights along the digging plane the clearance is judged on, m.
 pub(super) const CLEARANCE_STEP_M: f64 = 0.1;
 
@@ -259,18 +264,28 @@ impl WorkCycle {
             None => (0.0, true),
         };
         // Blocked: a commanded cylinder pushing at relief (the port its valve command pressurises:
-        // extending, a positive command, fills the head).
+        // extending, a positive command, fills the head), or a stick or bucket pushed to relief
+        // against its closed valve (something outside holds it). The boom's chambers bounce to
+        // relief on their oil columns behind its closed valve while the swing turns; they do not
+        // count.
         let relief = &self.autodig_config.relief_pressure_pa;
         let at_relief = (0..3).any(|i| {
             let u = implement[i];
             let port_pa = if u > 0.0 {
                 s.head_pressure_pa[i]
-            } else {
+            } else if u < 0.0 {
                 s.rod_pressure_pa[i]
+            } else if i == 0 {
+                0.0
+            } else {
+                s.head_pressure_pa[i].max(s.rod_pressure_pa[i])
             };
-            u != 0.0 && port_pa >= RELIEF_RELIFT_FRACTION * relief[i]
+            port_pa >= RELIEF_RELIFT_FRACTION * relief[i]
         });
-        self.relief_since_s = if at_relief {
+        if at_relief {
+            self.relief_seen_s = now_s;
+        }
+        self.relief_since_s = if now_s - self.relief_seen_s <= MOVE_RELIEF_GAP_S {
             self.relief_since_s.or(Some(now_s))
         } else {
             None
@@ -412,7 +427,7 @@ mod tests {
     use crate::cycle::{Action, CycleCommand, CycleConfig, Phase, StartPose, WorkCycle};
     use crate::safety::{ArmMode, ControlFault};
 
-    use crate::cycle::test_support::{cycle, est_at, feed_pressures, kin};
+    use crate::cycle::test_support::{cycle, est_at, feed_cylinder_pressures, feed_pressures, kin};
     use crate::estimate::Estimator;
     use crate::estimate::EstimatorConfig;
     use planner::kinematics::JointAngles;
@@ -596,6 +611,42 @@ mod tests {
             } else {
                 assert_eq!(fault, None);
                 assert_eq!(c.phase(), Phase::MoveToDig);
+            }
+        }
+    }
+
+    /// A bucket held in the ground: its rod reaches the relief against its closed valve every
+    /// second (the boom tries to lift it free) and falls back between; with the stick pushing at
+    /// normal pressures and the tip getting no closer, the move is blocked within a few seconds.
+    /// Without the bucket's relief it keeps moving.
+    #[test]
+    fn a_bucket_pushed_to_relief_against_its_closed_valve_blocks_the_move() {
+        let (boom, stick, bucket) = (0.2, -1.3, -0.5);
+        let (k, m) = kin();
+        for (peak_pa, blocked) in [(37.0e6, true), (20.0e6, false)] {
+            let mut c = moving_to(boom, stick - 0.1, bucket);
+            let mut e =
+                Estimator::new(k.clone(), m.tracks.gauge_m, EstimatorConfig::default()).unwrap();
+            let (mut t, mut fault) = (0.0, None);
+            while t < 8.0 && fault.is_none() {
+                // At the peak for 0.2 s of every second.
+                let bucket_rod_pa = if t % 1.0 < 0.2 { peak_pa } else { 5.0e6 };
+                let pressures = [[8.0e6, 1.0e6], [8.0e6, 1.0e6], [1.0e6, bucket_rod_pa]];
+                feed_cylinder_pressures(&mut e, [boom, stick, bucket, 0.0], 0.0, t, pressures);
+                let out = c.step(t, &e, Some(ArmMode::Valve));
+                if let Ok(out) = &out
+                    && let CycleCommand::Valves(v) = out.command
+                {
+                    assert_eq!(v[2], 0.0, "the bucket's valve stays closed");
+                }
+                fault = out.err();
+                t += 0.01;
+            }
+            if blocked {
+                assert_eq!(fault, Some(ControlFault::Blocked("move to the dig")), "{t}");
+                assert!(t < 4.0, "{t}");
+            } else {
+                assert_eq!(fault, None);
             }
         }
     }

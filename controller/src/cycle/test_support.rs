@@ -50,6 +50,17 @@ pub(super) fn feed_pressures(
     head_pa: f64,
     rod_pa: f64,
 ) {
+    feed_cylinder_pressures(e, q, odo, t, [[head_pa, rod_pa]; 3]);
+}
+
+/// [`feed_pressures`] with each cylinder's `[head, rod]` pressures (boom, stick, bucket), Pa.
+pub(super) fn feed_cylinder_pressures(
+    e: &mut Estimator,
+    q: [f64; 4],
+    odo: f64,
+    t: f64,
+    pressures_pa: [[f64; 2]; 3],
+) {
     e.on_message(
         &Message::JointAngles(firmware_bridge::messages::JointAngles {
             boom_rad: q[0],
@@ -67,7 +78,7 @@ pub(super) fn feed_pressures(
         }),
         t,
     );
-    for c in Cylinder::ALL {
+    for (c, [head_pa, rod_pa]) in Cylinder::ALL.into_iter().zip(pressures_pa) {
         e.on_message(
             &Message::AuxValveMeasured(AuxValveMeasured {
                 cylinder: c,

@@ -137,9 +137,16 @@ impl WorkCycle {
             return Err(ControlFault::Timeout("dump"));
         }
         let s = est.state();
+        let tolerance = self.config.joint.tolerance;
         let err = self.config.dump_bucket_rad - s.joints.bucket_rad;
-        let open = err <= self.config.joint.tolerance;
-        if self.settled(open, now_s)
+        // The bucket empties by its angle to the horizontal: a stick folded in at the end of the
+        // dig leaves an opened bucket facing up enough to hold part of its load, which the next dig
+        // and weighing would carry. The stick extends until the bucket faces down enough.
+        let abs_err = self.config.dump_bucket_abs_rad - s.joints.bucket_abs_rad();
+        let stick_max_rad = est.kinematics().joint_limits(Joint::Stick).1 - 0.05;
+        let facing_down = abs_err <= tolerance || s.joints.stick_rad >= stick_max_rad;
+        let open = err <= tolerance;
+        if self.settled(open && facing_down, now_s)
             && now_s - self.settle_since_s.unwrap_or(now_s) >= self.config.dump_hold_s
         {
             if let Some(r) = self.record.take() {
@@ -192,7 +199,12 @@ impl WorkCycle {
         } else {
             0.0
         };
-        Ok(CycleCommand::Valves([boom, 0.0, bucket, 0.0, 0.0, 0.0]))
+        let stick = if facing_down {
+            0.0
+        } else {
+            JOINT_SIGN[1] * self.config.joint.command(abs_err)
+        };
+        Ok(CycleCommand::Valves([boom, stick, bucket, 0.0, 0.0, 0.0]))
     }
 
     pub(super) fn step_track(
@@ -352,13 +364,50 @@ mod tests {
 
     /// One Dump step with the bucket at `bucket_rad` and the bucket's rod at `rod_pa` (heads 8 MPa).
     fn dump_step(c: &mut WorkCycle, bucket_rad: f64, t: f64, rod_pa: f64) -> [f64; 6] {
-        let (k, m) = kin();
-        let mut e = Estimator::new(k, m.tracks.gauge_m, EstimatorConfig::default()).unwrap();
-        feed_pressures(&mut e, [0.5, -1.3, bucket_rad, 1.0], 0.0, t, 8e6, rod_pa);
-        match c.step(t, &e, Some(ArmMode::Valve)).unwrap().command {
+        match dump_step_at(c, [0.5, -1.3, bucket_rad], t, rod_pa) {
             CycleCommand::Valves(v) => v,
             other => panic!("expected valve commands, got {other:?}"),
         }
+    }
+
+    /// One Dump step at the joint angles `[boom, stick, bucket]`.
+    fn dump_step_at(c: &mut WorkCycle, q: [f64; 3], t: f64, rod_pa: f64) -> CycleCommand {
+        let (k, m) = kin();
+        let mut e = Estimator::new(k, m.tracks.gauge_m, EstimatorConfig::default()).unwrap();
+        feed_pressures(&mut e, [q[0], q[1], q[2], 1.0], 0.0, t, 8e6, rod_pa);
+        c.step(t, &e, Some(ArmMode::Valve)).unwrap().command
+    }
+
+    /// A bucket opened to `dump_bucket_deg` on a stick folded in still faces up enough to hold part
+    /// of its load: the stick extends until the bucket's angle to the horizontal reaches
+    /// `dump_bucket_abs_deg`, and only then the dump holds and ends.
+    #[test]
+    fn a_dump_on_a_folded_stick_extends_it_until_the_bucket_faces_down() {
+        let mut c = dumping();
+        let hold = c.config.dump_hold_s;
+        // Boom 46 deg, stick -145 deg, bucket 26 deg (open): the bucket at -73 deg.
+        let folded = [0.8, -2.53, 0.45];
+        let mut t = 0.0;
+        while t < 2.0 * hold {
+            let CycleCommand::Valves(v) = dump_step_at(&mut c, folded, t, 1e6) else {
+                panic!("the dump ended with the bucket at -73 deg, at {t} s")
+            };
+            assert!(v[1] < 0.0, "the stick extends (JOINT_SIGN): {v:?}");
+            assert_eq!(v[2], 0.0, "the bucket is open: {v:?}");
+            t += 0.01;
+        }
+        assert_eq!(c.phase(), Phase::Dump);
+        // Extended to -110 deg: the bucket at -38 deg faces down; the dump holds, then ends.
+        let extended = [0.8, -1.92, 0.45];
+        let since = t;
+        while c.phase() == Phase::Dump {
+            assert!(t < since + 2.0 * hold + 1.0, "the dump never ended");
+            if let CycleCommand::Valves(v) = dump_step_at(&mut c, extended, t, 1e6) {
+                assert_eq!(v[..3], [0.0; 3], "at {t} s");
+            }
+            t += 0.01;
+        }
+        assert!(t - since >= hold, "ended after {} s", t - since);
     }
 
     #[test]

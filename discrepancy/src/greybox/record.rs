@@ -84,6 +84,51 @@ fn pressing(samples: &[Sample], params: &GreyBoxParams, boom_gravity_n: &[f64]) 
         .collect()
 }
 
+/// Samples up to this long after one where a stick or bucket chamber reads the relief are held
+/// from outside too, s: a bucket held in the ground alternates, about a second apart, between
+/// being pushed to the relief against its closed valve while the boom tries to lift it free and
+/// pushing under its own command at part of the relief.
+const HELD_AFTER_S: f64 = 1.0;
+/// ... and up to this long before it, s: the contact builds the pressure up to the relief in
+/// about 0.15 s (16, 24, then 37 MPa at none_s203); the free-air lowering that ends on the ground
+/// a second before stays in.
+const HELD_BEFORE_S: f64 = 0.25;
+
+/// The samples at which something outside holds the implement: from [`HELD_BEFORE_S`] before to
+/// [`HELD_AFTER_S`] after a sample where a chamber of the stick or the bucket reads above
+/// [`PRESSING_RELIEF_FRACTION`] of the relief away from its stroke ends (`in_stroke`: at its end
+/// the stop holds the trapped oil, as for the curled full bucket at the relief all through the
+/// carry), under its own command or behind its closed valve. In free air neither the links'
+/// weight nor their inertia drives these cylinders that far. The boom is left out: its chambers
+/// bounce to relief on their oil columns behind its closed valve while the swing turns.
+/// (Effect-free session none_s203 of the planned bench: a move to a cleanup's start held the
+/// bucket in the floor for 3 s, the bucket's rod at 37 MPa behind its closed valve while the boom
+/// lifted at full command with 1 MPa in its heads; boom-force residuals of 380 kN made the
+/// session 23x its reference.)
+fn held_from_outside(
+    samples: &[Sample],
+    params: &GreyBoxParams,
+    in_stroke: &[[bool; 3]],
+) -> Vec<bool> {
+    let limit_pa = PRESSING_RELIEF_FRACTION * params.relief_pa;
+    let held_at: Vec<f64> = samples
+        .iter()
+        .zip(in_stroke)
+        .filter(|(s, inside)| (1..3).any(|i| inside[i] && s.head_pa[i].max(s.rod_pa[i]) > limit_pa))
+        .map(|(s, _)| s.time_s)
+        .collect();
+    samples
+        .iter()
+        .map(|s| {
+            // The first held sample not earlier than HELD_AFTER_S before this one (sorted times).
+            let first = held_at.partition_point(|t| *t < s.time_s - HELD_AFTER_S);
+            held_at
+                .get(first)
+                .is_some_and(|t| *t <= s.time_s + HELD_BEFORE_S)
+        })
+        .collect()
+}
+
 /// Whether each sample is at least [`WARMUP_SAMPLES`] past the start of its record or the last gap.
 /// (Effect-free session none_s200: in the Dig stage that followed a cleanup the stick moved at 0.22
 /// m/s on the spool the gateway had opened, the replay's spools came out of the gap closed and
@@ -281,6 +326,12 @@ impl PreparedRecord {
         let mut consistent = vec![[true; 3]; n];
         let boom_gravity_n: Vec<f64> = gravity_force.iter().map(|g| g[0]).collect();
         let mut stalled = pressing(&record.samples, params, &boom_gravity_n);
+        for (k, held) in held_from_outside(&record.samples, params, &in_stroke)
+            .into_iter()
+            .enumerate()
+        {
+            stalled[k] |= held;
+        }
         for k in 2..n.saturating_sub(2) {
             let dt = record.samples[k + 2].time_s - record.samples[k - 2].time_s;
             for i in 0..3 {
@@ -344,11 +395,13 @@ impl PreparedRecord {
                 .get(k + 1)
                 .map_or(0.01, |next| next.time_s - s.time_s);
             let spill = |c: &mut CutSection| {
-                if params.spill_pile && s.stage != StageTag::Outside {
-                    let in_soil = c
-                        .motion(tip, pose.bucket_abs_rad, tip_velocity)
+                let in_soil = s.stage != StageTag::Outside
+                    && c.motion(tip, pose.bucket_abs_rad, tip_velocity)
                         .is_some_and(|m| m.vertical_depth_m > 0.0);
+                if params.spill_pile && s.stage != StageTag::Outside {
                     c.spill(tip, pose.bucket_abs_rad, in_soil, spill_dt_s);
+                } else {
+                    c.pour(pose.bucket_abs_rad, in_soil, spill_dt_s);
                 }
             };
             let m = &mut measured[k];
@@ -717,6 +770,44 @@ mod tests {
         assert_eq!(
             pressing(&samples, &params, &[gravity_n; 5]),
             [false, true, false, false, true]
+        );
+    }
+
+    /// A stick or bucket chamber at the relief marks the samples from a quarter second before it
+    /// to a second after, whether its valve is closed or open; at its stroke end, or the boom's
+    /// chambers at the relief, it does not.
+    #[test]
+    fn a_bucket_pushed_to_relief_is_held_from_outside_for_a_second_after() {
+        let params = crate::AugmentedModel::nominal().unwrap().params;
+        let relief = params.relief_pa;
+        let sample = |time_s: f64, u: f64, bucket_rod_pa: f64, boom_head_pa: f64| {
+            let mut s = crate::Sample {
+                time_s,
+                ..Default::default()
+            };
+            s.command[2] = u;
+            s.rod_pa[2] = bucket_rod_pa;
+            s.head_pa[0] = boom_head_pa;
+            s
+        };
+        let quiet = 5.0e6;
+        let samples = [
+            sample(0.0, 0.0, quiet, 0.0),
+            sample(0.8, 0.0, quiet, 0.0),
+            sample(1.0, 0.0, 0.95 * relief, 0.0),
+            sample(1.9, 0.0, quiet, 0.0),
+            sample(2.1, 0.0, quiet, 0.0),
+            sample(3.0, -0.5, 0.95 * relief, 0.0),
+            sample(3.5, 0.0, quiet, 0.0),
+            sample(6.0, 0.0, 0.95 * relief, 0.0),
+            sample(8.0, 0.0, quiet, 0.95 * relief),
+        ];
+        let mut in_stroke = [[true; 3]; 9];
+        // The bucket at its stroke end at 6 s.
+        in_stroke[7][2] = false;
+        assert_eq!(
+            held_from_outside(&samples, &params, &in_stroke),
+            [false, true, true, true, false, true, true, false, false]
         );
     }
 
