@@ -176,7 +176,6 @@ pub fn calibrated(
     let mut params = model.params.clone();
     if !reference.parameter_calibration.is_empty() {
         let library = crate::parameters::ParameterLibrary::derive(machine)?;
-        let (lo, hi) = crate::parameters::FACTOR_RANGE;
         for p in &reference.parameter_calibration {
             let i = library.find(&p.key).with_context(|| {
                 format!(
@@ -184,6 +183,7 @@ pub fn calibrated(
                     p.key
                 )
             })?;
+            let (lo, hi) = crate::parameters::factor_range(&p.key);
             anyhow::ensure!(
                 p.factor.is_finite() && (lo..=hi).contains(&p.factor),
                 "the reference calibrates {} by a factor of {} (outside {lo}-{hi})",

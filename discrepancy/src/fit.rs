@@ -27,7 +27,7 @@ use super::effects::{Candidate, CandidateEffect as _};
 use super::greybox::{
     Augmentation, GreyBoxParams, N_SIGNALS, PreparedRecord, Signal, SignalGroups, replay,
 };
-use super::parameters::{FACTOR_RANGE, ParameterLibrary};
+use super::parameters::{FACTOR_RANGE, ParameterLibrary, factor_range};
 use super::stats::{self, ResidualSummary};
 use super::{DiscrepancyError, Result};
 
@@ -269,10 +269,11 @@ impl Trial {
         }
     }
 
-    fn range(self) -> (f64, f64) {
-        match self {
-            Trial::Effect(c) => c.range(),
-            Trial::Parameter(_) => FACTOR_RANGE,
+    fn range(self, library: Option<&ParameterLibrary>) -> (f64, f64) {
+        match (self, library) {
+            (Trial::Effect(c), _) => c.range(),
+            (Trial::Parameter(i), Some(l)) => factor_range(&l.parameters[i].key),
+            (Trial::Parameter(_), None) => FACTOR_RANGE,
         }
     }
 
@@ -780,7 +781,7 @@ pub fn analyse(
             let c = *c;
             let library = config.parameters.as_ref();
             let groups = c.groups();
-            let (lo, hi) = c.range();
+            let (lo, hi) = c.range(library);
             // The model with the trial at `x`: an effect's magnitude, or a parameter's factor on
             // the file's value (`None`: the machine file is not valid there).
             let at = |x: f64| c.at(x, &aug, &params_now, library);
@@ -1089,7 +1090,7 @@ fn resolve_confusable(
         Some((a, p)) => chi2(&round.w, &train_eval.sse_with(&a, p.as_ref(), groups)),
         None => f64::INFINITY,
     };
-    let ((lo_c, hi_c), (lo_d, hi_d)) = (c.range(), d.range());
+    let ((lo_c, hi_c), (lo_d, hi_d)) = (c.range(library), d.range(library));
     // Start on the line between the two fits alone (where the confusable pair trades one for
     // the other: coordinate descent from either end stays on its axis), then coordinate descent.
     let yd = d.base(base) + ds.magnitude;
