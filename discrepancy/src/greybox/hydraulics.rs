@@ -219,7 +219,7 @@ impl NeutralCache {
         params: &GreyBoxParams,
         b: PumpBalance,
         meter_in: &[(f64, f64)],
-        guess: (f64, PumpStart),
+        guess: f64,
     ) -> f64 {
         if meter_in.iter().any(|(k, _)| *k > 0.0) {
             return pump_pressure(params, b, meter_in, guess);
@@ -235,115 +235,101 @@ impl NeutralCache {
     }
 }
 
-/// Where the pump solve starts: the measured reading, or a prediction of a nearby model (the
-/// bracket around it starts narrower: 20 kPa instead of 250 kPa, widening fourfold until it
-/// holds the root).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) enum PumpStart {
-    /// The measured pump pressure.
-    Reading,
-    /// The pump pressure an earlier replay predicted.
-    Prediction,
-}
-
 /// The pump balance is solved to this pressure, Pa.
 const SOLVE_TOLERANCE_PA: f64 = 1.0e3;
 
-/// Gallery pressure of one pump from its flow balance, solved by regula falsi (the balance falls
-/// monotonically with the pressure, so the root is unique), starting from a bracket around
-/// `guess_pa` (the measured pump pressure: a few evaluations instead of a dozen).
+/// Most steps of the pump solve (Newton or bisection); the bisection alone needs about 16 on the
+/// whole window from the tank to above the relief.
+const SOLVE_MAX_STEPS: usize = 60;
+
+/// Gallery pressure of one pump from its flow balance (Eqs. 1-2 at the pump: supply less the
+/// bypass, the open meter-in orifices and the relief), solved by Newton's method from `guess_pa`
+/// (the measured pump pressure or an earlier replay's prediction, usually within a few hundred
+/// kPa of the root), safeguarded by bisection: the balance falls monotonically with the pressure,
+/// so the root is unique and every evaluation narrows a bracket `[tank, top]` around it; a Newton
+/// step that would leave the bracket (at a kink of the balance: the power limit, a laminar-turbulent
+/// change, the relief) is replaced by its midpoint.
 fn pump_pressure(
     params: &GreyBoxParams,
     b: PumpBalance,
     meter_in: &[(f64, f64)],
-    (guess_pa, start): (f64, PumpStart),
+    guess_pa: f64,
 ) -> f64 {
     let lam = params.laminar_dp_pa;
     let tank = params.tank_pa;
     let relief_slope = params.pump_max_flow_m3_per_s / params.relief_override_pa;
+    // The balance (flow surplus, m^3/s) and its slope in the pressure.
     let balance = |p: f64| {
-        let mut f = b.max_flow.min(params.pump_power_w / p.max(1.0)) - b.fixed_demand;
-        f -= orifice(b.bypass_k, p - tank, lam);
+        let supply = params.pump_power_w / p.max(1.0);
+        let (mut f, mut df) = if supply < b.max_flow {
+            (supply, -supply / p.max(1.0))
+        } else {
+            (b.max_flow, 0.0)
+        };
+        f -= b.fixed_demand;
+        let mut take = |k: f64, dp: f64| {
+            if k <= 0.0 {
+            } else if dp.abs() < lam {
+                let g = k / lam.sqrt();
+                f -= g * dp;
+                df -= g;
+            } else {
+                let r = dp.abs().sqrt();
+                f -= k * r * dp.signum();
+                df -= 0.5 * k / r;
+            }
+        };
+        take(b.bypass_k, p - tank);
         for (k, p_in) in meter_in {
             if p > *p_in {
-                f -= orifice(*k, p - p_in, lam);
+                take(*k, p - p_in);
             }
         }
         if p > params.relief_pa {
             f -= relief_slope * (p - params.relief_pa);
+            df -= relief_slope;
         }
-        f
+        (f, df)
     };
+    // Above `top` the relief alone takes 20 times the pump's flow: the balance is negative there.
     let top = params.relief_pa + 20.0 * params.relief_override_pa;
-    let f_tank = balance(tank);
-    if f_tank <= 0.0 {
-        return tank;
-    }
-    // Bracket: grow a window around the guess until the balance changes sign in it.
-    let guess = if guess_pa.is_finite() {
+    let (mut lo, mut hi) = (tank, top);
+    let mut tank_checked = false;
+    let mut p = if guess_pa.is_finite() {
         guess_pa.clamp(tank, top)
     } else {
         0.5 * (tank + top)
     };
-    let mut step = match start {
-        PumpStart::Reading => 2.5e5,
-        PumpStart::Prediction => 2.0e4,
-    };
-    let (mut lo, mut hi) = ((guess - step).max(tank), (guess + step).min(top));
-    let (mut f_lo, mut f_hi) = (if lo <= tank { f_tank } else { balance(lo) }, balance(hi));
-    while f_lo <= 0.0 || f_hi > 0.0 {
-        step *= 4.0;
-        if f_lo <= 0.0 {
-            hi = lo;
-            f_hi = f_lo;
-            lo = (lo - step).max(tank);
-            f_lo = if lo <= tank { f_tank } else { balance(lo) };
-        } else {
-            if hi >= top {
-                return top;
-            }
-            lo = hi;
-            f_lo = f_hi;
-            hi = (hi + step).min(top);
-            f_hi = balance(hi);
-        }
-    }
-    // Regula falsi with the Illinois modification: a few evaluations to 1 kPa. It stops when the
-    // bracket is that narrow, or when the balance at the new point is within 1 kPa of its root
-    // along the bracket's secant (`true_lo`, `true_hi`: the balance at the ends before the
-    // Illinois halving): the balance falls monotonically, so the secant's slope is a fair measure
-    // of its slope there, and one side of the bracket often stays put while the other converges.
-    let (mut true_lo, mut true_hi) = (f_lo, f_hi);
-    let mut side = 0;
-    for _ in 0..60 {
-        if hi - lo < SOLVE_TOLERANCE_PA {
-            break;
-        }
-        let p = (lo * (-f_hi) + hi * f_lo) / (f_lo - f_hi);
-        let f = balance(p);
-        let slope = (true_lo - true_hi) / (hi - lo);
-        if f == 0.0 || f.abs() < SOLVE_TOLERANCE_PA * slope {
+    for _ in 0..SOLVE_MAX_STEPS {
+        let (f, df) = balance(p);
+        if f == 0.0 {
             return p;
         }
         if f > 0.0 {
             lo = p;
-            f_lo = f;
-            true_lo = f;
-            if side == 1 {
-                f_hi *= 0.5;
-            }
-            side = 1;
         } else {
             hi = p;
-            f_hi = f;
-            true_hi = f;
-            if side == -1 {
-                f_lo *= 0.5;
-            }
-            side = -1;
         }
+        let newton = p - f / df;
+        let next = if newton > lo && newton < hi {
+            newton
+        } else {
+            // A step out of the bracket toward the tank: the tank itself may be the answer
+            // (nothing demanded and no bypass flow to push).
+            if lo <= tank && !tank_checked {
+                tank_checked = true;
+                if balance(tank).0 <= 0.0 {
+                    return tank;
+                }
+            }
+            0.5 * (lo + hi)
+        };
+        if (next - p).abs() < SOLVE_TOLERANCE_PA || hi - lo < SOLVE_TOLERANCE_PA {
+            return next;
+        }
+        p = next;
     }
-    0.5 * (lo + hi)
+    p
 }
 
 /// Cylinder velocity the grey-box model gives for a spool position and a cylinder force, used by
@@ -486,6 +472,40 @@ mod tests {
 
     /// The warm-started solve finds the flow balance's unique root from any starting guess, and the
     /// neutral-valve cache returns what a fresh solve gives.
+    /// The solve's ends: a demand above the pump's flow leaves the gallery at the tank, and a
+    /// pump with every path closed (no bypass, no open valve) rises above the relief until the
+    /// relief takes the pump's whole flow, from any start.
+    #[test]
+    fn pump_pressure_at_the_tank_and_over_the_relief() {
+        let params = crate::AugmentedModel::nominal().unwrap().params;
+        let starved = PumpBalance {
+            max_flow: params.pump_max_flow_m3_per_s,
+            bypass_k: params.bypass_k,
+            fixed_demand: 2.0 * params.pump_max_flow_m3_per_s,
+        };
+        let closed = PumpBalance {
+            max_flow: params.pump_max_flow_m3_per_s,
+            bypass_k: 0.0,
+            fixed_demand: 0.0,
+        };
+        // Above the relief the supply is power-limited: P / p = (p - relief) q_max / override.
+        let (r, o, q) = (
+            params.relief_pa,
+            params.relief_override_pa,
+            params.pump_max_flow_m3_per_s,
+        );
+        let supply = |p: f64| (params.pump_power_w / p).min(q);
+        for guess in [f64::NAN, 0.0, 3.0e5, 1.0e7, r, 1.0e9] {
+            assert_eq!(pump_pressure(&params, starved, &[], guess), params.tank_pa);
+            let p = pump_pressure(&params, closed, &[(0.0, 0.0)], guess);
+            let surplus = supply(p) - q * (p - r) / o;
+            assert!(
+                p > r && surplus.abs() * o / q < 2.0e3,
+                "guess {guess}: {p}, {surplus}"
+            );
+        }
+    }
+
     #[test]
     fn pump_pressure_does_not_depend_on_the_guess_and_the_neutral_cache_is_exact() {
         let params = crate::AugmentedModel::nominal().unwrap().params;
@@ -495,17 +515,18 @@ mod tests {
             fixed_demand: 0.0,
         };
         let meter = [(0.5 * params.meter_in_k[0], 8.0e6), (0.0, 0.0)];
-        let reference = pump_pressure(&params, b, &meter, (f64::NAN, PumpStart::Reading));
+        let reference = pump_pressure(&params, b, &meter, f64::NAN);
         assert!(
             reference > params.tank_pa && reference < params.relief_pa + 2.0e6,
             "{reference}"
         );
         for guess in [0.0, 1.0e5, 5.0e6, 9.0e6, 2.0e7, 4.0e7, 1.0e9] {
-            let p = pump_pressure(&params, b, &meter, (guess, PumpStart::Reading));
-            let q = pump_pressure(&params, b, &meter, (guess, PumpStart::Prediction));
+            let p = pump_pressure(&params, b, &meter, guess);
+            let q = pump_pressure(&params, b, &meter, 0.5 * guess + 1.0e5);
             assert!(
                 (q - reference).abs() < 2.0e3,
-                "guess {guess} as a prediction: {q} vs {reference}"
+                "guess {}: {q} vs {reference}",
+                0.5 * guess + 1.0e5
             );
             assert!(
                 (p - reference).abs() < 2.0e3,
@@ -516,22 +537,13 @@ mod tests {
             bypass_k: params.bypass_k,
             ..b
         };
-        let fresh = pump_pressure(&params, neutral, &[], (1.0e6, PumpStart::Reading));
+        let fresh = pump_pressure(&params, neutral, &[], 1.0e6);
         let mut cache = NeutralCache::default();
         let closed = [(0.0, 5.0e6)];
-        assert_eq!(
-            cache.solve(&params, neutral, &closed, (1.0e6, PumpStart::Reading)),
-            fresh
-        );
-        assert_eq!(
-            cache.solve(&params, neutral, &closed, (3.0e6, PumpStart::Prediction)),
-            fresh
-        );
+        assert_eq!(cache.solve(&params, neutral, &closed, 1.0e6), fresh);
+        assert_eq!(cache.solve(&params, neutral, &closed, 3.0e6), fresh);
         // An open orifice is never served from the cache.
-        let open = cache.solve(&params, neutral, &meter, (1.0e6, PumpStart::Reading));
-        assert!(
-            (open - pump_pressure(&params, neutral, &meter, (1.0e6, PumpStart::Reading))).abs()
-                < 1e-9
-        );
+        let open = cache.solve(&params, neutral, &meter, 1.0e6);
+        assert!((open - pump_pressure(&params, neutral, &meter, 1.0e6)).abs() < 1e-9);
     }
 }

@@ -54,5 +54,4 @@ pub use prefilter::{VELOCITY_PREFILTER_HALF, prefilter_velocities};
 pub use record::{PreparedRecord, WARMUP_SAMPLES, warmed_up};
 pub use replay::replay;
 pub use soil::SoilTerms;
-pub use spool::spools;
 pub use weighing::PayloadTerms;

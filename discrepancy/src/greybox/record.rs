@@ -8,6 +8,7 @@ use super::inertia::{cylinder_masses, gravity_forces};
 use super::params::GreyBoxParams;
 use super::prefilter::prefilter_velocities;
 use super::soil::{SoilTerms, soil_terms_of};
+use super::spool::SpoolCache;
 use super::weighing::{PayloadTerms, WEIGH_MIN_FILL, WEIGH_SETTLE_S, weigh_accel, weighed_payload};
 use crate::signal::{N_SIGNALS, Signal};
 use crate::soil_replay::CutSection;
@@ -21,7 +22,7 @@ pub const WARMUP_SAMPLES: usize = 50;
 
 /// A pause between two samples longer than this is a gap in the record, s (the reader leaves out the
 /// samples under the gateway's position mode, whose spools the gateway set itself): the spool
-/// integration ([`super::spools`]) steps over it as one sample and comes out of it with the state before it.
+/// integration (`spool::spools`) steps over it as one sample and comes out of it with the state before it.
 const GAP_S: f64 = 0.05;
 
 /// A chamber above this fraction of the main relief's cracking pressure, under a command beyond the
@@ -222,6 +223,8 @@ pub struct PreparedRecord {
     pub(super) soil: Vec<Option<SoilTerms>>,
     /// Payload: the terms of the weighing samples.
     pub(super) payload: Vec<Option<PayloadTerms>>,
+    /// The spool positions of the last replay.
+    pub(super) spool_cache: SpoolCache,
 }
 
 impl PreparedRecord {
@@ -634,6 +637,7 @@ impl PreparedRecord {
             accel,
             compression,
             compression_bulk_modulus_pa: params.bulk_modulus_pa,
+            spool_cache: SpoolCache::default(),
             gravity_force,
             gravity_force_per_rad,
             mass,

@@ -2,13 +2,13 @@
 //! every sample from the measured state of that sample (equation-error, one step).
 
 use super::hydraulics::{
-    NeutralCache, PumpBalance, PumpStart, bypass_fraction, crossover_fraction, cylinder_velocity,
-    metering, series_bypass,
+    NeutralCache, PumpBalance, bypass_fraction, crossover_fraction, cylinder_velocity, metering,
+    series_bypass,
 };
 use super::params::{Augmentation, GreyBoxParams};
 use super::prefilter::prefilter_velocities;
 use super::record::{CLAMPED_READING_PA, PreparedRecord, WARMUP_SAMPLES};
-use super::spool::spools;
+use super::spool::SpoolRelation;
 use crate::effects::Candidate;
 use crate::signal::{N_SIGNALS, Signal, SignalGroups};
 
@@ -44,9 +44,10 @@ pub fn replay(
     // The Eq. 2 compression flows scale with `1 / beta` (a bulk-modulus parameter candidate).
     let compression_scale = rec.compression_bulk_modulus_pa / params.bulk_modulus_pa;
     let spool = if groups.hydraulic || groups.pumps {
-        spools(&rec.samples, params, aug)
+        rec.spool_cache
+            .spools(&rec.samples, SpoolRelation::of(params, aug))
     } else {
-        Vec::new()
+        Default::default()
     };
     let mut neutral = [NeutralCache::default(); 2];
     for k in 0..n {
@@ -133,8 +134,8 @@ pub fn replay(
                 fixed_demand: 0.0,
             };
             let start = |j: usize| match prior_pump_pa[j] {
-                p if p.is_finite() && p > 0.0 => (p - offset, PumpStart::Prediction),
-                _ => (pump[j], PumpStart::Reading),
+                p if p.is_finite() && p > 0.0 => p - offset,
+                _ => pump[j],
             };
             o[3] = (neutral[0].solve(params, balance1, &meter1, start(0)) + offset).max(0.0);
             // Pump 2: stick and swing, and the crossover to the boom (its spool closes the centre).
