@@ -11,6 +11,7 @@
 //!   cleanup, weigh, swing to the spoil pile, dump, return; tracking backwards; per-dig statistics.
 //! - [`config`]: [`ControllerConfig`] (the TOML of `excavator-ctl run --config`), its loading with
 //!   errors naming file, line and field, and the parameter checks every part's `validate()` uses.
+//! - [`log_throttle`]: the rate limit of log lines another node can trigger frame by frame.
 //! - [`node`]: [`ControllerNode`], the synchronous, clock-agnostic control step combining the three:
 //!   frames in, frames out, no I/O.
 //! - [`planned`]: the dig planner as the work cycle's action source (thesis 5.3, Fig. 42), and the
@@ -39,6 +40,7 @@
 pub mod config;
 pub mod cycle;
 pub mod estimate;
+pub mod log_throttle;
 pub mod node;
 pub mod operator;
 pub mod planned;

@@ -71,6 +71,7 @@ use crate::ControllerError;
 pub use crate::config::{ConfigFileError, ControllerConfig, MAX_TRACK_EVERY_STEPS, ParamError};
 use crate::cycle::{Action, CycleCommand, DigStats, Phase, WorkCycle};
 use crate::estimate::{Estimator, MachineState};
+use crate::log_throttle::LogThrottle;
 use crate::safety::{ArmMode, Fault, Safety, SafetyState, bus_fault_stops_motion};
 
 /// Most frames one step sends: six valve commands or a setpoint, neutral valves, and the heartbeat.
@@ -214,6 +215,8 @@ pub struct ControllerNode {
     gateway_address_lost: bool,
     /// The operator's reset asked for the addresses to be claimed again (at the next step).
     reclaim_requested: bool,
+    /// Rate limit of the intrusion log (every intrusion is counted and raised).
+    intrusion_log: LogThrottle,
 }
 
 impl ControllerNode {
@@ -279,6 +282,7 @@ impl ControllerNode {
             gateway_name,
             gateway_address_lost: false,
             reclaim_requested: false,
+            intrusion_log: LogThrottle::default(),
             out: Outbox::new().map_err(|e| ControllerError::Config {
                 field: "outbox",
                 reason: e.to_string(),
@@ -475,13 +479,17 @@ impl ControllerNode {
         let owner_lost = name < owner;
         self.counters.intrusions += 1;
         self.counters.faulty += 1;
-        tracing::error!(
-            address = format_args!("{source:#04X}"),
-            name = format_args!("{:#018X}", name.raw()),
-            expected = format_args!("{:#018X}", owner.raw()),
-            owner_lost,
-            "address claim from an unexpected NAME: intrusion"
-        );
+        if let Some(held_back) = self.intrusion_log.allow(time_s) {
+            tracing::error!(
+                address = format_args!("{source:#04X}"),
+                name = format_args!("{:#018X}", name.raw()),
+                expected = format_args!("{:#018X}", owner.raw()),
+                owner_lost,
+                intrusions = self.counters.intrusions,
+                held_back,
+                "address claim from an unexpected NAME: intrusion"
+            );
+        }
         if source == CONTROLLER_ADDRESS && owner_lost {
             // The claim procedure loses the address and raises `AddressLost`.
             return true;

@@ -62,6 +62,7 @@ use serde::{Deserialize, Serialize};
 use crate::ControllerError;
 use crate::config::{Limits, ParamError, check, check_count};
 use crate::estimate::{Estimator, Signal, joint_angle};
+use crate::log_throttle::LogThrottle;
 
 /// The gateway mode the controller arms for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -507,6 +508,8 @@ pub struct Safety {
     now_s: f64,
     /// Time and mode of the last heartbeat sent.
     last_heartbeat: Option<(f64, RequestedMode)>,
+    /// Rate limit of the listen-only fault log (every fault is still counted).
+    listen_only_log: LogThrottle,
 }
 
 impl Safety {
@@ -553,6 +556,7 @@ impl Safety {
             gateway_mode: None,
             now_s: f64::NEG_INFINITY,
             last_heartbeat: None,
+            listen_only_log: LogThrottle::default(),
         })
     }
 
@@ -616,7 +620,9 @@ impl Safety {
         }
         match self.state {
             SafetyState::ListenOnly => {
-                tracing::warn!(%fault, "listen-only: would stop motion");
+                if let Some(held_back) = self.listen_only_log.allow(now_s) {
+                    tracing::warn!(%fault, held_back, "listen-only: would stop motion");
+                }
             }
             SafetyState::Shutdown => {}
             SafetyState::Faulted { .. } => {
