@@ -91,45 +91,73 @@ fn what_to_record(sig: Signal) -> &'static str {
     }
 }
 
-/// Warnings about signals after an analysis: too few held-out independent samples (the candidates
-/// acting on the signal are named from too little), or all samples on one side of the split.
+/// Warnings about signals after an analysis: no samples at all (the candidates acting on the signal
+/// are not checked), too few held-out independent samples (they are named from too little), or all
+/// samples on one side of the split.
 pub fn signal_warnings(result: &AnalysisResult) -> Vec<String> {
-    let mut warnings = Vec::new();
-    for sig in Signal::ALL {
-        let j = sig.index();
-        let test = result.rms.get(j).map_or(0, |m| m.samples);
-        let train = result.train_samples.get(j).copied().unwrap_or(0);
-        if test + train == 0 {
-            continue;
-        }
-        let candidates: Vec<&str> = Candidate::ALL
-            .iter()
-            .filter(|c| c.groups().contains(j))
-            .map(|c| c.name())
-            .collect();
-        let kappa = result.kappa.get(j).copied().unwrap_or(1.0).max(1.0);
-        if test == 0 || train == 0 {
-            warnings.push(format!(
-                "{}: all {} samples fall in the {} digs: it cannot be both fitted and judged \
-                 ({}); record {}",
-                sig.name(),
-                test + train,
-                if test == 0 { "training" } else { "held-out" },
-                candidates.join(", "),
-                what_to_record(sig)
-            ));
-        } else if (test as f64) / kappa < MIN_INDEPENDENT_SAMPLES {
-            warnings.push(format!(
-                "{}: {test} held-out samples, about {:.0} independent (< {MIN_INDEPENDENT_SAMPLES:.0}): \
-                 {} are judged on too little; record {}",
-                sig.name(),
-                test as f64 / kappa,
-                candidates.join(", "),
-                what_to_record(sig)
-            ));
-        }
+    Signal::ALL
+        .iter()
+        .filter_map(|sig| {
+            let j = sig.index();
+            signal_warning(
+                *sig,
+                result.rms.get(j).map_or(0, |m| m.samples),
+                result.train_samples.get(j).copied().unwrap_or(0),
+                result.kappa.get(j).copied().unwrap_or(1.0),
+            )
+        })
+        .collect()
+}
+
+/// The warning about one signal with `test` held-out and `train` training samples and the
+/// decorrelation factor `kappa` (samples per independent one), if any.
+fn signal_warning(sig: Signal, test: usize, train: usize, kappa: f64) -> Option<String> {
+    let j = sig.index();
+    let candidates: Vec<&str> = Candidate::ALL
+        .iter()
+        .filter(|c| c.groups().contains(j))
+        .map(|c| c.name())
+        .collect();
+    let kappa = if kappa.is_finite() {
+        kappa.max(1.0)
+    } else {
+        1.0
+    };
+    if test + train == 0 {
+        // A resolver offset that keeps the bucket short of its stop, say: the sessions hold no
+        // end-stop sample, and nothing else shows the offset.
+        Some(format!(
+            "{}: no samples in the measured sessions, so {} cannot be checked; record {}",
+            sig.name(),
+            if candidates.is_empty() {
+                "the signal".to_string()
+            } else {
+                candidates.join(", ")
+            },
+            what_to_record(sig)
+        ))
+    } else if test == 0 || train == 0 {
+        Some(format!(
+            "{}: all {} samples fall in the {} digs: it cannot be both fitted and judged \
+             ({}); record {}",
+            sig.name(),
+            test + train,
+            if test == 0 { "training" } else { "held-out" },
+            candidates.join(", "),
+            what_to_record(sig)
+        ))
+    } else if (test as f64) / kappa < MIN_INDEPENDENT_SAMPLES {
+        Some(format!(
+            "{}: {test} held-out samples, about {:.0} independent (< {MIN_INDEPENDENT_SAMPLES:.0}): \
+             {} are judged on too little; record {}",
+            sig.name(),
+            test as f64 / kappa,
+            candidates.join(", "),
+            what_to_record(sig)
+        ))
+    } else {
+        None
     }
-    warnings
 }
 
 #[cfg(test)]
@@ -222,5 +250,27 @@ mod tests {
         assert!(warnings[1].contains("only 3 completed dig(s)"));
         let many: Vec<PreparedRecord> = (0..8).map(|i| record(i, true)).collect();
         assert!(check_records(&many).unwrap().is_empty());
+    }
+
+    /// A signal without a sample says which candidates go unchecked and what to record; one
+    /// split to one side, or held out too thinly, says so; one with enough says nothing.
+    #[test]
+    fn signals_without_enough_samples_are_warned_about_by_name() {
+        let none = signal_warning(Signal::StopAngle, 0, 0, 1.0).expect("warned");
+        assert!(
+            none.contains("stop_angle: no samples")
+                && none.contains("resolver_offset cannot be checked")
+                && none.contains("end stop"),
+            "{none}"
+        );
+        let one_side = signal_warning(Signal::StopAngle, 0, 500, 1.0).expect("warned");
+        assert!(
+            one_side.contains("all 500 samples fall in the training digs"),
+            "{one_side}"
+        );
+        let thin = signal_warning(Signal::StopAngle, 200, 500, 10.0).expect("warned");
+        assert!(thin.contains("about 20 independent"), "{thin}");
+        assert_eq!(signal_warning(Signal::StopAngle, 500, 500, 10.0), None);
+        assert_eq!(signal_warning(Signal::StopAngle, 500, 500, f64::NAN), None);
     }
 }
