@@ -7,6 +7,7 @@
 //! outcomes (expected, named, partly explained, unexplained) per kind of case. `discrepancy bench`
 //! times the analysis.
 
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
@@ -325,6 +326,11 @@ pub struct CaseResult {
     pub warnings: usize,
     /// For a pair of hidden effects, how it was reported.
     pub pair: Option<PairOutcome>,
+    /// What the analysis wrote into the twin's profile (machine-file keys and effect names).
+    pub twin_written: Vec<String>,
+    /// The twin's free-air gap to the held-out digs over the nominal plant's, per group
+    /// ([`crate::twin::GAP_GROUPS`]); empty without a twin re-run.
+    pub twin_ratio: BTreeMap<String, f64>,
 }
 
 impl CaseResult {
@@ -350,6 +356,8 @@ impl CaseResult {
             max_ratio: None,
             warnings: 0,
             pair: None,
+            twin_written: Vec::new(),
+            twin_ratio: BTreeMap::new(),
         }
     }
 }
@@ -582,6 +590,17 @@ fn run_case(
         max_ratio,
         warnings: analysis.warnings.len(),
         pair,
+        twin_written: analysis.twin.as_ref().map_or_else(Vec::new, |(_, t)| {
+            t.parameters
+                .iter()
+                .chain(&t.effects)
+                .map(|v| v.name.clone())
+                .collect()
+        }),
+        twin_ratio: analysis
+            .twin
+            .as_ref()
+            .map_or_else(BTreeMap::new, |(_, t)| t.ratio.clone()),
     })
 }
 
@@ -794,6 +813,70 @@ pub fn pairs_text(results: &[CaseResult]) -> String {
         "pairs reported right (both named within 25 % or ambiguous): {right}/{} ({:.0} %, target >= 90 %)",
         pairs.len(),
         100.0 * right as f64 / pairs.len() as f64
+    );
+    s
+}
+
+/// Whether a written profile changes the simulator in free air, where the twin's gap is measured:
+/// anything but the soil effects (the re-run has no terrain and no payload).
+fn acts_in_free_air(written: &[String]) -> bool {
+    written
+        .iter()
+        .any(|n| n != Candidate::SoilCohesion.name() && n != Candidate::SoilDensity.name())
+}
+
+/// The twin: for every case whose profile changes the simulator in free air, its gap to the
+/// held-out digs over the nominal plant's per group, and the share of cases in which the mean of
+/// the groups' ratios is at most one half.
+pub fn twin_text(results: &[CaseResult]) -> String {
+    use std::fmt::Write as _;
+    let cases: Vec<&CaseResult> = results
+        .iter()
+        .filter(|c| acts_in_free_air(&c.twin_written) && !c.twin_ratio.is_empty())
+        .collect();
+    let mut s = String::new();
+    if cases.is_empty() {
+        return s;
+    }
+    let _ = writeln!(
+        s,
+        "\nthe twin: the simulator re-run on the held-out digs' commands with the written profile, \
+         its free-air gap over the nominal plant's (cases whose profile acts in free air)"
+    );
+    let groups: Vec<&str> = crate::twin::GAP_GROUPS.iter().map(|(g, _)| *g).collect();
+    let _ = write!(s, "{:<60}", "case");
+    for g in &groups {
+        let _ = write!(s, " {g:>17}");
+    }
+    let _ = writeln!(s, "  written");
+    let mut halved = 0;
+    let mut means = Vec::new();
+    for c in &cases {
+        let _ = write!(s, "{:<60}", c.case);
+        let ratios: Vec<f64> = groups
+            .iter()
+            .map(|g| c.twin_ratio.get(*g).copied().unwrap_or(f64::NAN))
+            .collect();
+        for r in &ratios {
+            let _ = write!(s, " {r:>17.2}");
+        }
+        let _ = writeln!(s, "  {}", c.twin_written.join(", "));
+        let finite: Vec<f64> = ratios.into_iter().filter(|r| r.is_finite()).collect();
+        if !finite.is_empty() {
+            let mean = finite.iter().sum::<f64>() / finite.len() as f64;
+            means.push(mean);
+            if mean <= 0.5 {
+                halved += 1;
+            }
+        }
+    }
+    let _ = writeln!(
+        s,
+        "gap halved (mean of the groups' ratios <= 0.5): {halved}/{} ({:.0} %); mean ratio median {:.2}, worst {:.2}",
+        cases.len(),
+        100.0 * halved as f64 / cases.len() as f64,
+        lab::results::median(&means),
+        means.iter().copied().fold(f64::NAN, f64::max),
     );
     s
 }
@@ -1047,10 +1130,11 @@ pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
         .collect();
     bar.finish_and_clear();
     let text = format!(
-        "{}{}{}",
+        "{}{}{}{}",
         confusion_text(&results),
         pairs_text(&results),
-        outcome_text(&results)
+        outcome_text(&results),
+        twin_text(&results)
     );
     print!("{text}");
     println!(
@@ -1230,6 +1314,41 @@ mod tests {
     /// `eval` killed while generating (a closed pipe) left sessions with a trace cut short, which the
     /// next `eval` reused and could not analyse ("no ControllerStatus frames"): a session without
     /// `summary.json` is generated again; a finished one is kept.
+    /// The twin's table counts the cases whose profile acts in free air, and a case halves the gap
+    /// when the mean of its groups' ratios is at most one half; a soil effect alone (not measured
+    /// in free air) and a case without a re-run are left out.
+    #[test]
+    fn the_twin_table_counts_the_cases_whose_gap_halved() {
+        let case = |name: &str, written: &[&str], ratios: [f64; 3]| {
+            let mut c = CaseResult::failed(name.into(), &Hidden::None, 1);
+            c.twin_written = written.iter().map(|w| (*w).to_string()).collect();
+            c.twin_ratio = crate::twin::GAP_GROUPS
+                .iter()
+                .zip(ratios)
+                .map(|((g, _), r)| ((*g).to_string(), r))
+                .collect();
+            c
+        };
+        let results = [
+            case("lag", &["hydraulic_lag"], [0.1, 0.2, 0.3]),
+            case("bore", &["cylinders.boom.bore_m"], [0.9, 0.5, 0.4]),
+            case("density", &["soil_density"], [1.0, 1.0, 1.0]),
+            case("nothing", &[], [1.0, 1.0, 1.0]),
+        ];
+        let text = twin_text(&results);
+        assert!(text.contains("lag") && text.contains("bore"), "{text}");
+        assert!(
+            !text.contains("density") && !text.contains("nothing"),
+            "{text}"
+        );
+        assert!(
+            text.contains("gap halved (mean of the groups' ratios <= 0.5): 1/2 (50 %)"),
+            "{text}"
+        );
+        assert!(text.contains("median 0.40, worst 0.60"), "{text}");
+        assert_eq!(twin_text(&results[2..]), "");
+    }
+
     #[test]
     fn an_interrupted_session_is_generated_again() {
         let dir = tempfile::tempdir().unwrap();
