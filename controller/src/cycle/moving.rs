@@ -272,15 +272,15 @@ impl WorkCycle {
         let at_relief = (0..3).any(|i| {
             let u = implement[i];
             let port_pa = if u > 0.0 {
-                s.head_pressure_pa[i]
+                Some(s.head_pressure_pa[i])
             } else if u < 0.0 {
-                s.rod_pressure_pa[i]
+                Some(s.rod_pressure_pa[i])
             } else if i == 0 {
-                0.0
+                None
             } else {
-                s.head_pressure_pa[i].max(s.rod_pressure_pa[i])
+                Some(s.head_pressure_pa[i].max(s.rod_pressure_pa[i]))
             };
-            port_pa >= RELIEF_RELIFT_FRACTION * relief[i]
+            port_pa.is_some_and(|p| p >= RELIEF_RELIFT_FRACTION * relief[i])
         });
         if at_relief {
             self.relief_seen_s = now_s;
