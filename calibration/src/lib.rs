@@ -454,22 +454,14 @@ fn calibrate_greybox(
     Ok((model, calibration))
 }
 
-/// Per cylinder, the median and the worst (largest) error over sessions.
+/// Per cylinder, the median and the worst (largest) error over sessions (NaN without a session).
 fn median_and_worst(errors: &[NetworkError]) -> ([f64; 3], [f64; 3]) {
     let mut median = [f64::NAN; 3];
     let mut worst = [f64::NAN; 3];
     for j in 0..3 {
-        let mut v: Vec<f64> = errors.iter().map(|e| e.mae_percent_of_peak[j]).collect();
-        v.sort_by(f64::total_cmp);
-        if let Some(&w) = v.last() {
-            worst[j] = w;
-            let n = v.len();
-            median[j] = if n % 2 == 1 {
-                v[n / 2]
-            } else {
-                0.5 * (v[n / 2 - 1] + v[n / 2])
-            };
-        }
+        let v: Vec<f64> = errors.iter().map(|e| e.mae_percent_of_peak[j]).collect();
+        median[j] = lab::results::median(&v);
+        worst[j] = v.iter().copied().max_by(f64::total_cmp).unwrap_or(f64::NAN);
     }
     (median, worst)
 }
@@ -598,4 +590,30 @@ pub fn install(from: &Path, config: &Path) -> anyhow::Result<()> {
             .with_context(|| format!("installing {a} into {}", config.display()))?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Per cylinder, the median over the sessions (the mean of the middle two for an even count)
+    /// and the largest; NaN for every cylinder without a session.
+    #[test]
+    fn the_median_and_the_worst_are_taken_per_cylinder() {
+        let e = |seed: u64, mae: [f64; 3]| NetworkError {
+            seed,
+            digs: 12,
+            mae_percent_of_peak: mae,
+        };
+        let (median, worst) = median_and_worst(&[
+            e(1, [1.0, 5.0, 2.0]),
+            e(2, [3.0, 1.0, 2.0]),
+            e(3, [2.0, 4.0, 9.0]),
+            e(4, [8.0, 2.0, 2.0]),
+        ]);
+        assert_eq!(median, [2.5, 3.0, 2.0]);
+        assert_eq!(worst, [8.0, 5.0, 9.0]);
+        let (median, worst) = median_and_worst(&[]);
+        assert!(median.iter().chain(&worst).all(|v| v.is_nan()));
+    }
 }
