@@ -15,12 +15,20 @@ const MAKEUP_MARGIN_PA: f64 = 2.0e5;
 /// Laminar-regularised orifice flow (Eq. 1) for a constant `k = Cd A sqrt(2/rho)`, positive for `dp > 0`.
 #[inline]
 fn orifice(k: f64, dp: f64, laminar_dp_pa: f64) -> f64 {
+    orifice_and_slope(k, dp, laminar_dp_pa).0
+}
+
+/// [`orifice`]'s flow and its derivative in `dp` (the pump solve's Newton steps).
+#[inline]
+fn orifice_and_slope(k: f64, dp: f64, laminar_dp_pa: f64) -> (f64, f64) {
     if k <= 0.0 {
-        0.0
+        (0.0, 0.0)
     } else if dp.abs() < laminar_dp_pa {
-        k * dp / laminar_dp_pa.sqrt()
+        let root = laminar_dp_pa.sqrt();
+        (k * dp / root, k / root)
     } else {
-        k * dp.abs().sqrt() * dp.signum()
+        let root = dp.abs().sqrt();
+        (k * root * dp.signum(), 0.5 * k / root)
     }
 }
 
@@ -268,16 +276,9 @@ fn pump_pressure(
         };
         f -= b.fixed_demand;
         let mut take = |k: f64, dp: f64| {
-            if k <= 0.0 {
-            } else if dp.abs() < lam {
-                let g = k / lam.sqrt();
-                f -= g * dp;
-                df -= g;
-            } else {
-                let r = dp.abs().sqrt();
-                f -= k * r * dp.signum();
-                df -= 0.5 * k / r;
-            }
+            let (q, dq) = orifice_and_slope(k, dp, lam);
+            f -= q;
+            df -= dq;
         };
         take(b.bypass_k, p - tank);
         for (k, p_in) in meter_in {
@@ -470,8 +471,6 @@ mod tests {
         assert!((closed_clamped - pulled).abs() < 1e-12, "{closed_clamped}");
     }
 
-    /// The warm-started solve finds the flow balance's unique root from any starting guess, and the
-    /// neutral-valve cache returns what a fresh solve gives.
     /// The solve's ends: a demand above the pump's flow leaves the gallery at the tank, and a
     /// pump with every path closed (no bypass, no open valve) rises above the relief until the
     /// relief takes the pump's whole flow, from any start.
@@ -506,6 +505,8 @@ mod tests {
         }
     }
 
+    /// The warm-started solve finds the flow balance's unique root from any starting guess, and the
+    /// neutral-valve cache returns what a fresh solve gives.
     #[test]
     fn pump_pressure_does_not_depend_on_the_guess_and_the_neutral_cache_is_exact() {
         let params = crate::AugmentedModel::nominal().unwrap().params;
