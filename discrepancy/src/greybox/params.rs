@@ -105,9 +105,9 @@ fn default_dead_volume_m3() -> f64 {
 impl GreyBoxParams {
     /// Physical first guesses from a machine file (Eq. 1 constants from its valve area and discharge
     /// coefficient; the boom section passes two cylinders' flow, so 1.3 times the area; meter-out
-    /// areas 1.6 times the meter-in ones, a usual valve-catalogue ratio), the soil of
-    /// `config/dig_model.toml`. [`crate::AugmentedModel::nominal`] holds these after calibration on
-    /// nominal traces.
+    /// areas 1.6 times the meter-in ones, a usual valve-catalogue ratio), the soil of the default
+    /// bench (`config/bench_extended.toml`, the ground the planned sessions dig; a test ties the two).
+    /// [`crate::AugmentedModel::nominal`] holds these after calibration on nominal traces.
     pub fn from_machine(cfg: &MachineConfig) -> Self {
         let h = &cfg.hydraulics;
         let cyl = [
@@ -144,7 +144,7 @@ impl GreyBoxParams {
                 failure_angle_rad: 30f64.to_radians(),
                 friction_angle_rad: 35f64.to_radians(),
                 tool_friction_angle_rad: 20f64.to_radians(),
-                cohesion_pa: 8000.0,
+                cohesion_pa: 5000.0,
             },
             soil_force_factor: 1.0,
             bearing: BearingParams::default(),
@@ -250,5 +250,45 @@ impl Augmentation {
     /// Sets one candidate's magnitude.
     pub fn set(&mut self, c: Candidate, value: f64) {
         self.values[c.index()] = value;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::AugmentedModel;
+    use vcan_sim::scenario::{EXTENDED_BENCH_TOML, Scenario};
+
+    /// The nominal soil is the bench material of the default bench, the ground the measured and the
+    /// reference sessions are dug in, in the first guesses and in the shipped model alike.
+    #[test]
+    fn the_nominal_soil_is_the_default_benchs() {
+        let bench =
+            Scenario::from_toml_str_named(EXTENDED_BENCH_TOML, "config/bench_extended.toml")
+                .expect("bundled bench")
+                .soil;
+        let machine = MachineConfig::default_machine().expect("bundled machine");
+        let shipped = AugmentedModel::nominal()
+            .expect("shipped model")
+            .params
+            .soil;
+        for soil in [GreyBoxParams::from_machine(&machine).soil, shipped] {
+            assert_eq!(soil.density_kg_per_m3, bench.density_kg_per_m3);
+            assert_eq!(soil.cohesion_pa, bench.cohesion_pa);
+            let deg = [
+                soil.friction_angle_rad,
+                soil.tool_friction_angle_rad,
+                soil.failure_angle_rad,
+            ]
+            .map(f64::to_degrees);
+            let want = [
+                bench.friction_angle_deg,
+                bench.tool_friction_angle_deg,
+                bench.failure_angle_deg,
+            ];
+            for (got, want) in deg.iter().zip(want) {
+                assert!((got - want).abs() < 1e-9, "{got} vs {want}");
+            }
+        }
     }
 }

@@ -48,6 +48,13 @@ const SLOPE_TRUST_TAN: f64 = 0.1;
 /// relation's own residual RMS in the Dig stage of the effect-free sessions (8-10 kN).
 const SLOPE_SENSITIVITY_N: f64 = 1.0e4;
 
+/// Fill (share of the bucket's capacity) from which a sample leaves the soil signals: a full bucket
+/// spills what the edge cuts beyond its capacity around the edge, and the simulator's and the
+/// machine's edge then meets that pile (a slope at the edge of `tan -1.2` to `-2.0`), which this
+/// replay does not build (its slope there `tan -3.2` to `-4.0`, with a modelled force of 2-15 kN
+/// against 55-80 kN).
+pub(super) const SOIL_MAX_FILL: f64 = 0.93;
+
 /// The soil terms of one sample: the measured tip force (Eqs. A20-A23 from the pressures, less
 /// inertia and seal damping) at zero payload and per kg of payload, and the modelled soil force
 /// ([`soil_replay`]) on the section cut so far, at nominal soil and per unit of cohesion and density
@@ -71,6 +78,9 @@ pub(super) fn soil_terms_of(
     };
     let pose = kin.forward(&q);
     if tip_velocity[0].hypot(tip_velocity[1]) < SOIL_MOVING_SPEED_M_PER_S {
+        return None;
+    }
+    if section.content_m3() >= SOIL_MAX_FILL * cfg.bucket.capacity_m3 {
         return None;
     }
     let width = cfg.bucket.width_m;
