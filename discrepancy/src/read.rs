@@ -264,8 +264,16 @@ pub fn scan_section(
     scan: &ScanFile,
     machine: &MachineConfig,
     plane_azimuth_rad: f64,
+    floor: &CutFloor,
 ) -> Option<SectionProfile> {
-    scan_section_beside(scan, machine, plane_azimuth_rad, 0.0, SECTION_HALF_WIDTH_M)
+    scan_section_beside(
+        scan,
+        machine,
+        plane_azimuth_rad,
+        0.0,
+        SECTION_HALF_WIDTH_M,
+        floor,
+    )
 }
 
 /// Lanes beside the digging plane (each side): lateral offset and the half width of the band of
@@ -285,6 +293,65 @@ pub const LANES_M: [(f64, f64); 7] = [
     (2.5, 0.25),
 ];
 
+/// Step of a section's bins along the plane, m.
+const SECTION_STEP_M: f64 = 0.1;
+/// Distance from the swing axis of a section's first bin, m.
+const SECTION_R0_M: f64 = 1.0;
+/// Bins of a section (out to 14 m).
+const SECTION_BINS: usize = 130;
+
+/// Longest run of bins without a scan point that a section bridges as seen ground, m: at the
+/// 4-7 m where the bucket cuts, a 0.5 m band holds 1-3 points per 0.1 m bin, so one or two empty
+/// bins are sampling, a longer run is ground the scanner did not see. From the cab the crest of
+/// the face and the near wall of a trench hide the ground just beyond them, and a trench an
+/// earlier dig cut there is not in the bridge (a 40 kPa cohesion session, digs at 4.4-4.9 m in the
+/// crest's shadow: the bridge 0.4-0.5 m above the simulator's ground), so there the section is
+/// lowered to the earlier digs' edge paths ([`CutFloor`]).
+pub const SEEN_GAP_M: f64 = 0.2;
+
+/// Cell of a [`CutFloor`], m.
+const FLOOR_CELL_M: f64 = 0.1;
+
+/// The lowest the cutting edge of the earlier digs of a session has passed over each world cell
+/// (world `[x, y]` on a 0.1 m grid, height in the base frame as the sections): the edge lowers every
+/// point within half the bucket width of it to its own height (thesis 3.2), so the ground there is
+/// at most that, until something is piled on it.
+#[derive(Debug, Clone, Default)]
+pub struct CutFloor {
+    cells: std::collections::HashMap<(i64, i64), f64>,
+}
+
+impl CutFloor {
+    /// Adds the edge at world `[x, y]`, height `z_m`, on a digging plane of azimuth
+    /// `plane_azimuth_rad`, for a bucket `width_m` wide.
+    pub fn add(&mut self, xy: [f64; 2], z_m: f64, plane_azimuth_rad: f64, width_m: f64) {
+        if !(xy.iter().all(|v| v.is_finite()) && z_m.is_finite() && width_m.is_finite()) {
+            return;
+        }
+        let (sin, cos) = plane_azimuth_rad.sin_cos();
+        let n = (0.5 * width_m / FLOOR_CELL_M).floor() as i64;
+        for k in -n..=n {
+            let off = k as f64 * FLOOR_CELL_M;
+            let key = (
+                ((xy[0] - off * sin) / FLOOR_CELL_M).floor() as i64,
+                ((xy[1] + off * cos) / FLOOR_CELL_M).floor() as i64,
+            );
+            let h = self.cells.entry(key).or_insert(f64::INFINITY);
+            *h = h.min(z_m);
+        }
+    }
+
+    /// The lowest edge height over the cell of world `[x, y]` (`None`: no edge passed there).
+    #[must_use]
+    pub fn lowest(&self, xy: [f64; 2]) -> Option<f64> {
+        let key = (
+            (xy[0] / FLOOR_CELL_M).floor() as i64,
+            (xy[1] / FLOOR_CELL_M).floor() as i64,
+        );
+        self.cells.get(&key).copied()
+    }
+}
+
 /// As [`scan_section`], for the points within `half_width_m` of the line parallel to the digging
 /// plane at `lateral_m` (left positive).
 pub fn scan_section_beside(
@@ -293,13 +360,61 @@ pub fn scan_section_beside(
     plane_azimuth_rad: f64,
     lateral_m: f64,
     half_width_m: f64,
+    floor: &CutFloor,
 ) -> Option<SectionProfile> {
+    let mut heights = section_bins(scan, machine, plane_azimuth_rad, lateral_m, half_width_m);
+    let first = heights.iter().position(Option::is_some)?;
+    let last = heights.iter().rposition(Option::is_some)?;
+    if last <= first {
+        return None;
+    }
+    let origin = machine_origin(scan, machine);
+    let (sin, cos) = plane_azimuth_rad.sin_cos();
+    let world = |b: usize| {
+        let r = SECTION_R0_M + b as f64 * SECTION_STEP_M;
+        [
+            origin[0] + r * cos - lateral_m * sin,
+            origin[1] + r * sin + lateral_m * cos,
+        ]
+    };
+    let mut k = first;
+    while k < last {
+        let next = (k + 1..=last).find(|j| heights[*j].is_some())?;
+        let (a, b) = (heights[k]?, heights[next]?);
+        let unseen = (next - k - 1) as f64 * SECTION_STEP_M > SEEN_GAP_M + 1e-9;
+        for (j, h) in heights.iter_mut().enumerate().take(next).skip(k + 1) {
+            let t = (j - k) as f64 / (next - k) as f64;
+            let bridge = a + t * (b - a);
+            // Ground the scan did not see is at most where an earlier dig's edge left it.
+            let cut = if unseen { floor.lowest(world(j)) } else { None };
+            *h = Some(cut.map_or(bridge, |c| bridge.min(c)));
+        }
+        k = next;
+    }
+    let values: Vec<f64> = heights[first..=last]
+        .iter()
+        .map(|h| h.unwrap_or(0.0))
+        .collect();
+    SectionProfile::new(
+        SECTION_R0_M + first as f64 * SECTION_STEP_M,
+        SECTION_STEP_M,
+        values,
+    )
+    .ok()
+}
+
+/// The median height of the scan points in each bin along the line parallel to the digging plane
+/// at `lateral_m`, within `half_width_m` of it (`None`: no point).
+fn section_bins(
+    scan: &ScanFile,
+    machine: &MachineConfig,
+    plane_azimuth_rad: f64,
+    lateral_m: f64,
+    half_width_m: f64,
+) -> Vec<Option<f64>> {
     let h = plane_azimuth_rad;
     let origin = machine_origin(scan, machine);
-    const STEP_M: f64 = 0.1;
-    const R0_M: f64 = 1.0;
-    const BINS: usize = 130;
-    let mut bins: Vec<Vec<f64>> = vec![Vec::new(); BINS];
+    let mut bins: Vec<Vec<f64>> = vec![Vec::new(); SECTION_BINS];
     for p in &scan.points {
         let (dx, dy) = (p[0] - origin[0], p[1] - origin[1]);
         let along = dx * h.cos() + dy * h.sin();
@@ -307,13 +422,12 @@ pub fn scan_section_beside(
         if (lateral - lateral_m).abs() > half_width_m || !p[2].is_finite() {
             continue;
         }
-        let b = ((along - R0_M) / STEP_M).round();
-        if b >= 0.0 && (b as usize) < BINS {
+        let b = ((along - SECTION_R0_M) / SECTION_STEP_M).round();
+        if b >= 0.0 && (b as usize) < SECTION_BINS {
             bins[b as usize].push(p[2]);
         }
     }
-    let mut heights: Vec<Option<f64>> = bins
-        .iter_mut()
+    bins.iter_mut()
         .map(|v| {
             if v.is_empty() {
                 None
@@ -322,27 +436,7 @@ pub fn scan_section_beside(
                 Some(v[v.len() / 2])
             }
         })
-        .collect();
-    let first = heights.iter().position(Option::is_some)?;
-    let last = heights.iter().rposition(Option::is_some)?;
-    if last <= first {
-        return None;
-    }
-    let mut k = first;
-    while k < last {
-        let next = (k + 1..=last).find(|j| heights[*j].is_some())?;
-        let (a, b) = (heights[k]?, heights[next]?);
-        for (j, h) in heights.iter_mut().enumerate().take(next).skip(k + 1) {
-            let t = (j - k) as f64 / (next - k) as f64;
-            *h = Some(a + t * (b - a));
-        }
-        k = next;
-    }
-    let values: Vec<f64> = heights[first..=last]
-        .iter()
-        .map(|h| h.unwrap_or(0.0))
-        .collect();
-    SectionProfile::new(R0_M + first as f64 * STEP_M, STEP_M, values).ok()
+        .collect()
 }
 
 /// The machine's position (its swing axis, world `[x, y]`) during a scan: the sensor's, less its
@@ -403,6 +497,58 @@ impl GroundMap {
     }
 }
 
+/// The base where `scan` was taken, heading `base_heading_rad`, and the first of `samples` it
+/// stood there for: the one after the record's last Track sample (before it the base stood
+/// elsewhere).
+fn scanned_base(
+    samples: &[Sample],
+    scan: &ScanFile,
+    machine: &MachineConfig,
+    base_heading_rad: f64,
+) -> (MachinePose, usize) {
+    let origin = machine_origin(scan, machine);
+    let pose = MachinePose {
+        x_m: origin[0],
+        y_m: origin[1],
+        heading_rad: base_heading_rad,
+    };
+    let from = samples
+        .iter()
+        .rposition(|s| s.tracking)
+        .map_or(0, |k| k + 1);
+    (pose, from)
+}
+
+/// Adds the edge path of a record's Autodig stages (where the edge cuts) to `floor`, the base at
+/// the scan's position with heading `base_heading_rad`, from the record's last Track sample on.
+fn add_cuts(
+    floor: &mut CutFloor,
+    samples: &[Sample],
+    scan: &ScanFile,
+    machine: &MachineConfig,
+    kin: &Kinematics,
+    base_heading_rad: f64,
+) {
+    let (pose, from) = scanned_base(samples, scan, machine, base_heading_rad);
+    for s in samples[from..]
+        .iter()
+        .filter(|s| s.stage != StageTag::Outside)
+    {
+        let tip = kin.forward(&JointAngles {
+            boom_rad: s.angles_rad[0],
+            stick_rad: s.angles_rad[1],
+            bucket_rad: s.angles_rad[2],
+        });
+        let [x, y, _] = pose.world_from_base(s.swing_rad, tip.x_m, tip.z_m);
+        floor.add(
+            [x, y],
+            tip.z_m,
+            pose.dig_plane_azimuth_rad(s.swing_rad),
+            machine.bucket.width_m,
+        );
+    }
+}
+
 /// Marks the empty-bucket samples outside Autodig whose bucket (pin, middle of the chord and tip)
 /// comes within [`GROUND_CLEARANCE_M`] of the ground of `scan` as [`LoadTag::NearGround`]: the
 /// base at the scan's position with heading `base_heading_rad`, from the record's last Track
@@ -415,16 +561,7 @@ fn mark_near_ground(
     base_heading_rad: f64,
 ) {
     let ground = GroundMap::new(scan);
-    let origin = machine_origin(scan, machine);
-    let pose = MachinePose {
-        x_m: origin[0],
-        y_m: origin[1],
-        heading_rad: base_heading_rad,
-    };
-    let from = samples
-        .iter()
-        .rposition(|s| s.tracking)
-        .map_or(0, |k| k + 1);
+    let (pose, from) = scanned_base(samples, scan, machine, base_heading_rad);
     for s in &mut samples[from..] {
         if s.load != LoadTag::EmptyFreeAir || s.stage != StageTag::Outside {
             continue;
@@ -489,6 +626,7 @@ pub fn read_session(dir: &Path, machine: &MachineConfig) -> anyhow::Result<Vec<D
             }),
         }
     }
+    let mut floor = CutFloor::default();
     for r in &mut records {
         let dig_start = r
             .samples
@@ -505,15 +643,16 @@ pub fn read_session(dir: &Path, machine: &MachineConfig) -> anyhow::Result<Vec<D
                 // Without the swing angle at the scan, the scan's own heading is the best guess.
                 let base_heading = s.sensor.heading_rad - swing.unwrap_or(dig_swing);
                 let azimuth = base_heading + dig_swing;
-                r.section = scan_section(s, machine, azimuth);
+                r.section = scan_section(s, machine, azimuth, &floor);
                 r.lanes = LANES_M
                     .iter()
                     .flat_map(|&(o, w)| [(o, w), (-o, w)])
                     .filter_map(|(o, w)| {
-                        scan_section_beside(s, machine, azimuth, o, w).map(|l| (o, l))
+                        scan_section_beside(s, machine, azimuth, o, w, &floor).map(|l| (o, l))
                     })
                     .collect();
                 mark_near_ground(&mut r.samples, s, machine, &kin, base_heading);
+                add_cuts(&mut floor, &r.samples, s, machine, &kin, base_heading);
             }
         }
     }
@@ -525,18 +664,23 @@ pub fn read_session(dir: &Path, machine: &MachineConfig) -> anyhow::Result<Vec<D
 mod tests {
     use super::*;
 
+    /// A scanner 3 m up at the world origin, facing +x.
+    fn cab_sensor() -> ScanSensor {
+        ScanSensor {
+            x_m: 0.0,
+            y_m: 0.0,
+            z_m: 3.0,
+            heading_rad: 0.0,
+        }
+    }
+
     /// A bench top at 2 m with the trench of a neighbouring dig (floor 1 m) from 0.3 m beside the
     /// plane, scanned sparsely: per 0.1 m along the plane two points on the ground at the plane and
     /// three in the trench within 0.5 m of it. The section is the ground on the plane.
     #[test]
     fn a_neighbouring_trench_beside_the_plane_does_not_lower_the_section() {
         let machine = MachineConfig::default_machine().expect("machine");
-        let sensor = ScanSensor {
-            x_m: 0.0,
-            y_m: 0.0,
-            z_m: 3.0,
-            heading_rad: 0.0,
-        };
+        let sensor = cab_sensor();
         let mount = sensor.heading_rad + machine.sensor.bearing_rad;
         let origin = [
             sensor.x_m - machine.sensor.radial_offset_m * mount.cos(),
@@ -555,14 +699,94 @@ mod tests {
             sensor,
             points,
         };
-        let section = scan_section(&scan, &machine, 0.0).expect("section");
+        let section = scan_section(&scan, &machine, 0.0, &CutFloor::default()).expect("section");
         for r in [5.5, 6.0, 7.0, 8.5] {
             let h = section.height_at(r).expect("on the section");
             assert!((h - 2.0).abs() < 1e-9, "ground at r = {r}: {h}");
         }
         // The trench itself, as a lane beside the plane.
-        let lane = scan_section_beside(&scan, &machine, 0.0, 0.42, 0.1).expect("lane");
+        let lane = scan_section_beside(&scan, &machine, 0.0, 0.42, 0.1, &CutFloor::default())
+            .expect("lane");
         assert!((lane.height_at(6.0).expect("on") - 1.0).abs() < 1e-9);
+    }
+
+    /// A face scanned from the cab with a shadow behind its crest: points every 0.1 m from 4 to
+    /// 8 m along the plane, none from 5.0 to 5.6 m, where an earlier dig's edge passed at 0.5 m (the
+    /// bridge there 1.2-1.6 m). The section is lowered to the edge's path in the shadow only; seen
+    /// ground stays the scan's, even where the edge passed above or below it, and without that
+    /// dig the shadow is bridged.
+    #[test]
+    fn ground_the_scan_did_not_see_is_lowered_to_an_earlier_digs_edge_path() {
+        let machine = MachineConfig::default_machine().expect("machine");
+        let sensor = cab_sensor();
+        let scan0 = ScanFile {
+            time_s: 0.0,
+            sensor,
+            points: Vec::new(),
+        };
+        let origin = machine_origin(&scan0, &machine);
+        let ground = |along: f64| 6.0 - along; // a 45 degree face
+        let mut points = Vec::new();
+        for k in 0..=40 {
+            let along = 4.0 + 0.1 * f64::from(k);
+            if (4.95..5.65).contains(&along) {
+                continue;
+            }
+            points.push([origin[0] + along, origin[1], ground(along)]);
+        }
+        let scan = ScanFile { points, ..scan0 };
+        // The earlier dig: its edge at 0.5 m from 4.0 to 7.0 m along the same plane.
+        let mut floor = CutFloor::default();
+        for k in 0..=300 {
+            let along = 4.0 + 0.01 * f64::from(k);
+            floor.add(
+                [origin[0] + along, origin[1]],
+                0.5,
+                0.0,
+                machine.bucket.width_m,
+            );
+        }
+        let lowered = scan_section(&scan, &machine, 0.0, &floor).expect("section");
+        let bridged = scan_section(&scan, &machine, 0.0, &CutFloor::default()).expect("section");
+        for r in [5.1, 5.3, 5.5] {
+            let h = lowered.height_at(r).expect("on");
+            assert!((h - 0.5).abs() < 1e-9, "shadow at {r}: {h}");
+            let b = bridged.height_at(r).expect("on");
+            assert!((b - ground(r)).abs() < 1e-9, "bridge at {r}: {b}");
+        }
+        for r in [4.2, 4.8, 5.8, 6.5, 7.5] {
+            let h = lowered.height_at(r).expect("on");
+            assert!((h - ground(r)).abs() < 1e-9, "seen at {r}: {h}");
+        }
+        // A lane beside the plane within the bucket's half width has the same shadow, lowered.
+        let points_beside: Vec<[f64; 3]> = scan
+            .points
+            .iter()
+            .map(|p| [p[0], p[1] + 0.5, p[2]])
+            .collect();
+        let beside = ScanFile {
+            points: points_beside,
+            ..scan
+        };
+        let lane = scan_section_beside(&beside, &machine, 0.0, 0.5, 0.125, &floor).expect("lane");
+        assert!((lane.height_at(5.3).expect("on") - 0.5).abs() < 1e-9);
+    }
+
+    /// The edge lowers the cells across the bucket width, across its own plane (here at 90
+    /// degrees: across is along world x); a non-finite edge adds nothing.
+    #[test]
+    fn the_cut_floor_spans_the_bucket_width_across_the_plane() {
+        let mut floor = CutFloor::default();
+        floor.add([0.05, 5.05], -1.0, std::f64::consts::FRAC_PI_2, 1.3);
+        floor.add([0.05, 5.05], -0.5, std::f64::consts::FRAC_PI_2, 1.3);
+        for x in [-0.55, 0.05, 0.65] {
+            assert_eq!(floor.lowest([x, 5.05]), Some(-1.0), "x = {x}");
+        }
+        assert_eq!(floor.lowest([0.95, 5.05]), None);
+        assert_eq!(floor.lowest([0.05, 5.25]), None);
+        floor.add([f64::NAN, 5.0], -3.0, 0.0, 1.3);
+        floor.add([0.05, 5.05], f64::INFINITY, 0.0, 1.3);
+        assert_eq!(floor.lowest([0.05, 5.05]), Some(-1.0));
     }
 
     /// An empty bucket outside Autodig whose tip comes within the clearance of a scanned pile is
@@ -572,12 +796,7 @@ mod tests {
     fn an_empty_bucket_low_over_the_scanned_ground_is_near_it() {
         let machine = MachineConfig::default_machine().expect("machine");
         let kin = Kinematics::new(&machine).expect("kinematics");
-        let sensor = ScanSensor {
-            x_m: 0.0,
-            y_m: 0.0,
-            z_m: 3.0,
-            heading_rad: 0.0,
-        };
+        let sensor = cab_sensor();
         let origin = machine_origin(
             &ScanFile {
                 time_s: 0.0,

@@ -520,6 +520,30 @@ pub struct BucketMotion {
     pub swept_volume_m3: f64,
 }
 
+impl BucketMotion {
+    /// The speeds at which the bearing resistances are pushed in, m/s: `[tip first, back first]`,
+    /// the tip velocity against the blade (tip -> pin) and against the direction the opening faces.
+    /// Each bearing acts only while its speed is positive, mobilised from rest over the creep speed
+    /// ([`MovingBucketSoil::force`]).
+    #[must_use]
+    pub fn bearing_speeds_m_per_s(&self) -> [f64; 2] {
+        let v = self.tip_velocity_m_per_s;
+        let b = self.blade();
+        let o = self.opening();
+        [-(v[0] * b[0] + v[1] * b[1]), -(v[0] * o[0] + v[1] * o[1])]
+    }
+
+    /// The blade: from the tip up the bucket line to the pin (unit, base frame).
+    fn blade(&self) -> [f64; 2] {
+        [-self.cos_bucket_abs, -self.sin_bucket_abs]
+    }
+
+    /// The direction the opening faces, `bucket_abs - 90 degrees` (unit, base frame).
+    fn opening(&self) -> [f64; 2] {
+        [self.sin_bucket_abs, -self.cos_bucket_abs]
+    }
+}
+
 impl MovingBucketSoil {
     /// Precomputes the constants for soil `psi`, bearing parameters and a bucket `width_m`.
     ///
@@ -624,7 +648,7 @@ impl MovingBucketSoil {
         let alpha = m.slope_tan.atan();
         let d = m.vertical_depth_m * cos_a; // Eq. 17 measures d perpendicular to the terrain
         // The blade: from the tip up the bucket line to the pin; its normal facing the travel.
-        let b = [-m.cos_bucket_abs, -m.sin_bucket_abs];
+        let b = m.blade();
         let travel = if v[0] > 0.0 { 1.0 } else { -1.0 };
         let mut n = [b[1], -b[0]];
         if n[0] * travel < 0.0 {
@@ -643,7 +667,7 @@ impl MovingBucketSoil {
         let mut fz = mobilised * (-self.cos_delta * n[1] + self.sin_delta * b[1]);
         // Bearing: the edge pushed in tip first, the back pushed against the soil.
         let pressure = self.bearing.pressure_pa(&self.psi, d);
-        let v_tip_first = -(v[0] * b[0] + v[1] * b[1]);
+        let [v_tip_first, v_back_first] = m.bearing_speeds_m_per_s();
         if v_tip_first > 0.0 {
             let edge = pressure
                 * self.width_m
@@ -652,9 +676,7 @@ impl MovingBucketSoil {
             fx += edge * b[0];
             fz += edge * b[1];
         }
-        // The opening faces bucket_abs - 90 degrees.
-        let opening = [m.sin_bucket_abs, -m.cos_bucket_abs];
-        let v_back_first = -(v[0] * opening[0] + v[1] * opening[1]);
+        let opening = m.opening();
         if v_back_first > 0.0 {
             let back = pressure
                 * self.width_m
@@ -951,6 +973,39 @@ mod tests {
                 "rake {rake}"
             );
         }
+    }
+
+    /// The bearing speeds are the tip velocity against the blade (tip -> pin) and against the
+    /// opening, and the force has a bearing exactly where its speed is positive.
+    #[test]
+    fn bearing_speeds_are_the_pushes_of_the_edge_and_of_the_back() {
+        let psi = SoilProperties::typical();
+        let bearing = BearingParams::default();
+        let soil = MovingBucketSoil::new(&psi, &bearing, WIDTH_M).expect("soil");
+        // Bucket line vertical (tip below the pin): the blade points up, the opening toward -x.
+        let base = motion_toward_machine(-0.5 * PI, 0.3, 0.0);
+        let m = |v: [f64; 2]| BucketMotion {
+            tip_velocity_m_per_s: v,
+            ..base
+        };
+        let [edge, back] = m([0.1, -0.2]).bearing_speeds_m_per_s();
+        assert!(
+            (edge - 0.2).abs() < 1e-12 && (back - 0.1).abs() < 1e-12,
+            "{edge} {back}"
+        );
+        let [edge, back] = m([-0.1, 0.2]).bearing_speeds_m_per_s();
+        assert!(
+            (edge + 0.2).abs() < 1e-12 && (back + 0.1).abs() < 1e-12,
+            "{edge} {back}"
+        );
+        // Pushed down: the edge bears (up the blade); drawn up: no bearing, the FEE alone.
+        let down = soil.force(&m([-0.1, -0.2])).expect("force");
+        let up = soil.force(&m([-0.1, 0.2])).expect("force");
+        let edge_n = bearing.pressure_pa(&psi, 0.3) * WIDTH_M * bearing.edge_thickness_m;
+        assert!(
+            down.fz_n - up.fz_n > 0.9 * edge_n,
+            "{down:?} {up:?} {edge_n}"
+        );
     }
 
     #[test]

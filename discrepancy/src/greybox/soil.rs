@@ -11,7 +11,7 @@ use crate::Sample;
 use crate::soil_replay::{self, CutSection};
 use planner::kinematics::{JointAngles, Kinematics};
 use planner::machine::MachineConfig;
-use planner::soil::SoilProperties;
+use planner::soil::{BearingParams, BucketMotion, SoilProperties};
 
 /// The soil terms of one sample (base frame `[x, z]`, N): what the soil signals are made of.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -47,6 +47,26 @@ const SLOPE_TRUST_TAN: f64 = 0.1;
 /// [`SLOPE_TRUST_TAN`] in the slope may make for a sample to enter the soil signals, N: about the
 /// relation's own residual RMS in the Dig stage of the effect-free sessions (8-10 kN).
 const SLOPE_SENSITIVITY_N: f64 = 1.0e4;
+
+/// Slowest speed at which a bearing (the edge pushed in tip first, the back pushed against the soil)
+/// counts as surely pushed in or drawn away for a sample to enter the soil signals, in creep speeds
+/// (the speed over which it is mobilised, `planner::soil::BearingParams`, 1 cm/s; `tanh 5` is 1 to
+/// 5e-5). Slower, the bearing is mobilised part way and holds whatever the cylinders push, up to its
+/// capacity: a constraint force, which the replay puts on or off by the sign of the measured rates
+/// and their noise (a 40 kPa cohesion session: the simulator's edge bearing of 120 kN capacity
+/// held the bucket at 70-115 kN while the replay switched it on and off from one sample to the
+/// next).
+const BEARING_SURE_CREEP_SPEEDS: f64 = 5.0;
+
+/// Whether both bearings of `motion` are surely on or off: each pushed in or drawn away at
+/// [`BEARING_SURE_CREEP_SPEEDS`] creep speeds or more.
+fn bearings_sure(motion: &BucketMotion, bearing: &BearingParams) -> bool {
+    let sure = BEARING_SURE_CREEP_SPEEDS * bearing.creep_speed_m_per_s;
+    motion
+        .bearing_speeds_m_per_s()
+        .iter()
+        .all(|v| v.abs() >= sure)
+}
 
 /// Fill (share of the bucket's capacity) from which a sample leaves the soil signals: a full bucket
 /// spills what the edge cuts beyond its capacity around the edge, and the simulator's and the
@@ -89,6 +109,9 @@ pub(super) fn soil_terms_of(
     let volume = section.content_m3().clamp(0.0, cfg.bucket.capacity_m3);
     let motion = section.motion([pose.x_m, pose.z_m], pose.bucket_abs_rad, tip_velocity)?;
     if motion.vertical_depth_m <= 0.0 {
+        return None;
+    }
+    if !bearings_sure(&motion, &params.bearing) {
         return None;
     }
     // Measured soil force: Eq. A20 forces less inertia and seal damping, then Eq. A23.
@@ -155,4 +178,37 @@ pub(super) fn soil_terms_of(
         .chain(&out.fee_per_density)
         .all(|v| v.is_finite());
     all.then_some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A bucket dragged toward the machine along its opening is surely on neither bearing's push;
+    /// the same drag with the edge pushed in (or drawn out) at under five creep speeds along the
+    /// blade is not sure, at more it is; a NaN velocity is never sure.
+    #[test]
+    fn a_bearing_mobilised_part_way_is_not_sure() {
+        let bearing = BearingParams::default();
+        let creep = bearing.creep_speed_m_per_s;
+        // The bucket line at -90 degrees (tip below the pin): the blade points up (+z), the
+        // opening toward the machine (-x).
+        let at = |v: [f64; 2]| BucketMotion {
+            sin_bucket_abs: -1.0,
+            cos_bucket_abs: 0.0,
+            tip_velocity_m_per_s: v,
+            vertical_depth_m: 0.3,
+            slope_tan: 0.0,
+            swept_volume_m3: 0.0,
+        };
+        assert_eq!(at([-0.3, 0.0]).bearing_speeds_m_per_s(), [0.0, -0.3]);
+        assert!(!bearings_sure(&at([-0.3, 0.0]), &bearing));
+        for vz in [-4.9 * creep, -0.5 * creep, 0.5 * creep, 4.9 * creep] {
+            assert!(!bearings_sure(&at([-0.3, vz]), &bearing), "vz = {vz}");
+        }
+        for vz in [-5.1 * creep, 5.1 * creep, -0.2, 0.2] {
+            assert!(bearings_sure(&at([-0.3, vz]), &bearing), "vz = {vz}");
+        }
+        assert!(!bearings_sure(&at([f64::NAN, 0.2]), &bearing));
+    }
 }
