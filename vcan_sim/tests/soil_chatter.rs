@@ -146,3 +146,44 @@ fn stalled_bucket_comes_out(contact: SoilContactIntegration) {
     // The edge started ~0.9 m under the bench top.
     assert!(z1 - z0 > 1.0, "the tip rose {} m", z1 - z0);
 }
+
+/// The soil's force must follow the edge's motion, not ring: driven through the bench from the
+/// stalled pose above (the stick pulled in; the boom lowered with the bucket curling), the force of
+/// one physics step may differ from the last by more than 200 kN a few times at most.
+///
+/// The FEE wedge forms ahead of the edge on the side it travels (Fig. 25, Eq. 18), so the failure
+/// force turns over with the sign of the horizontal speed, and it is mobilised from rest over the
+/// creep speed (1 cm/s). The implicit step takes the force's gradient at the velocity it starts
+/// from: where the travel reverses, or turns from out to in while the edge rises, within one step,
+/// that gradient does not see the turn, the step overshoots, and the edge rings across it with
+/// force swings of several hundred kN at about 100 Hz (docs/simulator.md, "Known issues").
+#[test]
+#[ignore = "known issue of the default plant (implicit-1): the failure force turns over with the \
+            sign of the edge's horizontal speed, and an implicit step linearised at its start \
+            overshoots the turn, so the edge rings across it (docs/simulator.md, Known issues)"]
+fn the_soil_force_follows_an_edge_driven_through_the_bench() {
+    for (what, cmd) in [
+        ("stick pulled in", [0.0, -0.5, 0.0, 0.0, 0.0, 0.0]),
+        (
+            "boom lowered, bucket curling",
+            [-0.3, 0.0, -0.6, 0.0, 0.0, 0.0],
+        ),
+    ] {
+        let mut p = plant_in_the_bench(SoilContactIntegration::default());
+        let mut jumps = 0;
+        let mut last = p.true_state().soil_force_n;
+        for _ in 0..3000 {
+            p.step(cmd);
+            let f = p.true_state().soil_force_n;
+            if (f[0] - last[0]).hypot(f[1] - last[1]) > 2.0e5 {
+                jumps += 1;
+            }
+            last = f;
+        }
+        println!("{what}: {jumps} steps of 3000 changed the soil force by more than 200 kN");
+        assert!(
+            jumps < 10,
+            "{what}: {jumps} force jumps over 200 kN in 3000 steps"
+        );
+    }
+}
