@@ -253,10 +253,20 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
     }
     let mut config = AnalysisConfig {
         base: model.augmentation()?,
-        refit: reference
+        // The starting model's own effects (the shipped nominal's calibration on healthy sessions)
+        // and the reference's calibration are fitted again: a healthy machine's small flow sharing
+        // or delay must not hide a larger one.
+        refit: model
+            .effects
             .iter()
-            .flat_map(|r| &r.calibration)
-            .filter_map(|e| crate::Candidate::from_name(&e.name))
+            .map(|e| &e.name)
+            .chain(
+                reference
+                    .iter()
+                    .flat_map(|r| &r.calibration)
+                    .map(|e| &e.name),
+            )
+            .filter_map(|name| crate::Candidate::from_name(name))
             .collect(),
         parameters: Some(crate::parameters::ParameterLibrary::derive(&machine)?),
         ..AnalysisConfig::default()

@@ -60,9 +60,9 @@ pub struct AnalysisConfig {
     /// The model's effects before the analysis (from `--model`); their candidates are not refitted,
     /// except those in `refit`.
     pub base: Augmentation,
-    /// Candidates of `base` fitted again (the calibration on a reference: a healthy machine's own
-    /// transport delay must not hide a larger one); a named one's magnitude is the change on top
-    /// of `base`.
+    /// Candidates of `base` fitted again (the starting model's own effects and the calibration on a
+    /// reference: a healthy machine's own transport delay must not hide a larger one); a named
+    /// one's magnitude is the change on top of `base`.
     pub refit: Vec<Candidate>,
     /// The machine's own parameters as candidates (parameter drift), derived from its file; none
     /// without it.

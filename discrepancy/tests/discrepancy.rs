@@ -105,6 +105,38 @@ fn effect_free_session_reports_no_missing_effect() {
 /// The CI-sized confusion table (`excavator-ctl discrepancy eval --quick`: six hidden effects, one
 /// effect-free session, four digs each; seconds): the workflow's targets on it (docs/discrepancy.md),
 /// every case counted.
+/// A starting model that already holds an effect (the shipped nominal's calibration on healthy
+/// sessions may name a small one) must not hide a larger one of the same kind: the analysis fits
+/// that effect again and names the change on top of it.
+#[test]
+fn an_effect_of_the_starting_model_is_fitted_again() {
+    let tmp = tempfile::tempdir().unwrap();
+    let s = tmp.path().join("session");
+    session(&s, Some("flow_sharing=0.7"), 11);
+    let mut start = discrepancy::AugmentedModel::nominal().unwrap();
+    start.effects.push(discrepancy::model::ModelEffect {
+        name: "flow_sharing".to_owned(),
+        magnitude: 0.05,
+        uncertainty: 0.003,
+    });
+    let model = tmp.path().join("start.json");
+    std::fs::write(&model, start.to_json().unwrap()).unwrap();
+    let mut args = AnalyseArgs::new(vec![s], tmp.path().join("report"));
+    args.model = Some(model);
+    let a = run_analysis(&args).expect("analysis");
+    let named = a
+        .result
+        .named_effects
+        .iter()
+        .find(|e| e.name == "flow_sharing")
+        .unwrap_or_else(|| panic!("flow_sharing named: {:?}", a.result.named_effects));
+    // The change on top of the starting model's 0.05.
+    assert!(
+        (named.magnitude + 0.05 - 0.7).abs() < 0.25 * 0.7,
+        "{named:?}"
+    );
+}
+
 #[test]
 fn quick_confusion_table() {
     let tmp = tempfile::tempdir().unwrap();
