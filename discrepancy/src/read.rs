@@ -368,7 +368,8 @@ pub fn scan_section_beside(
     half_width_m: f64,
     floor: &CutFloor,
 ) -> Option<SectionProfile> {
-    let mut heights = section_bins(scan, machine, plane_azimuth_rad, lateral_m, half_width_m);
+    let (mut heights, seen) =
+        section_bins(scan, machine, plane_azimuth_rad, lateral_m, half_width_m);
     let first = heights.iter().position(Option::is_some)?;
     let last = heights.iter().rposition(Option::is_some)?;
     if last <= first {
@@ -395,14 +396,7 @@ pub fn scan_section_beside(
     }
     // Ground the scan did not see on the line itself is at most where an earlier dig's edge
     // left it.
-    let on_line = section_bins(
-        scan,
-        machine,
-        plane_azimuth_rad,
-        lateral_m,
-        half_width_m.min(SEEN_HALF_WIDTH_M),
-    );
-    for (from, to) in unseen_runs(&on_line, first, last) {
+    for (from, to) in unseen_runs(&seen, first, last) {
         for (j, h) in heights.iter_mut().enumerate().take(to).skip(from) {
             if let (Some(height), Some(cut)) = (*h, floor.lowest(world(j))) {
                 *h = Some(height.min(cut));
@@ -421,18 +415,18 @@ pub fn scan_section_beside(
     .ok()
 }
 
-/// The runs `[from, to)` of bins between `first` and `last` without a point, longer than
+/// The runs `[from, to)` of bins between `first` and `last` not `seen`, longer than
 /// [`SEEN_GAP_M`].
-fn unseen_runs(bins: &[Option<f64>], first: usize, last: usize) -> Vec<(usize, usize)> {
+fn unseen_runs(seen: &[bool], first: usize, last: usize) -> Vec<(usize, usize)> {
     let mut runs = Vec::new();
     let mut j = first;
     while j <= last {
-        if bins.get(j).is_some_and(Option::is_some) {
+        if seen.get(j).copied().unwrap_or(false) {
             j += 1;
             continue;
         }
         let end = (j..=last)
-            .find(|q| bins.get(*q).is_some_and(Option::is_some))
+            .find(|q| seen.get(*q).copied().unwrap_or(false))
             .unwrap_or(last + 1);
         if (end - j) as f64 * SECTION_STEP_M > SEEN_GAP_M + 1e-9 {
             runs.push((j, end));
@@ -443,30 +437,35 @@ fn unseen_runs(bins: &[Option<f64>], first: usize, last: usize) -> Vec<(usize, u
 }
 
 /// The median height of the scan points in each bin along the line parallel to the digging plane
-/// at `lateral_m`, within `half_width_m` of it (`None`: no point).
+/// at `lateral_m`, within `half_width_m` of it (`None`: no point), and whether the bin has a point
+/// within [`SEEN_HALF_WIDTH_M`] of the line itself (one pass over the scan for both).
 fn section_bins(
     scan: &ScanFile,
     machine: &MachineConfig,
     plane_azimuth_rad: f64,
     lateral_m: f64,
     half_width_m: f64,
-) -> Vec<Option<f64>> {
-    let h = plane_azimuth_rad;
+) -> (Vec<Option<f64>>, Vec<bool>) {
+    let (sin, cos) = plane_azimuth_rad.sin_cos();
     let origin = machine_origin(scan, machine);
+    let on_line_m = half_width_m.min(SEEN_HALF_WIDTH_M);
     let mut bins: Vec<Vec<f64>> = vec![Vec::new(); SECTION_BINS];
+    let mut seen = vec![false; SECTION_BINS];
     for p in &scan.points {
         let (dx, dy) = (p[0] - origin[0], p[1] - origin[1]);
-        let along = dx * h.cos() + dy * h.sin();
-        let lateral = -dx * h.sin() + dy * h.cos();
-        if (lateral - lateral_m).abs() > half_width_m || !p[2].is_finite() {
+        let along = dx * cos + dy * sin;
+        let off = (-dx * sin + dy * cos - lateral_m).abs();
+        if off > half_width_m || !p[2].is_finite() {
             continue;
         }
         let b = ((along - SECTION_R0_M) / SECTION_STEP_M).round();
         if b >= 0.0 && (b as usize) < SECTION_BINS {
             bins[b as usize].push(p[2]);
+            seen[b as usize] |= off <= on_line_m;
         }
     }
-    bins.iter_mut()
+    let medians = bins
+        .iter_mut()
         .map(|v| {
             if v.is_empty() {
                 None
@@ -475,7 +474,8 @@ fn section_bins(
                 Some(v[v.len() / 2])
             }
         })
-        .collect()
+        .collect();
+    (medians, seen)
 }
 
 /// The machine's position (its swing axis, world `[x, y]`) during a scan: the sensor's, less its
