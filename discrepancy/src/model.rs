@@ -307,7 +307,13 @@ mod tests {
     #[test]
     fn shipped_nominal_model_parses_and_round_trips() {
         let m = AugmentedModel::nominal().unwrap();
-        assert!(m.effects.is_empty());
+        // Its effects are those the calibration on healthy sessions named, each in its provenance.
+        assert!(
+            m.effects.iter().all(|e| m.provenance.contains(&e.name)),
+            "{:?} against {}",
+            m.effects,
+            m.provenance
+        );
         let back = AugmentedModel::from_json(&m.to_json().unwrap()).unwrap();
         assert_eq!(back, m);
     }

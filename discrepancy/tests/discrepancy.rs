@@ -73,7 +73,12 @@ fn hidden_valve_deadband_is_named_with_its_magnitude_and_the_model_file_loads() 
         &std::fs::read_to_string(out.join("model.json")).unwrap(),
     )
     .unwrap();
-    assert_eq!(model.effects[0].name, "valve_deadband");
+    // The starting model's own effects (the shipped nominal's calibration) and the named one.
+    assert!(
+        model.effects.iter().any(|e| e.name == "valve_deadband"),
+        "{:?}",
+        model.effects
+    );
     model
         .dig_model()
         .expect("the planner's dig model runs with the augmented actuator");
@@ -365,13 +370,15 @@ fn a_heavier_boom_gets_a_new_term_and_a_clean_session_none() {
         .iter()
         .find(|t| t.signal == "boom_force")
         .unwrap_or_else(|| panic!("a term for the boom force: {:#?}", a.terms));
-    // It removes a real share of the held-out residual, and the boom's pose carries it (gravity).
+    // It removes a real share of the held-out residual, carried by the boom's pose or by a constant
+    // (the extra weight's force, which varies little over the poses where the boom lowers an empty
+    // bucket: about 150 samples a half).
     assert!(term.heldout_explained > 0.5, "{term:#?}");
     assert!(term.heldout_rms.1 < 0.75 * term.heldout_rms.0, "{term:#?}");
     assert!(
         term.terms
             .iter()
-            .any(|t| t.regressor.contains("θ_boom") && t.inclusion >= 0.8),
+            .any(|t| (t.regressor.contains("θ_boom") || t.regressor == "1") && t.inclusion >= 0.8),
         "{term:#?}"
     );
     let json: serde_json::Value =

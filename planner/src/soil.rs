@@ -479,15 +479,42 @@ fn fast_tanh(a: f64) -> f64 {
     }
 }
 
+/// The share of the FEE wedge on the outward side (the edge travelling away from the machine, `+x`)
+/// at tip velocity `v_m_per_s` (base frame `[vx, vz]`), and its gradient in the velocity (s/m): the
+/// wedge forms ahead of the edge on the side it travels (Fig. 25), so the outward side's share is
+/// `(1 + vx / sqrt(|v|^2 + v_creep^2)) / 2`, the cosine of the travel's angle from the horizontal
+/// smoothed at rest over the creep speed; the inward side has the rest. An edge moving straight up
+/// or down has half of each, and the share turns over smoothly where the travel does. The
+/// simulator's contact law and [`MovingBucketSoil`] both take it from here.
+#[must_use]
+pub fn outward_wedge_share(v_m_per_s: [f64; 2], creep_speed_m_per_s: f64) -> (f64, [f64; 2]) {
+    let [vx, vz] = v_m_per_s;
+    let c2 = creep_speed_m_per_s * creep_speed_m_per_s;
+    let r2 = vx * vx + vz * vz + c2;
+    let r = r2.sqrt();
+    if !(r.is_finite() && r > 0.0) {
+        return (0.5, [0.0; 2]);
+    }
+    let r3 = r2 * r;
+    (
+        0.5 * (1.0 + vx / r),
+        [0.5 * (vz * vz + c2) / r3, -0.5 * vx * vz / r3],
+    )
+}
+
 /// The soil force on a moving bucket, with the soil constants of Eq. 17 precomputed for one `Psi` (the
 /// dig model evaluates it every 10 ms step): the modified FEE (Eqs. 14-17) for either direction of
 /// travel, directed by Eq. 18 (at `delta` from the blade normal, the blade along the bucket line), held
 /// [`WEDGE_LIMIT_MARGIN_RAD`] short of the wedge's failure limit, mobilised from rest over the creep
-/// speed, plus the bearing resistance of [`BearingParams`].
+/// speed, plus the bearing resistance of [`BearingParams`]. The wedge forms ahead of the edge on the
+/// side it travels (Fig. 25); each side's share is `(1 +- vx / sqrt(|v|^2 + v_creep^2)) / 2`, the
+/// cosine of the travel's angle from the horizontal smoothed at rest, as in the simulator's contact
+/// law (plant `implicit-2`): an edge moving straight up meets half of each side's wedge.
 ///
-/// For a bucket pulled toward the machine below the limit the FEE part equals [`fee_tip_force`] (tested),
-/// which is Eq. 18 written with the signed rake; the vector form here also covers a bucket pushed away
-/// from the machine (the rake is then measured from the other side of the blade).
+/// For a bucket pulled toward the machine at speed below the limit the FEE part equals
+/// [`fee_tip_force`] (tested), which is Eq. 18 written with the signed rake; the vector form here
+/// also covers a bucket pushed away from the machine (the rake is then measured from the other side
+/// of the blade).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MovingBucketSoil {
     psi: SoilProperties,
@@ -647,24 +674,34 @@ impl MovingBucketSoil {
         let (cos_a, sin_a) = (1.0 / sec, m.slope_tan / sec);
         let alpha = m.slope_tan.atan();
         let d = m.vertical_depth_m * cos_a; // Eq. 17 measures d perpendicular to the terrain
-        // The blade: from the tip up the bucket line to the pin; its normal facing the travel.
+        // The blade: from the tip up the bucket line to the pin.
         let b = m.blade();
-        let travel = if v[0] > 0.0 { 1.0 } else { -1.0 };
-        let mut n = [b[1], -b[0]];
-        if n[0] * travel < 0.0 {
-            n = [-n[0], -n[1]];
-        }
-        // Classical rake (Fig. 25): between the blade and the terrain surface behind the edge.
-        let blade_from_travel = b[1].atan2(b[0] * travel);
-        let rake = (PI - blade_from_travel + alpha * travel).clamp(0.1, PI - 0.1);
-        let f = self.fee_magnitude_n(d, cos_a, sin_a, m.slope_tan, rake, m.swept_volume_m3);
         let speed = v[0].hypot(v[1]);
         let creep = self.bearing.creep_speed_m_per_s;
-        let mobilised = f * fast_tanh(speed / creep);
-        // Eq. 18: the bucket's force on the soil is at delta from the blade normal; on the bucket the
-        // opposite: against the normal and up the blade by friction.
-        let mut fx = mobilised * (-self.cos_delta * n[0] + self.sin_delta * b[0]);
-        let mut fz = mobilised * (-self.cos_delta * n[1] + self.sin_delta * b[1]);
+        let mobilised = fast_tanh(speed / creep);
+        // The wedge forms ahead of the edge on the side it travels, each side by its share.
+        let (share_out, _) = outward_wedge_share(v, creep);
+        let (mut fx, mut fz) = (0.0, 0.0);
+        for (travel, share) in [(1.0, share_out), (-1.0, 1.0 - share_out)] {
+            if share <= 0.0 {
+                continue;
+            }
+            // The blade's normal facing this travel.
+            let mut n = [b[1], -b[0]];
+            if n[0] * travel < 0.0 {
+                n = [-n[0], -n[1]];
+            }
+            // Classical rake (Fig. 25): between the blade and the terrain surface behind the edge.
+            let blade_from_travel = b[1].atan2(b[0] * travel);
+            let rake = (PI - blade_from_travel + alpha * travel).clamp(0.1, PI - 0.1);
+            let f = self.fee_magnitude_n(d, cos_a, sin_a, m.slope_tan, rake, m.swept_volume_m3)
+                * share
+                * mobilised;
+            // Eq. 18: the bucket's force on the soil is at delta from the blade normal; on the
+            // bucket the opposite: against the normal and up the blade by friction.
+            fx += f * (-self.cos_delta * n[0] + self.sin_delta * b[0]);
+            fz += f * (-self.cos_delta * n[1] + self.sin_delta * b[1]);
+        }
         // Bearing: the edge pushed in tip first, the back pushed against the soil.
         let pressure = self.bearing.pressure_pa(&self.psi, d);
         let [v_tip_first, v_back_first] = m.bearing_speeds_m_per_s();
@@ -977,6 +1014,46 @@ mod tests {
 
     /// The bearing speeds are the tip velocity against the blade (tip -> pin) and against the
     /// opening, and the force has a bearing exactly where its speed is positive.
+    /// The wedge's outward share: half of each side for an edge moving straight up, nearly all on
+    /// the side the edge travels at speed, continuous across `vx = 0`, its gradient the share's
+    /// derivative; and the moving-bucket force turns over smoothly with it.
+    #[test]
+    fn the_wedge_turns_over_smoothly_with_the_travel() {
+        let creep = 0.01;
+        assert!((outward_wedge_share([0.0, 0.3], creep).0 - 0.5).abs() < 1e-12);
+        assert!(outward_wedge_share([0.4, 0.0], creep).0 > 0.999);
+        assert!(outward_wedge_share([-0.4, 0.0], creep).0 < 0.001);
+        assert_eq!(outward_wedge_share([f64::NAN, 0.0], creep), (0.5, [0.0; 2]));
+        let h = 1e-8;
+        for v in [[0.0, 0.3], [0.003, -0.004], [-0.3, 0.1], [0.2, 0.05]] {
+            let (_, g) = outward_wedge_share(v, creep);
+            for c in 0..2 {
+                let (mut up, mut down) = (v, v);
+                up[c] += h;
+                down[c] -= h;
+                let numeric = (outward_wedge_share(up, creep).0
+                    - outward_wedge_share(down, creep).0)
+                    / (2.0 * h);
+                assert!(
+                    (g[c] - numeric).abs() < 1e-5 * numeric.abs().max(1.0),
+                    "{v:?} {c}"
+                );
+            }
+        }
+        let soil =
+            MovingBucketSoil::new(&SoilProperties::typical(), &NO_BEARING, WIDTH_M).expect("soil");
+        let rising = |vx: f64| {
+            let mut m = motion_toward_machine(-130f64.to_radians(), 0.4, 0.0);
+            m.tip_velocity_m_per_s = [vx, 0.3];
+            soil.force(&m).expect("force")
+        };
+        let (a, b) = (rising(-1e-6), rising(1e-6));
+        assert!(
+            (a.fx_n - b.fx_n).hypot(a.fz_n - b.fz_n) < 1.0,
+            "{a:?} {b:?}"
+        );
+    }
+
     #[test]
     fn bearing_speeds_are_the_pushes_of_the_edge_and_of_the_back() {
         let psi = SoilProperties::typical();

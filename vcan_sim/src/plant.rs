@@ -21,7 +21,9 @@ use crate::scenario::{Scenario, SoilContactIntegration};
 use crate::sensors::{
     Scan, ScanRequest, SensedTruth, SensorEffects, SensorReadings, SensorSpec, Sensors,
 };
-use crate::soil_contact::{ContactInput, ContactLaw, MassLedger, SoilContact, SoilEffects, World};
+use crate::soil_contact::{
+    ContactInput, ContactLaw, MassLedger, SoilContact, SoilEffects, TravelSide, World,
+};
 
 /// Physics step (s): 1 kHz.
 pub const PHYSICS_DT_S: f64 = 1.0e-3;
@@ -31,6 +33,11 @@ pub const PHYSICS_DT_S: f64 = 1.0e-3;
 /// [`SoilContactIntegration::Implicit`]. The bucket edge moves ~1-3 mm in 5 ms, far below a terrain
 /// cell.
 pub const SOIL_SUBSTEPS: u64 = 5;
+/// Most solves of one physics step in the soil (`Plant::step_in_soil`).
+const SOIL_ITERATIONS: u32 = 8;
+/// How far the soil's force at a step's end may be from the step's linearisation of it, N (the
+/// soil resists a digging bucket with 20-200 kN).
+const LINEARISATION_TOLERANCE_N: f64 = 5_000.0;
 /// Track speed time constant (s).
 const TRACK_TIME_CONSTANT_S: f64 = 0.3;
 /// Table resolution for angle(length) and arm(length) lookups.
@@ -492,9 +499,22 @@ impl Plant {
         };
         self.contact_law = self.contact.step_law(&mut self.world, &input, dt, &soil_fx);
         if self.contact_integration == SoilContactIntegration::Held {
+            self.contact_law.travel = TravelSide::Sign;
             // The force at this update's velocity, held for the next SOIL_SUBSTEPS steps.
             self.soil_force = self.scaled(self.contact_law.force(tip_v));
         }
+    }
+
+    /// The tip's velocity (base frame `[vx, vz]`, m/s) at the actuators' velocities, through the
+    /// linkage's Jacobian at the last soil update's pose.
+    fn tip_velocity(&self) -> [f64; 2] {
+        let mut v_tip = [0.0; 2];
+        for (i, j) in self.tip_per_actuator.iter().enumerate() {
+            let v = self.hydraulics.actuators[i].velocity;
+            v_tip[0] += j[0] * v;
+            v_tip[1] += j[1] * v;
+        }
+        v_tip
     }
 
     /// `f` times [`Scenario::soil_force_factor`] (Table 2).
@@ -511,6 +531,18 @@ impl Plant {
     /// the contact law, with its velocity gradient `dF_i/dv_j = a_i . G . J_j` for the hydraulics'
     /// implicit step (`ActuatorLoad::damping`).
     fn loads_with_soil(&mut self) -> [ActuatorLoad; N_ACTUATORS] {
+        let v_tip = self.tip_velocity();
+        self.loads_with_soil_at(v_tip, v_tip)
+    }
+
+    /// As [`Self::loads_with_soil`], with the soil's force linearised at the tip velocity `v_lin`
+    /// instead of at the current one, `v_now`: the load is the force at `v_lin` carried to `v_now`
+    /// along the gradient, which the step then follows from `v_now`.
+    fn loads_with_soil_at(
+        &mut self,
+        v_now: [f64; 2],
+        v_lin: [f64; 2],
+    ) -> [ActuatorLoad; N_ACTUATORS] {
         let mut loads = self.cached_loads;
         let law = &self.contact_law;
         if *law == ContactLaw::default() {
@@ -518,14 +550,18 @@ impl Plant {
             return loads;
         }
         let k = self.soil_force_factor;
-        let mut v_tip = [0.0; 2];
-        for (i, j) in self.tip_per_actuator.iter().enumerate() {
-            let v = self.hydraulics.actuators[i].velocity;
-            v_tip[0] += j[0] * v;
-            v_tip[1] += j[1] * v;
-        }
-        let g = law.gradient(v_tip);
-        self.soil_force = self.scaled(law.force(v_tip));
+        let g = law.gradient(v_lin);
+        let at = law.force(v_lin);
+        let f = [0, 1].map(|r| {
+            [at.fx_n, at.fz_n][r]
+                + g[r][0] * (v_now[0] - v_lin[0])
+                + g[r][1] * (v_now[1] - v_lin[1])
+        });
+        self.soil_force = self.scaled(TipForce {
+            fx_n: f[0],
+            fz_n: f[1],
+            my_nm: 0.0,
+        });
         for (i, load) in loads.iter_mut().take(3).enumerate() {
             let a = self.load_per_tip_force[i];
             load.force += a[0] * self.soil_force.fx_n + a[1] * self.soil_force.fz_n;
@@ -539,6 +575,51 @@ impl Plant {
             }
         }
         loads
+    }
+
+    /// One hydraulics step of `dt` with the soil's force implicit in the new velocities. The step
+    /// linearises the force at a tip velocity and solves the three linkage velocities with that
+    /// gradient; where the force at the step's end misses the linearisation by more than
+    /// [`LINEARISATION_TOLERANCE_N`] (the travel turned within the step: the force turns over
+    /// within a few creep speeds, which a gradient taken at the start does not see, and the step
+    /// would overshoot the turn and ring across it), the step is solved again from the same state
+    /// with the force linearised at the last solve's end, then halfway between the last two points
+    /// (Newton, damped so that ends on either side of a turn close in on it), at most
+    /// [`SOIL_ITERATIONS`] times.
+    fn step_in_soil(&mut self, dt: f64, valves: [f64; N_ACTUATORS], hfx: &HydraulicEffects) {
+        let start = self.hydraulics.clone();
+        let v_start = self.tip_velocity();
+        let mut v_lin = v_start;
+        for iteration in 0..SOIL_ITERATIONS {
+            if iteration > 0 {
+                self.hydraulics = start.clone();
+            }
+            let loads = self.loads_with_soil_at(v_start, v_lin);
+            self.hydraulics.step(dt, valves, &loads, hfx);
+            let v_end = self.tip_velocity();
+            let law = &self.contact_law;
+            let (at, g, end) = (law.force(v_lin), law.gradient(v_lin), law.force(v_end));
+            // The force the step applied at its end (the linearisation), and what it missed.
+            let applied = [0, 1].map(|r| {
+                [at.fx_n, at.fz_n][r]
+                    + g[r][0] * (v_end[0] - v_lin[0])
+                    + g[r][1] * (v_end[1] - v_lin[1])
+            });
+            let miss = (end.fx_n - applied[0]).hypot(end.fz_n - applied[1]);
+            self.soil_force = self.scaled(TipForce {
+                fx_n: applied[0],
+                fz_n: applied[1],
+                my_nm: 0.0,
+            });
+            if self.soil_force_factor * miss <= LINEARISATION_TOLERANCE_N {
+                return;
+            }
+            v_lin = if iteration == 0 {
+                v_end
+            } else {
+                [0.5 * (v_lin[0] + v_end[0]), 0.5 * (v_lin[1] + v_end[1])]
+            };
+        }
     }
 
     /// Advances the machine by one physics step [`PHYSICS_DT_S`] with the valve commands
@@ -590,10 +671,6 @@ impl Plant {
             self.cached_loads = self.loads(&frame);
         }
         self.steps += 1;
-        let loads = match self.contact_integration {
-            SoilContactIntegration::Held => self.cached_loads,
-            SoilContactIntegration::Implicit => self.loads_with_soil(),
-        };
         let hfx = HydraulicEffects {
             flow_sharing: fx.get(Effect::FlowSharing),
             pump_saturation: fx.get(Effect::PumpSaturation),
@@ -601,12 +678,17 @@ impl Plant {
             viscous_friction_n_s_per_m: fx.get(Effect::ViscousFriction),
             internal_leakage: fx.get(Effect::InternalLeakage),
         };
-        self.hydraulics.step(
-            dt,
-            [spools[BOOM], spools[STICK], spools[BUCKET], spools[SWING]],
-            &loads,
-            &hfx,
-        );
+        let valves = [spools[BOOM], spools[STICK], spools[BUCKET], spools[SWING]];
+        match self.contact_integration {
+            SoilContactIntegration::Held => {
+                self.hydraulics.step(dt, valves, &self.cached_loads, &hfx);
+            }
+            SoilContactIntegration::Implicit if self.contact_law == ContactLaw::default() => {
+                let loads = self.loads_with_soil();
+                self.hydraulics.step(dt, valves, &loads, &hfx);
+            }
+            SoilContactIntegration::Implicit => self.step_in_soil(dt, valves, &hfx),
+        }
         self.link_stale = true;
 
         // Tracks: speed follows the command with a lag; odometry and pose by differential drive.
@@ -711,7 +793,9 @@ mod tests {
     }
 
     /// Table 2's force factor scales the soil's force on the bucket: the two machines move alike
-    /// until the bucket first touches the soil, and then the force of one is twice the other's.
+    /// until the bucket first touches the soil, and then the force of one is twice the other's (to
+    /// 1 %: the force reported is the one the implicit step applied at its end, where the bucket
+    /// resisted twice as much has slowed a little more).
     #[test]
     fn soil_force_factor_scales_the_force_on_the_bucket() {
         let mut scenario = Scenario::default_bench().unwrap();
@@ -728,11 +812,11 @@ mod tests {
             let (f1, f2) = (one.true_state().soil_force_n, two.true_state().soil_force_n);
             if f1[0].hypot(f1[1]) > 1.0 {
                 assert!(
-                    (f2[0] - 2.0 * f1[0]).abs() < 1e-6 * f1[0].abs().max(1.0),
+                    (f2[0] - 2.0 * f1[0]).abs() < 1e-2 * f1[0].abs().max(1.0),
                     "{f1:?} {f2:?}"
                 );
                 assert!(
-                    (f2[1] - 2.0 * f1[1]).abs() < 1e-6 * f1[1].abs().max(1.0),
+                    (f2[1] - 2.0 * f1[1]).abs() < 1e-2 * f1[1].abs().max(1.0),
                     "{f1:?} {f2:?}"
                 );
                 touched = true;
@@ -748,15 +832,13 @@ mod tests {
     /// creep: the soil's force settles to what holds the creeping bucket instead of swinging between
     /// full resistance and none at every contact update (the limit cycle of a steep damper held
     /// explicitly for 5 ms against the oil column: with [`SoilContactIntegration::Held`] 179 kN,
-    /// jumping by up to 218 kN per step). In 8 kPa bench material, no native ground: in the default
-    /// bench's 5 kPa the same push takes the edge 0.17 m deeper, and held there the force still
-    /// chatters (docs/simulator.md, Known issues).
+    /// jumping by up to 218 kN per step). On the default bench (5 kPa); with the wedge on the side
+    /// of `sign(vx)` (plant `implicit-1`) it still rang there, by up to 325 kN per step, as the
+    /// creeping edge's travel turned.
     #[test]
     fn a_bucket_held_in_the_soil_rests_without_chatter_with_implicit_contact() {
         let mut scenario = Scenario::default_bench().unwrap();
         scenario.soil_contact = SoilContactIntegration::Implicit;
-        scenario.native_soil = None;
-        scenario.soil.cohesion_pa = 8000.0;
         let mut p = Plant::new(
             &MachineConfig::default_machine().unwrap(),
             &scenario,

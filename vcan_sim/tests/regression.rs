@@ -340,11 +340,13 @@ const EMBEDDED: (u64, f64, f64, f64, f64) = (
     0.39294108636532804,
     -1.3638106957235487,
 );
+// The edge path's forces re-recorded with the FEE wedge blended across the travel's direction
+// (plant implicit-2, `TravelSide::Blended`); the ledger and the terrain are unchanged.
 const EDGE_PATH: [(&str, f64); 11] = [
     ("steps", 1200.0),
-    ("mean_fx_n", 22825.256972401556),
-    ("mean_fz_n", 23286.813386974143),
-    ("max_force_n", 189092.67019007457),
+    ("mean_fx_n", 20193.35880954226),
+    ("mean_fz_n", 21967.802161279542),
+    ("max_force_n", 204736.97285818646),
     ("removed_kg", 2988.6000000000013),
     ("spilled_kg", 2988.6000000000045),
     ("deposited_m3", 1.7580000000000013),
@@ -427,9 +429,9 @@ const WITH_EFFECTS: [(&str, f64); 34] = [
 ];
 const EDGE_PATH_HARD: [(&str, f64); 11] = [
     ("steps", 1200.0),
-    ("mean_fx_n", 24592.262902568036),
-    ("mean_fz_n", -46666.75308391674),
-    ("max_force_n", 5824103.015977654),
+    ("mean_fx_n", 21214.7122101855),
+    ("mean_fz_n", -46347.588464572626),
+    ("max_force_n", 5823178.700093417),
     ("removed_kg", 3999.450000000001),
     ("spilled_kg", 3999.4500000000066),
     ("deposited_m3", 1.904500000000001),

@@ -151,16 +151,13 @@ fn stalled_bucket_comes_out(contact: SoilContactIntegration) {
 /// stalled pose above (the stick pulled in; the boom lowered with the bucket curling), the force of
 /// one physics step may differ from the last by more than 200 kN a few times at most.
 ///
-/// The FEE wedge forms ahead of the edge on the side it travels (Fig. 25, Eq. 18), so the failure
-/// force turns over with the sign of the horizontal speed, and it is mobilised from rest over the
-/// creep speed (1 cm/s). The implicit step takes the force's gradient at the velocity it starts
-/// from: where the travel reverses, or turns from out to in while the edge rises, within one step,
-/// that gradient does not see the turn, the step overshoots, and the edge rings across it with
-/// force swings of several hundred kN at about 100 Hz (docs/simulator.md, "Known issues").
+/// The FEE wedge forms ahead of the edge on the side it travels (Fig. 25, Eq. 18). If the whole
+/// wedge sat on the side of `sign(vx)`, the force would turn over in a step at `vx = 0`, and an
+/// implicit step linearised at its start would overshoot every turn of the travel, ringing at about
+/// 100 Hz with swings of several hundred kN. The default plant blends the two sides by the travel's
+/// direction and solves a step again where the force at its end misses the linearisation
+/// (docs/simulator.md, "Soil contact integration").
 #[test]
-#[ignore = "known issue of the default plant (implicit-1): the failure force turns over with the \
-            sign of the edge's horizontal speed, and an implicit step linearised at its start \
-            overshoots the turn, so the edge rings across it (docs/simulator.md, Known issues)"]
 fn the_soil_force_follows_an_edge_driven_through_the_bench() {
     for (what, cmd) in [
         ("stick pulled in", [0.0, -0.5, 0.0, 0.0, 0.0, 0.0]),

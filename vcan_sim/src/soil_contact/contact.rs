@@ -4,7 +4,7 @@
 
 use planner::kinematics::TipForce;
 use planner::machine::GRAVITY_M_PER_S2;
-use planner::soil::{DigGeometry, SoilProperties};
+use planner::soil::{DigGeometry, SoilProperties, outward_wedge_share};
 
 use super::fee::layered_failure_force_n;
 use super::world::{SoilEffects, World};
@@ -87,8 +87,9 @@ const BOULDER_DAMPING: f64 = 2.0e5;
 /// 100 Hz limit cycle with load swings of about 1 MN.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct ContactLaw {
-    /// Fully mobilised FEE failure force (N).
-    pub failure_n: f64,
+    /// Fully mobilised FEE failure force (N) for the edge travelling out (`+x`, index 0) and in
+    /// (`-x`, index 1): the wedge forms ahead of the edge, so its rake follows the travel.
+    pub failure_n: [f64; 2],
     /// Blade direction (edge toward the pin), base frame.
     pub blade: [f64; 2],
     /// `(sin, cos)` of the soil-tool friction angle delta.
@@ -101,6 +102,22 @@ pub struct ContactLaw {
     pub opening: [f64; 2],
     /// Force independent of the velocity (boulders; penalty and damping held for the step), N.
     pub held: [f64; 2],
+    /// How the wedge's side follows the travel.
+    pub travel: TravelSide,
+}
+
+/// How the FEE wedge's side follows the edge's travel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum TravelSide {
+    /// Each side's share of the wedge is [`planner::soil::outward_wedge_share`]'s: the cosine of
+    /// the travel's angle from the horizontal, smoothed at rest over the creep speed. An edge moving
+    /// straight up or down has half of each side's wedge, and the force turns over smoothly where
+    /// the travel does (plant version `implicit-2`).
+    #[default]
+    Blended,
+    /// The whole wedge on the side of `sign(vx)` (plant versions `held-1` and `implicit-1`): the
+    /// force turns over in a step at `vx = 0`, which an edge rising through the soil rings across.
+    Sign,
 }
 
 impl ContactLaw {
@@ -114,15 +131,66 @@ impl ContactLaw {
         }
     }
 
-    /// `d force / d v` (2 x 2, row = force component, column = velocity component) at `v`, with the
-    /// directions of the forces held (the travel direction at `v`).
+    /// `d force / d v` (2 x 2, row = force component, column = velocity component) at `v`.
     pub fn gradient(&self, v: [f64; 2]) -> [[f64; 2]; 2] {
         self.evaluate(v, true).1
+    }
+
+    /// Each side's share of the wedge at `v` (out, then in) and their gradients in `v`.
+    fn shares(&self, v: [f64; 2]) -> [(f64, [f64; 2]); 2] {
+        match self.travel {
+            TravelSide::Sign => {
+                let out = if v[0] > 0.0 { 1.0 } else { 0.0 };
+                [(out, [0.0; 2]), (1.0 - out, [0.0; 2])]
+            }
+            TravelSide::Blended => {
+                let (out, d_out) = outward_wedge_share(v, CREEP_SPEED_M_PER_S);
+                [(out, d_out), (1.0 - out, d_out.map(|x| -x))]
+            }
+        }
     }
 
     fn evaluate(&self, v: [f64; 2], want_gradient: bool) -> ([f64; 2], [[f64; 2]; 2]) {
         let mut force = self.held;
         let mut grad = [[0.0; 2]; 2];
+        let b = self.blade;
+        if self.failure_n != [0.0; 2] {
+            let (sd, cd) = self.friction;
+            let speed = v[0].hypot(v[1]);
+            let mobilised = (speed / CREEP_SPEED_M_PER_S).tanh();
+            let d_mobilised = (1.0 - mobilised * mobilised) / CREEP_SPEED_M_PER_S;
+            let ds = if speed > 1e-12 {
+                [v[0] / speed, v[1] / speed]
+            } else {
+                [0.0, 0.0]
+            };
+            let shares = self.shares(v);
+            for (k, travel_sign) in [1.0, -1.0].into_iter().enumerate() {
+                let (share, d_share) = shares[k];
+                let f = self.failure_n[k];
+                if f == 0.0 || (share == 0.0 && d_share == [0.0; 2]) {
+                    continue;
+                }
+                // The normal into the soil ahead of the edge, on this side.
+                let mut n = [b[1], -b[0]];
+                if n[0] * travel_sign < 0.0 {
+                    n = [-n[0], -n[1]];
+                }
+                // Eq. 18 on the bucket: against the normal, and up the blade by friction.
+                let dir = [-cd * n[0] + sd * b[0], -cd * n[1] + sd * b[1]];
+                force[0] += f * share * mobilised * dir[0];
+                force[1] += f * share * mobilised * dir[1];
+                if want_gradient {
+                    let g =
+                        [0, 1].map(|c| f * (share * d_mobilised * ds[c] + mobilised * d_share[c]));
+                    for r in 0..2 {
+                        for c in 0..2 {
+                            grad[r][c] += dir[r] * g[c];
+                        }
+                    }
+                }
+            }
+        }
         // `scale * tanh(s / creep)` along `dir`, with `s` of gradient `ds` in the velocity.
         let mut add = |scale: f64, s: f64, ds: [f64; 2], dir: [f64; 2]| {
             let x = s / CREEP_SPEED_M_PER_S;
@@ -138,25 +206,6 @@ impl ContactLaw {
                 }
             }
         };
-        let b = self.blade;
-        if self.failure_n != 0.0 {
-            // The normal into the soil ahead of the edge, on the side the edge travels.
-            let travel_sign = if v[0] > 0.0 { 1.0 } else { -1.0 };
-            let mut n = [b[1], -b[0]];
-            if n[0] * travel_sign < 0.0 {
-                n = [-n[0], -n[1]];
-            }
-            let (sd, cd) = self.friction;
-            // Eq. 18 on the bucket: against the normal, and up the blade by friction.
-            let dir = [-cd * n[0] + sd * b[0], -cd * n[1] + sd * b[1]];
-            let speed = v[0].hypot(v[1]);
-            let ds = if speed > 1e-12 {
-                [v[0] / speed, v[1] / speed]
-            } else {
-                [0.0, 0.0]
-            };
-            add(self.failure_n, speed, ds, dir);
-        }
         let tip_first = -(v[0] * b[0] + v[1] * b[1]);
         if self.edge_n != 0.0 && tip_first > 0.0 {
             add(self.edge_n, tip_first, [-b[0], -b[1]], b);
@@ -239,16 +288,18 @@ impl SoilContact {
             ];
             let nb = b[0].hypot(b[1]).max(1e-9);
             let b = [b[0] / nb, b[1] / nb];
-            let travel_sign = if v[0] > 0.0 { 1.0 } else { -1.0 };
-            // Rake angle (Fig. 25): between the blade and the terrain surface behind the edge.
-            let blade_from_travel = b[1].atan2(b[0] * travel_sign);
-            let rho = (std::f64::consts::PI - blade_from_travel + alpha * travel_sign)
-                .clamp(0.1, std::f64::consts::PI - 0.1);
-            let gamma = DigGeometry {
-                depth_m: d,
-                slope_rad: alpha,
-                rake_rad: -rho, // the thesis's sign (planner::soil)
-                swept_volume_m3: self.content.volume_m3,
+            // Rake angle (Fig. 25): between the blade and the terrain surface behind the edge, for
+            // either direction of travel.
+            let gamma = |travel_sign: f64| {
+                let blade_from_travel = b[1].atan2(b[0] * travel_sign);
+                let rho = (std::f64::consts::PI - blade_from_travel + alpha * travel_sign)
+                    .clamp(0.1, std::f64::consts::PI - 0.1);
+                DigGeometry {
+                    depth_m: d,
+                    slope_rad: alpha,
+                    rake_rad: -rho, // the thesis's sign (planner::soil)
+                    swept_volume_m3: self.content.volume_m3,
+                }
             };
             // The native ground below the floor (layered benches): the share of the cut depth below
             // the floor (the wedge's failure plane runs from the edge up to the surface) and the
@@ -263,7 +314,9 @@ impl SoilContact {
                 _ => (soil, 0.0, 0.0),
             };
             // Without depth below the floor this is the bench soil's failure_force_n.
-            let f = layered_failure_force_n(&soil, &native, below, &gamma, input.width_m);
+            let f = [1.0, -1.0].map(|travel_sign| {
+                layered_failure_force_n(&soil, &native, below, &gamma(travel_sign), input.width_m)
+            });
             // Eq. 18: the tool force on the soil is at delta from the blade normal; on the bucket it is
             // the opposite: against the normal, and up the blade by friction (`ContactLaw`),
             // mobilised from rest over the creep speed. On a layered cut delta is weighted by the
@@ -516,6 +569,90 @@ mod tests {
             x -= 0.0005;
         }
         (f, contact)
+    }
+
+    /// A law in the soil: a 45 degree blade, both wedge sides (the outward one the larger, its rake
+    /// nearer the wedge's limit), the edge and back bearing.
+    fn law_in_soil(travel: TravelSide) -> ContactLaw {
+        let b = [
+            -std::f64::consts::FRAC_1_SQRT_2,
+            std::f64::consts::FRAC_1_SQRT_2,
+        ];
+        ContactLaw {
+            failure_n: [6.0e5, 1.0e5],
+            blade: b,
+            friction: 0.4f64.sin_cos(),
+            edge_n: 1.2e5,
+            back_n: 6.0e5,
+            opening: [b[1], -b[0]],
+            held: [0.0; 2],
+            travel,
+        }
+    }
+
+    /// The gradient the plant's implicit step takes is the force's own, including the turn of the
+    /// blended wedge with the travel's direction: central differences at velocities across the
+    /// turn (straight up, reversing through rest, near rest, digging in and out).
+    #[test]
+    fn the_contact_law_gradient_is_the_forces_derivative() {
+        let law = law_in_soil(TravelSide::Blended);
+        let h = 1e-7;
+        for v in [
+            [0.0, 0.3],
+            [0.004, -0.007],
+            [-0.3, 0.1],
+            [0.25, -0.05],
+            [-0.002, 0.001],
+            [0.02, 0.2],
+        ] {
+            let g = law.gradient(v);
+            for c in 0..2 {
+                let (mut up, mut down) = (v, v);
+                up[c] += h;
+                down[c] -= h;
+                let (fu, fd) = (law.force(up), law.force(down));
+                let numeric = [
+                    (fu.fx_n - fd.fx_n) / (2.0 * h),
+                    (fu.fz_n - fd.fz_n) / (2.0 * h),
+                ];
+                for r in 0..2 {
+                    let scale = g[r][c].abs().max(numeric[r].abs()).max(1e3);
+                    assert!(
+                        (g[r][c] - numeric[r]).abs() <= 1e-4 * scale,
+                        "v {v:?}: dF{r}/dv{c} {} against {}",
+                        g[r][c],
+                        numeric[r]
+                    );
+                }
+            }
+        }
+    }
+
+    /// The blended wedge turns over with the travel's direction: an edge rising straight up meets
+    /// half of each side's wedge, one digging in or out at speed nearly all of that side's, and the
+    /// force is continuous across `vx = 0` where the sign rule (plants `held-1`, `implicit-1`)
+    /// steps.
+    #[test]
+    fn the_blended_wedge_turns_over_with_the_travel() {
+        let blended = law_in_soil(TravelSide::Blended);
+        let sign = law_in_soil(TravelSide::Sign);
+        let up = blended.shares([0.0, 0.3]);
+        assert!((up[0].0 - 0.5).abs() < 1e-12 && (up[1].0 - 0.5).abs() < 1e-12);
+        let digging_in = blended.shares([-0.3, 0.02]);
+        assert!(digging_in[1].0 > 0.99, "{digging_in:?}");
+        let (a, b) = (blended.force([-1e-6, 0.3]), blended.force([1e-6, 0.3]));
+        assert!(
+            (a.fx_n - b.fx_n).hypot(a.fz_n - b.fz_n) < 100.0,
+            "{a:?} {b:?}"
+        );
+        let (a, b) = (sign.force([-1e-6, 0.3]), sign.force([1e-6, 0.3]));
+        assert!(
+            (a.fx_n - b.fx_n).hypot(a.fz_n - b.fz_n) > 1.0e5,
+            "{a:?} {b:?}"
+        );
+        // Digging in at speed the two rules agree to the other side's small share.
+        let (a, b) = (blended.force([-0.4, 0.0]), sign.force([-0.4, 0.0]));
+        assert!((a.fx_n - b.fx_n).hypot(a.fz_n - b.fz_n) < 0.01 * b.fx_n.hypot(b.fz_n) + 1.0);
     }
 
     /// Done-when: the mass removed from the terrain equals the mass in the bucket plus spill.

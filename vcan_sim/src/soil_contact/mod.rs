@@ -49,5 +49,5 @@ mod world;
 #[cfg(test)]
 mod fixtures;
 
-pub use contact::{BucketContent, ContactInput, ContactLaw, MassLedger, SoilContact};
+pub use contact::{BucketContent, ContactInput, ContactLaw, MassLedger, SoilContact, TravelSide};
 pub use world::{SoilEffects, World};
