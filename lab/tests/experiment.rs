@@ -101,7 +101,11 @@ fn table1_read_to_the_horizontal_perception_is_more_consistent() {
         "{rows:?}"
     );
     assert!(with[0].payload_kg > 1.2 * plain[0].payload_kg, "{rows:?}");
-    assert!(with[2].payload_kg >= plain[2].payload_kg, "{rows:?}");
+    // Both may be full buckets, equal to rounding.
+    assert!(
+        with[2].payload_kg >= plain[2].payload_kg * (1.0 - 1e-9),
+        "{rows:?}"
+    );
     assert!(with[2].time_s < plain[2].time_s - 0.5, "{rows:?}");
 }
 
