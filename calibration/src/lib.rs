@@ -189,6 +189,9 @@ pub struct CalibrationReport {
     pub networks_fresh_worst: [f64; 3],
     /// The hardness regression: intercept, slope per kN, r^2, cases.
     pub hardness: (f64, f64, f64, usize),
+    /// The least-squares line through the hardness sweep's points, with its slope's t statistic (the
+    /// regression is that line only where the slope is significant).
+    pub hardness_line: planner::plan::hardness::HardnessLine,
     /// The grey-box calibration: the effects named on the healthy sessions.
     pub greybox_calibration: Vec<ModelEffect>,
     /// The grey-box transport delay after folding, s.
@@ -382,6 +385,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<CalibrationReport> {
             hardness.regression.r_squared,
             hardness.regression.cases,
         ),
+        hardness_line: hardness.line,
         greybox_calibration: calibration,
         greybox_transport_delay_s: greybox.params.transport_delay_s,
         wall_s,
@@ -516,7 +520,9 @@ pub fn report_markdown(r: &CalibrationReport) -> String {
     let _ = writeln!(
         s,
         "| `hardness_regression.toml` (5.2, Eq. 25, Fig. 53) | the default sweep through the dig \
-         model with these networks | index = {a:.3} + {b:.5} x force/kN, r^2 {r2:.3}, {cases} cases |"
+         model with these networks | index = {a:.3} + {b:.5} x force/kN, r^2 {r2:.3}, {cases} cases \
+         ({}) |",
+        lab::experiment::hardness_line_note(&r.hardness_line)
     );
     let named = if r.greybox_calibration.is_empty() {
         "nothing named".to_owned()

@@ -1612,10 +1612,13 @@ pub fn hardness_fit_with<A: planner::dig_model::ActuatorDynamics + Clone>(
         "Autodig soil hardness index from the average soil force (thesis 5.2, Eq. 25, Fig. 53):\n\
          index = intercept + slope_per_kn x |F(Gamma_typical)| / 1 kN, clamped to [min_index, max_index].\n\
          Fitted by `{source}` (planner::plan::hardness::fit_hardness_regression\n\
-         on default_sweep(): {} soils x {} terrains x {} indices, config/planner.toml quality).",
+         on default_sweep(): {} soils x {} terrains x {} indices, config/planner.toml quality).\n\
+         The {}; the line is used where its slope is at least {} standard errors from zero.",
         sweep.soils.len(),
         sweep.terrains.len(),
         sweep.indices.len(),
+        hardness_line_note(&fit.line),
+        planner::plan::hardness::SLOPE_T_MIN,
     );
     let path = out.join("hardness_regression.toml");
     std::fs::write(&path, fit.regression.to_toml(&header))
@@ -1636,6 +1639,23 @@ pub fn hardness_fit_with<A: planner::dig_model::ActuatorDynamics + Clone>(
     )
     .with_context(|| format!("writing {}", path.display()))?;
     Ok(fit)
+}
+
+/// How the hardness sweep's least-squares line became the regression, for the reports.
+#[must_use]
+pub fn hardness_line_note(line: &planner::plan::hardness::HardnessLine) -> String {
+    let fit = format!(
+        "least-squares line {:.3} + {:.5} x force/kN, r^2 {:.3}, slope t {:.2}",
+        line.intercept, line.slope_per_kn, line.r_squared, line.slope_t
+    );
+    if line.slope_t.abs() >= planner::plan::hardness::SLOPE_T_MIN {
+        fit
+    } else {
+        format!(
+            "{fit}: the slope is not significant (|t| < {}), so the mean optimal index",
+            planner::plan::hardness::SLOPE_T_MIN
+        )
+    }
 }
 
 fn hardness_fit_report(out: &std::path::Path) -> anyhow::Result<String> {
@@ -1668,12 +1688,13 @@ fn hardness_fit_report(out: &std::path::Path) -> anyhow::Result<String> {
     let r = &fit.regression;
     let _ = writeln!(
         s,
-        "\nindex = {:.3} + {:.5} x force/kN (r^2 {:.3}, {} cases) in {:.1} s; thesis: the index rises with the force.\n\
+        "\nindex = {:.3} + {:.5} x force/kN (r^2 {:.3}, {} cases; {}) in {:.1} s; thesis: the index rises with the force.\n\
          Outputs: {} (hardness_regression.toml, fig53.svg)",
         r.intercept,
         r.slope_per_kn,
         r.r_squared,
         r.cases,
+        hardness_line_note(&fit.line),
         t0.elapsed().as_secs_f64(),
         out.display()
     );

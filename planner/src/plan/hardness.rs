@@ -201,13 +201,44 @@ pub struct HardnessPoint {
     pub best_quality: f64,
 }
 
+/// The least-squares line through a sweep's points (Fig. 53), before the significance test.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct HardnessLine {
+    /// Index at zero force.
+    pub intercept: f64,
+    /// Index per kN of average soil force.
+    pub slope_per_kn: f64,
+    /// Coefficient of determination.
+    pub r_squared: f64,
+    /// The slope over its standard error (Student's t, `n - 2` degrees of freedom).
+    pub slope_t: f64,
+}
+
+/// A slope is used only where it is at least this many standard errors from zero (about the 5 %
+/// two-sided level for the sweep's 15-30 cases); otherwise the regression is the mean optimal index.
+pub const SLOPE_T_MIN: f64 = 2.0;
+
 /// The fitted regression and its data.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct HardnessFit {
-    /// The regression.
+    /// The regression: the line where its slope is significant ([`SLOPE_T_MIN`]), else the mean
+    /// optimal index at every force.
     pub regression: HardnessRegression,
+    /// The least-squares line through the points.
+    pub line: HardnessLine,
     /// The cases (Fig. 53's points); cases where every dig was vetoed are left out.
     pub points: Vec<HardnessPoint>,
+}
+
+/// The slope's t statistic of a least-squares line with coefficient of determination `r2` through
+/// `n` points, signed as `slope` (infinite for a perfect fit).
+fn slope_t(slope: f64, r2: f64, n: usize) -> f64 {
+    if n < 3 {
+        return 0.0;
+    }
+    let r2 = r2.clamp(0.0, 1.0);
+    let t = (r2 * (n - 2) as f64 / (1.0 - r2)).sqrt();
+    t.copysign(slope)
 }
 
 /// Least squares `y = a + b x`: `(a, b, r^2)`.
@@ -341,16 +372,29 @@ pub fn fit_hardness_regression<A: ActuatorDynamics + Clone>(
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &i| {
             (lo.min(i), hi.max(i))
         });
+    let line = HardnessLine {
+        intercept: a,
+        slope_per_kn: b,
+        r_squared: r2,
+        slope_t: slope_t(b, r2, xy.len()),
+    };
+    let (intercept, slope_per_kn, r_squared) = if line.slope_t.abs() >= SLOPE_T_MIN {
+        (a, b, r2)
+    } else {
+        let mean = xy.iter().map(|p| p.1).sum::<f64>() / xy.len() as f64;
+        (mean, 0.0, 0.0)
+    };
     Ok(HardnessFit {
         regression: HardnessRegression {
-            intercept: a,
-            slope_per_kn: b,
+            intercept,
+            slope_per_kn,
             min_index: lo,
             max_index: hi,
-            r_squared: r2,
+            r_squared,
             cases: points.len(),
             origin: None,
         },
+        line,
         points,
     })
 }
@@ -505,5 +549,28 @@ mod tests {
         assert!((a - 1.0).abs() < 1e-12 && (b - 0.5).abs() < 1e-12 && (r2 - 1.0).abs() < 1e-12);
         assert!(linear_fit(&[(1.0, 1.0)]).is_none());
         assert!(linear_fit(&[(1.0, 1.0), (1.0, 2.0)]).is_none());
+    }
+
+    /// The slope's t statistic matches its definition `b / se(b)` on scattered points, and is large
+    /// only where the points follow the line.
+    #[test]
+    fn slope_t_is_the_slope_over_its_standard_error() {
+        let xy: Vec<(f64, f64)> = (0..20)
+            .map(|i| {
+                let x = f64::from(i);
+                (x, 3.0 + 0.02 * x + if i % 2 == 0 { 0.5 } else { -0.5 })
+            })
+            .collect();
+        let (a, b, r2) = linear_fit(&xy).expect("fit");
+        let n = xy.len() as f64;
+        let mx = xy.iter().map(|p| p.0).sum::<f64>() / n;
+        let sxx: f64 = xy.iter().map(|p| (p.0 - mx).powi(2)).sum();
+        let sse: f64 = xy.iter().map(|p| (p.1 - a - b * p.0).powi(2)).sum();
+        let t = b / (sse / (n - 2.0) / sxx).sqrt();
+        assert!((slope_t(b, r2, xy.len()) - t).abs() < 1e-9 * t.abs().max(1.0));
+        assert!(slope_t(b, r2, xy.len()).abs() < SLOPE_T_MIN, "{t}");
+        let steep: Vec<(f64, f64)> = xy.iter().map(|&(x, y)| (x, y + 0.3 * x)).collect();
+        let (_, b, r2) = linear_fit(&steep).expect("fit");
+        assert!(slope_t(b, r2, steep.len()) > SLOPE_T_MIN);
     }
 }
