@@ -19,6 +19,12 @@ use crate::effects::CandidateEffect as _;
 use crate::fit::{AnalysisResult, SignalRms};
 use crate::parameters::ParameterLibrary;
 use crate::reference::{MIN_JUDGED_SAMPLES, Reference, Regressor, SignalStructure};
+
+/// Fewest held-out samples on which a signal's mean residual is checked against the reference's
+/// band ([`SignalVerdict::bias_beyond`]): the band is that of the reference's per-dig means over as
+/// many digs, so it does not need the [`MIN_JUDGED_SAMPLES`] an RMS ratio does (the free-air forces
+/// of the empty bucket, 5-10 held-out samples a dig).
+pub const MIN_BIAS_SAMPLES: usize = 30;
 use crate::{Candidate, Signal};
 
 /// A correlation counts as structure when its magnitude exceeds this ...
@@ -97,7 +103,8 @@ pub struct SignalVerdict {
     pub mean_residual: Option<f64>,
     /// The band of that mean on as many digs of the reference ([`Reference::bias_band`]).
     pub bias_band: Option<(f64, f64)>,
-    /// Whether the mean is outside the band (judged signals only).
+    /// Whether the mean is outside the band (signals with at least [`MIN_BIAS_SAMPLES`] held-out
+    /// samples).
     pub bias_beyond: bool,
     /// Named effects acting on the signal.
     pub named: Vec<String>,
@@ -247,7 +254,10 @@ fn judge_signal(
     };
     let mean_residual = crate::reference::mean_residual(after);
     let bias_band = reference.bias_band(sig, after.per_dig.len());
-    let bias_beyond = judged
+    // A mean is judged on fewer samples than an RMS ratio: its band comes from the reference's
+    // per-dig means on as many digs.
+    let bias_judged = rms.samples >= MIN_BIAS_SAMPLES && expected > 0.0;
+    let bias_beyond = bias_judged
         && matches!((mean_residual, bias_band), (Some(m), Some((lo, hi))) if m < lo || m > hi);
     let beyond = ratio_after > tolerance;
     let outcome = match (judged, beyond, named.is_empty()) {
