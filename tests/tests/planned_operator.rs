@@ -31,11 +31,11 @@ use hil_tests::analysis::{
     messages_from, read_candump,
 };
 use hil_tests::env;
-use hil_tests::planned::{PlannedSim, path_str, read_summary};
+use hil_tests::planned::{OPERATOR_SEED, PlannedSim, path_str, read_summary};
 use hil_tests::process::operator;
 use socketcan::Socket as _;
 
-/// Dig and cleanup actions of the session (dig, cleanup, dig and a track back on the planned bench).
+/// Dig and cleanup actions of the session (at [`OPERATOR_SEED`]: dig, cleanup, dig and a track back).
 const DIGS: u32 = 3;
 /// The e-stop must latch (neutral valves, the heartbeat requesting EStop) within this long of the
 /// request, wall s: the request crosses the control socket and the connection task, which share
@@ -139,7 +139,7 @@ fn planned_session_estop_holds_until_reset_and_a_killed_controller_resumes() {
     let candump_log = dir.join("candump.log");
     let mut candump = common::start_candump(&iface, &socket, &candump_log);
     drop(socket);
-    let mut sim = PlannedSim::start(&iface, &dir);
+    let mut sim = PlannedSim::start_with_seed(&iface, &dir, OPERATOR_SEED);
     let out = dir.join("run");
     let control = sim.control_socket.clone();
     let digs = DIGS.to_string();
