@@ -1012,8 +1012,6 @@ mod tests {
         }
     }
 
-    /// The bearing speeds are the tip velocity against the blade (tip -> pin) and against the
-    /// opening, and the force has a bearing exactly where its speed is positive.
     /// The wedge's outward share: half of each side for an edge moving straight up, nearly all on
     /// the side the edge travels at speed, continuous across `vx = 0`, its gradient the share's
     /// derivative; and the moving-bucket force turns over smoothly with it.
@@ -1054,6 +1052,8 @@ mod tests {
         );
     }
 
+    /// The bearing speeds are the tip velocity against the blade (tip -> pin) and against the
+    /// opening, and the force has a bearing exactly where its speed is positive.
     #[test]
     fn bearing_speeds_are_the_pushes_of_the_edge_and_of_the_back() {
         let psi = SoilProperties::typical();
