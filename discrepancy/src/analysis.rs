@@ -269,6 +269,9 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
             .filter_map(|name| crate::Candidate::from_name(name))
             .collect(),
         parameters: Some(crate::parameters::ParameterLibrary::derive(&machine)?),
+        expected_rms: reference
+            .as_ref()
+            .map(|r| crate::greybox::Signal::ALL.map(|s| r.expected_rms(s))),
         ..AnalysisConfig::default()
     };
     let judge = |result: &crate::AnalysisResult, r: &Reference| {
@@ -282,6 +285,7 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
     if let Some(r) = &reference {
         let (eligible, warning) = eligible_signals(&records, &model, &config, |p| judge(p, r))?;
         config.eligible = eligible;
+        config.ignored[crate::greybox::Signal::PayloadMass.index()] = warning.is_some();
         warnings.extend(warning);
     }
     let bar = (!args.quiet && std::io::IsTerminal::is_terminal(&std::io::stdout())).then(|| {

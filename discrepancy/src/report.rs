@@ -423,20 +423,21 @@ fn markdown(a: &Analysis, measured: &[PathBuf], figures: &[String]) -> String {
     for (i, round) in r.rounds.iter().enumerate() {
         let _ = writeln!(
             s,
-            "Round {}:\n\n| candidate | magnitude | uncertainty | train chi2 drop | held-out dBIC | explained | significant |\n|---|---|---|---|---|---|---|",
+            "Round {}:\n\n| candidate | magnitude | uncertainty | train chi2 drop | held-out dBIC | explained (where it acts) | significant |\n|---|---|---|---|---|---|---|",
             i + 1
         );
         for c in round {
             let _ = writeln!(
                 s,
-                "| {} | {:.4e} | {:.2e} | {:.1} | {:.1} | {:.3} | {} |",
+                "| {} | {:.4e} | {:.2e} | {:.1} | {:.1} | {:.3} ({:.3}) | {} |",
                 c.name,
                 c.magnitude,
                 c.uncertainty,
                 c.train_chi2_drop,
                 c.heldout_delta_bic,
                 c.heldout_explained,
-                c.significant
+                c.heldout_explained_acted,
+                c.veto.as_deref().unwrap_or("yes")
             );
         }
         s.push('\n');
