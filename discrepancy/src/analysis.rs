@@ -337,7 +337,10 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
         None => Vec::new(),
     };
     let twin = match crate::twin::update_twin(&machine_text, &result, &held_out) {
-        Ok(t) => Some(t),
+        Ok(t) => {
+            warnings.extend(t.1.clamped.iter().map(|c| format!("twin: {c}")));
+            Some(t)
+        }
         Err(e) => {
             warnings.push(format!("the twin was not updated: {e}"));
             None

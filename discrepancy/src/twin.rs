@@ -61,6 +61,10 @@ pub struct TwinProfile {
     pub parameters: Vec<ProfileValue>,
     /// The named effects.
     pub effects: Vec<ProfileValue>,
+    /// Named effects the simulator cannot hide at their value (a change below the starting
+    /// model's calibration, such as less flow sharing than the nominal model's), written at the
+    /// end of the simulator's range instead: what was named, and what was written.
+    pub clamped: Vec<String>,
 }
 
 /// `text` (a machine file) with the number at dotted `key` set to `value`; everything else (other
@@ -117,8 +121,20 @@ impl TwinProfile {
             machine_toml: machine_text.to_string(),
             parameters: Vec::new(),
             effects: Vec::new(),
+            clamped: Vec::new(),
         };
-        for (name, kind, value, unit) in named.chain(carried) {
+        for (name, kind, named_value, unit) in named.chain(carried) {
+            let mut value = named_value;
+            if kind != "parameter"
+                && let Some((lo, hi)) = Effect::from_name(name).map(Effect::range)
+                && !(lo..=hi).contains(&value)
+            {
+                value = value.clamp(lo, hi);
+                profile.clamped.push(format!(
+                    "{name} {named_value:.4e} is outside the simulator's range {lo:e}..{hi:e}; \
+                     the twin has {value:e}"
+                ));
+            }
             let v = ProfileValue {
                 name: name.to_string(),
                 value,
@@ -401,6 +417,8 @@ pub struct TwinReport {
     pub effects: Vec<ProfileValue>,
     /// The `demo` options that run the twin.
     pub demo_options: String,
+    /// Named effects written at the end of the simulator's range ([`TwinProfile::clamped`]).
+    pub clamped: Vec<String>,
     /// The simulator's gap to the held-out digs with the nominal plant (the machine file, no
     /// effect).
     pub gap_before: SimulatorGap,
@@ -465,6 +483,7 @@ pub fn update_twin(
         parameters: profile.parameters.clone(),
         effects: profile.effects.clone(),
         demo_options: profile.demo_options("twin/machine.toml"),
+        clamped: profile.clamped.clone(),
         gap_before,
         gap_after,
         ratio,
@@ -476,10 +495,50 @@ pub fn update_twin(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::NamedEffect;
     use planner::machine::DEFAULT_MACHINE_TOML;
 
     /// The written file loads, has the fitted value at the key, and is otherwise the nominal file
     /// line for line (comments included) and value for value.
+    /// A named effect the simulator cannot hide at its value (less flow sharing than the nominal
+    /// model's calibration: a negative change) is written at the end of its range and said so;
+    /// one within the range is written as named.
+    #[test]
+    fn an_effect_outside_the_simulators_range_is_written_at_its_end() {
+        let params = crate::AugmentedModel::nominal().unwrap().params;
+        let named = |name: &str, magnitude: f64| NamedEffect {
+            name: name.to_string(),
+            kind: "effect",
+            magnitude,
+            uncertainty: 1e-3,
+            unit: "",
+            description: String::new(),
+            heldout_delta_bic: 100.0,
+            fitted_jointly_with: None,
+        };
+        let result = AnalysisResult {
+            named_effects: vec![named("flow_sharing", -0.037), named("hydraulic_lag", 0.1)],
+            ambiguous: Vec::new(),
+            augmentation: crate::Augmentation::nominal(),
+            params,
+            rounds: Vec::new(),
+            rms: Vec::new(),
+            localisation: Vec::new(),
+            train_digs: Vec::new(),
+            test_digs: Vec::new(),
+            train_samples: Vec::new(),
+            sigma: Vec::new(),
+            kappa: Vec::new(),
+        };
+        let profile = TwinProfile::of(DEFAULT_MACHINE_TOML, &result).unwrap();
+        let value = |n: &str| profile.effects.iter().find(|e| e.name == n).unwrap().value;
+        assert_eq!(value("flow_sharing"), 0.0);
+        assert_eq!(value("hydraulic_lag"), 0.1);
+        assert_eq!(profile.clamped.len(), 1, "{:?}", profile.clamped);
+        assert!(profile.clamped[0].starts_with("flow_sharing"));
+        assert!(profile.effect_set().is_ok());
+    }
+
     #[test]
     fn a_written_machine_file_has_the_fitted_value_and_nothing_else_changed() {
         let key = "hydraulics.relief_pressure_pa";
