@@ -276,6 +276,29 @@ pub fn scan_section(
     )
 }
 
+/// As [`scan_section`], with the ground the scan did not see on the plane passing no higher than
+/// the dig's first contact, `contact_m` (`[r, z]`: the cutting edge where Boom-Down met the
+/// ground, base frame): between the seen ground either side of that unseen run, the section is
+/// at most the two straight lines through it. From the cab the crest of the face hides the face
+/// below it, and the section bridges the shadow along the line of sight, an upper bound of the
+/// ground: in a 40 kPa cohesion session the edge met the ground 0.08-0.17 m below that bridge in
+/// the seven digs whose contact it hid, and within 0.05 m of the section in the three it did not.
+pub fn scan_section_through_contact(
+    scan: &ScanFile,
+    machine: &MachineConfig,
+    plane_azimuth_rad: f64,
+    floor: &CutFloor,
+    contact_m: Option<[f64; 2]>,
+) -> Option<SectionProfile> {
+    section_of(
+        scan,
+        machine,
+        (plane_azimuth_rad, 0.0, SECTION_HALF_WIDTH_M),
+        floor,
+        contact_m,
+    )
+}
+
 /// Lanes beside the digging plane (each side): lateral offset and the half width of the band of
 /// scan points each is made of, m. Across the bucket width every 0.25 m: the ground the edge cuts is
 /// not the section's all across (the trench of a neighbouring or earlier dig, an earlier dig's spill
@@ -368,6 +391,24 @@ pub fn scan_section_beside(
     half_width_m: f64,
     floor: &CutFloor,
 ) -> Option<SectionProfile> {
+    section_of(
+        scan,
+        machine,
+        (plane_azimuth_rad, lateral_m, half_width_m),
+        floor,
+        None,
+    )
+}
+
+/// The section of [`scan_section_beside`] on the line `(azimuth, lateral offset, half width)`,
+/// lowered through `contact_m` as [`scan_section_through_contact`].
+fn section_of(
+    scan: &ScanFile,
+    machine: &MachineConfig,
+    (plane_azimuth_rad, lateral_m, half_width_m): (f64, f64, f64),
+    floor: &CutFloor,
+    contact_m: Option<[f64; 2]>,
+) -> Option<SectionProfile> {
     let (mut heights, seen) =
         section_bins(scan, machine, plane_azimuth_rad, lateral_m, half_width_m);
     let first = heights.iter().position(Option::is_some)?;
@@ -396,12 +437,16 @@ pub fn scan_section_beside(
     }
     // Ground the scan did not see on the line itself is at most where an earlier dig's edge
     // left it.
-    for (from, to) in unseen_runs(&seen, first, last) {
+    let runs = unseen_runs(&seen, first, last);
+    for &(from, to) in &runs {
         for (j, h) in heights.iter_mut().enumerate().take(to).skip(from) {
             if let (Some(height), Some(cut)) = (*h, floor.lowest(world(j))) {
                 *h = Some(height.min(cut));
             }
         }
+    }
+    if let Some(c) = contact_m.filter(|c| c.iter().all(|v| v.is_finite())) {
+        lower_through(&mut heights, &runs, (first, last), c);
     }
     let values: Vec<f64> = heights[first..=last]
         .iter()
@@ -413,6 +458,54 @@ pub fn scan_section_beside(
         values,
     )
     .ok()
+}
+
+/// Lowers the bins of the unseen run (of `runs`) that holds the point `[r, z]` to at most the two
+/// straight lines from the seen bins either side of the run (within `first..=last`) through the
+/// point, where the point lies below the section (every bin of `first..=last` has a height).
+fn lower_through(
+    heights: &mut [Option<f64>],
+    runs: &[(usize, usize)],
+    (first, last): (usize, usize),
+    [r, z]: [f64; 2],
+) {
+    let bin_r = |j: usize| SECTION_R0_M + j as f64 * SECTION_STEP_M;
+    let at = ((r - SECTION_R0_M) / SECTION_STEP_M).round();
+    if at.is_nan() || at < 0.0 {
+        return;
+    }
+    let at = at as usize;
+    let Some(&(from, to)) = runs.iter().find(|(f, t)| (*f..*t).contains(&at)) else {
+        return;
+    };
+    let (a, b) = (from.saturating_sub(1).max(first), to.min(last));
+    let (Some(Some(ha)), Some(Some(hb)), Some(Some(here))) =
+        (heights.get(a), heights.get(b), heights.get(at))
+    else {
+        return;
+    };
+    let (ha, hb) = (*ha, *hb);
+    if z >= *here {
+        return;
+    }
+    let line = |(r0, z0): (f64, f64), (r1, z1): (f64, f64), q: f64| {
+        if (r1 - r0).abs() < 1e-9 {
+            z1
+        } else {
+            z0 + (q - r0) / (r1 - r0) * (z1 - z0)
+        }
+    };
+    for (j, h) in heights.iter_mut().enumerate().take(b + 1).skip(a) {
+        let q = bin_r(j);
+        let bound = if q <= r {
+            line((bin_r(a), ha), (r, z), q)
+        } else {
+            line((r, z), (bin_r(b), hb), q)
+        };
+        if let Some(h) = h.as_mut() {
+            *h = h.min(bound);
+        }
+    }
 }
 
 /// The runs `[from, to)` of bins between `first` and `last` not `seen`, longer than
@@ -626,6 +719,26 @@ fn mark_near_ground(
     }
 }
 
+/// The cutting edge (base frame `[r, z]`) where Boom-Down first met the ground in `samples`: the
+/// first sample after a Boom-Down sample in Pre-Dig or Dig (Boom-Down ends on the contact
+/// signature, thesis 3.1).
+fn first_contact(samples: &[Sample], kin: &Kinematics) -> Option<[f64; 2]> {
+    samples
+        .windows(2)
+        .find(|w| {
+            w[0].stage == StageTag::BoomDown
+                && matches!(w[1].stage, StageTag::PreDig | StageTag::Dig)
+        })
+        .map(|w| {
+            let tip = kin.forward(&JointAngles {
+                boom_rad: w[1].angles_rad[0],
+                stick_rad: w[1].angles_rad[1],
+                bucket_rad: w[1].angles_rad[2],
+            });
+            [tip.x_m, tip.z_m]
+        })
+}
+
 /// Swing angle at time `t_s`: the sample nearest in time (samples in time order).
 fn swing_at(samples: &[(u16, Sample)], t_s: f64) -> Option<f64> {
     let k = samples.partition_point(|(_, s)| s.time_s < t_s);
@@ -682,7 +795,13 @@ pub fn read_session(dir: &Path, machine: &MachineConfig) -> anyhow::Result<Vec<D
                 // Without the swing angle at the scan, the scan's own heading is the best guess.
                 let base_heading = s.sensor.heading_rad - swing.unwrap_or(dig_swing);
                 let azimuth = base_heading + dig_swing;
-                r.section = scan_section(s, machine, azimuth, &floor);
+                r.section = scan_section_through_contact(
+                    s,
+                    machine,
+                    azimuth,
+                    &floor,
+                    first_contact(&r.samples, &kin),
+                );
                 r.lanes = LANES_M
                     .iter()
                     .flat_map(|&(o, w)| [(o, w), (-o, w)])
@@ -747,6 +866,61 @@ mod tests {
         let lane = scan_section_beside(&scan, &machine, 0.0, 0.42, 0.1, &CutFloor::default())
             .expect("lane");
         assert!((lane.height_at(6.0).expect("on") - 1.0).abs() < 1e-9);
+    }
+
+    /// A crest at 4.5 m (height 0) hiding a 45 degree face down to a floor at -2 m from 6.5 m on:
+    /// the scan sees the bench top to 4.5 m and the floor from 7.5 m, so the section bridges the
+    /// shadow in a straight line 0-1 m above the face. Boom-Down met the face at 5.5 m (height
+    /// -1.0); the section then runs from the crest through that contact to the first seen floor,
+    /// never above the bridge; seen ground stays as scanned. A contact above the section, or
+    /// where the scan saw the ground, changes nothing.
+    #[test]
+    fn unseen_ground_passes_no_higher_than_the_first_contact() {
+        let machine = MachineConfig::default_machine().expect("machine");
+        let scan0 = ScanFile {
+            time_s: 0.0,
+            sensor: cab_sensor(),
+            points: Vec::new(),
+        };
+        let origin = machine_origin(&scan0, &machine);
+        let ground = |along: f64| (4.5 - along).clamp(-2.0, 0.0);
+        let points = (0..=60)
+            .map(|k| 2.0 + 0.1 * f64::from(k))
+            .filter(|along| !(4.55..7.45).contains(along))
+            .map(|along| [origin[0] + along, origin[1], ground(along)])
+            .collect();
+        let scan = ScanFile { points, ..scan0 };
+        let floor = CutFloor::default();
+        let at = |section: &SectionProfile, r: f64| section.height_at(r).expect("on the section");
+        let bridged = scan_section(&scan, &machine, 0.0, &floor).expect("section");
+        let bridge = |r: f64| -2.0 * (r - 4.5) / 3.0;
+        assert!((at(&bridged, 5.5) - bridge(5.5)).abs() < 1e-9);
+        let lowered = scan_section_through_contact(&scan, &machine, 0.0, &floor, Some([5.5, -1.0]))
+            .expect("section");
+        assert!((at(&lowered, 5.5) + 1.0).abs() < 1e-9);
+        // Crest to contact, then contact to the first seen floor at 7.5 m (above the bridge:
+        // the bridge).
+        assert!((at(&lowered, 5.0) + 0.5).abs() < 1e-9);
+        for r in [6.0, 6.5, 7.0] {
+            let through = -1.0 - (r - 5.5) / 2.0;
+            assert!(
+                (at(&lowered, r) - through.min(bridge(r))).abs() < 1e-9,
+                "{r}"
+            );
+        }
+        for r in [3.0, 4.0, 4.5, 7.5, 8.0] {
+            assert!((at(&lowered, r) - ground(r)).abs() < 1e-9, "seen at {r}");
+        }
+        for contact in [[5.5, -0.5], [4.0, -1.0], [7.8, -3.0]] {
+            let same = scan_section_through_contact(&scan, &machine, 0.0, &floor, Some(contact))
+                .expect("section");
+            for r in [4.0, 5.0, 5.5, 6.0, 7.0, 8.0] {
+                assert!(
+                    (at(&same, r) - at(&bridged, r)).abs() < 1e-9,
+                    "{contact:?} at {r}"
+                );
+            }
+        }
     }
 
     /// A face scanned from the cab with a shadow behind its crest: points every 0.1 m from 4 to
