@@ -227,7 +227,13 @@ pub fn calibrated(
 /// As [`prepare_readable_sessions`], [`analyse`] and writing the outputs.
 pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
     let machine = load_machine(args.machine.as_deref())?;
-    let model = load_model(args.model.as_deref())?;
+    let mut model = load_model(args.model.as_deref())?;
+    // A model file from before the link masses were a parameter: the machine file's.
+    model.params.link_mass_kg.get_or_insert(
+        crate::greybox::GreyBoxParams::from_machine(&machine)
+            .link_mass_kg
+            .unwrap_or_default(),
+    );
     let (records, skipped_sessions) = prepare_readable_sessions(&args.measured, &machine, &model)?;
     for s in &skipped_sessions {
         tracing::warn!("session {} left out: {}", s.session.display(), s.reason);

@@ -331,10 +331,11 @@ enum Trial {
 }
 
 impl Trial {
-    fn groups(self) -> SignalGroups {
-        match self {
-            Trial::Effect(c) => c.groups(),
-            Trial::Parameter(_) => ParameterLibrary::groups(),
+    fn groups(self, library: Option<&ParameterLibrary>) -> SignalGroups {
+        match (self, library) {
+            (Trial::Effect(c), _) => c.groups(),
+            (Trial::Parameter(i), Some(l)) => ParameterLibrary::groups_of(&l.parameters[i].key),
+            (Trial::Parameter(_), None) => SignalGroups::default(),
         }
     }
 
@@ -824,9 +825,10 @@ pub fn analyse(
                 .flat_map(|l| (0..l.parameters.len()).map(Trial::Parameter)),
         )
         .filter(|t| {
-            config
-                .eligible
-                .is_none_or(|e| (0..N_SIGNALS).any(|j| e[j] && groups_contain(t.groups(), j)))
+            config.eligible.is_none_or(|e| {
+                (0..N_SIGNALS)
+                    .any(|j| e[j] && groups_contain(t.groups(config.parameters.as_ref()), j))
+            })
         })
         .collect();
     let n_trials = remaining.len();
@@ -854,7 +856,7 @@ pub fn analyse(
         for c in &remaining {
             let c = *c;
             let library = config.parameters.as_ref();
-            let groups = c.groups();
+            let groups = c.groups(library);
             let (lo, hi) = c.range(library);
             // The model with the trial at `x`: an effect's magnitude, or a parameter's factor on
             // the file's value (`None`: the machine file is not valid there).
@@ -1164,7 +1166,7 @@ fn resolve_confusable(
     let Some((a, p)) = c.at(xc, aug, params, library) else {
         return Resolution::Alone;
     };
-    train_eval.sse_with(&a, p.as_ref(), c.groups());
+    train_eval.sse_with(&a, p.as_ref(), c.groups(library));
     let effect_c = train_eval.weighted_delta(&round.w);
     let partner = scores
         .iter()
@@ -1174,14 +1176,14 @@ fn resolve_confusable(
         .take(MAX_PARTNERS)
         .find_map(|(d, ds)| {
             let (a, p) = d.at(d.base(base) + ds.magnitude, aug, params, library)?;
-            train_eval.sse_with(&a, p.as_ref(), d.groups());
+            train_eval.sse_with(&a, p.as_ref(), d.groups(library));
             let r = cosine(&effect_c, &train_eval.weighted_delta(&round.w));
             (r.abs() >= CONFUSABLE_CORRELATION).then(|| (*d, ds.clone(), r))
         });
     let Some((d, ds, effect_correlation)) = partner else {
         return Resolution::Alone;
     };
-    let groups = c.groups().union(d.groups());
+    let groups = c.groups(library).union(d.groups(library));
     let mut cost = |x: f64, y: f64| match c.at_pair(d, (x, y), aug, params, library) {
         Some((a, p)) => chi2(&round.w, &train_eval.sse_with(&a, p.as_ref(), groups)),
         None => f64::INFINITY,

@@ -12,9 +12,12 @@
 //!
 //! What is left to the effect library: the spool's delay and lag (the `transport_delay` and
 //! `hydraulic_lag` effects add to them, and a parameter of the same action would tie with them).
-//! What is not a candidate yet: the fields that act only through the prepared records (link masses
-//! and centres, the cylinders' force areas at the measured pressures), which would need the records
-//! prepared again for every trial value.
+//! The link masses are candidates through `GreyBoxParams::link_mass_kg`: the prepared records carry
+//! each cylinder's gravity force per kg of each link (Eq. A4 is linear in the masses), and a link's
+//! mass is fitted and scored on the cylinder forces ([`ParameterLibrary::groups_of`]). What is not a
+//! candidate yet: the fields that act only through the prepared records otherwise (the links'
+//! centres of gravity, the cylinders' force areas at the measured pressures), which would need the
+//! records prepared again for every trial value.
 
 use serde::Serialize;
 
@@ -163,14 +166,17 @@ impl ParameterLibrary {
         Ok(out)
     }
 
-    /// The signals a parameter candidate is fitted and scored on: the velocity and pump-pressure
-    /// relations (the replay takes the grey-box parameters there; the forces are prepared with
-    /// the file's areas).
-    pub fn groups() -> SignalGroups {
+    /// The signals the parameter candidate of machine-file `key` is fitted and scored on: a link's
+    /// mass (`masses.*.mass_kg`) on the cylinder forces (its gravity, Eq. A4; the weighed payload,
+    /// weighed through the same links, is left to the reference's bias check), every other on the
+    /// velocity and pump-pressure relations (the replay takes the grey-box parameters there; the
+    /// forces are prepared with the file's areas).
+    pub fn groups_of(key: &str) -> SignalGroups {
+        let mass = key.starts_with("masses.") && key.ends_with(".mass_kg");
         SignalGroups {
-            hydraulic: true,
-            pumps: true,
-            force: false,
+            hydraulic: !mass,
+            pumps: !mass,
+            force: mass,
             soil: false,
             stops: false,
             payload: false,
@@ -289,9 +295,10 @@ mod tests {
     use super::*;
 
     /// The candidates come from the machine file: the discharge coefficient, a bore, the relief,
-    /// the bulk modulus are among them with the file's values; the spool's delay (an effect of
-    /// the library), the link masses (prepared into the records) and the link lengths (no grey-box
-    /// parameter) are not.
+    /// the bulk modulus and the link masses are among them with the file's values; the spool's
+    /// delay (an effect of the library), the links' centres of gravity (prepared into the records)
+    /// and the link lengths (no grey-box parameter) are not. A link's mass acts on the cylinder
+    /// forces, the others on the velocities and pump pressures.
     #[test]
     fn parameter_candidates_are_the_machine_fields_the_model_derives_from() {
         let machine = MachineConfig::default_machine().unwrap();
@@ -307,6 +314,8 @@ mod tests {
             ("cylinders.boom.bore_m", machine.cylinders.boom.bore_m, "m"),
             ("hydraulics.relief_pressure_pa", h.relief_pressure_pa, "Pa"),
             ("hydraulics.bulk_modulus_pa", h.bulk_modulus_pa, "Pa"),
+            ("masses.stick.mass_kg", machine.masses.stick.mass_kg, "kg"),
+            ("masses.bucket.mass_kg", machine.masses.bucket.mass_kg, "kg"),
         ] {
             let p = &lib.parameters[lib.find(key).unwrap_or_else(|| panic!("{key}: {keys:?}"))];
             assert_eq!(p.nominal, value, "{key}");
@@ -315,11 +324,15 @@ mod tests {
         for key in [
             "hydraulics.transport_delay_s",
             "hydraulics.pump_max_flow_m3_per_s",
-            "masses.bucket.mass_kg",
+            "masses.bucket.cog_distance_m",
             "links.boom_m",
         ] {
             assert!(lib.find(key).is_none(), "{key}: {keys:?}");
         }
+        let mass = ParameterLibrary::groups_of("masses.stick.mass_kg");
+        assert!(mass.force && !mass.hydraulic && !mass.pumps && !mass.payload);
+        let bore = ParameterLibrary::groups_of("cylinders.boom.bore_m");
+        assert!(!bore.force && bore.hydraulic && bore.pumps);
     }
 
     /// A trial value changes the model in use by the ratio it makes to the derived parameters:

@@ -104,7 +104,7 @@ impl Signal {
 }
 
 /// Which groups of signals a replay must recompute.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct SignalGroups {
     /// Cylinder velocities.
     pub hydraulic: bool,

@@ -170,7 +170,7 @@ pub struct Verdict {
 /// Whether the candidate `name` of `kind` (`effect` or `parameter`) acts on `sig`.
 fn acts_on(name: &str, kind: &str, sig: Signal) -> bool {
     match kind {
-        "parameter" => ParameterLibrary::groups().contains(sig.index()),
+        "parameter" => ParameterLibrary::groups_of(name).contains(sig.index()),
         _ => Candidate::ALL
             .iter()
             .any(|c| c.name() == name && c.groups().contains(sig.index())),

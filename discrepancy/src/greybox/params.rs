@@ -14,6 +14,12 @@ use planner::soil::{BearingParams, SoilProperties};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GreyBoxParams {
+    /// Link masses `[boom, stick, bucket]` (the machine file's `masses.*.mass_kg`), kg: the
+    /// replay's gravity forces are the prepared records' (their machine's masses) plus the
+    /// difference times their derivative per kg (Eq. A4, linear in each link's mass). `None` in a
+    /// model file written before it: the records' own masses.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link_mass_kg: Option<[f64; 3]>,
     /// Head areas `[boom, stick, bucket]` (all cylinders of a joint together), m^2.
     pub head_area_m2: [f64; 3],
     /// Rod (annulus) areas, m^2.
@@ -118,6 +124,11 @@ impl GreyBoxParams {
         let k = h.valve_discharge_coefficient * h.valve_max_area_m2;
         let pumps = f64::from(h.pump_count.max(1));
         Self {
+            link_mass_kg: Some([
+                cfg.masses.boom.mass_kg,
+                cfg.masses.stick.mass_kg,
+                cfg.masses.bucket.mass_kg,
+            ]),
             head_area_m2: cyl.map(|c| c.head_area_m2()),
             rod_area_m2: cyl.map(|c| c.rod_area_m2()),
             tank_pa: h.tank_pressure_pa,
@@ -165,6 +176,11 @@ impl GreyBoxParams {
         let positive = [
             ("head_area_m2", self.head_area_m2.iter().all(|v| *v > 0.0)),
             ("rod_area_m2", self.rod_area_m2.iter().all(|v| *v > 0.0)),
+            (
+                "link_mass_kg",
+                self.link_mass_kg
+                    .is_none_or(|m| m.iter().all(|v| v.is_finite() && *v > 0.0)),
+            ),
             ("meter_in_k", self.meter_in_k.iter().all(|v| *v > 0.0)),
             ("meter_out_k", self.meter_out_k.iter().all(|v| *v > 0.0)),
             ("bypass_k", self.bypass_k > 0.0),

@@ -216,6 +216,10 @@ pub struct PreparedRecord {
     pub(super) gravity_force: Vec<[f64; 3]>,
     /// Their derivative with respect to a common offset of the three resolvers, N/rad.
     pub(super) gravity_force_per_rad: Vec<[f64; 3]>,
+    /// Their derivative with respect to each link's mass `[boom, stick, bucket][cylinder]`, N/kg.
+    pub(super) gravity_force_per_kg: Vec<[[f64; 3]; 3]>,
+    /// The link masses `gravity_force` was computed with (the machine file's), kg.
+    pub(super) link_mass_kg: [f64; 3],
     /// Reflected cylinder masses, kg.
     pub(super) mass: Vec<[f64; 3]>,
     /// Soil: measured tip force at zero payload `[fx, fz]` and its change per kg of payload, the
@@ -247,6 +251,26 @@ impl PreparedRecord {
         let mut velocity = vec![[0.0; 3]; n];
         let mut gravity_force = vec![[f64::NAN; 3]; n];
         let mut gravity_force_per_rad = vec![[0.0; 3]; n];
+        let mut gravity_force_per_kg = vec![[[0.0; 3]; 3]; n];
+        let link_mass_kg = [
+            cfg.masses.boom.mass_kg,
+            cfg.masses.stick.mass_kg,
+            cfg.masses.bucket.mass_kg,
+        ];
+        // The machine with each link 100 kg heavier (the gravity forces are linear in each mass).
+        const D_KG: f64 = 100.0;
+        let heavier: Vec<Kinematics> = (0..3)
+            .map(|l| {
+                let mut c = cfg.clone();
+                let m = match l {
+                    0 => &mut c.masses.boom,
+                    1 => &mut c.masses.stick,
+                    _ => &mut c.masses.bucket,
+                };
+                m.mass_kg += D_KG;
+                Kinematics::new(&c)
+            })
+            .collect::<std::result::Result<_, _>>()?;
         let mut mass = vec![[0.0; 3]; n];
         let mut in_stroke = vec![[false; 3]; n];
         let mut chamber_strokes = vec![None; n];
@@ -292,6 +316,11 @@ impl PreparedRecord {
                 };
                 if let Some(g2) = gravity_forces(&kin, &shifted) {
                     gravity_force_per_rad[k] = [0, 1, 2].map(|i| (g2[i] - g[i]) / D_RAD);
+                }
+                for (l, kin_l) in heavier.iter().enumerate() {
+                    if let Some(g2) = gravity_forces(kin_l, &q) {
+                        gravity_force_per_kg[k][l] = [0, 1, 2].map(|i| (g2[i] - g[i]) / D_KG);
+                    }
                 }
             }
             mass[k] = cylinder_masses(&kin, cfg, &params.inertia_floor_kg_m2, &q, &arms);
@@ -640,6 +669,8 @@ impl PreparedRecord {
             spool_cache: SpoolCache::default(),
             gravity_force,
             gravity_force_per_rad,
+            gravity_force_per_kg,
+            link_mass_kg,
             mass,
             soil: soil_terms,
             payload: payload_terms,

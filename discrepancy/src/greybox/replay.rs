@@ -40,6 +40,10 @@ pub fn replay(
     let coulomb = aug.get(C::CoulombFriction).max(0.0);
     let viscous = params.damping_n_s_per_m + aug.get(C::ViscousFriction).max(0.0);
     let cohesion = aug.get(C::SoilCohesion);
+    // The links' masses against the records' (Eq. A4: the gravity forces are linear in each).
+    let link_mass_change_kg = params
+        .link_mass_kg
+        .map_or([0.0; 3], |m| [0, 1, 2].map(|l| m[l] - rec.link_mass_kg[l]));
     let density = aug.get(C::SoilDensity);
     // The Eq. 2 compression flows scale with `1 / beta` (a bulk-modulus parameter candidate).
     let compression_scale = rec.compression_bulk_modulus_pa / params.bulk_modulus_pa;
@@ -182,7 +186,11 @@ pub fn replay(
                 let sensor = params.head_area_m2[i] * chamber(smp.head_pa[i])
                     - params.rod_area_m2[i] * chamber(smp.rod_pa[i]);
                 // Eq. 3 at the measured motion; the true angles are the readings less the offset.
+                let links: f64 = (0..3)
+                    .map(|l| link_mass_change_kg[l] * rec.gravity_force_per_kg[k][l][i])
+                    .sum();
                 let mut f = rec.gravity_force[k][i]
+                    + links
                     + resolver * rec.gravity_force_per_rad[k][i]
                     + rec.mass[k][i] * rec.accel[k][i]
                     + viscous * v;
@@ -274,6 +282,99 @@ mod tests {
             lanes: Vec::new(),
         };
         (record, cfg, params)
+    }
+
+    /// The gravity forces of a record prepared on the machine file, with a 20 % heavier stick in
+    /// the model's link masses, are those of the record prepared on a file with that stick (Eq.
+    /// A4 is linear in each link's mass), and the nominal masses change nothing.
+    #[test]
+    fn a_heavier_link_in_the_model_moves_the_gravity_forces_as_a_heavier_file() {
+        let (record, cfg, params) = resting_at_stop(0.0, 2.0e4);
+        let mut nominal = PreparedRecord::new(&record, &cfg, &params).unwrap();
+        let mut heavy_cfg = cfg.clone();
+        heavy_cfg.masses.stick.mass_kg *= 1.2;
+        let mut heavy = PreparedRecord::new(&record, &heavy_cfg, &params).unwrap();
+        // A measured force at every sample, so the replay predicts one there (the record rests:
+        // its own force samples are moving ones only).
+        for rec in [&mut nominal, &mut heavy] {
+            for m in &mut rec.measured {
+                m[5..8].fill(0.0);
+            }
+        }
+        let masses = |m: &MachineConfig| {
+            Some([
+                m.masses.boom.mass_kg,
+                m.masses.stick.mass_kg,
+                m.masses.bucket.mass_kg,
+            ])
+        };
+        for k in 0..nominal.len() {
+            let g = nominal.gravity_force[k];
+            let dm = heavy_cfg.masses.stick.mass_kg - cfg.masses.stick.mass_kg;
+            for i in 0..3 {
+                let moved = g[i] + dm * nominal.gravity_force_per_kg[k][1][i];
+                let truth = heavy.gravity_force[k][i];
+                assert!(
+                    (moved - truth).abs() < 1e-6 * truth.abs().max(1.0),
+                    "{k} {i}"
+                );
+            }
+        }
+        assert!(
+            nominal
+                .gravity_force_per_kg
+                .iter()
+                .any(|d| d[1][0].abs() > 1.0)
+        );
+        // The replay's forces: the heavier model on the nominal record against the nominal model
+        // on the heavier record, wherever a force is predicted.
+        let groups = SignalGroups {
+            force: true,
+            ..SignalGroups::default()
+        };
+        let with_masses = |p: &GreyBoxParams, m| GreyBoxParams {
+            link_mass_kg: m,
+            ..p.clone()
+        };
+        let (mut a, mut b, mut c) = (Vec::new(), Vec::new(), Vec::new());
+        let aug = Augmentation::nominal();
+        replay(
+            &nominal,
+            &with_masses(&params, masses(&heavy_cfg)),
+            &aug,
+            groups,
+            &mut a,
+        );
+        replay(
+            &heavy,
+            &with_masses(&params, masses(&heavy_cfg)),
+            &aug,
+            groups,
+            &mut b,
+        );
+        replay(
+            &nominal,
+            &with_masses(&params, masses(&cfg)),
+            &aug,
+            groups,
+            &mut c,
+        );
+        let mut d = Vec::new();
+        replay(&nominal, &with_masses(&params, None), &aug, groups, &mut d);
+        let predicted = b
+            .iter()
+            .flat_map(|o| &o[5..8])
+            .filter(|f| f.is_finite())
+            .count();
+        assert!(predicted > 0, "no force predicted");
+        for k in 0..a.len() {
+            for j in 5..8 {
+                if b[k][j].is_finite() {
+                    assert!((a[k][j] - b[k][j]).abs() < 1e-6 * b[k][j].abs().max(1.0));
+                }
+                assert!(c[k][j].total_cmp(&d[k][j]).is_eq(), "{k} {j}");
+            }
+        }
     }
 
     fn stop_signal(rec: &PreparedRecord) -> Vec<f64> {
