@@ -426,6 +426,23 @@ impl Reference {
         quantile(&ratios, TOLERANCE_QUANTILE).max(min_tolerance(sig))
     }
 
+    /// The mean residual of signal `sig` over the reference's digs (sample-weighted), `None` where
+    /// the reference has fewer than [`MIN_JUDGED_SAMPLES`] samples or keeps no per-dig means.
+    pub fn mean_residual(&self, sig: Signal) -> Option<f64> {
+        let s = &self.signals[sig.index()];
+        let n: usize = s.per_dig.iter().map(|d| d.0).sum();
+        if n < MIN_JUDGED_SAMPLES || s.per_dig_mean.len() != s.per_dig.len() {
+            return None;
+        }
+        let sum: f64 = s
+            .per_dig
+            .iter()
+            .zip(&s.per_dig_mean)
+            .map(|(d, m)| m * d.0 as f64)
+            .sum();
+        Some(sum / n as f64)
+    }
+
     /// The band of the mean residual over `digs` digs of a healthy machine: the
     /// `(1 - TOLERANCE_QUANTILE) / 2` and `(1 + TOLERANCE_QUANTILE) / 2` quantiles of the
     /// sample-weighted mean residual of `digs` reference digs drawn with replacement. `None` when
