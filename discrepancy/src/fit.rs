@@ -1766,6 +1766,24 @@ mod parameter_tests {
         assert!(!h.lowers_any(&eligible, Candidate::SoilCohesion.groups()));
     }
 
+    /// The machine's parameters as the only candidates, one to be named.
+    fn parameters_only(library: ParameterLibrary) -> AnalysisConfig {
+        AnalysisConfig {
+            candidates: Vec::new(),
+            parameters: Some(library),
+            max_effects: 1,
+            ..AnalysisConfig::default()
+        }
+    }
+
+    fn assert_nothing_named(result: &AnalysisResult) {
+        assert!(
+            result.named_effects.is_empty(),
+            "{:?}",
+            result.named_effects
+        );
+    }
+
     /// Signals marked ignored are evidence for no candidate: with the velocities and pump
     /// pressures ignored, the drifted discharge coefficient (which acts on them alone) is not named.
     #[test]
@@ -1782,18 +1800,11 @@ mod parameter_tests {
             ignored[s.index()] = true;
         }
         let config = AnalysisConfig {
-            candidates: Vec::new(),
-            parameters: Some(library),
-            max_effects: 1,
             ignored,
-            ..AnalysisConfig::default()
+            ..parameters_only(library)
         };
         let result = analyse(&records, &params, &config, &mut |_, _| {}).unwrap();
-        assert!(
-            result.named_effects.is_empty(),
-            "{:?}",
-            result.named_effects
-        );
+        assert_nothing_named(&result);
         assert!(
             result.rounds[0]
                 .iter()
@@ -1818,18 +1829,11 @@ mod parameter_tests {
             e
         };
         let config = AnalysisConfig {
-            candidates: Vec::new(),
-            parameters: Some(library),
-            max_effects: 1,
             eligible: Some(only(&[Signal::PayloadMass])),
-            ..AnalysisConfig::default()
+            ..parameters_only(library)
         };
         let result = analyse(&records, &params, &config, &mut |_, _| {}).unwrap();
-        assert!(
-            result.named_effects.is_empty(),
-            "{:?}",
-            result.named_effects
-        );
+        assert_nothing_named(&result);
         assert!(
             result.rounds.iter().all(|r| r.is_empty()),
             "{:?}",

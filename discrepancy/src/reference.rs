@@ -426,21 +426,15 @@ impl Reference {
         quantile(&ratios, TOLERANCE_QUANTILE).max(min_tolerance(sig))
     }
 
-    /// The mean residual of signal `sig` over the reference's digs (sample-weighted), `None` where
-    /// the reference has fewer than [`MIN_JUDGED_SAMPLES`] samples or keeps no per-dig means.
+    /// The mean residual of signal `sig` over the reference's digs ([`mean_residual`]), `None`
+    /// where the reference has fewer than [`MIN_JUDGED_SAMPLES`] samples of it.
     pub fn mean_residual(&self, sig: Signal) -> Option<f64> {
         let s = &self.signals[sig.index()];
         let n: usize = s.per_dig.iter().map(|d| d.0).sum();
-        if n < MIN_JUDGED_SAMPLES || s.per_dig_mean.len() != s.per_dig.len() {
+        if n < MIN_JUDGED_SAMPLES {
             return None;
         }
-        let sum: f64 = s
-            .per_dig
-            .iter()
-            .zip(&s.per_dig_mean)
-            .map(|(d, m)| m * d.0 as f64)
-            .sum();
-        Some(sum / n as f64)
+        mean_residual(s)
     }
 
     /// The band of the mean residual over `digs` digs of a healthy machine: the
@@ -636,5 +630,19 @@ mod tests {
         assert!((m - 0.7).abs() < 1e-12 && m > hi8);
         shifted.per_dig_mean.clear();
         assert_eq!(mean_residual(&shifted), None);
+    }
+
+    /// The reference's mean residual of a signal weighs each dig by its samples, and is `None`
+    /// on fewer than `MIN_JUDGED_SAMPLES` samples.
+    #[test]
+    fn the_mean_residual_weighs_digs_by_their_samples() {
+        let mut s = signal(1.0, vec![(300, 1.0), (100, 1.0)]);
+        s.per_dig_mean = vec![-2.0, 2.0];
+        let r = reference(vec![s.clone(); N_SIGNALS]);
+        let m = r.mean_residual(Signal::BoomForce).unwrap();
+        assert!((m + 1.0).abs() < 1e-12, "{m}");
+        s.per_dig = vec![(40, 1.0), (40, 1.0)];
+        let few = reference(vec![s; N_SIGNALS]);
+        assert_eq!(few.mean_residual(Signal::BoomForce), None);
     }
 }
