@@ -131,7 +131,8 @@ pub struct CandidateScore {
     /// Whether it passed the thresholds and worsened no signal by more than 10 %.
     pub significant: bool,
     /// Why it is not significant (`None` when it is): the signal it makes worse, a magnitude
-    /// within three uncertainties of zero, or too small a gain.
+    /// within three uncertainties of zero, no signal beyond the reference lowered, or too small a
+    /// gain.
     pub veto: Option<String>,
 }
 
