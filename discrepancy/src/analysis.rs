@@ -229,11 +229,10 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
     let machine = load_machine(args.machine.as_deref())?;
     let mut model = load_model(args.model.as_deref())?;
     // A model file from before the link masses were a parameter: the machine file's.
-    model.params.link_mass_kg.get_or_insert(
-        crate::greybox::GreyBoxParams::from_machine(&machine)
-            .link_mass_kg
-            .unwrap_or_default(),
-    );
+    model
+        .params
+        .link_mass_kg
+        .get_or_insert(machine.masses.mass_kg());
     let (records, skipped_sessions) = prepare_readable_sessions(&args.measured, &machine, &model)?;
     for s in &skipped_sessions {
         tracing::warn!("session {} left out: {}", s.session.display(), s.reason);
@@ -305,8 +304,8 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
         bar
     });
     let fit_records = match &reference {
-        Some(r) => less_healthy_force_bias(&records, r),
-        None => records.clone(),
+        Some(r) => std::borrow::Cow::Owned(less_healthy_force_bias(&records, r)),
+        None => std::borrow::Cow::Borrowed(records.as_slice()),
     };
     let result = analyse(&fit_records, &model.params, &config, &mut |done, total| {
         if let Some(b) = &bar {

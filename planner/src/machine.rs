@@ -230,6 +230,25 @@ pub struct LinkMasses {
     pub bucket: LinkMass,
 }
 
+impl LinkMasses {
+    /// The links `[boom, stick, bucket]`.
+    #[must_use]
+    pub fn links(&self) -> [&LinkMass; 3] {
+        [&self.boom, &self.stick, &self.bucket]
+    }
+
+    /// The links `[boom, stick, bucket]`, to change.
+    pub fn links_mut(&mut self) -> [&mut LinkMass; 3] {
+        [&mut self.boom, &mut self.stick, &mut self.bucket]
+    }
+
+    /// The masses `[boom, stick, bucket]`, kg.
+    #[must_use]
+    pub fn mass_kg(&self) -> [f64; 3] {
+        self.links().map(|l| l.mass_kg)
+    }
+}
+
 /// The bucket as a container.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -124,11 +124,7 @@ impl GreyBoxParams {
         let k = h.valve_discharge_coefficient * h.valve_max_area_m2;
         let pumps = f64::from(h.pump_count.max(1));
         Self {
-            link_mass_kg: Some([
-                cfg.masses.boom.mass_kg,
-                cfg.masses.stick.mass_kg,
-                cfg.masses.bucket.mass_kg,
-            ]),
+            link_mass_kg: Some(cfg.masses.mass_kg()),
             head_area_m2: cyl.map(|c| c.head_area_m2()),
             rod_area_m2: cyl.map(|c| c.rod_area_m2()),
             tank_pa: h.tank_pressure_pa,

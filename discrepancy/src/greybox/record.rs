@@ -252,22 +252,13 @@ impl PreparedRecord {
         let mut gravity_force = vec![[f64::NAN; 3]; n];
         let mut gravity_force_per_rad = vec![[0.0; 3]; n];
         let mut gravity_force_per_kg = vec![[[0.0; 3]; 3]; n];
-        let link_mass_kg = [
-            cfg.masses.boom.mass_kg,
-            cfg.masses.stick.mass_kg,
-            cfg.masses.bucket.mass_kg,
-        ];
+        let link_mass_kg = cfg.masses.mass_kg();
         // The machine with each link 100 kg heavier (the gravity forces are linear in each mass).
         const D_KG: f64 = 100.0;
         let heavier: Vec<Kinematics> = (0..3)
             .map(|l| {
                 let mut c = cfg.clone();
-                let m = match l {
-                    0 => &mut c.masses.boom,
-                    1 => &mut c.masses.stick,
-                    _ => &mut c.masses.bucket,
-                };
-                m.mass_kg += D_KG;
+                c.masses.links_mut()[l].mass_kg += D_KG;
                 Kinematics::new(&c)
             })
             .collect::<std::result::Result<_, _>>()?;

@@ -301,13 +301,7 @@ mod tests {
                 m[5..8].fill(0.0);
             }
         }
-        let masses = |m: &MachineConfig| {
-            Some([
-                m.masses.boom.mass_kg,
-                m.masses.stick.mass_kg,
-                m.masses.bucket.mass_kg,
-            ])
-        };
+        let masses = |m: &MachineConfig| Some(m.masses.mass_kg());
         for k in 0..nominal.len() {
             let g = nominal.gravity_force[k];
             let dm = heavy_cfg.masses.stick.mass_kg - cfg.masses.stick.mass_kg;
