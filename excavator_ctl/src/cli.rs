@@ -21,7 +21,10 @@ pub enum Command {
     Run(RunCmd),
     /// Operator control of a running `run` over its control socket: status, pause, resume, estop,
     /// reset, stop (docs/controller.md).
-    Ctl(lab::wire::CtlArgs),
+    Ctl(onboard::run::CtlArgs),
+    /// Print the site part of a simulator bench file (the work area, floor, start pose and material
+    /// that `run --site` reads; docs/controller.md, "The site").
+    Site(SiteArgs),
     /// The embedded default: the simulator in-process in virtual time and a full autonomous session;
     /// writes the trace, scans, summary and plots into --out (docs/demo-output.md); --live serves it
     /// to Foxglove as it runs (docs/live-view.md).
@@ -70,10 +73,18 @@ pub struct DemoCmd {
 pub struct RunCmd {
     /// The session.
     #[command(flatten)]
-    pub run: lab::wire::RunArgs,
+    pub run: onboard::run::RunArgs,
     /// The live view.
     #[command(flatten)]
     pub live: live::LiveArgs,
+}
+
+/// Arguments of `excavator-ctl site`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct SiteArgs {
+    /// The bench file whose site part to print.
+    #[arg(long, value_name = "FILE")]
+    pub bench: std::path::PathBuf,
 }
 
 #[cfg(test)]
@@ -128,7 +139,7 @@ mod tests {
         assert_eq!(o.iface, "vcan0");
         assert!(o.listen_only);
         assert_eq!(o.digs, Some(3));
-        assert_eq!(o.strategy, lab::demo::DemoStrategy::Planned);
+        assert_eq!(o.strategy, onboard::DemoStrategy::Planned);
         assert!((o.time_scale.get() - 4.0).abs() < 1e-12);
         assert!(Cli::try_parse_from(["excavator-ctl", "run"]).is_err());
         for bad in ["0", "25", "NaN", "-2"] {

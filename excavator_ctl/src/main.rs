@@ -39,18 +39,40 @@ fn demo(runtime: &tokio::runtime::Runtime, cmd: cli::DemoCmd) -> anyhow::Result<
     runtime.block_on(lab::demo::run_observed(cmd.session, Box::new(stream)))
 }
 
+/// The lab's plots of a `run` session folder.
+fn plots() -> std::sync::Arc<dyn onboard::summary::SessionPlots> {
+    std::sync::Arc::new(lab::demo::Plots)
+}
+
+/// `site`: prints the site part of a bench file (what `run --site` reads).
+fn site(args: &cli::SiteArgs) -> anyhow::Result<()> {
+    use anyhow::Context as _;
+    let bench = vcan_sim::scenario::Scenario::from_toml_file(&args.bench)
+        .with_context(|| format!("bench {}", args.bench.display()))?;
+    let text = bench.site().to_toml_string().context("writing the site")?;
+    print!(
+        "# The site part of the bench {} (excavator-ctl site --bench); planner::site.\n{text}",
+        args.bench.display()
+    );
+    Ok(())
+}
+
 /// `run`, with the live view when `--live` is given.
 fn run(runtime: &tokio::runtime::Runtime, cmd: cli::RunCmd) -> anyhow::Result<()> {
     if cmd.live.live.is_none() {
-        return runtime.block_on(lab::wire::run(cmd.run));
+        return runtime.block_on(onboard::run::run(cmd.run, Some(plots())));
     }
     anyhow::ensure!(
         cmd.live.pace.is_none(),
         "--pace paces demo's virtual time; run follows the bus in real time (--time-scale)"
     );
-    let machine = lab::wire::machine(&cmd.run)?;
+    let machine = onboard::run::machine(&cmd.run)?;
     let mut stream = start_live(&cmd.live, &machine)?;
-    let result = runtime.block_on(lab::wire::run_observed(cmd.run, &mut stream));
+    let result = runtime.block_on(onboard::run::run_observed(
+        cmd.run,
+        &mut stream,
+        Some(plots()),
+    ));
     // The stream's runtime ends here, outside the session's runtime.
     drop(stream);
     result
@@ -67,12 +89,12 @@ fn main() -> std::process::ExitCode {
         .with(
             tracing_subscriber::fmt::layer()
                 // Through the console: log lines do not break the progress line of `demo` and `run`.
-                .with_writer(|| lab::console::ConsoleWriter)
+                .with_writer(|| onboard::console::ConsoleWriter)
                 // Colours only for a person at a terminal: a journal, a file or a pipe gets plain text.
                 .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr())),
         )
         // `run`'s session log (run.log in its session folder), while one is open.
-        .with(lab::session_log::layer())
+        .with(onboard::session_log::layer())
         .init();
     let cli = Cli::parse();
     let runtime = match tokio::runtime::Builder::new_current_thread()
@@ -87,7 +109,8 @@ fn main() -> std::process::ExitCode {
     };
     let result = match cli.command {
         Command::Run(cmd) => run(&runtime, cmd),
-        Command::Ctl(args) => runtime.block_on(lab::wire::ctl(args)),
+        Command::Ctl(args) => runtime.block_on(onboard::run::ctl(args)),
+        Command::Site(args) => site(&args),
         Command::Demo(cmd) => demo(&runtime, cmd),
         Command::Experiment(args) => lab::experiment::run(&args),
         Command::Trace { cmd } => runtime.block_on(trace_tools::run(cmd)),

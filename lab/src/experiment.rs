@@ -32,9 +32,9 @@ use vcan_sim::scenario::SoilContactIntegration;
 
 pub use crate::demo::SoilContact;
 
-use crate::session::TipPoint;
 use controller::cycle::{Action, Phase, StartPose};
 use controller::node::ControllerConfig;
+use onboard::record::TipPoint;
 
 use crate::harness::Harness;
 

@@ -1,6 +1,6 @@
 //! SVG plots of a demo session (plotters): tip trajectories per dig over the terrain section, terrain
 //! elevation maps before and after, and per-dig weight, time and energy. Each function returns the SVG
-//! text; `demo` and the experiments write it. It draws the session records ([`crate::session`]) and
+//! text; `demo` and the experiments write it. It draws the session records ([`onboard::record`]) and
 //! nothing else of the lab.
 
 use std::path::{Path, PathBuf};
@@ -11,7 +11,7 @@ use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
-use crate::session::{DigRecord, TipPoint};
+use onboard::record::{DigRecord, TipPoint};
 
 use trace_tools::plot::color;
 pub(crate) use trace_tools::plot::err;

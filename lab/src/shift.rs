@@ -79,7 +79,7 @@ use controller::state_file::StateFileError;
 
 use crate::demo::{self, DemoArgs};
 use crate::harness::{Harness, HarnessOptions, PERIOD_S, SimScans};
-use crate::resume::{RunRecords, RunState};
+use onboard::resume::{RunRecords, RunState};
 
 /// Fault-free time at the start of a shift, s (the first scan, plan and arming).
 pub const WARM_UP_S: f64 = 20.0;
@@ -580,7 +580,7 @@ pub fn run_shift(args: &ShiftArgs) -> anyhow::Result<ShiftReport> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let setup = Setup::new(args)?;
-    let state_path = crate::resume::state_path(&args.out);
+    let state_path = onboard::resume::state_path(&args.out);
     // A state file of an earlier run would be resumed by the first restart.
     if state_path.exists() {
         std::fs::remove_file(&state_path)
@@ -706,9 +706,10 @@ impl Setup {
         // The session runs until its bench is done.
         config.cycle.max_digs = None;
         let planner = demo::planner_config(&dargs, &sim)?;
-        let identity = crate::wire::session_identity(
+        let identity = onboard::run::session_identity(
             &sim.machine,
-            &sim,
+            &sim.scenario.site(),
+            sim.scenario.seed,
             demo::DemoStrategy::Planned,
             &config,
             &planner,
@@ -996,7 +997,7 @@ impl<'a> Shift<'a> {
         if let (Some(driver), Some((node, machine))) = (self.driver.as_mut(), self.h.parts_mut()) {
             driver.after_step(node, &mut SimScans::new(machine))?;
             if let (Some(path), Some(cp)) = (&self.state_path, driver.checkpoint()) {
-                let state = crate::resume::run_state(
+                let state = onboard::resume::run_state(
                     &self.setup.identity,
                     cp.clone(),
                     RunRecords {

@@ -97,7 +97,7 @@ fn demo_writes_all_outputs_with_the_documented_fields_for_two_digs() {
     assert_clean_protocol(&out.join("trace.log"));
     assert_epoch_stamps(&out.join("trace.log"), &summary);
     // The soil estimator's samples of the planned session, for `model soil-cv`.
-    let soil: lab::session::SoilSamplesFile =
+    let soil: onboard::record::SoilSamplesFile =
         serde_json::from_slice(&std::fs::read(out.join("soil_samples.json")).unwrap()).unwrap();
     assert!(soil.digs.iter().all(|d| d.index < 2));
     assert!(soil.digs.iter().flat_map(|d| &d.samples).all(|s| {

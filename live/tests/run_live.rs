@@ -1,4 +1,4 @@
-//! `excavator-ctl run --live`: the run loop ([`lab::wire::run_on_observed`]) over the in-process
+//! `excavator-ctl run --live`: the run loop ([`onboard::run::run_on_observed`]) over the in-process
 //! bus on the wall clock, against the simulator's real-time loop, with the live view observing it.
 //! The operator page's event stream follows the session, and its e-stop (an HTTP POST, as the
 //! page's button sends) goes through the run loop's operator port: the controller faults with the
@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use firmware_bridge::transport::{InProcessBus, TimeScale};
 use lab::demo::{DemoArgs, DemoStrategy};
-use lab::wire::RunArgs;
+use onboard::run::RunArgs;
 use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
 use vcan_sim::node::MachineNode;
 use vcan_sim::realtime::RealtimeOptions;
@@ -88,7 +88,7 @@ fn run_serves_the_page_and_its_estop_reaches_the_run_loop() {
             pace: None,
             live_queue: live::DEFAULT_QUEUE,
         },
-        &lab::wire::machine(&args).unwrap(),
+        &onboard::run::machine(&args).unwrap(),
     )
     .unwrap();
     let page = format!("127.0.0.1:{}", stream.page_port());
@@ -142,11 +142,11 @@ fn run_serves_the_page_and_its_estop_reaches_the_run_loop() {
                 () = tokio::time::sleep(Duration::from_secs(120)) => {}
             }
         };
-        lab::wire::run_on_observed(
+        onboard::run::run_on_observed(
             &ctl_node,
             None,
             &args,
-            lab::wire::RunConsole::default(),
+            onboard::run::RunConsole::default(),
             budget,
             &mut stream,
         )

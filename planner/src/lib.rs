@@ -6,6 +6,7 @@
 //! - [`machine`]: the machine description (`config/machine.toml`): geometry, cylinders, masses, hydraulics.
 //! - [`toml_lines`]: lines and dotted fields of TOML text, for configuration errors naming file, line
 //!   and field.
+//! - [`config_file`]: configuration files read as untrusted input (regular files, bounded size).
 //! - [`effects`]: the catalogue of hidden physical effects (names, units, ranges) that the simulator
 //!   applies and the discrepancy workflow identifies.
 //! - [`kinematics`]: joint angles <-> cylinder lengths, forward/inverse kinematics, Jacobian, gravity and
@@ -24,6 +25,8 @@
 //!   the shared Autodig step, predicting a dig's trajectory, time, energy and swept volume.
 //! - [`plan`]: the dig planner (thesis ch. 5): terrain mapping from scans, coarse and refined dig
 //!   location, dig quality, cleanup and tracking plans, action selection, soil hardness index.
+//! - [`site`]: the work site as the controller knows it (`site.toml`): work area, target floor,
+//!   the machine's start pose, the material's density.
 //! - `synthetic` (tests and the `synthetic` feature): synthetic actuator and FEE soil digs with a known
 //!   truth, for the tests and the examples (`cargo run -p planner --release --features synthetic
 //!   --example actuator_training` or `--example soil_cross_validation`).
@@ -31,6 +34,7 @@
 pub mod actuator;
 pub mod autodig;
 pub mod cleanup;
+pub mod config_file;
 pub mod dig_model;
 pub mod effects;
 pub mod estimate;
@@ -41,6 +45,7 @@ pub mod machine;
 pub mod origin;
 mod par;
 pub mod plan;
+pub mod site;
 pub mod soil;
 #[cfg(any(test, feature = "synthetic"))]
 pub mod synthetic;

@@ -56,6 +56,37 @@ fn line_suffix(line: Option<usize>) -> String {
     line.map(|l| format!(":{l}")).unwrap_or_default()
 }
 
+/// The machine file's tables that are simulator settings, not the machine's (the controller ignores
+/// them): hidden effects and the gateway's NAME.
+pub const SIMULATOR_TABLES: [&str; 2] = ["effects", "gateway_name"];
+
+/// Splits the [`SIMULATOR_TABLES`] out of machine-file text, keeping line numbers (their lines
+/// become blank in the returned machine text, and every other line is blank in theirs). Returns
+/// `(machine text, [effects text, gateway name text])`.
+pub fn split_simulator_tables(text: &str) -> (String, [String; 2]) {
+    let mut machine = String::with_capacity(text.len());
+    let mut tables = [String::new(), String::new()];
+    let mut current: Option<usize> = None;
+    for line in text.lines() {
+        let t = line.trim();
+        if t.starts_with('[') {
+            let header = t.trim_start_matches('[').trim_end_matches(']').trim();
+            current = SIMULATOR_TABLES.iter().position(|name| *name == header);
+        }
+        for (i, table) in tables.iter_mut().enumerate() {
+            if current == Some(i) {
+                table.push_str(line);
+            }
+            table.push('\n');
+        }
+        if current.is_none() {
+            machine.push_str(line);
+        }
+        machine.push('\n');
+    }
+    (machine, tables)
+}
+
 /// Serde adapter: the struct holds radians, the file holds degrees.
 pub mod degrees {
     use serde::{Deserialize, Deserializer, Serializer};
@@ -418,6 +449,24 @@ impl MachineConfig {
             Some(p) => Self::from_toml_file(p),
             None => Self::default_machine(),
         }
+    }
+
+    /// Reads a machine file as the controller does: its simulator tables ([`SIMULATOR_TABLES`]: a
+    /// simulated machine's hidden effects and its gateway's NAME) ignored, errors naming the file,
+    /// line and field; the built-in machine without a path.
+    ///
+    /// # Errors
+    /// As [`Self::from_toml_file`].
+    pub fn controller_file(path: Option<&Path>) -> Result<Self, ConfigError> {
+        let Some(path) = path else {
+            return Self::default_machine();
+        };
+        let origin = path.display().to_string();
+        let text = crate::config_file::read_text(path).map_err(|reason| ConfigError::Io {
+            origin: origin.clone(),
+            reason,
+        })?;
+        Self::from_toml_str_named(&split_simulator_tables(&text).0, &origin)
     }
 
     /// Parses and validates a machine from TOML text.

@@ -47,6 +47,30 @@ pub fn bench_toml() -> String {
     text
 }
 
+/// The machine file `run` is given: the project's (the simulator's default machine).
+pub const MACHINE_FILE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../config/machine.toml");
+
+/// The site part of the bench at `bench`, written to `dir/site.toml` by `excavator-ctl site --bench`.
+///
+/// # Panics
+/// When the command fails.
+pub fn write_site(dir: &Path, bench: &Path) -> PathBuf {
+    let out = std::process::Command::new(env::binary("excavator-ctl"))
+        .args(["site", "--bench", path_str(bench)])
+        .output()
+        .unwrap_or_else(|e| panic!("excavator-ctl site: {e}"));
+    assert!(
+        out.status.success(),
+        "excavator-ctl site --bench {}: {}",
+        bench.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let path = dir.join("site.toml");
+    std::fs::write(&path, &out.stdout)
+        .unwrap_or_else(|e| panic!("cannot write {}: {e}", path.display()));
+    path
+}
+
 /// Writes [`bench_toml`] to `dir/bench.toml`.
 ///
 /// # Panics
@@ -79,6 +103,9 @@ pub struct PlannedSim {
     pub dir: PathBuf,
     /// The bench file.
     pub bench: PathBuf,
+    /// The bench's site part (`excavator-ctl site --bench`), which `run` reads: a controller knows
+    /// the site, never the simulated world.
+    pub site: PathBuf,
     /// `host:port` of the scan socket.
     pub scan_addr: String,
     /// The machine key both ends hold.
@@ -146,12 +173,14 @@ impl PlannedSim {
             p
         });
         let control_socket = private.path().join("control.sock");
+        let site = write_site(dir, &bench);
         Self {
             sim,
             control_socket,
             iface: iface.to_owned(),
             dir: dir.to_owned(),
             bench,
+            site,
             scan_addr,
             key_file,
             seed: seed.to_owned(),
@@ -170,8 +199,10 @@ impl PlannedSim {
             &self.iface,
             "--strategy",
             "planned",
-            "--bench",
-            path_str(&self.bench),
+            "--machine",
+            MACHINE_FILE,
+            "--site",
+            path_str(&self.site),
             "--seed",
             &self.seed,
             "--scan-addr",

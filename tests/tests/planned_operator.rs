@@ -124,9 +124,9 @@ fn wait_armed(iface: &str, ctl: &mut hil_tests::process::Proc) {
 
 /// Completed actions in the session's state file (0 before the first).
 fn saved_actions(out: &Path) -> usize {
-    std::fs::read(lab::resume::state_path(out))
+    std::fs::read(onboard::resume::state_path(out))
         .ok()
-        .and_then(|b| serde_json::from_slice::<lab::resume::RunState>(&b).ok())
+        .and_then(|b| serde_json::from_slice::<onboard::resume::RunState>(&b).ok())
         .map_or(0, |s| s.records.digs.len())
 }
 
@@ -177,8 +177,8 @@ fn planned_session_estop_holds_until_reset_and_a_killed_controller_resumes() {
     wait_armed(&iface, &mut ctl);
     let t_kill = unix_now_s();
     ctl.kill();
-    let saved: lab::resume::RunState =
-        serde_json::from_slice(&std::fs::read(lab::resume::state_path(&out)).unwrap()).unwrap();
+    let saved: onboard::resume::RunState =
+        serde_json::from_slice(&std::fs::read(onboard::resume::state_path(&out)).unwrap()).unwrap();
     std::thread::sleep(Duration::from_millis(1000));
     let t_restart = unix_now_s();
     let args = sim.run_args(&["--resume", path_str(&out)], &[]);

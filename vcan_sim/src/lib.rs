@@ -106,37 +106,6 @@ pub struct SimConfig {
     pub gateway_name: Name,
 }
 
-/// The machine file's tables that are simulator settings, not the machine's (the controller ignores
-/// them): hidden effects and the gateway's NAME.
-const SIMULATOR_TABLES: [&str; 2] = ["effects", "gateway_name"];
-
-/// Splits the [`SIMULATOR_TABLES`] out of machine-file text, keeping line numbers (their lines
-/// become blank in the returned machine text, and every other line is blank in theirs). Returns
-/// `(machine text, [effects text, gateway name text])`.
-fn split_simulator_tables(text: &str) -> (String, [String; 2]) {
-    let mut machine = String::with_capacity(text.len());
-    let mut tables = [String::new(), String::new()];
-    let mut current: Option<usize> = None;
-    for line in text.lines() {
-        let t = line.trim();
-        if t.starts_with('[') {
-            let header = t.trim_start_matches('[').trim_end_matches(']').trim();
-            current = SIMULATOR_TABLES.iter().position(|name| *name == header);
-        }
-        for (i, table) in tables.iter_mut().enumerate() {
-            if current == Some(i) {
-                table.push_str(line);
-            }
-            table.push('\n');
-        }
-        if current.is_none() {
-            machine.push_str(line);
-        }
-        machine.push('\n');
-    }
-    (machine, tables)
-}
-
 /// The `[gateway_name]` table of a machine file ([`GATEWAY_NAME`] without one), checked field by
 /// field.
 fn gateway_name_from_table(text: &str, origin: &str) -> Result<Name> {
@@ -233,7 +202,8 @@ impl SimConfig {
                     context: format!("reading {origin}"),
                     source,
                 })?;
-                let (machine_text, [effects_text, name_text]) = split_simulator_tables(&text);
+                let (machine_text, [effects_text, name_text]) =
+                    planner::machine::split_simulator_tables(&text);
                 let cfg = MachineConfig::from_toml_str_named(&machine_text, &origin)?;
                 check_transport_delay(&cfg, &machine_text, &origin)?;
                 gateway_name = gateway_name_from_table(&name_text, &origin)?;
@@ -296,7 +266,7 @@ mod tests {
     #[test]
     fn machine_file_effects_table_is_split_out_keeping_lines() {
         let text = "a = 1\n[effects]\nvalve_deadband = 0.1\n[b]\nc = 2\n";
-        let (m, [e, n]) = split_simulator_tables(text);
+        let (m, [e, n]) = planner::machine::split_simulator_tables(text);
         assert_eq!(m.lines().count(), 5);
         assert!(!m.contains("valve_deadband") && m.contains("[b]"));
         let set = effects_from_table(&e, "m.toml").unwrap();

@@ -331,6 +331,37 @@ pub const DEFAULT_BENCH_TOML: &str = include_str!("../../config/bench.toml");
 pub const EXTENDED_BENCH_TOML: &str = include_str!("../../config/bench_extended.toml");
 
 impl Scenario {
+    /// The bench's site part: what the controller knows of the place (planner::site): the terrain
+    /// map's grid, the floor, the machine's start pose and the bench material's density. The rest of
+    /// the bench (soil strength, native ground, boulders, undulation, spoil pile, joints, effects) is
+    /// the simulated world's truth, which a controller never reads.
+    #[must_use]
+    pub fn site(&self) -> planner::site::Site {
+        use planner::site::{Floor, MachineStart, Material, Site, WorkArea};
+        let g = &self.grid;
+        Site {
+            name: self.name.clone(),
+            work_area: WorkArea {
+                cell_m: g.cell_m,
+                x_min_m: g.x_min_m,
+                y_min_m: g.y_min_m,
+                size_x_m: g.size_x_m,
+                size_y_m: g.size_y_m,
+            },
+            floor: Floor {
+                elevation_m: self.bench.floor_elevation_m,
+            },
+            machine: MachineStart {
+                x_m: self.start.x_m,
+                y_m: self.start.y_m,
+                heading_deg: self.start.heading_deg,
+            },
+            material: Material {
+                bulk_density_kg_per_m3: self.soil.density_kg_per_m3,
+            },
+        }
+    }
+
     /// The default bench (`config/bench.toml`, compiled in).
     ///
     /// # Errors
@@ -562,6 +593,22 @@ impl Scenario {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `config/site.toml` is the extended bench's site part (the default site of `run` and the
+    /// default bench of `demo` describe one place).
+    #[test]
+    fn the_bundled_site_is_the_extended_benchs() {
+        let bench =
+            Scenario::from_toml_str_named(EXTENDED_BENCH_TOML, "config/bench_extended.toml")
+                .unwrap();
+        assert_eq!(bench.site(), planner::site::Site::extended_bench().unwrap());
+        bench.site().validate().unwrap();
+        Scenario::default_bench()
+            .unwrap()
+            .site()
+            .validate()
+            .unwrap();
+    }
 
     #[test]
     fn bundled_bench_parses() {

@@ -19,7 +19,7 @@ use planner::estimate::{
     cross_validate,
 };
 
-use crate::session::SoilSamplesFile;
+use onboard::record::SoilSamplesFile;
 
 /// `excavator-ctl model soil-cv`
 #[derive(Debug, Args)]

@@ -120,10 +120,10 @@ pub(super) fn tip_start(
 }
 
 /// The tip path of a predicted dig, for the tip-path plots.
-pub(super) fn predicted_tip_path(p: &DigPrediction) -> Vec<crate::session::TipPoint> {
+pub(super) fn predicted_tip_path(p: &DigPrediction) -> Vec<onboard::record::TipPoint> {
     p.samples
         .iter()
-        .map(|s| crate::session::TipPoint {
+        .map(|s| onboard::record::TipPoint {
             x_m: s.tip_x_m,
             z_m: s.tip_z_m,
         })
@@ -131,7 +131,7 @@ pub(super) fn predicted_tip_path(p: &DigPrediction) -> Vec<crate::session::TipPo
 }
 
 /// The section of the default bench as [`TipPoint`]s (every 0.05 m from 1 to 12 m).
-pub(super) fn default_section() -> anyhow::Result<Vec<crate::session::TipPoint>> {
+pub(super) fn default_section() -> anyhow::Result<Vec<onboard::record::TipPoint>> {
     let site = default_site()?;
     Ok((0..=220)
         .filter_map(|k| {
@@ -139,7 +139,7 @@ pub(super) fn default_section() -> anyhow::Result<Vec<crate::session::TipPoint>>
             site.profile()
                 .height_at(r)
                 .ok()
-                .map(|z| crate::session::TipPoint { x_m: r, z_m: z })
+                .map(|z| onboard::record::TipPoint { x_m: r, z_m: z })
         })
         .collect())
 }

@@ -4,18 +4,19 @@
 //! - `planned` / `predefined`: the session driver that `demo` runs ([`SessionDriver`]: the dig
 //!   planner or the predefined sequence, Autodig, cleanup, tracking back, the hardness index and the
 //!   soil estimate online), with range scans from the scan service (`--scan-addr`;
-//!   docs/scan-protocol.md) and the bench file's grid, floor and start pose (`--bench`, default
-//!   config/bench_extended.toml, as in `demo`); the planner runs off the control loop
+//!   docs/scan-protocol.md) on the site's work area, floor and start pose (`--site`, default
+//!   config/site.toml, the site of `demo`'s bench); the planner runs off the control loop
 //!   ([`controller::run::run_session_loop`]);
-//! - `fixed` (default): the controller config's action list, as before the planner was wired.
+//! - `fixed` (default): the controller config's action list.
 //!
-//! With `--out DIR` the session folder is the one `demo` writes (trace, scans, `summary.json`,
-//! `summary.md`, plots, `soil_samples.json`; docs/demo-output.md), without the simulator's truth
-//! (true payload, true terrain), which a bus session does not have, plus `session_state.json`: the
-//! session saved after every completed action ([`crate::resume`]). `--resume DIR` loads it, checks
-//! that it is this machine's, bench's and configuration's, and goes on with the session where it
-//! stood after the normal arming handshake, appending to its trace and records. The run's log goes
-//! to the folder's `run.log` too ([`crate::session_log`]).
+//! The machine is the machine file's (`--machine`), the place the site file's: nothing comes from a
+//! simulator. With `--out DIR` the session folder is the one `demo` writes (trace, scans,
+//! `summary.json`, `summary.md`, plots, `soil_samples.json`; docs/demo-output.md), without the
+//! simulator's truth (true payload, true terrain), which a bus session does not have, plus
+//! `session_state.json`: the session saved after every completed action ([`crate::resume`]).
+//! `--resume DIR` loads it, checks that it is this machine's, site's and configuration's, and goes
+//! on with the session where it stood after the normal arming handshake, appending to its trace and
+//! records. The run's log goes to the folder's `run.log` too ([`crate::session_log`]).
 //!
 //! Before it opens the bus, `run` reads the interface's link over netlink ([`check_link`]): it logs
 //! the bitrate, state, `restart-ms` and listen-only mode, records them in the summary, and refuses a
@@ -26,6 +27,7 @@
 //! input is a terminal, from its keys ([`crate::keys`]); both through one [`OperatorPort`].
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::Context as _;
@@ -46,10 +48,12 @@ use firmware_bridge::transport::{Bus, LinkStatus, ProfileBus, SocketCanBus, Time
 use planner::autodig::AutodigMaps;
 use planner::machine::MachineConfig;
 use planner::plan::PlannerConfig;
-use vcan_sim::SimConfig;
+use planner::site::Site;
 
-use crate::demo::{self, DemoArgs, DemoStrategy, SessionEnd, SessionRecords};
+use crate::record::{BenchSnapshot, SessionRecords, SoilSamplesFile};
 use crate::resume::{RunRecords, RunState, StateWriter};
+use crate::setup;
+use crate::summary::{self, DemoStrategy, DemoSummary, FileRecord, SessionEnd, SessionPlots};
 
 /// Arguments of `excavator-ctl run`.
 #[derive(Debug, Clone, Args)]
@@ -86,11 +90,13 @@ pub struct RunArgs {
     /// The action source: the dig planner, the predefined sequence of 6.2, or the config's plan.
     #[arg(long, value_enum, default_value_t = DemoStrategy::Fixed)]
     pub strategy: DemoStrategy,
-    /// Bench scenario file: the map's grid, the floor and the start pose of the planned and
-    /// predefined strategies (default: the built-in config/bench_extended.toml).
+    /// Site file: the work area, the target floor, the machine's start pose and the material of the
+    /// planned and predefined strategies (default: the built-in config/site.toml, the site of
+    /// `demo`'s extended bench; `excavator-ctl site --bench FILE` writes a bench's).
     #[arg(long, value_name = "FILE")]
-    pub bench: Option<PathBuf>,
-    /// The simulator's seed, recorded in summary.json (default: the bench file's).
+    pub site: Option<PathBuf>,
+    /// The simulated machine's seed (`excavator-sim --seed`), recorded in summary.json when the
+    /// machine is a simulator (default 0: none).
     #[arg(long, value_name = "N")]
     pub seed: Option<u64>,
     /// Planner settings (default: the built-in config/planner.toml); the floor is the bench's.
@@ -115,7 +121,7 @@ pub struct RunArgs {
     #[arg(long, value_name = "PATH")]
     pub control_socket: Option<PathBuf>,
     /// The deployed configuration's folder (the package's /etc/excavator): machine.toml,
-    /// autodig_maps.toml, controller.toml, bench.toml, planner.toml, hardness_regression.toml, key
+    /// autodig_maps.toml, controller.toml, site.toml, planner.toml, hardness_regression.toml, key
     /// and profile.toml, each used when present; a file given by its own option wins, a missing one is the
     /// built-in default.
     #[arg(long, value_name = "DIR")]
@@ -132,7 +138,7 @@ pub const CONFIG_DIR_FILES: [&str; 8] = [
     "machine.toml",
     "autodig_maps.toml",
     "controller.toml",
-    "bench.toml",
+    "site.toml",
     "planner.toml",
     "hardness_regression.toml",
     "key",
@@ -202,7 +208,7 @@ impl RunArgs {
             digs: None,
             scan_addr: None,
             strategy: DemoStrategy::Fixed,
-            bench: None,
+            site: None,
             seed: None,
             planner: None,
             hardness: None,
@@ -238,21 +244,13 @@ impl RunArgs {
         let Some(dir) = &self.config_dir else {
             return a;
         };
-        let [
-            machine,
-            maps,
-            config,
-            bench,
-            planner,
-            hardness,
-            key,
-            profile,
-        ] = CONFIG_DIR_FILES.map(|name| Some(dir.join(name)).filter(|p| p.is_file()));
+        let [machine, maps, config, site, planner, hardness, key, profile] =
+            CONFIG_DIR_FILES.map(|name| Some(dir.join(name)).filter(|p| p.is_file()));
         for (given, found) in [
             (&mut a.machine, machine),
             (&mut a.maps, maps),
             (&mut a.config, config),
-            (&mut a.bench, bench),
+            (&mut a.site, site),
             (&mut a.planner, planner),
             (&mut a.hardness, hardness),
             (&mut a.key_file, key),
@@ -273,12 +271,12 @@ impl RunArgs {
                 .map_or_else(|| "built-in".to_owned(), |p| p.display().to_string())
         };
         format!(
-            "machine {}, maps {}, controller {}, bench {}, planner {}, hardness {}, key {}, \
+            "machine {}, maps {}, controller {}, site {}, planner {}, hardness {}, key {}, \
              profile {}",
             show(&self.machine),
             show(&self.maps),
             show(&self.config),
-            show(&self.bench),
+            show(&self.site),
             show(&self.planner),
             show(&self.hardness),
             self.key_file
@@ -286,22 +284,6 @@ impl RunArgs {
                 .map_or_else(|| "none".to_owned(), |p| p.display().to_string()),
             show(&self.profile),
         )
-    }
-
-    /// `demo`'s arguments for the same strategy, files and bench (one setup for both).
-    fn demo_args(&self) -> DemoArgs {
-        let out = self.resume.clone().or_else(|| self.out.clone());
-        let mut d = DemoArgs::new(out.unwrap_or_default());
-        d.strategy = self.strategy;
-        d.machine.clone_from(&self.machine);
-        d.bench.clone_from(&self.bench);
-        d.seed = self.seed;
-        d.maps.clone_from(&self.maps);
-        d.config.clone_from(&self.config);
-        d.planner.clone_from(&self.planner);
-        d.hardness.clone_from(&self.hardness);
-        d.profile.clone_from(&self.profile);
-        d
     }
 }
 
@@ -312,8 +294,11 @@ impl RunArgs {
 /// service.
 pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, RunSetup)> {
     let args = &args.with_config_dir();
-    let dargs = args.demo_args();
-    let (sim, mut config, maps) = demo::setup(&dargs)?;
+    let machine = setup::machine(args.machine.as_deref())?;
+    let site = setup::site(args.site.as_deref())?;
+    let maps = setup::maps(args.maps.as_deref())?;
+    let mut config = setup::controller_config(args.strategy, args.config.as_deref(), &site, false)?;
+    let planner = setup::planner_config(args.planner.as_deref(), &site)?;
     let session = match args.strategy.session() {
         Some(st) => {
             anyhow::ensure!(
@@ -321,16 +306,15 @@ pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, R
                 "--strategy {} plans on range scans: give the scan service's --scan-addr",
                 args.strategy.name()
             );
-            Some(demo::build_session(&dargs, &sim, st)?)
+            Some(setup::planned_session(
+                &machine,
+                planner.clone(),
+                &site,
+                st,
+                args.hardness.as_deref(),
+            )?)
         }
-        None => {
-            // The config's plan as it is (repeat and all), not the demo's plan.
-            config = match &args.config {
-                Some(p) => ControllerConfig::from_toml_file(p).context("controller config")?,
-                None => ControllerConfig::default(),
-            };
-            None
-        }
+        None => None,
     };
     config.cycle.max_digs = match (args.digs, args.strategy) {
         (Some(n), _) => Some(n),
@@ -341,7 +325,7 @@ pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, R
     };
     config.safety.listen_only |= args.listen_only;
     // A profile's gateway: the stale-data limits in its periods, checked against its watchdogs.
-    if let Some(p) = demo::load_profile(args.profile.as_deref())? {
+    if let Some(p) = setup::load_profile(args.profile.as_deref())? {
         config.safety = config.safety.for_gateway(p.timing());
     }
     // Without a scan service nobody would answer the cycle's requests: dig on the plain angle rules
@@ -349,16 +333,21 @@ pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, R
     if args.scan_addr.is_none() {
         config.cycle.scan = false;
     }
-    let machine = machine_of(args, &sim)?;
-    let full_bucket_n = machine.bucket.capacity_m3
-        * sim.scenario.soil.density_kg_per_m3
-        * planner::machine::GRAVITY_M_PER_S2;
+    let full_bucket_n = site.full_bucket_n(machine.bucket.capacity_m3);
     if let Some(file) = &args.key_file {
         config.security.key_file = Some(file.clone());
     }
     let key = config.security.load_key().context("the machine's key")?;
-    let planner = demo::planner_config(&dargs, &sim)?;
-    let identity = session_identity(&machine, &sim, args.strategy, &config, &planner, &maps);
+    let seed = args.seed.unwrap_or(0);
+    let identity = session_identity(
+        &machine,
+        &site,
+        seed,
+        args.strategy,
+        &config,
+        &planner,
+        &maps,
+    );
     let mut node =
         ControllerNode::new(&machine, maps, config).context("controller configuration")?;
     match &key {
@@ -374,42 +363,29 @@ pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, R
     let mut driver = SessionDriver::new(session, None, &mut node);
     driver.set_detached_planning(true);
     let setup = RunSetup {
-        bench: sim.scenario.name.clone(),
-        seed: sim.scenario.seed,
-        soil_contact: sim.scenario.soil_contact,
+        site: site.name.clone(),
+        seed,
         full_bucket_n,
         identity,
     };
     Ok((node, driver, setup))
 }
 
-/// The machine a run of `args` controls.
+/// The machine a run of `args` controls: the machine file's (or the built-in one).
 ///
 /// # Errors
-/// An unreadable or invalid machine or bench file.
+/// An unreadable or invalid machine file.
 pub fn machine(args: &RunArgs) -> anyhow::Result<MachineConfig> {
-    let args = &args.with_config_dir();
-    let (sim, _, _) = demo::setup(&args.demo_args())?;
-    machine_of(args, &sim)
+    setup::machine(args.with_config_dir().machine.as_deref())
 }
 
-/// The machine of `args` with the simulator configuration `sim` of its bench: the fixed plan's is
-/// the machine file's, the planned and predefined strategies' the bench's.
-fn machine_of(args: &RunArgs, sim: &SimConfig) -> anyhow::Result<MachineConfig> {
-    Ok(match args.strategy {
-        DemoStrategy::Fixed => {
-            MachineConfig::load_or_default(args.machine.as_deref()).context("machine file")?
-        }
-        _ => sim.machine.clone(),
-    })
-}
-
-/// What a saved session of `strategy` on `machine` and `sim`'s bench with `config`, `planner` and
-/// `maps` belongs to ([`SessionIdentity`]): a state is resumed only by a run with the same.
+/// What a saved session of `strategy` on `machine` at `site` with `config`, `planner` and `maps`
+/// belongs to ([`SessionIdentity`]): a state is resumed only by a run with the same.
 #[must_use]
 pub fn session_identity(
     machine: &MachineConfig,
-    sim: &SimConfig,
+    site: &Site,
+    seed: u64,
     strategy: DemoStrategy,
     config: &ControllerConfig,
     planner: &PlannerConfig,
@@ -417,8 +393,8 @@ pub fn session_identity(
 ) -> SessionIdentity {
     SessionIdentity {
         machine: fingerprint(machine),
-        bench: sim.scenario.name.clone(),
-        seed: sim.scenario.seed,
+        bench: site.name.clone(),
+        seed,
         strategy: strategy.name().to_owned(),
         config: {
             // The dig count, listen-only and the key file may change between a session and its resumption.
@@ -435,9 +411,8 @@ pub fn session_identity(
 /// What a run's summary takes from its setup.
 #[derive(Debug, Clone)]
 pub struct RunSetup {
-    bench: String,
+    site: String,
     seed: u64,
-    soil_contact: vcan_sim::scenario::SoilContactIntegration,
     full_bucket_n: f64,
     identity: SessionIdentity,
 }
@@ -456,8 +431,8 @@ pub struct SessionTrace {
 ///
 /// # Errors
 /// Configuration, interface, bus, scan and file errors.
-pub async fn run(args: RunArgs) -> anyhow::Result<()> {
-    run_observed(args, &mut NoObserver).await
+pub async fn run(args: RunArgs, plots: Option<Arc<dyn SessionPlots>>) -> anyhow::Result<()> {
+    run_observed(args, &mut NoObserver, plots).await
 }
 
 /// As [`run`], with `observer` watching every control step (the live view) and offered the
@@ -465,10 +440,14 @@ pub async fn run(args: RunArgs) -> anyhow::Result<()> {
 ///
 /// # Errors
 /// As [`run`].
-pub async fn run_observed(args: RunArgs, observer: &mut dyn SessionObserver) -> anyhow::Result<()> {
+pub async fn run_observed(
+    args: RunArgs,
+    observer: &mut dyn SessionObserver,
+    plots: Option<Arc<dyn SessionPlots>>,
+) -> anyhow::Result<()> {
     // A bad profile stops the run before it touches the bus. Without one the bus speaks the default
     // profile, the identity: every frame passes unchanged.
-    let profile = match demo::load_profile(args.with_config_dir().profile.as_deref())? {
+    let profile = match setup::load_profile(args.with_config_dir().profile.as_deref())? {
         Some(p) => p,
         None => std::sync::Arc::new(Profile::default_profile()?),
     };
@@ -491,6 +470,7 @@ pub async fn run_observed(args: RunArgs, observer: &mut dyn SessionObserver) -> 
         keys: operator_terminal(),
         session_log: true,
         link: Some(link),
+        plots,
     };
     let bus = ProfileBus::new(bus, profile);
     let result = run_on_observed(
@@ -522,7 +502,7 @@ pub fn check_link(args: &RunArgs) -> anyhow::Result<LinkStatus> {
 }
 
 /// What `run` does besides the session: the operator's keys, the session log and the link.
-#[derive(Debug, Default)]
+#[derive(Default)]
 pub struct RunConsole {
     /// The terminal whose keys are operator commands ([`crate::keys`]); `None`: no key reader.
     pub keys: Option<std::fs::File>,
@@ -531,6 +511,8 @@ pub struct RunConsole {
     pub session_log: bool,
     /// The interface's link as [`check_link`] found it: logged, and recorded in the summary.
     pub link: Option<LinkStatus>,
+    /// Who draws the session folder's plots (the binary's lab layer); none: data files only.
+    pub plots: Option<Arc<dyn SessionPlots>>,
 }
 
 /// Standard input when it is a terminal (a person at the console), else `None`: no key reader for a
@@ -708,8 +690,10 @@ pub async fn run_on_observed<B: Bus>(
     live.operator_control(operator.sender());
     let mut steps = 0_u64;
     let progress = crate::console::session_bar(args.digs, false);
+    let mut bus_watch = BusWatch::new(bus.interface().to_owned());
     let mut observer = |node: &ControllerNode, driver: &SessionDriver, events: &[SessionEvent]| {
         steps += 1;
+        bus_watch.check(session_s(steps), node);
         live.after_step(session_s(steps), node, driver.session(), events);
         if steps.is_multiple_of(PROGRESS_EVERY_STEPS) {
             crate::console::update(progress.as_ref(), log.records.len(), node, driver.backups());
@@ -775,13 +759,15 @@ pub async fn run_on_observed<B: Bus>(
     }
     let saved = state_writer.map(StateWriter::finish);
     let trace = match trace {
-        Some(t) => {
-            let mut closed = t.recorder.close().context("closing the trace")?;
-            tracing::info!(?closed, "trace closed");
-            closed.recorded += t.frames_before;
-            closed
-        }
-        None => firmware_bridge::trace::RecorderStats::default(),
+        Some(t) => match t.recorder.close() {
+            Ok(mut closed) => {
+                tracing::info!(?closed, "trace closed");
+                closed.recorded += t.frames_before;
+                Ok(closed)
+            }
+            Err(e) => Err(anyhow::Error::new(e).context("closing the trace")),
+        },
+        None => Ok(firmware_bridge::trace::RecorderStats::default()),
     };
     live.finished(
         session_s(steps),
@@ -791,48 +777,78 @@ pub async fn run_on_observed<B: Bus>(
             Err(_) => "error",
         },
     );
-    let (reason, stats) = result?;
-    tracing::info!(
-        ?reason,
-        ?stats,
-        ?saved,
-        digs = node.statistics().len(),
-        "stopped"
-    );
-    let Some(out) = &out_dir else {
-        return Ok(());
+    // Whatever ended the session, its folder gets a summary that says so.
+    let error = match (&result, &trace) {
+        (Err(e), _) => Some(format!("{e:#}")),
+        (_, Err(e)) => Some(format!("{e:#}")),
+        _ => None,
     };
-    let end = match (reason, driver.end_reason()) {
-        (StopReason::Signal, _) => "stopped".to_owned(),
-        (StopReason::Finished, _) if node.cycle().stop_requested() => "operator stop".to_owned(),
-        (StopReason::Finished, Some(why)) => why.to_owned(),
-        (StopReason::Finished, None) => "dig count reached".to_owned(),
+    let steps_run = match &result {
+        Ok((reason, stats)) => {
+            tracing::info!(
+                ?reason,
+                ?stats,
+                ?saved,
+                digs = node.statistics().len(),
+                "stopped"
+            );
+            stats.steps
+        }
+        Err(_) => steps,
     };
-    let mut summary = demo::session_summary(
-        log.records,
-        SessionEnd {
-            strategy: args.strategy,
-            bench: setup.bench,
-            seed: setup.seed,
-            soil_contact: setup.soil_contact,
-            effects: Vec::new(),
-            full_bucket_n: setup.full_bucket_n,
-            end,
-            track_backs: driver.track_backs(),
-            backups: driver.backups(),
-            plan_ms: driver.planning_ms(),
-            scans: log.scans,
-            session_time_s: base.session_time_s + session_s(stats.steps),
-            wall_time_s: base.wall_time_s + wall.elapsed().as_secs_f64(),
-            trace,
-            trace_clock: bus.trace_clock(),
-        },
-        &node,
-        driver.session(),
-    );
-    summary.can_link = console.link;
-    write_folder(out, &summary, &node, &driver, log.soil_samples)?;
-    print!("{}", demo::summary_markdown(&summary));
+    if let Some(out) = &out_dir {
+        let end = match (&result, driver.end_reason()) {
+            (Err(_), _) => "error".to_owned(),
+            (Ok((StopReason::Signal, _)), _) => "stopped".to_owned(),
+            (Ok((StopReason::Finished, _)), _) if node.cycle().stop_requested() => {
+                "operator stop".to_owned()
+            }
+            (Ok((StopReason::Finished, _)), Some(why)) => why.to_owned(),
+            (Ok((StopReason::Finished, _)), None) => "dig count reached".to_owned(),
+        };
+        let mut summary = summary::session_summary(
+            log.records,
+            SessionEnd {
+                command: "run",
+                strategy: args.strategy,
+                bench: setup.site,
+                seed: setup.seed,
+                soil_contact: None,
+                effects: Vec::new(),
+                full_bucket_n: setup.full_bucket_n,
+                end,
+                track_backs: driver.track_backs(),
+                backups: driver.backups(),
+                plan_ms: driver.planning_ms(),
+                scans: log.scans,
+                session_time_s: base.session_time_s + session_s(steps_run),
+                wall_time_s: base.wall_time_s + wall.elapsed().as_secs_f64(),
+                trace: trace.as_ref().copied().unwrap_or_default(),
+                trace_clock: bus.trace_clock(),
+            },
+            &node,
+            driver.session(),
+        );
+        summary.can_link = console.link;
+        summary.error.clone_from(&error);
+        summary.profile = args
+            .with_config_dir()
+            .profile
+            .as_deref()
+            .map(FileRecord::of)
+            .transpose()?;
+        write_folder(
+            out,
+            &summary,
+            &node,
+            &driver,
+            &log.soil_samples,
+            console.plots.as_deref(),
+        )?;
+        print!("{}", summary::summary_markdown(&summary));
+    }
+    result?;
+    trace?;
     match saved {
         Some(s) if s.failed > 0 => Err(anyhow::anyhow!(
             "the session state could not be saved {} times (last: {}): the session cannot be \
@@ -844,6 +860,74 @@ pub async fn run_on_observed<B: Bus>(
     }
 }
 
+/// Session seconds without a frame from the gateway before `run` says it is waiting for one.
+pub const NO_GATEWAY_WARNING_S: f64 = 3.0;
+/// Session seconds between two repeats of a bus warning.
+const BUS_WARNING_REPEAT_S: f64 = 10.0;
+/// Frames the gateway reports rejected, while the controller is not armed, before `run` says the
+/// keys probably differ (a handshake sends about one secured frame per control period).
+pub const REJECTED_FRAMES_WARNING: u16 = 20;
+
+/// What `run` tells the person at the console about the bus when nothing else would: no gateway on
+/// it, or a gateway that rejects the controller's frames (the keys differ).
+#[derive(Debug)]
+struct BusWatch {
+    iface: String,
+    last_no_gateway_s: Option<f64>,
+    last_rejected_s: Option<f64>,
+    first_rejected: Option<u16>,
+}
+
+impl BusWatch {
+    fn new(iface: String) -> Self {
+        Self {
+            iface,
+            last_no_gateway_s: None,
+            last_rejected_s: None,
+            first_rejected: None,
+        }
+    }
+
+    /// Warns (at most every [`BUS_WARNING_REPEAT_S`]) at session time `now_s`.
+    fn check(&mut self, now_s: f64, node: &ControllerNode) {
+        let due = |last: Option<f64>| last.is_none_or(|t| now_s - t >= BUS_WARNING_REPEAT_S);
+        let gateway = node.estimator().state().gateway;
+        if gateway.is_none() && now_s >= NO_GATEWAY_WARNING_S && due(self.last_no_gateway_s) {
+            self.last_no_gateway_s = Some(now_s);
+            tracing::warn!(
+                iface = %self.iface,
+                "waiting for the gateway: no status from it (address 0x80) in {now_s:.0} s; is \
+                 excavator-sim running on {} (or the machine's gateway powered and on this bus, at \
+                 its bitrate)?",
+                self.iface
+            );
+        }
+        let Some(status) = gateway else {
+            return;
+        };
+        let armed = matches!(
+            node.safety().state(),
+            controller::safety::SafetyState::Armed { .. }
+        );
+        if armed {
+            self.first_rejected = None;
+            return;
+        }
+        let first = *self.first_rejected.get_or_insert(status.rejected_frames);
+        let rejected = status.rejected_frames.saturating_sub(first);
+        if rejected >= REJECTED_FRAMES_WARNING && due(self.last_rejected_s) {
+            self.last_rejected_s = Some(now_s);
+            tracing::warn!(
+                iface = %self.iface,
+                rejected,
+                "the gateway rejects this controller's frames ({rejected} since it was last seen \
+                 armed) and does not arm: the keys probably differ (--key-file here and the \
+                 gateway's key; docs/protocol.md, \"Key provisioning\")"
+            );
+        }
+    }
+}
+
 /// Control steps between updates of the progress line (0.5 s of session time).
 const PROGRESS_EVERY_STEPS: u64 = 50;
 
@@ -852,30 +936,35 @@ fn session_s(steps: u64) -> f64 {
     CONTROL_PERIOD.as_secs_f64() * steps as f64
 }
 
-/// The session folder's files besides the trace and the scans.
+/// The session folder's files besides the trace and the scans: the data files here, the pictures
+/// through `plots` when the caller draws them.
 fn write_folder(
     out: &Path,
-    summary: &demo::DemoSummary,
+    summary: &DemoSummary,
     node: &ControllerNode,
     driver: &SessionDriver,
-    soil: crate::session::SoilSamplesFile,
+    soil: &SoilSamplesFile,
+    plots: Option<&dyn SessionPlots>,
 ) -> anyhow::Result<()> {
     let plan = node.cycle().config().actions.clone();
+    summary::write_files(out, summary, &plan)?;
+    summary::write_soil_samples(out, soil)?;
     let mut snapshots = Vec::new();
     if let Some(s) = driver.session() {
+        summary::write_last_plan(out, s)?;
         // The planner's map stands for the terrain: a bus session has no simulator truth.
         let pose = node.estimator().state().pose;
-        let pose = [pose.x_m, pose.y_m, pose.heading_rad];
-        demo::write_planner_outputs(out, s, pose)?;
-        snapshots.push(demo::BenchSnapshot {
+        snapshots.push(BenchSnapshot {
             digs: summary.digs.len(),
             backups: summary.backups,
             terrain: s.terrain().clone(),
-            pose,
+            pose: [pose.x_m, pose.y_m, pose.heading_rad],
         });
     }
-    demo::write_outputs(out, summary, None, &plan, &snapshots)?;
-    demo::write_soil_samples(out, &soil)
+    match plots {
+        Some(p) => p.write(out, summary, driver.session(), &snapshots),
+        None => Ok(()),
+    }
 }
 
 #[cfg(test)]

@@ -23,7 +23,7 @@ use controller::state_file::{self, FieldError, Validate, finite};
 use firmware_bridge::trace::Recorder;
 use serde::{Deserialize, Serialize};
 
-use crate::session::{DigRecord, SoilSamplesFile};
+use crate::record::{DigRecord, SoilSamplesFile};
 
 /// The session folder's records in a saved run.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]

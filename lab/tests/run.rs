@@ -1,4 +1,4 @@
-//! `excavator-ctl run --strategy planned` through the real run loop ([`lab::wire::run_on`],
+//! `excavator-ctl run --strategy planned` through the real run loop ([`onboard::run::run_on`],
 //! [`controller::run::run_session_loop`]) over the in-process bus on the wall clock, against the
 //! simulator's real-time loop (`vcan_sim::realtime::run_on`) with its scan socket on loopback TCP,
 //! both at the same time scale: the session folder is the one `demo` writes; a controller dropped
@@ -17,7 +17,7 @@ use firmware_bridge::profile::Profile;
 use firmware_bridge::trace::Recorder;
 use firmware_bridge::transport::{InProcessBus, ProfileBus, TimeScale};
 use lab::demo::{DemoArgs, DemoStrategy, DemoSummary};
-use lab::wire::RunArgs;
+use onboard::run::RunArgs;
 use vcan_sim::node::MachineNode;
 use vcan_sim::realtime::RealtimeOptions;
 
@@ -153,13 +153,13 @@ fn recorded_controller(
     out: &std::path::Path,
 ) -> (
     firmware_bridge::transport::InProcessNode,
-    lab::wire::SessionTrace,
+    onboard::run::SessionTrace,
 ) {
     let mut ctl_node = sim.bus.attach();
     std::fs::create_dir_all(out).unwrap();
     let recorder = Recorder::create(&out.join("trace.log"), "vcan0").unwrap();
     ctl_node.set_recorder(recorder.clone());
-    let trace = lab::wire::SessionTrace {
+    let trace = onboard::run::SessionTrace {
         recorder,
         frames_before: 0,
     };
@@ -169,18 +169,21 @@ fn recorded_controller(
 /// Runs the controller on `bus` until its session ends, then stops `sim`; the simulator's summary.
 async fn run_to_the_end<B: firmware_bridge::Bus>(
     bus: &B,
-    trace: lab::wire::SessionTrace,
+    trace: onboard::run::SessionTrace,
     args: &RunArgs,
     sim: Simulator,
 ) -> vcan_sim::realtime::RunSummary {
     // A budget far above a session of two digs (~2 x 30 s at 2x); the test fails if it is what stops
     // it.
     let budget = tokio::time::sleep(Duration::from_secs(240));
-    lab::wire::run_on(
+    onboard::run::run_on(
         bus,
         Some(trace),
         args,
-        lab::wire::RunConsole::default(),
+        onboard::run::RunConsole {
+            plots: Some(Arc::new(lab::demo::Plots)),
+            ..Default::default()
+        },
         budget,
     )
     .await
@@ -315,17 +318,17 @@ async fn a_controller_killed_mid_session_resumes_without_losing_or_repeating_an_
     let time_scale = TimeScale::new(2.0).unwrap();
     let sim = simulator(&out, time_scale).await;
     let mut args = planned_run(&sim, DIGS, time_scale, &out);
-    let state_path = lab::resume::state_path(&out);
+    let state_path = onboard::resume::state_path(&out);
     let trace_path = out.join("trace.log");
 
     // The first controller: killed (its future dropped at whatever step it is in) a while after
     // its first completed dig reached the state file.
     {
         let mut ctl_node = sim.bus.attach();
-        let (recorder, before) = lab::resume::open_trace(&trace_path, "vcan0", false).unwrap();
+        let (recorder, before) = onboard::resume::open_trace(&trace_path, "vcan0", false).unwrap();
         assert_eq!(before, 0);
         ctl_node.set_recorder(recorder.clone());
-        let trace = lab::wire::SessionTrace {
+        let trace = onboard::run::SessionTrace {
             recorder,
             frames_before: 0,
         };
@@ -334,7 +337,7 @@ async fn a_controller_killed_mid_session_resumes_without_losing_or_repeating_an_
                 tokio::time::sleep(Duration::from_millis(50)).await;
                 let digs = std::fs::read(&state_path)
                     .ok()
-                    .and_then(|b| serde_json::from_slice::<lab::resume::RunState>(&b).ok())
+                    .and_then(|b| serde_json::from_slice::<onboard::resume::RunState>(&b).ok())
                     .map_or(0, |s| s.records.digs.len());
                 if digs >= 1 {
                     break;
@@ -344,14 +347,14 @@ async fn a_controller_killed_mid_session_resumes_without_losing_or_repeating_an_
             tokio::time::sleep(Duration::from_millis(2500)).await;
         };
         tokio::select! {
-            r = lab::wire::run_on(&ctl_node, Some(trace), &args, lab::wire::RunConsole::default(), std::future::pending()) => {
+            r = onboard::run::run_on(&ctl_node, Some(trace), &args, onboard::run::RunConsole::default(), std::future::pending()) => {
                 panic!("the first run ended before it was killed: {r:?}");
             }
             () = killer => {}
             () = tokio::time::sleep(Duration::from_secs(200)) => panic!("no dig within the budget"),
         }
     }
-    let saved: lab::resume::RunState =
+    let saved: onboard::resume::RunState =
         serde_json::from_slice(&std::fs::read(&state_path).unwrap()).unwrap();
     assert_eq!(saved.records.digs.len(), 1, "{:?}", saved.records);
     let before_resume = status_dig_indices(&trace_path).len();
@@ -361,19 +364,20 @@ async fn a_controller_killed_mid_session_resumes_without_losing_or_repeating_an_
     args.out = None;
     args.resume = Some(out.clone());
     let mut ctl_node = sim.bus.attach();
-    let (recorder, frames_before) = lab::resume::open_trace(&trace_path, "vcan0", true).unwrap();
+    let (recorder, frames_before) =
+        onboard::resume::open_trace(&trace_path, "vcan0", true).unwrap();
     assert!(frames_before > 1000, "{frames_before}");
     ctl_node.set_recorder(recorder.clone());
-    let trace = lab::wire::SessionTrace {
+    let trace = onboard::run::SessionTrace {
         recorder,
         frames_before,
     };
     let budget = tokio::time::sleep(Duration::from_secs(200));
-    lab::wire::run_on(
+    onboard::run::run_on(
         &ctl_node,
         Some(trace),
         &args,
-        lab::wire::RunConsole::default(),
+        onboard::run::RunConsole::default(),
         budget,
     )
     .await
@@ -447,9 +451,9 @@ fn the_fixed_strategy_keeps_the_configs_dig_limit_unless_digs_is_given() {
     )
     .unwrap();
     // A repeating plan ends only at its limit: dropping it would run forever.
-    let (node, _, _) = lab::wire::build(&fixed_args(&config, None)).unwrap();
+    let (node, _, _) = onboard::run::build(&fixed_args(&config, None)).unwrap();
     assert_eq!(node.cycle().config().max_digs, Some(4));
-    let (node, _, _) = lab::wire::build(&fixed_args(&config, Some(2))).unwrap();
+    let (node, _, _) = onboard::run::build(&fixed_args(&config, Some(2))).unwrap();
     assert_eq!(node.cycle().config().max_digs, Some(2));
 }
 
@@ -461,12 +465,12 @@ fn the_key_file_is_checked_before_the_bus_is_touched() {
     std::fs::write(&config, "[security]\nkey_file = \"machine.key\"\n").unwrap();
     let key = write_key_file(dir.path());
     // The config's key file, relative to the config's folder.
-    assert!(lab::wire::build(&fixed_args(&config, Some(1))).is_ok());
+    assert!(onboard::run::build(&fixed_args(&config, Some(1))).is_ok());
     // Readable by others: refused, naming the file and the fix.
     std::fs::set_permissions(&key, std::fs::Permissions::from_mode(0o644)).unwrap();
     let e = format!(
         "{:#}",
-        lab::wire::build(&fixed_args(&config, Some(1)))
+        onboard::run::build(&fixed_args(&config, Some(1)))
             .err()
             .unwrap()
     );
@@ -477,7 +481,7 @@ fn the_key_file_is_checked_before_the_bus_is_touched() {
     std::fs::set_permissions(&short, std::fs::Permissions::from_mode(0o600)).unwrap();
     let mut args = fixed_args(&config, Some(1));
     args.key_file = Some(short);
-    let e = format!("{:#}", lab::wire::build(&args).err().unwrap());
+    let e = format!("{:#}", onboard::run::build(&args).err().unwrap());
     assert!(
         e.contains("short.key") && e.contains("32 hexadecimal digits") && e.contains("has 30"),
         "{e}"
@@ -502,10 +506,11 @@ async fn the_operator_keys_at_a_terminal_estop_reset_and_stop_the_run() {
     let mut keyboard = std::fs::File::from(pty.master);
     let cooked = tcgetattr(&pty.slave).unwrap().local_flags;
     assert!(cooked.contains(LocalFlags::ICANON | LocalFlags::ECHO));
-    let console = lab::wire::RunConsole {
+    let console = onboard::run::RunConsole {
         keys: Some(terminal),
         session_log: false,
         link: None,
+        plots: None,
     };
     let slave = pty.slave;
     let operator = async {
@@ -530,7 +535,7 @@ async fn the_operator_keys_at_a_terminal_estop_reset_and_stop_the_run() {
             () = budget => {}
         }
     };
-    lab::wire::run_on(&ctl_node, Some(trace), &args, console, shutdown)
+    onboard::run::run_on(&ctl_node, Some(trace), &args, console, shutdown)
         .await
         .unwrap();
     let _ = sim.stop.send(());
