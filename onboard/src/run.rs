@@ -591,6 +591,21 @@ pub async fn run_on_observed<B: Bus>(
                 .restore(&state.driver, &mut node)
                 .map_err(|e| StateFileError::field(&path, e))
                 .context("--resume: the saved session")?;
+            // A finished session stays finished: nothing is armed or sent.
+            if let Some(end) = finished_session(
+                dir,
+                state.records.digs.len(),
+                node.cycle().config().max_digs,
+            )? {
+                tracing::info!(folder = %dir.display(), end, "the session is finished: nothing to resume");
+                println!(
+                    "excavator-ctl run: the session in {} is finished ({end}, {} digs): nothing to \
+                     resume",
+                    dir.display(),
+                    state.records.digs.len()
+                );
+                return Ok(());
+            }
             tracing::info!(
                 state = %path.display(),
                 actions_done = state.driver.cycle.action_index,
@@ -860,6 +875,37 @@ pub async fn run_on_observed<B: Bus>(
     }
 }
 
+/// Why the session in the folder `dir` ended, if it ended for good: its `summary.json` says it ended
+/// (not stopped by a signal, not by an error) and, when it ended on its dig count, `digs` (done)
+/// reach `max_digs` (a resumption may give more). `None`: there is something to resume.
+///
+/// # Errors
+/// A `summary.json` that cannot be read or parsed.
+pub fn finished_session(
+    dir: &Path,
+    digs: usize,
+    max_digs: Option<u32>,
+) -> anyhow::Result<Option<String>> {
+    #[derive(serde::Deserialize)]
+    struct Ended {
+        #[serde(default)]
+        end: String,
+    }
+    let path = dir.join("summary.json");
+    let text = match std::fs::read_to_string(&path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
+    };
+    let ended: Ended =
+        serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+    Ok(match ended.end.as_str() {
+        "" | "stopped" | "error" => None,
+        "dig count reached" if max_digs.is_none_or(|m| digs < m as usize) => None,
+        _ => Some(ended.end),
+    })
+}
+
 /// Session seconds without a frame from the gateway before `run` says it is waiting for one.
 pub const NO_GATEWAY_WARNING_S: f64 = 3.0;
 /// Session seconds between two repeats of a bus warning.
@@ -1040,6 +1086,48 @@ mod tests {
             controller::safety::SafetyConfig::default(),
             "without a profile, the project's gateway"
         );
+    }
+
+    /// A folder whose summary says the session ended is finished, unless it was stopped, failed,
+    /// or ended on a dig count that the resumption raises.
+    #[test]
+    fn a_finished_session_is_not_resumed() {
+        let dir = tempfile::tempdir().unwrap();
+        assert_eq!(
+            finished_session(dir.path(), 3, Some(3)).unwrap(),
+            None,
+            "no summary"
+        );
+        let write = |end: &str| {
+            std::fs::write(
+                dir.path().join("summary.json"),
+                format!(r#"{{"end": "{end}", "seed": 1}}"#),
+            )
+            .unwrap();
+        };
+        for end in ["stopped", "error"] {
+            write(end);
+            assert_eq!(
+                finished_session(dir.path(), 3, Some(3)).unwrap(),
+                None,
+                "{end}"
+            );
+        }
+        write("dig count reached");
+        assert_eq!(
+            finished_session(dir.path(), 3, Some(3)).unwrap().as_deref(),
+            Some("dig count reached")
+        );
+        assert_eq!(
+            finished_session(dir.path(), 3, Some(5)).unwrap(),
+            None,
+            "more digs"
+        );
+        write("bench removed: no material within reach");
+        assert!(finished_session(dir.path(), 3, None).unwrap().is_some());
+        std::fs::write(dir.path().join("summary.json"), "{").unwrap();
+        let e = format!("{:#}", finished_session(dir.path(), 3, None).unwrap_err());
+        assert!(e.contains("summary.json"), "{e}");
     }
 
     #[test]
