@@ -48,10 +48,11 @@ use planner::plan::{HardnessRegression, PlannerConfig, TerrainMapper};
 use planner::terrain::TerrainGrid;
 use vcan_sim::scenario::{Scenario, SoilContactIntegration};
 
-use controller::cycle::{Action, ActionKind, DigStats, Phase, StartPose};
-use controller::node::{ControllerConfig, ControllerNode};
-use controller::planned::{PlannedSession, Strategy, median_joints};
-use controller::session::{NoObserver, PlannedDig, SessionDriver, SessionEvent, SessionObserver};
+use controller::session::driver::{NoObserver, SessionDriver, SessionEvent, SessionObserver};
+use controller::session::planned::{PlannedSession, median_joints};
+use controller::session::snapshot::{PlannedDig, Strategy};
+use controller::step::cycle::{Action, ActionKind, DigStats, Phase, StartPose};
+use controller::{ControllerConfig, ControllerNode};
 
 pub use crate::harness::PERIOD_S;
 use crate::harness::{Harness, SimScans};
@@ -756,7 +757,7 @@ pub fn build_session(
         g.cell_m,
         n(g.size_x_m),
         n(g.size_y_m),
-        controller::cycle::ScanGrid::default().max_gap_cells,
+        controller::step::cycle::ScanGrid::default().max_gap_cells,
     )
     .context("terrain map")?;
     let machine = controller_machine(args, sim)?;
@@ -1035,7 +1036,7 @@ pub fn run_session_observed(
     let mut snapshots: Vec<BenchSnapshot> = Vec::new();
     // Operator commands in-process (the live view's page): applied between two steps, as `run`
     // applies those of its control socket before a step.
-    let mut operator = controller::operator::OperatorPort::new();
+    let mut operator = controller::io::operator::OperatorPort::new();
     observer.operator_control(operator.sender());
     let finished = |h: &Harness| h.node().is_none_or(ControllerNode::finished);
     while !finished(&h) && h.time_s() < budget_s && !stop.load(Ordering::Relaxed) {

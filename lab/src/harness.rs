@@ -27,8 +27,8 @@ use planner::autodig::AutodigMaps;
 use vcan_sim::SimConfig;
 use vcan_sim::embedded::EmbeddedMachine;
 
-use controller::node::{ControllerConfig, ControllerNode, Outbox};
-use controller::session::{BoxError, ScanSource};
+use controller::session::driver::{BoxError, ScanSource};
+use controller::{ControllerConfig, ControllerNode, Outbox};
 
 /// The control period, s.
 pub const PERIOD_S: f64 = 0.01;

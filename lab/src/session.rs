@@ -6,7 +6,7 @@
 use std::path::Path;
 
 use anyhow::Context as _;
-use controller::cycle::{ActionKind, StartPose};
+use controller::step::cycle::{ActionKind, StartPose};
 use planner::estimate::SoilSample;
 use serde::{Deserialize, Serialize};
 
