@@ -30,8 +30,8 @@ use vcan_sim::embedded::EmbeddedMachine;
 use controller::session::driver::{BoxError, ScanSource};
 use controller::{ControllerConfig, ControllerNode, Outbox};
 
-/// The control period, s.
-pub const PERIOD_S: f64 = 0.01;
+/// The control period, s ([`firmware_bridge::dbc::CONTROL_PERIOD`]).
+pub const PERIOD_S: f64 = firmware_bridge::dbc::CONTROL_PERIOD.as_secs_f64();
 
 /// Bus options of a harness.
 #[derive(Debug, Clone)]

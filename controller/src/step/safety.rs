@@ -1093,7 +1093,7 @@ mod tests {
         assert_eq!(signal.value_table, table);
     }
 
-    const PERIOD_S: f64 = 0.01;
+    const PERIOD_S: f64 = CONTROL_PERIOD_S;
     /// A pose inside the default machine's limits.
     const Q: [f64; 3] = [0.3, -1.6, -0.9];
 
