@@ -1,6 +1,6 @@
 //! The controller's configuration: [`ControllerConfig`] (the TOML of `excavator-ctl run --config`),
-//! its loading with errors that name the file, the line and the field, and the parameter checks the
-//! parts' `validate()` share ([`ParamError`], `Limits`, `check`, `check_count`, `check_deg`).
+//! and its loading with errors that name the file, the line and the field (the checks themselves are
+//! [`crate::check`]'s).
 //!
 //! [`ControllerConfig`] (the TOML of `excavator-ctl run --config`) and each of its parts has a
 //! `validate()` that checks every safety and timing parameter: finite, in range, consistent with the
@@ -14,7 +14,6 @@ use planner::autodig::AutodigConfig;
 use planner::cleanup::CleanupConfig;
 use planner::toml_lines::{field_at_offset, line_of_field, line_of_offset};
 use serde::{Deserialize, Serialize};
-use std::fmt;
 use std::path::{Path, PathBuf};
 
 use firmware_bridge::address_claim::{CONTROLLER_NAME, GATEWAY_NAME, Name};
@@ -22,9 +21,10 @@ use firmware_bridge::name_config::NameConfig;
 use firmware_bridge::secoc::{KeyFileError, SessionKey};
 
 use crate::ControllerError;
-use crate::cycle::CycleConfig;
-use crate::estimate::EstimatorConfig;
-use crate::safety::SafetyConfig;
+use crate::check::{ParamError, check_count};
+use crate::step::cycle::CycleConfig;
+use crate::step::estimate::EstimatorConfig;
+use crate::step::safety::SafetyConfig;
 
 /// Everything the node is configured with (besides the machine and the Autodig maps).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -274,66 +274,6 @@ impl ControllerConfig {
     }
 }
 
-/// A configuration value that is not finite, out of range, or inconsistent with another.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{}{}: {rule}", self.path(), value_suffix(self.value.as_deref()))]
-pub struct ParamError {
-    /// The table of the controller config the value lives in (`safety`, `estimator`, `cycle`,
-    /// `autodig`, `cleanup`, `j1939`; empty for top-level keys).
-    pub section: &'static str,
-    /// The key inside it as the file spells it, dotted through nested tables and array entries
-    /// (`sensor_max_age_s`, `joint.kp`, `actions.2.swing_deg`).
-    pub key: String,
-    /// The value as the file states it (degrees for `_deg` keys), when known.
-    pub value: Option<String>,
-    /// The rule it breaks.
-    pub rule: String,
-}
-
-fn value_suffix(value: Option<&str>) -> String {
-    value.map(|v| format!(" = {v}")).unwrap_or_default()
-}
-
-impl ParamError {
-    /// An error for `key` in `section`.
-    pub fn new(
-        section: &'static str,
-        key: impl Into<String>,
-        value: Option<String>,
-        rule: impl Into<String>,
-    ) -> Self {
-        Self {
-            section,
-            key: key.into(),
-            value,
-            rule: rule.into(),
-        }
-    }
-
-    /// The dotted path of the field in the controller config (`safety.sensor_max_age_s`).
-    pub fn path(&self) -> String {
-        match (self.section.is_empty(), self.key.is_empty()) {
-            (true, _) => self.key.clone(),
-            (false, true) => self.section.to_owned(),
-            (false, false) => format!("{}.{}", self.section, self.key),
-        }
-    }
-}
-
-impl From<ParamError> for ControllerError {
-    fn from(e: ParamError) -> Self {
-        let (field, reason) = if e.section.is_empty() {
-            ("controller", e.to_string())
-        } else {
-            (
-                e.section,
-                format!("{}{}: {}", e.key, value_suffix(e.value.as_deref()), e.rule),
-            )
-        };
-        ControllerError::Config { field, reason }
-    }
-}
-
 /// A controller config file that cannot be used.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigFileError {
@@ -374,170 +314,4 @@ fn place(origin: &str, line: Option<usize>) -> String {
         (true, Some(l)) => format!("line {l}"),
         (true, None) => "controller config".to_owned(),
     }
-}
-
-/// An interval a parameter must lie in; only finite values lie in one.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct Limits {
-    lo: f64,
-    lo_open: bool,
-    hi: f64,
-    hi_open: bool,
-    unit: &'static str,
-}
-
-impl Limits {
-    /// `[lo, hi]`.
-    pub(crate) const fn closed(lo: f64, hi: f64, unit: &'static str) -> Self {
-        Self {
-            lo,
-            lo_open: false,
-            hi,
-            hi_open: false,
-            unit,
-        }
-    }
-
-    /// `(lo, hi)`.
-    pub(crate) const fn open(lo: f64, hi: f64, unit: &'static str) -> Self {
-        Self {
-            lo,
-            lo_open: true,
-            hi,
-            hi_open: true,
-            unit,
-        }
-    }
-
-    /// `(lo, hi]`.
-    pub(crate) const fn above(lo: f64, hi: f64, unit: &'static str) -> Self {
-        Self {
-            lo,
-            lo_open: true,
-            hi,
-            hi_open: false,
-            unit,
-        }
-    }
-
-    /// `[lo, hi)`.
-    pub(crate) const fn below(lo: f64, hi: f64, unit: &'static str) -> Self {
-        Self {
-            lo,
-            lo_open: false,
-            hi,
-            hi_open: true,
-            unit,
-        }
-    }
-
-    fn contains(&self, v: f64) -> bool {
-        let above_lo = if self.lo_open {
-            v > self.lo
-        } else {
-            v >= self.lo
-        };
-        let below_hi = if self.hi_open {
-            v < self.hi
-        } else {
-            v <= self.hi
-        };
-        v.is_finite() && above_lo && below_hi
-    }
-}
-
-impl fmt::Display for Limits {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "{}{}, {}{}",
-            if self.lo_open { '(' } else { '[' },
-            self.lo,
-            self.hi,
-            if self.hi_open { ')' } else { ']' }
-        )?;
-        if !self.unit.is_empty() {
-            write!(f, " {}", self.unit)?;
-        }
-        Ok(())
-    }
-}
-
-/// A value as TOML spells it (`nan`, `inf`, `1e308`, `0.25`).
-pub(crate) fn toml_float(v: f64) -> String {
-    if v.is_nan() {
-        "nan".to_owned()
-    } else if v.is_infinite() {
-        if v > 0.0 { "inf" } else { "-inf" }.to_owned()
-    } else {
-        format!("{v:?}")
-    }
-}
-
-/// `Ok` if `v` is finite and within `limits`; `why` (may be empty) explains the limits.
-pub(crate) fn check(
-    section: &'static str,
-    key: &str,
-    v: f64,
-    limits: Limits,
-    why: &str,
-) -> Result<(), ParamError> {
-    if limits.contains(v) {
-        return Ok(());
-    }
-    Err(out_of_range(
-        section,
-        key,
-        toml_float(v),
-        format!("must be finite and in {limits}"),
-        why,
-    ))
-}
-
-/// [`check`] for an angle held in radians and written in degrees (a `_deg` key); `limits` in
-/// degrees.
-pub(crate) fn check_deg(
-    section: &'static str,
-    key: &str,
-    v_rad: f64,
-    limits_deg: Limits,
-) -> Result<(), ParamError> {
-    check(section, key, v_rad.to_degrees(), limits_deg, "")
-}
-
-/// `Ok` if the count `v` is within `[lo, hi]`; `why` (may be empty) explains the limits.
-pub(crate) fn check_count(
-    section: &'static str,
-    key: &str,
-    v: u64,
-    lo: u64,
-    hi: u64,
-    why: &str,
-) -> Result<(), ParamError> {
-    if (lo..=hi).contains(&v) {
-        return Ok(());
-    }
-    Err(out_of_range(
-        section,
-        key,
-        v.to_string(),
-        format!("must be in [{lo}, {hi}]"),
-        why,
-    ))
-}
-
-/// The error of [`check`] and [`check_count`]: `rule`, then `why` in parentheses unless empty.
-fn out_of_range(
-    section: &'static str,
-    key: &str,
-    value: String,
-    rule: String,
-    why: &str,
-) -> ParamError {
-    let rule = if why.is_empty() {
-        rule
-    } else {
-        format!("{rule} ({why})")
-    };
-    ParamError::new(section, key, Some(value), rule)
 }

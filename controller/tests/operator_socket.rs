@@ -1,4 +1,4 @@
-//! The operator's control socket ([`controller::operator`]): requests over a real Unix socket,
+//! The operator's control socket ([`controller::io::operator`]): requests over a real Unix socket,
 //! served by a loop that never waits for it; malformed input answered with an error and counted.
 
 #![allow(clippy::unwrap_used)]
@@ -8,7 +8,7 @@ use common::node;
 
 use std::time::Duration;
 
-use controller::operator::{self, Command, Request, Response};
+use controller::io::operator::{self, Command, Request, Response};
 use tokio::io::{AsyncBufReadExt as _, AsyncWriteExt as _, BufReader};
 use tokio::net::UnixStream;
 

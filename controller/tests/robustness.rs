@@ -6,7 +6,7 @@
 mod common;
 use common::node;
 
-use controller::node::OUTBOX_CAPACITY;
+use controller::step::node::OUTBOX_CAPACITY;
 use firmware_bridge::messages::{AuxValveCommand, Message, RequestedMode, Valve};
 use firmware_bridge::transport::{InProcessBus, TimestampedFrame};
 use firmware_bridge::{CONTROLLER_ADDRESS, CanFrame, CanId};
@@ -91,10 +91,10 @@ async fn the_loop_ends_with_neutral_valves_and_a_disarm_heartbeat() {
         .unwrap();
     let shutdown = tokio::time::sleep(std::time::Duration::from_millis(320));
     let (reason, stats) =
-        controller::run::run_loop(&ctl, &mut n, controller::run::CONTROL_PERIOD, shutdown)
+        controller::io::run::run_loop(&ctl, &mut n, firmware_bridge::dbc::CONTROL_PERIOD, shutdown)
             .await
             .unwrap();
-    assert_eq!(reason, controller::run::StopReason::Signal);
+    assert_eq!(reason, controller::io::run::StopReason::Signal);
     assert!((32..=33).contains(&stats.steps), "{stats:?}");
     let mut frames = Vec::new();
     while let Some(f) = observer.try_recv() {

@@ -9,11 +9,12 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use controller::node::{ControllerConfig, ControllerNode};
-use controller::run::{CONTROL_PERIOD, LoopSession, run_session_loop};
-use controller::safety::Fault;
-use controller::scan_client::NoScans;
-use controller::session::SessionDriver;
+use controller::io::run::{LoopSession, run_session_loop};
+use controller::io::scan_client::NoScans;
+use controller::session::driver::SessionDriver;
+use controller::step::safety::Fault;
+use controller::{ControllerConfig, ControllerNode};
+use firmware_bridge::dbc::CONTROL_PERIOD;
 use firmware_bridge::messages::{
     AuxValveMeasured, Cylinder, GatewayFaults, GatewayMode, GatewayStatus, JointAngles, JointRates,
     Message, ValveState,
@@ -101,18 +102,19 @@ async fn a_wall_clock_step_neither_hides_a_stale_sensor_nor_raises_a_false_fault
     let mut driver = SessionDriver::new(None, None, &mut node);
     let mut scans = NoScans::default();
     let mut health: Vec<Result<(), Fault>> = Vec::new();
-    let mut observer =
-        |node: &ControllerNode, _: &SessionDriver, _: &[controller::session::SessionEvent]| {
-            health.push(node.safety().health());
-            let step = health.len();
-            if WALL_STEPS.contains(&step) {
-                wall.advance_ns(HOUR_NS);
-            }
-            if step == SENSORS_STOP {
-                sensors.store(false, Ordering::Relaxed);
-            }
-            Ok(())
-        };
+    let mut observer = |node: &ControllerNode,
+                        _: &SessionDriver,
+                        _: &[controller::session::driver::SessionEvent]| {
+        health.push(node.safety().health());
+        let step = health.len();
+        if WALL_STEPS.contains(&step) {
+            wall.advance_ns(HOUR_NS);
+        }
+        if step == SENSORS_STOP {
+            sensors.store(false, Ordering::Relaxed);
+        }
+        Ok(())
+    };
     let shutdown = tokio::time::sleep(CONTROL_PERIOD * u32::try_from(STEPS).unwrap());
     run_session_loop(
         &ctl,

@@ -92,8 +92,8 @@ pub enum DiscrepancyError {
 /// Result alias for this module.
 pub type Result<T> = std::result::Result<T, DiscrepancyError>;
 
-/// The control period of the records, s (100 Hz, docs/ARCHITECTURE.md).
-pub const PERIOD_S: f64 = 0.01;
+/// The control period of the records, s ([`firmware_bridge::dbc::CONTROL_PERIOD`], 100 Hz).
+pub const PERIOD_S: f64 = firmware_bridge::dbc::CONTROL_PERIOD.as_secs_f64();
 
 /// Autodig stage of a sample (from the controller's `ControllerStatus`).
 #[derive(

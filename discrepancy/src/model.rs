@@ -150,8 +150,8 @@ impl AugmentedModel {
 
 /// Longest delay line of the actuator state, control periods.
 const MAX_DELAY_STEPS: usize = 64;
-/// The dig model's step, s.
-const DT_S: f64 = 0.01;
+/// The dig model's step, s: the records' control period.
+const DT_S: f64 = crate::PERIOD_S;
 
 /// The grey-box actuator (steady-state Eqs. 1-3 behind the spool delay and lag) with its effects.
 #[derive(Debug, Clone, PartialEq)]

@@ -16,6 +16,13 @@
 /// `build.rs` generates the descriptors from.
 pub const DBC_TEXT: &str = include_str!("../excavator.dbc");
 
+/// The controller's control period: the DBC's cycle time (`GenMsgCycleTime`) of its periodic command,
+/// `AuxValveCommand_Boom` (every joint's command and the position setpoint have the same). The
+/// controller steps at this period, and the simulator, the lab and the tests that step with it use
+/// this constant, so the message schedule and the step rate are one fact.
+pub const CONTROL_PERIOD: core::time::Duration =
+    core::time::Duration::from_millis(aux_valve_command_boom::MESSAGE.cycle_time_ms as u64);
+
 /// Description of one signal, generated from the DBC.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SignalDesc {
@@ -372,6 +379,48 @@ mod tests {
         assert_eq!(joint_angles::PGN, 0xFF50);
         assert_eq!(controller_status::MESSAGE.default_id, 0x18FF_6227);
         assert_eq!(MESSAGES.len(), 20);
+    }
+
+    /// The `GenMsgCycleTime` of message `name`, ms, read from the DBC text itself (not through
+    /// `build.rs`).
+    fn dbc_cycle_time_ms(name: &str) -> u64 {
+        let id = DBC_TEXT
+            .lines()
+            .find_map(|l| {
+                let mut words = l.split_whitespace();
+                (words.next() == Some("BO_"))
+                    .then(|| (words.next(), words.next()))
+                    .and_then(|(id, n)| (n == Some(&std::format!("{name}:")[..])).then_some(id))
+                    .flatten()
+            })
+            .unwrap_or_else(|| panic!("no message {name} in the DBC"));
+        let prefix = std::format!("BA_ \"GenMsgCycleTime\" BO_ {id} ");
+        DBC_TEXT
+            .lines()
+            .find_map(|l| l.strip_prefix(&prefix[..]))
+            .and_then(|rest| rest.trim_end_matches(';').trim().parse().ok())
+            .unwrap_or_else(|| panic!("no GenMsgCycleTime for {name} ({id})"))
+    }
+
+    #[test]
+    fn the_control_period_is_the_dbc_cycle_time_of_the_controllers_commands() {
+        assert_eq!(CONTROL_PERIOD, core::time::Duration::from_millis(10));
+        let period_ms = u64::try_from(CONTROL_PERIOD.as_millis()).unwrap();
+        for name in [
+            "AuxValveCommand_Boom",
+            "AuxValveCommand_Stick",
+            "AuxValveCommand_Bucket",
+            "AuxValveCommand_Swing",
+            "PositionSetpoint",
+        ] {
+            assert_eq!(dbc_cycle_time_ms(name), period_ms, "{name}");
+        }
+        // Every other periodic message of the controller goes out every so many steps.
+        for m in MESSAGES.iter().filter(|m| m.transmitter == "Controller") {
+            let ms = dbc_cycle_time_ms(m.name);
+            assert_eq!(ms, u64::from(m.cycle_time_ms), "{}", m.name);
+            assert_eq!(ms % period_ms, 0, "{}: {ms} ms", m.name);
+        }
     }
 
     #[test]

@@ -71,7 +71,7 @@
 //!   for the gateway, every frame after the address was lost, the controller's `ControllerStatus` (for traces,
 //!   the gateway has no use for it) and neutral valve commands (block, zero flow) outside ArmedValve.
 //!   Neutral is what every other mode outputs anyway, and the controller sends neutral commands on any
-//!   disarm or fault without knowing whether the gateway already left ArmedValve (`controller::safety`),
+//!   disarm or fault without knowing whether the gateway already left ArmedValve (`controller::step::safety`),
 //!   so they are not errors. [`Gateway::ignored_frames`] counts them for tests and logs.
 //!
 //! Counted and reported in the status frame, never acted on:
@@ -812,7 +812,8 @@ mod tests {
     use std::string::ToString;
     use std::vec::Vec;
 
-    const PERIOD_S: f64 = 0.01;
+    /// The controller's heartbeat and command period of these tests, s.
+    const PERIOD_S: f64 = crate::dbc::CONTROL_PERIOD.as_secs_f64();
 
     /// The controller's side of the link: seals its frames in the gateway's current session, as the
     /// controller does after reading `GatewaySession`.
@@ -1556,7 +1557,7 @@ mod tests {
     }
 
     /// Heartbeat period of the phase sweep (the tightest the controller may use), s.
-    const SWEEP_HEARTBEAT_PERIOD_S: f64 = 0.01;
+    const SWEEP_HEARTBEAT_PERIOD_S: f64 = crate::dbc::CONTROL_PERIOD.as_secs_f64();
     /// The gateway's tick period in the simulator and on the reference gateway, s.
     const SWEEP_TICK_S: f64 = 0.001;
 

@@ -11,7 +11,7 @@
 
 #![allow(clippy::unwrap_used)]
 
-use controller::node::{ControllerConfig, ControllerNode};
+use controller::{ControllerConfig, ControllerNode};
 use firmware_bridge::messages::{JointAngles, Message};
 use firmware_bridge::transport::InProcessBus;
 use lab::harness::{Harness, HarnessOptions};

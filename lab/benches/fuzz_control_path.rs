@@ -13,7 +13,7 @@
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::time::{Duration, Instant};
 
-use controller::node::{ControllerConfig, ControllerNode};
+use controller::{ControllerConfig, ControllerNode};
 use firmware_bridge::gateway::{Gateway, VALVES};
 use firmware_bridge::messages::{
     AuxValveCommand, ControllerHeartbeat, GatewayMode, JointAngles, RequestedMode, Valve,

@@ -9,7 +9,7 @@
 mod common;
 
 use common::{Loop, default_sim, one_dig};
-use controller::cycle::{Action, Phase, StartPose};
+use controller::step::cycle::{Action, Phase, StartPose};
 
 fn main() {
     for (rho2, hardness, x, z) in [

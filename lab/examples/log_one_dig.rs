@@ -17,7 +17,7 @@
 mod common;
 
 use common::{Loop, cleanup_setup, default_sim, floor_extremes, one_dig};
-use controller::cycle::{Action, Phase, StartPose};
+use controller::step::cycle::{Action, Phase, StartPose};
 
 fn main() {
     let mut c = one_dig();
@@ -148,7 +148,7 @@ fn main() {
                 s.extension_fraction[1],
                 s.extension_fraction[2],
                 match l.node().last_command() {
-                    controller::cycle::CycleCommand::Valves(v) =>
+                    controller::step::cycle::CycleCommand::Valves(v) =>
                         format!("[{:.2} {:.2} {:.2}]", v[0], v[1], v[2]),
                     c => format!("{c:?}"),
                 },

@@ -46,10 +46,12 @@ use planner::plan::PlannerConfig;
 use planner::terrain::TerrainGrid;
 use vcan_sim::scenario::{Scenario, SoilContactIntegration};
 
-use controller::cycle::{Action, ActionKind, StartPose};
-use controller::node::{ControllerConfig, ControllerNode};
-use controller::planned::{PlannedSession, Strategy, median_joints};
-use controller::session::{NoObserver, SessionDriver, SessionEvent, SessionObserver};
+use controller::ControllerConfig;
+use controller::session::driver::{NoObserver, SessionDriver, SessionEvent, SessionObserver};
+use controller::session::planned::{PlannedSession, median_joints};
+use controller::session::snapshot::Strategy;
+use controller::step::cycle::{Action, ActionKind, StartPose};
+use controller::step::node::ControllerNode;
 
 pub use onboard::record::{BenchSnapshot, DigRecord, SessionRecords, TipPoint, Truth};
 pub use onboard::setup::{
@@ -524,7 +526,7 @@ pub fn run_session_observed(
     let mut snapshots: Vec<BenchSnapshot> = Vec::new();
     // Operator commands in-process (the live view's page): applied between two steps, as `run`
     // applies those of its control socket before a step.
-    let mut operator = controller::operator::OperatorPort::new();
+    let mut operator = controller::io::operator::OperatorPort::new();
     observer.operator_control(operator.sender());
     let finished = |h: &Harness| h.node().is_none_or(ControllerNode::finished);
     while !finished(&h) && h.time_s() < budget_s && !stop.load(Ordering::Relaxed) {

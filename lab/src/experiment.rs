@@ -32,8 +32,8 @@ use vcan_sim::scenario::SoilContactIntegration;
 
 pub use crate::demo::SoilContact;
 
-use controller::cycle::{Action, Phase, StartPose};
-use controller::node::ControllerConfig;
+use controller::ControllerConfig;
+use controller::step::cycle::{Action, Phase, StartPose};
 use onboard::record::TipPoint;
 
 use crate::harness::Harness;
@@ -723,7 +723,10 @@ fn scale_soil(sim: &mut SimConfig, k: f64) {
 }
 
 fn default_start() -> StartPose {
-    match controller::cycle::CycleConfig::default().actions.first() {
+    match controller::step::cycle::CycleConfig::default()
+        .actions
+        .first()
+    {
         Some(Action::Dig { start, .. }) => *start,
         _ => start_with_stick_angle(-45.0),
     }
@@ -1250,7 +1253,7 @@ pub fn extended(
     args.planner = planner.map(std::path::Path::to_path_buf);
     args.bench_after = vec![12, digs / 2];
     let planned = run_session(&args, &stop).context("planned session")?;
-    let median = controller::planned::median_joints(&dig_starts(&planned.digs))
+    let median = controller::session::planned::median_joints(&dig_starts(&planned.digs))
         .context("the planned session made no dig to take the median start of")?;
     let mut args = DemoArgs::planned(out.join("predefined"));
     args.strategy = DemoStrategy::Predefined;
@@ -1732,7 +1735,7 @@ pub struct DigCheck {
 /// 7 m) in the simulator and in the nominal dig model from the same start over the simulator's true
 /// section: where their tip paths part (the model once predicted the tip 0.5-1.2 m deeper than
 /// the simulator took it for starts high on the face). With `boom_down` the simulated dig starts
-/// [`controller::planned::APPROACH_HEIGHT_M`] above the start with Autodig's Boom-Down, as in a session;
+/// [`controller::session::planned::APPROACH_HEIGHT_M`] above the start with Autodig's Boom-Down, as in a session;
 /// the model starts in Pre-Dig on the start as the refined planner evaluates it.
 ///
 /// # Errors
@@ -1792,10 +1795,10 @@ pub fn extended_dig_check(boom_down: bool) -> anyhow::Result<Vec<DigCheck>> {
                     continue;
                 };
                 let q_sim = if boom_down {
-                    controller::planned::approach_joints(
+                    controller::session::planned::approach_joints(
                         &kin,
                         q,
-                        controller::planned::APPROACH_HEIGHT_M,
+                        controller::session::planned::APPROACH_HEIGHT_M,
                     )
                 } else {
                     q

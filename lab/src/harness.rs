@@ -27,11 +27,11 @@ use planner::autodig::AutodigMaps;
 use vcan_sim::SimConfig;
 use vcan_sim::embedded::EmbeddedMachine;
 
-use controller::node::{ControllerConfig, ControllerNode, Outbox};
-use controller::session::{BoxError, ScanSource};
+use controller::session::driver::{BoxError, ScanSource};
+use controller::{ControllerConfig, ControllerNode, Outbox};
 
-/// The control period, s.
-pub const PERIOD_S: f64 = 0.01;
+/// The control period, s ([`firmware_bridge::dbc::CONTROL_PERIOD`]).
+pub const PERIOD_S: f64 = firmware_bridge::dbc::CONTROL_PERIOD.as_secs_f64();
 
 /// Bus options of a harness.
 #[derive(Debug, Clone)]

@@ -388,7 +388,7 @@ fn dig_panel<'a, 'b>(
 
 /// A dig's colour in the per-dig panels: cleanups orange, other actions blue.
 fn action_color(d: &DigRecord) -> RGBColor {
-    if d.action == controller::cycle::ActionKind::Cleanup {
+    if d.action == controller::step::cycle::ActionKind::Cleanup {
         color(1)
     } else {
         color(0)
@@ -601,7 +601,7 @@ pub fn weight_sequence_svg(
 ) -> anyhow::Result<String> {
     let pick = |digs: &[DigRecord]| -> Vec<(f64, f64)> {
         digs.iter()
-            .filter(|d| d.action == controller::cycle::ActionKind::Dig)
+            .filter(|d| d.action == controller::step::cycle::ActionKind::Dig)
             .enumerate()
             .map(|(i, d)| (i as f64, d.weight_n.unwrap_or(0.0) * 1e-3))
             .collect()

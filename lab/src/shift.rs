@@ -17,10 +17,10 @@
 //!   arbitration: the flood costs receive work, not bus time);
 //! - bus-off: an error frame reporting bus-off, then every frame lost, then a `restarted` error frame;
 //! - gateway fault: the gateway's clock steps back 1 s (it latches `CLOCK_FAULT`, valves neutral);
-//! - e-stop: the operator's e-stop ([`controller::operator`]), the operator's reset after a hold;
+//! - e-stop: the operator's e-stop ([`controller::io::operator`]), the operator's reset after a hold;
 //! - controller restart: the controller is killed (no shutdown frames) and after a downtime a fresh
 //!   [`ControllerNode`] goes on from the saved state as `run --resume` does ([`crate::resume`],
-//!   [`controller::session_state`]): the checkpoint of every completed action is saved to the
+//!   [`controller::session::session_state`]): the checkpoint of every completed action is saved to the
 //!   state file, synchronously (the shift is reproducible for its seed).
 //!
 //! A fault is **detected** when the part that must notice it does ([`FaultKind::detection`]) and
@@ -68,14 +68,14 @@ use serde::{Deserialize, Serialize};
 use vcan_sim::SimConfig;
 use vcan_sim::node::MachineNode;
 
-use controller::node::{ControllerConfig, ControllerNode};
-use controller::operator::{self, Command};
-use controller::planned::Strategy;
-use controller::run::LoopMonitor;
-use controller::safety::{Fault, GATEWAY_WATCHDOG_S};
-use controller::session::SessionDriver;
-use controller::session_state::SessionIdentity;
-use controller::state_file::StateFileError;
+use controller::io::operator::{self, Command};
+use controller::io::run::LoopMonitor;
+use controller::session::driver::SessionDriver;
+use controller::session::session_state::SessionIdentity;
+use controller::session::snapshot::Strategy;
+use controller::session::state_file::StateFileError;
+use controller::step::safety::{Fault, GATEWAY_WATCHDOG_S};
+use controller::{ControllerConfig, ControllerNode};
 
 use crate::demo::{self, DemoArgs};
 use crate::harness::{Harness, HarnessOptions, PERIOD_S, SimScans};
@@ -740,7 +740,7 @@ impl Setup {
                 .context("controller")?;
         let mut driver = SessionDriver::new(Some(session), None, &mut node);
         if let Some(path) = resume.filter(|p| p.exists()) {
-            let state: RunState = controller::session_state::load(path, &self.identity)
+            let state: RunState = controller::session::session_state::load(path, &self.identity)
                 .context("resuming the saved session")?;
             driver
                 .restore(&state.driver, &mut node)
@@ -1005,7 +1005,8 @@ impl<'a> Shift<'a> {
                         ..RunRecords::default()
                     },
                 );
-                controller::state_file::save(path, &state).context("saving the session state")?;
+                controller::session::state_file::save(path, &state)
+                    .context("saving the session state")?;
             }
         }
         self.operator(t);
@@ -1341,7 +1342,7 @@ const ERR_RESTARTED: u32 = 0x100;
 /// Whether `fault` is a stale control signal (not the gateway status).
 fn stale_sensor(fault: Option<Fault>) -> bool {
     matches!(fault, Some(Fault::StaleSensor { signal, .. })
-        if signal != controller::estimate::Signal::GatewayStatus)
+        if signal != controller::step::estimate::Signal::GatewayStatus)
 }
 
 /// Whether `f` is one of the gateway's sensor frames.

@@ -8,8 +8,8 @@ use common::{
     Loop, PERIOD_S, cleanup_setup, default_sim, floor_extremes, has_all_neutral, has_motion,
     heartbeat_mode, one_dig,
 };
-use controller::cycle::Phase;
-use controller::safety::Fault;
+use controller::step::cycle::Phase;
+use controller::step::safety::Fault;
 use firmware_bridge::messages::{GatewayMode, RequestedMode};
 use firmware_bridge::transport::TimestampedFrame;
 use firmware_bridge::{CanFrame, GATEWAY_ADDRESS};

@@ -5,7 +5,7 @@
 
 use std::sync::atomic::AtomicBool;
 
-use controller::cycle::ActionKind;
+use controller::step::cycle::ActionKind;
 use lab::demo::{DemoArgs, DemoStrategy, run_session};
 
 /// A short planned session: the planner digs, and once the face within reach is used up it backs up

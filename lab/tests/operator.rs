@@ -1,4 +1,4 @@
-//! Operator control ([`controller::operator`]) against the simulated machine in virtual time: what
+//! Operator control ([`controller::io::operator`]) against the simulated machine in virtual time: what
 //! each command does to the valve commands on the bus.
 
 #![allow(clippy::unwrap_used)]
@@ -6,9 +6,9 @@
 mod common;
 
 use common::{Loop, PERIOD_S, default_sim, has_all_neutral, has_motion, heartbeat_mode};
-use controller::cycle::Phase;
-use controller::node::ControllerConfig;
-use controller::operator::{Command, apply};
+use controller::ControllerConfig;
+use controller::io::operator::{Command, apply};
+use controller::step::cycle::Phase;
 use firmware_bridge::messages::RequestedMode;
 
 /// The default plan's first two digs.

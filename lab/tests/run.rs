@@ -1,5 +1,5 @@
 //! `excavator-ctl run --strategy planned` through the real run loop ([`onboard::run::run_on`],
-//! [`controller::run::run_session_loop`]) over the in-process bus on the wall clock, against the
+//! [`controller::io::run::run_session_loop`]) over the in-process bus on the wall clock, against the
 //! simulator's real-time loop (`vcan_sim::realtime::run_on`) with its scan socket on loopback TCP,
 //! both at the same time scale: the session folder is the one `demo` writes; a controller dropped
 //! mid-session and started again with `--resume` finishes the session without losing or repeating

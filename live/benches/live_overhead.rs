@@ -36,9 +36,9 @@ use std::process::{Child, Command, Stdio};
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
-use controller::node::ControllerConfig;
-use controller::run::CONTROL_PERIOD;
-use controller::session::{NoObserver, SessionObserver};
+use controller::ControllerConfig;
+use controller::session::driver::{NoObserver, SessionObserver};
+use firmware_bridge::dbc::CONTROL_PERIOD;
 use lab::harness::{Harness, HarnessOptions};
 use live::{LiveArgs, LiveStream};
 use planner::autodig::AutodigMaps;

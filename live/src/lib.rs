@@ -6,7 +6,7 @@
 //! # Layout
 //!
 //! - [`LiveArgs`]: the command-line options (`--live [ADDR]`, `--pace FACTOR`, `--live-queue N`).
-//! - [`stream`]: [`LiveStream`], a `controller::session::SessionObserver`. On the control loop it only
+//! - [`stream`]: [`LiveStream`], a `controller::session::driver::SessionObserver`. On the control loop it only
 //!   copies what the publisher needs of each step (plain values: the estimate's angles, pose,
 //!   pressures and tip, the status, the command) into a preallocated single-producer queue (dropped
 //!   and counted when full; no allocation, lock or system call) and paces virtual time when asked; a
@@ -23,7 +23,7 @@
 //!     --rtrb ring buffer (push; full: dropped, counted)--> publisher thread --view::*--> channels
 //!     --foxglove WebSocket server (its own runtime, per-client backlog)--> Foxglove
 //!                   \--page state (at most 10 Hz)--> HTTP server (same runtime) --SSE--> the page
-//! the page --POST /command--> controller::operator::OperatorSender --> the control loop's port
+//! the page --POST /command--> controller::io::operator::OperatorSender --> the control loop's port
 //! ```
 
 pub mod page;

@@ -26,9 +26,9 @@ use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
-use controller::cycle::Action;
-use controller::cycle::DigStats;
-use controller::operator::{Command, OperatorSender, Request};
+use controller::io::operator::{Command, OperatorSender, Request};
+use controller::step::cycle::Action;
+use controller::step::cycle::DigStats;
 use futures::Stream;
 use futures::StreamExt as _;
 use planner::terrain::TerrainGrid;
@@ -365,7 +365,7 @@ struct PageCommand {
 }
 
 /// A reply to the page.
-fn reply(status: StatusCode, body: &controller::operator::Response) -> Response {
+fn reply(status: StatusCode, body: &controller::io::operator::Response) -> Response {
     let mut r = (status, to_json(body).to_string()).into_response();
     r.headers_mut().insert(
         header::CONTENT_TYPE,
@@ -379,7 +379,7 @@ fn refuse(status: StatusCode, why: impl Into<String>) -> Response {
     tracing::warn!(%status, why, "operator page: command refused");
     reply(
         status,
-        &controller::operator::Response {
+        &controller::io::operator::Response {
             ok: false,
             error: Some(why),
             status: None,
@@ -490,7 +490,7 @@ mod tests {
 
     #[tokio::test]
     async fn commands_reach_the_operator_port_and_bad_ones_are_refused() {
-        let mut port = controller::operator::OperatorPort::new();
+        let mut port = controller::io::operator::OperatorPort::new();
         let (addr, _tx) = serve(Some(port.sender())).await;
         // Unknown command, unknown field, wrong type, foreign origin, oversized body.
         for (ct, origin, body, code) in [
@@ -516,10 +516,10 @@ mod tests {
             async move { http(&addr, &request).await }
         });
         let machine = planner::machine::MachineConfig::load_or_default(None).unwrap();
-        let mut node = controller::node::ControllerNode::new(
+        let mut node = controller::step::node::ControllerNode::new(
             &machine,
             planner::autodig::AutodigMaps::builtin().unwrap(),
-            controller::node::ControllerConfig::default(),
+            controller::ControllerConfig::default(),
         )
         .unwrap();
         while port.serve(&mut node, 0.0) == 0 {
@@ -527,7 +527,7 @@ mod tests {
         }
         let (code, body) = client.await.unwrap();
         assert_eq!(code, 200, "{body}");
-        let reply: controller::operator::Response = serde_json::from_str(&body).unwrap();
+        let reply: controller::io::operator::Response = serde_json::from_str(&body).unwrap();
         let status = reply.status.unwrap();
         assert!(
             status.fault.as_deref().is_some_and(|f| f.contains("stop")),

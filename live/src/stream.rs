@@ -15,13 +15,13 @@ use planner::kinematics::{Kinematics, MachinePose};
 use planner::machine::MachineConfig;
 use planner::terrain::TerrainGrid;
 
-use controller::cycle::DigStats;
-use controller::cycle::{Action, CycleCommand, Phase};
-use controller::node::ControllerNode;
-use controller::operator::OperatorSender;
-use controller::planned::PlannedSession;
-use controller::safety::{Fault, SafetyState};
-use controller::session::{SessionEvent, SessionObserver};
+use controller::io::operator::OperatorSender;
+use controller::session::driver::{SessionEvent, SessionObserver};
+use controller::session::planned::PlannedSession;
+use controller::step::cycle::DigStats;
+use controller::step::cycle::{Action, CycleCommand, Phase};
+use controller::step::node::ControllerNode;
+use controller::step::safety::{Fault, SafetyState};
 use firmware_bridge::messages::ControllerStatus;
 use trace_tools::view;
 

@@ -8,7 +8,7 @@
 
 use std::sync::OnceLock;
 
-use controller::node::ControllerNode;
+use controller::step::node::ControllerNode;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
 
 /// The process's progress lines (drawn on stderr, hidden when it is not a terminal).
@@ -97,10 +97,10 @@ mod tests {
 
     #[test]
     fn the_message_names_action_phase_and_faults() {
-        let node = controller::node::ControllerNode::new(
+        let node = controller::step::node::ControllerNode::new(
             &planner::machine::MachineConfig::default_machine().unwrap(),
             planner::autodig::AutodigMaps::builtin().unwrap(),
-            controller::node::ControllerConfig::default(),
+            controller::ControllerConfig::default(),
         )
         .unwrap();
         let m = super::status_message(&node, 2);

@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! terminal --byte--> key reader thread: command_for --OperatorSender--> the operator queue
-//!                                                         (the control socket's own; controller::operator)
+//!                                                         (the control socket's own; controller::io::operator)
 //! ```
 //!
 //! A key is a request on the very path of the control socket ([`OperatorSender`]): the control loop
@@ -23,7 +23,7 @@ use std::sync::Arc;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use controller::operator::{Command, OperatorSender, Request};
+use controller::io::operator::{Command, OperatorSender, Request};
 use nix::sys::termios::{self, LocalFlags, SetArg, SpecialCharacterIndices, Termios};
 
 /// The keys and their commands (letters in either case).

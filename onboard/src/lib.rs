@@ -25,7 +25,7 @@
 //!
 //! ```text
 //! machine file, site, config, maps --setup--> ControllerNode + SessionDriver
-//! CAN bus <--frames--> controller::run::run_session_loop --events--> records --> summary, state file
+//! CAN bus <--frames--> controller::io::run::run_session_loop --events--> records --> summary, state file
 //! operator (socket, keys) --> OperatorPort --> the loop, before each step
 //! ```
 

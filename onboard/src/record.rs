@@ -7,10 +7,11 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
-use controller::cycle::{Action, ActionKind, DigStats, Phase, StartPose};
-use controller::node::ControllerNode;
-use controller::planned::PlannedSession;
-use controller::session::{PlannedDig, SessionDriver, SessionEvent};
+use controller::session::driver::{SessionDriver, SessionEvent};
+use controller::session::planned::PlannedSession;
+use controller::session::snapshot::PlannedDig;
+use controller::step::cycle::{Action, ActionKind, DigStats, Phase, StartPose};
+use controller::step::node::ControllerNode;
 use planner::estimate::SoilSample;
 use planner::kinematics::MachinePose;
 use planner::terrain::TerrainGrid;

@@ -4,8 +4,8 @@
 //! and the trace a resumed session appends to ([`open_trace`]).
 //!
 //! The driver's checkpoint and these records are written together, as one
-//! [`controller::session_state::SessionState`] in `session_state.json`, with
-//! [`controller::state_file::save`] (temp, fsync, rename): a controller killed at any moment leaves
+//! [`controller::session::session_state::SessionState`] in `session_state.json`, with
+//! [`controller::session::state_file::save`] (temp, fsync, rename): a controller killed at any moment leaves
 //! the state of the last completed action, and `run --resume DIR` goes on from there. What was
 //! written after that checkpoint is not duplicated: the scans are numbered on from the saved count
 //! (a later scan file is overwritten by the resumed session's), the records of `summary.json` come
@@ -18,8 +18,9 @@ use std::sync::mpsc::{self, SyncSender, TrySendError};
 use std::thread::JoinHandle;
 
 use anyhow::Context as _;
-use controller::session_state::{DriverSnapshot, FORMAT, SessionIdentity, SessionState};
-use controller::state_file::{self, FieldError, Validate, finite};
+use controller::session::session_state::{FORMAT, SessionIdentity, SessionState};
+use controller::session::snapshot::DriverSnapshot;
+use controller::session::state_file::{self, FieldError, Validate, finite};
 use firmware_bridge::trace::Recorder;
 use serde::{Deserialize, Serialize};
 
@@ -73,7 +74,7 @@ pub type RunState = SessionState<RunRecords>;
 /// The state file in `dir`.
 #[must_use]
 pub fn state_path(dir: &Path) -> PathBuf {
-    dir.join(controller::session_state::STATE_FILE_NAME)
+    dir.join(controller::session::session_state::STATE_FILE_NAME)
 }
 
 /// Saves the checkpoints of a session on its own thread, in order, so the control loop never waits

@@ -6,7 +6,7 @@
 //!   soil estimate online), with range scans from the scan service (`--scan-addr`;
 //!   docs/scan-protocol.md) on the site's work area, floor and start pose (`--site`, default
 //!   config/site.toml, the site of `demo`'s bench); the planner runs off the control loop
-//!   ([`controller::run::run_session_loop`]);
+//!   ([`controller::io::run::run_session_loop`]);
 //! - `fixed` (default): the controller config's action list.
 //!
 //! The machine is the machine file's (`--machine`), the place the site file's: nothing comes from a
@@ -32,16 +32,18 @@ use std::time::Instant;
 
 use anyhow::Context as _;
 use clap::Args;
-use controller::node::{ControllerConfig, ControllerNode};
+use controller::ControllerConfig;
 #[cfg(doc)]
-use controller::operator::OperatorPort;
-use controller::run::{
-    CONTROL_PERIOD, LoopSession, StopReason, run_session_loop, scan_client_config,
+use controller::io::operator::OperatorPort;
+use controller::io::run::{LoopSession, StopReason, run_session_loop, scan_client_config};
+use controller::io::scan_client::{NoScans, ScanClient, ScanService};
+use controller::session::driver::{
+    NoObserver, ScanSource, SessionDriver, SessionEvent, SessionObserver,
 };
-use controller::scan_client::{NoScans, ScanClient, ScanService};
-use controller::session::{NoObserver, ScanSource, SessionDriver, SessionEvent, SessionObserver};
-use controller::session_state::{SessionIdentity, fingerprint};
-use controller::state_file::StateFileError;
+use controller::session::session_state::{SessionIdentity, fingerprint};
+use controller::session::state_file::StateFileError;
+use controller::step::node::ControllerNode;
+use firmware_bridge::dbc::CONTROL_PERIOD;
 use firmware_bridge::profile::Profile;
 use firmware_bridge::trace::Recorder;
 use firmware_bridge::transport::{Bus, LinkStatus, ProfileBus, SocketCanBus, TimeScale};
@@ -153,7 +155,7 @@ pub struct CtlArgs {
     #[arg(long, value_name = "PATH")]
     pub socket: PathBuf,
     /// status, pause, resume, estop, reset or stop.
-    pub command: controller::operator::Command,
+    pub command: controller::io::operator::Command,
     /// Why (written to the controller's log).
     #[arg(long)]
     pub reason: Option<String>,
@@ -164,9 +166,9 @@ pub struct CtlArgs {
 /// # Errors
 /// The socket cannot be reached, or the controller refused the request.
 pub async fn ctl(args: CtlArgs) -> anyhow::Result<()> {
-    let reply = controller::operator::request(
+    let reply = controller::io::operator::request(
         &args.socket,
-        &controller::operator::Request {
+        &controller::io::operator::Request {
             cmd: args.command,
             reason: args.reason,
         },
@@ -478,7 +480,7 @@ pub async fn run_observed(
         trace,
         &args,
         console,
-        controller::run::shutdown_signal(),
+        controller::io::run::shutdown_signal(),
         observer,
     )
     .await;
@@ -579,7 +581,7 @@ pub async fn run_on_observed<B: Bus>(
     let resumed = match &args.resume {
         Some(dir) => {
             let path = crate::resume::state_path(dir);
-            let state: RunState = controller::session_state::load(&path, &setup.identity)
+            let state: RunState = controller::session::session_state::load(&path, &setup.identity)
                 .context("--resume: the saved session")?;
             // The session's dig count, unless --digs gives another.
             if args.digs.is_none() && state.records.max_digs.is_some() {
@@ -666,11 +668,12 @@ pub async fn run_on_observed<B: Bus>(
         }
     }
     // The socket's and the keys' commands meet in this one port.
-    let mut operator = controller::operator::OperatorPort::new();
-    let socket_path = args
-        .control_socket
-        .clone()
-        .or_else(|| out_dir.as_deref().map(controller::operator::default_path));
+    let mut operator = controller::io::operator::OperatorPort::new();
+    let socket_path = args.control_socket.clone().or_else(|| {
+        out_dir
+            .as_deref()
+            .map(controller::io::operator::default_path)
+    });
     let socket_task = match &socket_path {
         Some(p) => {
             let task = operator.listen(p).with_context(|| {
@@ -953,7 +956,7 @@ impl BusWatch {
         };
         let armed = matches!(
             node.safety().state(),
-            controller::safety::SafetyState::Armed { .. }
+            controller::step::safety::SafetyState::Armed { .. }
         );
         if armed {
             self.first_rejected = None;
@@ -1083,7 +1086,7 @@ mod tests {
         let (node, _, _) = build(&args(&[])).unwrap();
         assert_eq!(
             *node.safety().config(),
-            controller::safety::SafetyConfig::default(),
+            controller::step::safety::SafetyConfig::default(),
             "without a profile, the project's gateway"
         );
     }

@@ -157,10 +157,10 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join(super::FILE_NAME);
         let subscriber = tracing_subscriber::registry().with(super::layer());
-        let mut node = controller::node::ControllerNode::new(
+        let mut node = controller::step::node::ControllerNode::new(
             &planner::machine::MachineConfig::default_machine().unwrap(),
             planner::autodig::AutodigMaps::builtin().unwrap(),
-            controller::node::ControllerConfig::default(),
+            controller::ControllerConfig::default(),
         )
         .unwrap();
         tracing::subscriber::with_default(subscriber, || {
@@ -168,15 +168,15 @@ mod tests {
             // A resumed session at 42 s, at twice real time.
             let log = super::open(&path, 42.0, 2.0).unwrap();
             log.start_clock();
-            controller::operator::apply(
+            controller::io::operator::apply(
                 &mut node,
-                controller::operator::Command::Estop,
+                controller::io::operator::Command::Estop,
                 "terminal key space",
                 42.0,
             );
-            controller::operator::apply(
+            controller::io::operator::apply(
                 &mut node,
-                controller::operator::Command::Stop,
+                controller::io::operator::Command::Stop,
                 "end of shift",
                 42.0,
             );

@@ -8,8 +8,9 @@ use std::path::Path;
 use std::sync::Arc;
 
 use anyhow::Context as _;
-use controller::node::ControllerConfig;
-use controller::planned::{PlannedSession, Strategy};
+use controller::ControllerConfig;
+use controller::session::planned::PlannedSession;
+use controller::session::snapshot::Strategy;
 use firmware_bridge::profile::Profile;
 use planner::autodig::AutodigMaps;
 use planner::machine::MachineConfig;
@@ -163,7 +164,7 @@ pub fn planned_session(
         a.cell_m,
         nx,
         ny,
-        controller::cycle::ScanGrid::default().max_gap_cells,
+        controller::step::cycle::ScanGrid::default().max_gap_cells,
     )
     .context("terrain map")?;
     let mut session =

@@ -5,9 +5,10 @@
 use std::path::Path;
 
 use anyhow::Context as _;
-use controller::cycle::{Action, ActionKind};
-use controller::node::ControllerNode;
-use controller::planned::{PlannedSession, Strategy};
+use controller::session::planned::PlannedSession;
+use controller::session::snapshot::Strategy;
+use controller::step::cycle::{Action, ActionKind};
+use controller::step::node::ControllerNode;
 use firmware_bridge::transport::{TraceClock, TraceTimeBase};
 use serde::{Deserialize, Serialize};
 

@@ -4,7 +4,7 @@
 //! Scan requests are answered with the default scan. "Killing" the controller stops the node
 //! without its shutdown frames, as SIGKILL does.
 
-use controller::node::ControllerNode;
+use controller::step::node::ControllerNode;
 use firmware_bridge::CanFrame;
 use firmware_bridge::transport::InProcessNode;
 use lab::harness::{Harness, HarnessOptions};
@@ -45,7 +45,7 @@ impl Session {
     ///
     /// # Panics
     /// When the built-in machine, bench or maps do not load, or `config` is invalid.
-    pub fn new(config: controller::node::ControllerConfig, seed: u64) -> Self {
+    pub fn new(config: controller::ControllerConfig, seed: u64) -> Self {
         Self::with_soil_contact(config, seed, SoilContactIntegration::default())
     }
 
@@ -54,7 +54,7 @@ impl Session {
     /// # Panics
     /// As [`Session::new`].
     pub fn with_soil_contact(
-        config: controller::node::ControllerConfig,
+        config: controller::ControllerConfig,
         seed: u64,
         contact: SoilContactIntegration,
     ) -> Self {

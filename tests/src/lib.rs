@@ -11,7 +11,7 @@
 //!   in-process recording: the `ControllerStatus` activity sequence and the dig cycles in it, gateway
 //!   status frames, joint angles, heartbeats.
 //! - [`inprocess`]: the same scenarios over the in-process bus in virtual time (`vcan_sim::embedded`
-//!   and `controller::node`), so a machine without vcan or qemu still covers the logic.
+//!   and `controller::step::node`), so a machine without vcan or qemu still covers the logic.
 //!
 //! The vcan tests themselves live in `tests/*.rs`, `#[ignore]`d in a plain `cargo test` and run by
 //! `scripts/test-all` through `scripts/vcan-vm` (natively where the kernel has vcan, otherwise inside a

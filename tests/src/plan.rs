@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use controller::node::ControllerConfig;
+use controller::ControllerConfig;
 
 /// Digs in the plan.
 pub const PLAN_DIGS: usize = 3;
@@ -124,7 +124,7 @@ mod tests {
     #[test]
     fn the_vm_profile_parses_with_the_plan() {
         let text = super::PLAN_TOML.to_owned() + super::VM_SAFETY_TOML;
-        let config = controller::node::ControllerConfig::from_toml_str(&text);
+        let config = controller::ControllerConfig::from_toml_str(&text);
         assert!(config.is_ok_and(|c| c.safety.max_auto_rearms == 1000));
     }
 }

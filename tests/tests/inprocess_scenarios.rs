@@ -4,7 +4,7 @@
 
 #![allow(clippy::unwrap_used)]
 
-use controller::run::LoopMonitor;
+use controller::io::run::LoopMonitor;
 use firmware_bridge::messages::{
     Activity, AutodigStageCode, AuxValveCommand, GatewayFaults, GatewayMode, Message, Valve,
 };
@@ -70,7 +70,7 @@ fn three_dig_cycles_and_a_cleanup_complete() {
         s.node()
             .statistics()
             .iter()
-            .any(|d| d.action == controller::cycle::ActionKind::Cleanup)
+            .any(|d| d.action == controller::step::cycle::ActionKind::Cleanup)
     );
     assert!(s.scans >= 4, "each dig asked for a scan");
     // After the plan the gateway is disarmed.
@@ -284,7 +284,7 @@ fn bus_flood_keeps_the_loop_or_stops_safely() {
         hb + 1 >= baseline,
         "{hb} heartbeats in {steps} periods, {baseline} without the flood"
     );
-    assert!(report.rate_kept(controller::run::CONTROL_PERIOD));
+    assert!(report.rate_kept(firmware_bridge::dbc::CONTROL_PERIOD));
     // ... and either kept digging or stopped with a named fault: never silently nothing.
     assert!(moving || fault.is_some());
     let statuses = controller_statuses(&s.record);

@@ -24,7 +24,7 @@
 //! timestamp in ns.
 //!
 //! Beside them the Foxglove view of the session ([`crate::view`], the topics the live stream
-//! serves): the frames go through the controller's own estimator (`controller::estimate`), and at
+//! serves): the frames go through the controller's own estimator (`controller::step::estimate`), and at
 //! each joint-angle frame `/tf` gets the machine's frames and `/signals` the pressures, joint angles,
 //! the valve commands and the `ControllerStatus` fields the controller sent; `/scene` holds the
 //! machine's links, `/log` a line at each change of activity or fault. A trace has no scans, so no
@@ -419,7 +419,7 @@ fn add_typed_channel<T: foxglove::Encode, W: Write + Seek>(
 /// estimator (the one the live stream reads), with the commands and status the controller sent.
 #[derive(Debug)]
 struct ViewWriter {
-    est: controller::estimate::Estimator,
+    est: controller::step::estimate::Estimator,
     kin: planner::kinematics::Kinematics,
     track_length_m: f64,
     valves: [Option<f64>; 6],
@@ -441,10 +441,10 @@ impl ViewWriter {
     ) -> anyhow::Result<Self> {
         use foxglove::messages::{FrameTransforms, Log, SceneUpdate};
         let kin = planner::kinematics::Kinematics::new(machine).context("machine kinematics")?;
-        let est = controller::estimate::Estimator::new(
+        let est = controller::step::estimate::Estimator::new(
             kin.clone(),
             machine.tracks.gauge_m,
-            controller::estimate::EstimatorConfig::default(),
+            controller::step::estimate::EstimatorConfig::default(),
         )
         .context("state estimator")?;
         Ok(Self {

@@ -521,7 +521,7 @@ pub fn finite(v: f64) -> Option<f64> {
     v.is_finite().then_some(v)
 }
 
-/// What the view shows of the controller's estimate (`controller::estimate::MachineState`): the
+/// What the view shows of the controller's estimate (`controller::step::estimate::MachineState`): the
 /// angles, the pose, the pressures and the tip, as plain values. A live view copies this much on the
 /// control loop and leaves the messages to its publisher.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -547,7 +547,7 @@ pub struct EstimateSample {
 impl EstimateSample {
     /// The sample of `state`.
     #[must_use]
-    pub fn of(state: &controller::estimate::MachineState) -> Self {
+    pub fn of(state: &controller::step::estimate::MachineState) -> Self {
         Self {
             joints: state.joints,
             swing_rad: state.swing_rad,

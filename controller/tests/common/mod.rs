@@ -1,6 +1,6 @@
 //! Shared by the controller's integration tests.
 
-use controller::node::{ControllerConfig, ControllerNode};
+use controller::{ControllerConfig, ControllerNode};
 use planner::autodig::AutodigMaps;
 use planner::machine::MachineConfig;
 

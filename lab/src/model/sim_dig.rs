@@ -22,7 +22,7 @@ use vcan_sim::SimConfig;
 use vcan_sim::soil_contact::World;
 
 /// Control period, s.
-pub(super) const PERIOD_S: f64 = 0.01;
+pub(super) const PERIOD_S: f64 = crate::harness::PERIOD_S;
 /// Physics steps per control period.
 const PHYSICS_PER_PERIOD: usize = 10;
 /// Neutral time recorded before and after each dig, s.

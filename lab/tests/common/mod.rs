@@ -3,8 +3,8 @@
 
 #![allow(dead_code, clippy::unwrap_used)]
 
-use controller::cycle::{Action, Phase, StartPose};
-use controller::node::{ControllerConfig, ControllerNode, Outbox};
+use controller::step::cycle::{Action, Phase, StartPose};
+use controller::{ControllerConfig, ControllerNode, Outbox};
 use firmware_bridge::messages::{AuxValveCommand, Message, RequestedMode, Valve};
 use firmware_bridge::transport::TimestampedFrame;
 use lab::harness::{Harness, HarnessOptions};

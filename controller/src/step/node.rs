@@ -2,7 +2,7 @@
 //!
 //! `step(now_s, received) -> frames to send` combines the [`Estimator`], the [`Safety`] layer and the
 //! [`WorkCycle`] (with Autodig and cleanup inside). It does no I/O and reads no clock, so the real-time
-//! loop on SocketCAN ([`crate::run`]), the in-process demo and the tests drive the very same code. The
+//! loop on SocketCAN ([`crate::io::run`]), the in-process demo and the tests drive the very same code. The
 //! output is a fixed-capacity [`Outbox`]; the step allocates nothing except when a dig starts (the
 //! pre-dig terrain section) and never panics.
 //!
@@ -68,11 +68,11 @@ use planner::machine::MachineConfig;
 use planner::terrain::TerrainGrid;
 
 use crate::ControllerError;
-pub use crate::config::{ConfigFileError, ControllerConfig, MAX_TRACK_EVERY_STEPS, ParamError};
-use crate::cycle::{Action, CycleCommand, DigStats, Phase, WorkCycle};
-use crate::estimate::{Estimator, MachineState};
-use crate::log_throttle::LogThrottle;
-use crate::safety::{ArmMode, Fault, Safety, SafetyState, bus_fault_stops_motion};
+use crate::config::ControllerConfig;
+use crate::step::cycle::{Action, CycleCommand, DigStats, Phase, WorkCycle};
+use crate::step::estimate::{Estimator, MachineState};
+use crate::step::log_throttle::LogThrottle;
+use crate::step::safety::{ArmMode, Fault, Safety, SafetyState, bus_fault_stops_motion};
 
 /// Most frames one step sends: six valve commands or a setpoint, neutral valves, and the heartbeat.
 pub const OUTBOX_CAPACITY: usize = 16;
@@ -276,7 +276,7 @@ impl ControllerNode {
             // The step's frames leave after its computation (and its logs): a period of margin
             // keeps the claim's 250 ms on the wire when a step is late.
             claim: AddressClaimer::controller_named(name).with_hold_margin(
-                i64::try_from(crate::run::CONTROL_PERIOD.as_nanos()).unwrap_or(0),
+                i64::try_from(firmware_bridge::dbc::CONTROL_PERIOD.as_nanos()).unwrap_or(0),
             ),
             address_lost_raised: false,
             gateway_name,
@@ -336,7 +336,7 @@ impl ControllerNode {
         &self.cycle
     }
 
-    /// Hook for an external action source (`crate::planned`): see [`WorkCycle::set_external_plan`].
+    /// Hook for an external action source (`crate::session::planned`): see [`WorkCycle::set_external_plan`].
     pub fn set_external_plan(&mut self, on: bool) {
         self.cycle.set_external_plan(on);
     }
@@ -355,13 +355,13 @@ impl ControllerNode {
     }
 
     /// Puts a saved session's work cycle and dead-reckoned pose into this fresh node (see
-    /// [`crate::session_state`]); the arming handshake runs as for a new session.
+    /// [`crate::session::session_state`]); the arming handshake runs as for a new session.
     ///
     /// # Errors
-    /// As [`crate::cycle::WorkCycle::restore`].
+    /// As [`crate::step::cycle::WorkCycle::restore`].
     pub fn restore(
         &mut self,
-        cycle: &crate::cycle::CycleSnapshot,
+        cycle: &crate::step::cycle::CycleSnapshot,
         pose: planner::kinematics::MachinePose,
         odometry_m: Option<[f64; 2]>,
     ) -> Result<(), crate::ControllerError> {
@@ -513,7 +513,7 @@ impl ControllerNode {
         self.cycle.take_scan_request()
     }
 
-    /// Hands over a terrain map built from a range scan (see [`crate::cycle::ScanGrid::terrain`]).
+    /// Hands over a terrain map built from a range scan (see [`crate::step::cycle::ScanGrid::terrain`]).
     pub fn provide_terrain(&mut self, terrain: TerrainGrid) {
         self.cycle.provide_terrain(terrain);
     }
@@ -715,7 +715,7 @@ impl ControllerNode {
             Ok(o) => o,
             Err(e) => {
                 self.raise(now_s, Fault::Control(e));
-                crate::cycle::CycleOutput {
+                crate::step::cycle::CycleOutput {
                     want: None,
                     command: CycleCommand::Neutral,
                 }
@@ -757,7 +757,7 @@ impl ControllerNode {
                     // Out of the setpoint range: the gateway would fault anyway; stop cleanly.
                     self.raise(
                         now_s,
-                        Fault::Control(crate::safety::ControlFault::Kinematics(
+                        Fault::Control(crate::step::safety::ControlFault::Kinematics(
                             "setpoint out of the encodable range",
                         )),
                     );
@@ -913,11 +913,12 @@ impl ControllerNode {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::toml_float;
-    use crate::cycle::CycleConfig;
-    use crate::estimate::EstimatorConfig;
-    use crate::safety::SafetyConfig;
-    use crate::safety::{GATEWAY_STATUS_PERIOD_S, GATEWAY_WATCHDOG_S, SENSOR_PERIOD_S};
+    use crate::check::toml_float;
+    use crate::config::{ConfigFileError, MAX_TRACK_EVERY_STEPS};
+    use crate::step::cycle::CycleConfig;
+    use crate::step::estimate::EstimatorConfig;
+    use crate::step::safety::SafetyConfig;
+    use crate::step::safety::{GATEWAY_STATUS_PERIOD_S, GATEWAY_WATCHDOG_S, SENSOR_PERIOD_S};
     use std::path::Path;
 
     /// The four settings of issue #23 that gave a session that silently did nothing, or one that
@@ -1016,7 +1017,7 @@ mod tests {
         assert_eq!(rate("JointRates"), Some(1.0 / SENSOR_PERIOD_S));
         assert_eq!(rate("GatewayStatus"), Some(1.0 / GATEWAY_STATUS_PERIOD_S));
         // The track commands go out every `MAX_TRACK_EVERY_STEPS` steps at most: half the timeout.
-        let period = crate::run::CONTROL_PERIOD.as_secs_f64();
+        let period = firmware_bridge::dbc::CONTROL_PERIOD.as_secs_f64();
         assert!(
             f64::from(MAX_TRACK_EVERY_STEPS) * period <= gateway.command_timeout_s / 2.0 + 1e-12
         );
@@ -1170,8 +1171,8 @@ mod tests {
     struct PGainFixture;
 
     impl PGainFixture {
-        fn crossed() -> crate::cycle::PGain {
-            crate::cycle::PGain {
+        fn crossed() -> crate::step::cycle::PGain {
+            crate::step::cycle::PGain {
                 kp: 1.0,
                 max_command: 0.3,
                 min_command: 0.5,

@@ -60,9 +60,9 @@ use planner::kinematics::Joint;
 use serde::{Deserialize, Serialize};
 
 use crate::ControllerError;
-use crate::config::{Limits, ParamError, check, check_count};
-use crate::estimate::{Estimator, Signal, joint_angle};
-use crate::log_throttle::LogThrottle;
+use crate::check::{Limits, ParamError, check, check_count};
+use crate::step::estimate::{Estimator, Signal, joint_angle};
+use crate::step::log_throttle::LogThrottle;
 
 /// The gateway mode the controller arms for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -309,8 +309,8 @@ pub const GATEWAY_STATUS_PERIOD_S: f64 = 0.05;
 pub const GATEWAY_WATCHDOG_S: f64 = 0.1;
 /// The longest gateway status age, in status periods (1 s at the project's 20 Hz).
 const STATUS_AGE_PERIODS: u32 = 20;
-/// The controller's control period, s ([`crate::run::CONTROL_PERIOD`]).
-const CONTROL_PERIOD_S: f64 = crate::run::CONTROL_PERIOD.as_secs_f64();
+/// The controller's control period, s ([`firmware_bridge::dbc::CONTROL_PERIOD`]).
+const CONTROL_PERIOD_S: f64 = firmware_bridge::dbc::CONTROL_PERIOD.as_secs_f64();
 
 impl SafetyConfig {
     /// The configuration for the gateway of a machine profile (`docs/machine-profile.md`, "Rates and
@@ -990,7 +990,7 @@ impl Safety {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::estimate::EstimatorConfig;
+    use crate::step::estimate::EstimatorConfig;
     use firmware_bridge::messages::{
         AuxValveMeasured, Cylinder, GatewayStatus, JointAngles, JointRates, Message, ValveState,
     };
@@ -1041,7 +1041,7 @@ mod tests {
             .expect("ControllerStatus.FaultReason");
         let every_variant = [
             Fault::StaleSensor {
-                signal: crate::estimate::Signal::JointAngles,
+                signal: crate::step::estimate::Signal::JointAngles,
                 age_s: 0.1,
             },
             Fault::Decode {
@@ -1093,7 +1093,7 @@ mod tests {
         assert_eq!(signal.value_table, table);
     }
 
-    const PERIOD_S: f64 = 0.01;
+    const PERIOD_S: f64 = CONTROL_PERIOD_S;
     /// A pose inside the default machine's limits.
     const Q: [f64; 3] = [0.3, -1.6, -0.9];
 

@@ -3,8 +3,8 @@
 use planner::kinematics::Joint;
 use planner::machine::GRAVITY_M_PER_S2;
 
-use crate::estimate::Estimator;
-use crate::safety::ControlFault;
+use crate::step::estimate::Estimator;
+use crate::step::safety::ControlFault;
 
 use super::weigh::{
     WEIGH_LIFT_MAX_S, WEIGH_LIFT_RAD, WEIGH_MAX_EXTRA_S, WEIGH_MAX_LIFTS, WEIGH_SUPPORTED_KG,
@@ -235,13 +235,13 @@ impl WorkCycle {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cycle::stats::DigRecord;
-    use crate::cycle::{Action, ActionKind, CycleCommand, CycleConfig, Phase, WorkCycle};
-    use crate::safety::ArmMode;
+    use crate::step::cycle::stats::DigRecord;
+    use crate::step::cycle::{Action, ActionKind, CycleCommand, CycleConfig, Phase, WorkCycle};
+    use crate::step::safety::ArmMode;
 
-    use crate::cycle::test_support::{cycle, est_at, feed, feed_pressures, kin};
-    use crate::estimate::Estimator;
-    use crate::estimate::EstimatorConfig;
+    use crate::step::cycle::test_support::{cycle, est_at, feed, feed_pressures, kin};
+    use crate::step::estimate::Estimator;
+    use crate::step::estimate::EstimatorConfig;
 
     #[test]
     fn track_back_moves_the_tracks_backwards_until_the_distance() {

@@ -6,8 +6,8 @@ use planner::cleanup::{Cleanup, CleanupInputs, CleanupOutput};
 use planner::kinematics::BucketPose;
 use planner::terrain::{SectionProfile, SweptVolume, TerrainError, TerrainGrid};
 
-use crate::estimate::Estimator;
-use crate::safety::ControlFault;
+use crate::step::estimate::Estimator;
+use crate::step::safety::ControlFault;
 
 use super::action::Action;
 use super::stats::DigRecord;

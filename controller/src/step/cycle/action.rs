@@ -6,7 +6,7 @@ use planner::kinematics::{BucketPose, JointAngles, Kinematics};
 use serde::{Deserialize, Serialize};
 
 use crate::ControllerError;
-use crate::config::{Limits, ParamError, check, check_deg};
+use crate::check::{Limits, ParamError, check, check_deg};
 
 /// Where a dig or cleanup starts, before Autodig's Boom-Down (or the cleanup probe).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -10,7 +10,7 @@ use planner::kinematics::Kinematics;
 use planner::machine::MachineConfig;
 
 use super::{CycleConfig, WorkCycle};
-use crate::estimate::{Estimator, EstimatorConfig};
+use crate::step::estimate::{Estimator, EstimatorConfig};
 
 pub(super) fn kin() -> (Kinematics, MachineConfig) {
     let m = MachineConfig::default_machine().unwrap();

@@ -3,7 +3,7 @@
 use planner::cleanup::FloorPolicy;
 use serde::{Deserialize, Serialize};
 
-use crate::config::{Limits, ParamError, check, check_count, check_deg};
+use crate::check::{Limits, ParamError, check, check_count, check_deg};
 
 use super::action::Action;
 use super::scan_grid::ScanGrid;
@@ -83,7 +83,7 @@ pub struct CycleConfig {
     pub floor_max_z_m: f64,
     /// An action of the plan abandoned on a control fault (a move timing out, the floor not found,
     /// Autodig rejecting its inputs) is tried again this many times before the plan goes on with the
-    /// next one. Plans pushed by the planner (`crate::planned`) are not retried: it plans again from the
+    /// next one. Plans pushed by the planner (`crate::session::planned`) are not retried: it plans again from the
     /// new terrain. Default 1.
     pub retries: u32,
     /// The grid scans are binned into.
@@ -328,7 +328,7 @@ impl PGain {
 #[cfg(test)]
 mod tests {
 
-    use crate::cycle::{Action, CycleConfig, StartPose};
+    use crate::step::cycle::{Action, CycleConfig, StartPose};
 
     use planner::cleanup::CleanupPlan;
 

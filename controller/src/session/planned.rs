@@ -36,12 +36,13 @@ use planner::plan::{
 };
 use planner::soil::{Contact, EmpiricalSoilModel, dig_geometry};
 use planner::terrain::{SectionProfile, TerrainGrid};
-use serde::{Deserialize, Serialize};
 
-use crate::cycle::{Action, StartPose};
-use crate::node::ControllerNode;
-use crate::session_state::{PlannedSnapshot, StepSnapshot, TerrainSnapshot};
-use crate::state_file::FieldError;
+use crate::session::snapshot::{
+    PlannedSnapshot, PredefinedSequence, StepSnapshot, Strategy, TerrainSnapshot,
+};
+use crate::session::state_file::FieldError;
+use crate::step::cycle::{Action, StartPose};
+use crate::step::node::ControllerNode;
 
 /// How far above the planned start the bucket is brought before Autodig's Boom-Down lowers it onto
 /// the terrain, m. The planner's start (Fig. 45) has the tip on the surface, where the dig model
@@ -96,35 +97,6 @@ pub enum SessionError {
 
 /// Result alias of this module.
 pub type Result<T> = std::result::Result<T, SessionError>;
-
-/// Which action source drives the cycle (`demo --strategy planned|predefined`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Strategy {
-    /// The perception-based dig planner (5.1).
-    Planned,
-    /// The predefined excavation sequence (6.2).
-    Predefined,
-}
-
-/// The predefined excavation sequence of 6.2.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct PredefinedSequence {
-    /// Implement joint angles of every dig start (the median of the planner's).
-    pub start: JointAngles,
-    /// Swing angles of the regions, in dig order (from the spoil side).
-    pub swings_rad: Vec<f64>,
-    /// Cleanup start radius: the far reach at floor level, m.
-    pub cleanup_start_m: f64,
-    /// Cleanup end radius, m.
-    pub cleanup_min_m: f64,
-    /// Cleanup start pose height over the floor and bucket angle.
-    pub cleanup_start_z_m: f64,
-    /// Cleanup start bucket angle to the horizontal, rad.
-    pub cleanup_bucket_abs_rad: f64,
-    /// Track-back distance, m (1.3 in the thesis).
-    pub backup_m: f64,
-}
 
 impl PredefinedSequence {
     /// The sequence for a planner's geometry: regions of its coarse plan on `grid` at `pose`, cleanup

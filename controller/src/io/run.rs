@@ -11,7 +11,7 @@
 //!   was read less the time it waited in the socket since the kernel stamped it ([`MAX_RX_WAIT_S`]),
 //!   so a loop that reads late does not make old sensor data look fresh.
 //!
-//! - with `--scan-addr`, the results of the range-scan task ([`crate::scan_client`]): after a tick in
+//! - with `--scan-addr`, the results of the range-scan task ([`crate::io::scan_client`]): after a tick in
 //!   which the work cycle asked for a scan ([`ControllerNode::take_scan_request`]) the loop asks the
 //!   task, which never blocks the loop; a terrain map goes to [`ControllerNode::provide_terrain`], a
 //!   failure is logged with its reason and Autodig digs on its plain angle rules.
@@ -33,15 +33,13 @@ use anyhow::Context as _;
 use firmware_bridge::transport::{self, Bus, BusFault, TimeScale, TimestampedFrame};
 use tokio::time::MissedTickBehavior;
 
-use crate::node::ControllerNode;
-use crate::operator::OperatorPort;
-use crate::scan_client::ScanClientConfig;
+use crate::io::operator::OperatorPort;
+use crate::io::scan_client::ScanClientConfig;
 #[cfg(doc)]
-use crate::scan_client::ScanService;
-use crate::session::{PlanOutcome, ScanSource, SessionDriver, SessionEvent};
+use crate::io::scan_client::ScanService;
+use crate::session::driver::{PlanOutcome, ScanSource, SessionDriver, SessionEvent};
+use crate::step::node::ControllerNode;
 
-/// The control period (100 Hz).
-pub const CONTROL_PERIOD: Duration = Duration::from_millis(10);
 /// Frames queued between two ticks before further ones are dropped (a full 10 ms of the bus at
 /// 500 kbit/s is under 40 frames).
 pub const MAX_INBOX: usize = 1024;
@@ -355,7 +353,7 @@ async fn planned(task: &mut Option<PlanTask>) -> Result<PlanOutcome, tokio::task
 /// fast as the monotonic clock: the tick is `period / time_scale` of wall time and the node steps at
 /// the scaled time (the simulator must run at the same scale).
 ///
-/// With an `operator` port ([`crate::operator`]) the operator's requests are applied before each
+/// With an `operator` port ([`crate::io::operator`]) the operator's requests are applied before each
 /// step (never waiting for them).
 ///
 /// # Errors
@@ -581,6 +579,7 @@ pub async fn shutdown_signal() {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use firmware_bridge::dbc::CONTROL_PERIOD;
 
     fn window(steps_per_s: f64, max_gap_s: f64, frames_per_s: f64, dropped: u64) -> LoadReport {
         LoadReport {

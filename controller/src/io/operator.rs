@@ -33,7 +33,7 @@ use tokio::io::{AsyncBufReadExt as _, AsyncReadExt as _, AsyncWriteExt as _, Buf
 use tokio::net::{UnixListener, UnixStream};
 use tokio::sync::{Semaphore, mpsc, oneshot};
 
-use crate::node::ControllerNode;
+use crate::step::node::ControllerNode;
 
 /// Longest request line, bytes (a request is under 100).
 pub const MAX_LINE_BYTES: usize = 1024;

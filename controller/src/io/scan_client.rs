@@ -1,6 +1,6 @@
 //! The range-scan client of the real-time loop (docs/scan-protocol.md): JSON lines over TCP.
 //!
-//! The session driver ([`crate::session::SessionDriver`]) asks for scans: the work cycle's before each
+//! The session driver ([`crate::session::driver::SessionDriver`]) asks for scans: the work cycle's before each
 //! dig, and the planner's workspace scan before it plans. Over the network its [`ScanSource`] is
 //! [`ScanService`], a tokio task that owns the connection, so the control loop never waits on the
 //! network. The task
@@ -24,8 +24,8 @@ use tokio::net::TcpStream;
 use tokio::net::tcp::{OwnedReadHalf, OwnedWriteHalf};
 use tokio::sync::mpsc;
 
-use crate::cycle::ScanGrid;
-use crate::session::{BoxError, ScanSource};
+use crate::session::driver::{BoxError, ScanSource};
+use crate::step::cycle::ScanGrid;
 
 /// Longest reply line accepted (a 2000 x 2000 scan would be far larger; the default is about 0.5 MB).
 pub const MAX_REPLY_BYTES: usize = 64 * 1024 * 1024;

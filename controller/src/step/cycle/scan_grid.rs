@@ -4,7 +4,7 @@ use planner::terrain::TerrainGrid;
 use serde::{Deserialize, Serialize};
 
 use crate::ControllerError;
-use crate::config::{Limits, ParamError, check, check_count, toml_float};
+use crate::check::{Limits, ParamError, check, check_count, toml_float};
 
 /// The grid a range scan is binned into (world frame).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

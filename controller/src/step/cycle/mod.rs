@@ -3,7 +3,7 @@
 //!
 //! The plan is a list of [`Action`]s (dig at a swing angle from a start pose, cleanup, track back a
 //! distance): fixed in the configuration and repeated until the requested number of digs, or pushed one
-//! at a time by an external action source (the dig planner, [`crate::planned`]). Per action the
+//! at a time by an external action source (the dig planner, [`crate::session::planned`]). Per action the
 //! [`WorkCycle`] runs these phases:
 //!
 //! ```text
@@ -69,8 +69,8 @@ use planner::terrain::{SweptVolume, TerrainGrid};
 use serde::{Deserialize, Serialize};
 
 use crate::ControllerError;
-use crate::estimate::Estimator;
-use crate::safety::{ArmMode, ControlFault};
+use crate::step::estimate::Estimator;
+use crate::step::safety::{ArmMode, ControlFault};
 
 use self::stats::DigRecord;
 
@@ -196,7 +196,7 @@ pub struct WorkCycle {
     /// MoveToDig: the terrain heights along the start's digging plane, every [`CLEARANCE_STEP_M`](moving::CLEARANCE_STEP_M)
     /// from the swing axis (NaN where unknown); filled on the first use in a move.
     clearance_profile: Vec<f64>,
-    /// Hook for an external action source (`crate::planned`): hold in Idle when the actions run out.
+    /// Hook for an external action source (`crate::session::planned`): hold in Idle when the actions run out.
     external_plan: bool,
     /// Control faults of the current action so far.
     failed_attempts: u32,
@@ -276,14 +276,14 @@ impl WorkCycle {
         })
     }
 
-    /// Hook for an external action source (the dig planner, `crate::planned`): with `on`, the cycle
+    /// Hook for an external action source (the dig planner, `crate::session::planned`): with `on`, the cycle
     /// holds neutral in Idle when its actions run out (instead of returning home) until
     /// [`Self::push_action`] adds one.
     pub fn set_external_plan(&mut self, on: bool) {
         self.external_plan = on;
     }
 
-    /// Hook for the online soil hardness index (thesis 5.2, `crate::planned`): the index Autodig uses
+    /// Hook for the online soil hardness index (thesis 5.2, `crate::session::planned`): the index Autodig uses
     /// from the next dig on. Non-finite values are ignored.
     pub fn set_hardness_index(&mut self, index: f64) {
         if index.is_finite() {
@@ -637,10 +637,10 @@ impl WorkCycle {
 #[cfg(test)]
 mod tests {
 
-    use crate::cycle::{Action, CycleCommand, CycleConfig, Phase};
-    use crate::safety::ArmMode;
+    use crate::step::cycle::{Action, CycleCommand, CycleConfig, Phase};
+    use crate::step::safety::ArmMode;
 
-    use crate::cycle::test_support::{cycle, est_at, kin};
+    use crate::step::cycle::test_support::{cycle, est_at, kin};
 
     #[test]
     fn default_start_pose_is_reachable_and_inside_the_limits() {

@@ -3,8 +3,8 @@
 
 use planner::kinematics::{BucketPose, Joint, JointAngles, wrap_angle};
 
-use crate::estimate::Estimator;
-use crate::safety::ControlFault;
+use crate::step::estimate::Estimator;
+use crate::step::safety::ControlFault;
 
 use super::action::Action;
 use super::{CycleCommand, JOINT_SIGN, RELIEF_RELIFT_FRACTION, STALL_PROGRESS_RAD, WorkCycle};
@@ -424,12 +424,14 @@ pub(super) fn boom_for_tip_z(est: &Estimator, joints: &JointAngles, z_m: f64) ->
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cycle::{Action, CycleCommand, CycleConfig, Phase, StartPose, WorkCycle};
-    use crate::safety::{ArmMode, ControlFault};
+    use crate::step::cycle::{Action, CycleCommand, CycleConfig, Phase, StartPose, WorkCycle};
+    use crate::step::safety::{ArmMode, ControlFault};
 
-    use crate::cycle::test_support::{cycle, est_at, feed_cylinder_pressures, feed_pressures, kin};
-    use crate::estimate::Estimator;
-    use crate::estimate::EstimatorConfig;
+    use crate::step::cycle::test_support::{
+        cycle, est_at, feed_cylinder_pressures, feed_pressures, kin,
+    };
+    use crate::step::estimate::Estimator;
+    use crate::step::estimate::EstimatorConfig;
     use planner::kinematics::JointAngles;
 
     #[test]

@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 use super::{Action, DigStats, Phase, WorkCycle};
 use crate::ControllerError;
 
-/// The work cycle's part of a saved session (see [`crate::session_state`]).
+/// The work cycle's part of a saved session (see [`crate::session::session_state`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CycleSnapshot {

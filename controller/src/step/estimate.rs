@@ -26,7 +26,7 @@ use planner::machine::GRAVITY_M_PER_S2;
 use serde::{Deserialize, Serialize};
 
 use crate::ControllerError;
-use crate::config::{Limits, ParamError, check};
+use crate::check::{Limits, ParamError, check};
 
 /// A signal the estimator tracks, with its own receive timestamp.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]

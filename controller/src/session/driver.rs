@@ -19,11 +19,11 @@ use planner::estimate::SoilSample;
 use planner::kinematics::{JointAngles, MachinePose, wrap_angle};
 use planner::plan::ActionChoice;
 
-use crate::cycle::{Action, Phase};
-use crate::node::ControllerNode;
-use crate::planned::{PlannedSession, PredefinedSequence, SoilMonitor, Strategy, plane_section};
-use crate::session_state::DriverSnapshot;
-use crate::state_file::FieldError;
+use crate::session::planned::{PlannedSession, SoilMonitor, plane_section};
+use crate::session::snapshot::{DriverSnapshot, PlannedDig, PredefinedSequence, Strategy};
+use crate::session::state_file::FieldError;
+use crate::step::cycle::{Action, Phase};
+use crate::step::node::ControllerNode;
 
 /// Where range scans come from. A scan is requested, then taken when it is there: the in-process
 /// simulator answers at once, a scan service over the network some control periods later, and the
@@ -60,9 +60,9 @@ pub trait SessionObserver {
     }
 
     /// The session takes operator commands (pause, resume, e-stop, reset, stop) from `sender`, the
-    /// control loop's [`crate::operator::OperatorPort`]: an observer that offers them (the live
+    /// control loop's [`crate::io::operator::OperatorPort`]: an observer that offers them (the live
     /// view's operator page) keeps it. Called once, before the first step.
-    fn operator_control(&mut self, sender: crate::operator::OperatorSender) {
+    fn operator_control(&mut self, sender: crate::io::operator::OperatorSender) {
         let _ = sender;
     }
 }
@@ -102,31 +102,13 @@ pub enum DriverError {
     Scan(#[source] BoxError),
     /// The planned session failed outside planning (predefined start, the cycle refused an action).
     #[error(transparent)]
-    Session(#[from] crate::planned::SessionError),
+    Session(#[from] crate::session::planned::SessionError),
     /// The controller refused an action.
     #[error(transparent)]
     Controller(#[from] crate::ControllerError),
     /// The predefined sequence has no start.
     #[error("predefined sequence: no start joints (no valid dig on the map)")]
     NoPredefinedStart,
-}
-
-/// What the planner predicted for an action it pushed (for the dig's record).
-#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct PlannedDig {
-    /// Dig quality (Eq. 26 terms weighted).
-    pub quality: Option<f64>,
-    /// Predicted swept volume, m^3.
-    pub volume_m3: Option<f64>,
-    /// Predicted time, s.
-    pub time_s: Option<f64>,
-    /// Predicted energy, kJ.
-    pub energy_kj: Option<f64>,
-    /// Predicted lowest tip height, m.
-    pub min_tip_z_m: Option<f64>,
-    /// Planned start `[r_m, z_m, bucket_deg]` in the base frame.
-    pub start: Option<[f64; 3]>,
 }
 
 /// What happened in one call of [`SessionDriver::after_step`], in order.
@@ -242,7 +224,7 @@ impl SessionDriver {
     }
 
     /// The checkpoint the last [`Self::after_step`] took, if it took one: the session between two
-    /// actions, to be saved by the caller with its records ([`crate::session_state`]).
+    /// actions, to be saved by the caller with its records ([`crate::session::session_state`]).
     pub fn checkpoint(&self) -> Option<&DriverSnapshot> {
         self.checkpoint.as_deref()
     }
@@ -640,7 +622,7 @@ impl SessionDriver {
         if let Some(s) = &mut self.session {
             let carved = s.observe_bucket_pass(&dig.pose, d.swing_rad, &dig.tip_path);
             tracing::debug!(carved, "bucket pass carved into the map");
-            if d.action == crate::cycle::ActionKind::Dig
+            if d.action == crate::step::cycle::ActionKind::Dig
                 && let (Some([r_m, z_m, _]), Some(predicted_m3)) =
                     (dig.planned.start, dig.planned.volume_m3)
                 && s.observe_dig_outcome(
