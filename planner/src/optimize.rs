@@ -93,7 +93,7 @@ mod tests {
 
     #[test]
     fn brent_finds_the_vertex_of_a_parabola_from_one_known_point() {
-        let mut f = |x: f64| (x - VERTEX).powi(2) + 1.0;
+        let f = |x: f64| (x - VERTEX).powi(2) + 1.0;
         let start = (0.0, f(0.0));
         let mut calls = 0;
         let (x, v) = brent(

@@ -718,6 +718,9 @@ impl<A: ActuatorDynamics> DigModel<A> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::kinematics::MachinePose;
+    use crate::soil::{EmpiricalSoilModel, SoilProperties};
+    use crate::terrain::TerrainGrid;
 
     /// The default bench (config/bench.toml) seen from the machine at the origin: floor at 0, a
     /// 45 degree face from 3 m to the 2 m top at 5 m.
