@@ -735,6 +735,7 @@ pub fn before_after(
 
 #[cfg(test)]
 mod parameter_tests {
+    use super::confusable::CONFUSABLE_CORRELATION;
     use super::*;
     use crate::parameters::ParameterLibrary;
     use crate::{DigRecord, LoadTag, Sample, StageTag};
