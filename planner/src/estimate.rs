@@ -20,6 +20,7 @@
 
 use crate::kinematics::TipForce;
 use crate::machine::GRAVITY_M_PER_S2;
+use crate::optimize::brent;
 use crate::soil::{DigGeometry, EmpiricalSoilModel, SoilError, SoilProperties, fee_tip_force};
 use nalgebra::{DMatrix, Matrix3x4};
 use rand::{RngExt, SeedableRng};
@@ -593,86 +594,11 @@ fn anneal(
     Some(best)
 }
 
-/// Brent's minimisation of `f` on `[a, b]` (golden section with parabolic steps, after Press et al.),
-/// given `f(x0)` at an interior `x0`. Returns `(x, f(x))`.
-fn brent(
-    mut f: impl FnMut(f64) -> f64,
-    a: f64,
-    b: f64,
-    x0: f64,
-    f0: f64,
-    tol: f64,
-    max_iter: usize,
-) -> (f64, f64) {
-    const CGOLD: f64 = 0.381_966_011_250_105;
-    let (mut a, mut b) = (a.min(b), a.max(b));
-    let (mut x, mut w, mut v) = (x0, x0, x0);
-    let (mut fx, mut fw, mut fv) = (f0, f0, f0);
-    let (mut d, mut e) = (0.0_f64, 0.0_f64);
-    for _ in 0..max_iter {
-        let xm = 0.5 * (a + b);
-        let tol1 = tol * x.abs() + 1e-10;
-        let tol2 = 2.0 * tol1;
-        if (x - xm).abs() <= tol2 - 0.5 * (b - a) {
-            break;
-        }
-        let mut golden = true;
-        if e.abs() > tol1 {
-            let r = (x - w) * (fx - fv);
-            let q = (x - v) * (fx - fw);
-            let mut p = (x - v) * q - (x - w) * r;
-            let mut q = 2.0 * (q - r);
-            if q > 0.0 {
-                p = -p;
-            }
-            q = q.abs();
-            let e_old = e;
-            if p.abs() < (0.5 * q * e_old).abs() && p > q * (a - x) && p < q * (b - x) {
-                e = d;
-                d = p / q;
-                let u = x + d;
-                if u - a < tol2 || b - u < tol2 {
-                    d = if xm >= x { tol1 } else { -tol1 };
-                }
-                golden = false;
-            }
-        }
-        if golden {
-            e = if x >= xm { a - x } else { b - x };
-            d = CGOLD * e;
-        }
-        let u = if d.abs() >= tol1 {
-            x + d
-        } else {
-            x + if d >= 0.0 { tol1 } else { -tol1 }
-        };
-        let u = u.clamp(a, b);
-        let fu = f(u);
-        if fu <= fx {
-            if u >= x {
-                a = x;
-            } else {
-                b = x;
-            }
-            (v, w, x) = (w, x, u);
-            (fv, fw, fx) = (fw, fx, fu);
-        } else {
-            if u < x {
-                a = u;
-            } else {
-                b = u;
-            }
-            if fu <= fw || w == x {
-                (v, w) = (w, u);
-                (fv, fw) = (fw, fu);
-            } else if fu <= fv || v == x || v == w {
-                v = u;
-                fv = fu;
-            }
-        }
-    }
-    (x, fx)
-}
+/// A line search stops when the best step is within this of both ends of its bracket (the unit box's
+/// coordinates are of order one).
+const LINE_SEARCH_TOLERANCE: f64 = 2e-4;
+/// At most this many evaluations of `J` per line search.
+const LINE_SEARCH_ITERATIONS: usize = 40;
 
 /// Minimises `J` along `dir` from `p` inside the unit box. Updates `p` and returns the new `J`.
 fn line_minimise(obj: &mut Objective<'_>, p: &mut [f64; 5], dir: &[f64; 5], fp: f64) -> f64 {
@@ -690,7 +616,13 @@ fn line_minimise(obj: &mut Objective<'_>, p: &mut [f64; 5], dir: &[f64; 5], fp: 
     let base = *p;
     let at =
         |t: f64| -> [f64; 5] { std::array::from_fn(|i| (base[i] + t * dir[i]).clamp(0.0, 1.0)) };
-    let (t, ft) = brent(|t| obj.eval(&at(t)), t_lo, t_hi, 0.0, fp, 1e-4, 40);
+    let (t, ft) = brent(
+        &mut |t| obj.eval(&at(t)),
+        (t_lo, t_hi),
+        [(0.0, fp); 3],
+        LINE_SEARCH_TOLERANCE,
+        LINE_SEARCH_ITERATIONS,
+    );
     if ft < fp {
         *p = at(t);
         ft

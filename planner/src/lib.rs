@@ -17,6 +17,8 @@
 //!   the bucket-terrain intersection geometry Gamma.
 //! - [`actuator`]: the recurrent-network actuator model (thesis 4.2, Figs. 17-18, Eq. 4), training and
 //!   `actuator.json`.
+//! - [`optimize`]: one-dimensional minimisation (Brent's method), for the estimator's line searches and
+//!   the discrepancy workflow's fits.
 //! - [`estimate`]: soil-tool property estimation, empirical by least squares and analytical by annealing
 //!   and Powell's method (Eqs. 22-24), and the thesis's cross-validation (4.3.4-4.3.5).
 //! - [`autodig`]: the Autodig state machine and its pressure-to-command maps (thesis 3.1-3.2, Figs. 9-11).
@@ -42,6 +44,7 @@ mod input_check;
 pub mod kinematics;
 mod linkage;
 pub mod machine;
+pub mod optimize;
 pub mod origin;
 mod par;
 pub mod plan;

@@ -339,6 +339,26 @@ pub struct ActuatorLoad {
     pub blocked_retract: bool,
 }
 
+/// One step's valve openings: the meter-in areas and Eq. 1's orifices (the areas are fixed within
+/// a step).
+#[derive(Debug, Clone, Copy)]
+struct StepValves {
+    /// Meter-in area per actuator (m^2), after the flow sharing.
+    meter_in: [f64; N_ACTUATORS],
+    meter_in_orifice: [Orifice; N_ACTUATORS],
+    meter_out_orifice: [Orifice; N_ACTUATORS],
+    /// The series bypass of each pump's valves.
+    bypass_orifice: [Orifice; 2],
+    /// The boom crossover from pump 2 (m^2; zero when closed).
+    crossover_area: f64,
+    crossover_orifice: Orifice,
+}
+
+/// Inlet-chamber pressure seen by a meter-in orifice (the check valve blocks backflow).
+fn inlet_pa(s: &ActuatorState, spool: f64) -> f64 {
+    if spool >= 0.0 { s.head_pa } else { s.rod_pa }
+}
+
 /// One actuator's implicit mechanics (Eq. 3 with the oil stiffness of Eq. 2) before the loads'
 /// velocity coupling is solved: `inertia v' = numerator`.
 #[derive(Debug, Clone, Copy, Default)]
@@ -877,7 +897,9 @@ impl Hydraulics {
     }
 
     /// Advances the hydraulics by `dt_s` with the spool positions (after delay and lag, in [-1, 1]),
-    /// the external loads and the hydraulic effects.
+    /// the external loads and the hydraulic effects: the valve openings, then (1) the gallery
+    /// pressures, (2) the chamber pressures and (3) each actuator's implicit mechanics, the loads'
+    /// velocity coupling, and the motion.
     pub fn step(
         &mut self,
         dt_s: f64,
@@ -888,9 +910,6 @@ impl Hydraulics {
         if dt_s.is_nan() || dt_s <= 0.0 {
             return;
         }
-        let p = &self.params;
-        let oc = self.orifice_constants;
-        let tank = p.fluid.tank_pressure_pa;
         let spools = spools.map(|s| {
             if s.is_finite() {
                 s.clamp(-1.0, 1.0)
@@ -898,7 +917,24 @@ impl Hydraulics {
                 0.0
             }
         });
+        let valves = self.valve_openings(&spools, effects);
+        self.solve_galleries(&valves, &spools, effects);
+        // 2 and 3. Chamber pressures (implicit Euler of Eq. 2) and mechanics (Eq. 3).
+        let pending: [Pending; N_ACTUATORS] = std::array::from_fn(|i| {
+            self.implicit_mechanics(i, &valves, &spools, loads, effects, dt_s)
+        });
+        let v_solved = self.coupled_velocities(&pending, loads, dt_s);
+        self.integrate_motion(&pending, &v_solved, loads, dt_s);
+    }
 
+    /// This step's valve areas and their orifices, from the clamped spools.
+    fn valve_openings(
+        &self,
+        spools: &[f64; N_ACTUATORS],
+        effects: &HydraulicEffects,
+    ) -> StepValves {
+        let p = &self.params;
+        let oc = self.orifice_constants;
         // Valve areas ([`ValveParams::meter_in_area`], `meter_out_area`, `bypass_area`, with the
         // divisions by constant spans done once in `Hydraulics::new`).
         let mut meter_in = [0.0; N_ACTUATORS];
@@ -949,18 +985,38 @@ impl Hydraulics {
             };
         }
 
-        // Inlet-chamber pressure seen by each meter-in orifice (the check valve blocks backflow).
-        let inlet_pa = |s: &ActuatorState, spool: f64| {
-            if spool >= 0.0 { s.head_pa } else { s.rod_pa }
-        };
-
         // Eq. 1 constants of this step's orifices (the areas are fixed within a step).
         let meter_in_orifice = meter_in.map(|a| Orifice::new(&oc, a));
         let meter_out_orifice = meter_out.map(|a| Orifice::new(&oc, a));
         let bypass_orifice = bypass.map(|a| Orifice::new(&oc, a));
         let crossover_orifice = Orifice::new(&oc, crossover_area);
-        let makeup_orifice = self.makeup_orifice;
+        StepValves {
+            meter_in,
+            meter_in_orifice,
+            meter_out_orifice,
+            bypass_orifice,
+            crossover_area,
+            crossover_orifice,
+        }
+    }
 
+    /// Stage 1: the gallery pressures and pump flows of this step.
+    fn solve_galleries(
+        &mut self,
+        valves: &StepValves,
+        spools: &[f64; N_ACTUATORS],
+        effects: &HydraulicEffects,
+    ) {
+        let p = &self.params;
+        let tank = p.fluid.tank_pressure_pa;
+        let StepValves {
+            meter_in,
+            meter_in_orifice,
+            bypass_orifice,
+            crossover_area,
+            crossover_orifice,
+            ..
+        } = *valves;
         // 1. Gallery pressures from the flow balance (monotone decreasing in p).
         let mut new_pump = self.pump_pa;
         let mut pump_flow = [0.0; 2];
@@ -1010,111 +1066,126 @@ impl Hydraulics {
         self.previous_pump_pa = self.pump_pa;
         self.pump_pa = new_pump;
         self.pump_flow_m3_per_s = pump_flow;
+    }
 
-        // 2 and 3. Chamber pressures (implicit Euler of Eq. 2) and mechanics (Eq. 3).
-        let mut pending = [Pending::default(); N_ACTUATORS];
-        for i in 0..N_ACTUATORS {
-            let ch = self.chambers(i);
-            let spool = spools[i];
-            let state = self.actuators[i];
-            let gallery = self.pump_pa[VALVE_PUMP[i]];
-            let cross = if i == BOOM && crossover_area > 0.0 {
-                self.pump_pa[1]
-            } else {
-                f64::NAN
-            };
-            let relief_pa = if i == SWING {
-                p.swing.relief_pa
-            } else {
-                p.port_relief_pa
-            };
-            let port_relief = self.port_reliefs[i];
-            let (meter_in_i, meter_out_i) = (meter_in_orifice[i], meter_out_orifice[i]);
-            let leak = if i == SWING {
-                0.0
-            } else {
-                effects.internal_leakage
-            };
-            let laminar_dp = oc.laminar_dp_pa;
-            let has_cross = cross.is_finite();
-            // Net flow into a chamber at pressure `pc` (value, d/dpc), excluding the piston motion,
-            // and d^2/dpc^2 (signed, and the sum of its terms' magnitudes).
-            let chamber_inflow = |pc: f64, supplied: bool, drained: bool, other: f64| {
-                let mut q = 0.0;
-                let mut d = 0.0;
-                let (mut dd, mut dd_abs) = (0.0, 0.0);
-                if supplied {
-                    // d^2/dpc^2 of Q(gallery - pc) is Q''(dp) = -|Q''| for dp > 0.
-                    let (qi, di, ci) = meter_in_i.flow_with_curvature(gallery - pc);
-                    if qi > 0.0 {
-                        q += qi;
-                        d -= di;
-                        dd -= ci;
-                        dd_abs += ci;
+    /// Stages 2 and 3 for actuator `i`: its chamber pressures (implicit Euler of Eq. 2) and its
+    /// mechanics (Eq. 3) with the oil stiffness, before the loads' velocity coupling.
+    fn implicit_mechanics(
+        &self,
+        i: usize,
+        valves: &StepValves,
+        spools: &[f64; N_ACTUATORS],
+        loads: &[ActuatorLoad; N_ACTUATORS],
+        effects: &HydraulicEffects,
+        dt_s: f64,
+    ) -> Pending {
+        let p = &self.params;
+        let oc = self.orifice_constants;
+        let tank = p.fluid.tank_pressure_pa;
+        let StepValves {
+            meter_in_orifice,
+            meter_out_orifice,
+            crossover_area,
+            crossover_orifice,
+            ..
+        } = *valves;
+        let makeup_orifice = self.makeup_orifice;
+        let ch = self.chambers(i);
+        let spool = spools[i];
+        let state = self.actuators[i];
+        let gallery = self.pump_pa[VALVE_PUMP[i]];
+        let cross = if i == BOOM && crossover_area > 0.0 {
+            self.pump_pa[1]
+        } else {
+            f64::NAN
+        };
+        let relief_pa = if i == SWING {
+            p.swing.relief_pa
+        } else {
+            p.port_relief_pa
+        };
+        let port_relief = self.port_reliefs[i];
+        let (meter_in_i, meter_out_i) = (meter_in_orifice[i], meter_out_orifice[i]);
+        let leak = if i == SWING {
+            0.0
+        } else {
+            effects.internal_leakage
+        };
+        let laminar_dp = oc.laminar_dp_pa;
+        let has_cross = cross.is_finite();
+        // Net flow into a chamber at pressure `pc` (value, d/dpc), excluding the piston motion,
+        // and d^2/dpc^2 (signed, and the sum of its terms' magnitudes).
+        let chamber_inflow = |pc: f64, supplied: bool, drained: bool, other: f64| {
+            let mut q = 0.0;
+            let mut d = 0.0;
+            let (mut dd, mut dd_abs) = (0.0, 0.0);
+            if supplied {
+                // d^2/dpc^2 of Q(gallery - pc) is Q''(dp) = -|Q''| for dp > 0.
+                let (qi, di, ci) = meter_in_i.flow_with_curvature(gallery - pc);
+                if qi > 0.0 {
+                    q += qi;
+                    d -= di;
+                    dd -= ci;
+                    dd_abs += ci;
+                }
+                if has_cross {
+                    let (qx, dx, cx) = crossover_orifice.flow_with_curvature(cross - pc);
+                    if qx > 0.0 {
+                        q += qx;
+                        d -= dx;
+                        dd -= cx;
+                        dd_abs += cx;
                     }
-                    if has_cross {
-                        let (qx, dx, cx) = crossover_orifice.flow_with_curvature(cross - pc);
-                        if qx > 0.0 {
-                            q += qx;
-                            d -= dx;
-                            dd -= cx;
-                            dd_abs += cx;
-                        }
-                    }
                 }
-                if drained {
-                    // d^2/dpc^2 of -Q(pc - tank) is -Q''(dp) = sign(dp) |Q''|.
-                    let dp = pc - tank;
-                    let (qo, dout, co) = meter_out_i.flow_with_curvature(dp);
-                    q -= qo;
-                    d -= dout;
-                    dd += co.copysign(dp);
-                    dd_abs += co;
-                }
-                // Port relief to tank and anti-cavitation make-up from tank.
-                let (qr, dr) = port_relief.flow(pc);
-                q -= qr;
-                d -= dr;
-                if pc < tank {
-                    let (qm, dm, cm) = makeup_orifice.flow_with_curvature(tank - pc);
-                    q += qm;
-                    d -= dm;
-                    dd -= cm;
-                    dd_abs += cm;
-                }
-                // Cross-piston leakage (hidden effect), from this chamber to the other.
-                q -= leak * (pc - other);
-                d -= leak;
-                (q, d, dd, dd_abs)
-            };
-            // Whether every term of `chamber_inflow` is in the same regime at `p0` and `p1` (no kink
-            // between them; turbulent orifices within half their drop).
-            let same_regime = |p0: f64, p1: f64, supplied: bool, drained: bool| {
-                (!supplied
-                    || meter_in_i.k == 0.0
-                    || same_orifice_regime(gallery - p0, gallery - p1, laminar_dp, true))
-                    && (!supplied
-                        || !has_cross
-                        || crossover_orifice.k == 0.0
-                        || same_orifice_regime(cross - p0, cross - p1, laminar_dp, true))
-                    && (!drained
-                        || meter_out_i.k == 0.0
-                        || same_orifice_regime(p0 - tank, p1 - tank, laminar_dp, false))
-                    && (p0 <= port_relief.crack) == (p1 <= port_relief.crack)
-                    && same_orifice_regime(tank - p0, tank - p1, laminar_dp, true)
-            };
-            let head_in = spool > 0.0;
-            let head_out = spool < 0.0;
-            let v = state.velocity;
-            // Eq. 2 in backward Euler: P' = P + dt beta / V (Q_in(P') - dV/dt).
-            let previous = self.previous_chamber_pa[i];
-            let solve_chamber = |p_old: f64,
-                                 p_before: f64,
-                                 c: f64,
-                                 dvdt: f64,
-                                 supplied: bool,
-                                 drained: bool,
-                                 other| {
+            }
+            if drained {
+                // d^2/dpc^2 of -Q(pc - tank) is -Q''(dp) = sign(dp) |Q''|.
+                let dp = pc - tank;
+                let (qo, dout, co) = meter_out_i.flow_with_curvature(dp);
+                q -= qo;
+                d -= dout;
+                dd += co.copysign(dp);
+                dd_abs += co;
+            }
+            // Port relief to tank and anti-cavitation make-up from tank.
+            let (qr, dr) = port_relief.flow(pc);
+            q -= qr;
+            d -= dr;
+            if pc < tank {
+                let (qm, dm, cm) = makeup_orifice.flow_with_curvature(tank - pc);
+                q += qm;
+                d -= dm;
+                dd -= cm;
+                dd_abs += cm;
+            }
+            // Cross-piston leakage (hidden effect), from this chamber to the other.
+            q -= leak * (pc - other);
+            d -= leak;
+            (q, d, dd, dd_abs)
+        };
+        // Whether every term of `chamber_inflow` is in the same regime at `p0` and `p1` (no kink
+        // between them; turbulent orifices within half their drop).
+        let same_regime = |p0: f64, p1: f64, supplied: bool, drained: bool| {
+            (!supplied
+                || meter_in_i.k == 0.0
+                || same_orifice_regime(gallery - p0, gallery - p1, laminar_dp, true))
+                && (!supplied
+                    || !has_cross
+                    || crossover_orifice.k == 0.0
+                    || same_orifice_regime(cross - p0, cross - p1, laminar_dp, true))
+                && (!drained
+                    || meter_out_i.k == 0.0
+                    || same_orifice_regime(p0 - tank, p1 - tank, laminar_dp, false))
+                && (p0 <= port_relief.crack) == (p1 <= port_relief.crack)
+                && same_orifice_regime(tank - p0, tank - p1, laminar_dp, true)
+        };
+        let head_in = spool > 0.0;
+        let head_out = spool < 0.0;
+        let v = state.velocity;
+        // Eq. 2 in backward Euler: P' = P + dt beta / V (Q_in(P') - dV/dt).
+        let previous = self.previous_chamber_pa[i];
+        let solve_chamber =
+            |p_old: f64, p_before: f64, c: f64, dvdt: f64, supplied: bool, drained: bool, other| {
                 // The inflow slope at the last pressure the solver evaluated: within its 10 Pa tolerance
                 // of the root, so it stands in for the slope at the root without another evaluation.
                 // With it, the second derivative there (signed, and its terms' magnitudes).
@@ -1150,92 +1221,101 @@ impl Hydraulics {
                 // Stiffness of the chamber seen by the piston: dP'/d(dV/dt) = -c / (1 - c dQ/dP).
                 (pn, c / (1.0 - c * d).max(1.0))
             };
-            // The chambers that need no solver (`chamber_root_without_solver`): the path of oil
-            // into or out of each, and Eq. 2's factor `c = beta dt / V`.
-            let path = |supplied: bool, drained: bool| {
-                if leak != 0.0 || (supplied && has_cross) {
-                    ChamberPath::Solve
-                } else if supplied && meter_in_i.k > 0.0 {
-                    ChamberPath::In(&meter_in_i, gallery)
-                } else if drained && meter_out_i.k > 0.0 {
-                    ChamberPath::Out(&meter_out_i, &makeup_orifice)
-                } else {
-                    ChamberPath::DeadEnd
-                }
-            };
-            let (head_dvdt, rod_dvdt) = (ch.area_head * v, -ch.area_rod * v);
-            let c_head = p.fluid.bulk_modulus_pa * dt_s / ch.head_volume(state.position).max(1e-6);
-            let c_rod = p.fluid.bulk_modulus_pa * dt_s / ch.rod_volume(state.position).max(1e-6);
-            let (head0, head_gain) = chamber_root_without_solver(
-                path(head_in, head_out),
+        // The chambers that need no solver (`chamber_root_without_solver`): the path of oil
+        // into or out of each, and Eq. 2's factor `c = beta dt / V`.
+        let path = |supplied: bool, drained: bool| {
+            if leak != 0.0 || (supplied && has_cross) {
+                ChamberPath::Solve
+            } else if supplied && meter_in_i.k > 0.0 {
+                ChamberPath::In(&meter_in_i, gallery)
+            } else if drained && meter_out_i.k > 0.0 {
+                ChamberPath::Out(&meter_out_i, &makeup_orifice)
+            } else {
+                ChamberPath::DeadEnd
+            }
+        };
+        let (head_dvdt, rod_dvdt) = (ch.area_head * v, -ch.area_rod * v);
+        let c_head = p.fluid.bulk_modulus_pa * dt_s / ch.head_volume(state.position).max(1e-6);
+        let c_rod = p.fluid.bulk_modulus_pa * dt_s / ch.rod_volume(state.position).max(1e-6);
+        let (head0, head_gain) = chamber_root_without_solver(
+            path(head_in, head_out),
+            state.head_pa,
+            c_head,
+            head_dvdt,
+            tank,
+            port_relief.crack,
+            self.closed_form,
+        )
+        .unwrap_or_else(|| {
+            solve_chamber(
                 state.head_pa,
+                previous[0],
                 c_head,
                 head_dvdt,
-                tank,
-                port_relief.crack,
-                self.closed_form,
-            )
-            .unwrap_or_else(|| {
-                solve_chamber(
-                    state.head_pa,
-                    previous[0],
-                    c_head,
-                    head_dvdt,
-                    head_in,
-                    head_out,
-                    state.rod_pa,
-                )
-            });
-            let (rod0, rod_gain) = chamber_root_without_solver(
-                path(head_out, head_in),
+                head_in,
+                head_out,
                 state.rod_pa,
+            )
+        });
+        let (rod0, rod_gain) = chamber_root_without_solver(
+            path(head_out, head_in),
+            state.rod_pa,
+            c_rod,
+            rod_dvdt,
+            tank,
+            port_relief.crack,
+            self.closed_form,
+        )
+        .unwrap_or_else(|| {
+            solve_chamber(
+                state.rod_pa,
+                previous[1],
                 c_rod,
                 rod_dvdt,
-                tank,
-                port_relief.crack,
-                self.closed_form,
+                head_out,
+                head_in,
+                state.head_pa,
             )
-            .unwrap_or_else(|| {
-                solve_chamber(
-                    state.rod_pa,
-                    previous[1],
-                    c_rod,
-                    rod_dvdt,
-                    head_out,
-                    head_in,
-                    state.head_pa,
-                )
-            });
+        });
 
-            // Eq. 3: M x'' = P1 A1 - P2 A2 - F. The piston velocity enters Eq. 2 through dV/dt, so the
-            // new pressures are linear in the new velocity v':
-            //   P_head' = head0 - g_h A_h (v' - v),  P_rod' = rod0 + g_r A_r (v' - v),
-            // and Eq. 3 is solved for v' with that oil stiffness (implicit in v', hence no
-            // oscillator instability however stiff the oil column or coarse the step).
-            let load = loads[i];
-            let mass = load.mass.max(1.0);
-            let (damping, coulomb) = if i == SWING {
-                (p.swing_damping_n_m_s_per_rad, 0.0)
-            } else {
-                (
-                    p.nominal_damping_n_s_per_m + effects.viscous_friction_n_s_per_m,
-                    effects.coulomb_friction_n,
-                )
-            };
-            let stiffness =
-                head_gain * ch.area_head * ch.area_head + rod_gain * ch.area_rod * ch.area_rod;
-            let drive0 = head0 * ch.area_head - rod0 * ch.area_rod - load.force;
-            let inertia = mass + dt_s * (damping + stiffness);
-            pending[i] = Pending {
-                inertia,
-                numerator: mass * v + dt_s * (drive0 + stiffness * v),
-                coulomb,
-                head0,
-                head_gain,
-                rod0,
-                rod_gain,
-            };
+        // Eq. 3: M x'' = P1 A1 - P2 A2 - F. The piston velocity enters Eq. 2 through dV/dt, so the
+        // new pressures are linear in the new velocity v':
+        //   P_head' = head0 - g_h A_h (v' - v),  P_rod' = rod0 + g_r A_r (v' - v),
+        // and Eq. 3 is solved for v' with that oil stiffness (implicit in v', hence no
+        // oscillator instability however stiff the oil column or coarse the step).
+        let load = loads[i];
+        let mass = load.mass.max(1.0);
+        let (damping, coulomb) = if i == SWING {
+            (p.swing_damping_n_m_s_per_rad, 0.0)
+        } else {
+            (
+                p.nominal_damping_n_s_per_m + effects.viscous_friction_n_s_per_m,
+                effects.coulomb_friction_n,
+            )
+        };
+        let stiffness =
+            head_gain * ch.area_head * ch.area_head + rod_gain * ch.area_rod * ch.area_rod;
+        let drive0 = head0 * ch.area_head - rod0 * ch.area_rod - load.force;
+        let inertia = mass + dt_s * (damping + stiffness);
+        Pending {
+            inertia,
+            numerator: mass * v + dt_s * (drive0 + stiffness * v),
+            coulomb,
+            head0,
+            head_gain,
+            rod0,
+            rod_gain,
         }
+    }
+
+    /// The new velocities: each actuator's `inertia v' = numerator`, solved jointly for the linkage
+    /// when the loads depend on its velocities.
+    fn coupled_velocities(
+        &self,
+        pending: &[Pending; N_ACTUATORS],
+        loads: &[ActuatorLoad; N_ACTUATORS],
+        dt_s: f64,
+    ) -> [f64; N_ACTUATORS] {
         // The loads' velocity dependence (soil resistance, `ActuatorLoad::damping`) is implicit too:
         // F(v') = F(v) + D (v' - v) couples the linkage's three actuators,
         //   (diag(inertia) + dt D) v' = numerator + dt D v.
@@ -1262,6 +1342,18 @@ impl Hydraulics {
                 v_solved[..SWING].copy_from_slice(v.as_slice());
             }
         }
+        v_solved
+    }
+
+    /// Friction, blocking and end stops on the solved velocities, then the new positions and the
+    /// chamber pressures at the new velocities.
+    fn integrate_motion(
+        &mut self,
+        pending: &[Pending; N_ACTUATORS],
+        v_solved: &[f64; N_ACTUATORS],
+        loads: &[ActuatorLoad; N_ACTUATORS],
+        dt_s: f64,
+    ) {
         for i in 0..N_ACTUATORS {
             let ch = self.chambers(i);
             let state = self.actuators[i];
