@@ -147,8 +147,19 @@ fn a_foxglove_client_sees_the_live_session_and_its_recording() {
         std::fs::metadata(&trace).unwrap().len(),
         std::fs::metadata(&mcap).unwrap().len(),
     );
-    println!("candump log {log_len} bytes, MCAP {mcap_len} bytes");
+    let zstd_len = zstd::encode_all(&std::fs::read(&trace).unwrap()[..], 3)
+        .unwrap()
+        .len() as u64;
+    let ratio = mcap_len as f64 / zstd_len as f64;
+    println!(
+        "candump log {log_len} bytes (zstd -3: {zstd_len}), MCAP {mcap_len} bytes ({ratio:.2}x)"
+    );
     assert!(mcap_len <= log_len, "MCAP {mcap_len} > candump {log_len}");
+    // With a message index entry (16 bytes, uncompressed) per message: within 5x the zstd'd log.
+    assert!(
+        ratio <= 5.0,
+        "MCAP {mcap_len} is {ratio:.2}x the zstd candump {zstd_len}"
+    );
     let script = r#"
 import json, sys
 from collections import Counter
@@ -229,6 +240,19 @@ fn the_operator_page_follows_the_session_and_its_estop_stops_the_machine() {
     assert_eq!(seen["shown"]["safety"], "Faulted", "{seen}");
     assert_eq!(seen["shown"]["fault"], "emergency stop", "{seen}");
     assert!(seen["shown"]["updates"].as_u64().unwrap() >= 10, "{seen}");
+    // The valves by the protocol's names, in % of full flow.
+    let valves = seen["shown"]["valves"].as_str().unwrap();
+    for name in [
+        "Boom",
+        "Stick",
+        "Bucket",
+        "Swing",
+        "LeftTrack",
+        "RightTrack",
+    ] {
+        assert!(valves.contains(name), "{valves}");
+    }
+    assert!(valves.contains(" %"), "{valves}");
     assert!(log.contains("operator e-stop"), "{log}");
 
     // The trace: the controller moved the machine before the e-stop and, once its status reports
@@ -274,4 +298,41 @@ fn the_operator_page_follows_the_session_and_its_estop_stops_the_machine() {
         "no neutral valve commands after the e-stop"
     );
     assert_eq!(moving_after, 0, "valves commanded open after the e-stop");
+}
+
+#[test]
+fn the_operator_page_keeps_the_sessions_last_state_after_it_ends() {
+    if !have_chromium() || !python_has("websockets.sync.client") {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo");
+    // Two digs at 4x (about 15 s): the browser follows it from its start to its end.
+    let demo = LiveDemo::spawn(&out, "2", "4");
+    let screenshot = artefacts_dir().join("operator-page-finished.png");
+    let browser = Command::new("python3")
+        .args([BROWSER, &demo.page_url])
+        .arg(&screenshot)
+        .args(["120", "finish"])
+        .output()
+        .unwrap();
+    let (seen, _) = demo.report("browser", &browser);
+    println!(
+        "operator page: {seen}\nscreenshot: {}",
+        screenshot.display()
+    );
+    let shown = &seen["shown"];
+    assert_eq!(
+        shown["over"], "session finished: dig count reached",
+        "{seen}"
+    );
+    assert_eq!(shown["connection"], "stream closed", "{seen}");
+    // The last state stays: both digs done (numbered from 1), none in progress.
+    assert_eq!(shown["digsDone"], "2", "{seen}");
+    assert!(
+        shown["lastDig"].as_str().unwrap().starts_with("dig 2 "),
+        "{seen}"
+    );
+    assert_eq!(shown["digs"], "none (between digs)", "{seen}");
+    assert_eq!(seen["after"]["session_over"], "dig count reached", "{seen}");
 }

@@ -1,10 +1,12 @@
 """Drives the operator page in headless Chromium over the Chrome DevTools Protocol.
 
-Usage: operator_page.py URL SCREENSHOT.png TIMEOUT_S
+Usage: operator_page.py URL SCREENSHOT.png TIMEOUT_S [estop|finish]
 
 Opens URL, waits until the page shows the session's state updating (session time advancing), the
-terrain map and open valves, clicks E-STOP, waits until the page shows the controller's e-stop (safety Faulted,
-fault "emergency stop"), saves a screenshot, and prints what it saw as JSON on stdout. Exits non-zero
+terrain map and open valves. Then, with `estop` (the default), clicks E-STOP and waits until the page
+shows the controller's e-stop (safety Faulted, fault "emergency stop"); with `finish`, waits until the
+session ends and the page says so (it keeps its last state). It saves a screenshot and prints what it
+saw as JSON on stdout. Exits non-zero
 with the reason on stderr when a step does not happen in time. Needs `chromium` (Debian) and the
 `websockets` package (PyPI).
 """
@@ -68,6 +70,7 @@ class Page:
 
 def main():
     url, screenshot, timeout_s = sys.argv[1], sys.argv[2], float(sys.argv[3])
+    mode = sys.argv[4] if len(sys.argv) > 4 else "estop"
     deadline = time.monotonic() + timeout_s
     browser = shutil.which("chromium") or fail("chromium is not installed")
     profile = tempfile.mkdtemp(prefix="operator-page-")
@@ -90,19 +93,27 @@ def main():
         page.call("Runtime.enable")
         page.call("Page.navigate", url=url)
         page.wait_for("!!(window.operatorPage && window.operatorPage.state)", "the first state", deadline)
-        t0 = page.eval("window.operatorPage.state.time_s")
-        page.wait_for(f"window.operatorPage.state.time_s > {t0} + 1.0", "the session time to advance", deadline)
-        page.wait_for("!!window.operatorPage.terrain", "the terrain map", deadline)
-        page.wait_for("window.operatorPage.state.valves.some((v) => v !== null && Math.abs(v) > 0.01)",
-                      "the machine to move", deadline)
-        before = page.eval("JSON.stringify(window.operatorPage.state)")
-        page.wait_for("!document.getElementById('estop').disabled", "the e-stop button to be enabled", deadline)
-        page.eval("document.getElementById('estop').click()")
-        page.wait_for(
-            "window.operatorPage.state.safety === 'Faulted' && "
-            "(window.operatorPage.state.fault || '').includes('emergency stop') && "
-            "document.getElementById('command-result').textContent.startsWith('estop: done')",
-            "the e-stop to reach the controller", deadline)
+        if mode == "finish":
+            # However late the browser came, the page shows the session's end and its last state.
+            page.wait_for("window.operatorPage.finished", "the end of the session", deadline)
+            page.wait_for("!!window.operatorPage.terrain", "the terrain map", deadline)
+            # The server has gone with the session: the page still shows its last state.
+            time.sleep(1.0)
+            before = "null"
+        else:
+            t0 = page.eval("window.operatorPage.state.time_s")
+            page.wait_for(f"window.operatorPage.state.time_s > {t0} + 1.0", "the session time to advance", deadline)
+            page.wait_for("!!window.operatorPage.terrain", "the terrain map", deadline)
+            page.wait_for("window.operatorPage.state.valves.some((v) => v.command_pct !== null && Math.abs(v.command_pct) > 1)",
+                          "the machine to move", deadline)
+            before = page.eval("JSON.stringify(window.operatorPage.state)")
+            page.wait_for("!document.getElementById('estop').disabled", "the e-stop button to be enabled", deadline)
+            page.eval("document.getElementById('estop').click()")
+            page.wait_for(
+                "window.operatorPage.state.safety === 'Faulted' && "
+                "(window.operatorPage.state.fault || '').includes('emergency stop') && "
+                "document.getElementById('command-result').textContent.startsWith('estop: done')",
+                "the e-stop to reach the controller", deadline)
         # The page is drawn: keep what it shows.
         time.sleep(0.3)
         shot = page.call("Page.captureScreenshot", format="png")
@@ -111,9 +122,14 @@ def main():
         after = page.eval("JSON.stringify(window.operatorPage.state)")
         shown = page.eval("({safety: document.getElementById('safety').textContent, "
                           "fault: document.getElementById('fault').textContent, "
-                          "digs: document.getElementById('digs').textContent, "
+                          "digs: document.getElementById('current-dig').textContent, "
+                          "valves: document.getElementById('valves').textContent, "
                           "stage: document.getElementById('stage').textContent, "
                           "result: document.getElementById('command-result').textContent, "
+                          "over: document.getElementById('session-over').textContent, "
+                          "connection: document.getElementById('connection').textContent, "
+                          "digsDone: document.getElementById('digs-done').textContent, "
+                          "lastDig: document.getElementById('last-dig').textContent, "
                           "updates: window.operatorPage.updates})")
         print(json.dumps({"before": json.loads(before), "after": json.loads(after), "shown": shown}))
     finally:

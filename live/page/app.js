@@ -2,7 +2,7 @@
 // operator's commands (POST /command). Plain JavaScript, no build step.
 "use strict";
 
-const page = { state: null, terrain: null, updates: 0 };
+const page = { state: null, terrain: null, updates: 0, events: null, finished: false };
 window.operatorPage = page;
 
 const $ = (id) => document.getElementById(id);
@@ -27,22 +27,58 @@ function showState(s) {
   $("stage").textContent = s.stage;
   $("action").textContent = describeAction(s.action);
   $("operator-state").textContent = [s.paused ? "paused" : "running", s.stopping ? "stopping after this action" : ""].filter(Boolean).join(", ");
-  $("valves").textContent = s.valves.map((v) => v === null ? "pos" : v.toFixed(2)).join("  ");
-  $("digs").textContent = s.digs;
+  showValves(s.valves);
+  // Digs are numbered from 1; the current dig is the one in progress (from the move to it to its dump).
+  $("digs-done").textContent = s.digs_done;
+  $("current-dig").textContent = s.current_dig === null ? "none (between digs)" : `dig ${s.current_dig}`;
   const d = s.last_dig;
-  $("digs-done").textContent = d ? d.index + 1 : 0;
-  $("last-dig").textContent = d ? `#${d.index} (${d.action})` : "-";
+  $("last-dig").textContent = d ? `dig ${d.number} (${d.action})` : "-";
   $("last-weight").textContent = d ? fmt(d.weight_n === null ? null : d.weight_n / 1000, 2, " kN") : "-";
   $("last-time").textContent = d ? fmt(d.time_s, 1, " s") : "-";
   $("last-energy").textContent = d ? fmt(d.energy_kj, 1, " kJ") : "-";
   $("last-volume").textContent = d ? fmt(d.swept_volume_m3, 2, " m³") : "-";
   $("log").textContent = s.log.join("\n");
   for (const b of document.querySelectorAll("button[data-cmd]")) b.disabled = !s.operator || !!s.session_over;
-  if (s.session_over) {
-    $("session-over").hidden = false;
-    $("session-over").textContent = `session over: ${s.session_over}`;
-  }
+  if (s.session_over) finish(s.session_over);
   draw();
+}
+
+// The valve commands as the protocol names the valves, in % of full port flow with a bar.
+function showValves(valves) {
+  const table = $("valves");
+  if (table.rows.length !== valves.length) {
+    table.replaceChildren();
+    for (const v of valves) {
+      const row = table.insertRow();
+      row.insertCell().textContent = v.name;
+      row.cells[0].className = "name";
+      row.insertCell().className = "pct";
+      const bar = document.createElement("span");
+      bar.className = "bar";
+      bar.appendChild(document.createElement("i"));
+      row.insertCell().appendChild(bar);
+    }
+  }
+  valves.forEach((v, k) => {
+    const row = table.rows[k];
+    const pct = v.command_pct;
+    row.cells[1].textContent = pct === null ? "position mode" : `${pct >= 0 ? "+" : ""}${pct.toFixed(1)} %`;
+    const fill = row.cells[2].querySelector("i");
+    const f = pct === null ? 0 : Math.max(-100, Math.min(100, pct)) / 100;
+    fill.style.left = `${50 + Math.min(0, f) * 50}%`;
+    fill.style.width = `${Math.abs(f) * 50}%`;
+  });
+}
+
+// The session ended: the page keeps its last state and says why (the server goes away with the
+// session, so the event stream is closed rather than retried).
+function finish(reason) {
+  page.finished = true;
+  if (page.events) page.events.close();
+  $("session-over").hidden = false;
+  $("session-over").textContent = `session finished: ${reason}`;
+  $("connection").textContent = "stream closed";
+  $("connection").className = "badge over";
 }
 
 // Terrain colours: low blue, high brown; unknown cells dark.
@@ -66,13 +102,15 @@ function draw() {
   } else {
     return;
   }
-  const scale = Math.min(canvas.width / w, canvas.height / h);
+  // The right-hand strip holds the colour legend.
+  const legendW = 90;
+  const scale = Math.min((canvas.width - legendW) / w, canvas.height / h);
   // World x to the right, y up.
   const px = (x) => (x - x0) * scale;
   const py = (y) => canvas.height - (y - y0) * scale;
   if (t) {
     const known = t.z_m.filter((z) => z !== null);
-    const lo = Math.min(...known), hi = Math.max(...known);
+    const lo = known.length ? Math.min(...known) : 0, hi = known.length ? Math.max(...known) : 0;
     for (let j = 0; j < t.ny; j++) {
       for (let i = 0; i < t.nx; i++) {
         const z = t.z_m[j * t.nx + i];
@@ -80,7 +118,9 @@ function draw() {
         ctx.fillRect(px(x0 + i * t.cell_m), py(y0 + (j + 1) * t.cell_m), Math.ceil(t.cell_m * scale), Math.ceil(t.cell_m * scale));
       }
     }
+    drawLegend(ctx, canvas.width - legendW + 14, 20, canvas.height - 40, lo, hi);
   }
+  drawScaleBar(ctx, canvas.height, scale);
   if (!s) return;
   const dot = (p, r, c) => { ctx.beginPath(); ctx.arc(px(p[0]), py(p[1]), r, 0, 2 * Math.PI); ctx.fillStyle = c; ctx.fill(); };
   if (s.next_dig_m) {
@@ -106,6 +146,44 @@ function draw() {
   dot(s.tip_m, 5, "#ff8c42");
 }
 
+// The height legend: the colour range spans the map's known cells, heights in m.
+function drawLegend(ctx, x, y, h, lo, hi) {
+  const steps = 40;
+  for (let k = 0; k < steps; k++) {
+    ctx.fillStyle = colour(hi - (hi - lo) * (k + 0.5) / steps, lo, hi);
+    ctx.fillRect(x, y + k * h / steps, 14, Math.ceil(h / steps));
+  }
+  ctx.fillStyle = "#e6e6e6";
+  ctx.font = "12px system-ui, sans-serif";
+  ctx.textBaseline = "middle";
+  for (const [z, at] of [[hi, y], [(lo + hi) / 2, y + h / 2], [lo, y + h]]) {
+    ctx.fillText(`${z.toFixed(2)} m`, x + 18, at);
+  }
+  ctx.save();
+  ctx.translate(x - 4, y + h / 2);
+  ctx.rotate(-Math.PI / 2);
+  ctx.textAlign = "center";
+  ctx.fillText("height z (m)", 0, 0);
+  ctx.restore();
+}
+
+// A scale bar of a round length, about a fifth of the map's width.
+function drawScaleBar(ctx, height, pxPerM) {
+  const want = ctx.canvas.width / 5 / pxPerM;
+  const len = [0.5, 1, 2, 5, 10, 20, 50, 100].find((l) => l >= want) || 100;
+  const x = 12, y = height - 14, w = len * pxPerM;
+  ctx.strokeStyle = "#e6e6e6";
+  ctx.fillStyle = "#e6e6e6";
+  ctx.lineWidth = 2;
+  ctx.beginPath();
+  ctx.moveTo(x, y - 5); ctx.lineTo(x, y); ctx.lineTo(x + w, y); ctx.lineTo(x + w, y - 5);
+  ctx.stroke();
+  ctx.font = "12px system-ui, sans-serif";
+  ctx.textBaseline = "bottom";
+  ctx.textAlign = "left";
+  ctx.fillText(`${len} m`, x + w + 6, y + 4);
+}
+
 async function send(cmd) {
   $("command-result").textContent = `${cmd}: sent`;
   try {
@@ -126,11 +204,13 @@ async function send(cmd) {
 
 function connect() {
   const events = new EventSource("events");
+  page.events = events;
   events.addEventListener("open", () => {
     $("connection").textContent = "live";
     $("connection").className = "badge on";
   });
   events.addEventListener("error", () => {
+    if (page.finished) return;
     $("connection").textContent = "disconnected (retrying)";
     $("connection").className = "badge off";
   });
@@ -138,7 +218,7 @@ function connect() {
   events.addEventListener("terrain", (e) => {
     page.terrain = JSON.parse(e.data);
     const t = page.terrain;
-    $("terrain-info").textContent = `${t.nx} x ${t.ny} cells of ${t.cell_m} m`;
+    $("terrain-info").textContent = `${t.nx} x ${t.ny} cells of ${t.cell_m} m: ${(t.nx * t.cell_m).toFixed(1)} m x ${(t.ny * t.cell_m).toFixed(1)} m from (${t.origin_m[0].toFixed(1)}, ${t.origin_m[1].toFixed(1)}) m in the world frame`;
     draw();
   });
 }

@@ -12,6 +12,9 @@
 //!   and counted when full; no allocation, lock or system call) and paces virtual time when asked; a
 //!   publisher thread turns the queue into Foxglove messages ([`trace_tools::view`], the schemas
 //!   `trace convert --to mcap` writes too) on the server's channels.
+//! - [`subprotocol`]: the accept shim on the `--live` port in front of the crate's server (on
+//!   loopback), so that clients asking for `foxglove.websocket.v1` (older Foxglove Studio,
+//!   Lichtblick) are served as well as those asking for `foxglove.sdk.v1`.
 //! - [`page`]: the operator page (static assets in `live/page/`), served over HTTP on the port after
 //!   the WebSocket's: the publisher keeps its state, the page follows it as server-sent events and
 //!   sends the operator commands of the session's control path (`SessionObserver::operator_control`).
@@ -21,13 +24,14 @@
 //! ```text
 //! control loop --SessionObserver::after_step--> Update (step record by value, rare events)
 //!     --rtrb ring buffer (push; full: dropped, counted)--> publisher thread --view::*--> channels
-//!     --foxglove WebSocket server (its own runtime, per-client backlog)--> Foxglove
+//!     --foxglove WebSocket server (its own runtime, per-client backlog)--subprotocol shim--> Foxglove
 //!                   \--page state (at most 10 Hz)--> HTTP server (same runtime) --SSE--> the page
 //! the page --POST /command--> controller::io::operator::OperatorSender --> the control loop's port
 //! ```
 
 pub mod page;
 pub mod stream;
+pub mod subprotocol;
 
 pub use stream::{LiveStats, LiveStream};
 
@@ -57,6 +61,15 @@ pub enum LiveError {
         /// Why.
         #[source]
         source: foxglove::FoxgloveError,
+    },
+    /// The WebSocket's address could not be bound (in use, say).
+    #[error("starting the Foxglove WebSocket server on {addr}: {source}")]
+    Bind {
+        /// The address.
+        addr: String,
+        /// Why.
+        #[source]
+        source: std::io::Error,
     },
     /// The operator page's port (the WebSocket's + 1) does not exist.
     #[error("--live port {0}: the operator page needs the next port; pick a lower one")]

@@ -29,6 +29,7 @@ use axum::routing::{get, post};
 use controller::io::operator::{Command, OperatorSender, Request};
 use controller::step::cycle::Action;
 use controller::step::cycle::DigStats;
+use firmware_bridge::messages::Valve;
 use futures::Stream;
 use futures::StreamExt as _;
 use planner::terrain::TerrainGrid;
@@ -54,12 +55,15 @@ const STYLE_CSS: &str = include_str!("../page/style.css");
 pub(crate) struct Snapshot {
     state: Arc<str>,
     terrain: Option<(u64, Arc<str>)>,
+    /// The session is over: this is the last state, and the event streams end after sending it.
+    finished: bool,
 }
 
 /// The last finished dig as the page shows it.
 #[derive(Debug, Clone, Serialize)]
 struct LastDig {
-    index: u32,
+    /// The dig number, from 1 (`controller::step::cycle::dig_number`).
+    number: u32,
     action: String,
     weight_n: Option<f64>,
     time_s: f64,
@@ -73,7 +77,10 @@ struct PageState {
     time_s: f64,
     activity: String,
     stage: String,
-    digs: u16,
+    /// Digs finished.
+    digs_done: u32,
+    /// The number of the dig in progress (from the move to it to its dump), from 1.
+    current_dig: Option<u32>,
     safety: &'static str,
     fault: Option<String>,
     fault_count: u64,
@@ -84,8 +91,8 @@ struct PageState {
     pose: [f64; 3],
     /// The bucket tip in the world, m.
     tip_m: [f64; 3],
-    /// The valve commands (fractions; null in position mode).
-    valves: [Option<f64>; 6],
+    /// The valve commands, in the protocol's valve order.
+    valves: Vec<PageValve>,
     last_dig: Option<LastDig>,
     /// The chosen dig's planned start in the world, m.
     next_dig_m: Option<[f64; 3]>,
@@ -94,6 +101,16 @@ struct PageState {
     operator: bool,
     /// Why the session ended, once it has.
     session_over: Option<String>,
+}
+
+/// One valve's command as the page shows it.
+#[derive(Debug, Clone, Serialize)]
+struct PageValve {
+    /// The protocol's name of the valve (`AuxValveCommand_Boom` is `Boom`).
+    name: String,
+    /// The commanded port flow, % of full flow (signed: negative is the other port); null in
+    /// position mode, where the gateway's loops drive the valves.
+    command_pct: Option<f64>,
 }
 
 /// The page's `terrain` event: the controller's terrain map.
@@ -113,7 +130,8 @@ pub(crate) struct PageStep {
     pub time_s: f64,
     pub activity: firmware_bridge::messages::Activity,
     pub stage: firmware_bridge::messages::AutodigStageCode,
-    pub digs: u16,
+    pub digs_done: u32,
+    pub current_dig: Option<u32>,
     pub safety: &'static str,
     pub fault_count: u64,
     pub paused: bool,
@@ -141,6 +159,13 @@ impl PageFeed {
             state: PageState {
                 operator,
                 safety: "ListenOnly",
+                valves: Valve::ALL
+                    .iter()
+                    .map(|v| PageValve {
+                        name: format!("{v:?}"),
+                        command_pct: None,
+                    })
+                    .collect(),
                 ..PageState::default()
             },
             terrain: None,
@@ -159,7 +184,8 @@ impl PageFeed {
         st.time_s = s.time_s;
         st.activity = format!("{:?}", s.activity);
         st.stage = format!("{:?}", s.stage);
-        st.digs = s.digs;
+        st.digs_done = s.digs_done;
+        st.current_dig = s.current_dig;
         st.safety = s.safety;
         st.fault = fault;
         st.fault_count = s.fault_count;
@@ -168,7 +194,9 @@ impl PageFeed {
         st.action = s.action;
         st.pose = s.pose;
         st.tip_m = s.tip_m;
-        st.valves = s.valves;
+        for (v, fraction) in st.valves.iter_mut().zip(s.valves) {
+            v.command_pct = fraction.map(|f| f * 100.0);
+        }
         self.dirty = true;
     }
 
@@ -182,7 +210,7 @@ impl PageFeed {
 
     pub(crate) fn dig_done(&mut self, d: &DigStats) {
         self.state.last_dig = Some(LastDig {
-            index: d.index,
+            number: d.number(),
             action: format!("{:?}", d.action),
             weight_n: d.weight_n.filter(|w| w.is_finite()),
             time_s: d.time_s,
@@ -235,6 +263,7 @@ impl PageFeed {
         let snapshot = Snapshot {
             state: to_json(&self.state),
             terrain: self.terrain.clone(),
+            finished: self.state.session_over.is_some(),
         };
         // No page connected is not an error: the latest state waits for the next one.
         self.tx.send_replace(snapshot);
@@ -268,6 +297,12 @@ impl App {
             operator,
             event_slots: Arc::new(Semaphore::new(MAX_EVENT_CLIENTS)),
         }
+    }
+
+    /// Whether no page follows the state (every event stream has ended).
+    pub(crate) fn idle(&self) -> impl Fn() -> bool + Send + 'static {
+        let slots = Arc::clone(&self.event_slots);
+        move || slots.available_permits() == MAX_EVENT_CLIENTS
     }
 }
 
@@ -328,8 +363,8 @@ async fn events(State(app): State<App>) -> Response {
         .into_response()
 }
 
-/// The events of `rx`: the current snapshot at once, then each new one; ends when the publisher
-/// does.
+/// The events of `rx`: the current snapshot at once, then each new one; ends after the session's
+/// last state or when the publisher ends.
 fn snapshot_events(
     rx: watch::Receiver<Snapshot>,
 ) -> impl Stream<Item = Result<Event, Infallible>> + Send {
@@ -337,6 +372,9 @@ fn snapshot_events(
         (rx, 0_u64, true),
         |(mut rx, terrain_sent, first)| async move {
             if !first {
+                if rx.borrow().finished {
+                    return None;
+                }
                 rx.changed().await.ok()?;
             }
             let snap = rx.borrow_and_update().clone();

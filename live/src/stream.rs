@@ -18,8 +18,8 @@ use planner::terrain::TerrainGrid;
 use controller::io::operator::OperatorSender;
 use controller::session::driver::{SessionEvent, SessionObserver};
 use controller::session::planned::PlannedSession;
-use controller::step::cycle::DigStats;
 use controller::step::cycle::{Action, CycleCommand, Phase};
+use controller::step::cycle::{DigStats, dig_number};
 use controller::step::node::ControllerNode;
 use controller::step::safety::{Fault, SafetyState};
 use firmware_bridge::messages::ControllerStatus;
@@ -36,6 +36,9 @@ const LATCH_EVERY: Duration = Duration::from_secs(1);
 /// and about 0.2 s at the demo's virtual-time speed).
 const POLL: Duration = Duration::from_millis(5);
 
+/// How long the end of a stream waits for the pages to receive the session's last state.
+const PAGE_LINGER: Duration = Duration::from_secs(2);
+
 /// One control step as the publisher needs it: plain values copied on the control loop (no
 /// allocation, no conversion); the publisher derives the messages and the page's state from it.
 #[derive(Debug, Clone, Copy)]
@@ -46,6 +49,8 @@ struct StepRecord {
     /// The safety state (with the active fault, if any).
     safety: SafetyState,
     fault_count: u64,
+    /// Digs finished (the node's statistics).
+    digs_done: u32,
     command: CycleCommand,
     action: Option<Action>,
     paused: bool,
@@ -224,6 +229,11 @@ fn active_fault(s: SafetyState) -> Option<Fault> {
     }
 }
 
+/// The digs `node` has finished.
+fn digs_done(node: &ControllerNode) -> u32 {
+    u32::try_from(node.statistics().len()).unwrap_or(u32::MAX)
+}
+
 /// The page's view of a step.
 fn page_step(step: &StepRecord) -> PageStep {
     let e = &step.estimate;
@@ -233,7 +243,11 @@ fn page_step(step: &StepRecord) -> PageStep {
         time_s: step.time_s,
         activity: step.status.activity,
         stage: step.status.stage,
-        digs: step.status.dig_index,
+        digs_done: step.digs_done,
+        // The bus counts the digs begun: while one runs (from the move to it to its dump) that is
+        // its number.
+        current_dig: (u32::from(step.status.dig_index) > step.digs_done)
+            .then_some(u32::from(step.status.dig_index)),
         safety: safety_name(step.safety),
         fault_count: step.fault_count,
         paused: step.paused,
@@ -279,6 +293,10 @@ pub struct LiveStream {
     publisher: Option<std::thread::JoinHandle<()>>,
     server: Option<WebSocketServerHandle>,
     page_server: Option<tokio::task::JoinHandle<()>>,
+    /// The subprotocol shim in front of the server ([`crate::subprotocol`]).
+    shim: Option<tokio::task::JoinHandle<()>>,
+    /// Whether every page's event stream has ended (after the session's last state).
+    pages_idle: Box<dyn Fn() -> bool + Send>,
     runtime: Option<tokio::runtime::Runtime>,
     port: u16,
     page_port: u16,
@@ -331,12 +349,14 @@ impl LiveStream {
             .enable_all()
             .build()?;
         let ctx = Context::new();
+        // The crate's server listens on loopback behind the subprotocol shim, which takes the
+        // address asked for.
         let server = runtime
             .block_on(
                 WebSocketServer::new()
                     .name("excavator")
                     .context(&ctx)
-                    .bind(addr.host.clone(), addr.port)
+                    .bind("127.0.0.1", 0)
                     .tokio_runtime(runtime.handle())
                     .start(),
             )
@@ -344,7 +364,18 @@ impl LiveStream {
                 addr: addr_text.clone(),
                 source,
             })?;
-        let port = server.port();
+        let upstream = std::net::SocketAddr::from(([127, 0, 0, 1], server.port()));
+        let ws_listener = runtime
+            .block_on(tokio::net::TcpListener::bind((
+                addr.host.as_str(),
+                addr.port,
+            )))
+            .map_err(|source| LiveError::Bind {
+                addr: addr_text.clone(),
+                source,
+            })?;
+        let port = ws_listener.local_addr()?.port();
+        let shim = runtime.spawn(crate::subprotocol::serve(ws_listener, upstream));
         // The operator page on the neighbouring port (any free one with port 0).
         let page_port = if addr.port == 0 {
             0
@@ -365,7 +396,9 @@ impl LiveStream {
         let page_port = listener.local_addr()?.port();
         let (page_tx, page_rx) = tokio::sync::watch::channel(Snapshot::default());
         let operator = Arc::new(OnceLock::new());
-        let app = crate::page::router(App::new(page_rx, Arc::clone(&operator)));
+        let app = App::new(page_rx, Arc::clone(&operator));
+        let pages_idle = Box::new(app.idle());
+        let app = crate::page::router(app);
         let page_server = runtime.spawn(async move {
             if let Err(e) = axum::serve(listener, app).await {
                 tracing::error!(error = %e, "the operator page's server stopped");
@@ -403,6 +436,8 @@ impl LiveStream {
             publisher: Some(handle),
             server: Some(server),
             page_server: Some(page_server),
+            shim: Some(shim),
+            pages_idle,
             runtime: Some(runtime),
             port,
             page_port,
@@ -539,7 +574,7 @@ impl LiveStream {
                     };
                     let mut text = format!(
                         "dig {} started at swing {:.1} deg",
-                        node.statistics().len() + 1,
+                        dig_number(digs_done(node)),
                         swing_rad.to_degrees()
                     );
                     if let Some(v) = planned.volume_m3 {
@@ -563,7 +598,7 @@ impl LiveStream {
                             Level::Info,
                             format!(
                                 "dig {} done: {:?}, weight {} N, {:.1} s, {:.1} kJ, swept {:.2} m3",
-                                d.index,
+                                d.number(),
                                 d.action,
                                 d.weight_n.map_or("-".to_owned(), |w| format!("{w:.0}")),
                                 d.time_s,
@@ -619,6 +654,7 @@ impl SessionObserver for LiveStream {
             status: node.bus_status(),
             safety: safety.state(),
             fault_count: safety.fault_count(),
+            digs_done: digs_done(node),
             command: node.last_command(),
             action: node.action().copied(),
             paused: node.cycle().paused(),
@@ -655,8 +691,17 @@ impl Drop for LiveStream {
         {
             tracing::warn!("the live publisher thread panicked");
         }
+        // The pages following the session get its last state before the server goes: their event
+        // streams end after sending it.
+        let linger = Instant::now();
+        while !(self.pages_idle)() && linger.elapsed() < PAGE_LINGER {
+            std::thread::sleep(POLL);
+        }
         if let Some(page) = self.page_server.take() {
             page.abort();
+        }
+        if let Some(shim) = self.shim.take() {
+            shim.abort();
         }
         if let Some(server) = self.server.take() {
             drop(server.stop());

@@ -6,6 +6,8 @@
 
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use std::time::Duration;
 
 use firmware_bridge::transport::{InProcessBus, TimeScale};
@@ -14,35 +16,6 @@ use onboard::run::RunArgs;
 use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
 use vcan_sim::node::MachineNode;
 use vcan_sim::realtime::RealtimeOptions;
-
-/// Reads the page's event stream at `addr` until a `state` event satisfies `done`; returns it.
-async fn wait_for_state(
-    addr: &str,
-    done: impl Fn(&serde_json::Value) -> bool,
-) -> serde_json::Value {
-    let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
-    s.write_all(format!("GET /events HTTP/1.1\r\nHost: {addr}\r\n\r\n").as_bytes())
-        .await
-        .unwrap();
-    let mut text = String::new();
-    let mut buf = vec![0_u8; 64 * 1024];
-    loop {
-        let n = s.read(&mut buf).await.unwrap();
-        assert!(n > 0, "the event stream ended: {text}");
-        text.push_str(&String::from_utf8_lossy(&buf[..n]));
-        // Events are `event: state\ndata: {...}\n\n`; keep the unfinished tail.
-        while let Some(end) = text.find("\n\n") {
-            let event: String = text.drain(..end + 2).collect();
-            if let Some(at) = event.find("event: state\ndata: ") {
-                let data = event[at + "event: state\ndata: ".len()..].trim();
-                let state: serde_json::Value = serde_json::from_str(data).unwrap();
-                if done(&state) {
-                    return state;
-                }
-            }
-        }
-    }
-}
 
 /// POSTs `body` to the page's `/command` at `addr`; returns the status code and the reply.
 async fn post_command(addr: &str, body: &str) -> (u16, serde_json::Value) {
@@ -119,19 +92,18 @@ fn run_serves_the_page_and_its_estop_reaches_the_run_loop() {
         let operator = tokio::spawn({
             let page = page.clone();
             async move {
-                let moving = wait_for_state(&page, |s| {
-                    s["operator"] == true
-                        && s["valves"]
-                            .as_array()
-                            .unwrap()
-                            .iter()
-                            .any(|v| v.as_f64().is_some_and(|v| v.abs() > 0.01))
-                })
-                .await;
+                let moving =
+                    common::wait_for_state(&page, |s| {
+                        s["operator"] == true
+                            && s["valves"].as_array().unwrap().iter().any(|v| {
+                                v["command_pct"].as_f64().is_some_and(|pct| pct.abs() > 1.0)
+                            })
+                    })
+                    .await;
                 let (code, reply) = post_command(&page, r#"{"cmd":"estop"}"#).await;
                 assert_eq!(code, 200, "{reply}");
                 assert_eq!(reply["status"]["fault"], "emergency stop", "{reply}");
-                let after = wait_for_state(&page, |s| s["fault"] == "emergency stop").await;
+                let after = common::wait_for_state(&page, |s| s["fault"] == "emergency stop").await;
                 let _ = stop.send(());
                 (moving, after)
             }
@@ -170,7 +142,7 @@ fn run_serves_the_page_and_its_estop_reaches_the_run_loop() {
             .as_array()
             .unwrap()
             .iter()
-            .all(|v| v.as_f64() == Some(0.0)),
+            .all(|v| v["command_pct"].as_f64() == Some(0.0)),
         "{after}"
     );
 }

@@ -29,7 +29,7 @@ pub struct TipPoint {
 /// One dig (or cleanup) of the session, as written to `summary.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DigRecord {
-    /// Dig number, from 0.
+    /// The dig's index in the session, from 0 (`summary.md` shows [`DigRecord::number`]).
     pub index: u32,
     /// `dig` or `cleanup`.
     pub action: ActionKind,
@@ -100,6 +100,13 @@ pub struct DigRecord {
     /// The true terrain along the digging plane before the dig, `(r, z)` in the base frame.
     #[serde(skip)]
     pub section: Vec<TipPoint>,
+}
+
+impl DigRecord {
+    /// The dig number people see, from 1 (`controller::step::cycle::dig_number`).
+    pub const fn number(&self) -> u32 {
+        controller::step::cycle::dig_number(self.index)
+    }
 }
 
 /// The soil samples of one dig (an element of `soil_samples.json`).

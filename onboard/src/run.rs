@@ -723,7 +723,7 @@ pub async fn run_on_observed<B: Bus>(
             if log.on_event(node, driver, None, e)? {
                 let d = log.records.last();
                 tracing::info!(
-                    dig = d.map(|d| d.index),
+                    dig = d.map(crate::record::DigRecord::number),
                     action = ?d.map(|d| d.action),
                     weight_n = ?d.and_then(|d| d.weight_n),
                     backups = driver.backups(),

@@ -516,7 +516,7 @@ pub fn summary_markdown(s: &DemoSummary) -> String {
         let _ = writeln!(
             m,
             "| {} | {:?} | {:.0} | {} | {:.0} | {:.1} | {:.0} | {:.2} | {} |",
-            d.index,
+            d.number(),
             d.action,
             d.swing_deg,
             d.weight_n.map_or("-".to_owned(), |w| format!("{w:.0}")),

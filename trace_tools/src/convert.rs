@@ -28,8 +28,9 @@
 //! each joint-angle frame `/tf` gets the machine's frames and `/signals` the pressures, joint angles,
 //! the valve commands and the `ControllerStatus` fields the controller sent; `/scene` holds the
 //! machine's links, `/log` a line at each change of activity or fault. A trace has no scans, so no
-//! `/terrain`. Chunks are zstd-compressed and indexed by the summary's chunk indexes; there are no
-//! per-message index records (they would take more room than the compressed messages).
+//! `/terrain`. Chunks are zstd-compressed, each followed by its message indexes (per channel, the
+//! log time and offset of every message), and the summary lists the chunk indexes and statistics, so
+//! a reader seeks by time and topic.
 
 use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
@@ -567,6 +568,27 @@ impl ViewWriter {
 }
 
 /// Writes `input` as MCAP to `out`: the decoded `/can/...` channels and `/can/raw` (JSON), and the
+/// The MCAP writer's options: zstd-compressed chunks of [`MCAP_CHUNK_BYTES`] with a message index
+/// after each chunk and chunk indexes in the summary, so that a reader seeks by time and topic
+/// without decompressing every chunk.
+fn mcap_options() -> mcap::WriteOptions {
+    mcap::WriteOptions::new()
+        .compression(Some(mcap::Compression::Zstd))
+        .compression_level(MCAP_ZSTD_LEVEL)
+        .chunk_size(Some(MCAP_CHUNK_BYTES))
+        .emit_message_indexes(true)
+        .emit_chunk_indexes(true)
+        .emit_statistics(true)
+        .emit_summary_offsets(true)
+}
+
+/// Uncompressed bytes per MCAP chunk: larger chunks compress the JSON messages better, and the
+/// message index still finds a message within its chunk.
+pub const MCAP_CHUNK_BYTES: u64 = 4 * 1024 * 1024;
+
+/// The zstd level of MCAP chunks.
+pub const MCAP_ZSTD_LEVEL: u32 = 9;
+
 /// Foxglove view of the session ([`crate::view`]) for `machine`, in zstd-compressed chunks.
 ///
 /// # Errors
@@ -579,11 +601,7 @@ pub fn to_mcap<R: BufRead, W: Write + Seek>(
     strict: bool,
     diag: &mut dyn Write,
 ) -> anyhow::Result<ConvertSummary> {
-    let mut writer = mcap::WriteOptions::new()
-        .compression(Some(mcap::Compression::Zstd))
-        // Chunk indexes only: a message index record per message would take more room than the
-        // compressed messages themselves (readers scan a chunk's records instead).
-        .emit_message_indexes(false)
+    let mut writer = mcap_options()
         .profile("")
         .library(concat!("excavator-ctl ", env!("CARGO_PKG_VERSION")))
         .create(out)

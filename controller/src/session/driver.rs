@@ -632,7 +632,7 @@ impl SessionDriver {
                 )
             {
                 tracing::info!(
-                    dig = d.index,
+                    dig = d.number(),
                     swept_m3 = d.swept_volume_m3,
                     predicted_m3,
                     "barren dig: its start is not planned again until a track back"

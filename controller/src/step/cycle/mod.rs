@@ -60,7 +60,7 @@ pub use action::{Action, ActionKind, StartPose};
 pub use config::{CycleConfig, PGain};
 pub use scan_grid::ScanGrid;
 pub use snapshot::CycleSnapshot;
-pub use stats::DigStats;
+pub use stats::{DigStats, dig_number};
 
 use planner::autodig::{Autodig, AutodigConfig, AutodigMaps, Stage};
 use planner::cleanup::{Cleanup, CleanupConfig, FloorEstimate};

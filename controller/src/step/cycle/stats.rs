@@ -10,7 +10,8 @@ use super::weigh::WeighAverage;
 /// Statistics of one dig or cleanup (thesis 6.1, Tables 3 and 4).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct DigStats {
-    /// Dig number, from 0.
+    /// The dig's place in the session, from 0 (its index in the statistics); people see
+    /// [`DigStats::number`].
     pub index: u32,
     /// Dig or cleanup.
     pub action: ActionKind,
@@ -41,7 +42,19 @@ pub struct DigStats {
     pub perception: bool,
 }
 
+/// The dig number people see, from 1, for the dig at `index` (from 0) of a session: the log lines,
+/// the live view and the reports say "dig 1" for the first dig, as the bus's `DigIndex` does (it
+/// counts the digs begun, so it is the number of the dig in progress or the last one finished).
+pub const fn dig_number(index: u32) -> u32 {
+    index.saturating_add(1)
+}
+
 impl DigStats {
+    /// The dig number people see, from 1 ([`dig_number`]).
+    pub const fn number(&self) -> u32 {
+        dig_number(self.index)
+    }
+
     /// Energy in kJ (the unit of the thesis's tables).
     pub fn energy_kj(&self) -> f64 {
         self.energy_j * 1e-3

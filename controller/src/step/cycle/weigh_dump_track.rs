@@ -151,7 +151,7 @@ impl WorkCycle {
         {
             if let Some(r) = self.record.take() {
                 tracing::info!(
-                    dig = r.stats.index,
+                    dig = r.stats.number(),
                     weight_n = ?r.stats.weight_n,
                     time_s = r.stats.time_s,
                     energy_kj = r.stats.energy_kj(),
