@@ -47,7 +47,13 @@ fn demo_effect_errors_point_to_demos_own_list_of_effects() {
 fn a_missing_profile_dbc_is_one_line_naming_the_profile() {
     let dir = tempfile::tempdir().unwrap();
     let profile = dir.path().join("p.toml");
-    std::fs::write(&profile, "# a profile\ndbc = \"gone.dbc\"\n").unwrap();
+    let example = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/other_gateway.toml"
+    );
+    let text = std::fs::read_to_string(example).unwrap();
+    let dbc_line = text.lines().position(|l| l.starts_with("dbc =")).unwrap() + 1;
+    std::fs::write(&profile, text.replace("other_gateway.dbc", "gone.dbc")).unwrap();
     let log = dir.path().join("t.log");
     std::fs::write(&log, "(1.000000) vcan0 123#00\n").unwrap();
     let o = ctl(&[
@@ -62,7 +68,7 @@ fn a_missing_profile_dbc_is_one_line_naming_the_profile() {
     assert_eq!(
         err.trim_end(),
         format!(
-            "error: {}:2: dbc = \"gone.dbc\": cannot read {}: No such file or directory (os error 2)",
+            "error: {}:{dbc_line}: dbc = \"gone.dbc\": cannot read {}: No such file or directory (os error 2)",
             profile.display(),
             dir.path().join("gone.dbc").display()
         )
