@@ -456,3 +456,233 @@ fn replay_without_the_interface_says_how_to_create_it() {
         stderr(&o)
     );
 }
+
+const OTHER_GATEWAY: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../examples/other_gateway.toml"
+);
+
+/// The standard fixture as the example gateway's wire frames (what `--profile` records).
+fn profile_fixture(dir: &Path, frames: u64) -> PathBuf {
+    let profile = firmware_bridge::profile::Profile::load(Path::new(OTHER_GATEWAY)).unwrap();
+    let canonical = fixture(dir, "canonical.log", frames);
+    let mut out = String::new();
+    for line in std::fs::read_to_string(canonical).unwrap().lines() {
+        let rec = firmware_bridge::trace::parse_line(line).unwrap();
+        // Network management does not cross this (non-J1939) wire bus.
+        if let Ok(wire) = profile.to_wire(&rec.frame) {
+            out += &firmware_bridge::trace::format_line(rec.timestamp_ns, "vcan0", &wire, None);
+            out.push('\n');
+        }
+    }
+    let path = dir.join("wire.log");
+    std::fs::write(&path, out).unwrap();
+    path
+}
+
+/// `stats` on another gateway's trace listed every frame as an unknown id with no protocol checks;
+/// with `--profile` the frames are the project's messages, checked against the profile's periods,
+/// and `plot`, `convert` and `diff` read them too.
+#[test]
+fn every_trace_command_reads_a_profile_trace() {
+    let dir = tempfile::tempdir().unwrap();
+    let wire = profile_fixture(dir.path(), FRAMES);
+    let wire = wire.to_str().unwrap();
+    let o = trace(&["stats", wire, "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let plain: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert!(
+        plain["unknown_id_frames"].as_u64().unwrap() > 2000,
+        "{plain}"
+    );
+
+    let o = trace(&["stats", wire, "--profile", OTHER_GATEWAY, "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(r["unknown_id_frames"], 0, "{r}");
+    assert_eq!(r["profile"], OTHER_GATEWAY);
+    let ids = r["ids"].as_array().unwrap();
+    let by_message = |name: &str| ids.iter().find(|i| i["message"] == name).unwrap().clone();
+    let angles = by_message("JointAngles (ArmAngles)");
+    // The example gateway's ArmAngles: 11-bit id, every 20 ms (its DBC's GenMsgCycleTime).
+    assert_eq!(angles["id"].as_str().unwrap().len(), 3);
+    assert_eq!(angles["nominal_hz"], 50.0);
+    let heartbeat = by_message("ControllerHeartbeat (Heartbeat)");
+    assert_eq!(heartbeat["checksum_errors"], 0);
+    assert_eq!(heartbeat["alive_errors"], 0);
+    // The six valve commands share one multiplexed wire id and are checked one by one.
+    let valve_ids: Vec<_> = ids
+        .iter()
+        .filter(|i| {
+            i["message"]
+                .as_str()
+                .unwrap()
+                .starts_with("AuxValveCommand_")
+        })
+        .map(|i| i["id"].clone())
+        .collect();
+    assert_eq!(valve_ids.len(), 6);
+    assert!(valve_ids.windows(2).all(|w| w[0] == w[1]), "{valve_ids:?}");
+
+    let csv = dir.path().join("wire.csv");
+    let o = trace(&[
+        "convert",
+        wire,
+        "--to",
+        "csv",
+        "--out",
+        csv.to_str().unwrap(),
+        "--signal",
+        "BoomAngle",
+        "--profile",
+        OTHER_GATEWAY,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    assert!(text.lines().count() > 100, "{text}");
+    let svg = dir.path().join("wire.svg");
+    let o = trace(&[
+        "plot",
+        wire,
+        "--signal",
+        "BoomAngle",
+        "--out",
+        svg.to_str().unwrap(),
+        "--profile",
+        OTHER_GATEWAY,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("no data"), "{}", stderr(&o));
+    // The same scenario on the two gateways does not diverge.
+    let canonical = dir.path().join("canonical.log");
+    let o = trace(&[
+        "diff",
+        canonical.to_str().unwrap(),
+        wire,
+        "--profile-b",
+        OTHER_GATEWAY,
+        "--signal",
+        "BoomAngle",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout(&o).contains("no signal diverges"), "{}", stdout(&o));
+}
+
+/// Plain `candump vcan0` output was refused as "bad direction marker"; it and the `-t` variants
+/// read, with the times they carry.
+#[test]
+fn candump_screen_output_and_its_timestamp_variants_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = fixture(dir.path(), "dig.log", 1170);
+    let recs: Vec<_> = std::fs::read_to_string(&log)
+        .unwrap()
+        .lines()
+        .map(|l| firmware_bridge::trace::parse_line(l).unwrap())
+        .collect();
+    let screen = |time: &dyn Fn(usize, u64) -> String| -> String {
+        let mut s = String::new();
+        for (i, r) in recs.iter().enumerate() {
+            let id = match r.frame.id() {
+                firmware_bridge::frame::CanId::Extended(id) => format!("{id:08X}"),
+                firmware_bridge::frame::CanId::Standard(id) => format!("{id:03X}"),
+            };
+            let data: Vec<String> = r.frame.data().iter().map(|b| format!("{b:02X}")).collect();
+            s += &format!(
+                "{} vcan0  {id}   [{}]  {}\n",
+                time(i, r.timestamp_ns),
+                r.frame.len(),
+                data.join(" ")
+            );
+        }
+        s
+    };
+    let t0 = recs[0].timestamp_ns;
+    let micros = |ns: u64| format!("{}.{:06}", ns / 1_000_000_000, ns % 1_000_000_000 / 1000);
+    let variants: [(&str, Box<dyn Fn(usize, u64) -> String>, &[&str]); 5] = [
+        ("plain", Box::new(|_, _| String::new()), &[]),
+        ("ta", Box::new(|_, t| format!(" ({})", micros(t))), &[]),
+        (
+            "tz",
+            Box::new(move |_, t| format!(" ({})", micros(t - t0))),
+            &[],
+        ),
+        (
+            "td",
+            Box::new(|i, t| format!(" ({})", micros(t - recs[i.saturating_sub(1)].timestamp_ns))),
+            &["--delta-timestamps"],
+        ),
+        (
+            "tA",
+            // 1700000000 s is 2023-11-14 22:13:20 UTC; the fixture's frames are within a second.
+            Box::new(|_, t| {
+                let us = t % 1_000_000_000 / 1000;
+                format!(
+                    " (2023-11-14 22:13:2{}.{us:06})",
+                    t / 1_000_000_000 - 1_700_000_000
+                )
+            }),
+            &[],
+        ),
+    ];
+    for (name, time, extra) in &variants {
+        let path = dir.path().join(format!("{name}.txt"));
+        std::fs::write(&path, screen(time.as_ref())).unwrap();
+        let mut args = vec!["stats", path.to_str().unwrap(), "--json", "--strict"];
+        args.extend_from_slice(extra);
+        let o = trace(&args);
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        let r: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        assert_eq!(r["frames"], 1170, "{name}");
+        assert_eq!(r["unknown_id_frames"], 0, "{name}");
+        let span = r["span_s"].as_f64().unwrap();
+        if *name == "plain" {
+            assert_eq!(span, 0.0);
+            assert!(stderr(&o).contains("without a timestamp"), "{}", stderr(&o));
+        } else {
+            let want = (recs[1169].timestamp_ns - t0) as f64 * 1e-9;
+            assert!((span - want).abs() < 1e-5, "{name}: span {span} vs {want}");
+        }
+    }
+}
+
+/// A file of nothing but unparsable lines exited 0; every command now fails naming the file and
+/// the first bad line.
+#[test]
+fn a_trace_without_one_frame_fails_naming_the_file_and_the_first_bad_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("junk.log");
+    std::fs::write(&bad, "\nnot-a-frame\nneither\n").unwrap();
+    let bad = bad.to_str().unwrap();
+    let csv = dir.path().join("x.csv");
+    let svg = dir.path().join("x.svg");
+    for args in [
+        vec!["decode", bad],
+        vec!["stats", bad],
+        vec![
+            "convert",
+            bad,
+            "--to",
+            "csv",
+            "--out",
+            csv.to_str().unwrap(),
+        ],
+        vec![
+            "plot",
+            bad,
+            "--signal",
+            "BoomAngle",
+            "--out",
+            svg.to_str().unwrap(),
+        ],
+        vec!["diff", bad, bad],
+    ] {
+        let o = trace(&args);
+        assert!(!o.status.success(), "{args:?}");
+        let err = stderr(&o);
+        assert!(err.contains(bad), "{args:?}: {err}");
+        assert!(
+            err.contains("no CAN frame in 3 line(s): line 2 `not-a-frame`: expected"),
+            "{args:?}: {err}"
+        );
+    }
+}

@@ -66,21 +66,24 @@ pub const DEFAULT_PROFILE_TEXT: &str = include_str!("../../profiles/default.toml
 /// Why a profile could not be loaded.
 #[derive(Debug, thiserror::Error)]
 pub enum ProfileError {
-    /// A file could not be read.
-    #[error("{path}: {source}")]
+    /// A file could not be read. The cause is in the message, not also a `source`: printed with
+    /// its chain (`{:#}`) it would show twice.
+    #[error("{path}: {error}")]
     Io {
         /// The file.
         path: PathBuf,
         /// The I/O error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The profile's DBC could not be loaded.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error} (the DBC of {origin})")]
     Dbc {
         /// The DBC file.
         path: PathBuf,
+        /// The profile naming it.
+        origin: String,
         /// What is wrong with it.
-        source: wire_dbc::LoadError,
+        error: wire_dbc::LoadError,
     },
     /// The profile is not valid TOML, or a mapping is missing or wrong.
     #[error("{origin}{}: {message}", line.map(|l| format!(":{l}")).unwrap_or_default())]
@@ -98,11 +101,11 @@ pub enum ProfileError {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum TranslateError {
     /// A wire frame whose id (and multiplexor value) the profile maps to no canonical message.
-    #[error("unmapped frame {0:?}")]
+    #[error("unmapped frame {0}")]
     Unmapped(CanId),
     /// J1939 network management (an address claim, a request) for a wire bus that is not a J1939
     /// network: there are no addresses to claim there, so it is not sent (not an error).
-    #[error("J1939 network management {0:?}: the wire bus is not J1939")]
+    #[error("J1939 network management {0}: the wire bus is not J1939")]
     NotOnThisBus(CanId),
     /// A frame of a known id with the wrong length or kind.
     #[error("{message}: {actual} data bytes, expected {expected}")]
@@ -360,9 +363,9 @@ impl Profile {
     /// # Errors
     /// [`ProfileError`] naming the file, the line and the missing or wrong quantity.
     pub fn load(path: &Path) -> Result<Self, ProfileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ProfileError::Io {
+        let text = std::fs::read_to_string(path).map_err(|error| ProfileError::Io {
             path: path.to_path_buf(),
-            source,
+            error,
         })?;
         let origin = path.display().to_string();
         let file = parse_file(&text, &origin)?;
@@ -370,10 +373,16 @@ impl Profile {
             .parent()
             .unwrap_or_else(|| Path::new(""))
             .join(file.dbc.get_ref());
-        let dbc_text = std::fs::read_to_string(&dbc_path).map_err(|source| ProfileError::Io {
-            path: dbc_path.clone(),
-            source,
-        })?;
+        let dbc_text =
+            std::fs::read_to_string(&dbc_path).map_err(|error| ProfileError::Invalid {
+                origin: origin.clone(),
+                line: Some(line_of_offset(&text, file.dbc.span().start)),
+                message: format!(
+                    "dbc = {:?}: cannot read {}: {error}",
+                    file.dbc.get_ref(),
+                    dbc_path.display()
+                ),
+            })?;
         Self::build(&text, &origin, file, dbc_path, &dbc_text)
     }
 
@@ -398,9 +407,10 @@ impl Profile {
         dbc_path: PathBuf,
         dbc_text: &str,
     ) -> Result<Self, ProfileError> {
-        let wire = WireDbc::parse(dbc_text).map_err(|source| ProfileError::Dbc {
+        let wire = WireDbc::parse(dbc_text).map_err(|error| ProfileError::Dbc {
             path: dbc_path.clone(),
-            source,
+            origin: origin.to_string(),
+            error,
         })?;
         let invalid = |span: std::ops::Range<usize>, message: String| ProfileError::Invalid {
             origin: origin.to_string(),
@@ -689,6 +699,16 @@ impl Profile {
             identity,
             timing,
         })
+    }
+
+    /// The period of the canonical message `canonical` on this gateway, ms (0 for a message sent on
+    /// events), and the name of the wire message carrying it; `None` for a message the profile does
+    /// not route (J1939 network management).
+    pub fn route_of(&self, canonical: &str) -> Option<(u32, &str)> {
+        self.routes
+            .iter()
+            .find(|r| r.canonical.name == canonical)
+            .map(|r| (r.period_ms, self.wire.messages[r.wire].name.as_str()))
     }
 
     /// The gateway's periods and timeouts.
@@ -1039,10 +1059,40 @@ fn network_management(frame: &CanFrame) -> bool {
 }
 
 fn parse_file(text: &str, origin: &str) -> Result<ProfileFile, ProfileError> {
-    toml::from_str(text).map_err(|e| ProfileError::Invalid {
-        origin: origin.to_string(),
-        line: e.span().map(|s| line_of_offset(text, s.start)),
-        message: e.message().trim().to_string(),
+    toml::from_str(text).map_err(|e| {
+        let field = e.span().and_then(|s| field_at(text, s.start));
+        let message = e.message().trim();
+        ProfileError::Invalid {
+            origin: origin.to_string(),
+            line: e.span().map(|s| line_of_offset(text, s.start)),
+            message: match field {
+                // The parser's type errors name the value, not the key.
+                Some(field) if !message.contains(&field) => format!("{field}: {message}"),
+                _ => message.to_string(),
+            },
+        }
+    })
+}
+
+/// The dotted name of the TOML key whose value is at `offset` (`messages.JointAngles.mux`): the key
+/// before `=` on its line under the last `[table]` header above it.
+fn field_at(text: &str, offset: usize) -> Option<String> {
+    let head = text.get(..offset.min(text.len()))?;
+    let line_start = head.rfind('\n').map_or(0, |i| i + 1);
+    let line = text[line_start..].lines().next()?;
+    let key = line.split_once('=')?.0.trim();
+    if key.is_empty() || key.starts_with('[') || key.starts_with('#') {
+        return None;
+    }
+    let table = head[..line_start].lines().rev().find_map(|l| {
+        let l = l.trim();
+        l.strip_prefix('[')
+            .and_then(|t| t.split(']').next())
+            .map(|t| t.trim_start_matches('[').trim().to_string())
+    });
+    Some(match table {
+        Some(t) => format!("{t}.{key}"),
+        None => key.to_string(),
     })
 }
 
@@ -1145,6 +1195,70 @@ fn field_target(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Regression for what a user saw: a missing DBC printed its cause twice and named no profile
+    /// line, `mux = "2"` said `invalid type` without the field, and unmapped ids printed as
+    /// `Extended(218058880)`.
+    #[test]
+    fn profile_errors_name_the_file_line_and_field_once() {
+        let dir = std::env::temp_dir().join(format!("profile-errors-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/other_gateway.toml");
+        let text = std::fs::read_to_string(&example).unwrap();
+        let missing = dir.join("missing.toml");
+        std::fs::write(&missing, text.replace("other_gateway.dbc", "nope.dbc")).unwrap();
+        let err = Profile::load(&missing).unwrap_err();
+        let dbc_line = text.lines().position(|l| l.starts_with("dbc =")).unwrap() + 1;
+        assert_eq!(
+            format!("{:#}", anyhow_like(&err)),
+            format!(
+                "{}:{dbc_line}: dbc = \"nope.dbc\": cannot read {}: No such file or directory \
+                 (os error 2)",
+                missing.display(),
+                dir.join("nope.dbc").display()
+            )
+        );
+        let bad_mux = dir.join("mux.toml");
+        std::fs::write(&bad_mux, text.replacen("mux = 2", "mux = \"2\"", 1)).unwrap();
+        let mux_line = text.lines().position(|l| l == "mux = 2").unwrap() + 1;
+        let err = Profile::load(&bad_mux).unwrap_err().to_string();
+        assert!(
+            err.starts_with(&format!(
+                "{}:{mux_line}: messages.AuxValveCommand_Bucket.mux: invalid type",
+                bad_mux.display()
+            )),
+            "{err}"
+        );
+        let bad_dbc = dir.join("other_gateway.dbc");
+        std::fs::write(&bad_dbc, "VERSION \"\"\nBO_ nonsense\n").unwrap();
+        let syntax = dir.join("syntax.toml");
+        std::fs::write(&syntax, &text).unwrap();
+        let err = Profile::load(&syntax).unwrap_err();
+        let shown = format!("{:#}", anyhow_like(&err));
+        assert!(shown.contains("not a valid DBC"), "{shown}");
+        assert_eq!(shown.matches("not a valid DBC").count(), 1, "{shown}");
+        assert!(shown.contains(&syntax.display().to_string()), "{shown}");
+        let _ = std::fs::remove_dir_all(&dir);
+        assert_eq!(
+            TranslateError::Unmapped(CanId::Extended(0x0CFF_1234)).to_string(),
+            "unmapped frame 0x0CFF1234"
+        );
+        assert_eq!(
+            TranslateError::Unmapped(CanId::Standard(0x7F)).to_string(),
+            "unmapped frame 0x07F"
+        );
+    }
+
+    /// The error with its whole `source` chain, as a binary prints it with `{:#}`.
+    fn anyhow_like(err: &dyn std::error::Error) -> String {
+        let mut text = err.to_string();
+        let mut cause = err.source();
+        while let Some(c) = cause {
+            text += &format!(": {c}");
+            cause = c.source();
+        }
+        text
+    }
 
     #[test]
     fn the_default_profile_is_the_identity() {

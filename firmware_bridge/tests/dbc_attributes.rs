@@ -141,3 +141,26 @@ fn value_tables_are_the_typed_messages_states() {
         );
     }
 }
+
+/// docs/protocol.md said "priority 3 for everything" while three messages are priority 6: the
+/// priorities are the ones it now lists.
+#[test]
+fn priorities_are_the_ones_docs_protocol_md_lists() {
+    let priority = |m: &&dbc::MessageDesc| m.default_id >> 26;
+    let six: Vec<&str> = dbc::MESSAGES
+        .iter()
+        .filter(|m| priority(m) == 6)
+        .map(|m| m.name)
+        .collect();
+    assert_eq!(six, ["ControllerStatus", "AddressClaimed", "RequestPgn"]);
+    assert!(
+        dbc::MESSAGES
+            .iter()
+            .all(|m| six.contains(&m.name) || priority(&m) == 3)
+    );
+    let doc = include_str!("../../docs/protocol.md").replace("\n  ", " ");
+    assert!(
+        doc.contains("priority 6 (J1939's default for information and network management) for `ControllerStatus`, `AddressClaimed` and `RequestPgn`"),
+        "docs/protocol.md names the priority-6 messages"
+    );
+}

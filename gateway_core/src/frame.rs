@@ -52,6 +52,17 @@ pub enum CanId {
     Extended(u32),
 }
 
+/// As CAN tools print ids: hex, 8 digits for a 29-bit id (`0x0CFF1234`), 3 for an 11-bit one
+/// (`0x123`).
+impl core::fmt::Display for CanId {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Standard(id) => write!(f, "0x{id:03X}"),
+            Self::Extended(id) => write!(f, "0x{id:08X}"),
+        }
+    }
+}
+
 impl CanId {
     /// An 11-bit id.
     ///

@@ -103,9 +103,13 @@ pub struct DemoArgs {
     /// predefined strategies, config/bench.toml for the fixed plan).
     #[arg(long, value_name = "FILE")]
     pub bench: Option<PathBuf>,
-    /// A hidden effect of the simulator, NAME=VALUE (repeatable; `excavator-sim --list-effects`).
+    /// A hidden effect of the simulator, NAME=VALUE (repeatable; see --list-effects).
     #[arg(long = "effect", value_name = "NAME=VALUE")]
     pub effects: Vec<String>,
+    /// Print the simulator's hidden effects (name, unit, range, description) and exit: the
+    /// catalogue of `excavator-sim --list-effects`.
+    #[arg(long)]
+    pub list_effects: bool,
     /// How the simulator integrates the soil's force (default: the bench file's `soil_contact`,
     /// `implicit` when absent; docs/simulator.md, "Soil contact integration").
     #[arg(long, value_enum, value_name = "HOW")]
@@ -165,6 +169,7 @@ impl DemoArgs {
             plant_machine: None,
             bench: None,
             effects: Vec::new(),
+            list_effects: false,
             soil_contact: None,
             out,
             config: None,
@@ -252,6 +257,10 @@ pub async fn run_observed(
     args: DemoArgs,
     mut observer: Box<dyn SessionObserver + Send>,
 ) -> anyhow::Result<()> {
+    if args.list_effects {
+        print!("{}", vcan_sim::effects::registry_table());
+        return Ok(());
+    }
     let stop = Arc::new(AtomicBool::new(false));
     let stop_on_signal = Arc::clone(&stop);
     let signal = tokio::spawn(async move {

@@ -215,7 +215,7 @@ pub fn to_csv<R: BufRead>(
     rows: Rows,
     step_s: f64,
     signal_names: &[String],
-    strict: bool,
+    read: impl Into<input::ReadOptions>,
     diag: &mut dyn Write,
 ) -> anyhow::Result<ConvertSummary> {
     let step_ns = step_s * 1e9;
@@ -227,7 +227,7 @@ pub fn to_csv<R: BufRead>(
     out.write_all(st.header().as_bytes())
         .context("writing the CSV header")?;
     let mut written = 0u64;
-    let read = input::for_each_record(input, strict, diag, |rec| {
+    let read = input::for_each_record(input, read, diag, |rec| {
         let is_first = st.first_ns.is_none();
         let first = *st.first_ns.get_or_insert(rec.timestamp_ns);
         match rows {
@@ -598,7 +598,7 @@ pub fn to_mcap<R: BufRead, W: Write + Seek>(
     input: R,
     out: W,
     machine: &planner::machine::MachineConfig,
-    strict: bool,
+    read: impl Into<input::ReadOptions>,
     diag: &mut dyn Write,
 ) -> anyhow::Result<ConvertSummary> {
     let mut writer = mcap_options()
@@ -619,7 +619,7 @@ pub fn to_mcap<R: BufRead, W: Write + Seek>(
     let mut raw_seq = 0u32;
     let mut payload = String::with_capacity(512);
     let mut written = 0u64;
-    let read = input::for_each_record(input, strict, diag, |rec| {
+    let read = input::for_each_record(input, read, diag, |rec| {
         let t = rec.timestamp_ns;
         view.record(&mut writer, &rec)?;
         let Some((msg_index, desc)) = signals::message_of(&rec.frame) else {
@@ -699,6 +699,7 @@ pub fn to_mcap<R: BufRead, W: Write + Seek>(
 /// # Errors
 /// As [`to_csv`] / [`to_mcap`], and an output file that cannot be created.
 pub fn run(args: &ConvertArgs) -> anyhow::Result<()> {
+    let read = args.input.read_options()?;
     let reader = input::open(&args.input.file)?;
     let file =
         File::create(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
@@ -712,9 +713,10 @@ pub fn run(args: &ConvertArgs) -> anyhow::Result<()> {
                 args.rows,
                 args.step_ms * 1e-3,
                 &args.signals,
-                args.input.strict,
+                read,
                 &mut diag,
-            )?
+            )
+            .with_context(|| format!("converting {}", args.input.file.display()))?
         }
         Format::Mcap => {
             let machine = planner::machine::MachineConfig::load_or_default(args.machine.as_deref())
@@ -723,9 +725,10 @@ pub fn run(args: &ConvertArgs) -> anyhow::Result<()> {
                 reader,
                 BufWriter::with_capacity(256 * 1024, file),
                 &machine,
-                args.input.strict,
+                read,
                 &mut diag,
-            )?
+            )
+            .with_context(|| format!("converting {}", args.input.file.display()))?
         }
     };
     let view = match args.format {

@@ -57,9 +57,6 @@ pub struct DecodeArgs {
     /// shows frames live).
     #[arg(long)]
     pub line_buffered: bool,
-    /// Machine profile the trace was recorded with (`run --profile`, `excavator-sim --profile`).
-    #[arg(long, value_name = "FILE")]
-    pub profile: Option<std::path::PathBuf>,
 }
 
 /// What [`Decoder`] shows.
@@ -485,7 +482,7 @@ pub fn decode_stream<R: BufRead>(
 pub fn decode_stream_with<R: BufRead>(
     input: R,
     decoder: Decoder,
-    strict: bool,
+    read: impl Into<input::ReadOptions>,
     out: &mut dyn Write,
     diag: &mut dyn Write,
     line_flush: bool,
@@ -494,7 +491,7 @@ pub fn decode_stream_with<R: BufRead>(
     let mut line = String::with_capacity(256);
     let mut lines_out = 0u64;
     let mut pipe_closed = false;
-    let read = input::for_each_record(input, strict, diag, |rec| {
+    let read = input::for_each_record(input, read, diag, |rec| {
         line.clear();
         if !decoder.format_record(&rec, &mut line) {
             return Ok(true);
@@ -539,8 +536,8 @@ pub fn run(args: &DecodeArgs) -> anyhow::Result<()> {
         args.to,
     )?;
     let mut decoder = Decoder::new(filter);
-    if let Some(path) = &args.profile {
-        decoder = decoder.with_profile(std::sync::Arc::new(Profile::load(path)?));
+    if let Some(profile) = input::load_profile(args.input.profile.as_deref())? {
+        decoder = decoder.with_profile(profile);
     }
     let reader = input::open(&args.input.file)?;
     let line_flush = args.line_buffered || input::is_stdin(&args.input.file);
@@ -550,7 +547,7 @@ pub fn run(args: &DecodeArgs) -> anyhow::Result<()> {
     decode_stream_with(
         reader,
         decoder,
-        args.input.strict,
+        args.input.wire_options(),
         &mut out,
         &mut diag,
         line_flush,
@@ -725,9 +722,8 @@ mod tests {
             )
         );
         assert!(
-            lines[1].ends_with(
-                &(":: not in profile ".to_owned() + path + ": unmapped frame Standard(2047)")
-            ),
+            lines[1]
+                .ends_with(&(":: not in profile ".to_owned() + path + ": unmapped frame 0x7FF")),
             "{}",
             lines[1]
         );

@@ -16,7 +16,7 @@
 use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::io::{self, BufRead, Write};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
 use firmware_bridge::trace::{TraceError, TraceRecord};
@@ -54,6 +54,17 @@ pub struct DiffArgs {
     /// Stop at the first malformed line.
     #[arg(long)]
     pub strict: bool,
+    /// Machine profile both traces were recorded with (their wire frames are read as the project's
+    /// messages).
+    #[arg(long, value_name = "FILE")]
+    pub profile: Option<PathBuf>,
+    /// Machine profile of B when it differs from A's (`--profile`), e.g. the same scenario on
+    /// another gateway.
+    #[arg(long, value_name = "FILE")]
+    pub profile_b: Option<PathBuf>,
+    /// The traces are `candump -td` output (timestamps since the previous frame).
+    #[arg(long)]
+    pub delta_timestamps: bool,
 }
 
 /// Settings of [`diff_traces`].
@@ -69,8 +80,10 @@ pub struct DiffOptions {
     pub signals: Vec<String>,
     /// Shift of B, s.
     pub offset_s: f64,
-    /// Fail on malformed lines.
-    pub strict: bool,
+    /// How to read A (`strict`, its profile).
+    pub read_a: input::ReadOptions,
+    /// How to read B.
+    pub read_b: input::ReadOptions,
 }
 
 impl Default for DiffOptions {
@@ -81,7 +94,8 @@ impl Default for DiffOptions {
             tolerances: Vec::new(),
             signals: Vec::new(),
             offset_s: 0.0,
-            strict: false,
+            read_a: input::ReadOptions::default(),
+            read_b: input::ReadOptions::default(),
         }
     }
 }
@@ -146,10 +160,11 @@ struct Side<R: BufRead> {
 }
 
 impl<R: BufRead> Side<R> {
-    fn new(input: R, offset_s: f64, strict: bool, label: &'static str) -> Self {
+    fn new(input: R, offset_s: f64, read: &input::ReadOptions, label: &'static str) -> Self {
         let n = signals::all_signals().len();
+        let strict = read.strict;
         Self {
-            records: Records::new(input),
+            records: Records::with_options(input, read),
             peeked: None,
             first_ns: None,
             last_ns: 0,
@@ -319,8 +334,8 @@ pub fn diff_traces<RA: BufRead, RB: BufRead>(
     }
     let selected = selected_signals(opts)?;
     let tol = tolerances(opts)?;
-    let mut side_a = Side::new(a, 0.0, opts.strict, "A");
-    let mut side_b = Side::new(b, opts.offset_s, opts.strict, "B");
+    let mut side_a = Side::new(a, 0.0, &opts.read_a, "A");
+    let mut side_b = Side::new(b, opts.offset_s, &opts.read_b, "B");
     let mut acc = vec![Acc::default(); selected.len()];
     let mut grid_index: u64 = 0;
     let mut compared_s = 0.0;
@@ -384,6 +399,14 @@ pub fn diff_traces<RA: BufRead, RB: BufRead>(
     while side_b.peek(diag)? {
         side_b.apply_peeked();
     }
+    if let Some(e) = side_a.records.nothing_read(side_a.count) {
+        return Err(e.context("reading A"));
+    }
+    if let Some(e) = side_b.records.nothing_read(side_b.count) {
+        return Err(e.context("reading B"));
+    }
+    side_a.records.warn_at_end(diag);
+    side_b.records.warn_at_end(diag);
 
     let mut only_a = Vec::new();
     let mut only_b = Vec::new();
@@ -516,6 +539,15 @@ pub fn run(args: &DiffArgs) -> anyhow::Result<()> {
     if input::is_stdin(&args.a) && input::is_stdin(&args.b) {
         anyhow::bail!("only one of A and B can be stdin");
     }
+    let read = |profile: Option<&Path>| -> anyhow::Result<input::ReadOptions> {
+        Ok(input::ReadOptions {
+            strict: args.strict,
+            delta_timestamps: args.delta_timestamps,
+            profile: input::load_profile(profile)?,
+        })
+    };
+    let read_a = read(args.profile.as_deref())?;
+    let read_b = read(args.profile_b.as_deref().or(args.profile.as_deref()))?;
     let a = input::open(&args.a)?;
     let b = input::open(&args.b)?;
     let opts = DiffOptions {
@@ -524,7 +556,8 @@ pub fn run(args: &DiffArgs) -> anyhow::Result<()> {
         tolerances: args.tolerances.clone(),
         signals: args.signals.clone(),
         offset_s: args.offset_ms * 1e-3,
-        strict: args.strict,
+        read_a,
+        read_b,
     };
     let report = diff_traces(a, b, &opts, &mut io::stderr())?;
     let text = format_report(

@@ -46,12 +46,43 @@ pub use firmware_bridge::trace::TraceRecord;
 /// Arguments shared by the commands that read one trace.
 #[derive(Debug, Clone, clap::Args)]
 pub struct InputArgs {
-    /// The `candump -L` / `candump -l` log, or `-` for stdin.
+    /// The `candump -L` / `candump -l` log or `candump` screen output (with or without `-t`), or
+    /// `-` for stdin.
     pub file: PathBuf,
     /// Stop at the first malformed line with a non-zero exit status (default: report it with its line
     /// number on stderr and skip it).
     #[arg(long)]
     pub strict: bool,
+    /// Machine profile the trace was recorded with (`run --profile`, `excavator-sim --profile`,
+    /// `demo --profile`): its wire frames are read as the project's messages.
+    #[arg(long, value_name = "FILE")]
+    pub profile: Option<PathBuf>,
+    /// The trace is `candump -td` output: each timestamp is the time since the previous frame.
+    #[arg(long)]
+    pub delta_timestamps: bool,
+}
+
+impl InputArgs {
+    /// How to read the trace, the profile's wire frames translated to the project's messages.
+    ///
+    /// # Errors
+    /// The profile cannot be loaded.
+    pub fn read_options(&self) -> anyhow::Result<input::ReadOptions> {
+        Ok(input::ReadOptions {
+            profile: input::load_profile(self.profile.as_deref())?,
+            ..self.wire_options()
+        })
+    }
+
+    /// How to read the trace as recorded (wire frames, for commands that handle the profile
+    /// themselves).
+    pub fn wire_options(&self) -> input::ReadOptions {
+        input::ReadOptions {
+            strict: self.strict,
+            delta_timestamps: self.delta_timestamps,
+            profile: None,
+        }
+    }
 }
 
 /// The `trace` subcommands.

@@ -535,8 +535,8 @@ pub struct PlotOptions {
     pub max_points: usize,
     /// Image width, px.
     pub width: u32,
-    /// Fail on malformed lines.
-    pub strict: bool,
+    /// How to read the trace (`--strict`, its profile).
+    pub read: input::ReadOptions,
 }
 
 impl Default for PlotOptions {
@@ -549,7 +549,7 @@ impl Default for PlotOptions {
             to_s: None,
             max_points: 5000,
             width: 1400,
-            strict: false,
+            read: input::ReadOptions::default(),
         }
     }
 }
@@ -582,7 +582,7 @@ pub fn plot_trace<R: std::io::BufRead>(
     let mut data = PlotData::new(&refs, opts.preset, kin, opts.max_points);
     data.from_s = opts.from_s;
     data.to_s = opts.to_s;
-    let read = input::for_each_record(input, opts.strict, diag, |rec| {
+    let read = input::for_each_record(input, opts.read.clone(), diag, |rec| {
         data.add(&rec);
         Ok(true)
     })?;
@@ -649,6 +649,7 @@ pub fn plot_trace<R: std::io::BufRead>(
 /// # Errors
 /// As [`plot_trace`].
 pub fn run(args: &PlotArgs) -> anyhow::Result<()> {
+    let read = args.input.read_options()?;
     let reader = input::open(&args.input.file)?;
     let opts = PlotOptions {
         signals: args.signals.clone(),
@@ -658,9 +659,10 @@ pub fn run(args: &PlotArgs) -> anyhow::Result<()> {
         to_s: args.to,
         max_points: args.max_points,
         width: args.width,
-        strict: args.input.strict,
+        read,
     };
-    let summary = plot_trace(reader, &args.out, &opts, &mut std::io::stderr())?;
+    let summary = plot_trace(reader, &args.out, &opts, &mut std::io::stderr())
+        .with_context(|| format!("plotting {}", args.input.file.display()))?;
     eprintln!(
         "{}: {} record(s) read, {} series drawn",
         args.out.display(),

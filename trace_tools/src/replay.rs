@@ -12,6 +12,12 @@
 //! counted unless `--allow-control-frames` is given: on a bus with a gateway they request arming and
 //! drive valves. The gateway refuses a recording of another session ([`firmware_bridge::secoc`]), but
 //! a replay is no place to rely on that; the flag is for benches without a machine.
+//!
+//! A trace recorded with a machine profile holds that gateway's wire frames: with `--profile FILE`
+//! each frame is translated to the project's message it carries and withheld when that is a
+//! controller frame or a heartbeat, and the wire frame as recorded is what is sent. Without a
+//! profile, frames that are not the project's messages are sent and counted, with a warning that a
+//! profile trace needs `--profile`.
 
 use std::collections::HashSet;
 use std::io::{self, Write as _};
@@ -50,6 +56,12 @@ pub struct ReplayArgs {
     /// machine.
     #[arg(long)]
     pub allow_control_frames: bool,
+    /// Machine profile the trace was recorded with: its controller frames are withheld too.
+    #[arg(long, value_name = "FILE")]
+    pub profile: Option<PathBuf>,
+    /// The trace is `candump -td` output (timestamps since the previous frame).
+    #[arg(long)]
+    pub delta_timestamps: bool,
 }
 
 /// How to replay (the options of [`ReplayArgs`] apart from the file and the interface).
@@ -65,6 +77,10 @@ pub struct ReplayOptions {
     pub strict: bool,
     /// Send the controller's frames and heartbeats too (see the module docs).
     pub allow_control_frames: bool,
+    /// The machine profile of the trace's wire frames.
+    pub profile: Option<std::sync::Arc<firmware_bridge::profile::Profile>>,
+    /// Screen-format timestamps are `candump -td` deltas.
+    pub delta_timestamps: bool,
 }
 
 /// True for a frame that can arm the gateway or drive a valve: from the controller's source address,
@@ -125,6 +141,8 @@ pub struct ReplaySummary {
     pub unsendable: u64,
     /// Controller frames and heartbeats withheld (without `--allow-control-frames`).
     pub withheld_control: u64,
+    /// Frames sent that are not the project's messages (or with a profile, not in it).
+    pub foreign: u64,
     /// Malformed lines skipped.
     pub malformed: u64,
     /// Passes over the file.
@@ -148,7 +166,16 @@ pub async fn replay_pass<B: Bus>(
     let mut clock = ReplayClock::new(options.speed)?;
     let start = tokio::time::Instant::now();
     let mut reported = 0u64;
-    for item in Records::new(input) {
+    let mut records = Records::with_options(
+        input,
+        &input::ReadOptions {
+            strict,
+            delta_timestamps: options.delta_timestamps,
+            profile: None,
+        },
+    );
+    let mut read = 0u64;
+    for item in records.by_ref() {
         let rec = match item {
             Ok(rec) => rec,
             Err(TraceError::Malformed { line, kind } | TraceError::Truncated { line, kind }) => {
@@ -164,6 +191,7 @@ pub async fn replay_pass<B: Bus>(
             }
             Err(e) => return Err(anyhow::Error::new(e).context("reading the trace")),
         };
+        read += 1;
         let at = start + clock.offset(rec.timestamp_ns);
         let frame = rec.frame;
         if !ids.is_empty() {
@@ -180,9 +208,17 @@ pub async fn replay_pass<B: Bus>(
             summary.unsendable += 1;
             continue;
         }
-        if !options.allow_control_frames && is_control_frame(&frame) {
+        let project = match &options.profile {
+            Some(p) => p.from_wire(&frame).ok(),
+            None => Some(frame),
+        };
+        let project = project.filter(|f| super::signals::message_of(f).is_some());
+        if !options.allow_control_frames && project.as_ref().is_some_and(is_control_frame) {
             summary.withheld_control += 1;
             continue;
+        }
+        if project.is_none() {
+            summary.foreign += 1;
         }
         tokio::time::sleep_until(at).await;
         summary.max_late = summary
@@ -193,6 +229,10 @@ pub async fn replay_pass<B: Bus>(
             .with_context(|| format!("sending on {}", bus.interface()))?;
         summary.sent += 1;
     }
+    if let Some(e) = records.nothing_read(read) {
+        return Err(e);
+    }
+    records.warn_at_end(&mut io::stderr());
     summary.passes += 1;
     Ok(())
 }
@@ -250,6 +290,8 @@ pub async fn run(args: &ReplayArgs) -> anyhow::Result<()> {
         repeat: args.repeat,
         strict: args.strict,
         allow_control_frames: args.allow_control_frames,
+        profile: input::load_profile(args.profile.as_deref())?,
+        delta_timestamps: args.delta_timestamps,
     };
     let mut err = io::stderr();
     if args.allow_control_frames {
@@ -259,7 +301,16 @@ pub async fn run(args: &ReplayArgs) -> anyhow::Result<()> {
             args.iface
         );
     }
-    let summary = replay_to(&bus, &args.file, &options, stop).await?;
+    let summary = replay_to(&bus, &args.file, &options, stop)
+        .await
+        .with_context(|| format!("replaying {}", args.file.display()))?;
+    if summary.foreign > 0 && options.profile.is_none() {
+        let _ = writeln!(
+            err,
+            "warning: sent {} frame(s) that are not the project's messages: a trace recorded with a machine profile needs --profile FILE so that its controller frames are withheld",
+            summary.foreign
+        );
+    }
     if summary.withheld_control > 0 {
         let _ = writeln!(
             err,

@@ -15,6 +15,15 @@
 //! - Invalid: other reasons [`Message::decode`] rejects a frame of a known message (DLC, range).
 //! - Bus load: `busload::stuffed_bits` of every classic frame; the total over the trace's span as in
 //!   `busload::measured_load`, the peak over fixed windows (`--window-ms`, 100 ms) from the first frame.
+//! - Expected messages: every periodic message of the schedule that the trace never carries is listed
+//!   as absent.
+//!
+//! With `--profile FILE` the trace holds that gateway's wire frames: each is translated to the
+//! project's message it carries ([`Profile::from_wire`]) and checked as above (counters, checksum,
+//! validity), against the profile's periods (its DBC's `GenMsgCycleTime` and `period_ms`) instead of
+//! the project's schedule; the id column shows the wire id, the message column the project's message
+//! and the wire message carrying it; frames the profile does not map are the unknown ones. The bus
+//! load is that of the wire frames.
 
 use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
@@ -25,6 +34,7 @@ use firmware_bridge::busload;
 use firmware_bridge::dbc::{self, DecodeError};
 use firmware_bridge::frame::{CanId, FrameKind};
 use firmware_bridge::messages::{self, Message};
+use firmware_bridge::profile::Profile;
 use firmware_bridge::trace::TraceRecord;
 use firmware_bridge::transport::BusFault;
 use serde::Serialize;
@@ -59,7 +69,7 @@ pub struct StatsArgs {
 }
 
 /// Settings of [`StatsCollector`].
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct StatsOptions {
     /// Gap threshold for every id, s (`None`: 3x the nominal period).
     pub gap_s: Option<f64>,
@@ -67,6 +77,8 @@ pub struct StatsOptions {
     pub bitrate: u32,
     /// Peak load window, s.
     pub window_s: f64,
+    /// The machine profile of the trace's wire frames (see the module docs).
+    pub profile: Option<std::sync::Arc<Profile>>,
 }
 
 impl Default for StatsOptions {
@@ -75,6 +87,21 @@ impl Default for StatsOptions {
             gap_s: None,
             bitrate: busload::BITRATE,
             window_s: 0.1,
+            profile: None,
+        }
+    }
+}
+
+impl StatsOptions {
+    /// The nominal period of `msg` on the trace's gateway, s: the profile's, or the project's
+    /// schedule's.
+    fn nominal_period_s(&self, msg: &dbc::MessageDesc) -> Option<f64> {
+        match &self.profile {
+            Some(p) => p
+                .route_of(msg.name)
+                .filter(|(ms, _)| *ms > 0)
+                .map(|(ms, _)| f64::from(ms) * 1e-3),
+            None => signals::nominal_period_s(msg),
         }
     }
 }
@@ -138,8 +165,13 @@ pub struct StatsReport {
     pub malformed_line_numbers: Vec<u64>,
     /// Line of a truncated last line.
     pub truncated_at_line: Option<u64>,
-    /// Frames whose id is not a project message (unknown PGN, 11-bit, remote, FD).
+    /// Frames whose id is not a project message (unknown PGN, 11-bit, remote, FD), or with a profile
+    /// frames the profile does not map.
     pub unknown_id_frames: u64,
+    /// The profile the frames were read with.
+    pub profile: Option<String>,
+    /// Periodic messages of the schedule (or the profile) that the trace does not carry.
+    pub absent: Vec<String>,
     /// Error frames.
     pub error_frames: u64,
     /// Error frames by most severe condition.
@@ -162,6 +194,8 @@ pub struct StatsReport {
 
 #[derive(Debug, Clone)]
 struct IdState {
+    /// The id on the wire, as candump prints it.
+    id: String,
     label: String,
     msg: Option<&'static dbc::MessageDesc>,
     counter: Option<(&'static dbc::SignalDesc, u32)>,
@@ -204,11 +238,19 @@ pub struct StatsCollector {
 }
 
 /// A key that keeps 11-bit, 29-bit and error ids apart.
-fn id_key(rec: &TraceRecord) -> u32 {
-    match (rec.frame.kind(), rec.frame.id()) {
+fn id_key(frame: &firmware_bridge::CanFrame) -> u32 {
+    match (frame.kind(), frame.id()) {
         (FrameKind::Error, _) => u32::MAX,
         (_, CanId::Extended(id)) => id | 0x8000_0000,
         (_, CanId::Standard(id)) => u32::from(id),
+    }
+}
+
+/// The id as candump prints it.
+fn id_text(frame: &firmware_bridge::CanFrame) -> String {
+    match frame.id() {
+        CanId::Extended(id) => format!("{id:08X}"),
+        CanId::Standard(id) => format!("{id:03X}"),
     }
 }
 
@@ -243,11 +285,25 @@ impl StatsCollector {
         }
     }
 
-    fn new_state(&self, rec: &TraceRecord) -> IdState {
-        let frame = &rec.frame;
-        let known = signals::message_of(frame);
-        let label = match (known, frame.kind(), frame.id()) {
-            (Some((_, m)), _, _) => m.name.to_string(),
+    /// The state of a new id: `frame` is the project's frame (translated when there is a profile,
+    /// `None` when the profile does not map `wire`).
+    fn new_state(
+        &self,
+        rec: &TraceRecord,
+        wire: &firmware_bridge::CanFrame,
+        frame: Option<&firmware_bridge::CanFrame>,
+    ) -> IdState {
+        let known = frame.and_then(signals::message_of);
+        let label = match (known, wire.kind(), wire.id()) {
+            (Some((_, m)), _, _) => {
+                match self.opts.profile.as_ref().and_then(|p| p.route_of(m.name)) {
+                    Some((_, wire_name)) if wire_name != m.name => {
+                        format!("{} ({wire_name})", m.name)
+                    }
+                    _ => m.name.to_string(),
+                }
+            }
+            (None, _, _) if frame.is_none() => "not in profile".to_string(),
             (None, FrameKind::Remote, _) => "remote".to_string(),
             (None, FrameKind::Fd { .. }, _) => "CAN FD".to_string(),
             (None, _, CanId::Standard(_)) => "11-bit".to_string(),
@@ -260,11 +316,12 @@ impl StatsCollector {
                 .find(|s| s.name == "AliveCounter" || s.name == "SequenceCounter")
                 .map(|s| (s, u32::from(s.len)))
         });
-        let gap_s = self
-            .opts
-            .gap_s
-            .or_else(|| msg.and_then(signals::nominal_period_s).map(|p| 3.0 * p));
+        let gap_s = self.opts.gap_s.or_else(|| {
+            msg.and_then(|m| self.opts.nominal_period_s(m))
+                .map(|p| 3.0 * p)
+        });
         IdState {
+            id: id_text(wire),
             label,
             msg,
             counter,
@@ -314,16 +371,23 @@ impl StatsCollector {
             *self.error_kinds.entry(kind).or_insert(0) += 1;
             return;
         }
-        if signals::message_of(frame).is_none() {
+        let translated = match &self.opts.profile {
+            Some(p) => p.from_wire(frame).ok(),
+            None => Some(*frame),
+        };
+        if translated.as_ref().and_then(signals::message_of).is_none() {
             self.unknown += 1;
         }
-        let key = id_key(rec);
+        // A multiplexed wire id carries several messages: one state per project message.
+        let key = translated
+            .as_ref()
+            .map_or_else(|| id_key(frame) ^ 0x4000_0000, id_key);
         if !self.ids.contains_key(&key) {
             if self.ids.len() >= MAX_IDS {
                 self.untracked += 1;
                 return;
             }
-            let state = self.new_state(rec);
+            let state = self.new_state(rec, frame, translated.as_ref());
             self.ids.insert(key, state);
         }
         let Some(st) = self.ids.get_mut(&key) else {
@@ -352,7 +416,7 @@ impl StatsCollector {
                 st.last_ns = rec.timestamp_ns;
             }
         }
-        let Some(desc) = st.msg else {
+        let (Some(desc), Some(frame)) = (st.msg, translated.as_ref()) else {
             return;
         };
         let data = frame.data();
@@ -411,16 +475,23 @@ impl StatsCollector {
         let peak_load = (self.peak_bits > 0).then(|| self.peak_bits as f64 / window_s / bitrate);
         let peak_at_s = peak_load.map(|_| self.peak_window as f64 * window_s);
 
+        let seen: Vec<&str> = self
+            .ids
+            .values()
+            .filter_map(|st| st.msg.map(|m| m.name))
+            .collect();
+        let absent = dbc::MESSAGES
+            .iter()
+            .filter(|m| self.opts.nominal_period_s(m).is_some() && !seen.contains(&m.name))
+            .map(|m| m.name.to_string())
+            .collect();
         let mut keyed: Vec<(u32, IdState)> = self.ids.into_iter().collect();
-        keyed.sort_by_key(|(k, _)| *k);
+        keyed.sort_by(|(ka, a), (kb, b)| (a.id.len(), &a.id, ka).cmp(&(b.id.len(), &b.id, kb)));
+        let opts = &self.opts;
         let ids = keyed
             .into_iter()
-            .map(|(key, st)| {
-                let id = if key & 0x8000_0000 != 0 {
-                    format!("{:08X}", key & 0x1FFF_FFFF)
-                } else {
-                    format!("{key:03X}")
-                };
+            .map(|(_, st)| {
+                let id = st.id;
                 let span = st.last_ns.saturating_sub(st.first_ns) as f64 * 1e-9;
                 let std = (st.periods >= 2).then(|| (st.m2 / (st.periods - 1) as f64).sqrt());
                 let is_heartbeat = st
@@ -431,7 +502,10 @@ impl StatsCollector {
                     message: st.label,
                     count: st.count,
                     rate_hz: (st.periods >= 1 && span > 0.0).then(|| st.periods as f64 / span),
-                    nominal_hz: st.msg.and_then(signals::nominal_period_s).map(|p| 1.0 / p),
+                    nominal_hz: st
+                        .msg
+                        .and_then(|m| opts.nominal_period_s(m))
+                        .map(|p| 1.0 / p),
                     period_mean_ms: (st.periods >= 1).then_some(st.mean_s * 1e3),
                     period_std_ms: std.map(|s| s * 1e3),
                     period_max_ms: (st.periods >= 1).then_some(st.max_s * 1e3),
@@ -453,6 +527,8 @@ impl StatsCollector {
             malformed_line_numbers: read.malformed_lines.clone(),
             truncated_at_line: read.truncated_at,
             unknown_id_frames: self.unknown,
+            profile: self.opts.profile.as_ref().map(|p| p.origin().to_string()),
+            absent,
             error_frames: self.error_frames,
             error_frame_kinds: self.error_kinds,
             untracked_frames: self.untracked,
@@ -473,11 +549,11 @@ impl StatsCollector {
 pub fn collect<R: BufRead>(
     input: R,
     opts: StatsOptions,
-    strict: bool,
+    read: impl Into<input::ReadOptions>,
     diag: &mut dyn Write,
 ) -> anyhow::Result<StatsReport> {
     let mut collector = StatsCollector::new(opts);
-    let read = input::for_each_record(input, strict, diag, |rec| {
+    let read = input::for_each_record(input, read, diag, |rec| {
         collector.add(&rec);
         Ok(true)
     })?;
@@ -507,6 +583,15 @@ pub fn format_report(r: &StatsReport) -> String {
         r.unknown_id_frames,
         r.error_frames
     );
+    if let Some(p) = &r.profile {
+        let _ = writeln!(
+            s,
+            "read with profile {p}: unknown ids are frames it does not map; rates against its periods"
+        );
+    }
+    if !r.absent.is_empty() {
+        let _ = writeln!(s, "periodic messages absent: {}", r.absent.join(", "));
+    }
     if !r.malformed_line_numbers.is_empty() {
         let lines: Vec<String> = r
             .malformed_line_numbers
@@ -619,13 +704,14 @@ pub fn format_report(r: &StatsReport) -> String {
 /// # Errors
 /// As [`collect`], and output errors.
 pub fn run(args: &StatsArgs) -> anyhow::Result<()> {
-    let reader = input::open(&args.input.file)?;
     let opts = StatsOptions {
         gap_s: args.gap_ms.map(|ms| ms * 1e-3),
         bitrate: args.bitrate,
         window_s: args.window_ms * 1e-3,
+        profile: input::load_profile(args.input.profile.as_deref())?,
     };
-    let report = collect(reader, opts, args.input.strict, &mut io::stderr())
+    let reader = input::open(&args.input.file)?;
+    let report = collect(reader, opts, args.input.wire_options(), &mut io::stderr())
         .with_context(|| format!("reading {}", args.input.file.display()))?;
     let text = if args.json {
         let mut j = serde_json::to_string_pretty(&report).context("formatting JSON")?;

@@ -209,3 +209,68 @@ fn schedule_is_relative_scaled_and_monotonic() {
         [0, 2, 6, 6, 20].map(Duration::from_millis).to_vec()
     );
 }
+
+/// Regression: `trace replay` of a trace recorded with a machine profile withheld 0 of its
+/// controller frames (it knew only the project's ids). With `--profile` every controller frame and
+/// heartbeat of the profile's wire protocol is withheld, the gateway's go out as recorded; without
+/// it they are sent, counted as frames that are not the project's.
+#[tokio::test(start_paused = true)]
+async fn replay_of_a_profile_trace_withholds_that_profiles_controller_frames() {
+    let profile_path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../examples/other_gateway.toml"
+    );
+    let profile = std::sync::Arc::new(
+        firmware_bridge::profile::Profile::load(std::path::Path::new(profile_path)).unwrap(),
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let (_, frames) = fixture(dir.path(), 1170);
+    let mut text = String::new();
+    let mut control = 0u64;
+    let mut wire_frames = Vec::new();
+    for (t, canonical) in &frames {
+        // Network management does not cross this (non-J1939) wire bus.
+        let Ok(wire) = profile.to_wire(canonical) else {
+            continue;
+        };
+        if replay::is_control_frame(canonical) {
+            control += 1;
+        }
+        wire_frames.push(wire);
+        text += &firmware_bridge::trace::format_line(*t, "vcan0", &wire, None);
+        text.push('\n');
+    }
+    assert!(control > 500, "the fixture has the controller's traffic");
+    let path = dir.path().join("wire.log");
+    std::fs::write(&path, text).unwrap();
+
+    let bus = RecordingBus::new();
+    let options = ReplayOptions {
+        speed: 1.0,
+        profile: Some(profile.clone()),
+        ..ReplayOptions::default()
+    };
+    let summary = replay::replay_to(&bus, &path, &options, std::future::pending())
+        .await
+        .unwrap();
+    assert_eq!(summary.withheld_control, control);
+    assert_eq!(summary.sent, wire_frames.len() as u64 - control);
+    assert_eq!(summary.foreign, 0);
+    for (_, sent) in bus.sent() {
+        let canonical = profile.from_wire(&sent).unwrap();
+        assert!(!replay::is_control_frame(&canonical), "{sent:?} sent");
+        assert!(wire_frames.contains(&sent), "the wire frame as recorded");
+    }
+
+    // Without the profile nothing is recognised as the controller's: all sent, all foreign.
+    let bus = RecordingBus::new();
+    let options = ReplayOptions {
+        speed: 1.0,
+        ..ReplayOptions::default()
+    };
+    let summary = replay::replay_to(&bus, &path, &options, std::future::pending())
+        .await
+        .unwrap();
+    assert_eq!(summary.withheld_control, 0);
+    assert_eq!(summary.foreign, wire_frames.len() as u64);
+}

@@ -34,20 +34,22 @@ pub const MAX_REPLY_BYTES: usize = 64 * 1024 * 1024;
 #[derive(Debug, thiserror::Error)]
 pub enum ScanError {
     /// The TCP connection could not be opened.
-    #[error("cannot connect to the scan service at {addr}: {source}")]
+    // The causes are in the messages and not also `source`s: printed with the chain (`{:#}`) they
+    // would show again.
+    #[error("cannot connect to the scan service at {addr}: {error}")]
     Connect {
         /// The address.
         addr: String,
         /// The socket error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// Reading or writing failed.
-    #[error("scan connection to {addr}: {source}")]
+    #[error("scan connection to {addr}: {error}")]
     Io {
         /// The address.
         addr: String,
         /// The socket error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The service closed the connection before replying.
     #[error("the scan service at {addr} closed the connection")]
@@ -164,16 +166,16 @@ impl ScanClient {
     /// Sends the request and returns the reply line.
     async fn exchange(&mut self, request: &ScanRequest) -> Result<String, ScanError> {
         let addr = self.config.addr.clone();
-        let io = |source| ScanError::Io {
+        let io = |error| ScanError::Io {
             addr: addr.clone(),
-            source,
+            error,
         };
         if self.conn.is_none() {
             let stream = TcpStream::connect(&addr)
                 .await
-                .map_err(|source| ScanError::Connect {
+                .map_err(|error| ScanError::Connect {
                     addr: addr.clone(),
-                    source,
+                    error,
                 })?;
             // Small request lines: do not let Nagle hold them back.
             let _ = stream.set_nodelay(true);
@@ -382,6 +384,19 @@ mod tests {
             .await
             .unwrap_err();
         assert!(matches!(e, ScanError::Connect { .. }), "{e}");
+        // The cause once, as `run` prints the session's error with its chain: it was three times.
+        let ended = crate::session::driver::DriverError::Scan(Box::new(e));
+        let mut shown = ended.to_string();
+        let mut cause = std::error::Error::source(&ended);
+        while let Some(c) = cause {
+            shown += &format!(": {c}");
+            cause = c.source();
+        }
+        assert!(
+            shown.starts_with("range scan: cannot connect to the scan service at "),
+            "{shown}"
+        );
+        assert_eq!(shown.matches("refused").count(), 1, "{shown}");
 
         let addr = server(vec![
             Some(r#"{"error": "bad request: nope"}"#.to_owned()),

@@ -97,9 +97,10 @@ pub type BoxError = Box<dyn std::error::Error + Send + Sync + 'static>;
 /// Errors that end a session.
 #[derive(Debug, thiserror::Error)]
 pub enum DriverError {
-    /// The scan source failed.
+    /// The scan source failed. Its message carries its causes, so it is not also a `source` (the
+    /// chain would print them again).
     #[error("range scan: {0}")]
-    Scan(#[source] BoxError),
+    Scan(BoxError),
     /// The planned session failed outside planning (predefined start, the cycle refused an action).
     #[error(transparent)]
     Session(#[from] crate::session::planned::SessionError),

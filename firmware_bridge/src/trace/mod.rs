@@ -20,12 +20,18 @@
 //! ([`FormatError::FdFlags`]) instead of dropping the bits ([`Recorder`] counts such frames as
 //! rejected).
 //!
+//! The reader also takes `candump`'s screen format (without `-L`, with or without a `-t` timestamp):
+//! see [`parse_screen_line`]. A screen line without a timestamp gets time 0 and is counted
+//! ([`TraceReader::untimed`]).
+//!
 //! **Bounded input.** The reader never holds more than [`MAX_LINE_BYTES`] of a line: a longer line
 //! is malformed ([`LineError::TooLong`]), counted, and skipped up to the next newline without being
 //! buffered, so a file without newlines (or `/dev/zero`) is read in constant memory.
 
+mod candump;
 mod recorder;
 
+pub use candump::{ScreenLine, ScreenTime, is_screen_line, parse_screen_line};
 pub use recorder::{MAX_QUEUE_CAPACITY, Recorder, RecorderError, RecorderStats};
 
 use std::fmt::Write as _;
@@ -71,7 +77,10 @@ pub enum LineError {
     #[error("not UTF-8 text")]
     NotUtf8,
     /// Not 3 or 4 space-separated fields.
-    #[error("expected `(time) iface frame [R|T]`")]
+    #[error(
+        "expected `(time) iface id#data [R|T]` (candump -L) or `[(time)] iface id [len] data` \
+         (candump)"
+    )]
     Fields,
     /// The `(seconds.fraction)` field is malformed or its fraction is not 6 or 9 digits.
     #[error("bad timestamp (expected (seconds.ffffff) or (seconds.fffffffff))")]
@@ -486,6 +495,11 @@ pub struct TraceReader<R: BufRead> {
     /// An over-long line was reported and the rest of it, up to its newline, is still to be skipped.
     resync: bool,
     done: bool,
+    /// Screen-format timestamps are `candump -td` deltas ([`Self::with_delta_timestamps`]).
+    delta: bool,
+    /// The running sum of the deltas, ns.
+    delta_total_ns: u64,
+    untimed: u64,
 }
 
 /// What [`TraceReader::read_line`] found.
@@ -510,7 +524,55 @@ impl<R: BufRead> TraceReader<R> {
             buf: Vec::with_capacity(MAX_LINE_BYTES),
             resync: false,
             done: false,
+            delta: false,
+            delta_total_ns: 0,
+            untimed: 0,
         }
+    }
+
+    /// Reads the timestamps of screen-format lines as `candump -td` prints them: the time since the
+    /// previous frame, summed into times since the first (`candump -L` lines stay absolute).
+    #[must_use]
+    pub fn with_delta_timestamps(mut self, delta: bool) -> Self {
+        self.delta = delta;
+        self
+    }
+
+    /// Records read from screen-format lines without a timestamp (plain `candump`), given time 0.
+    pub fn untimed(&self) -> u64 {
+        self.untimed
+    }
+
+    /// The text of the line read last (lossy UTF-8), for naming a bad line in a message.
+    pub fn current_line(&self) -> String {
+        String::from_utf8_lossy(&self.buf)
+            .trim_end_matches('\r')
+            .to_string()
+    }
+
+    /// A line in either format.
+    fn parse_text(&mut self, text: &str) -> std::result::Result<TraceRecord, LineError> {
+        if !is_screen_line(text) {
+            return parse_line(text);
+        }
+        let line = parse_screen_line(text)?;
+        let timestamp_ns = match line.time {
+            ScreenTime::None => {
+                self.untimed = self.untimed.saturating_add(1);
+                0
+            }
+            ScreenTime::Stamp(ns) if self.delta => {
+                self.delta_total_ns = self.delta_total_ns.saturating_add(ns);
+                self.delta_total_ns
+            }
+            ScreenTime::Stamp(ns) => ns,
+        };
+        Ok(TraceRecord {
+            timestamp_ns,
+            interface: line.interface,
+            frame: line.frame,
+            direction: line.direction,
+        })
     }
 
     /// Malformed lines so far, over-long and truncated last lines included ([`ReadMode::Skip`],
@@ -671,16 +733,19 @@ impl<R: BufRead> Iterator for TraceReader<R> {
                 Err(source) => return self.io_error(source),
             };
             self.line_no = self.line_no.saturating_add(1);
-            let parsed = match std::str::from_utf8(&self.buf) {
+            let buf = std::mem::take(&mut self.buf);
+            let parsed = match std::str::from_utf8(&buf) {
                 Ok(text) => {
                     let text = text.trim_end_matches('\r');
                     if text.trim().is_empty() {
+                        self.buf = buf;
                         continue;
                     }
-                    parse_line(text)
+                    self.parse_text(text)
                 }
                 Err(_) => Err(LineError::NotUtf8),
             };
+            self.buf = buf;
             match parsed {
                 Ok(rec) => return Some(Ok(rec)),
                 Err(kind) if !complete => {
@@ -767,6 +832,23 @@ mod tests {
             let again = parse_line(&line).unwrap();
             assert_eq!(again.frame, r.frame);
         }
+    }
+
+    /// Plain `candump vcan0` output was refused as "bad direction marker"; the screen format and
+    /// its `-td` deltas read, mixed with `-L` lines.
+    #[test]
+    fn candump_screen_lines_and_their_deltas_read() {
+        let text = "  vcan0  123   [1]  AA\n (000.000000)  vcan0  123   [1]  AA\n \
+                    (000.010000)  vcan0  123   [1]  AA\n (000.005000)  vcan0  123   [1]  AA\n";
+        let plain: Vec<_> = TraceReader::new(text.as_bytes(), ReadMode::Stop)
+            .map(|r| r.unwrap().timestamp_ns)
+            .collect();
+        assert_eq!(plain, [0, 0, 10_000_000, 5_000_000]);
+        let mut reader =
+            TraceReader::new(text.as_bytes(), ReadMode::Stop).with_delta_timestamps(true);
+        let delta: Vec<_> = reader.by_ref().map(|r| r.unwrap().timestamp_ns).collect();
+        assert_eq!(delta, [0, 0, 10_000_000, 15_000_000]);
+        assert_eq!(reader.untimed(), 1);
     }
 
     #[test]

@@ -165,7 +165,8 @@ pub enum Error {
     },
     /// The kernel has no SocketCAN support (no `AF_CAN`).
     #[error(
-        "SocketCAN is not available in this kernel (AF_CAN unsupported; load can and can_raw): {0}"
+        "SocketCAN is not available in this kernel ({0}): load its modules (`modprobe can_raw \
+         vcan`), or run the vcan tests in scripts/test-all's VM"
     )]
     NoSocketCan(std::io::Error),
     /// The transmit queue stayed full (`ENOBUFS`) for every retry.

@@ -127,16 +127,35 @@ pub struct SocketCanBus {
     kernel_stamps: bool,
 }
 
+/// Whether the kernel can make `AF_CAN` sockets at all: a raw CAN socket bound to every interface
+/// (index 0), closed at once.
+fn af_can_available() -> io::Result<()> {
+    use socketcan::Socket as _;
+    socketcan::CanSocket::open_iface(0).map(drop)
+}
+
 fn map_open_error(iface: &str, e: io::Error) -> Error {
+    classify_open_error(iface, e, af_can_available)
+}
+
+/// The error of opening `iface`. The interface's name is looked up before any CAN socket is made,
+/// so on a kernel without SocketCAN the lookup fails first (`ENODEV`): then `af_can` tells a
+/// missing interface from a missing protocol.
+fn classify_open_error(
+    iface: &str,
+    e: io::Error,
+    af_can: impl FnOnce() -> io::Result<()>,
+) -> Error {
     const ENODEV: i32 = 19;
     const EAFNOSUPPORT: i32 = 97;
+    let not_found = e.raw_os_error() == Some(ENODEV) || e.kind() == io::ErrorKind::NotFound;
     match e.raw_os_error() {
-        Some(ENODEV) => Error::InterfaceNotFound {
-            iface: iface.to_string(),
-        },
         Some(EAFNOSUPPORT) => Error::NoSocketCan(e),
-        _ if e.kind() == io::ErrorKind::NotFound => Error::InterfaceNotFound {
-            iface: iface.to_string(),
+        _ if not_found => match af_can() {
+            Err(probe) if probe.raw_os_error() == Some(EAFNOSUPPORT) => Error::NoSocketCan(probe),
+            _ => Error::InterfaceNotFound {
+                iface: iface.to_string(),
+            },
         },
         _ => Error::Io {
             iface: iface.to_string(),
@@ -337,9 +356,38 @@ mod tests {
             "unexpected error: {text}"
         );
         assert!(
-            text.contains("nosuchcan0") || text.contains("AF_CAN"),
+            text.contains("nosuchcan0") || text.contains("SocketCAN is not available"),
             "{text}"
         );
+    }
+
+    /// The no-SocketCAN message existed but was never reached: the interface's name is looked up
+    /// first and fails with ENODEV on such a kernel, which gave the vcan advice instead.
+    #[test]
+    fn a_kernel_without_af_can_gets_the_no_socketcan_message() {
+        let enodev = || io::Error::from_raw_os_error(19);
+        let no_af_can = || Err(io::Error::from_raw_os_error(97));
+        let err = classify_open_error("vcan0", enodev(), no_af_can);
+        assert_eq!(
+            err.to_string(),
+            "SocketCAN is not available in this kernel (Address family not supported by protocol \
+             (os error 97)): load its modules (`modprobe can_raw vcan`), or run the vcan tests in \
+             scripts/test-all's VM"
+        );
+        let with_af_can = || Ok(());
+        assert!(matches!(
+            classify_open_error("vcan0", enodev(), with_af_can),
+            Error::InterfaceNotFound { .. }
+        ));
+        // What this kernel says, whichever it is.
+        let probe = af_can_available();
+        let err = SocketCanBus::open("nosuchcan0").unwrap_err();
+        match probe {
+            Err(e) if e.raw_os_error() == Some(97) => {
+                assert!(matches!(err, Error::NoSocketCan(_)), "{err}");
+            }
+            _ => assert!(matches!(err, Error::InterfaceNotFound { .. }), "{err}"),
+        }
     }
 
     #[test]
