@@ -47,6 +47,7 @@ pub mod planned;
 pub mod run;
 pub mod safety;
 pub mod scan_client;
+pub mod sd_notify;
 pub mod session;
 pub mod session_state;
 pub mod state_file;
