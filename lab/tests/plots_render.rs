@@ -54,7 +54,16 @@ fn demo(out: &Path, digs: &str, seed: &str) {
 
 fn render(svg: &str) -> Pixmap {
     let mut opt = resvg::usvg::Options::default();
-    opt.fontdb_mut().load_system_fonts();
+    let fonts = opt.fontdb_mut();
+    fonts.load_system_fonts();
+    // The plots ask for "sans-serif", which fontdb maps to Arial unless told otherwise.
+    if let Some(family) = ["DejaVu Sans", "Liberation Sans"].into_iter().find(|name| {
+        fonts
+            .faces()
+            .any(|f| f.families.iter().any(|(n, _)| n == name))
+    }) {
+        fonts.set_sans_serif_family(family);
+    }
     let tree = resvg::usvg::Tree::from_str(svg, &opt).unwrap();
     let size = tree.size().to_int_size();
     let mut pixmap = Pixmap::new(size.width(), size.height()).unwrap();
