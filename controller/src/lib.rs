@@ -36,6 +36,7 @@
 //!   - [`io::operator`]: operator control of a running controller over a Unix socket (status, pause,
 //!     resume, e-stop, reset, stop), served beside the loop and applied before each step.
 //!   - [`io::scan_client`]: the range-scan client of the real-time loop (JSON lines over TCP).
+//!   - [`io::sd_notify`]: systemd readiness and watchdog notifications from the loop.
 //!
 //! `io` uses `session` and `step`, `session` uses `step` (and the driver's observer hook takes the
 //! operator socket's sender), the step's parts use `check`, and `config` gathers the parts'

@@ -55,6 +55,9 @@ pub enum Command {
     /// calibration report; --install copies them into a config folder (docs/models.md,
     /// "Calibration"). Long: not part of CI.
     Calibrate(calibration::CalibrateArgs),
+    /// Write the manual pages and shell completions of this command line (scripts/package).
+    #[command(hide = true)]
+    GenerateDocs(crate::docs::DocsArgs),
 }
 
 /// Arguments of `excavator-ctl demo`: the session's and the live view's.

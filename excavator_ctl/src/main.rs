@@ -4,6 +4,7 @@
 
 use clap::Parser;
 mod cli;
+mod docs;
 
 use cli::{Cli, Command};
 
@@ -116,6 +117,7 @@ fn main() -> std::process::ExitCode {
         Command::Trace { cmd } => runtime.block_on(trace_tools::run(cmd)),
         Command::Model { cmd } => lab::model::run(cmd),
         Command::Discrepancy(args) => discrepancy::command::run(args),
+        Command::GenerateDocs(args) => docs::generate(&args),
         Command::Calibrate(args) => calibration::run(&args).map(|report| {
             println!("{}", calibration::report_markdown(&report));
             println!("wrote {}", args.out.display());

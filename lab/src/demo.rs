@@ -769,7 +769,8 @@ pub fn write_planner_outputs(out: &Path, s: &PlannedSession, pose: [f64; 3]) -> 
         &path,
         crate::plots::bench_svg(
             s.terrain(),
-            pose,
+            crate::plots::ElevationScale::spanning([s.terrain()]),
+            &crate::plots::MachineTrack::default().at(pose),
             "the planner's terrain map at the end (elevation, m)",
         )?,
     )
@@ -796,16 +797,30 @@ pub fn write_plots(
         "trajectories.svg",
         crate::plots::trajectories_svg(&summary.digs)?.as_bytes(),
     )?;
+    // One colour scale for the maps meant to be compared.
+    let scale = crate::plots::ElevationScale::spanning(
+        terrain
+            .iter()
+            .flat_map(|&(b, a)| [b, a])
+            .chain(snapshots.iter().map(|s| &s.terrain)),
+    );
+    let track =
+        |n: usize| crate::plots::MachineTrack::of_digs(&summary.digs[..n.min(summary.digs.len())]);
     if let Some((before, after)) = terrain {
         write(
             "terrain_before.svg",
-            crate::plots::terrain_svg(before, "terrain before the session (elevation, m)")?
+            crate::plots::terrain_svg(before, scale, &track(1), "terrain before the session")?
                 .as_bytes(),
         )?;
         write(
             "terrain_after.svg",
-            crate::plots::terrain_svg(after, "terrain after the session (elevation, m)")?
-                .as_bytes(),
+            crate::plots::terrain_svg(
+                after,
+                scale,
+                &track(usize::MAX),
+                "terrain after the session",
+            )?
+            .as_bytes(),
         )?;
     }
     write(
@@ -818,9 +833,10 @@ pub fn write_plots(
                 &format!("bench_after_{:03}.svg", snap.digs),
                 crate::plots::bench_svg(
                     &snap.terrain,
-                    snap.pose,
+                    scale,
+                    &track(snap.digs).at(snap.pose),
                     &format!(
-                        "bench after {} digs, {} backups ({}; elevation, m)",
+                        "bench after {} digs, {} backups ({})",
                         snap.digs, snap.backups, summary.strategy
                     ),
                 )?

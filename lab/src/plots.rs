@@ -13,8 +13,8 @@ use plotters::prelude::*;
 
 use onboard::record::{DigRecord, TipPoint};
 
-use trace_tools::plot::color;
 pub(crate) use trace_tools::plot::err;
+use trace_tools::plot::{LegendMark, color, draw_legend_column, tick_label};
 
 /// Draws an SVG image of `size` pixels on a white background with `draw`, and returns its text.
 fn svg_image(
@@ -32,7 +32,9 @@ fn svg_image(
 }
 
 /// Tip trajectories of every dig in the digging plane (base frame, x forward of the swing axis, z up),
-/// each over the true terrain section along its plane before the dig (dashed, same colour).
+/// each over the true terrain section along its plane before the dig (thin, faint, same colour),
+/// coloured by dig number on the heat scale with its colour bar beside the chart. Each curve is
+/// decimated to at most [`MAX_CURVE_POINTS`] points for the picture.
 ///
 /// # Errors
 /// A plotting error (not expected for finite data).
@@ -56,8 +58,22 @@ pub fn trajectories_svg(digs: &[DigRecord]) -> anyhow::Result<String> {
     } else {
         4.5
     };
-    svg_image((900, 560), |root| {
-        let mut chart = ChartBuilder::on(root)
+    let (first, last) = match (digs.first(), digs.last()) {
+        (Some(a), Some(b)) => (f64::from(a.index), f64::from(b.index)),
+        _ => (0.0, 1.0),
+    };
+    let dig_colour = |index: u32| {
+        if last > first {
+            heat((f64::from(index) - first) / (last - first))
+        } else {
+            heat(0.0)
+        }
+    };
+    const WIDTH: u32 = 960;
+    const HEIGHT: u32 = 560;
+    svg_image((WIDTH, HEIGHT), |root| {
+        let (plot, strip) = root.split_horizontally(WIDTH - COLOUR_BAR_STRIP_PX);
+        let mut chart = ChartBuilder::on(&plot)
             .caption(
                 "bucket-tip trajectories per dig over the pre-dig terrain section (base frame)",
                 ("sans-serif", 16),
@@ -71,20 +87,57 @@ pub fn trajectories_svg(digs: &[DigRecord]) -> anyhow::Result<String> {
             .configure_mesh()
             .x_desc("x [m] (from the swing axis, along the digging plane)")
             .y_desc("z [m]")
+            .x_label_formatter(&tick_label)
+            .y_label_formatter(&tick_label)
             .draw()
             .map_err(err)?;
-        for (i, d) in digs.iter().enumerate() {
-            draw_tip_path(
-                &mut chart,
-                &d.section,
-                &d.trajectory,
-                color(i),
-                format!("#{} {:?} swing {:.0} deg", d.index, d.action, d.swing_deg),
-            )?;
+        let xz = |points: &[TipPoint]| -> Vec<(f64, f64)> {
+            let finite: Vec<(f64, f64)> = points
+                .iter()
+                .filter(|p| p.x_m.is_finite() && p.z_m.is_finite())
+                .map(|p| (p.x_m, p.z_m))
+                .collect();
+            decimate(&finite, MAX_CURVE_POINTS)
+        };
+        for d in digs {
+            let c = dig_colour(d.index);
+            chart
+                .draw_series(LineSeries::new(xz(&d.section), c.mix(0.35).stroke_width(1)))
+                .map_err(err)?;
+            chart
+                .draw_series(LineSeries::new(xz(&d.trajectory), c.stroke_width(2)))
+                .map_err(err)?;
         }
-        draw_legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
-        Ok(())
+        let (_, strip_h) = strip.dim_in_pixel();
+        let (bar, key) = strip.split_vertically(strip_h.saturating_sub(90));
+        draw_colour_bar(&bar, HEIGHT - 90, "dig number", (first, last), &|v| {
+            format!("{:.0}", v.round())
+        })?;
+        draw_legend_column(
+            &key,
+            &[
+                ("tip path".to_owned(), BLACK, LegendMark::Line),
+                (
+                    "terrain before".to_owned(),
+                    RGBColor(170, 170, 170),
+                    LegendMark::Line,
+                ),
+            ],
+        )
     })
+}
+
+/// The most points of one curve in a session plot (the curves' shapes need no more at this size).
+pub const MAX_CURVE_POINTS: usize = 240;
+
+/// At most `max` of `points`, evenly spaced and keeping the first and the last.
+fn decimate<T: Copy>(points: &[T], max: usize) -> Vec<T> {
+    let max = max.max(2);
+    if points.len() <= max {
+        return points.to_vec();
+    }
+    let last = points.len() - 1;
+    (0..max).map(|k| points[k * last / (max - 1)]).collect()
 }
 
 /// One curve of [`tip_paths_svg`]: a dig's tip path over the terrain section it started on.
@@ -232,76 +285,278 @@ fn draw_legend<'a, 'b: 'a>(
         .map_err(err)
 }
 
-/// A terrain elevation map (world frame, x east, y north) of the region around the machine, 0.2 m
-/// cells, colour from blue (low) to red (high).
-///
-/// # Errors
-/// A plotting error.
-pub fn terrain_svg(terrain: &TerrainGrid, title: &str) -> anyhow::Result<String> {
-    const X: (f64, f64) = (-4.0, 14.0);
-    const Y: (f64, f64) = (-9.0, 9.0);
-    const CELL: f64 = 0.2;
-    const Z: (f64, f64) = (0.0, 2.5);
-    svg_image((760, 680), |root| {
-        let (map, legend) = root.split_horizontally(680);
+/// The colour scale of the elevation maps: the elevations its ends stand for, m. Maps meant to be
+/// compared (a session's terrain before and after, its bench snapshots) share one.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ElevationScale {
+    /// The elevation of the scale's low (blue) end, m.
+    pub lo_m: f64,
+    /// The elevation of the scale's high (red) end, m.
+    pub hi_m: f64,
+}
+
+impl ElevationScale {
+    /// The scale from the lowest to the highest cell of `terrains` (0..1 m when there is none, or
+    /// all are level).
+    pub fn spanning<'a>(terrains: impl IntoIterator<Item = &'a TerrainGrid>) -> Self {
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for t in terrains {
+            for j in 0..t.ny() {
+                for i in 0..t.nx() {
+                    if let Some(z) = t.cell(i, j).filter(|z| z.is_finite()) {
+                        lo = lo.min(z);
+                        hi = hi.max(z);
+                    }
+                }
+            }
+        }
+        if lo < hi {
+            Self { lo_m: lo, hi_m: hi }
+        } else if lo.is_finite() {
+            Self {
+                lo_m: lo - 0.5,
+                hi_m: lo + 0.5,
+            }
+        } else {
+            Self {
+                lo_m: 0.0,
+                hi_m: 1.0,
+            }
+        }
+    }
+
+    /// The colour of elevation `z_m`.
+    fn color(&self, z_m: f64) -> RGBColor {
+        heat((z_m - self.lo_m) / (self.hi_m - self.lo_m))
+    }
+}
+
+/// Where the machine was (world frame): the swing axis at each dig in order, and its pose
+/// `[x, y, heading]` (m, m, rad) at the moment a map shows.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct MachineTrack {
+    /// The swing axis's positions in order, m.
+    pub path: Vec<[f64; 2]>,
+    /// The pose drawn as the machine's outline.
+    pub pose: Option<[f64; 3]>,
+}
+
+impl MachineTrack {
+    /// The track of `digs` (their dead-reckoned poses), the machine drawn at the last one.
+    pub fn of_digs(digs: &[DigRecord]) -> Self {
+        let mut track = Self::default();
+        for pose in digs.iter().filter_map(|d| d.pose) {
+            track = track.at(pose);
+        }
+        track
+    }
+
+    /// The track ending at `pose` (the machine drawn there).
+    #[must_use]
+    pub fn at(mut self, pose: [f64; 3]) -> Self {
+        let p = [pose[0], pose[1]];
+        if self
+            .path
+            .last()
+            .is_none_or(|q| (q[0] - p[0]).hypot(q[1] - p[1]) > 0.05)
+        {
+            self.path.push(p);
+        }
+        self.pose = Some(pose);
+        self
+    }
+}
+
+/// The width of the colour bar's strip right of an elevation map, px.
+const COLOUR_BAR_STRIP_PX: u32 = 110;
+
+/// An elevation map (world frame, x east, y north) of `terrain` over `window` (`[x0, x1, y0, y1]`,
+/// m) in `cell`-sized squares coloured on `scale`, with a colour bar labelled in m, and the machine's
+/// path (dashed) and outline (tracks, heading, swing axis) from `track`.
+fn elevation_map_svg(
+    terrain: &TerrainGrid,
+    window: [f64; 4],
+    cell_m: f64,
+    scale: ElevationScale,
+    track: &MachineTrack,
+    title: &str,
+) -> anyhow::Result<String> {
+    let [x0, x1, y0, y1] = window;
+    let map_w = 700u32;
+    let map_h = (f64::from(map_w - 60) * (y1 - y0) / (x1 - x0)).clamp(240.0, 900.0) as u32 + 80;
+    let nx = ((x1 - x0) / cell_m).round().max(1.0) as usize;
+    let ny = ((y1 - y0) / cell_m).round().max(1.0) as usize;
+    svg_image((map_w + COLOUR_BAR_STRIP_PX, map_h), |root| {
+        let (map, bar) = root.split_horizontally(map_w);
         let mut chart = ChartBuilder::on(&map)
-            .caption(title, ("sans-serif", 16))
+            .caption(title, ("sans-serif", 15))
             .margin(12)
             .x_label_area_size(35)
             .y_label_area_size(45)
-            .build_cartesian_2d(X.0..X.1, Y.0..Y.1)
+            .build_cartesian_2d(x0..x1, y0..y1)
             .map_err(err)?;
         chart
             .configure_mesh()
             .disable_mesh()
             .x_desc("x east [m]")
             .y_desc("y north [m]")
+            .x_label_formatter(&tick_label)
+            .y_label_formatter(&tick_label)
             .draw()
             .map_err(err)?;
-        let nx = ((X.1 - X.0) / CELL).round() as usize;
-        let ny = ((Y.1 - Y.0) / CELL).round() as usize;
         let mut cells = Vec::with_capacity(nx * ny);
         for j in 0..ny {
             for i in 0..nx {
-                let x = X.0 + CELL * i as f64;
-                let y = Y.0 + CELL * j as f64;
-                if let Ok(z) = terrain.height_at(x + 0.5 * CELL, y + 0.5 * CELL) {
+                let x = x0 + cell_m * i as f64;
+                let y = y0 + cell_m * j as f64;
+                if let Ok(z) = terrain.height_at(x + 0.5 * cell_m, y + 0.5 * cell_m)
+                    && z.is_finite()
+                {
                     cells.push(Rectangle::new(
-                        [(x, y), (x + CELL, y + CELL)],
-                        heat((z - Z.0) / (Z.1 - Z.0)).filled(),
+                        [(x, y), (x + cell_m, y + cell_m)],
+                        scale.color(z).filled(),
                     ));
                 }
             }
         }
         chart.draw_series(cells).map_err(err)?;
-        // The machine's swing axis at the start.
-        chart
-            .draw_series(std::iter::once(Circle::new((0.0, 0.0), 4, BLACK.filled())))
-            .map_err(err)?;
-        // Colour bar.
-        let steps = 20;
-        for k in 0..steps {
-            let f = k as f64 / f64::from(steps);
-            let y0 = 600 - (k * 26);
-            legend
-                .draw(&Rectangle::new([(20, y0 - 26), (45, y0)], heat(f).filled()))
-                .map_err(err)?;
-        }
-        for k in 0..=5 {
-            let z = Z.0 + (Z.1 - Z.0) * f64::from(k) / 5.0;
-            let y = 600 - k * 104;
-            legend
-                .draw(&Text::new(
-                    format!("{z:.1} m"),
-                    (48, y - 6),
-                    ("sans-serif", 11),
+        if track.path.len() > 1 {
+            chart
+                .draw_series(DashedLineSeries::new(
+                    track.path.iter().map(|p| (p[0], p[1])),
+                    6,
+                    4,
+                    BLACK.stroke_width(2),
                 ))
                 .map_err(err)?;
         }
-        Ok(())
+        if let Some([mx, my, h]) = track.pose {
+            // The tracks' 4.45 m x 3 m footprint and the heading.
+            let (c, s) = (h.cos(), h.sin());
+            let corner = |a: f64, b: f64| (mx + a * c - b * s, my + a * s + b * c);
+            let outline = vec![
+                corner(-2.2, -1.5),
+                corner(2.2, -1.5),
+                corner(2.2, 1.5),
+                corner(-2.2, 1.5),
+                corner(-2.2, -1.5),
+            ];
+            chart
+                .draw_series([
+                    PathElement::new(outline, BLACK.stroke_width(2)),
+                    PathElement::new(vec![(mx, my), corner(3.5, 0.0)], BLACK.stroke_width(2)),
+                ])
+                .map_err(err)?;
+            chart
+                .draw_series(std::iter::once(Circle::new((mx, my), 4, BLACK.filled())))
+                .map_err(err)?;
+        }
+        draw_colour_bar(
+            &bar,
+            map_h,
+            "elevation [m]",
+            (scale.lo_m, scale.hi_m),
+            &|z| format!("{z:.2} m"),
+        )
     })
 }
 
+/// A colour bar of the heat scale in its strip beside a chart: `title` above it, the values `ends`
+/// at its low and high ends and three ticks between them, each labelled with `label`.
+fn draw_colour_bar(
+    bar: &DrawingArea<SVGBackend<'_>, Shift>,
+    height_px: u32,
+    title: &str,
+    ends: (f64, f64),
+    label: &dyn Fn(f64) -> String,
+) -> anyhow::Result<()> {
+    const TOP: i32 = 60;
+    const STEPS: i32 = 40;
+    let span = i32::try_from(height_px.saturating_sub(140))
+        .unwrap_or(200)
+        .max(80);
+    bar.draw(&Text::new(
+        title.to_owned(),
+        (4, TOP - 22),
+        ("sans-serif", 12),
+    ))
+    .map_err(err)?;
+    for k in 0..STEPS {
+        let f = (f64::from(k) + 0.5) / f64::from(STEPS);
+        let y_lo = TOP + span - k * span / STEPS;
+        let y_hi = TOP + span - (k + 1) * span / STEPS;
+        bar.draw(&Rectangle::new([(10, y_hi), (34, y_lo)], heat(f).filled()))
+            .map_err(err)?;
+    }
+    for k in 0..=4 {
+        let z = ends.0 + (ends.1 - ends.0) * f64::from(k) / 4.0;
+        let y = TOP + span - k * span / 4;
+        bar.draw(&PathElement::new(vec![(34, y), (39, y)], BLACK))
+            .map_err(err)?;
+        bar.draw(&Text::new(label(z), (42, y - 6), ("sans-serif", 11)))
+            .map_err(err)?;
+    }
+    Ok(())
+}
+
+/// A terrain elevation map of the region around the machine's work (world frame, x east, y north):
+/// the region in front of its start (x -4..14 m, y -9..9 m) widened to the machine's whole path,
+/// within the terrain, 0.2 m cells, colours on `scale`; the machine's path and pose from `track`.
+///
+/// # Errors
+/// A plotting error.
+pub fn terrain_svg(
+    terrain: &TerrainGrid,
+    scale: ElevationScale,
+    track: &MachineTrack,
+    title: &str,
+) -> anyhow::Result<String> {
+    const MARGIN_M: f64 = 4.0;
+    let [ox, oy] = terrain.origin();
+    let res = terrain.resolution_m();
+    let (gx1, gy1) = (
+        ox + res * terrain.nx() as f64,
+        oy + res * terrain.ny() as f64,
+    );
+    let mut w = [-4.0_f64, 14.0, -9.0, 9.0];
+    for p in &track.path {
+        w = [
+            w[0].min(p[0] - MARGIN_M),
+            w[1].max(p[0] + MARGIN_M),
+            w[2].min(p[1] - MARGIN_M),
+            w[3].max(p[1] + MARGIN_M),
+        ];
+    }
+    let window = [w[0].max(ox), w[1].min(gx1), w[2].max(oy), w[3].min(gy1)];
+    let window = if window[0] < window[1] && window[2] < window[3] {
+        window
+    } else {
+        [ox, gx1, oy, gy1]
+    };
+    elevation_map_svg(terrain, window, 0.2, scale, track, title)
+}
+
+/// The bench after some digs (thesis Fig. 55): true terrain elevation over the whole map (world frame,
+/// 0.3 m cells, colours on `scale`), the machine's path and its tracks and heading from `track`.
+///
+/// # Errors
+/// A plotting error.
+pub fn bench_svg(
+    terrain: &TerrainGrid,
+    scale: ElevationScale,
+    track: &MachineTrack,
+    title: &str,
+) -> anyhow::Result<String> {
+    let [ox, oy] = terrain.origin();
+    let res = terrain.resolution_m();
+    let window = [
+        ox,
+        ox + res * terrain.nx() as f64,
+        oy,
+        oy + res * terrain.ny() as f64,
+    ];
+    elevation_map_svg(terrain, window, 0.3, scale, track, title)
+}
 fn heat(f: f64) -> RGBColor {
     let f = if f.is_finite() {
         f.clamp(0.0, 1.0)
@@ -322,69 +577,172 @@ fn heat(f: f64) -> RGBColor {
     RGBColor((r * 255.0) as u8, (g * 255.0) as u8, (b * 255.0) as u8)
 }
 
-/// Per-dig weight (kN), time (s) and energy (kJ), three panels, bars by dig number (cleanups hatched
-/// in a lighter shade), with the thesis's Table 4 dig means as dashed lines.
+/// Per-dig weight (kN), time (s) and energy (kJ), three panels, bars by dig number (dig actions
+/// blue, cleanups orange), with the thesis's Table 4 dig means as dashed lines; the legend beside the
+/// panels.
 ///
 /// # Errors
 /// A plotting error.
 pub fn dig_stats_svg(digs: &[DigRecord]) -> anyhow::Result<String> {
-    svg_image((760, 720), |root| {
-        let panels = root.split_evenly((3, 1));
-        let n = digs.len().max(1) as f64;
-        type Get = fn(&DigRecord) -> f64;
-        let series: [(&str, Get, f64); 3] = [
-            (
-                "weight [kN] (thesis Table 4 digs: 21.2)",
-                |d| d.weight_n.unwrap_or(0.0) * 1e-3,
-                21.2,
-            ),
-            ("time [s] (thesis: 5.8)", |d| d.time_s, 5.8),
-            ("energy [kJ] (thesis: 212)", |d| d.energy_kj, 212.0),
-        ];
-        for (area, (label, get, thesis)) in panels.iter().zip(series) {
-            let top = digs.iter().map(get).fold(thesis, f64::max).max(1e-3) * 1.15;
-            let mut chart = dig_panel(area, label, n, top)?;
+    type Get = fn(&DigRecord) -> f64;
+    let series: [(&str, &str, Get, f64); 3] = [
+        (
+            "bucket weight per dig (thesis Table 4 digs: 21.2 kN)",
+            "weight [kN]",
+            |d| d.weight_n.unwrap_or(0.0) * 1e-3,
+            21.2,
+        ),
+        (
+            "time per dig (thesis: 5.8 s)",
+            "time [s]",
+            |d| d.time_s,
+            5.8,
+        ),
+        (
+            "energy per dig (thesis: 212 kJ)",
+            "energy [kJ]",
+            |d| d.energy_kj,
+            212.0,
+        ),
+    ];
+    let panels = series.map(|(title, y, get, level)| Panel {
+        title: title.to_owned(),
+        y_desc: y,
+        top: digs.iter().map(get).fold(level, f64::max),
+        level: Some(level),
+    });
+    per_dig_panels_svg(
+        digs,
+        (860, 720),
+        "thesis Table 4 mean",
+        |chart, panel| {
+            let (_, _, get, _) = series[panel];
             chart
-                .configure_mesh()
-                .disable_x_mesh()
-                .x_desc("dig")
-                .x_labels(digs.len().clamp(2, 20))
-                .x_label_formatter(&|v| format!("{:.0}", v.round()))
-                .draw()
-                .map_err(err)?;
-            chart
-                .draw_series(digs.iter().enumerate().map(|(i, d)| {
-                    let x = i as f64;
+                .draw_series(digs.iter().map(|d| {
+                    let x = f64::from(d.index);
                     Rectangle::new(
                         [(x - 0.35, 0.0), (x + 0.35, get(d))],
                         action_color(d).filled(),
                     )
                 }))
                 .map_err(err)?;
-            draw_level(&mut chart, n, thesis)?;
-        }
-        Ok(())
-    })
+            Ok(())
+        },
+        &panels,
+        LegendMark::Box,
+    )
+}
+
+/// One panel of [`per_dig_panels_svg`].
+struct Panel {
+    title: String,
+    y_desc: &'static str,
+    /// The largest value drawn.
+    top: f64,
+    /// The dashed reference level, if any.
+    level: Option<f64>,
 }
 
 /// A chart in the coordinates of plotters' SVG drawing, both axes `f64`.
 type Chart<'a, 'b> = ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
-/// One panel of the per-dig statistics: dig numbers `0..n` along x, `0..top` up.
-fn dig_panel<'a, 'b>(
-    area: &'a DrawingArea<SVGBackend<'b>, Shift>,
-    label: &str,
-    n: f64,
-    top: f64,
-) -> anyhow::Result<Chart<'a, 'b>> {
-    ChartBuilder::on(area)
-        .caption(label, ("sans-serif", 14))
-        .margin(8)
-        .x_label_area_size(28)
-        .y_label_area_size(50)
-        .build_cartesian_2d(-0.5..(n - 0.5), 0.0..top)
-        .map_err(err)
+/// The width of the legend strip beside the per-dig panels, px.
+const PANEL_LEGEND_PX: u32 = 150;
+
+/// Stacked per-dig panels of `digs` (x: the dig number), each drawn by `draw(chart, panel index)`
+/// over its axes, dashed level and the session's backups (grey vertical lines between two digs whose
+/// machine poses differ); the legend (dig actions, cleanups as `mark`, the level named `level_name`,
+/// backups) in a strip beside the panels.
+fn per_dig_panels_svg(
+    digs: &[DigRecord],
+    size: (u32, u32),
+    level_name: &str,
+    draw: impl Fn(&mut Chart<'_, '_>, usize) -> anyhow::Result<()>,
+    panels: &[Panel],
+    mark: LegendMark,
+) -> anyhow::Result<String> {
+    let (first, last) = match (digs.first(), digs.last()) {
+        (Some(a), Some(b)) => (f64::from(a.index), f64::from(b.index)),
+        _ => (0.0, 1.0),
+    };
+    let backups: Vec<f64> = digs
+        .windows(2)
+        .filter_map(|w| match (w[0].pose, w[1].pose) {
+            (Some(a), Some(b)) if (a[0] - b[0]).hypot(a[1] - b[1]) > 0.2 => {
+                Some(f64::from(w[1].index) - 0.5)
+            }
+            _ => None,
+        })
+        .collect();
+    svg_image(size, |root| {
+        let (left, strip) = root.split_horizontally(size.0 - PANEL_LEGEND_PX);
+        for (k, (area, panel)) in left
+            .split_evenly((panels.len().max(1), 1))
+            .iter()
+            .zip(panels)
+            .enumerate()
+        {
+            let top = panel.top.max(1e-3) * 1.15;
+            let mut chart = ChartBuilder::on(area)
+                .caption(&panel.title, ("sans-serif", 14))
+                .margin(8)
+                .x_label_area_size(30)
+                .y_label_area_size(55)
+                .build_cartesian_2d((first - 0.5)..(last + 0.5), 0.0..top)
+                .map_err(err)?;
+            let whole = |v: &f64| {
+                if (v - v.round()).abs() < 1e-6 {
+                    format!("{:.0}", v.round())
+                } else {
+                    String::new()
+                }
+            };
+            chart
+                .configure_mesh()
+                .disable_x_mesh()
+                .x_desc("dig")
+                .y_desc(panel.y_desc)
+                .x_labels(digs.len().clamp(2, 20))
+                .x_label_formatter(&whole)
+                .y_label_formatter(&tick_label)
+                .draw()
+                .map_err(err)?;
+            for &b in &backups {
+                chart
+                    .draw_series(std::iter::once(PathElement::new(
+                        vec![(b, 0.0), (b, top)],
+                        BACKUP.stroke_width(1),
+                    )))
+                    .map_err(err)?;
+            }
+            draw(&mut chart, k)?;
+            if let Some(y) = panel.level {
+                chart
+                    .draw_series(DashedLineSeries::new(
+                        vec![(first - 0.5, y), (last + 0.5, y)],
+                        5,
+                        4,
+                        LEVEL.stroke_width(1),
+                    ))
+                    .map_err(err)?;
+            }
+        }
+        let mut entries = vec![
+            ("dig".to_owned(), color(0), mark),
+            ("cleanup".to_owned(), color(1), mark),
+            (level_name.to_owned(), LEVEL, LegendMark::Dashed),
+        ];
+        if !backups.is_empty() {
+            entries.push(("track back".to_owned(), BACKUP, LegendMark::Line));
+        }
+        draw_legend_column(&strip.margin(30, 0, 0, 0), &entries)
+    })
 }
+
+/// The dashed reference level of the per-dig panels.
+const LEVEL: RGBColor = RGBColor(90, 90, 90);
+/// The backups' lines in the per-dig panels.
+const BACKUP: RGBColor = RGBColor(180, 180, 180);
 
 /// A dig's colour in the per-dig panels: cleanups orange, other actions blue.
 fn action_color(d: &DigRecord) -> RGBColor {
@@ -395,199 +753,47 @@ fn action_color(d: &DigRecord) -> RGBColor {
     }
 }
 
-/// A dashed level at `y` across a per-dig panel of `n` digs.
-fn draw_level(chart: &mut Chart<'_, '_>, n: f64, y: f64) -> anyhow::Result<()> {
-    chart
-        .draw_series(DashedLineSeries::new(
-            vec![(-0.5, y), (n - 0.5, y)],
-            5,
-            4,
-            BLACK.mix(0.6).stroke_width(1),
-        ))
-        .map_err(err)?;
-    Ok(())
-}
-
-/// The bench after some digs (thesis Fig. 55): true terrain elevation over the whole map (world frame,
-/// 0.3 m cells, colour from the lowest to the highest elevation), the machine's tracks and heading.
-///
-/// # Errors
-/// A plotting error.
-pub fn bench_svg(terrain: &TerrainGrid, pose: [f64; 3], title: &str) -> anyhow::Result<String> {
-    const CELL: f64 = 0.3;
-    let [ox, oy] = terrain.origin();
-    let res = terrain.resolution_m();
-    let (x1, y1) = (
-        ox + res * terrain.nx() as f64,
-        oy + res * terrain.ny() as f64,
-    );
-    let nx = ((x1 - ox) / CELL).floor().max(1.0) as usize;
-    let ny = ((y1 - oy) / CELL).floor().max(1.0) as usize;
-    let mut z_lo = f64::INFINITY;
-    let mut z_hi = f64::NEG_INFINITY;
-    let mut samples = Vec::with_capacity(nx * ny);
-    for j in 0..ny {
-        for i in 0..nx {
-            let x = ox + CELL * i as f64;
-            let y = oy + CELL * j as f64;
-            if let Ok(z) = terrain.height_at(x + 0.5 * CELL, y + 0.5 * CELL)
-                && z.is_finite()
-            {
-                z_lo = z_lo.min(z);
-                z_hi = z_hi.max(z);
-                samples.push((x, y, z));
-            }
-        }
-    }
-    if z_hi.is_nan() || z_lo.is_nan() || z_hi <= z_lo {
-        z_lo = 0.0;
-        z_hi = 1.0;
-    }
-    let width_px = 760u32;
-    let height_px =
-        (f64::from(width_px - 80) * (y1 - oy) / (x1 - ox)).clamp(200.0, 900.0) as u32 + 90;
-    svg_image((width_px + 80, height_px), |root| {
-        let (map, legend) = root.split_horizontally(width_px);
-        let mut chart = ChartBuilder::on(&map)
-            .caption(title, ("sans-serif", 15))
-            .margin(12)
-            .x_label_area_size(35)
-            .y_label_area_size(45)
-            .build_cartesian_2d(ox..x1, oy..y1)
-            .map_err(err)?;
-        chart
-            .configure_mesh()
-            .disable_mesh()
-            .x_desc("x east [m]")
-            .y_desc("y north [m]")
-            .draw()
-            .map_err(err)?;
-        chart
-            .draw_series(samples.iter().map(|&(x, y, z)| {
-                Rectangle::new(
-                    [(x, y), (x + CELL, y + CELL)],
-                    heat((z - z_lo) / (z_hi - z_lo)).filled(),
-                )
-            }))
-            .map_err(err)?;
-        // The machine: its tracks (4.45 m x 3 m footprint) and the heading.
-        let [mx, my, h] = pose;
-        let (c, s) = (h.cos(), h.sin());
-        let corner = |a: f64, b: f64| (mx + a * c - b * s, my + a * s + b * c);
-        let outline = vec![
-            corner(-2.2, -1.5),
-            corner(2.2, -1.5),
-            corner(2.2, 1.5),
-            corner(-2.2, 1.5),
-            corner(-2.2, -1.5),
-        ];
-        chart
-            .draw_series(std::iter::once(PathElement::new(
-                outline,
-                BLACK.stroke_width(2),
-            )))
-            .map_err(err)?;
-        chart
-            .draw_series(std::iter::once(PathElement::new(
-                vec![(mx, my), corner(3.5, 0.0)],
-                BLACK.stroke_width(2),
-            )))
-            .map_err(err)?;
-        chart
-            .draw_series(std::iter::once(Circle::new((mx, my), 4, BLACK.filled())))
-            .map_err(err)?;
-        let steps = 20;
-        let bar_h = (height_px.saturating_sub(140) / 20).max(5) as i32;
-        for k in 0..steps {
-            let f = f64::from(k) / f64::from(steps);
-            let y0 = 60 + (steps - k) * bar_h;
-            legend
-                .draw(&Rectangle::new(
-                    [(15, y0 - bar_h), (38, y0)],
-                    heat(f).filled(),
-                ))
-                .map_err(err)?;
-        }
-        for k in 0..=4 {
-            let z = z_lo + (z_hi - z_lo) * f64::from(k) / 4.0;
-            let y = 60 + steps * bar_h - k * steps * bar_h / 4;
-            legend
-                .draw(&Text::new(
-                    format!("{z:.1} m"),
-                    (40, y - 6),
-                    ("sans-serif", 11),
-                ))
-                .map_err(err)?;
-        }
-        Ok(())
-    })
-}
-
 /// The statistics of a session in dig order (thesis Fig. 56): weight (kN) with the half-full line,
-/// time (s) and energy (kJ); dig actions blue, cleanups orange; backups as grey vertical lines.
+/// time (s) and energy (kJ); dig actions blue, cleanups orange; backups as grey vertical lines; the
+/// legend beside the panels.
 ///
 /// # Errors
 /// A plotting error.
 pub fn dig_sequence_svg(digs: &[DigRecord], full_bucket_n: f64) -> anyhow::Result<String> {
-    svg_image((860, 760), |root| {
-        let panels = root.split_evenly((3, 1));
-        let n = digs.len().max(1) as f64;
-        // A backup happened between two digs whose machine poses differ.
-        let backups: Vec<f64> = digs
-            .windows(2)
-            .filter_map(|w| match (w[0].pose, w[1].pose) {
-                (Some(a), Some(b)) if (a[0] - b[0]).hypot(a[1] - b[1]) > 0.2 => {
-                    Some(f64::from(w[1].index) - 0.5)
-                }
-                _ => None,
-            })
-            .collect();
-        type Get = fn(&DigRecord) -> f64;
-        let half = 0.5 * full_bucket_n * 1e-3;
-        let series: [(String, Get, Option<f64>); 3] = [
-            (
-                format!("weight [kN] (dashed: half full, {half:.1} kN)"),
-                |d| d.weight_n.unwrap_or(0.0) * 1e-3,
-                Some(half),
-            ),
-            ("time [s]".to_owned(), |d| d.time_s, None),
-            ("energy [kJ]".to_owned(), |d| d.energy_kj, None),
-        ];
-        for (area, (label, get, line)) in panels.iter().zip(series) {
-            let top = digs
-                .iter()
-                .map(get)
-                .fold(line.unwrap_or(0.0), f64::max)
-                .max(1e-3)
-                * 1.15;
-            let mut chart = dig_panel(area, &label, n, top)?;
+    type Get = fn(&DigRecord) -> f64;
+    let half = 0.5 * full_bucket_n * 1e-3;
+    let series: [(&str, &str, Get, Option<f64>); 3] = [
+        (
+            "bucket weight per dig",
+            "weight [kN]",
+            |d| d.weight_n.unwrap_or(0.0) * 1e-3,
+            Some(half),
+        ),
+        ("time per dig", "time [s]", |d| d.time_s, None),
+        ("energy per dig", "energy [kJ]", |d| d.energy_kj, None),
+    ];
+    let panels = series.map(|(title, y, get, level)| Panel {
+        title: title.to_owned(),
+        y_desc: y,
+        top: digs.iter().map(get).fold(level.unwrap_or(0.0), f64::max),
+        level,
+    });
+    per_dig_panels_svg(
+        digs,
+        (900, 760),
+        &format!("half full ({half:.1} kN)"),
+        |chart, panel| {
+            let (_, _, get, _) = series[panel];
             chart
-                .configure_mesh()
-                .disable_x_mesh()
-                .x_desc("dig")
-                .draw()
+                .draw_series(digs.iter().map(|d| {
+                    Circle::new((f64::from(d.index), get(d)), 3, action_color(d).filled())
+                }))
                 .map_err(err)?;
-            for &b in &backups {
-                chart
-                    .draw_series(std::iter::once(PathElement::new(
-                        vec![(b, 0.0), (b, top)],
-                        BLACK.mix(0.3).stroke_width(1),
-                    )))
-                    .map_err(err)?;
-            }
-            chart
-                .draw_series(
-                    digs.iter()
-                        .enumerate()
-                        .map(|(i, d)| Circle::new((i as f64, get(d)), 3, action_color(d).filled())),
-                )
-                .map_err(err)?;
-            if let Some(v) = line {
-                draw_level(&mut chart, n, v)?;
-            }
-        }
-        Ok(())
-    })
+            Ok(())
+        },
+        &panels,
+        LegendMark::Dot,
+    )
 }
 
 /// The bucket weights of the dig actions in order for two strategies (thesis Fig. 60): the planner

@@ -82,6 +82,9 @@ fn unit_passes_systemd_analyze_verify() {
 fn unit_runs_unprivileged_never_restarts_and_keeps_to_its_address_families() {
     assert_eq!(unit_value(UNIT, "User"), Some("excavator"));
     assert_eq!(unit_value(UNIT, "Restart"), Some("no"));
+    // The control loop feeds the watchdog (controller::io::sd_notify): a stalled loop is ended.
+    assert_eq!(unit_value(UNIT, "Type"), Some("notify"));
+    assert!(unit_value(UNIT, "WatchdogSec").is_some_and(|v| v.ends_with('s')));
     assert_eq!(unit_value(UNIT, "CapabilityBoundingSet"), Some(""));
     assert_eq!(unit_value(UNIT, "NoNewPrivileges"), Some("yes"));
     assert_eq!(unit_value(UNIT, "ProtectSystem"), Some("strict"));
@@ -155,6 +158,16 @@ fn has_symbols(path: &Path) -> bool {
 }
 
 #[test]
+fn the_changelog_names_the_workspace_version() {
+    let changelog = include_str!("../../packaging/debian/changelog");
+    let first = changelog.lines().next().unwrap_or_default();
+    assert!(
+        first.starts_with(&format!("excavator-ctl ({}-", env!("CARGO_PKG_VERSION"))),
+        "{first}"
+    );
+}
+
+#[test]
 fn the_package_installs_its_files_and_its_unit_runs() {
     if !have_or_skip(have("dpkg-deb"), "dpkg-deb") {
         return;
@@ -176,6 +189,13 @@ fn the_package_installs_its_files_and_its_unit_runs() {
         "usr/share/doc/excavator-ctl/deployment.md",
         "usr/share/doc/excavator-ctl/examples/80-can0.network",
         "usr/share/doc/excavator-ctl/examples/config/machine.toml",
+        "usr/share/doc/excavator-ctl/examples/config/controller.toml",
+        "usr/share/doc/excavator-ctl/changelog.Debian.gz",
+        "usr/share/man/man1/excavator-ctl.1.gz",
+        "usr/share/man/man1/excavator-ctl-run.1.gz",
+        "usr/share/bash-completion/completions/excavator-ctl",
+        "usr/share/zsh/vendor-completions/_excavator-ctl",
+        "usr/share/fish/vendor_completions.d/excavator-ctl.fish",
         "usr/share/doc/excavator-ctl/examples/profiles/other_gateway.toml",
         "usr/share/doc/excavator-ctl/examples/profiles/other_gateway.dbc",
         "usr/share/doc/excavator-ctl/machine-profile.md",
@@ -207,6 +227,21 @@ fn the_package_installs_its_files_and_its_unit_runs() {
 
     if have("systemd-analyze") {
         verify(&unit, &bin);
+    }
+    if have_or_skip(have("lintian"), "lintian") {
+        let out = Command::new("lintian")
+            .args(["--fail-on", "error,warning"])
+            .arg(&deb)
+            .output()
+            .unwrap();
+        let report = String::from_utf8_lossy(&out.stdout);
+        println!("lintian: {report}");
+        assert!(out.status.success(), "lintian: {report}");
+        assert!(
+            !report
+                .lines()
+                .any(|l| l.starts_with("E: ") || l.starts_with("W: "))
+        );
     }
 
     // The unit's ExecStart from the unpacked root: --help, then against a missing interface (netlink

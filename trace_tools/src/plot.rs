@@ -136,8 +136,8 @@ struct Panel {
 #[derive(Debug)]
 struct PlotData {
     panels: Vec<Panel>,
-    /// message index -> (signal index, panel, series)
-    by_message: HashMap<usize, Vec<(usize, usize, usize)>>,
+    /// message index -> (signal index, panel, series, factor from the signal's unit to the panel's)
+    by_message: HashMap<usize, Vec<(usize, usize, usize, f64)>>,
     dig: Option<DigPanels>,
     first_ns: Option<u64>,
     from_s: Option<f64>,
@@ -183,6 +183,87 @@ pub fn color(i: usize) -> RGBColor {
     PALETTE[i % PALETTE.len()]
 }
 
+/// A tick label without noise: at most three decimals, trailing zeros dropped (`10`, `2.5`, `0.125`),
+/// and `0` for a negative zero. Every axis of the project's plots uses it.
+pub fn tick_label(v: &f64) -> String {
+    if !v.is_finite() {
+        return String::new();
+    }
+    let digits = if v.abs() >= 100.0 { 0 } else { 3 };
+    let text = format!("{v:.digits$}");
+    let text = if text.contains('.') {
+        text.trim_end_matches('0').trim_end_matches('.').to_owned()
+    } else {
+        text
+    };
+    if text == "-0" { "0".to_owned() } else { text }
+}
+
+/// How a legend entry of [`draw_legend_column`] shows its series.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LegendMark {
+    /// A line.
+    Line,
+    /// A dashed line.
+    Dashed,
+    /// A filled box (bars, map cells).
+    Box,
+    /// A dot (scatter points).
+    Dot,
+}
+
+/// One legend entry: the series' name, colour and mark.
+pub type LegendEntry = (String, RGBColor, LegendMark);
+
+/// Draws `entries` as a column of legend lines from the top left of `area`, an area beside the chart
+/// (never over its data); entries that do not fit are left out and counted in a last line.
+///
+/// # Errors
+/// A drawing error.
+pub fn draw_legend_column<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    entries: &[LegendEntry],
+) -> anyhow::Result<()> {
+    const ROW_PX: i32 = 16;
+    let (_, height) = area.dim_in_pixel();
+    let rows = (i32::try_from(height).unwrap_or(i32::MAX) - 8) / ROW_PX;
+    let shown = usize::try_from(rows.max(0)).unwrap_or(0).min(entries.len());
+    let shown = if shown < entries.len() {
+        shown.saturating_sub(1)
+    } else {
+        shown
+    };
+    for (k, (label, c, mark)) in entries.iter().take(shown).enumerate() {
+        let y = 8 + ROW_PX * i32::try_from(k).unwrap_or(0) + ROW_PX / 2;
+        let c = *c;
+        match mark {
+            LegendMark::Line => {
+                area.draw(&PathElement::new(vec![(4, y), (22, y)], c.stroke_width(2)))
+            }
+            LegendMark::Dashed => area
+                .draw(&PathElement::new(vec![(4, y), (9, y)], c.stroke_width(1)))
+                .and_then(|()| {
+                    area.draw(&PathElement::new(vec![(13, y), (18, y)], c.stroke_width(1)))
+                }),
+            LegendMark::Box => area.draw(&Rectangle::new([(6, y - 5), (20, y + 5)], c.filled())),
+            LegendMark::Dot => area.draw(&Circle::new((13, y), 4, c.filled())),
+        }
+        .map_err(err)?;
+        area.draw(&Text::new(label.clone(), (27, y - 6), ("sans-serif", 12)))
+            .map_err(err)?;
+    }
+    if shown < entries.len() {
+        let y = 8 + ROW_PX * i32::try_from(shown).unwrap_or(0);
+        area.draw(&Text::new(
+            format!("(+{} more)", entries.len() - shown),
+            (27, y + 2),
+            ("sans-serif", 12),
+        ))
+        .map_err(err)?;
+    }
+    Ok(())
+}
+
 impl PlotData {
     fn new(
         signal_refs: &[SignalRef],
@@ -210,13 +291,13 @@ impl PlotData {
             };
             data.panels.push(panel(
                 "joint angles",
-                "rad",
+                "angle [rad]",
                 PanelKind::Lines,
                 mk(&["boom", "stick", "bucket", "swing"]),
             ));
             data.panels.push(panel(
                 "cylinder pressures",
-                "MPa",
+                "pressure [MPa]",
                 PanelKind::Lines,
                 mk(&[
                     "boom head",
@@ -229,7 +310,7 @@ impl PlotData {
             ));
             data.panels.push(panel(
                 "valve commands (fraction of max cylinder velocity, + extend)",
-                "command",
+                "command [1]",
                 PanelKind::Lines,
                 mk(&["boom", "stick", "bucket", "swing"]),
             ));
@@ -255,7 +336,7 @@ impl PlotData {
         // Chosen signals: one panel per unit.
         let mut unit_panel: HashMap<&'static str, usize> = HashMap::new();
         for s in signal_refs {
-            let unit = s.signal().unit;
+            let (unit, factor) = display_unit(s.signal().unit);
             let p = *unit_panel.entry(unit).or_insert_with(|| {
                 data.panels.push(Panel {
                     title: if unit.is_empty() {
@@ -263,7 +344,11 @@ impl PlotData {
                     } else {
                         format!("signals [{unit}]")
                     },
-                    y_desc: unit.to_string(),
+                    y_desc: if unit.is_empty() {
+                        "value".to_string()
+                    } else {
+                        format!("[{unit}]")
+                    },
                     kind: PanelKind::Lines,
                     series: Vec::new(),
                 });
@@ -275,7 +360,7 @@ impl PlotData {
                 data.by_message
                     .entry(s.msg_index)
                     .or_default()
-                    .push((s.sig_index, p, idx));
+                    .push((s.sig_index, p, idx, factor));
             }
         }
         data
@@ -303,11 +388,11 @@ impl PlotData {
             return;
         }
         if !outside && let Some(entries) = self.by_message.get(&msg_index).cloned() {
-            for (sig_index, panel, series) in entries {
+            for (sig_index, panel, series, factor) in entries {
                 if let Some(sig) = desc.signals.get(sig_index)
                     && let Some(v) = signals::decode_signal(sig, frame.data()).value()
                 {
-                    self.push(panel, series, t, v);
+                    self.push(panel, series, t, v * factor);
                 }
             }
         }
@@ -360,6 +445,21 @@ impl PlotData {
     }
 }
 
+/// The unit a signal of `unit` is drawn in, and the factor to it: pressures in MPa (a tick reads
+/// `35`, not `35000000`), everything else as decoded.
+fn display_unit(unit: &'static str) -> (&'static str, f64) {
+    match unit {
+        "Pa" => ("MPa", 1e-6),
+        other => (other, 1.0),
+    }
+}
+
+/// The ground line of the tip path.
+const GROUND: RGBColor = RGBColor(150, 150, 150);
+
+/// The width of the legend strip right of each time panel, px.
+const LEGEND_STRIP_PX: u32 = 150;
+
 fn range_of<'a>(points: impl Iterator<Item = &'a (f64, f64)>) -> Option<((f64, f64), (f64, f64))> {
     let mut r: Option<((f64, f64), (f64, f64))> = None;
     for &(x, y) in points {
@@ -396,7 +496,9 @@ fn draw_panel(
             r.map_or((0.0, 1.0), |(_, (lo, hi))| padded(lo, hi))
         }
     };
-    let mut chart = ChartBuilder::on(area)
+    let (width, _) = area.dim_in_pixel();
+    let (area, legend) = area.split_horizontally(width.saturating_sub(LEGEND_STRIP_PX));
+    let mut chart = ChartBuilder::on(&area)
         .caption(&panel.title, ("sans-serif", 15))
         .margin(6)
         .x_label_area_size(28)
@@ -412,11 +514,16 @@ fn draw_panel(
         }
     };
     let mut mesh = chart.configure_mesh();
-    mesh.x_desc("t [s]").y_desc(panel.y_desc.as_str());
+    mesh.x_desc("t [s]")
+        .y_desc(panel.y_desc.as_str())
+        .x_label_formatter(&tick_label);
     if panel.kind == PanelKind::Stage {
         mesh.y_labels(6).y_label_formatter(&stage_label);
+    } else {
+        mesh.y_label_formatter(&tick_label);
     }
     mesh.draw().map_err(err)?;
+    let mut entries: Vec<LegendEntry> = Vec::new();
     for (i, s) in panel.series.iter().enumerate() {
         if s.points.is_empty() {
             continue;
@@ -439,20 +546,11 @@ fn draw_panel(
         };
         chart
             .draw_series(LineSeries::new(points, c.stroke_width(1)))
-            .map_err(err)?
-            .label(s.label.as_str())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c));
-    }
-    if panel.kind == PanelKind::Lines && panel.series.len() > 1 {
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 11))
-            .draw()
             .map_err(err)?;
+        entries.push((s.label.clone(), c, LegendMark::Line));
     }
+    // Below the caption, level with the plot area.
+    draw_legend_column(&legend.margin(28, 0, 0, 0), &entries)?;
     Ok(())
 }
 
@@ -464,7 +562,9 @@ fn draw_tip_path(
     let ((x0, x1), (z0, z1)) = r.map_or(((0.0, 10.0), (-2.0, 4.0)), |((a, b), (c, d))| {
         (padded(a, b), padded(c.min(0.0), d.max(0.0)))
     });
-    let mut chart = ChartBuilder::on(area)
+    let (_, height) = area.dim_in_pixel();
+    let (area, legend) = area.split_vertically(height.saturating_sub(110));
+    let mut chart = ChartBuilder::on(&area)
         .caption(
             "bucket-tip path (base frame, side view)",
             ("sans-serif", 15),
@@ -478,15 +578,19 @@ fn draw_tip_path(
         .configure_mesh()
         .x_desc("x [m] (forward of the swing axis)")
         .y_desc("z [m]")
+        .x_label_formatter(&tick_label)
+        .y_label_formatter(&tick_label)
         .draw()
         .map_err(err)?;
     // The ground the tracks stand on.
     chart
         .draw_series(LineSeries::new(
             vec![(x0, 0.0), (x1, 0.0)],
-            BLACK.mix(0.4).stroke_width(1),
+            GROUND.stroke_width(1),
         ))
         .map_err(err)?;
+    let mut entries: Vec<LegendEntry> =
+        vec![("ground (z = 0)".to_owned(), GROUND, LegendMark::Line)];
     for (i, s) in tip.iter().enumerate() {
         if s.points.is_empty() {
             continue;
@@ -494,18 +598,10 @@ fn draw_tip_path(
         let c = color(i);
         chart
             .draw_series(s.points.iter().map(move |&p| Circle::new(p, 1, c.filled())))
-            .map_err(err)?
-            .label(s.label.as_str())
-            .legend(move |(x, y)| Circle::new((x + 8, y), 3, c.filled()));
+            .map_err(err)?;
+        entries.push((format!("Autodig stage: {}", s.label), c, LegendMark::Dot));
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::LowerRight)
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 11))
-        .draw()
-        .map_err(err)?;
+    draw_legend_column(&legend.margin(0, 0, 60, 0), &entries)?;
     Ok(())
 }
 
@@ -687,6 +783,79 @@ mod tests {
         assert!(s.points.last().unwrap().0 > 90_000.0);
         s.push(f64::NAN, 1.0);
         assert!(s.points.iter().all(|p| p.0.is_finite()));
+    }
+
+    #[test]
+    fn ticks_carry_no_noise() {
+        for (v, text) in [
+            (10.0, "10"),
+            (2.5, "2.5"),
+            (0.125, "0.125"),
+            (-0.0, "0"),
+            (-1.5, "-1.5"),
+            (35.0, "35"),
+            (1e-5, "0"),
+            (212.4, "212"),
+        ] {
+            assert_eq!(tick_label(&v), text);
+        }
+        assert_eq!(tick_label(&f64::NAN), "");
+    }
+
+    /// The `<text>` contents of an SVG.
+    fn svg_texts(svg: &str) -> Vec<String> {
+        svg.split("<text")
+            .skip(1)
+            .filter_map(|r| {
+                Some(
+                    r.split_once('>')?
+                        .1
+                        .split("</text>")
+                        .next()?
+                        .trim()
+                        .to_owned(),
+                )
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_pressure_plot_names_its_series_and_ticks_in_mpa() {
+        let mut trace = Vec::new();
+        crate::synth::write_candump(
+            &mut trace,
+            &crate::synth::SynthConfig {
+                frames: 4000,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("p.svg");
+        let opts = PlotOptions {
+            signals: vec!["AuxValveMeasured_Boom.ExtendPortPressure".to_owned()],
+            preset: Some(Preset::Dig),
+            ..Default::default()
+        };
+        plot_trace(trace.as_slice(), &out, &opts, &mut std::io::sink()).unwrap();
+        let texts = svg_texts(&std::fs::read_to_string(&out).unwrap());
+        // Every series named, the single one too.
+        for name in [
+            "AuxValveMeasured_Boom.ExtendPortPressure",
+            "boom head",
+            "stick",
+            "Autodig stage: dig",
+        ] {
+            assert!(texts.iter().any(|t| t == name), "{name} not in {texts:?}");
+        }
+        assert!(texts.iter().any(|t| t == "[MPa]"), "{texts:?}");
+        assert!(texts.iter().any(|t| t == "pressure [MPa]"), "{texts:?}");
+        // No tick like 35000000.0 or 10.0.
+        for t in &texts {
+            if let Ok(v) = t.parse::<f64>() {
+                assert!(v.abs() < 1e4 && !t.ends_with(".0"), "tick {t}");
+            }
+        }
     }
 
     #[test]

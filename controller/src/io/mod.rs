@@ -4,3 +4,4 @@
 pub mod operator;
 pub mod run;
 pub mod scan_client;
+pub mod sd_notify;

@@ -5,7 +5,7 @@
 //!
 //! - the shutdown signal (Ctrl-C or SIGTERM, passed in as a future),
 //! - a 10 ms interval tick: the frames received since the last tick go through `step`, and its output
-//!   is sent in order,
+//!   is sent in order, and systemd's watchdog is fed ([`crate::io::sd_notify`]: `READY=1`, `WATCHDOG=1`),
 //! - receiving: frames are queued for the next tick; error frames (`transport::Error::Fault`) go to
 //!   [`ControllerNode::on_bus_fault`] at once. A frame's session time is its arrival: the time it
 //!   was read less the time it waited in the socket since the kernel stamped it ([`MAX_RX_WAIT_S`]),
@@ -379,6 +379,7 @@ pub async fn run_session_loop<B: Bus>(
     let mut last_report_s = f64::NEG_INFINITY;
     let clock = SessionClock::start(time_scale);
     let mut plan_task: Option<PlanTask> = None;
+    let mut notifier = crate::io::sd_notify::LoopNotifier::from_env();
     tokio::pin!(shutdown);
     let result: anyhow::Result<StopReason> = loop {
         tokio::select! {
@@ -394,6 +395,7 @@ pub async fn run_session_loop<B: Bus>(
                         stats.max_tick_gap_us.max(u64::try_from(gap.as_micros()).unwrap_or(u64::MAX));
                 }
                 last_tick = Some(tick);
+                notifier.on_tick(tick.into_std());
                 let now = clock.now_s();
                 if let Some(report) = monitor.on_tick(now) {
                     judge_load(&report, period, node, now, &mut stats);
