@@ -598,7 +598,8 @@ fn candump_screen_output_and_its_timestamp_variants_read() {
     };
     let t0 = recs[0].timestamp_ns;
     let micros = |ns: u64| format!("{}.{:06}", ns / 1_000_000_000, ns % 1_000_000_000 / 1000);
-    let variants: [(&str, Box<dyn Fn(usize, u64) -> String>, &[&str]); 5] = [
+    type Stamp<'a> = Box<dyn Fn(usize, u64) -> String + 'a>;
+    let variants: [(&str, Stamp<'_>, &[&str]); 5] = [
         ("plain", Box::new(|_, _| String::new()), &[]),
         ("ta", Box::new(|_, t| format!(" ({})", micros(t))), &[]),
         (

@@ -310,7 +310,7 @@ pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, R
             );
             Some(setup::planned_session(
                 &machine,
-                planner.clone(),
+                planner,
                 &site,
                 st,
                 args.hardness.as_deref(),
