@@ -46,6 +46,11 @@ struct SourceFile {
     tokens: Vec<Token>,
 }
 
+/// A `use` leaf with its line, the module of its place, and whether it is a top-level `pub use`.
+type PlacedUse = (UseLeaf, usize, Vec<String>, bool);
+/// An inline path's segments with its line and the module of its place.
+type PlacedPath = (Vec<String>, usize, Vec<String>);
+
 /// The module graph: file index to the files it names, with the first place that names each.
 type Graph = Vec<BTreeMap<usize, Evidence>>;
 
@@ -317,8 +322,8 @@ fn graph(files: &[SourceFile]) -> Graph {
         .map(|(i, f)| (f.module.clone(), i))
         .collect();
     // Per file: its uses (leaf, line, module of the place, pub at top level) and inline paths.
-    let mut uses: Vec<Vec<(UseLeaf, usize, Vec<String>, bool)>> = Vec::new();
-    let mut inline: Vec<Vec<(Vec<String>, usize, Vec<String>)>> = Vec::new();
+    let mut uses: Vec<Vec<PlacedUse>> = Vec::new();
+    let mut inline: Vec<Vec<PlacedPath>> = Vec::new();
     for file in files {
         let toks = &file.tokens;
         let (mut file_uses, mut file_inline) = (Vec::new(), Vec::new());
