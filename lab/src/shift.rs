@@ -19,7 +19,7 @@
 //! - gateway fault: the gateway's clock steps back 1 s (it latches `CLOCK_FAULT`, valves neutral);
 //! - e-stop: the operator's e-stop ([`controller::io::operator`]), the operator's reset after a hold;
 //! - controller restart: the controller is killed (no shutdown frames) and after a downtime a fresh
-//!   [`ControllerNode`] goes on from the saved state as `run --resume` does ([`crate::resume`],
+//!   [`ControllerNode`] goes on from the saved state as `run --resume` does ([`onboard::resume`],
 //!   [`controller::session::session_state`]): the checkpoint of every completed action is saved to the
 //!   state file, synchronously (the shift is reproducible for its seed).
 //!

@@ -21,8 +21,8 @@
 //! the training cost at the optimum (Fisher information), the `kappa` weighting making it honest for
 //! correlated samples.
 //!
-//! Layout: [`trial`] (the candidates of the selection), [`cost`] (replay, sums of squares, the noise
-//! model), [`search`] (a candidate's magnitude by grid and Brent search), [`confusable`] (joint fits
+//! Layout: `trial` (the candidates of the selection), `cost` (replay, sums of squares, the noise
+//! model), `search` (a candidate's magnitude by grid and Brent search), `confusable` (joint fits
 //! of correlated candidates); this module runs the selection over them.
 
 use serde::Serialize;
