@@ -320,7 +320,8 @@ fn plot_draws_signals_and_the_dig_preset() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let text = std::fs::read_to_string(&svg2).unwrap();
-    assert!(text.contains("JointAngles.BoomAngle") && text.contains("signals [Pa]"));
+    // Pressures are drawn in MPa, their panel named for the unit.
+    assert!(text.contains("JointAngles.BoomAngle") && text.contains("signals [MPa]"));
     let o = trace(&[
         "plot",
         log.to_str().unwrap(),

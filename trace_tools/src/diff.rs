@@ -559,7 +559,8 @@ pub fn run(args: &DiffArgs) -> anyhow::Result<()> {
         read_a,
         read_b,
     };
-    let report = diff_traces(a, b, &opts, &mut io::stderr())?;
+    let report = diff_traces(a, b, &opts, &mut io::stderr())
+        .with_context(|| format!("A {}, B {}", args.a.display(), args.b.display()))?;
     let text = format_report(
         &report,
         &args.a.display().to_string(),
