@@ -139,12 +139,14 @@ mod tests {
             panic!("not run")
         };
         assert_eq!(live.live, None);
-        assert_eq!(o.iface, "vcan0");
+        assert_eq!(o.iface.as_deref(), Some("vcan0"));
         assert!(o.listen_only);
         assert_eq!(o.digs, Some(3));
-        assert_eq!(o.strategy, onboard::DemoStrategy::Planned);
-        assert!((o.time_scale.get() - 4.0).abs() < 1e-12);
+        assert_eq!(o.strategy(), onboard::DemoStrategy::Planned);
+        assert!((o.time_scale().get() - 4.0).abs() < 1e-12);
         assert!(Cli::try_parse_from(["excavator-ctl", "run"]).is_err());
+        // --resume DIR alone: the interface is the session's.
+        assert!(Cli::try_parse_from(["excavator-ctl", "run", "--resume", "s"]).is_ok());
         for bad in ["0", "25", "NaN", "-2"] {
             assert!(
                 Cli::try_parse_from([

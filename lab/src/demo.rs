@@ -123,9 +123,13 @@ pub struct DemoArgs {
     /// Autodig maps (default: the built-in config/autodig_maps.toml).
     #[arg(long, value_name = "FILE")]
     pub maps: Option<PathBuf>,
-    /// No progress bar.
+    /// No progress bar, and no line saying where the files went.
     #[arg(long)]
     pub quiet: bool,
+    /// Replace the session in `--out` (a folder holding another session is refused without it; a
+    /// folder holding no session is never deleted).
+    #[arg(long)]
+    pub force: bool,
     /// The action source: the dig planner, the predefined sequence of 6.2, or the fixed plan.
     #[arg(long, value_enum, default_value_t = DemoStrategy::Planned)]
     pub strategy: DemoStrategy,
@@ -175,6 +179,7 @@ impl DemoArgs {
             config: None,
             maps: None,
             quiet: true,
+            force: false,
             strategy: DemoStrategy::Fixed,
             planner: None,
             hardness: None,
@@ -261,6 +266,9 @@ pub async fn run_observed(
         print!("{}", vcan_sim::effects::registry_table());
         return Ok(());
     }
+    onboard::folder::prepare(&args.out, args.force)?;
+    let out = args.out.clone();
+    let quiet = args.quiet;
     let stop = Arc::new(AtomicBool::new(false));
     let stop_on_signal = Arc::clone(&stop);
     let signal = tokio::spawn(async move {
@@ -276,6 +284,12 @@ pub async fn run_observed(
     .context("demo session thread")??;
     signal.abort();
     print!("{}", summary_markdown(&summary));
+    if !quiet {
+        eprintln!(
+            "excavator-ctl demo: the session's files are in {}",
+            out.display()
+        );
+    }
     Ok(())
 }
 

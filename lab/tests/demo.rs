@@ -3,6 +3,8 @@
 #![allow(clippy::unwrap_used)]
 
 mod common;
+#[path = "support/markdown.rs"]
+mod markdown;
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -96,6 +98,7 @@ fn demo_writes_all_outputs_with_the_documented_fields_for_two_digs() {
     assert!(trace.lines().count() as u64 >= json["totals"]["trace_frames"].as_u64().unwrap());
     assert_clean_protocol(&out.join("trace.log"));
     assert_epoch_stamps(&out.join("trace.log"), &summary);
+    markdown::assert_tables_render(&std::fs::read_to_string(out.join("summary.md")).unwrap());
     // The soil estimator's samples of the planned session, for `model soil-cv`.
     let soil: onboard::record::SoilSamplesFile =
         serde_json::from_slice(&std::fs::read(out.join("soil_samples.json")).unwrap()).unwrap();

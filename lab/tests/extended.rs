@@ -3,6 +3,9 @@
 
 #![allow(clippy::unwrap_used)]
 
+#[path = "support/markdown.rs"]
+mod markdown;
+
 use std::sync::atomic::AtomicBool;
 
 use controller::step::cycle::ActionKind;
@@ -68,6 +71,7 @@ fn planned_session_digs_and_backs_up() {
         assert!(json.get(k).is_some(), "{k}");
     }
     assert!(json["digs"][0].get("quality").is_some());
+    markdown::assert_tables_render(&std::fs::read_to_string(out.join("summary.md")).unwrap());
 }
 
 /// The predefined sequence (6.2) from given start joints: digs swing across the regions.

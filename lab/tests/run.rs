@@ -140,8 +140,8 @@ fn planned_run(
         key_file: Some(sim.key_file.clone()),
         digs: Some(digs),
         scan_addr: Some(sim.scan_addr.clone()),
-        strategy: DemoStrategy::Planned,
-        time_scale,
+        strategy: Some(DemoStrategy::Planned),
+        time_scale: Some(time_scale),
         out: Some(out.to_path_buf()),
         ..RunArgs::new("vcan0")
     }
@@ -335,15 +335,16 @@ async fn a_controller_killed_mid_session_resumes_without_losing_or_repeating_an_
         let killer = async {
             loop {
                 tokio::time::sleep(Duration::from_millis(50)).await;
-                let digs = std::fs::read(&state_path)
+                // The second action planned and saved before the cycle begins it.
+                let actions = std::fs::read(&state_path)
                     .ok()
                     .and_then(|b| serde_json::from_slice::<onboard::resume::RunState>(&b).ok())
-                    .map_or(0, |s| s.records.digs.len());
-                if digs >= 1 {
+                    .map_or(0, |s| s.driver.cycle.actions.len());
+                if actions >= 2 {
                     break;
                 }
             }
-            // Into the next action (the planner, the swing, the dig).
+            // Into that action (the swing, the dig).
             tokio::time::sleep(Duration::from_millis(2500)).await;
         };
         tokio::select! {
@@ -357,6 +358,10 @@ async fn a_controller_killed_mid_session_resumes_without_losing_or_repeating_an_
     let saved: onboard::resume::RunState =
         serde_json::from_slice(&std::fs::read(&state_path).unwrap()).unwrap();
     assert_eq!(saved.records.digs.len(), 1, "{:?}", saved.records);
+    // The interrupted action is in the state: the resumed session runs it, not another one.
+    assert_eq!(saved.driver.cycle.action_index, 1);
+    assert_eq!(saved.driver.cycle.actions.len(), 2);
+    let interrupted = saved.driver.planned[1];
     let before_resume = status_dig_indices(&trace_path).len();
 
     // The second controller: `--resume`, after the gateway's watchdog neutralised the valves.
@@ -407,6 +412,11 @@ async fn a_controller_killed_mid_session_resumes_without_losing_or_repeating_an_
     let indices: Vec<u32> = s.digs.iter().map(|d| d.index).collect();
     assert_eq!(indices, (0..DIGS).collect::<Vec<_>>());
     assert_eq!(s.digs[0].time_s, saved.records.digs[0].time_s);
+    assert_eq!(
+        (s.digs[1].predicted_volume_m3, s.digs[1].predicted_time_s),
+        (interrupted.volume_m3, interrupted.time_s),
+        "the resumed session planned another action instead of re-running the interrupted one"
+    );
     assert!(s.digs.iter().all(|d| d.weight_n.is_some_and(|w| w > 0.0)));
     // The trace: one file, every line whole, the dig count never going back behind what was saved
     // and reaching the session's end.

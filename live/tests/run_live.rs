@@ -51,7 +51,7 @@ fn run_serves_the_page_and_its_estop_reaches_the_run_loop() {
     let args = RunArgs {
         config: Some(safety),
         digs: Some(1),
-        time_scale,
+        time_scale: Some(time_scale),
         ..RunArgs::new("vcan0")
     };
     // The live view has its own runtime: started outside the session's.

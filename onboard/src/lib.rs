@@ -10,6 +10,8 @@
 //!   folder.
 //! - [`setup`]: the controller config, machine, site, maps, planner and profile of a session, which
 //!   `run` and the lab's `demo` both build with.
+//! - [`folder`]: a session folder is new or empty; another session's is refused (`--force`).
+//! - [`options`]: the options a session was started with, kept in its folder for `--resume DIR`.
 //! - [`resume`]: a resumable `run`: the records saved with the session driver's checkpoints, the
 //!   writer that saves them off the control loop, the trace a resumed session appends to.
 //! - [`record`]: the records of a session folder (per-dig records, tip paths, soil samples) kept from
@@ -30,7 +32,9 @@
 //! ```
 
 pub mod console;
+pub mod folder;
 pub mod keys;
+pub mod options;
 pub mod record;
 pub mod resume;
 pub mod run;

@@ -254,6 +254,60 @@ mod tests {
         assert_eq!(cut_torn_line(&path).ok(), Some(2));
     }
 
+    /// A record with every float field set from `v` (cycled).
+    fn record(v: &[f64]) -> DigRecord {
+        let f = |k: usize| v[k % v.len()];
+        DigRecord {
+            index: 0,
+            action: controller::step::cycle::ActionKind::Dig,
+            swing_deg: f(0),
+            start_pose: None,
+            weight_n: Some(f(1)),
+            true_payload_kg: f(2),
+            time_s: f(3),
+            ground_contact_time_s: f(4),
+            energy_kj: f(5),
+            swept_volume_m3: f(6),
+            end_reason: None,
+            perception: true,
+            quality: Some(f(7)),
+            predicted_volume_m3: Some(f(8)),
+            predicted_time_s: Some(f(9)),
+            predicted_energy_kj: Some(f(10)),
+            predicted_min_tip_z_m: Some(f(11)),
+            contact_start: Some([f(12), f(13)]),
+            min_tip_z_m: Some(f(14)),
+            hardness_index: Some(f(15)),
+            pose: Some([f(16), f(17), f(18)]),
+            planned_start: Some([f(19), f(20), f(21)]),
+            map_error_m: Some(f(22)),
+            map_bias_at_start_m: Some(f(23)),
+            trajectory: Vec::new(),
+            section: Vec::new(),
+        }
+    }
+
+    proptest::proptest! {
+        /// A saved record reads back bit for bit (`--resume` continues from exactly what was saved).
+        #[test]
+        fn saved_records_read_back_bit_identically(
+            v in proptest::collection::vec(proptest::num::f64::NORMAL | proptest::num::f64::SUBNORMAL, 24),
+        ) {
+            let records = RunRecords {
+                digs: vec![record(&v)],
+                session_time_s: v[0].abs(),
+                wall_time_s: v[1].abs(),
+                ..RunRecords::default()
+            };
+            let text = serde_json::to_string(&records).unwrap_or_default();
+            let back: RunRecords = serde_json::from_str(&text).unwrap_or_else(|e| panic!("{e}: {text}"));
+            let bits = |r: &RunRecords| serde_json::to_value(r).map(|v| v.to_string()).unwrap_or_default();
+            proptest::prop_assert_eq!(bits(&back), bits(&records));
+            proptest::prop_assert_eq!(back.digs[0].predicted_energy_kj.map(f64::to_bits), records.digs[0].predicted_energy_kj.map(f64::to_bits));
+            proptest::prop_assert_eq!(back.session_time_s.to_bits(), records.session_time_s.to_bits());
+        }
+    }
+
     #[test]
     fn records_with_a_gap_are_refused_by_index() {
         let mut r = RunRecords::default();

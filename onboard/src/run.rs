@@ -60,9 +60,10 @@ use crate::summary::{self, DemoStrategy, DemoSummary, FileRecord, SessionEnd, Se
 /// Arguments of `excavator-ctl run`.
 #[derive(Debug, Clone, Args)]
 pub struct RunArgs {
-    /// CAN interface, e.g. can0 (the machine) or vcan0 (excavator-sim).
-    #[arg(long)]
-    pub iface: String,
+    /// CAN interface, e.g. can0 (the machine) or vcan0 (excavator-sim); with `--resume`, the
+    /// session's.
+    #[arg(long, required_unless_present = "resume")]
+    pub iface: Option<String>,
     /// Decode and log the bus but never transmit (first contact with a machine).
     #[arg(long)]
     pub listen_only: bool,
@@ -89,9 +90,10 @@ pub struct RunArgs {
     /// Range-scan service address (host:port): the planner's map and the perception enhancements.
     #[arg(long, value_name = "ADDR")]
     pub scan_addr: Option<String>,
-    /// The action source: the dig planner, the predefined sequence of 6.2, or the config's plan.
-    #[arg(long, value_enum, default_value_t = DemoStrategy::Fixed)]
-    pub strategy: DemoStrategy,
+    /// The action source: the dig planner, the predefined sequence of 6.2, or the config's plan
+    /// (default: fixed, the config's plan).
+    #[arg(long, value_enum)]
+    pub strategy: Option<DemoStrategy>,
     /// Site file: the work area, the target floor, the machine's start pose and the material of the
     /// planned and predefined strategies (default: the built-in config/site.toml, the site of
     /// `demo`'s extended bench; `excavator-ctl site --bench FILE` writes a bench's).
@@ -109,13 +111,18 @@ pub struct RunArgs {
     pub hardness: Option<PathBuf>,
     /// Session seconds per wall second, 0.1 to 20 (default 1, real time); excavator-sim must run
     /// with the same --time-scale.
-    #[arg(long, value_name = "X", default_value_t = TimeScale::REAL_TIME)]
-    pub time_scale: TimeScale,
+    #[arg(long, value_name = "X")]
+    pub time_scale: Option<TimeScale>,
     /// Session folder: trace, scans, summary and plots as `demo` writes them.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Replace the session in `--out` (a folder holding another session is refused without it; a
+    /// folder holding no session is never deleted).
+    #[arg(long)]
+    pub force: bool,
     /// Go on with the session saved in this session folder (its `session_state.json`), with the
-    /// same files and settings it was started with; the folder is the session folder.
+    /// files and settings it was started with (`run_options.json`); an option given again must
+    /// name the same value, but for --digs, --listen-only, --key-file and --control-socket.
     #[arg(long, value_name = "DIR")]
     pub resume: Option<PathBuf>,
     /// The operator's control socket (`excavator-ctl ctl`; default: `control.sock` in the session
@@ -200,7 +207,7 @@ impl RunArgs {
     #[must_use]
     pub fn new(iface: &str) -> Self {
         Self {
-            iface: iface.to_owned(),
+            iface: Some(iface.to_owned()),
             listen_only: false,
             machine: None,
             maps: None,
@@ -209,18 +216,41 @@ impl RunArgs {
             trace: None,
             digs: None,
             scan_addr: None,
-            strategy: DemoStrategy::Fixed,
+            strategy: None,
             site: None,
             seed: None,
             planner: None,
             hardness: None,
-            time_scale: TimeScale::REAL_TIME,
+            time_scale: None,
             out: None,
+            force: false,
             resume: None,
             control_socket: None,
             config_dir: None,
             profile: None,
         }
+    }
+
+    /// `--strategy`, or the default: the fixed plan.
+    #[must_use]
+    pub fn strategy(&self) -> DemoStrategy {
+        self.strategy.unwrap_or(DemoStrategy::Fixed)
+    }
+
+    /// `--time-scale`, or real time.
+    #[must_use]
+    pub fn time_scale(&self) -> TimeScale {
+        self.time_scale.unwrap_or(TimeScale::REAL_TIME)
+    }
+
+    /// `--iface`.
+    ///
+    /// # Errors
+    /// None given (and none saved with a resumed session).
+    pub fn iface(&self) -> anyhow::Result<&str> {
+        self.iface
+            .as_deref()
+            .context("--iface is required (a resumed session takes the one it was started with)")
     }
 
     /// The session folder: `--resume`'s or `--out`'s.
@@ -299,14 +329,15 @@ pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, R
     let machine = setup::machine(args.machine.as_deref())?;
     let site = setup::site(args.site.as_deref())?;
     let maps = setup::maps(args.maps.as_deref())?;
-    let mut config = setup::controller_config(args.strategy, args.config.as_deref(), &site, false)?;
+    let mut config =
+        setup::controller_config(args.strategy(), args.config.as_deref(), &site, false)?;
     let planner = setup::planner_config(args.planner.as_deref(), &site)?;
-    let session = match args.strategy.session() {
+    let session = match args.strategy().session() {
         Some(st) => {
             anyhow::ensure!(
                 args.scan_addr.is_some(),
                 "--strategy {} plans on range scans: give the scan service's --scan-addr",
-                args.strategy.name()
+                args.strategy().name()
             );
             Some(setup::planned_session(
                 &machine,
@@ -318,7 +349,7 @@ pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, R
         }
         None => None,
     };
-    config.cycle.max_digs = match (args.digs, args.strategy) {
+    config.cycle.max_digs = match (args.digs, args.strategy()) {
         (Some(n), _) => Some(n),
         // The config's own limit (a repeating plan may stop only there).
         (None, DemoStrategy::Fixed) => config.cycle.max_digs,
@@ -345,7 +376,7 @@ pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, R
         &machine,
         &site,
         seed,
-        args.strategy,
+        args.strategy(),
         &config,
         &planner,
         &maps,
@@ -447,6 +478,13 @@ pub async fn run_observed(
     observer: &mut dyn SessionObserver,
     plots: Option<Arc<dyn SessionPlots>>,
 ) -> anyhow::Result<()> {
+    let args = crate::options::resumed(args)?;
+    if args.resume.is_none()
+        && let Some(o) = &args.out
+    {
+        crate::folder::prepare(o, args.force)?;
+    }
+    let iface = args.iface()?;
     // A bad profile stops the run before it touches the bus. Without one the bus speaks the default
     // profile, the identity: every frame passes unchanged.
     let profile = match setup::load_profile(args.with_config_dir().profile.as_deref())? {
@@ -454,12 +492,12 @@ pub async fn run_observed(
         None => std::sync::Arc::new(Profile::default_profile()?),
     };
     let link = check_link(&args)?;
-    let mut bus = SocketCanBus::open(&args.iface)
-        .with_context(|| format!("opening CAN interface {}", args.iface))?;
+    let mut bus =
+        SocketCanBus::open(iface).with_context(|| format!("opening CAN interface {iface}"))?;
     let trace = match trace_path(&args)? {
         Some(p) => {
             let (recorder, frames_before) =
-                crate::resume::open_trace(&p, &args.iface, args.resume.is_some())?;
+                crate::resume::open_trace(&p, iface, args.resume.is_some())?;
             bus.set_recorder(recorder.clone());
             Some(SessionTrace {
                 recorder,
@@ -498,7 +536,7 @@ pub async fn run_observed(
 /// A missing interface (with the commands that create or configure it), a netlink failure, or the
 /// refusal, each one line.
 pub fn check_link(args: &RunArgs) -> anyhow::Result<LinkStatus> {
-    let link = LinkStatus::query(&args.iface)?;
+    let link = LinkStatus::query(args.iface()?)?;
     link.check(args.listen_only)?;
     Ok(link)
 }
@@ -576,6 +614,7 @@ pub async fn run_on_observed<B: Bus>(
     live: &mut dyn SessionObserver,
 ) -> anyhow::Result<()> {
     let wall = Instant::now();
+    let args = &crate::options::resumed(args.clone())?;
     let (mut node, mut driver, setup) = build(args)?;
     let out_dir = args.session_dir()?;
     let resumed = match &args.resume {
@@ -625,8 +664,8 @@ pub async fn run_on_observed<B: Bus>(
     }
     tracing::info!(
         iface = %bus.interface(),
-        strategy = args.strategy.name(),
-        time_scale = %args.time_scale,
+        strategy = args.strategy().name(),
+        time_scale = %args.time_scale(),
         listen_only = node.safety().config().listen_only,
         scan_addr = args.scan_addr.as_deref().unwrap_or("none"),
         "excavator-ctl running; Ctrl-C stops (valves neutral, disarm)"
@@ -644,7 +683,13 @@ pub async fn run_on_observed<B: Bus>(
         log.scans = r.scans;
     }
     let mut state_writer = match &out_dir {
-        Some(o) => Some(StateWriter::spawn(crate::resume::state_path(o))?),
+        Some(o) => {
+            if args.resume.is_none() {
+                std::fs::create_dir_all(o).with_context(|| format!("creating {}", o.display()))?;
+                crate::options::SavedOptions::of(args, bus.interface()).save(o)?;
+            }
+            Some(StateWriter::spawn(crate::resume::state_path(o))?)
+        }
         None => None,
     };
     let session_log = match (&out_dir, console.session_log) {
@@ -652,7 +697,7 @@ pub async fn run_on_observed<B: Bus>(
             std::fs::create_dir_all(o).with_context(|| format!("creating {}", o.display()))?;
             let path = o.join(crate::session_log::FILE_NAME);
             Some(
-                crate::session_log::open(&path, base.session_time_s, args.time_scale.get())
+                crate::session_log::open(&path, base.session_time_s, args.time_scale().get())
                     .with_context(|| format!("opening the session log {}", path.display()))?,
             )
         }
@@ -755,7 +800,7 @@ pub async fn run_on_observed<B: Bus>(
         bus,
         &mut node,
         CONTROL_PERIOD,
-        args.time_scale,
+        args.time_scale(),
         shutdown,
         Some(LoopSession {
             driver: &mut driver,
@@ -828,7 +873,7 @@ pub async fn run_on_observed<B: Bus>(
             log.records,
             SessionEnd {
                 command: "run",
-                strategy: args.strategy,
+                strategy: args.strategy(),
                 bench: setup.site,
                 seed: setup.seed,
                 soil_contact: None,
@@ -864,6 +909,18 @@ pub async fn run_on_observed<B: Bus>(
             console.plots.as_deref(),
         )?;
         print!("{}", summary::summary_markdown(&summary));
+        eprintln!(
+            "excavator-ctl run: the session's files are in {}{}",
+            out.display(),
+            if summary.end == "stopped" || summary.end == "error" {
+                format!(
+                    " (go on with: excavator-ctl run --resume {})",
+                    out.display()
+                )
+            } else {
+                String::new()
+            }
+        );
     }
     result?;
     trace?;

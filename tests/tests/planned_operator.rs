@@ -8,7 +8,8 @@
 //!    machine until the `reset`, motion again after it;
 //! 2. `kill -9` of the controller mid-session (armed, in the action after the e-stopped one), the
 //!    gateway's watchdog neutralising the valves, and
-//!    `run --resume DIR`: the session finishes with its action count, every action once.
+//!    `run --resume DIR` alone (the options come from the session folder): the interrupted action
+//!    runs again from its start and the session finishes with its action count, every action once.
 //!
 //! `#[ignore]`d in a plain `cargo test`: they need a vcan interface (`EXCAVATOR_VCAN_IFACE`) and the
 //! release binaries (`EXCAVATOR_BIN_DIR`); `scripts/test-all` runs them through `scripts/vcan-vm`.
@@ -122,12 +123,20 @@ fn wait_armed(iface: &str, ctl: &mut hil_tests::process::Proc) {
     panic!("the gateway was never armed: {}", ctl.log_tail(30));
 }
 
-/// Completed actions in the session's state file (0 before the first).
-fn saved_actions(out: &Path) -> usize {
+/// The session's state file, if it can be read.
+fn saved_state(out: &Path) -> Option<onboard::resume::RunState> {
     std::fs::read(onboard::resume::state_path(out))
         .ok()
         .and_then(|b| serde_json::from_slice::<onboard::resume::RunState>(&b).ok())
-        .map_or(0, |s| s.records.digs.len())
+}
+
+/// Completed actions in the session's state file (0 before the first), and whether the next one is
+/// saved as planned but not done.
+fn saved_actions(out: &Path) -> (usize, bool) {
+    saved_state(out).map_or((0, false), |s| {
+        let done = s.records.digs.len();
+        (done, s.driver.cycle.actions.len() > done)
+    })
 }
 
 #[test]
@@ -161,9 +170,10 @@ fn planned_session_estop_holds_until_reset_and_a_killed_controller_resumes() {
     let t_reset = unix_now_s();
     operator(&control, "reset");
 
-    // 2. kill -9 once an action after the e-stop is saved, into the next one; restart with --resume.
+    // 2. kill -9 once an action after the e-stop is saved and the next one planned, into that one;
+    //    restart with --resume DIR alone.
     let deadline = Instant::now() + SESSION_TIMEOUT;
-    while saved_actions(&out) < 1 {
+    while !matches!(saved_actions(&out), (done, true) if done >= 1) {
         ctl.assert_running();
         assert!(
             Instant::now() < deadline,
@@ -181,7 +191,11 @@ fn planned_session_estop_holds_until_reset_and_a_killed_controller_resumes() {
         serde_json::from_slice(&std::fs::read(onboard::resume::state_path(&out)).unwrap()).unwrap();
     std::thread::sleep(Duration::from_millis(1000));
     let t_restart = unix_now_s();
-    let args = sim.run_args(&["--resume", path_str(&out)], &[]);
+    let args = [
+        "run".to_owned(),
+        "--resume".to_owned(),
+        path_str(&out).to_owned(),
+    ];
     let mut resumed = sim.spawn_ctl(&args, "ctl-resumed.log");
     let ended = resumed.wait_timeout(SESSION_TIMEOUT);
     sim.sim.signal("INT");
@@ -428,6 +442,22 @@ fn planned_session_estop_holds_until_reset_and_a_killed_controller_resumes() {
             (b.index, b.time_s, b.weight_n)
         );
     }
+    // The interrupted action, as the planner planned it before the kill, is the one run next.
+    let next = saved.records.digs.len();
+    assert_eq!(
+        saved.driver.cycle.actions.len(),
+        next + 1,
+        "the interrupted action is not saved"
+    );
+    let interrupted = saved.driver.planned[next];
+    assert_eq!(
+        (
+            s.digs[next].predicted_volume_m3,
+            s.digs[next].predicted_time_s
+        ),
+        (interrupted.volume_m3, interrupted.time_s),
+        "the resumed session planned another action instead of re-running the interrupted one"
+    );
     let dig_index = |from: f64, to: f64| -> Vec<u16> {
         controller_statuses(&recs)
             .into_iter()

@@ -362,10 +362,12 @@ pub fn sensor_messages(
     readings: &SensorReadings,
     valve_commands: [f64; 3],
 ) -> [Message; 5] {
+    use firmware_bridge::dbc::{joint_angles, joint_rates};
     let r = readings;
-    // Inside the DBC range [-3.1416, 3.1416].
-    let angle = |a: f64| a.clamp(-std::f64::consts::PI + 1e-4, std::f64::consts::PI - 1e-4);
-    let rate = |w: f64| w.clamp(-31.9, 31.9);
+    // Inside each signal's DBC range (the four angles and the four rates share theirs).
+    let in_range = |sig: &firmware_bridge::dbc::SignalDesc, v: f64| v.clamp(sig.min, sig.max);
+    let angle = |a: f64| in_range(&joint_angles::BOOM_ANGLE, a);
+    let rate = |w: f64| in_range(&joint_rates::BOOM_RATE, w);
     let h = &plant.hydraulics;
     let rated = h.params().pumps[0].max_flow_m3_per_s;
     let valve = |i: usize| {
@@ -378,7 +380,10 @@ pub fn sensor_messages(
         } else {
             (ValveState::Block, 0.0)
         };
-        let flow = (a.velocity.abs() * area / rated * 100.0).clamp(0.0, 160.0);
+        let flow = in_range(
+            &firmware_bridge::dbc::aux_valve_measured_boom::MEASURED_FLOW,
+            a.velocity.abs() * area / rated * 100.0,
+        );
         Message::AuxValveMeasured(AuxValveMeasured {
             cylinder: Cylinder::ALL[i],
             flow_percent: flow,
@@ -428,6 +433,27 @@ pub fn steps_in(dt_s: f64) -> u64 {
 mod tests {
     use super::*;
     use crate::SimConfig;
+
+    #[test]
+    fn the_sensor_clamps_are_the_dbcs_ranges_of_every_joint() {
+        use firmware_bridge::dbc::{joint_angles as a, joint_rates as r};
+        let range = |s: &firmware_bridge::dbc::SignalDesc| (s.min, s.max);
+        for s in [&a::STICK_ANGLE, &a::BUCKET_ANGLE, &a::SWING_ANGLE] {
+            assert_eq!(range(s), range(&a::BOOM_ANGLE), "{}", s.name);
+        }
+        for s in [&r::STICK_RATE, &r::BUCKET_RATE, &r::SWING_RATE] {
+            assert_eq!(range(s), range(&r::BOOM_RATE), "{}", s.name);
+        }
+        for s in [
+            &firmware_bridge::dbc::aux_valve_measured_stick::MEASURED_FLOW,
+            &firmware_bridge::dbc::aux_valve_measured_bucket::MEASURED_FLOW,
+        ] {
+            assert_eq!(
+                range(s),
+                range(&firmware_bridge::dbc::aux_valve_measured_boom::MEASURED_FLOW)
+            );
+        }
+    }
 
     /// A node on the built-in configuration, its start moved to `start_x_m`.
     fn node_at(start_x_m: f64) -> MachineNode {

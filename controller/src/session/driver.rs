@@ -176,6 +176,9 @@ pub struct SessionDriver {
     checkpoint_key: Option<(usize, usize)>,
     /// The checkpoint taken in the last [`Self::after_step`], if any.
     checkpoint: Option<Box<DriverSnapshot>>,
+    /// A checkpoint taken by [`Self::finish_plan`] between two steps, reported by the next
+    /// [`Self::after_step`].
+    planned_checkpoint: Option<Box<DriverSnapshot>>,
 }
 
 /// A detached planning step.
@@ -221,6 +224,7 @@ impl SessionDriver {
             workspace_scan_failures: 0,
             checkpoint_key: None,
             checkpoint: None,
+            planned_checkpoint: None,
         }
     }
 
@@ -297,8 +301,10 @@ impl SessionDriver {
     }
 
     /// Takes a checkpoint when the cycle stands between actions, the last dig's bookkeeping is done,
-    /// the session is here and the plan moved on since the last one.
-    fn take_checkpoint(&mut self, node: &ControllerNode) {
+    /// the session is here and the plan moved on since the last one: before a planning step, and
+    /// once its action is pushed but not begun, so that a resumed session runs that action again
+    /// from its start instead of planning another from the half-dug ground.
+    fn take_checkpoint(&mut self, node: &ControllerNode) -> Option<Box<DriverSnapshot>> {
         let cycle = node.cycle();
         let key = (cycle.action_index(), cycle.config().actions.len());
         let between = cycle.phase() == Phase::Idle
@@ -307,8 +313,9 @@ impl SessionDriver {
             && self.job.is_none();
         if between && self.checkpoint_key != Some(key) {
             self.checkpoint_key = Some(key);
-            self.checkpoint = Some(Box::new(self.snapshot(node)));
+            return Some(Box::new(self.snapshot(node)));
         }
+        None
     }
 
     /// The planned session, if the planner drives (`None` while a detached planning step holds it).
@@ -354,7 +361,7 @@ impl SessionDriver {
         scans: &mut dyn ScanSource,
     ) -> Result<&[SessionEvent], DriverError> {
         self.events.clear();
-        self.checkpoint = None;
+        self.checkpoint = self.planned_checkpoint.take();
         if node.take_scan_request() {
             self.cycle_scan_wanted = true;
         }
@@ -375,7 +382,9 @@ impl SessionDriver {
         }
         self.plan(node, scans)?;
         self.follow_dig(node);
-        self.take_checkpoint(node);
+        if let Some(cp) = self.take_checkpoint(node) {
+            self.checkpoint = Some(cp);
+        }
         self.steps += 1;
         Ok(&self.events)
     }
@@ -455,7 +464,9 @@ impl SessionDriver {
             }
         };
         // The last chance to save the session between these two actions before the planner holds it.
-        self.take_checkpoint(node);
+        if let Some(cp) = self.take_checkpoint(node) {
+            self.checkpoint = Some(cp);
+        }
         let Some(session) = self.session.take() else {
             return Ok(());
         };
@@ -538,6 +549,10 @@ impl SessionDriver {
                 }
                 self.planned[index] = planned;
                 node.push_action(action)?;
+                // Saved before the cycle begins it: a resumed session runs this action again.
+                if let Some(cp) = self.take_checkpoint(node) {
+                    self.planned_checkpoint = Some(cp);
+                }
             }
             Planned::Over(reason) => {
                 self.over = Some(reason);
