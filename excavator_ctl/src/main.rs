@@ -82,10 +82,14 @@ fn run(runtime: &tokio::runtime::Runtime, cmd: cli::RunCmd) -> anyhow::Result<()
 fn main() -> std::process::ExitCode {
     use tracing_subscriber::layer::SubscriberExt as _;
     use tracing_subscriber::util::SubscriberInitExt as _;
+    let cli = Cli::parse();
+    // `--quiet`: warnings and errors only, unless RUST_LOG asks for more.
+    let quiet = matches!(&cli.command, Command::Demo(d) if d.session.quiet);
     tracing_subscriber::registry()
         .with(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| {
+                tracing_subscriber::EnvFilter::new(if quiet { "warn" } else { "info" })
+            }),
         )
         .with(
             tracing_subscriber::fmt::layer()
@@ -97,7 +101,6 @@ fn main() -> std::process::ExitCode {
         // `run`'s session log (run.log in its session folder), while one is open.
         .with(onboard::session_log::layer())
         .init();
-    let cli = Cli::parse();
     let runtime = match tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()

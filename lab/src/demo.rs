@@ -123,7 +123,8 @@ pub struct DemoArgs {
     /// Autodig maps (default: the built-in config/autodig_maps.toml).
     #[arg(long, value_name = "FILE")]
     pub maps: Option<PathBuf>,
-    /// No progress bar, and no line saying where the files went.
+    /// No progress bar, no log below warnings (unless RUST_LOG asks), and no line saying where the
+    /// files went.
     #[arg(long)]
     pub quiet: bool,
     /// Replace the session in `--out` (a folder holding another session is refused without it; a

@@ -770,7 +770,9 @@ pub async fn run_on_observed<B: Bus>(
                 tracing::info!(
                     dig = d.map(crate::record::DigRecord::number),
                     action = ?d.map(|d| d.action),
-                    weight_n = ?d.and_then(|d| d.weight_n),
+                    weight_n = %d
+                        .and_then(|d| d.weight_n)
+                        .map_or_else(|| "none".to_owned(), |w| format!("{w:.0}")),
                     backups = driver.backups(),
                     "dig done"
                 );

@@ -152,10 +152,13 @@ impl WorkCycle {
             if let Some(r) = self.record.take() {
                 tracing::info!(
                     dig = r.stats.number(),
-                    weight_n = ?r.stats.weight_n,
-                    time_s = r.stats.time_s,
-                    energy_kj = r.stats.energy_kj(),
-                    swept_m3 = r.stats.swept_volume_m3,
+                    weight_n = %r
+                        .stats
+                        .weight_n
+                        .map_or_else(|| "none".to_owned(), |w| format!("{w:.0}")),
+                    time_s = %format_args!("{:.2}", r.stats.time_s),
+                    energy_kj = %format_args!("{:.1}", r.stats.energy_kj()),
+                    swept_m3 = %format_args!("{:.3}", r.stats.swept_volume_m3),
                     "dig done"
                 );
                 self.stats.push(r.stats);
