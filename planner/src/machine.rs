@@ -484,9 +484,9 @@ impl MachineConfig {
     /// As [`Self::from_toml_str`], plus [`ConfigError::Io`] when the file cannot be read.
     pub fn from_toml_file(path: &Path) -> Result<Self, ConfigError> {
         let origin = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| ConfigError::Io {
+        let text = crate::config_file::read_text(path).map_err(|reason| ConfigError::Io {
             origin: origin.clone(),
-            reason: e.to_string(),
+            reason,
         })?;
         Self::from_toml_str_named(&text, &origin)
     }
@@ -834,6 +834,23 @@ fn positive(field: &str, v: f64) -> Result<(), (String, String)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[cfg(unix)]
+    #[test]
+    fn dev_zero_as_a_machine_file_is_refused_at_once() {
+        let started = std::time::Instant::now();
+        for load in [
+            |p: &Path| MachineConfig::from_toml_file(p),
+            |p: &Path| MachineConfig::controller_file(Some(p)),
+        ] {
+            let e = load(Path::new("/dev/zero")).unwrap_err().to_string();
+            assert!(
+                e.contains("/dev/zero") && e.contains("not a regular file"),
+                "{e}"
+            );
+        }
+        assert!(started.elapsed() < std::time::Duration::from_secs(1));
+    }
 
     #[test]
     fn default_machine_parses_and_validates() {
