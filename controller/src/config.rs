@@ -230,9 +230,10 @@ impl ControllerConfig {
     /// [`ConfigFileError`] naming the file, the line and the field.
     pub fn from_toml_file(path: &Path) -> Result<Self, ConfigFileError> {
         let origin = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigFileError::Io {
+        // A regular file of bounded size (`/dev/zero` or a FIFO as `--config` is refused at once).
+        let text = planner::config_file::read_text(path).map_err(|reason| ConfigFileError::Io {
             origin: origin.clone(),
-            source,
+            source: std::io::Error::other(reason),
         })?;
         let mut config = Self::from_toml_str_named(&text, &origin)?;
         if let (Some(key), Some(dir)) = (&config.security.key_file, path.parent())

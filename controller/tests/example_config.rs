@@ -30,3 +30,15 @@ fn the_packaged_example_config_loads_and_states_the_true_defaults() {
     assert_eq!(config.cycle.scan_timeout_s, default.scan_timeout_s);
     assert_eq!(config.security.key_file, None);
 }
+
+/// `/dev/zero` as `--config` once grew without bound (24 GB, then the OOM killer): refused at once.
+#[cfg(unix)]
+#[test]
+fn dev_zero_as_the_config_is_refused_at_once() {
+    let started = std::time::Instant::now();
+    let e = ControllerConfig::from_toml_file(std::path::Path::new("/dev/zero"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("/dev/zero"), "{e}");
+    assert!(started.elapsed() < std::time::Duration::from_secs(1), "{e}");
+}

@@ -363,7 +363,7 @@ impl Profile {
     /// # Errors
     /// [`ProfileError`] naming the file, the line and the missing or wrong quantity.
     pub fn load(path: &Path) -> Result<Self, ProfileError> {
-        let text = std::fs::read_to_string(path).map_err(|error| ProfileError::Io {
+        let text = read_text(path).map_err(|error| ProfileError::Io {
             path: path.to_path_buf(),
             error,
         })?;
@@ -373,16 +373,15 @@ impl Profile {
             .parent()
             .unwrap_or_else(|| Path::new(""))
             .join(file.dbc.get_ref());
-        let dbc_text =
-            std::fs::read_to_string(&dbc_path).map_err(|error| ProfileError::Invalid {
-                origin: origin.clone(),
-                line: Some(line_of_offset(&text, file.dbc.span().start)),
-                message: format!(
-                    "dbc = {:?}: cannot read {}: {error}",
-                    file.dbc.get_ref(),
-                    dbc_path.display()
-                ),
-            })?;
+        let dbc_text = read_text(&dbc_path).map_err(|error| ProfileError::Invalid {
+            origin: origin.clone(),
+            line: Some(line_of_offset(&text, file.dbc.span().start)),
+            message: format!(
+                "dbc = {:?}: cannot read {}: {error}",
+                file.dbc.get_ref(),
+                dbc_path.display()
+            ),
+        })?;
         Self::build(&text, &origin, file, dbc_path, &dbc_text)
     }
 
@@ -1192,9 +1191,79 @@ fn field_target(
     })
 }
 
+/// The largest profile or DBC file read, bytes (the shipped ones are under 20 kB).
+pub const MAX_FILE_BYTES: u64 = 4 << 20;
+
+/// The text of the file at `path` read as untrusted input, as `planner::config_file::read_text`
+/// does (this crate sits below the planner): a regular file (not a FIFO, which would block, nor a
+/// device such as `/dev/zero`, which never ends) of at most [`MAX_FILE_BYTES`], read through a
+/// bounded reader.
+fn read_text(path: &Path) -> std::io::Result<String> {
+    use std::io::Read as _;
+    let bad = |why: String| std::io::Error::new(std::io::ErrorKind::InvalidData, why);
+    let mut options = std::fs::OpenOptions::new();
+    options.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt as _;
+        // O_NONBLOCK: opening a FIFO for reading returns at once instead of waiting for a writer.
+        options.custom_flags(0o4000);
+    }
+    let file = options.open(path)?;
+    let meta = file.metadata()?;
+    if !meta.is_file() {
+        return Err(bad("not a regular file".to_owned()));
+    }
+    let mut bytes = Vec::new();
+    file.take(MAX_FILE_BYTES + 1).read_to_end(&mut bytes)?;
+    if meta.len() > MAX_FILE_BYTES || bytes.len() as u64 > MAX_FILE_BYTES {
+        return Err(bad(format!("larger than the {MAX_FILE_BYTES}-byte limit")));
+    }
+    String::from_utf8(bytes).map_err(|e| bad(format!("not UTF-8 text: {e}")))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `/dev/zero` (which never ends) or a FIFO (which blocks) as a profile or as its DBC: refused
+    /// at once, memory bounded, the file named.
+    #[cfg(unix)]
+    #[test]
+    fn a_device_or_a_fifo_as_the_profile_or_its_dbc_is_refused_at_once() {
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("fifo");
+        let made = std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap();
+        assert!(made.success());
+        let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/other_gateway.toml");
+        let text = std::fs::read_to_string(&example).unwrap();
+        let dbc_line = text
+            .lines()
+            .find(|l| l.trim_start().starts_with("dbc"))
+            .unwrap();
+        let mut cases = vec![
+            (Path::new("/dev/zero").to_path_buf(), "/dev/zero"),
+            (fifo.clone(), "fifo"),
+        ];
+        for (name, target) in [("zero.toml", "/dev/zero"), ("fifo.toml", "fifo")] {
+            let profile = dir.path().join(name);
+            std::fs::write(
+                &profile,
+                text.replace(dbc_line, &format!("dbc = {target:?}")),
+            )
+            .unwrap();
+            cases.push((profile, target));
+        }
+        for (path, named) in cases {
+            let started = std::time::Instant::now();
+            let e = Profile::load(&path).unwrap_err().to_string();
+            assert!(e.contains("not a regular file") && e.contains(named), "{e}");
+            assert!(started.elapsed() < std::time::Duration::from_secs(1), "{e}");
+        }
+    }
 
     /// Regression for what a user saw: a missing DBC printed its cause twice and named no profile
     /// line, `mux = "2"` said `invalid type` without the field, and unmapped ids printed as

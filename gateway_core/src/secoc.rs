@@ -78,7 +78,16 @@ impl SessionKey {
             path: path.display().to_string(),
             reason,
         };
-        let file = std::fs::File::open(path).map_err(|e| err(e.to_string()))?;
+        // Opened without blocking (a FIFO as the key file would wait for a writer forever), then
+        // checked to be a regular file before any read.
+        let mut options = std::fs::OpenOptions::new();
+        options.read(true);
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::OpenOptionsExt as _;
+            options.custom_flags(0o4000); // O_NONBLOCK
+        }
+        let file = options.open(path).map_err(|e| err(e.to_string()))?;
         let meta = file.metadata().map_err(|e| err(e.to_string()))?;
         if !meta.is_file() {
             return Err(err("not a regular file".into()));
@@ -613,6 +622,24 @@ mod tests {
         let missing = dir.path().join("none.key");
         let e = SessionKey::from_file(&missing).unwrap_err().to_string();
         assert!(e.contains("none.key"), "{e}");
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_fifo_or_a_device_as_the_key_file_is_refused_at_once() {
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("machine.key");
+        let made = std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap();
+        assert!(made.success());
+        for path in [fifo.as_path(), std::path::Path::new("/dev/zero")] {
+            let started = std::time::Instant::now();
+            let e = SessionKey::from_file(path).unwrap_err().to_string();
+            assert!(e.contains("not a regular file"), "{e}");
+            assert!(started.elapsed() < std::time::Duration::from_secs(1), "{e}");
+        }
     }
 
     #[test]

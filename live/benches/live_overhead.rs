@@ -250,6 +250,7 @@ fn stream() -> LiveStream {
             live: Some("127.0.0.1:0".to_owned()),
             pace: None,
             live_queue: live::DEFAULT_QUEUE,
+            ..Default::default()
         },
         &sim.machine,
     )

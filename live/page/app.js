@@ -189,7 +189,11 @@ async function send(cmd) {
   try {
     const r = await fetch("command", {
       method: "POST",
-      headers: { "Content-Type": "application/json" },
+      // The session's token, which this server put in the page it served (live/src/access.rs).
+      headers: {
+        "Content-Type": "application/json",
+        "X-Operator-Token": document.querySelector('meta[name="operator-token"]').content,
+      },
       body: JSON.stringify({ cmd }),
     });
     const reply = await r.json();

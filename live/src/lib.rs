@@ -15,6 +15,8 @@
 //! - [`subprotocol`]: the accept shim on the `--live` port in front of the crate's server (on
 //!   loopback), so that clients asking for `foxglove.websocket.v1` (older Foxglove Studio,
 //!   Lichtblick) are served as well as those asking for `foxglove.sdk.v1`.
+//! - [`access`]: who may use the page and the WebSocket: `Host` and `Origin` against an allow-list
+//!   (loopback by default, `--live-allow-host`), and the page's per-session command token.
 //! - [`page`]: the operator page (static assets in `live/page/`), served over HTTP on the port after
 //!   the WebSocket's: the publisher keeps its state, the page follows it as server-sent events and
 //!   sends the operator commands of the session's control path (`SessionObserver::operator_control`).
@@ -29,6 +31,7 @@
 //! the page --POST /command--> controller::io::operator::OperatorSender --> the control loop's port
 //! ```
 
+pub mod access;
 pub mod page;
 pub mod stream;
 pub mod subprotocol;
@@ -105,6 +108,15 @@ pub struct LiveArgs {
     /// Updates queued for the stream before it drops (and counts) them.
     #[arg(long, value_name = "N", default_value_t = DEFAULT_QUEUE, requires = "live")]
     pub live_queue: usize,
+    /// Also allow HOST (a name or address the operator's browser uses for this machine) in the
+    /// `Host` and `Origin` of the page and the WebSocket; loopback (localhost, 127.0.0.1, [::1])
+    /// and the `--live` address are always allowed. Repeat for more.
+    #[arg(long, value_name = "HOST", requires = "live")]
+    pub live_allow_host: Vec<String>,
+    /// Also accept ORIGIN (exactly, e.g. https://app.foxglove.dev) on the WebSocket, whose
+    /// stream is read only; never on the page's commands. Repeat for more.
+    #[arg(long, value_name = "ORIGIN", requires = "live")]
+    pub live_allow_origin: Vec<String>,
 }
 
 /// A parsed `--live` address.

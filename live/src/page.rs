@@ -8,11 +8,13 @@
 //! the page --POST /command {"cmd": "estop"}--> OperatorSender --bounded queue--> control loop
 //! ```
 //!
-//! Nothing from the network is trusted: a command is a JSON object of one known field (`cmd`, one
-//! of the operator commands) in at most [`MAX_COMMAND_BYTES`], sent as `application/json` (so a
-//! page of another origin cannot send it without a CORS preflight, which is never granted) and,
-//! when the browser names its origin, from this server's own origin; at most [`MAX_EVENT_CLIENTS`]
-//! pages follow the state at once.
+//! Nothing from the network is trusted: every request names an allowed `Host` ([`Access`]: loopback
+//! by default, so a DNS-rebinding page is refused); a command is a JSON object of one known field
+//! (`cmd`, one of the operator commands) in at most [`MAX_COMMAND_BYTES`], sent as
+//! `application/json` (so a page of another origin cannot send it without a CORS preflight, which
+//! is never granted), from an allowed origin when the browser names one, and carrying the session's
+//! token in [`TOKEN_HEADER`] (random per server, known only to the page this server served); at most
+//! [`MAX_EVENT_CLIENTS`] pages follow the state at once. Every command is logged with its surface.
 
 use std::collections::VecDeque;
 use std::convert::Infallible;
@@ -36,6 +38,8 @@ use planner::terrain::TerrainGrid;
 use serde::{Deserialize, Serialize};
 use tokio::sync::{Semaphore, watch};
 
+use crate::access::{Access, TOKEN_HEADER, Token};
+
 /// Longest command body, bytes (a command is under 40).
 pub const MAX_COMMAND_BYTES: usize = 1024;
 /// Pages following the state at once; more are answered 503.
@@ -46,6 +50,8 @@ pub const STATE_EVERY: Duration = Duration::from_millis(100);
 const LOG_LINES: usize = 8;
 
 const INDEX_HTML: &str = include_str!("../page/index.html");
+/// Where the page's HTML takes the session's token.
+const TOKEN_PLACEHOLDER: &str = "{{OPERATOR_TOKEN}}";
 const APP_JS: &str = include_str!("../page/app.js");
 const STYLE_CSS: &str = include_str!("../page/style.css");
 
@@ -285,18 +291,44 @@ pub(crate) struct App {
     snapshots: watch::Receiver<Snapshot>,
     operator: Arc<OnceLock<OperatorSender>>,
     event_slots: Arc<Semaphore>,
+    access: Arc<Access>,
+    token: Token,
+    /// The page's HTML with the token in it.
+    index_html: Arc<str>,
+    /// The port the page is served on (the `Host` and `Origin` name it).
+    port: u16,
 }
 
 impl App {
     pub(crate) fn new(
         snapshots: watch::Receiver<Snapshot>,
         operator: Arc<OnceLock<OperatorSender>>,
+        access: Access,
+        token: Token,
+        port: u16,
     ) -> Self {
         Self {
             snapshots,
             operator,
             event_slots: Arc::new(Semaphore::new(MAX_EVENT_CLIENTS)),
+            access: Arc::new(access),
+            index_html: INDEX_HTML.replace(TOKEN_PLACEHOLDER, token.as_str()).into(),
+            token,
+            port,
         }
+    }
+
+    /// The refusal of a request whose `Host` or `Origin` is not allowed, if it is one.
+    fn refused(&self, headers: &HeaderMap) -> Option<Response> {
+        let text = |name| {
+            headers
+                .get(name)
+                .map(|v| v.to_str().unwrap_or("(not text)"))
+        };
+        self.access
+            .check(text(header::HOST), text(header::ORIGIN), self.port, false)
+            .err()
+            .map(|why| refuse(StatusCode::FORBIDDEN, why))
     }
 
     /// Whether no page follows the state (every event stream has ended).
@@ -311,15 +343,25 @@ pub(crate) fn router(app: App) -> Router {
     Router::new()
         .route(
             "/",
-            get(|| async { asset(INDEX_HTML, "text/html; charset=utf-8") }),
+            get(|State(app): State<App>, headers: HeaderMap| async move {
+                let html = Arc::clone(&app.index_html);
+                app.refused(&headers)
+                    .unwrap_or_else(|| asset(html.to_string(), "text/html; charset=utf-8"))
+            }),
         )
         .route(
             "/app.js",
-            get(|| async { asset(APP_JS, "text/javascript; charset=utf-8") }),
+            get(|State(app): State<App>, headers: HeaderMap| async move {
+                app.refused(&headers)
+                    .unwrap_or_else(|| asset(APP_JS, "text/javascript; charset=utf-8"))
+            }),
         )
         .route(
             "/style.css",
-            get(|| async { asset(STYLE_CSS, "text/css; charset=utf-8") }),
+            get(|State(app): State<App>, headers: HeaderMap| async move {
+                app.refused(&headers)
+                    .unwrap_or_else(|| asset(STYLE_CSS, "text/css; charset=utf-8"))
+            }),
         )
         .route("/events", get(events))
         .route("/command", post(command))
@@ -327,7 +369,7 @@ pub(crate) fn router(app: App) -> Router {
         .with_state(app)
 }
 
-fn asset(body: &'static str, content_type: &'static str) -> Response {
+fn asset(body: impl Into<axum::body::Body>, content_type: &'static str) -> Response {
     (
         [
             (header::CONTENT_TYPE, content_type),
@@ -339,13 +381,16 @@ fn asset(body: &'static str, content_type: &'static str) -> Response {
             ),
             (header::X_CONTENT_TYPE_OPTIONS, "nosniff"),
         ],
-        body,
+        body.into(),
     )
         .into_response()
 }
 
 /// `GET /events`: the state (and the terrain map when it changed) as server-sent events.
-async fn events(State(app): State<App>) -> Response {
+async fn events(State(app): State<App>, headers: HeaderMap) -> Response {
+    if let Some(r) = app.refused(&headers) {
+        return r;
+    }
     let Ok(permit) = Arc::clone(&app.event_slots).try_acquire_owned() else {
         return (
             StatusCode::SERVICE_UNAVAILABLE,
@@ -441,15 +486,15 @@ async fn command(State(app): State<App>, headers: HeaderMap, body: Bytes) -> Res
             "a command is application/json",
         );
     }
-    if let Some(origin) = headers.get(header::ORIGIN) {
-        let host = headers.get(header::HOST).and_then(|h| h.to_str().ok());
-        let same = host.is_some_and(|h| origin.to_str().is_ok_and(|o| o == format!("http://{h}")));
-        if !same {
-            return refuse(
-                StatusCode::FORBIDDEN,
-                "a command comes from the operator page of this server only",
-            );
-        }
+    if let Some(r) = app.refused(&headers) {
+        return r;
+    }
+    let token = headers.get(TOKEN_HEADER).map(HeaderValue::as_bytes);
+    if !token.is_some_and(|t| app.token.matches(t)) {
+        return refuse(
+            StatusCode::FORBIDDEN,
+            "a command comes from the operator page of this server only (missing or wrong token)",
+        );
     }
     let cmd = match serde_json::from_slice::<PageCommand>(&body) {
         Ok(c) => c.cmd,
@@ -469,6 +514,7 @@ async fn command(State(app): State<App>, headers: HeaderMap, body: Bytes) -> Res
             "this session takes no operator commands",
         );
     };
+    tracing::info!(surface = "page", ?cmd, "operator command");
     let response = sender
         .send(Request {
             cmd,
@@ -489,7 +535,8 @@ mod tests {
 
     const ESTOP: &str = r#"{"cmd":"estop"}"#;
 
-    async fn serve(operator: Option<OperatorSender>) -> (String, watch::Sender<Snapshot>) {
+    /// The page's server with a fresh token on a free loopback port; its address and token.
+    async fn serve(operator: Option<OperatorSender>) -> (String, String, watch::Sender<Snapshot>) {
         let (tx, rx) = watch::channel(Snapshot::default());
         let cell = Arc::new(OnceLock::new());
         if let Some(s) = operator {
@@ -497,12 +544,13 @@ mod tests {
         }
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let addr = listener.local_addr().unwrap();
+        let token = Token::random().unwrap();
+        let text = token.as_str().to_owned();
+        let app = App::new(rx, cell, Access::loopback(), token, addr.port());
         tokio::spawn(async move {
-            axum::serve(listener, router(App::new(rx, cell)))
-                .await
-                .unwrap();
+            axum::serve(listener, router(app)).await.unwrap();
         });
-        (format!("{addr}"), tx)
+        (format!("{addr}"), text, tx)
     }
 
     /// A raw HTTP/1.1 request; returns the status code and the body.
@@ -517,19 +565,43 @@ mod tests {
         (code, body)
     }
 
-    fn post(addr: &str, content_type: &str, origin: Option<&str>, body: &str) -> String {
-        let origin = origin.map_or(String::new(), |o| format!("Origin: {o}\r\n"));
+    /// A command request naming `host`: `extra` header lines (each ending `\r\n`).
+    fn post_with(host: &str, content_type: &str, extra: &str, body: &str) -> String {
         format!(
-            "POST /command HTTP/1.1\r\nHost: {addr}\r\nContent-Type: {content_type}\r\n{origin}\
+            "POST /command HTTP/1.1\r\nHost: {host}\r\nContent-Type: {content_type}\r\n{extra}\
              Content-Length: {}\r\nConnection: close\r\n\r\n{body}",
             body.len()
         )
     }
 
+    /// A command request with the page's `token` and, when given, an `Origin`.
+    fn post(
+        addr: &str,
+        token: &str,
+        content_type: &str,
+        origin: Option<&str>,
+        body: &str,
+    ) -> String {
+        let origin = origin.map_or(String::new(), |o| format!("Origin: {o}\r\n"));
+        let extra = format!("{origin}X-Operator-Token: {token}\r\n");
+        post_with(addr, content_type, &extra, body)
+    }
+
+    /// A controller node of the default machine.
+    fn node() -> controller::step::node::ControllerNode {
+        let machine = planner::machine::MachineConfig::load_or_default(None).unwrap();
+        controller::step::node::ControllerNode::new(
+            &machine,
+            planner::autodig::AutodigMaps::builtin().unwrap(),
+            controller::ControllerConfig::default(),
+        )
+        .unwrap()
+    }
+
     #[tokio::test]
     async fn commands_reach_the_operator_port_and_bad_ones_are_refused() {
         let mut port = controller::io::operator::OperatorPort::new();
-        let (addr, _tx) = serve(Some(port.sender())).await;
+        let (addr, token, _tx) = serve(Some(port.sender())).await;
         // Unknown command, unknown field, wrong type, foreign origin, oversized body.
         for (ct, origin, body, code) in [
             ("application/json", None, r#"{"cmd":"launch"}"#, 400),
@@ -543,23 +615,17 @@ mod tests {
                 413,
             ),
         ] {
-            let (got, body_text) = http(&addr, &post(&addr, ct, origin, body)).await;
+            let (got, body_text) = http(&addr, &post(&addr, &token, ct, origin, body)).await;
             assert_eq!(got, code, "{ct} {origin:?} {body}: {body_text}");
         }
         // A good one from the page's own origin: queued for the control loop, which answers it.
         let page = format!("http://{addr}");
-        let request = post(&addr, "application/json", Some(&page), ESTOP);
+        let request = post(&addr, &token, "application/json", Some(&page), ESTOP);
         let client = tokio::spawn({
             let addr = addr.clone();
             async move { http(&addr, &request).await }
         });
-        let machine = planner::machine::MachineConfig::load_or_default(None).unwrap();
-        let mut node = controller::step::node::ControllerNode::new(
-            &machine,
-            planner::autodig::AutodigMaps::builtin().unwrap(),
-            controller::ControllerConfig::default(),
-        )
-        .unwrap();
+        let mut node = node();
         while port.serve(&mut node, 0.0) == 0 {
             tokio::time::sleep(Duration::from_millis(5)).await;
         }
@@ -575,8 +641,8 @@ mod tests {
 
     #[tokio::test]
     async fn without_an_operator_path_commands_are_unavailable() {
-        let (addr, _tx) = serve(None).await;
-        let (code, body) = http(&addr, &post(&addr, "application/json", None, ESTOP)).await;
+        let (addr, token, _tx) = serve(None).await;
+        let (code, body) = http(&addr, &post(&addr, &token, "application/json", None, ESTOP)).await;
         assert_eq!(code, 503, "{body}");
         let (code, page) = http(
             &addr,
@@ -585,6 +651,77 @@ mod tests {
         .await;
         assert_eq!(code, 200);
         assert!(page.contains("app.js"), "{page}");
+        // The page carries the session's token.
+        assert!(
+            page.contains(&format!(
+                "<meta name=\"operator-token\" content=\"{token}\">"
+            )),
+            "{page}"
+        );
+    }
+
+    #[tokio::test]
+    async fn a_dns_rebinding_reset_is_refused_and_the_estop_stays() {
+        let mut port = controller::io::operator::OperatorPort::new();
+        let (addr, token, _tx) = serve(Some(port.sender())).await;
+        let mut node = node();
+        let _ = controller::io::operator::apply(&mut node, Command::Estop, "test", 0.0);
+        let port_n = addr.rsplit_once(':').unwrap().1;
+        let evil = format!("evil.example:{port_n}");
+        let json = "application/json";
+        let reset = r#"{"cmd":"reset"}"#;
+        let token_line = format!("X-Operator-Token: {token}\r\n");
+        let origin = |o: &str| format!("Origin: http://{o}\r\n");
+        for (what, host, extra) in [
+            // The rebinding page: Host = Origin = its own name; even with the token.
+            (
+                "Host = Origin = evil",
+                evil.clone(),
+                origin(&evil) + &token_line,
+            ),
+            (
+                "Host = Origin = evil, no token",
+                evil.clone(),
+                origin(&evil),
+            ),
+            ("Host evil, no Origin", evil.clone(), token_line.clone()),
+            ("foreign Origin", addr.clone(), origin(&evil) + &token_line),
+            (
+                "null Origin",
+                addr.clone(),
+                "Origin: null\r\n".to_owned() + &token_line,
+            ),
+            ("no token", addr.clone(), origin(&addr)),
+            (
+                "wrong token",
+                addr.clone(),
+                origin(&addr) + "X-Operator-Token: 00000000000000000000000000000000\r\n",
+            ),
+            (
+                "token prefix",
+                addr.clone(),
+                origin(&addr) + &format!("X-Operator-Token: {}\r\n", &token[..16]),
+            ),
+        ] {
+            let (code, body) = http(&addr, &post_with(&host, json, &extra, reset)).await;
+            assert_eq!(code, 403, "{what}: {body}");
+        }
+        // Nothing reached the control loop: the e-stop stays.
+        assert_eq!(port.serve(&mut node, 0.0), 0);
+        let status = controller::io::operator::apply(&mut node, Command::Status, "test", 0.0);
+        assert!(
+            status.fault.as_deref().is_some_and(|f| f.contains("stop")),
+            "{status:?}"
+        );
+        // The state and the page itself are not served to the rebinding name either.
+        for path in ["/", "/events", "/app.js"] {
+            let (code, _) = http(
+                &addr,
+                &format!("GET {path} HTTP/1.1\r\nHost: {evil}\r\nConnection: close\r\n\r\n"),
+            )
+            .await;
+            assert_eq!(code, 403, "{path}");
+        }
     }
 
     #[tokio::test]

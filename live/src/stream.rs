@@ -25,6 +25,7 @@ use controller::step::safety::{Fault, SafetyState};
 use firmware_bridge::messages::ControllerStatus;
 use trace_tools::view;
 
+use crate::access::{Access, Token};
 use crate::page::{App, PageFeed, PageStep, Snapshot};
 use crate::{LiveAddr, LiveArgs, LiveError};
 
@@ -375,7 +376,13 @@ impl LiveStream {
                 source,
             })?;
         let port = ws_listener.local_addr()?.port();
-        let shim = runtime.spawn(crate::subprotocol::serve(ws_listener, upstream));
+        let access = Access::new(&addr.host, &args.live_allow_host, &args.live_allow_origin);
+        tracing::info!(allowed = %access, "live view: Host and Origin allow-list");
+        let shim = runtime.spawn(crate::subprotocol::serve(
+            ws_listener,
+            upstream,
+            Arc::new(access.clone()),
+        ));
         // The operator page on the neighbouring port (any free one with port 0).
         let page_port = if addr.port == 0 {
             0
@@ -396,7 +403,13 @@ impl LiveStream {
         let page_port = listener.local_addr()?.port();
         let (page_tx, page_rx) = tokio::sync::watch::channel(Snapshot::default());
         let operator = Arc::new(OnceLock::new());
-        let app = App::new(page_rx, Arc::clone(&operator));
+        let app = App::new(
+            page_rx,
+            Arc::clone(&operator),
+            access,
+            Token::random()?,
+            page_port,
+        );
         let pages_idle = Box::new(app.idle());
         let app = crate::page::router(app);
         let page_server = runtime.spawn(async move {

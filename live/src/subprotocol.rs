@@ -12,13 +12,17 @@
 //! ```
 //!
 //! Nothing from the network is trusted: a request head longer than [`MAX_HEAD_BYTES`] or not
-//! finished within [`HEAD_TIMEOUT`] closes the connection.
+//! finished within [`HEAD_TIMEOUT`] closes the connection, and one whose `Host`, or `Origin` when
+//! it names one, is not on the allow-list ([`crate::access`]) is answered 403 and closed.
 
 use std::net::SocketAddr;
+use std::sync::Arc;
 use std::time::Duration;
 
 use tokio::io::{AsyncRead, AsyncReadExt as _, AsyncWriteExt as _};
 use tokio::net::{TcpListener, TcpStream};
+
+use crate::access::Access;
 
 /// The subprotocol's former name, which older clients ask for.
 pub const LEGACY: &str = "foxglove.websocket.v1";
@@ -32,28 +36,51 @@ pub const HEAD_TIMEOUT: Duration = Duration::from_secs(10);
 
 const PROTOCOL_HEADER: &str = "sec-websocket-protocol";
 
-/// Accepts connections on `listener` and serves each through the shim to the server at `upstream`,
-/// until the task is aborted.
-pub(crate) async fn serve(listener: TcpListener, upstream: SocketAddr) {
+/// Accepts connections on `listener` and serves each through the shim to the server at `upstream`
+/// (those `access` allows), until the task is aborted.
+pub(crate) async fn serve(listener: TcpListener, upstream: SocketAddr, access: Arc<Access>) {
+    let port = listener.local_addr().map_or(0, |a| a.port());
     loop {
         let Ok((client, peer)) = listener.accept().await else {
             // Out of descriptors or similar: wait rather than spin.
             tokio::time::sleep(Duration::from_millis(50)).await;
             continue;
         };
+        let access = Arc::clone(&access);
         tokio::spawn(async move {
-            if let Err(e) = relay(client, upstream).await {
+            if let Err(e) = relay(client, upstream, &access, port).await {
                 tracing::debug!(%peer, error = %e, "live: WebSocket connection ended");
             }
         });
     }
 }
 
-/// One connection: the request head renamed, the answer renamed back, then a plain copy.
-async fn relay(mut client: TcpStream, upstream: SocketAddr) -> std::io::Result<()> {
+/// One connection: checked against `access` (the shim listens on `port`), the request head
+/// renamed, the answer renamed back, then a plain copy.
+async fn relay(
+    mut client: TcpStream,
+    upstream: SocketAddr,
+    access: &Access,
+    port: u16,
+) -> std::io::Result<()> {
     let (head, rest) = tokio::time::timeout(HEAD_TIMEOUT, read_head(&mut client))
         .await
         .map_err(|_| std::io::Error::new(std::io::ErrorKind::TimedOut, "no request head"))??;
+    if let Err(why) = access.check(
+        header_value(&head, "host"),
+        header_value(&head, "origin"),
+        port,
+        true,
+    ) {
+        tracing::warn!(why, "live: WebSocket connection refused");
+        let answer = format!(
+            "HTTP/1.1 403 Forbidden\r\nContent-Type: text/plain\r\nContent-Length: {}\r\n\
+             Connection: close\r\n\r\n{why}",
+            why.len()
+        );
+        client.write_all(answer.as_bytes()).await?;
+        return Ok(());
+    }
     let (head, legacy) = rename_request(&head);
     let mut server = TcpStream::connect(upstream).await?;
     server.write_all(head.as_bytes()).await?;
@@ -94,6 +121,14 @@ async fn read_head<S: AsyncRead + Unpin>(stream: &mut S) -> std::io::Result<(Str
         }
         buf.extend_from_slice(&chunk[..n]);
     }
+}
+
+/// The value of the first header `name` (lowercase) of `head`.
+fn header_value<'a>(head: &'a str, name: &str) -> Option<&'a str> {
+    head.split("\r\n").skip(1).find_map(|line| {
+        let (n, v) = line.split_once(':')?;
+        n.trim().eq_ignore_ascii_case(name).then(|| v.trim())
+    })
 }
 
 /// The value of a `Sec-WebSocket-Protocol` header line, if `line` is one.

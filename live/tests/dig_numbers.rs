@@ -134,6 +134,7 @@ fn digs_are_numbered_from_1_in_the_events_the_stream_the_page_and_the_summary() 
             live: Some("127.0.0.1:0".into()),
             pace: None,
             live_queue: live::DEFAULT_QUEUE,
+            ..Default::default()
         },
         &sim.machine,
     )

@@ -19,10 +19,11 @@ use vcan_sim::realtime::RealtimeOptions;
 
 /// POSTs `body` to the page's `/command` at `addr`; returns the status code and the reply.
 async fn post_command(addr: &str, body: &str) -> (u16, serde_json::Value) {
+    let token = common::page_token(addr).await;
     let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
     let request = format!(
         "POST /command HTTP/1.1\r\nHost: {addr}\r\nOrigin: http://{addr}\r\n\
-         Content-Type: application/json\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+         X-Operator-Token: {token}\r\nContent-Type: application/json\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
         body.len()
     );
     s.write_all(request.as_bytes()).await.unwrap();
@@ -60,6 +61,7 @@ fn run_serves_the_page_and_its_estop_reaches_the_run_loop() {
             live: Some("127.0.0.1:0".into()),
             pace: None,
             live_queue: live::DEFAULT_QUEUE,
+            ..Default::default()
         },
         &onboard::run::machine(&args).unwrap(),
     )

@@ -172,6 +172,7 @@ fn read_keys(
             } else {
                 char::from(byte).to_string()
             };
+            tracing::info!(surface = "terminal", ?cmd, key, "operator command");
             let reply = runtime.block_on(sender.send(Request {
                 cmd,
                 reason: Some(format!("terminal key {key}")),

@@ -484,9 +484,9 @@ impl MachineConfig {
     /// As [`Self::from_toml_str`], plus [`ConfigError::Io`] when the file cannot be read.
     pub fn from_toml_file(path: &Path) -> Result<Self, ConfigError> {
         let origin = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| ConfigError::Io {
+        let text = crate::config_file::read_text(path).map_err(|reason| ConfigError::Io {
             origin: origin.clone(),
-            reason: e.to_string(),
+            reason,
         })?;
         Self::from_toml_str_named(&text, &origin)
     }
@@ -703,6 +703,96 @@ impl MachineConfig {
                 return Err((field.into(), format!("must not be negative, got {v}")));
             }
         }
+        // Physical ranges, generous for the excavator class: a value beyond them is a typo or an
+        // attack (relief at 1e308 Pa disables every 90 %-of-relief rule).
+        let h = &self.hydraulics;
+        let mut ranges: Vec<(String, f64, f64, f64)> = vec![
+            (
+                "operating_mass_kg".into(),
+                self.operating_mass_kg,
+                500.0,
+                200e3,
+            ),
+            ("links.boom_m".into(), self.links.boom_m, 0.1, 20.0),
+            ("links.stick_m".into(), self.links.stick_m, 0.1, 20.0),
+            ("links.bucket_m".into(), self.links.bucket_m, 0.05, 5.0),
+            ("bucket.width_m".into(), self.bucket.width_m, 0.1, 5.0),
+            (
+                "bucket.capacity_m3".into(),
+                self.bucket.capacity_m3,
+                0.005,
+                20.0,
+            ),
+            (
+                "bucket.rated_density_kg_per_m3".into(),
+                self.bucket.rated_density_kg_per_m3,
+                500.0,
+                4000.0,
+            ),
+            (
+                "hydraulics.relief_pressure_pa".into(),
+                h.relief_pressure_pa,
+                5e6,
+                50e6,
+            ),
+            (
+                "hydraulics.tank_pressure_pa".into(),
+                h.tank_pressure_pa,
+                0.0,
+                2e6,
+            ),
+            (
+                "hydraulics.pump_max_flow_m3_per_s".into(),
+                h.pump_max_flow_m3_per_s,
+                1e-5,
+                0.02,
+            ),
+            (
+                "hydraulics.max_engine_power_w".into(),
+                h.max_engine_power_w,
+                1e3,
+                1e6,
+            ),
+            (
+                "hydraulics.valve_discharge_coefficient".into(),
+                h.valve_discharge_coefficient,
+                1e-4,
+                1.0,
+            ),
+            (
+                "hydraulics.valve_max_area_m2".into(),
+                h.valve_max_area_m2,
+                1e-7,
+                1e-2,
+            ),
+            (
+                "hydraulics.transport_delay_s".into(),
+                h.transport_delay_s,
+                0.0,
+                1.0,
+            ),
+        ];
+        for (name, m) in [
+            ("boom", &self.masses.boom),
+            ("stick", &self.masses.stick),
+            ("bucket", &self.masses.bucket),
+        ] {
+            ranges.push((format!("masses.{name}.mass_kg"), m.mass_kg, 1.0, 50e3));
+        }
+        for (field, v, lo, hi) in ranges {
+            if !(lo..=hi).contains(&v) {
+                return Err((field, format!("must lie in [{lo:e}, {hi:e}], got {v:e}")));
+            }
+        }
+        if h.valve_bleed_area_m2 >= h.valve_max_area_m2 {
+            return Err((
+                "hydraulics.valve_bleed_area_m2".into(),
+                format!(
+                    "must be below the valve's full area (hydraulics.valve_max_area_m2 = {:e}), got {:e}",
+                    h.valve_max_area_m2, h.valve_bleed_area_m2
+                ),
+            ));
+        }
         if !(0.0..=1.0).contains(&self.hydraulics.crossover_command) {
             return Err((
                 "hydraulics.crossover_command".into(),
@@ -835,6 +925,23 @@ fn positive(field: &str, v: f64) -> Result<(), (String, String)> {
 mod tests {
     use super::*;
 
+    #[cfg(unix)]
+    #[test]
+    fn dev_zero_as_a_machine_file_is_refused_at_once() {
+        let started = std::time::Instant::now();
+        for load in [
+            |p: &Path| MachineConfig::from_toml_file(p),
+            |p: &Path| MachineConfig::controller_file(Some(p)),
+        ] {
+            let e = load(Path::new("/dev/zero")).unwrap_err().to_string();
+            assert!(
+                e.contains("/dev/zero") && e.contains("not a regular file"),
+                "{e}"
+            );
+        }
+        assert!(started.elapsed() < std::time::Duration::from_secs(1));
+    }
+
     #[test]
     fn default_machine_parses_and_validates() {
         let m = MachineConfig::default_machine().expect("default machine");
@@ -881,6 +988,70 @@ mod tests {
             msg.starts_with("m.toml:") && msg.contains("relief_pressure_pa"),
             "{msg}"
         );
+    }
+
+    /// Implausible machine files once accepted (relief 1e308 Pa disabled the 90 %-of-relief rules;
+    /// 1e308 kg masses; a bleed area larger than the valve): each refused naming file, line, field.
+    #[test]
+    fn implausible_machine_values_are_refused_with_file_line_and_field() {
+        let huge = ["1e308", "1e30", "-1e308", "0.0"];
+        let mut cases: Vec<(&str, &str, String, &str)> = Vec::new();
+        for (line_start, field) in [
+            (
+                "relief_pressure_pa = 34.3e6",
+                "hydraulics.relief_pressure_pa",
+            ),
+            ("operating_mass_kg = 22000.0", "operating_mass_kg"),
+            ("mass_kg = 1850.0", "masses.boom.mass_kg"),
+            ("mass_kg = 950.0", "masses.stick.mass_kg"),
+            ("mass_kg = 1000.0", "masses.bucket.mass_kg"),
+            (
+                "pump_max_flow_m3_per_s = 3.583e-3",
+                "hydraulics.pump_max_flow_m3_per_s",
+            ),
+            (
+                "max_engine_power_w = 110e3",
+                "hydraulics.max_engine_power_w",
+            ),
+            ("valve_max_area_m2 = 1.2e-4", "hydraulics.valve_max_area_m2"),
+        ] {
+            let key = line_start.split(" = ").next().unwrap_or_default();
+            for v in huge {
+                cases.push((line_start, field, format!("{key} = {v}"), key));
+            }
+        }
+        for v in ["1.2e-4", "2e-4", "1e308"] {
+            cases.push((
+                "valve_bleed_area_m2 = 0.8e-4",
+                "hydraulics.valve_bleed_area_m2",
+                format!("valve_bleed_area_m2 = {v}"),
+                "valve_bleed_area_m2",
+            ));
+        }
+        for (old, field, new, key) in &cases {
+            assert!(DEFAULT_MACHINE_TOML.contains(old), "fixture {old}");
+            let text = DEFAULT_MACHINE_TOML.replacen(old, new, 1);
+            let err = MachineConfig::from_toml_str_named(&text, "m.toml")
+                .expect_err(&format!("{new} accepted"));
+            let ConfigError::Invalid {
+                origin,
+                line,
+                field: got,
+                ..
+            } = &err
+            else {
+                panic!("{new}: {err:?}");
+            };
+            assert_eq!(origin, "m.toml");
+            assert_eq!(got, field, "{new}: {err}");
+            let at = line.unwrap_or_else(|| panic!("{new}: no line: {err}"));
+            let line_text = text.lines().nth(at - 1).unwrap_or_default();
+            assert!(
+                line_text.trim_start().starts_with(key),
+                "{new}: line {at} {line_text:?}"
+            );
+        }
+        assert_eq!(cases.len(), 35, "the table's cases");
     }
 
     #[test]

@@ -198,10 +198,11 @@ impl SimConfig {
         let (machine, mut effects) = match machine {
             Some(path) => {
                 let origin = path.display().to_string();
-                let text = std::fs::read_to_string(path).map_err(|source| SimError::Io {
-                    context: format!("reading {origin}"),
-                    source,
-                })?;
+                let text =
+                    planner::config_file::read_text(path).map_err(|reason| SimError::Io {
+                        context: format!("reading {origin}"),
+                        source: std::io::Error::other(reason),
+                    })?;
                 let (machine_text, [effects_text, name_text]) =
                     planner::machine::split_simulator_tables(&text);
                 let cfg = MachineConfig::from_toml_str_named(&machine_text, &origin)?;

@@ -16,6 +16,13 @@
 //! arrival. Everything else (accepting, reading, parsing, answering) runs in tasks beside the loop,
 //! with a bounded number of connections, a bounded line length and an idle timeout.
 //!
+//! Who may connect: the socket file is owner-only (0600, set and verified after the bind whatever
+//! the umask), and each connection's peer credentials (`SO_PEERCRED`) must name the socket's owner,
+//! root or the configured group ([`SocketAccess`]); anyone else is refused before a byte is read.
+//! When all [`MAX_CONNECTIONS`] slots are busy (say, idle connections held open), a new connection
+//! still gets one request read within [`OVERFLOW_TIMEOUT`], of which only `estop` is carried out, so
+//! the stop can never be locked out; at most [`MAX_OVERFLOW`] such connections at once.
+//!
 //! The commands: `estop` (neutral valves and `Disarm` at once, latched until `reset`), `reset`
 //! (clears the e-stop; motion resumes through the arming handshake), `pause` (the current action
 //! runs to its end, then nothing new starts: the cycle holds neutral, disarmed), `resume` (goes on:
@@ -45,6 +52,12 @@ pub const QUEUE: usize = 8;
 pub const MAX_REQUESTS_PER_TICK: usize = 4;
 /// A connection without a request for this long is closed.
 pub const IDLE_TIMEOUT: Duration = Duration::from_secs(60);
+/// Connections beyond [`MAX_CONNECTIONS`] read at once for their one request (an `estop` only).
+pub const MAX_OVERFLOW: usize = 16;
+/// How long a connection beyond [`MAX_CONNECTIONS`] has to send its request.
+pub const OVERFLOW_TIMEOUT: Duration = Duration::from_millis(500);
+/// The socket file's mode: owner read and write only.
+pub const SOCKET_MODE: u32 = 0o600;
 /// A request the control loop has not answered in this long gets an error (the loop is gone).
 pub const REPLY_TIMEOUT: Duration = Duration::from_secs(2);
 
@@ -261,6 +274,19 @@ impl OperatorPort {
     /// # Errors
     /// The path is in use by a running controller, or cannot be bound.
     pub fn listen(&self, path: &Path) -> std::io::Result<tokio::task::JoinHandle<()>> {
+        self.listen_with(path, SocketAccess::default())
+    }
+
+    /// [`Self::listen`] letting the members of `access`'s group connect too.
+    ///
+    /// # Errors
+    /// As [`Self::listen`], or the socket's mode cannot be set to [`SOCKET_MODE`].
+    pub fn listen_with(
+        &self,
+        path: &Path,
+        access: SocketAccess,
+    ) -> std::io::Result<tokio::task::JoinHandle<()>> {
+        use std::os::unix::fs::{MetadataExt as _, PermissionsExt as _};
         if path.exists() {
             if std::os::unix::net::UnixStream::connect(path).is_ok() {
                 return Err(std::io::Error::new(
@@ -271,12 +297,50 @@ impl OperatorPort {
             std::fs::remove_file(path)?;
         }
         let listener = UnixListener::bind(path)?;
+        // The bind created the file under the umask: set the mode and check it took. Until then a
+        // connection of another user is still refused by its credentials.
+        std::fs::set_permissions(path, std::fs::Permissions::from_mode(SOCKET_MODE))?;
+        let meta = std::fs::metadata(path)?;
+        if meta.mode() & 0o777 != SOCKET_MODE {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::PermissionDenied,
+                format!(
+                    "{}: mode {:o}, not {SOCKET_MODE:o}",
+                    path.display(),
+                    meta.mode() & 0o777
+                ),
+            ));
+        }
+        // The file is this process's: its owner is our effective uid.
+        let owner_uid = meta.uid();
         Ok(tokio::spawn(accept(
             listener,
             self.tx.clone(),
             Arc::clone(&self.malformed),
+            Peers { owner_uid, access },
         )))
     }
+}
+
+/// Who may connect to the control socket besides its owner and root.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SocketAccess {
+    /// A group whose members (by the peer's primary gid) may connect too.
+    pub group_gid: Option<u32>,
+}
+
+/// The allowed peers of one socket.
+#[derive(Debug, Clone, Copy)]
+struct Peers {
+    owner_uid: u32,
+    access: SocketAccess,
+}
+
+/// Whether a peer of `peer_uid` and `peer_gid` may use a socket owned by `owner_uid`: the owner,
+/// root, or a member of the configured group.
+#[must_use]
+pub fn peer_allowed(peer_uid: u32, peer_gid: u32, owner_uid: u32, access: SocketAccess) -> bool {
+    peer_uid == owner_uid || peer_uid == 0 || access.group_gid == Some(peer_gid)
 }
 
 /// Queues requests for an [`OperatorPort`] from outside the control loop (cheap to clone).
@@ -303,9 +367,16 @@ pub fn listen(path: &Path) -> std::io::Result<(OperatorPort, tokio::task::JoinHa
     Ok((port, task))
 }
 
-/// Accepts connections, at most [`MAX_CONNECTIONS`] at once, until the [`OperatorPort`] is dropped.
-async fn accept(listener: UnixListener, tx: mpsc::Sender<Queued>, malformed: Arc<AtomicU64>) {
+/// Accepts connections of allowed peers, at most [`MAX_CONNECTIONS`] at once (and
+/// [`MAX_OVERFLOW`] for an e-stop beyond), until the [`OperatorPort`] is dropped.
+async fn accept(
+    listener: UnixListener,
+    tx: mpsc::Sender<Queued>,
+    malformed: Arc<AtomicU64>,
+    peers: Peers,
+) {
     let slots = Arc::new(Semaphore::new(MAX_CONNECTIONS));
+    let overflow = Arc::new(Semaphore::new(MAX_OVERFLOW));
     loop {
         // The loop's port gone (the controller stopped, or was dropped mid-run): stop listening.
         // The port holds a sender too, so `closed` waits for its receiver.
@@ -316,17 +387,73 @@ async fn accept(listener: UnixListener, tx: mpsc::Sender<Queued>, malformed: Arc
         let Ok((mut stream, _)) = accepted else {
             continue;
         };
-        let Ok(permit) = Arc::clone(&slots).try_acquire_owned() else {
-            let _ = write_reply(&mut stream, &Response::error("too many connections")).await;
-            continue;
+        let allowed = match stream.peer_cred() {
+            Ok(c) => {
+                let ok = peer_allowed(c.uid(), c.gid(), peers.owner_uid, peers.access);
+                if !ok {
+                    tracing::warn!(
+                        uid = c.uid(),
+                        gid = c.gid(),
+                        "operator socket: peer not allowed: connection refused"
+                    );
+                }
+                ok
+            }
+            Err(e) => {
+                tracing::warn!(error = %e, "operator socket: no peer credentials: connection refused");
+                false
+            }
         };
+        if !allowed {
+            let _ = write_reply(&mut stream, &Response::error("not allowed")).await;
+            continue;
+        }
         let tx = tx.clone();
         let malformed = Arc::clone(&malformed);
-        tokio::spawn(async move {
-            connection(stream, tx, malformed).await;
-            drop(permit);
-        });
+        if let Ok(permit) = Arc::clone(&slots).try_acquire_owned() {
+            tokio::spawn(async move {
+                connection(stream, tx, malformed).await;
+                drop(permit);
+            });
+        } else if let Ok(permit) = Arc::clone(&overflow).try_acquire_owned() {
+            tokio::spawn(async move {
+                overflow_connection(stream, &tx).await;
+                drop(permit);
+            });
+        } else {
+            let _ = write_reply(&mut stream, &Response::error("too many connections")).await;
+        }
     }
+}
+
+/// A connection beyond [`MAX_CONNECTIONS`]: one request, read within [`OVERFLOW_TIMEOUT`]; an
+/// `estop` is carried out, anything else is answered `too many connections`.
+async fn overflow_connection(stream: UnixStream, tx: &mpsc::Sender<Queued>) {
+    let (read, mut write) = stream.into_split();
+    let mut reader = BufReader::new(read);
+    let mut line = Vec::with_capacity(MAX_LINE_BYTES);
+    let limit = u64::try_from(MAX_LINE_BYTES + 1).unwrap_or(u64::MAX);
+    let read = tokio::time::timeout(
+        OVERFLOW_TIMEOUT,
+        (&mut reader).take(limit).read_until(b'\n', &mut line),
+    )
+    .await;
+    let request = match read {
+        Ok(Ok(n)) if n > 0 && line.len() <= MAX_LINE_BYTES => {
+            serde_json::from_slice::<Request>(&line).ok()
+        }
+        _ => None,
+    };
+    let reply = match request {
+        Some(req) if req.cmd == Command::Estop => {
+            tracing::info!(surface = "socket", cmd = ?req.cmd, "operator command (beyond the connection limit)");
+            forward(tx, req).await
+        }
+        _ => Response::error(format!(
+            "too many connections ({MAX_CONNECTIONS} busy): only estop is taken"
+        )),
+    };
+    let _ = write_reply(&mut write, &reply).await;
 }
 
 async fn write_reply(
@@ -370,7 +497,10 @@ async fn connection(stream: UnixStream, tx: mpsc::Sender<Queued>, malformed: Arc
             return;
         }
         let reply = match serde_json::from_slice::<Request>(&line) {
-            Ok(req) => forward(&tx, req).await,
+            Ok(req) => {
+                tracing::info!(surface = "socket", cmd = ?req.cmd, "operator command");
+                forward(&tx, req).await
+            }
             Err(e) => {
                 let count = malformed.fetch_add(1, Ordering::Relaxed) + 1;
                 tracing::warn!(error = %e, count, "operator socket: malformed request");
@@ -422,4 +552,27 @@ pub async fn request(path: &Path, request: &Request) -> std::io::Result<Response
 #[must_use]
 pub fn default_path(session_dir: &Path) -> PathBuf {
     session_dir.join("control.sock")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const OWNER: u32 = 1000;
+    const OTHER: u32 = 1001;
+    const GROUP: u32 = 2000;
+
+    #[test]
+    fn only_the_owner_root_or_the_configured_group_may_connect() {
+        let none = SocketAccess::default();
+        let group = SocketAccess {
+            group_gid: Some(GROUP),
+        };
+        assert!(peer_allowed(OWNER, OWNER, OWNER, none));
+        assert!(peer_allowed(0, 0, OWNER, none));
+        assert!(!peer_allowed(OTHER, OTHER, OWNER, none));
+        assert!(!peer_allowed(OTHER, GROUP, OWNER, none));
+        assert!(peer_allowed(OTHER, GROUP, OWNER, group));
+        assert!(!peer_allowed(OTHER, OTHER, OWNER, group));
+    }
 }

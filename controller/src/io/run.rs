@@ -541,17 +541,25 @@ impl SessionClock {
 }
 
 /// Longest wait in the socket credited to a frame, s: a kernel timestamp further in the past than
-/// this (or in the future) is a wall-clock step between the stamp and the read, not a wait.
+/// this (or in the future) is a wall-clock step between the stamp and the read, not a wait. (A loop
+/// that really reads this late has missed its period many times over, which its rate check faults.)
 pub const MAX_RX_WAIT_S: f64 = 0.25;
 
 /// The session time (ns) at which a frame arrived: `session_now_ns` less the time it waited between
 /// the bus's stamp (`stamp_ns`, the kernel's receive time where the socket gives one) and its read
-/// (`bus_now_ns`), in session time at `scale`. The wait is clamped to `0..=`[`MAX_RX_WAIT_S`], so a
-/// wall-clock step between stamp and read can neither make a frame younger than its read nor age it
-/// by more than that; a frame stamped when read waits 0.
+/// (`bus_now_ns`, the bus clock read then), in session time at `scale`. A wait that cannot be trusted
+/// (the stamp after the read, or more than [`MAX_RX_WAIT_S`] before it: the wall clock stepped
+/// between them) is discarded and the frame arrives at its read on the monotonic clock, so a step
+/// neither makes a frame younger than its read nor ages it (a false stale sensor).
 fn arrival_ns(session_now_ns: u64, scale: f64, bus_now_ns: u64, stamp_ns: u64) -> u64 {
-    let wait_s = (bus_now_ns.saturating_sub(stamp_ns) as f64 * 1e-9).min(MAX_RX_WAIT_S);
-    // Saturating float-to-int cast of a wait of at most a few seconds.
+    let Some(wait_ns) = bus_now_ns.checked_sub(stamp_ns) else {
+        return session_now_ns;
+    };
+    let wait_s = wait_ns as f64 * 1e-9;
+    if wait_s > MAX_RX_WAIT_S {
+        return session_now_ns;
+    }
+    // Saturating float-to-int cast of a wait of at most MAX_RX_WAIT_S times the scale.
     session_now_ns.saturating_sub((wait_s * scale * 1e9) as u64)
 }
 
@@ -642,16 +650,57 @@ mod tests {
             arrival_ns(NOW_NS, 1.0, BUS_NOW_NS, BUS_NOW_NS + 3_600_000_000_000),
             NOW_NS
         );
-        // ... or forward by an hour: at most MAX_RX_WAIT_S old.
+        // ... or forward by an hour: the wait is discarded, it arrived when read.
         assert_eq!(
             arrival_ns(NOW_NS, 1.0, BUS_NOW_NS + 3_600_000_000_000, BUS_NOW_NS),
-            NOW_NS - 250_000_000
+            NOW_NS
         );
         // Early in the session: not before its start.
         assert_eq!(
             arrival_ns(1_000, 1.0, BUS_NOW_NS, BUS_NOW_NS - 20_000_000),
             0
         );
+    }
+
+    /// A sensor frame every 10 ms, read 2 ms after the kernel stamped it, by a loop whose bus
+    /// (wall) clock steps by `step_ns` between the stamp and the read of frame 50: the age of each
+    /// frame at its read, ns.
+    fn ages_across_a_wall_clock_step(step_ns: i64) -> Vec<u64> {
+        const START_WALL_NS: i64 = 1_700_000_000_000_000_000;
+        const PERIOD_NS: u64 = 10_000_000;
+        const WAIT_NS: i64 = 2_000_000;
+        let mut offset_ns = 0_i64;
+        (0..100_u64)
+            .map(|i| {
+                let session_read_ns = 1_000_000_000 + i * PERIOD_NS;
+                let stamp = START_WALL_NS + (session_read_ns as i64 - WAIT_NS) + offset_ns;
+                if i == 50 {
+                    offset_ns += step_ns;
+                }
+                let read = START_WALL_NS + session_read_ns as i64 + offset_ns;
+                let arrival = arrival_ns(session_read_ns, 1.0, read as u64, stamp as u64);
+                session_read_ns - arrival
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_wall_clock_step_between_stamp_and_read_gives_no_false_stale_sensor() {
+        // Forward and back, by more than the stale bound and by an hour.
+        for step_ns in [
+            300_000_000,
+            -300_000_000,
+            3_600_000_000_000,
+            -3_600_000_000_000,
+        ] {
+            let ages = ages_across_a_wall_clock_step(step_ns);
+            for (i, age) in ages.iter().enumerate() {
+                // The stepped frame arrives at its read; every other one 2 ms before it. The old
+                // clamp aged the forward-stepped frame by 250 ms: a false StaleSensor.
+                let expected = if i == 50 { 0 } else { 2_000_000 };
+                assert_eq!(*age, expected, "step {step_ns} ns, frame {i}");
+            }
+        }
     }
 
     #[test]

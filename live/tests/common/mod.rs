@@ -30,3 +30,19 @@ pub async fn wait_for_state(
         }
     }
 }
+
+/// The operator page's command token at `addr`, read from the page it serves.
+#[allow(
+    dead_code,
+    reason = "not every test that shares these helpers sends commands"
+)]
+pub async fn page_token(addr: &str) -> String {
+    let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
+    s.write_all(format!("GET / HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n").as_bytes())
+        .await
+        .unwrap();
+    let mut text = String::new();
+    s.read_to_string(&mut text).await.unwrap();
+    let at = text.find("name=\"operator-token\" content=\"").unwrap() + 31;
+    text[at..at + 32].to_owned()
+}
