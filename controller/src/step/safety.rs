@@ -1439,7 +1439,8 @@ mod tests {
             }
         }
         let mut rig = Rig::new(SafetyConfig::default());
-        let mut gw = Gateway::default();
+        let mut gw =
+            Gateway::with_default_config(&mut firmware_bridge::secoc::SeededNonceSource(0));
         let mut log = Log::default();
         let mut t = 0.0;
         run(&mut rig, &mut gw, &mut t, 100, &mut log);
