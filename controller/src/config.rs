@@ -113,9 +113,13 @@ impl J1939Config {
 pub struct SecurityConfig {
     /// File with the machine's 128-bit key: 32 hex digits, readable by its owner only (`chmod
     /// 600`); the gateway holds the same key (`excavator-sim --key-file`). A relative path is taken
-    /// from the config file's folder; `excavator-ctl run --key-file` overrides it. Default: none
-    /// (freshness and the session binding only, which anyone who reads the protocol can forge).
+    /// from the config file's folder; `excavator-ctl run --key-file` overrides it. Default: none,
+    /// and then `run` refuses to arm unless `insecure_no_key` is set (or it only listens).
     pub key_file: Option<PathBuf>,
+    /// Run on the bus without a key: the control frames are sealed with the public all-zero key
+    /// ([`SessionKey::PUBLIC`]), which anyone who reads docs/protocol.md can forge. For a bench test
+    /// only; logged as an error at every start. Default false: no key, no motion.
+    pub insecure_no_key: bool,
 }
 
 impl SecurityConfig {
@@ -145,7 +149,47 @@ impl SecurityConfig {
             .map(SessionKey::from_file)
             .transpose()
     }
+
+    /// The key to seal with when the controller transmits: the provisioned one, or
+    /// [`SessionKey::PUBLIC`] when `insecure_no_key` asks for it explicitly; `listen_only` needs
+    /// none (it never transmits).
+    ///
+    /// # Errors
+    /// [`MissingKey`] when there is no key, no explicit insecure mode and the controller transmits.
+    pub fn key_for_motion(
+        key: Option<SessionKey>,
+        insecure_no_key: bool,
+        listen_only: bool,
+    ) -> Result<KeyUse, MissingKey> {
+        match key {
+            Some(key) => Ok(KeyUse::Provisioned(key)),
+            None if listen_only => Ok(KeyUse::ListenOnly),
+            None if insecure_no_key => Ok(KeyUse::Insecure),
+            None => Err(MissingKey),
+        }
+    }
 }
+
+/// How the control frames are keyed ([`SecurityConfig::key_for_motion`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum KeyUse {
+    /// The machine's provisioned key.
+    Provisioned(SessionKey),
+    /// No key and nothing sent: listen-only.
+    ListenOnly,
+    /// No key, asked for explicitly: sealed with the public key, forgeable by anyone on the bus.
+    Insecure,
+}
+
+/// No key provisioned and no explicit insecure mode: the controller does not arm.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "no key provisioned: refusing to arm. Provision the machine's key at both ends (32 random hex \
+     digits, mode 600: the gateway's, and --key-file or [security] key_file here; see \
+     docs/deployment.md, \"The machine's key\"), or run --listen-only. For a bench test only, \
+     --insecure-no-key (security.insecure_no_key = true) runs with the public all-zero key"
+)]
+pub struct MissingKey;
 
 impl Default for ControllerConfig {
     fn default() -> Self {

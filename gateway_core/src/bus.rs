@@ -128,7 +128,7 @@ mod tests {
     use crate::messages::{
         AuxValveCommand, ControllerHeartbeat, GatewayFaults, GatewayMode, RequestedMode, Valve,
     };
-    use crate::secoc::{Sealer, SessionKey};
+    use crate::secoc::{Sealer, SeededNonceSource, SessionKey};
     use crate::time::Instant;
     use std::collections::VecDeque;
     use std::vec::Vec;
@@ -205,7 +205,7 @@ mod tests {
 
     #[test]
     fn arms_drives_and_reports_over_an_embedded_can_driver() {
-        let mut g = Gateway::default();
+        let mut g = Gateway::with_default_config(&mut SeededNonceSource(0));
         let mut can = Fifo::default();
         let mut sealer = Sealer::new(&SessionKey::PUBLIC);
         // The address claim goes first; no report until it has stood for 250 ms.
@@ -270,7 +270,7 @@ mod tests {
 
     #[test]
     fn poll_stops_at_its_budget() {
-        let mut g = Gateway::default();
+        let mut g = Gateway::with_default_config(&mut SeededNonceSource(0));
         let mut can = Fifo::default();
         let junk = CanFrame::new_extended(0x18FE_EE00, &[1, 2, 3]).unwrap();
         for _ in 0..10 {

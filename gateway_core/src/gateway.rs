@@ -95,7 +95,7 @@ use crate::messages::{
     DecodeError, GatewayFaults, GatewayMode, GatewaySession, GatewayStatus, Message, RequestedMode,
     heartbeat_checksum, is_next_alive,
 };
-use crate::secoc::{SessionKey, SessionNonces, Verifier};
+use crate::secoc::{NonceSource, SessionKey, SessionNonces, Verifier};
 use crate::time::{ClockReading, Instant, NANOS_PER_S, secs_to_nanos};
 
 /// Number of valve outputs: boom, stick, bucket, swing, left track, right track.
@@ -293,12 +293,6 @@ pub struct Gateway {
     claim: AddressClaimer,
 }
 
-impl Default for Gateway {
-    fn default() -> Self {
-        Self::with_valid_config(GatewayConfig::default())
-    }
-}
-
 /// Outcome of handling one frame, for logs and tests.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FrameVerdict {
@@ -313,28 +307,43 @@ pub enum FrameVerdict {
 }
 
 impl Gateway {
-    /// A gateway in Disarmed mode.
+    /// A gateway in Disarmed mode whose session nonces start from `nonces`, the platform's source
+    /// ([`NonceSource`]: a hardware random number or a persisted boot counter; on a host the OS's,
+    /// `OsNonceSource`).
     ///
     /// # Errors
     /// [`GatewayConfigError`] if `config` does not pass [`GatewayConfig::validate`].
-    pub fn new(config: GatewayConfig) -> Result<Self, GatewayConfigError> {
+    pub fn new(
+        config: GatewayConfig,
+        nonces: &mut impl NonceSource,
+    ) -> Result<Self, GatewayConfigError> {
         config.validate()?;
-        Ok(Self::with_valid_config(config))
+        Ok(Self::with_valid_config(config, nonces.session_seed()))
+    }
+
+    /// [`Self::new`] with [`GatewayConfig::default`], the project's gateway.
+    pub fn with_default_config(nonces: &mut impl NonceSource) -> Self {
+        Self::with_valid_config(GatewayConfig::default(), nonces.session_seed())
     }
 
     /// The same gateway with a provisioned `key` (both ends must hold it; [`SessionKey::PUBLIC`] when
     /// none is) and session nonces from `session_seed`, which must differ at every power-up (a
     /// hardware random number or a persisted boot counter): starts a new session.
     pub fn with_security(mut self, key: &SessionKey, session_seed: u64) -> Self {
+        self.set_security(key, session_seed);
+        self
+    }
+
+    /// As [`Self::with_security`], in place.
+    pub fn set_security(&mut self, key: &SessionKey, session_seed: u64) {
         self.nonces = SessionNonces::new(session_seed);
         let first = self.nonces.next_after(None);
         self.verifier = Verifier::new(key, first);
         self.session_used = false;
-        self
     }
 
-    fn with_valid_config(config: GatewayConfig) -> Self {
-        let mut nonces = SessionNonces::new(0);
+    fn with_valid_config(config: GatewayConfig, session_seed: u64) -> Self {
+        let mut nonces = SessionNonces::new(session_seed);
         let first = nonces.next_after(None);
         Self {
             config,
@@ -366,17 +375,27 @@ impl Gateway {
     /// The same gateway with another NAME (a machine's provisioned serial number) for its address
     /// claim. Call before the first tick.
     pub fn with_name(mut self, name: Name) -> Self {
+        self.set_name(name);
+        self
+    }
+
+    /// As [`Self::with_name`], in place.
+    pub fn set_name(&mut self, name: Name) {
         let margin_ns = self.claim.hold_ns() - crate::address_claim::CLAIM_HOLD_NS;
         self.claim = AddressClaimer::gateway_named(name).with_hold_margin(margin_ns);
-        self
     }
 
     /// The same gateway waiting `margin_ns` longer than 250 ms before its claim stands
     /// ([`AddressClaimer::with_hold_margin`]): for a board whose clock can run behind the bus by up
     /// to that much when its claim leaves. Call before the first tick.
     pub fn with_claim_hold_margin(mut self, margin_ns: i64) -> Self {
-        self.claim = self.claim.with_hold_margin(margin_ns);
+        self.set_claim_hold_margin(margin_ns);
         self
+    }
+
+    /// As [`Self::with_claim_hold_margin`], in place.
+    pub fn set_claim_hold_margin(&mut self, margin_ns: i64) {
+        self.claim = self.claim.with_hold_margin(margin_ns);
     }
 
     /// The address claim (state, NAME, address).
@@ -806,11 +825,19 @@ mod tests {
         Activity, AutodigStageCode, AuxValveCommand, ControllerHeartbeat, ControllerStatus,
         JointAngles, PositionSetpoint, Valve,
     };
-    use crate::secoc::{Sealer, SessionKey};
+    use crate::secoc::{OsNonceSource, Sealer, SeededNonceSource, SessionKey};
     use proptest::prelude::*;
     use std::println;
     use std::string::ToString;
     use std::vec::Vec;
+
+    /// The nonce seed of the tests' gateways (fixed: the tests are reproducible).
+    const TEST_SEED: u64 = 0;
+
+    /// The project's gateway with its nonces from [`TEST_SEED`].
+    fn test_gateway() -> Gateway {
+        Gateway::with_default_config(&mut SeededNonceSource(TEST_SEED))
+    }
 
     /// The controller's heartbeat and command period of these tests, s.
     const PERIOD_S: f64 = crate::dbc::CONTROL_PERIOD.as_secs_f64();
@@ -857,7 +884,7 @@ mod tests {
 
     /// A gateway armed in valve mode at t = 0 with heartbeat counter 0, and its controller link.
     fn armed() -> (Gateway, Link) {
-        let mut g = Gateway::default();
+        let mut g = test_gateway();
 
         let mut l = Link::default();
         assert_eq!(
@@ -870,7 +897,7 @@ mod tests {
 
     #[test]
     fn boots_disarmed_and_ignores_commands() {
-        let mut g = Gateway::default();
+        let mut g = test_gateway();
         let mut l = Link::default();
         assert_eq!(
             g.on_frame(&l.valve(&g, Valve::Boom, 0.5), 0.0),
@@ -1046,7 +1073,7 @@ mod tests {
     /// valid `Disarm` cleared it and `ArmValve` re-armed.
     #[test]
     fn a_replayed_controller_trace_neither_arms_nor_drives() {
-        let mut g = Gateway::default().with_security(&SessionKey::PUBLIC, 1);
+        let mut g = test_gateway().with_security(&SessionKey::PUBLIC, 1);
         let mut l = Link::default();
         let (recording, end) = record_session(&mut g, &mut l, 0.0);
         // The controller dies; the watchdog faults and ends the session.
@@ -1062,10 +1089,56 @@ mod tests {
             "a replayed Disarm cleared the fault"
         );
         // A gateway after a power cycle (a new seed: a new session) does not take it either.
-        let mut rebooted = Gateway::default().with_security(&SessionKey::PUBLIC, 2);
+        let mut rebooted = test_gateway().with_security(&SessionKey::PUBLIC, 2);
         let (peak, armed) = replay(&mut rebooted, &recording, 0.0);
         assert_eq!((peak, armed), (0.0, false));
         assert!(rebooted.frame_counts().1 > 0, "the replay is counted");
+    }
+
+    /// Regression: `Gateway::default()` and `Gateway::new` started every gateway at the same session
+    /// nonce, so every power-up repeated the sessions of the last. On the product path the nonce
+    /// comes from the platform's source (here the host's OS random source).
+    #[test]
+    fn two_gateways_on_the_product_path_start_different_sessions() {
+        let a = Gateway::new(GatewayConfig::default(), &mut OsNonceSource).unwrap();
+        let b = Gateway::new(GatewayConfig::default(), &mut OsNonceSource).unwrap();
+        assert_ne!(a.session(), b.session());
+        let c = Gateway::with_default_config(&mut OsNonceSource);
+        assert_ne!(a.session(), c.session());
+        // A seeded source is reproducible, which is what the demo needs and a machine must not use.
+        assert_eq!(
+            Gateway::with_default_config(&mut SeededNonceSource(7)).session(),
+            Gateway::with_default_config(&mut SeededNonceSource(7)).session()
+        );
+    }
+
+    /// Regression: a demo trace (its nonces drawn from the demo's public seed) replayed verbatim onto
+    /// a fresh gateway armed and drove it, because both started at the same nonce. Even with the
+    /// demo's key, a product gateway (its nonce from the OS) takes none of it.
+    #[test]
+    fn a_demo_trace_replayed_onto_a_fresh_product_gateway_does_not_arm_it() {
+        /// The demo's seed: public (in its summary and docs).
+        const DEMO_SEED: u64 = 1;
+        let key = SessionKey::from_hex("2b7e151628aed2a6abf7158809cf4f3c").unwrap();
+        let mut demo = Gateway::with_default_config(&mut SeededNonceSource(DEMO_SEED))
+            .with_security(&key, DEMO_SEED);
+        let mut l = Link {
+            sealer: Some(Sealer::new(&key)),
+        };
+        let (recording, _) = record_session(&mut demo, &mut l, 0.0);
+        let mut product = Gateway::with_default_config(&mut OsNonceSource)
+            .with_security(&key, OsNonceSource.session_seed());
+        let (peak, armed) = replay(&mut product, &recording, 0.0);
+        assert_eq!(
+            (peak, armed),
+            (0.0, false),
+            "the demo trace moved the machine"
+        );
+        assert!(product.frame_counts().1 > 0, "the replay is counted");
+        // The same replay onto a gateway seeded as the demo's arms: what the nonce source prevents.
+        let mut same = Gateway::with_default_config(&mut SeededNonceSource(DEMO_SEED))
+            .with_security(&key, DEMO_SEED);
+        assert!(replay(&mut same, &recording, 0.0).1);
     }
 
     /// Regression: sixteen recorded heartbeats replayed in order passed the 4-bit alive counter
@@ -1073,7 +1146,7 @@ mod tests {
     /// driven.
     #[test]
     fn replayed_heartbeats_do_not_keep_the_valves_driven() {
-        let mut g = Gateway::default();
+        let mut g = test_gateway();
         let mut l = Link::default();
         let (recording, end) = record_session(&mut g, &mut l, 0.0);
         let pgn = |f: &CanFrame| Message::decode(f).map(|d| d.id.pgn()).unwrap_or(0);
@@ -1128,7 +1201,7 @@ mod tests {
         assert!(out.status.faults.contains(GatewayFaults::AUTH_FAILURE));
 
         let key = SessionKey::from_hex("2b7e151628aed2a6abf7158809cf4f3c").unwrap();
-        let mut g = Gateway::default().with_security(&key, 9);
+        let mut g = test_gateway().with_security(&key, 9);
         let mut owner = Sealer::new(&key);
         owner.set_session(g.session().session_id);
         let hb = |mode| {
@@ -1153,7 +1226,7 @@ mod tests {
         );
         assert_eq!(g.tick(0.002, None).valve_commands, [0.0; VALVES]);
         // Nor can a node without the key arm a disarmed gateway.
-        let mut g = Gateway::default().with_security(&key, 10);
+        let mut g = test_gateway().with_security(&key, 10);
         let mut stranger = Sealer::new(&SessionKey::PUBLIC);
         stranger.set_session(g.session().session_id);
         for k in 0..100u32 {
@@ -1178,7 +1251,7 @@ mod tests {
         assert_eq!(g.mode(), GatewayMode::ArmedValve);
         // An unused session does not expire on its own.
         let session = g.session();
-        let mut idle = Gateway::default();
+        let mut idle = test_gateway();
         let before = idle.session();
         for k in 0..1000u32 {
             idle.tick(f64::from(k) * 0.001, None);
@@ -1208,7 +1281,7 @@ mod tests {
 
     #[test]
     fn e_stop_latches_in_any_mode() {
-        let mut g = Gateway::default();
+        let mut g = test_gateway();
         let mut l = Link::default();
         g.on_frame(&l.hb(&g, RequestedMode::EStop, 0), 0.0);
         assert_eq!(g.mode(), GatewayMode::Faulted);
@@ -1280,7 +1353,7 @@ mod tests {
     /// than they were, so a controller that died just then kept the boom driven for 10 s.
     #[test]
     fn clock_stepped_back_10_s_does_not_keep_valves_driven() {
-        let mut g = Gateway::default();
+        let mut g = test_gateway();
         let mut l = Link::default();
         let mut alive = 0;
         g.on_frame(&l.hb(&g, RequestedMode::ArmValve, alive), 100.0);
@@ -1351,7 +1424,7 @@ mod tests {
 
     #[test]
     fn frame_counters_saturate_and_say_so() {
-        let mut g = Gateway::default();
+        let mut g = test_gateway();
 
         let unknown = CanFrame::new_extended(0x18FE_EE00, &[1, 2, 3]).unwrap();
         for k in 0..70_000u32 {
@@ -1414,7 +1487,7 @@ mod tests {
             },
         ];
         for config in bad {
-            let e = Gateway::new(config).unwrap_err();
+            let e = Gateway::new(config, &mut SeededNonceSource(TEST_SEED)).unwrap_err();
             assert!(!e.to_string().is_empty());
         }
     }
@@ -1512,7 +1585,7 @@ mod tests {
 
     #[test]
     fn position_mode_drives_toward_the_setpoint_with_rate_limit() {
-        let mut g = Gateway::default();
+        let mut g = test_gateway();
         let mut l = Link::default();
         g.on_frame(&l.hb(&g, RequestedMode::ArmPosition, 0), 0.0);
         assert_eq!(g.mode(), GatewayMode::ArmedPosition);
@@ -1535,7 +1608,7 @@ mod tests {
 
     #[test]
     fn position_mode_faults_on_stale_or_out_of_range_setpoints() {
-        let mut g = Gateway::default();
+        let mut g = test_gateway();
         let mut l = Link::default();
         g.on_frame(&l.hb(&g, RequestedMode::ArmPosition, 0), 0.0);
         g.on_frame(&l.hb(&g, RequestedMode::ArmPosition, 1), 0.09);
@@ -1547,7 +1620,7 @@ mod tests {
         );
         g.tick(0.11, Some([0.0; 4]));
         assert!(g.faults().contains(GatewayFaults::STALE_COMMAND));
-        let mut g = Gateway::default();
+        let mut g = test_gateway();
         let mut l = Link::default();
         g.on_frame(&l.hb(&g, RequestedMode::ArmPosition, 0), 0.0);
         g.on_frame(&l.setpoint(&g, [0.0, -1.0, -1.0, 0.0]), 0.0);
@@ -1565,7 +1638,7 @@ mod tests {
     /// every `SWEEP_HEARTBEAT_PERIOD_S` from `phase_s`, the last one number `last`; boom commands go on
     /// after it. Returns the last heartbeat's time and the time of the first tick with neutral output.
     fn first_neutral_after_last_heartbeat(phase_s: f64, last: u32) -> (f64, f64) {
-        let mut g = Gateway::default();
+        let mut g = test_gateway();
         let mut l = Link::default();
         let last_hb_s = phase_s + f64::from(last) * SWEEP_HEARTBEAT_PERIOD_S;
         let mut n = 0u32;
@@ -1624,7 +1697,7 @@ mod tests {
             ),
             measured in proptest::array::uniform4(any::<f64>()),
         ) {
-            let mut g = Gateway::default();
+            let mut g = test_gateway();
 
             let mut t = 0.0;
             for (id, data, extended) in frames {
@@ -1651,7 +1724,7 @@ mod tests {
 
     #[test]
     fn the_gateway_claims_its_address_and_reports_only_after_250_ms() {
-        let mut g = Gateway::default();
+        let mut g = test_gateway();
         assert!(g.take_claim_frame().is_none());
         g.tick(0.0, None);
         let frame = g.take_claim_frame().unwrap();
@@ -1709,10 +1782,10 @@ mod tests {
         use crate::address_claim::{AddressClaimer, CLAIM_HOLD_NS};
         let other = AddressClaimer::controller().name();
         for g in [
-            Gateway::default()
+            test_gateway()
                 .with_claim_hold_margin(40_000_000)
                 .with_name(other),
-            Gateway::default()
+            test_gateway()
                 .with_name(other)
                 .with_claim_hold_margin(40_000_000),
         ] {
@@ -1777,7 +1850,7 @@ mod tests {
 
     #[test]
     fn a_competitor_with_a_higher_name_is_answered_and_the_gateway_keeps_going() {
-        let mut g = Gateway::default();
+        let mut g = test_gateway();
         let mut l = Link::default();
         g.tick(0.0, None);
         g.take_claim_frame();
@@ -1799,7 +1872,7 @@ mod tests {
 
     #[test]
     fn a_request_for_address_claimed_gets_the_claim_and_other_claims_are_ignored() {
-        let mut g = Gateway::default();
+        let mut g = test_gateway();
         g.tick(0.0, None);
         g.take_claim_frame();
         let request = crate::address_claim::request_address_claimed(GATEWAY_ADDRESS, 0x99).unwrap();

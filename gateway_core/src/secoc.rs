@@ -453,6 +453,46 @@ impl Verifier {
     }
 }
 
+/// Where a gateway's session nonces start: a value the platform provides that differs at every
+/// power-up. On the microcontroller, its hardware random number generator (e.g. the STM32 `RNG`
+/// peripheral) or a boot counter kept in non-volatile memory, incremented and written back before the
+/// first session; on a host, the operating system's random source ([`OsNonceSource`]). Nonces need
+/// to be unique, not secret. There is deliberately no default: a constant would give every power-up
+/// the same sessions, and a recording of one would verify in the next.
+pub trait NonceSource {
+    /// The seed of this power-up's session nonces ([`SessionNonces::new`]).
+    fn session_seed(&mut self) -> u64;
+}
+
+/// A seed given by the caller: for an in-process session whose trace must be reproducible from its
+/// seed (`demo`, the lab, tests). Never on a machine, where every start would repeat its nonces.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SeededNonceSource(pub u64);
+
+impl NonceSource for SeededNonceSource {
+    fn session_seed(&mut self) -> u64 {
+        self.0
+    }
+}
+
+/// The host's nonce source: the operating system's random source (`getrandom`, through
+/// `rand::rngs::SysRng`).
+#[cfg(feature = "std")]
+#[derive(Debug, Clone, Copy, Default)]
+pub struct OsNonceSource;
+
+#[cfg(feature = "std")]
+impl NonceSource for OsNonceSource {
+    fn session_seed(&mut self) -> u64 {
+        use rand::TryRng as _;
+        // getrandom fails only where the OS has no random source at all; a gateway there must not
+        // start with a guessable nonce, so this is the end of the program.
+        rand::rngs::SysRng
+            .try_next_u64()
+            .unwrap_or_else(|e| panic!("the operating system's random source: {e}"))
+    }
+}
+
 /// A 64-bit generator of session nonces (SplitMix64). Nonces need to be unique, not secret: seed it
 /// from a hardware random source or a boot counter kept across power cycles, so that no two sessions
 /// of the machine share a nonce.

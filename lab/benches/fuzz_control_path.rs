@@ -18,7 +18,7 @@ use firmware_bridge::gateway::{Gateway, VALVES};
 use firmware_bridge::messages::{
     AuxValveCommand, ControllerHeartbeat, GatewayMode, JointAngles, RequestedMode, Valve,
 };
-use firmware_bridge::secoc::{Sealer, SessionKey};
+use firmware_bridge::secoc::{Sealer, SeededNonceSource, SessionKey};
 use firmware_bridge::trace::{self, ReadMode, TraceReader};
 use firmware_bridge::{CanFrame, CanId, Message, TimestampedFrame};
 use planner::autodig::AutodigMaps;
@@ -159,7 +159,8 @@ fn main() {
         .unwrap()
     };
     let mut node = new_node();
-    let mut gateway = Gateway::default().with_security(&key, seed);
+    let mut gateway =
+        Gateway::with_default_config(&mut SeededNonceSource(seed)).with_security(&key, seed);
     let mut legit = Legit {
         sealer: Sealer::new(&key),
         key: key.clone(),
@@ -169,7 +170,8 @@ fn main() {
     // sensor frames.
     let mut recorded: Vec<CanFrame> = Vec::new();
     {
-        let g = Gateway::default().with_security(&key, seed ^ 1);
+        let g = Gateway::with_default_config(&mut SeededNonceSource(seed ^ 1))
+            .with_security(&key, seed ^ 1);
         let mut l = Legit {
             sealer: Sealer::new(&key),
             key: key.clone(),

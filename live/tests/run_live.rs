@@ -53,6 +53,8 @@ fn run_serves_the_page_and_its_estop_reaches_the_run_loop() {
         config: Some(safety),
         digs: Some(1),
         time_scale: Some(time_scale),
+        // The page is under test, not the key: both ends in this process use the public key.
+        insecure_no_key: true,
         ..RunArgs::new("vcan0")
     };
     // The live view has its own runtime: started outside the session's.

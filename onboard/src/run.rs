@@ -33,6 +33,7 @@ use std::time::Instant;
 use anyhow::Context as _;
 use clap::Args;
 use controller::ControllerConfig;
+use controller::config::{KeyUse, SecurityConfig};
 #[cfg(doc)]
 use controller::io::operator::OperatorPort;
 use controller::io::run::{LoopSession, StopReason, run_session_loop, scan_client_config};
@@ -78,9 +79,15 @@ pub struct RunArgs {
     pub config: Option<PathBuf>,
     /// The machine's authentication key: 32 hex digits in a file readable by its owner only (chmod
     /// 600), the same file the gateway holds (excavator-sim --key-file). Overrides the config's
-    /// `[security] key_file`. Without a key the control frames carry freshness only (docs/protocol.md).
+    /// `[security] key_file`. Without a key `run` refuses to arm (docs/deployment.md, "The
+    /// machine's key"), unless it only listens or `--insecure-no-key` is given.
     #[arg(long, value_name = "FILE")]
     pub key_file: Option<PathBuf>,
+    /// Arm without a key: the control frames are sealed with the public all-zero key, which anyone
+    /// on the bus can forge (docs/protocol.md, "Threat model"). Bench tests only; logged as an error.
+    /// Same as the config's `security.insecure_no_key = true`.
+    #[arg(long)]
+    pub insecure_no_key: bool,
     /// Record a candump -L log of every frame sent and received (default with --out: DIR/trace.log).
     #[arg(long, value_name = "FILE")]
     pub trace: Option<PathBuf>,
@@ -213,6 +220,7 @@ impl RunArgs {
             maps: None,
             config: None,
             key_file: None,
+            insecure_no_key: false,
             trace: None,
             digs: None,
             scan_addr: None,
@@ -370,7 +378,12 @@ pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, R
     if let Some(file) = &args.key_file {
         config.security.key_file = Some(file.clone());
     }
-    let key = config.security.load_key().context("the machine's key")?;
+    config.security.insecure_no_key |= args.insecure_no_key;
+    let key = SecurityConfig::key_for_motion(
+        config.security.load_key().context("the machine's key")?,
+        config.security.insecure_no_key,
+        config.safety.listen_only,
+    )?;
     let seed = args.seed.unwrap_or(0);
     let identity = session_identity(
         &machine,
@@ -384,13 +397,15 @@ pub fn build(args: &RunArgs) -> anyhow::Result<(ControllerNode, SessionDriver, R
     let mut node =
         ControllerNode::new(&machine, maps, config).context("controller configuration")?;
     match &key {
-        Some(key) => {
+        KeyUse::Provisioned(key) => {
             node.set_key(key);
             tracing::info!("control frames authenticated with the provisioned key");
         }
-        None => tracing::warn!(
-            "no key provisioned (--key-file, [security] key_file): the control frames carry \
-             freshness only, and anyone who can send on the bus can forge them (docs/protocol.md)"
+        KeyUse::ListenOnly => tracing::info!("no key provisioned: listen-only, nothing is sent"),
+        KeyUse::Insecure => tracing::error!(
+            "INSECURE: --insecure-no-key (security.insecure_no_key): no key provisioned, the control \
+             frames are sealed with the public all-zero key and anyone who can send on the bus can \
+             forge them and move the machine (docs/protocol.md). Bench tests only."
         ),
     }
     let mut driver = SessionDriver::new(session, None, &mut node);
@@ -436,6 +451,7 @@ pub fn session_identity(
             c.safety.listen_only = false;
             // The key is the machine's, not the session's: it may be re-provisioned.
             c.security.key_file = None;
+            c.security.insecure_no_key = false;
             fingerprint(&(c, planner, maps))
         },
     }
@@ -1128,7 +1144,7 @@ mod tests {
         )
         .unwrap();
         let d = dir.path().to_str().unwrap();
-        let a = args(&["--config-dir", d]).with_config_dir();
+        let a = args(&["--config-dir", d, "--insecure-no-key"]).with_config_dir();
         assert_eq!(a.profile, Some(dir.path().join("profile.toml")));
         assert!(
             a.config_files().ends_with("profile.toml"),
@@ -1142,7 +1158,7 @@ mod tests {
         assert!((safety.sensor_max_age_s - 0.06).abs() < 1e-12, "{safety:?}");
         let a = args(&["--config-dir", d, "--profile", "mine.toml"]).with_config_dir();
         assert_eq!(a.profile, Some("mine.toml".into()), "an option wins");
-        let (node, _, _) = build(&args(&[])).unwrap();
+        let (node, _, _) = build(&args(&["--insecure-no-key"])).unwrap();
         assert_eq!(
             *node.safety().config(),
             controller::step::safety::SafetyConfig::default(),
@@ -1190,6 +1206,32 @@ mod tests {
         std::fs::write(dir.path().join("summary.json"), "{").unwrap();
         let e = format!("{:#}", finished_session(dir.path(), 3, None).unwrap_err());
         assert!(e.contains("summary.json"), "{e}");
+    }
+
+    /// Without a key `run` used to arm with the public all-zero key after a warning: now it refuses,
+    /// unless it only listens or the insecure mode is asked for (flag or config key).
+    #[test]
+    fn run_without_a_key_refuses_to_arm() {
+        let Err(e) = build(&args(&[])) else {
+            panic!("a run without a key was built to arm")
+        };
+        let e = format!("{e:#}");
+        assert!(e.contains("no key provisioned: refusing to arm"), "{e}");
+        assert!(e.contains("docs/deployment.md"), "{e}");
+        assert!(
+            build(&args(&["--listen-only"])).is_ok(),
+            "listen-only sends nothing"
+        );
+        assert!(build(&args(&["--insecure-no-key"])).is_ok());
+        let dir = tempfile::tempdir().unwrap();
+        let config = dir.path().join("controller.toml");
+        std::fs::write(&config, "[security]\ninsecure_no_key = true\n").unwrap();
+        assert!(build(&args(&["--config", config.to_str().unwrap()])).is_ok());
+        let key = dir.path().join("key");
+        std::fs::write(&key, "000102030405060708090a0b0c0d0e0f\n").unwrap();
+        std::fs::set_permissions(&key, std::os::unix::fs::PermissionsExt::from_mode(0o600))
+            .unwrap();
+        assert!(build(&args(&["--key-file", key.to_str().unwrap()])).is_ok());
     }
 
     #[test]

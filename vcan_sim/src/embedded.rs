@@ -21,11 +21,16 @@ use std::sync::Arc;
 
 use firmware_bridge::gateway::GatewayConfigError;
 use firmware_bridge::profile::Profile;
+use firmware_bridge::secoc::SessionKey;
 use firmware_bridge::transport::{InProcessNode, ProfileLink, VirtualClock};
 
 use crate::node::{MachineNode, steps_in};
 use crate::plant::{PHYSICS_DT_S, Plant};
 use crate::sensors::{Scan, ScanRequest};
+
+/// The session-nonce seed of an in-process gateway until its owner calls
+/// [`MachineNode::set_security`]: reproducible, and never on a bus (`excavator-sim` draws its own).
+const IN_PROCESS_NONCE_SEED: u64 = 0;
 
 /// The machine on the in-process bus in virtual time.
 #[derive(Debug)]
@@ -47,11 +52,14 @@ impl EmbeddedMachine {
     }
 
     fn attached(
-        node: MachineNode,
+        mut node: MachineNode,
         bus: InProcessNode,
         clock: Option<VirtualClock>,
         link: Option<ProfileLink>,
     ) -> Self {
+        // In virtual time a run must repeat exactly, so the gateway's nonces start from a fixed seed
+        // instead of the OS's; the lab reseeds them (and keys both ends) from the session's seed.
+        node.set_security(&SessionKey::PUBLIC, IN_PROCESS_NONCE_SEED);
         Self {
             node,
             bus,

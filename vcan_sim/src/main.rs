@@ -3,6 +3,7 @@
 //! ```text
 //! excavator-sim --iface vcan0 [--machine FILE] [--bench FILE] [--seed N] [--effect NAME=VALUE]...
 //!               [--state-log FILE] [--scan-socket ADDR] [--profile FILE]
+//!               (--key-file FILE | --insecure-no-key)
 //! excavator-sim --list-effects [--json]
 //! excavator-sim bench [--seconds S] [--case TEXT] [--repeat N]
 //! ```
@@ -49,10 +50,15 @@ struct Cli {
     /// HOST:PORT of the range-scan socket (docs/scan-protocol.md), e.g. 127.0.0.1:7878.
     #[arg(long)]
     scan_socket: Option<String>,
-    /// File with the machine's 128-bit authentication key (32 hex digits); the controller must hold
-    /// the same key. Without it the gateway checks freshness and session only (docs/protocol.md).
+    /// File with the machine's 128-bit authentication key (32 hex digits, mode 600); the controller
+    /// must hold the same key. Required on a bus (docs/deployment.md, "The machine's key") unless
+    /// --insecure-no-key is given.
     #[arg(long)]
     key_file: Option<PathBuf>,
+    /// Run the gateway without a key: it accepts control frames sealed with the public all-zero
+    /// key, which anyone on the bus can forge. Bench tests only; logged as an error.
+    #[arg(long, conflicts_with = "key_file")]
+    insecure_no_key: bool,
     /// Machine profile (TOML naming the gateway's DBC and the mapping, docs/machine-profile.md): speak
     /// that gateway's messages on the bus. Default: the project's own protocol (excavator.dbc).
     #[arg(long, value_name = "FILE")]
@@ -270,10 +276,7 @@ fn real_main() -> Result<()> {
         // Colours only for a person at a terminal: a journal, a file or a pipe gets plain text.
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
-    let key = match &cli.key_file {
-        Some(path) => SessionKey::from_file(path)?,
-        None => SessionKey::PUBLIC,
-    };
+    let key = gateway_key(cli.key_file.as_deref(), cli.insecure_no_key)?;
     let profile = cli
         .profile
         .as_deref()
@@ -325,9 +328,47 @@ fn real_main() -> Result<()> {
     Ok(())
 }
 
+/// The gateway's key: the provisioned one, or the public all-zero key only when `insecure` asks
+/// for it explicitly (and then loudly logged).
+///
+/// # Errors
+/// No key file and no `--insecure-no-key`; an unreadable or invalid key file.
+fn gateway_key(key_file: Option<&std::path::Path>, insecure: bool) -> Result<SessionKey> {
+    match key_file {
+        Some(path) => Ok(SessionKey::from_file(path)?),
+        None if insecure => {
+            tracing::error!(
+                "INSECURE: --insecure-no-key: no key provisioned, the gateway accepts control frames \
+                 sealed with the public all-zero key, which anyone who can send on the bus can forge \
+                 (docs/protocol.md). Bench tests only."
+            );
+            Ok(SessionKey::PUBLIC)
+        }
+        None => bail!(
+            "no key provisioned: the gateway refuses to run on the bus without one. Give the \
+             machine's key with --key-file FILE (32 random hex digits, mode 600, the same file as \
+             the controller's; docs/deployment.md, \"The machine's key\"), or --insecure-no-key for \
+             a bench test with the public all-zero key"
+        ),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Without --key-file the simulator used to run its gateway with the public all-zero key, silently.
+    #[test]
+    fn the_gateway_refuses_to_run_without_a_key() {
+        let e = format!("{:#}", gateway_key(None, false).unwrap_err());
+        assert!(e.contains("no key provisioned"), "{e}");
+        assert!(e.contains("docs/deployment.md"), "{e}");
+        assert_eq!(gateway_key(None, true).unwrap(), SessionKey::PUBLIC);
+        assert!(
+            Cli::try_parse_from(["excavator-sim", "--key-file", "k", "--insecure-no-key"]).is_err(),
+            "a key and the insecure mode contradict each other"
+        );
+    }
 
     #[test]
     fn bench_arguments_are_bounded() {

@@ -28,7 +28,7 @@ use firmware_bridge::messages::{
     ValveState,
 };
 use firmware_bridge::profile::GatewayTiming;
-use firmware_bridge::secoc::SessionKey;
+use firmware_bridge::secoc::{OsNonceSource, SessionKey};
 use firmware_bridge::time::Instant;
 
 use crate::plant::{PHYSICS_DT_S, Plant};
@@ -97,9 +97,10 @@ pub struct MachineNode {
 }
 
 impl MachineNode {
-    /// A node with the default gateway configuration.
+    /// A node with the default gateway configuration, its session nonces from the OS random source
+    /// (a simulation that must be reproducible reseeds them: [`Self::set_security`]).
     pub fn new(plant: Plant) -> Self {
-        Self::with(plant, Gateway::default())
+        Self::with(plant, Gateway::with_default_config(&mut OsNonceSource))
     }
 
     /// A node with a given gateway configuration.
@@ -107,7 +108,7 @@ impl MachineNode {
     /// # Errors
     /// [`GatewayConfigError`] if the configuration does not validate.
     pub fn with_gateway(plant: Plant, config: GatewayConfig) -> Result<Self, GatewayConfigError> {
-        Ok(Self::with(plant, Gateway::new(config)?))
+        Ok(Self::with(plant, Gateway::new(config, &mut OsNonceSource)?))
     }
 
     /// The same node with the gateway's key (both ends hold it; [`SessionKey::PUBLIC`] when none is
@@ -120,7 +121,7 @@ impl MachineNode {
 
     /// As [`Self::with_security`] in place (before the first step: the gateway starts a new session).
     pub fn set_security(&mut self, key: &SessionKey, session_seed: u64) {
-        self.gateway = std::mem::take(&mut self.gateway).with_security(key, session_seed);
+        self.gateway.set_security(key, session_seed);
     }
 
     /// A node whose gateway sends at `timing`'s periods and keeps its watchdogs (a machine profile's
@@ -147,13 +148,13 @@ impl MachineNode {
     /// Sets the gateway's J1939 NAME (the machine file's `[gateway_name]`, [`crate::SimConfig`]).
     /// Call before the first step.
     pub fn set_gateway_name(&mut self, name: firmware_bridge::address_claim::Name) {
-        self.gateway = std::mem::take(&mut self.gateway).with_name(name);
+        self.gateway.set_name(name);
     }
 
     /// Makes the gateway hold its address claim `margin_ns` longer than 250 ms
     /// ([`Gateway::with_claim_hold_margin`]). Call before the first step.
     pub fn set_claim_hold_margin(&mut self, margin_ns: i64) {
-        self.gateway = std::mem::take(&mut self.gateway).with_claim_hold_margin(margin_ns);
+        self.gateway.set_claim_hold_margin(margin_ns);
     }
 
     fn with(plant: Plant, gateway: Gateway) -> Self {
@@ -460,6 +461,14 @@ mod tests {
         let mut cfg = SimConfig::load::<&str>(None, None, None, &[]).expect("built-in config");
         cfg.scenario.start.x_m = start_x_m;
         MachineNode::new(cfg.build().expect("plant"))
+    }
+
+    /// Regression: every `MachineNode::new` started its gateway at the same session nonce, so a
+    /// recording of one simulator run verified in the next.
+    #[test]
+    fn two_machine_nodes_start_different_sessions() {
+        let (a, b) = (node_at(0.0), node_at(0.0));
+        assert_ne!(a.gateway().session(), b.gateway().session());
     }
 
     /// A node whose address claim has stood (its sensor frames go out from the next step on).

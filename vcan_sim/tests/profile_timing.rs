@@ -8,6 +8,7 @@
 use firmware_bridge::CanFrame;
 use firmware_bridge::messages::Message;
 use firmware_bridge::profile::{GatewayTiming, Profile};
+use firmware_bridge::secoc::SessionKey;
 use vcan_sim::SimConfig;
 use vcan_sim::node::{MachineNode, Schedule};
 
@@ -80,7 +81,11 @@ fn the_gateway_sends_at_the_profiles_periods() {
 
 #[test]
 fn the_projects_timing_is_the_default_node() {
-    let canonical = MachineNode::with_timing(plant(), &GatewayTiming::canonical()).unwrap();
+    // The same session nonces on both (each node draws its own from the OS otherwise).
+    let canonical = MachineNode::with_timing(plant(), &GatewayTiming::canonical())
+        .unwrap()
+        .with_security(&SessionKey::PUBLIC, 1);
     assert_eq!(canonical.schedule(), Schedule::default());
-    assert_eq!(run(canonical, 1000), run(MachineNode::new(plant()), 1000));
+    let default = MachineNode::new(plant()).with_security(&SessionKey::PUBLIC, 1);
+    assert_eq!(run(canonical, 1000), run(default, 1000));
 }

@@ -625,8 +625,15 @@ impl Safety {
                 }
             }
             SafetyState::Shutdown => {}
-            SafetyState::Faulted { .. } => {
-                tracing::debug!(%fault, "further fault while faulted");
+            SafetyState::Faulted { since_s, .. } => {
+                if fault == Fault::EStop {
+                    // The operator's stop is the latest safety reason: status reports it, not the
+                    // older fault it came on top of.
+                    tracing::warn!(%fault, "e-stop while faulted");
+                    self.state = SafetyState::Faulted { fault, since_s };
+                } else {
+                    tracing::debug!(%fault, "further fault while faulted");
+                }
             }
             SafetyState::Armed { .. } | SafetyState::Arming { .. } => {
                 tracing::warn!(%fault, "fault: valves neutral, disarming");
@@ -704,6 +711,21 @@ impl Safety {
             self.estop_reset = None;
         }
         let fresh_status = est.age_s(Signal::GatewayStatus, now_s) <= self.config.status_max_age_s;
+        // A gateway e-stop this controller did not give (one from before a restart of the controller
+        // process): the gateway keeps it latched, so adopt it, show it, and let `reset` clear it with
+        // ResetEStop.
+        if let Some(s) = status.filter(|_| fresh_status)
+            && s.faults.contains(GatewayFaults::E_STOP)
+            && !self.estop
+            && self.estop_reset.is_none()
+            && matches!(
+                self.state,
+                SafetyState::Disarmed | SafetyState::Faulted { .. }
+            )
+        {
+            tracing::warn!("the gateway reports a latched e-stop: waiting for an operator reset");
+            self.request_estop(now_s);
+        }
         match self.state {
             SafetyState::Armed { mode, since_s } => {
                 if let Err(fault) = self.healthy {
@@ -1439,7 +1461,8 @@ mod tests {
             }
         }
         let mut rig = Rig::new(SafetyConfig::default());
-        let mut gw = Gateway::default();
+        let mut gw =
+            Gateway::with_default_config(&mut firmware_bridge::secoc::SeededNonceSource(0));
         let mut log = Log::default();
         let mut t = 0.0;
         run(&mut rig, &mut gw, &mut t, 100, &mut log);
@@ -1464,6 +1487,78 @@ mod tests {
         assert_eq!(gw.mode(), GatewayMode::ArmedValve);
         assert!(gw.faults().is_empty());
         assert_eq!(log.boom.last(), Some(&1.0));
+    }
+
+    /// Regression: after an e-stop and a controller restart the new process showed "Disarmed, fault
+    /// none" and its reset never sent ResetEStop, so the gateway stayed faulted until a power cycle.
+    /// The restarted controller reads the latched e-stop from the gateway's status.
+    #[test]
+    fn a_restarted_controller_shows_the_gateways_estop_and_its_reset_clears_it() {
+        // The gateway as the first controller's e-stop left it; a fresh safety layer starts.
+        let mut rig = Rig::new(SafetyConfig::default());
+        rig.gateway_mode = GatewayMode::Faulted;
+        rig.faults = GatewayFaults::E_STOP;
+        let (tick, t) = rig.run(0.0, 20, Some(ArmMode::Valve));
+        assert!(
+            matches!(
+                rig.safety.state(),
+                SafetyState::Faulted {
+                    fault: Fault::EStop,
+                    ..
+                }
+            ),
+            "{:?}",
+            rig.safety.state()
+        );
+        assert!(rig.safety.needs_reset());
+        assert_eq!(tick.motion, None);
+        rig.safety.reset();
+        let mut requests = Vec::new();
+        let mut t = t;
+        for _ in 0..200 {
+            let tick = rig.period(t, Some(ArmMode::Valve), false);
+            if let Some(hb) = tick.heartbeat
+                && requests.last() != Some(&hb.mode)
+            {
+                requests.push(hb.mode);
+            }
+            t += PERIOD_S;
+        }
+        assert_eq!(
+            requests.first(),
+            Some(&RequestedMode::ResetEStop),
+            "{requests:?}"
+        );
+        assert_eq!(
+            rig.faults & GatewayFaults::E_STOP,
+            0,
+            "the gateway's e-stop cleared"
+        );
+        assert_eq!(rig.safety.motion(), Some(ArmMode::Valve), "{requests:?}");
+    }
+
+    /// Regression: an e-stop given while already faulted (e.g. a stale sensor) was latched but
+    /// reported as the older fault.
+    #[test]
+    fn an_estop_while_faulted_is_reported_as_the_latest_reason() {
+        let (mut rig, t) = Rig::armed(SafetyConfig::default());
+        rig.safety.report(t, Fault::ArmTimeout(ArmMode::Valve));
+        assert!(matches!(
+            rig.safety.state(),
+            SafetyState::Faulted {
+                fault: Fault::ArmTimeout(_),
+                ..
+            }
+        ));
+        rig.safety.request_estop(t + 0.01);
+        assert!(matches!(
+            rig.safety.state(),
+            SafetyState::Faulted {
+                fault: Fault::EStop,
+                ..
+            }
+        ));
+        assert_eq!(rig.safety.last_fault(), Some(Fault::EStop));
     }
 
     /// #20: a gateway whose status keeps coming with the same alive counter is not running.
