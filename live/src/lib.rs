@@ -109,11 +109,11 @@ pub struct LiveArgs {
     #[arg(long, value_name = "N", default_value_t = DEFAULT_QUEUE, requires = "live")]
     pub live_queue: usize,
     /// Also allow HOST (a name or address the operator's browser uses for this machine) in the
-    /// `Host` and `Origin` of the page and the WebSocket; loopback (localhost, 127.0.0.1, [::1])
+    /// `Host` and `Origin` of the page and the WebSocket; loopback (localhost, 127.0.0.1, `[::1]`)
     /// and the `--live` address are always allowed. Repeat for more.
     #[arg(long, value_name = "HOST", requires = "live")]
     pub live_allow_host: Vec<String>,
-    /// Also accept ORIGIN (exactly, e.g. https://app.foxglove.dev) on the WebSocket, whose
+    /// Also accept ORIGIN (exactly, e.g. `https://app.foxglove.dev`) on the WebSocket, whose
     /// stream is read only; never on the page's commands. Repeat for more.
     #[arg(long, value_name = "ORIGIN", requires = "live")]
     pub live_allow_origin: Vec<String>,

@@ -27,7 +27,7 @@ const FORMAT: u32 = 1;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SavedOptions {
-    /// [`FORMAT`].
+    /// The file's format, 1 (a file of another format is refused).
     pub format: u32,
     /// `--iface`.
     pub iface: String,
