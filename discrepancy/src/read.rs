@@ -3,14 +3,12 @@
 //! discrepancy workflow's 100 Hz records. Only the bus traffic and the scans are read; nothing else
 //! in the folder (in particular not `summary.json`, whose `effects` field would reveal the answer).
 
-use std::fs::File;
-use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
 use crate::{DigRecord, LoadTag, Sample, StageTag};
 use anyhow::Context as _;
-use firmware_bridge::messages::{Activity, AutodigStageCode, GatewayMode, Message};
-use firmware_bridge::trace::{ReadMode, TraceReader};
+use firmware_bridge::messages::{Activity, AutodigStageCode, Message};
+use lab::trace_samples::{BusSample, SampleSink, read_samples};
 use planner::kinematics::{JointAngles, Kinematics, MachinePose};
 use planner::machine::MachineConfig;
 use planner::terrain::SectionProfile;
@@ -102,118 +100,74 @@ pub const POSITION_MODE_SETTLE_S: f64 = 0.5;
 /// # Errors
 /// Opening or reading the file; a trace without controller status frames.
 pub fn read_trace(path: &Path) -> anyhow::Result<Vec<(u16, Sample)>> {
-    let file = File::open(path).with_context(|| format!("opening {}", path.display()))?;
-    let reader = TraceReader::new(BufReader::new(file), ReadMode::Skip);
-    let mut out: Vec<(u16, Sample)> = Vec::new();
-    let mut pending: Option<Sample> = None;
-    let mut current = Sample::default();
-    let mut status: Option<Status> = None;
-    // Time the gateway was last seen in position mode.
-    let mut position_mode_at = f64::NEG_INFINITY;
-    let mut time_base = lab::demo::trace_time_base(path)?;
-    let push =
-        |pending: &mut Option<Sample>, out: &mut Vec<(u16, Sample)>, cmd: &Sample, st: &Status| {
-            if let Some(mut s) = pending.take() {
-                s.command = cmd.command;
-                s.swing_command = cmd.swing_command;
-                s.stage = stage_tag(st.stage);
-                s.load = load_tag(st);
-                s.tracking = st.activity == Activity::Track;
-                s.swept_volume_m3 = if s.stage == StageTag::Outside {
+    /// The samples outside the position mode, with the controller's status folded over its frames.
+    #[derive(Default)]
+    struct Sink {
+        out: Vec<(u16, Sample)>,
+        status: Option<Status>,
+    }
+    impl SampleSink for Sink {
+        fn message(&mut self, _time_s: f64, message: &Message) {
+            let Message::ControllerStatus(s) = message else {
+                return;
+            };
+            // Weigh follows the dig (Autodig, or a cleanup ending in Autodig) of the same index and
+            // shows as Idle until the swing to the dump.
+            let weighing = s.activity == Activity::Idle
+                && self.status.is_some_and(|p| {
+                    p.dig_index == s.dig_index
+                        && (p.weighing || matches!(p.activity, Activity::Dig | Activity::Cleanup))
+                });
+            self.status = Some(Status {
+                activity: s.activity,
+                stage: s.stage,
+                dig_index: s.dig_index,
+                swept_volume_m3: s.swept_volume_m3,
+                weighing,
+            });
+        }
+        fn sample(&mut self, b: &BusSample) {
+            let Some(st) = self.status else {
+                return;
+            };
+            if b.time_s - b.position_mode_at_s <= POSITION_MODE_SETTLE_S {
+                return;
+            }
+            let [boom, stick, bucket, swing] = b.angles_rad;
+            let rates = b.rates_rad_per_s.unwrap_or_default();
+            let stage = stage_tag(st.stage);
+            let sample = Sample {
+                time_s: b.time_s,
+                command: [b.command[0], b.command[1], b.command[2]],
+                swing_command: b.command[3],
+                angles_rad: [boom, stick, bucket],
+                rates_rad_per_s: [rates[0], rates[1], rates[2]],
+                swing_rate_rad_per_s: rates[3],
+                swing_rad: swing,
+                head_pa: b.head_pa,
+                rod_pa: b.rod_pa,
+                pump_pa: b.pump_pa,
+                stage,
+                load: load_tag(&st),
+                swept_volume_m3: if stage == StageTag::Outside {
                     0.0
                 } else {
                     st.swept_volume_m3
-                };
-                out.push((st.dig_index, s));
-            }
-        };
-    for record in trace_tools::input::records_until_cut(path, reader) {
-        let record = record.with_context(|| format!("reading {}", path.display()))?;
-        let t = time_base.session_s(record.timestamp_ns);
-        let Ok(decoded) = Message::decode(&record.frame) else {
-            continue;
-        };
-        match decoded.message {
-            Message::JointAngles(a) => {
-                if let Some(st) = status {
-                    push(&mut pending, &mut out, &current, &st);
-                }
-                if t - position_mode_at <= POSITION_MODE_SETTLE_S {
-                    pending = None;
-                    continue;
-                }
-                current.time_s = t;
-                current.angles_rad = [a.boom_rad, a.stick_rad, a.bucket_rad];
-                current.swing_rad = a.swing_rad;
-                pending = Some(current);
-            }
-            Message::JointRates(r) => {
-                let rates = [r.boom_rad_per_s, r.stick_rad_per_s, r.bucket_rad_per_s];
-                current.rates_rad_per_s = rates;
-                current.swing_rate_rad_per_s = r.swing_rad_per_s;
-                if let Some(p) = pending.as_mut() {
-                    p.rates_rad_per_s = rates;
-                    p.swing_rate_rad_per_s = r.swing_rad_per_s;
-                }
-            }
-            Message::AuxValveMeasured(m) => {
-                let i = usize::from(m.cylinder.number());
-                if i < 3 {
-                    current.head_pa[i] = m.head_pressure_pa;
-                    current.rod_pa[i] = m.rod_pressure_pa;
-                    if let Some(p) = pending.as_mut() {
-                        p.head_pa[i] = m.head_pressure_pa;
-                        p.rod_pa[i] = m.rod_pressure_pa;
-                    }
-                }
-            }
-            Message::PumpPressures(p) => {
-                current.pump_pa = [p.pump1_pa, p.pump2_pa];
-                if let Some(s) = pending.as_mut() {
-                    s.pump_pa = current.pump_pa;
-                }
-            }
-            Message::AuxValveCommand(c) => {
-                let i = usize::from(c.valve.number());
-                match i {
-                    0..=2 => current.command[i] = c.to_fraction(),
-                    3 => current.swing_command = c.to_fraction(),
-                    _ => {}
-                }
-            }
-            Message::PositionSetpoint(_) => position_mode_at = t,
-            Message::GatewayStatus(g) if g.mode == GatewayMode::ArmedPosition => {
-                position_mode_at = t;
-            }
-            Message::ControllerStatus(s) => {
-                // Weigh follows the dig (Autodig, or a cleanup ending in Autodig) of the same index
-                // and shows as Idle until the swing to the dump.
-                let weighing = s.activity == Activity::Idle
-                    && status.is_some_and(|p| {
-                        p.dig_index == s.dig_index
-                            && (p.weighing
-                                || matches!(p.activity, Activity::Dig | Activity::Cleanup))
-                    });
-                status = Some(Status {
-                    activity: s.activity,
-                    stage: s.stage,
-                    dig_index: s.dig_index,
-                    swept_volume_m3: s.swept_volume_m3,
-                    weighing,
-                });
-            }
-            _ => {}
+                },
+                tracking: st.activity == Activity::Track,
+            };
+            self.out.push((st.dig_index, sample));
         }
     }
-    if let Some(st) = status {
-        push(&mut pending, &mut out, &current, &st);
-    } else {
+    let mut sink = Sink::default();
+    read_samples(path, &mut sink)?;
+    if sink.status.is_none() {
         anyhow::bail!(
             "{}: no ControllerStatus frames: the workflow segments digs by the controller's status",
             path.display()
         );
     }
-    Ok(out)
+    Ok(sink.out)
 }
 
 /// Reads every `scans/scan_*.json` of a session folder, in name order. A file that does not parse
@@ -821,6 +775,7 @@ pub fn read_session(dir: &Path, machine: &MachineConfig) -> anyhow::Result<Vec<D
 #[cfg(test)]
 mod tests {
     use super::*;
+    use firmware_bridge::messages::GatewayMode;
 
     /// A scanner 3 m up at the world origin, facing +x.
     fn cab_sensor() -> ScanSensor {

@@ -35,3 +35,4 @@ pub mod plots;
 pub mod results;
 pub mod shift;
 pub mod thesis;
+pub mod trace_samples;

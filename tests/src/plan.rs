@@ -66,21 +66,33 @@ pub fn plan_config() -> ControllerConfig {
         .unwrap_or_else(|e| panic!("the HIL plan does not parse: {e}"))
 }
 
-/// Safety timing for the TCG VM (appended to the plan by [`write_plan`] there). Measured in the VM on
-/// the shared 2-core CI machine at load 8-9: the controller's 10 ms loop ran 60-77 steps/s with gaps
-/// up to 320 ms, so the default 30 ms sensor age stopped the machine every second and the default
-/// five automatic re-arms ran out before the first dig. Natively the defaults apply.
+/// Safety timing for the TCG VM: `config/vm.toml`, the file the README's vcan section gives `run` in
+/// a VM (appended to the plan by [`write_plan`] there). Natively the defaults apply.
+pub const VM_SAFETY_TOML: &str = include_str!("../../config/vm.toml");
+
+/// `plan` (a controller config file) with the keys of [`VM_SAFETY_TOML`] over its own, table by table.
 ///
-/// The sensor age was 0.25 s here; the controller now refuses ages beyond the gateway's 100 ms
-/// watchdog (issue #23), so the VM profile uses the largest age it accepts and relies on the
-/// automatic re-arms for the longer gaps.
-pub const VM_SAFETY_TOML: &str = r#"
-[safety]
-sensor_max_age_s = 0.1
-status_max_age_s = 0.6
-arm_timeout_s = 2.0
-max_auto_rearms = 1000
-"#;
+/// # Panics
+/// When either does not parse as TOML (a bug in this file or in `config/vm.toml`).
+pub fn with_vm_timing(plan: &str) -> String {
+    let parse = |name: &str, text: &str| {
+        text.parse::<toml::Table>()
+            .unwrap_or_else(|e| panic!("{name} is not TOML: {e}"))
+    };
+    let mut merged = parse("the plan", plan);
+    for (section, keys) in parse("config/vm.toml", VM_SAFETY_TOML) {
+        let toml::Value::Table(keys) = keys else {
+            panic!("config/vm.toml: `{section}` is not a table")
+        };
+        let entry = merged
+            .entry(section)
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        if let toml::Value::Table(table) = entry {
+            table.extend(keys);
+        }
+    }
+    toml::to_string(&merged).unwrap_or_else(|e| panic!("the merged plan: {e}"))
+}
 
 /// Writes the plan to `dir/plan.toml` (with [`VM_SAFETY_TOML`] and a longer move timeout inside the
 /// VM) and returns the path.
@@ -90,7 +102,7 @@ max_auto_rearms = 1000
 pub fn write_plan(dir: &std::path::Path) -> std::path::PathBuf {
     let path = dir.join("plan.toml");
     let text = if crate::env::in_vm() {
-        PLAN_TOML.replace("move_timeout_s = 25.0", "move_timeout_s = 60.0") + VM_SAFETY_TOML
+        with_vm_timing(&PLAN_TOML.replace("move_timeout_s = 25.0", "move_timeout_s = 60.0"))
     } else {
         PLAN_TOML.to_owned()
     };
@@ -123,8 +135,13 @@ pub fn write_key_file(dir: &Path) -> PathBuf {
 mod tests {
     #[test]
     fn the_vm_profile_parses_with_the_plan() {
-        let text = super::PLAN_TOML.to_owned() + super::VM_SAFETY_TOML;
-        let config = controller::ControllerConfig::from_toml_str(&text);
-        assert!(config.is_ok_and(|c| c.safety.max_auto_rearms == 1000));
+        let text = super::with_vm_timing(super::PLAN_TOML);
+        let config = controller::ControllerConfig::from_toml_str(&text).unwrap();
+        assert_eq!(config.safety.max_auto_rearms, 1000);
+        assert!((config.cycle.scan_timeout_s - 30.0).abs() < 1e-12);
+        // The plan's own keys stay where the VM file says nothing.
+        assert_eq!(config.cycle.max_digs, Some(4));
+        // And the file alone, as `run --config config/vm.toml` reads it.
+        assert!(controller::ControllerConfig::from_toml_str(super::VM_SAFETY_TOML).is_ok());
     }
 }

@@ -31,8 +31,8 @@ use firmware_bridge::profile::GatewayTiming;
 use firmware_bridge::secoc::{OsNonceSource, SessionKey};
 use firmware_bridge::time::Instant;
 
-use crate::plant::{PHYSICS_DT_S, Plant};
-use crate::sensors::{Scan, ScanRequest, SensorReadings};
+use crate::plant::{PHYSICS_DT_S, PendingScan, Plant};
+use crate::sensors::{Scan, ScanCast, ScanRequest, SensorReadings};
 
 /// Steps between sensor frames (10 ms).
 pub const SENSOR_PERIOD_STEPS: u64 = 10;
@@ -231,6 +231,17 @@ impl MachineNode {
     /// A terrain scan from the cab's range sensor.
     pub fn scan(&mut self, request: &ScanRequest) -> Scan {
         self.plant.scan(request)
+    }
+
+    /// The rays of a scan to cast elsewhere ([`Plant::prepare_scan`]); [`Self::finish_scan`] makes
+    /// the scan of the cast.
+    pub fn prepare_scan(&self, request: &ScanRequest) -> PendingScan {
+        self.plant.prepare_scan(request)
+    }
+
+    /// The scan of rays cast from [`Self::prepare_scan`] ([`Plant::finish_scan`]).
+    pub fn finish_scan(&mut self, cast: ScanCast) -> Scan {
+        self.plant.finish_scan(cast)
     }
 
     /// Whether the next [`Self::step`] samples the sensors (every [`Schedule::sensor`] steps): the

@@ -9,6 +9,7 @@ use std::collections::VecDeque;
 
 use planner::kinematics::{Joint, JointAngles, MachinePose, TipForce};
 use planner::machine::MachineConfig;
+use planner::terrain::TerrainGrid;
 use serde::Serialize;
 
 use crate::effects::{Effect, EffectSet};
@@ -19,7 +20,8 @@ use crate::hydraulics::{
 use crate::linkage::{Linkage, LinkageState, PoseFrame};
 use crate::scenario::{Scenario, SoilContactIntegration};
 use crate::sensors::{
-    Scan, ScanRequest, SensedTruth, SensorEffects, SensorReadings, SensorSpec, Sensors,
+    Scan, ScanCast, ScanRequest, SensedTruth, SensorEffects, SensorReadings, SensorSpec, Sensors,
+    cast_scan,
 };
 use crate::soil_contact::{
     ContactInput, ContactLaw, MassLedger, SoilContact, SoilEffects, TravelSide, World,
@@ -178,6 +180,31 @@ pub struct TrueState {
     pub payload_kg: f64,
     /// Soil force on the bucket `[Fx, Fz]` in the base frame (N).
     pub soil_force_n: [f64; 2],
+}
+
+/// The rays of a scan to cast off the plant's step ([`Plant::prepare_scan`]): the terrain as it was
+/// when the scan was asked for, the sensor's pose and the request.
+#[derive(Debug, Clone)]
+pub struct PendingScan {
+    terrain: TerrainGrid,
+    origin: [f64; 3],
+    heading_rad: f64,
+    request: ScanRequest,
+    time_s: f64,
+}
+
+impl PendingScan {
+    /// Casts the rays ([`crate::sensors::cast_scan`]): the costly, pure part of a scan.
+    #[must_use]
+    pub fn cast(&self) -> ScanCast {
+        cast_scan(
+            &self.terrain,
+            self.origin,
+            self.heading_rad,
+            &self.request,
+            self.time_s,
+        )
+    }
 }
 
 /// The whole simulated machine.
@@ -744,6 +771,34 @@ impl Plant {
     /// Scans the terrain from the range sensor on the cab (machine file `[sensor]`), pointing along
     /// the digging plane.
     pub fn scan(&mut self, request: &ScanRequest) -> Scan {
+        let (origin, az) = self.scan_sensor_pose();
+        self.sensors
+            .scan(&self.world, origin, az, request, self.time_s)
+    }
+
+    /// [`Self::scan`] in two parts, for a caller that casts the rays elsewhere while the plant goes
+    /// on (the real-time simulator): the rays to cast, with a copy of the terrain as it is now. Its
+    /// [`PendingScan::cast`] and then [`Self::finish_scan`] give the scan [`Self::scan`] would have
+    /// given now, up to the range noise drawn later from the same generator.
+    pub fn prepare_scan(&self, request: &ScanRequest) -> PendingScan {
+        let (origin, heading_rad) = self.scan_sensor_pose();
+        PendingScan {
+            terrain: self.world.terrain.clone(),
+            origin,
+            heading_rad,
+            request: *request,
+            time_s: self.time_s,
+        }
+    }
+
+    /// The scan of rays cast from a [`PendingScan`]: the range noise added.
+    pub fn finish_scan(&mut self, cast: ScanCast) -> Scan {
+        self.sensors.add_range_noise(cast)
+    }
+
+    /// The range sensor's origin (world, m) and heading (rad): on the cab (machine file `[sensor]`),
+    /// pointing along the digging plane.
+    fn scan_sensor_pose(&self) -> ([f64; 3], f64) {
         let s = &self.cfg.sensor;
         let swing = self.hydraulics.actuators[SWING].position;
         let az = self.pose.dig_plane_azimuth_rad(swing);
@@ -753,8 +808,7 @@ impl Plant {
             self.pose.y_m + s.radial_offset_m * mount_az.sin(),
             s.height_m,
         ];
-        self.sensors
-            .scan(&self.world, origin, az, request, self.time_s)
+        (origin, az)
     }
 
     /// The true state (for state logs and tests).

@@ -1,11 +1,17 @@
 //! The simulator in real time on a SocketCAN interface (tokio), with the optional JSON-lines state log
 //! and the range-sensor scan socket (docs/scan-protocol.md).
 //!
-//! Every 10 ms of simulated time (`10 ms / time_scale` of wall time; real time by default, faster
-//! with `--time-scale` when the controller runs at the same scale) the loop steps the physics as many
-//! 1 ms steps as the elapsed (scaled) monotonic time requires, sends the frames
-//! due, and handles received frames and scan requests in between. Shutdown is passed in and
-//! `select!`ed on.
+//! Every sensor period of the gateway (10 ms of simulated time, the DBC's `JointAngles` cycle;
+//! `10 ms / time_scale` of wall time; real time by default, faster with `--time-scale` when the
+//! controller runs at the same scale) the loop steps the physics as many 1 ms steps as the elapsed
+//! (scaled) monotonic time requires, sends the frames due, and handles received frames and scan
+//! requests in between. Shutdown is passed in and `select!`ed on.
+//!
+//! A scan never holds the loop: the loop takes the sensor's pose and a copy of the terrain when the
+//! request comes, the rays are cast on tokio's blocking pool (a scan is seconds of CPU in a TCG VM),
+//! and the loop adds the range noise and answers when they are back. The reply's JSON is written on
+//! the blocking pool too. A scan that held the loop would stop the sensor frames for as long, and the
+//! controller would rightly stop the machine on stale data.
 //!
 //! After a late wake-up it catches up at most [`MAX_CATCH_UP_STEPS`] steps; when the host held the
 //! simulator off for longer, simulated time slips behind wall time instead (counted in
@@ -29,7 +35,7 @@ use tokio::sync::{mpsc, oneshot};
 
 use crate::node::MachineNode;
 use crate::plant::PHYSICS_DT_S;
-use crate::sensors::{Scan, ScanRequest};
+use crate::sensors::{Scan, ScanCast, ScanRequest};
 use crate::{Result, SimError};
 
 /// Options of a real-time run.
@@ -70,8 +76,11 @@ pub struct RunSummary {
 pub const MAX_CATCH_UP_STEPS: u64 = 30;
 
 /// How far the wire can run ahead of simulated time when a frame leaves: the catch-up
-/// ([`MAX_CATCH_UP_STEPS`] steps of 1 ms) and one 10 ms loop period, ns.
-const CLAIM_LAG_MARGIN_NS: i64 = (MAX_CATCH_UP_STEPS as i64 + 10) * 1_000_000;
+/// ([`MAX_CATCH_UP_STEPS`] physics steps) and one loop period of `loop_steps` steps, ns.
+fn claim_lag_margin_ns(loop_steps: u64) -> i64 {
+    let steps = i64::try_from(MAX_CATCH_UP_STEPS + loop_steps).unwrap_or(i64::MAX);
+    steps.saturating_mul((PHYSICS_DT_S * 1e9).round() as i64)
+}
 
 type ScanJob = (ScanRequest, oneshot::Sender<Scan>);
 
@@ -93,8 +102,13 @@ async fn serve_scans(listener: TcpListener, jobs: mpsc::Sender<ScanJob>) {
                             break;
                         }
                         match rx.await {
-                            Ok(scan) => serde_json::to_string(&scan)
-                                .unwrap_or_else(|e| error_json(&e.to_string())),
+                            // About 10,000 points: off the runtime's one thread, which runs the loop.
+                            Ok(scan) => tokio::task::spawn_blocking(move || {
+                                serde_json::to_string(&scan)
+                                    .unwrap_or_else(|e| error_json(&e.to_string()))
+                            })
+                            .await
+                            .unwrap_or_else(|e| error_json(&e.to_string())),
                             Err(_) => break,
                         }
                     }
@@ -162,7 +176,8 @@ pub async fn run_on<B: Bus>(
     // after that step's simulated time; the gateway stamps its address claim with the step's time, so
     // it holds the claim that much longer to keep 250 ms between the claim and its first other frame
     // on the wire.
-    node.set_claim_hold_margin(CLAIM_LAG_MARGIN_NS);
+    let loop_steps = node.schedule().sensor;
+    node.set_claim_hold_margin(claim_lag_margin_ns(loop_steps));
     let mut log = match &options.state_log {
         Some(path) => Some(std::io::BufWriter::new(
             std::fs::File::create(path).map_err(|source| SimError::Io {
@@ -187,7 +202,10 @@ pub async fn run_on<B: Bus>(
     }
     let mut summary = RunSummary::default();
     let scale = options.time_scale.get();
-    let mut interval = tokio::time::interval(Duration::from_millis(10).div_f64(scale));
+    let loop_period = Duration::from_secs_f64(loop_steps as f64 * PHYSICS_DT_S);
+    let mut interval = tokio::time::interval(loop_period.div_f64(scale));
+    // Rays cast on the blocking pool, back to the loop for their noise and the reply.
+    let (cast_tx, mut cast_rx) = mpsc::unbounded_channel::<(ScanCast, oneshot::Sender<Scan>)>();
     interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let start = Instant::now();
     let mut steps_done: u64 = 0;
@@ -205,7 +223,15 @@ pub async fn run_on<B: Bus>(
                 Err(e) => tracing::warn!("CAN receive: {e}"),
             },
             Some((request, reply)) = scan_rx.recv() => {
-                let _ = reply.send(node.scan(&request));
+                let pending = node.prepare_scan(&request);
+                let cast_tx = cast_tx.clone();
+                tokio::task::spawn_blocking(move || {
+                    // The loop is gone when the send fails: nobody waits for the scan.
+                    let _ = cast_tx.send((pending.cast(), reply));
+                });
+            }
+            Some((cast, reply)) = cast_rx.recv() => {
+                let _ = reply.send(node.finish_scan(cast));
             }
             _ = interval.tick() => {
                 // Wall-clock physics steps due, minus the time slipped so far.

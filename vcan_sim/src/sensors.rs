@@ -9,6 +9,8 @@ use rand_distr::{Distribution, Normal};
 
 pub use firmware_bridge::scan::{Scan, ScanRequest, SensorPose};
 
+use planner::terrain::TerrainGrid;
+
 use crate::soil_contact::World;
 
 /// Sensor noise and resolution.
@@ -151,9 +153,8 @@ impl Sensors {
         r
     }
 
-    /// Scans the terrain from a sensor at `origin` (world) looking along `heading_rad`, by ray
-    /// casting over the grid: the first crossing of the terrain surface is the hit, so nearer terrain
-    /// occludes what lies behind it. Range noise is added along the ray.
+    /// Scans the terrain from a sensor at `origin` (world) looking along `heading_rad`: the rays of
+    /// [`cast_scan`], then the range noise along each ray that hit.
     pub fn scan(
         &mut self,
         world: &World,
@@ -162,78 +163,118 @@ impl Sensors {
         request: &ScanRequest,
         time_s: f64,
     ) -> Scan {
-        let req = request.sanitised();
-        let step = 0.5 * world.terrain.resolution_m();
-        let mut points = Vec::with_capacity(req.azimuth_count * req.elevation_count);
-        for ia in 0..req.azimuth_count {
-            let fa = if req.azimuth_count > 1 {
-                ia as f64 / (req.azimuth_count - 1) as f64
-            } else {
-                0.5
-            };
-            let az = heading_rad
-                + req.azimuth_min_rad
-                + fa * (req.azimuth_max_rad - req.azimuth_min_rad);
-            for ie in 0..req.elevation_count {
-                let fe = if req.elevation_count > 1 {
-                    ie as f64 / (req.elevation_count - 1) as f64
-                } else {
-                    0.5
-                };
-                let el =
-                    req.elevation_min_rad + fe * (req.elevation_max_rad - req.elevation_min_rad);
-                let dir = [el.cos() * az.cos(), el.cos() * az.sin(), el.sin()];
-                let at = |t: f64| {
-                    [
-                        origin[0] + t * dir[0],
-                        origin[1] + t * dir[1],
-                        origin[2] + t * dir[2],
-                    ]
-                };
-                let above = |t: f64| {
-                    let p = at(t);
-                    world.terrain.height_at(p[0], p[1]).map(|h| p[2] - h)
-                };
-                let mut t_prev = 0.0;
-                let mut t = step;
-                let mut hit = None;
-                while t <= req.max_range_m {
-                    match above(t) {
-                        Ok(d) if d <= 0.0 => {
-                            // Refine the crossing by bisection.
-                            let (mut lo, mut hi) = (t_prev, t);
-                            for _ in 0..20 {
-                                let mid = 0.5 * (lo + hi);
-                                match above(mid) {
-                                    Ok(d) if d > 0.0 => lo = mid,
-                                    _ => hi = mid,
-                                }
-                            }
-                            hit = Some(hi);
-                            break;
-                        }
-                        Ok(_) => {}
-                        Err(_) => break, // left the map: no return
-                    }
-                    t_prev = t;
-                    t += step;
-                }
-                if let Some(range) = hit {
-                    let noisy = (range + Self::noise(&mut self.rng, self.range_noise)).max(0.0);
-                    points.push(at(noisy));
-                }
-            }
-        }
-        Scan {
+        self.add_range_noise(cast_scan(
+            &world.terrain,
+            origin,
+            heading_rad,
+            request,
             time_s,
+        ))
+    }
+
+    /// The scan of `cast` with the range noise drawn along each ray that hit, in ray order (the same
+    /// draws whether the rays were cast at once or elsewhere while the sensors went on reading).
+    pub fn add_range_noise(&mut self, cast: ScanCast) -> Scan {
+        let origin = cast.origin;
+        let points = cast
+            .hits
+            .iter()
+            .map(|&(dir, range)| {
+                let noisy = (range + Self::noise(&mut self.rng, self.range_noise)).max(0.0);
+                [0, 1, 2].map(|k| origin[k] + noisy * dir[k])
+            })
+            .collect();
+        Scan {
+            time_s: cast.time_s,
             sensor: SensorPose {
                 x_m: origin[0],
                 y_m: origin[1],
                 z_m: origin[2],
-                heading_rad,
+                heading_rad: cast.heading_rad,
             },
             points,
         }
+    }
+}
+
+/// A scan's rays before noise ([`cast_scan`]): the direction and the range of every ray that hit the
+/// terrain, in ray order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScanCast {
+    /// Simulated time of the scan, s.
+    pub time_s: f64,
+    /// The sensor (world), m.
+    pub origin: [f64; 3],
+    /// The sensor's heading, rad.
+    pub heading_rad: f64,
+    /// Unit direction (world) and range (m) of each ray that hit.
+    pub hits: Vec<([f64; 3], f64)>,
+}
+
+/// Casts the rays of `request` from a sensor at `origin` (world) looking along `heading_rad` over
+/// `terrain`: the first crossing of the terrain surface is the hit, so nearer terrain occludes what
+/// lies behind it. The costly part of a scan, and pure: the real-time simulator runs it off its loop
+/// on a copy of the terrain.
+pub fn cast_scan(
+    terrain: &TerrainGrid,
+    origin: [f64; 3],
+    heading_rad: f64,
+    request: &ScanRequest,
+    time_s: f64,
+) -> ScanCast {
+    let req = request.sanitised();
+    let step = 0.5 * terrain.resolution_m();
+    let mut hits = Vec::with_capacity(req.azimuth_count * req.elevation_count);
+    for ia in 0..req.azimuth_count {
+        let fa = if req.azimuth_count > 1 {
+            ia as f64 / (req.azimuth_count - 1) as f64
+        } else {
+            0.5
+        };
+        let az =
+            heading_rad + req.azimuth_min_rad + fa * (req.azimuth_max_rad - req.azimuth_min_rad);
+        for ie in 0..req.elevation_count {
+            let fe = if req.elevation_count > 1 {
+                ie as f64 / (req.elevation_count - 1) as f64
+            } else {
+                0.5
+            };
+            let el = req.elevation_min_rad + fe * (req.elevation_max_rad - req.elevation_min_rad);
+            let dir = [el.cos() * az.cos(), el.cos() * az.sin(), el.sin()];
+            let above = |t: f64| {
+                let p = [0, 1, 2].map(|k| origin[k] + t * dir[k]);
+                terrain.height_at(p[0], p[1]).map(|h| p[2] - h)
+            };
+            let mut t_prev = 0.0;
+            let mut t = step;
+            while t <= req.max_range_m {
+                match above(t) {
+                    Ok(d) if d <= 0.0 => {
+                        // Refine the crossing by bisection.
+                        let (mut lo, mut hi) = (t_prev, t);
+                        for _ in 0..20 {
+                            let mid = 0.5 * (lo + hi);
+                            match above(mid) {
+                                Ok(d) if d > 0.0 => lo = mid,
+                                _ => hi = mid,
+                            }
+                        }
+                        hits.push((dir, hi));
+                        break;
+                    }
+                    Ok(_) => {}
+                    Err(_) => break, // left the map: no return
+                }
+                t_prev = t;
+                t += step;
+            }
+        }
+    }
+    ScanCast {
+        time_s,
+        origin,
+        heading_rad,
+        hits,
     }
 }
 

@@ -3,13 +3,10 @@
 //! resolver angles), segmented into digs, optionally with the forces the dig model's statics would
 //! feed the networks instead of the measured ones.
 
-use std::fs::File;
-use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, bail};
 use firmware_bridge::messages::{Activity, Message};
-use firmware_bridge::trace::{ReadMode, TraceReader};
 use planner::actuator::{ActuatorDig, ActuatorSample};
 use planner::dig_model::DigModel;
 use planner::kinematics::{JointAngles, Kinematics};
@@ -17,6 +14,7 @@ use planner::terrain::{SectionProfile, SweptVolume};
 use vcan_sim::soil_contact::World;
 
 use super::sim_dig::{DigSetup, section_of, sim_config};
+use crate::trace_samples::{BusSample, SampleSink, read_samples};
 
 /// Cylinder speeds above this are sensor glitches (pump flow over the smallest area is far lower), m/s.
 const MAX_CYLINDER_SPEED_M_PER_S: f64 = 1.5;
@@ -151,38 +149,38 @@ pub fn read_training_digs(
     kin: &Kinematics,
     areas: [(f64, f64); 3],
 ) -> anyhow::Result<Vec<TraceDig>> {
-    let file = File::open(path).with_context(|| format!("opening {}", path.display()))?;
-    let reader = TraceReader::new(BufReader::new(file), ReadMode::Skip);
-    let mut command = [0.0; 3];
-    let mut head = [0.0; 3];
-    let mut rod = [0.0; 3];
-    let mut rates: Option<[f64; 3]> = None;
-    let mut pump = [0.0; 2];
-    let mut pending: Option<(f64, JointAngles)> = None;
-    let mut status: Option<(Activity, u16, u8)> = None;
-    let mut seen_status = false;
-    let mut tagged: Vec<Tagged> = Vec::new();
-    let mut flush = |pending: &mut Option<(f64, JointAngles)>,
-                     rates: &Option<[f64; 3]>,
-                     command: &[f64; 3],
-                     head: &[f64; 3],
-                     rod: &[f64; 3],
-                     pump: &[f64; 2],
-                     status: &Option<(Activity, u16, u8)>| {
-        if let (Some((t, q)), Some(w)) = (pending.take(), rates)
-            && let Ok(arms) = kin.moment_arms(&q)
-        {
+    /// The samples with the latest rates, tagged with their dig.
+    struct Sink<'a> {
+        kin: &'a Kinematics,
+        areas: [(f64, f64); 3],
+        tagged: Vec<Tagged>,
+        seen_status: bool,
+    }
+    impl SampleSink for Sink<'_> {
+        fn message(&mut self, _time_s: f64, message: &Message) {
+            self.seen_status |= matches!(message, Message::ControllerStatus(_));
+        }
+        fn sample(&mut self, s: &BusSample) {
+            let [boom_rad, stick_rad, bucket_rad, _] = s.angles_rad;
+            let q = JointAngles {
+                boom_rad,
+                stick_rad,
+                bucket_rad,
+            };
+            let (Some(w), Ok(arms)) = (s.rates_rad_per_s, self.kin.moment_arms(&q)) else {
+                return;
+            };
+            let (head, rod, areas) = (s.head_pa, s.rod_pa, self.areas);
             let sample = ActuatorSample {
-                time_s: t,
-                command: *command,
+                time_s: s.time_s,
+                command: [s.command[0], s.command[1], s.command[2]],
                 force_n: [0, 1, 2].map(|j| head[j] * areas[j].0 - rod[j] * areas[j].1), // Eq. A20
                 velocity_m_per_s: [0, 1, 2].map(|j| arms[j] * w[j]),
             };
-            let dig = match status {
-                Some((Activity::Dig | Activity::Cleanup, i, _)) => Some(*i),
-                _ => None,
-            };
-            let angles_rad = [q.boom_rad, q.stick_rad, q.bucket_rad];
+            let dig = s.status.and_then(|st| {
+                matches!(st.activity, Activity::Dig | Activity::Cleanup).then_some(st.dig_index)
+            });
+            let angles_rad = [boom_rad, stick_rad, bucket_rad];
             if sample
                 .force_n
                 .iter()
@@ -190,15 +188,15 @@ pub fn read_training_digs(
                 .chain(&angles_rad)
                 .all(|v| v.is_finite())
             {
-                tagged.push(Tagged {
+                self.tagged.push(Tagged {
                     sample: TraceSample {
                         sample,
                         angle_velocity_m_per_s: [0.0; 3],
                         angles_rad,
-                        head_pa: *head,
-                        rod_pa: *rod,
-                        pump_pa: *pump,
-                        stage: status.map_or(0, |s| s.2),
+                        head_pa: head,
+                        rod_pa: rod,
+                        pump_pa: s.pump_pa,
+                        stage: s.status.map_or(0, |st| st.stage as u8),
                     },
                     arms: [arms[0], arms[1], arms[2]],
                     angles_rad,
@@ -206,49 +204,19 @@ pub fn read_training_digs(
                 });
             }
         }
-    };
-    let mut time_base = crate::demo::trace_time_base(path)?;
-    for record in trace_tools::input::records_until_cut(path, reader) {
-        let record = record.with_context(|| format!("reading {}", path.display()))?;
-        let t = time_base.session_s(record.timestamp_ns);
-        let Ok(decoded) = Message::decode(&record.frame) else {
-            continue;
-        };
-        match decoded.message {
-            Message::JointAngles(a) => {
-                flush(&mut pending, &rates, &command, &head, &rod, &pump, &status);
-                pending = Some((
-                    t,
-                    JointAngles {
-                        boom_rad: a.boom_rad,
-                        stick_rad: a.stick_rad,
-                        bucket_rad: a.bucket_rad,
-                    },
-                ));
-            }
-            Message::JointRates(r) => {
-                rates = Some([r.boom_rad_per_s, r.stick_rad_per_s, r.bucket_rad_per_s]);
-            }
-            Message::AuxValveMeasured(m) => {
-                let i = usize::from(m.cylinder.number());
-                head[i] = m.head_pressure_pa;
-                rod[i] = m.rod_pressure_pa;
-            }
-            Message::AuxValveCommand(c) => {
-                let i = usize::from(c.valve.number());
-                if i < 3 {
-                    command[i] = c.to_fraction();
-                }
-            }
-            Message::ControllerStatus(s) => {
-                seen_status = true;
-                status = Some((s.activity, s.dig_index, s.stage as u8));
-            }
-            Message::PumpPressures(p) => pump = [p.pump1_pa, p.pump2_pa],
-            _ => {}
-        }
     }
-    flush(&mut pending, &rates, &command, &head, &rod, &pump, &status);
+    let mut sink = Sink {
+        kin,
+        areas,
+        tagged: Vec::new(),
+        seen_status: false,
+    };
+    read_samples(path, &mut sink)?;
+    let Sink {
+        mut tagged,
+        seen_status,
+        ..
+    } = sink;
     // Angle-derived velocities: the slope over the neighbouring samples of the same run (no gap
     // above 50 ms), at the sample's moment arms.
     let run_start: Vec<usize> = {
@@ -503,6 +471,7 @@ pub(super) fn load_digs(
 
 #[cfg(test)]
 mod tests {
+    use std::fs::File;
     use std::io::BufWriter;
 
     use firmware_bridge::trace::TraceWriter;
