@@ -120,8 +120,9 @@ async fn simulator_with(
 /// `run --strategy planned --digs N --out DIR --config SAFETY` against `sim`, SAFETY (written beside
 /// DIR) the wider safety timing of a loaded machine: the loop shares the test machine's cores with
 /// the simulator and other tests, and at a load of several times the core count its 10 ms tick slips
-/// past the default 30 ms sensor age and the five automatic re-arms run out before the first dig
-/// (the same timing as the HIL tests' in a TCG VM). The plumbing is under test, not the timing.
+/// past the default 30 ms sensor age; it opts in to the simulation policy (`auto_rearm`, with 1000
+/// re-arms) to ride through those false stale-sensor stops (the same timing as the HIL tests' in a
+/// TCG VM). The plumbing is under test, not the timing.
 fn planned_run(
     sim: &Simulator,
     digs: u32,
@@ -132,7 +133,7 @@ fn planned_run(
     std::fs::write(
         &safety,
         "[safety]\nsensor_max_age_s = 0.1\nstatus_max_age_s = 0.6\narm_timeout_s = 2.0\n\
-         max_auto_rearms = 1000\n",
+         auto_rearm = true\nmax_auto_rearms = 1000\n",
     )
     .unwrap();
     RunArgs {

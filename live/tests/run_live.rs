@@ -40,12 +40,13 @@ fn run_serves_the_page_and_its_estop_reaches_the_run_loop() {
     let mut demo_args = DemoArgs::new(dir.path().join("sim"));
     demo_args.strategy = DemoStrategy::Fixed;
     let (sim, _, _) = lab::demo::setup(&demo_args).unwrap();
-    // The safety timing of a loaded test machine (as lab's wire tests): the plumbing is under test.
+    // The safety timing of a loaded test machine and the simulation policy (as lab's wire tests):
+    // the plumbing is under test.
     let safety = dir.path().join("safety.toml");
     std::fs::write(
         &safety,
         "[safety]\nsensor_max_age_s = 0.1\nstatus_max_age_s = 0.6\narm_timeout_s = 2.0\n\
-         max_auto_rearms = 1000\n",
+         auto_rearm = true\nmax_auto_rearms = 1000\n",
     )
     .unwrap();
     let time_scale = TimeScale::new(2.0).unwrap();

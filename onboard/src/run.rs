@@ -557,6 +557,26 @@ pub fn check_link(args: &RunArgs) -> anyhow::Result<LinkStatus> {
     Ok(link)
 }
 
+/// `safety.auto_rearm` (motion resumes after a transient fault without the operator) is a policy of
+/// simulation: refused on a link with a real CAN controller.
+///
+/// # Errors
+/// One line naming the key and the interface.
+pub fn refuse_simulation_policy(
+    safety: &controller::SafetyConfig,
+    link: &LinkStatus,
+) -> anyhow::Result<()> {
+    if safety.auto_rearm && !link.is_virtual() {
+        anyhow::bail!(
+            "safety.auto_rearm = true is for simulation only (a vcan or the in-process bus): {} is a \
+             CAN controller ({link}); after a fault that stopped motion the machine waits for the \
+             operator's resume or reset. Remove the key from the controller config",
+            link.iface
+        );
+    }
+    Ok(())
+}
+
 /// What `run` does besides the session: the operator's keys, the session log and the link.
 #[derive(Default)]
 pub struct RunConsole {
@@ -632,6 +652,9 @@ pub async fn run_on_observed<B: Bus>(
     let wall = Instant::now();
     let args = &crate::options::resumed(args.clone())?;
     let (mut node, mut driver, setup) = build(args)?;
+    if let Some(link) = &console.link {
+        refuse_simulation_policy(node.safety().config(), link)?;
+    }
     let out_dir = args.session_dir()?;
     let resumed = match &args.resume {
         Some(dir) => {
@@ -1106,6 +1129,43 @@ mod tests {
         let mut all = vec!["run", "--iface", "can0"];
         all.extend_from_slice(extra);
         Cmd::try_parse_from(all).unwrap().run
+    }
+
+    /// The simulation policy `safety.auto_rearm` is refused on a real CAN controller (bit timing and
+    /// a controller state), allowed on a vcan; without it any link is fine.
+    #[test]
+    fn auto_rearm_is_refused_on_a_real_can_controller() {
+        use firmware_bridge::transport::ControllerState;
+        let vcan = LinkStatus {
+            iface: "vcan0".into(),
+            up: true,
+            bitrate_bps: None,
+            state: None,
+            restart_ms: None,
+            listen_only: false,
+        };
+        let can = LinkStatus {
+            iface: "can0".into(),
+            bitrate_bps: Some(500_000),
+            state: Some(ControllerState::ErrorActive),
+            restart_ms: Some(100),
+            ..vcan.clone()
+        };
+        // A real controller before its bitrate is set still reports a state.
+        let unset = LinkStatus {
+            bitrate_bps: None,
+            ..can.clone()
+        };
+        let sim = controller::SafetyConfig {
+            auto_rearm: true,
+            ..controller::SafetyConfig::default()
+        };
+        assert!(refuse_simulation_policy(&sim, &vcan).is_ok());
+        for link in [&can, &unset] {
+            let e = refuse_simulation_policy(&sim, link).unwrap_err().to_string();
+            assert!(e.contains("safety.auto_rearm") && e.contains("can0"), "{e}");
+            assert!(refuse_simulation_policy(&controller::SafetyConfig::default(), link).is_ok());
+        }
     }
 
     #[test]

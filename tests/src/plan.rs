@@ -73,13 +73,24 @@ pub fn plan_config() -> ControllerConfig {
 ///
 /// The sensor age was 0.25 s here; the controller now refuses ages beyond the gateway's 100 ms
 /// watchdog (issue #23), so the VM profile uses the largest age it accepts and relies on the
-/// automatic re-arms for the longer gaps.
+/// automatic re-arms for the longer gaps: the simulation policy `auto_rearm` (as [`SIM_SAFETY_TOML`]).
 pub const VM_SAFETY_TOML: &str = r#"
 [safety]
 sensor_max_age_s = 0.1
 status_max_age_s = 0.6
 arm_timeout_s = 2.0
+auto_rearm = true
 max_auto_rearms = 1000
+"#;
+
+/// The simulation policy of the HIL sessions run natively (appended to the plan by [`write_plan`]
+/// outside the VM): they drive the simulator over vcan, on a host shared with other tests, and check
+/// that a session rides through a transient fault (a spoofed frame, a false stale-sensor fault);
+/// `run` accepts `auto_rearm` on a vcan only. What a real machine does after a fault (it waits for
+/// the operator) is checked by the controller's and the lab's tests.
+pub const SIM_SAFETY_TOML: &str = r#"
+[safety]
+auto_rearm = true
 "#;
 
 /// Writes the plan to `dir/plan.toml` (with [`VM_SAFETY_TOML`] and a longer move timeout inside the
@@ -92,7 +103,7 @@ pub fn write_plan(dir: &std::path::Path) -> std::path::PathBuf {
     let text = if crate::env::in_vm() {
         PLAN_TOML.replace("move_timeout_s = 25.0", "move_timeout_s = 60.0") + VM_SAFETY_TOML
     } else {
-        PLAN_TOML.to_owned()
+        PLAN_TOML.to_owned() + SIM_SAFETY_TOML
     };
     std::fs::write(&path, text).unwrap_or_else(|e| panic!("cannot write {}: {e}", path.display()));
     path
@@ -125,6 +136,13 @@ mod tests {
     fn the_vm_profile_parses_with_the_plan() {
         let text = super::PLAN_TOML.to_owned() + super::VM_SAFETY_TOML;
         let config = controller::ControllerConfig::from_toml_str(&text);
-        assert!(config.is_ok_and(|c| c.safety.max_auto_rearms == 1000));
+        assert!(
+            config.is_ok_and(|c| c.safety.max_auto_rearms == 1000 && c.safety.auto_rearm),
+            "the VM profile opts in to the simulation policy"
+        );
+        let native = controller::ControllerConfig::from_toml_str(
+            &(super::PLAN_TOML.to_owned() + super::SIM_SAFETY_TOML),
+        );
+        assert!(native.is_ok_and(|c| c.safety.auto_rearm));
     }
 }

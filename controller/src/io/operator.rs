@@ -26,7 +26,9 @@
 //! The commands: `estop` (neutral valves and `Disarm` at once, latched until `reset`), `reset`
 //! (clears the e-stop; motion resumes through the arming handshake), `pause` (the current action
 //! runs to its end, then nothing new starts: the cycle holds neutral, disarmed), `resume` (goes on:
-//! the cycle re-arms for the next action), `stop` (the session ends cleanly after the current
+//! the cycle re-arms for the next action; after a fault that stopped motion, which waits for the
+//! operator, it acknowledges the stop, except an e-stop or a latching fault, which take `reset`),
+//! `stop` (the session ends cleanly after the current
 //! action: return home, neutral, disarm), `status`. Each is logged with the operator's reason;
 //! e-stop and pause show in `ControllerStatus` (`Faulted` with fault code 5, `Paused`).
 
@@ -69,11 +71,13 @@ pub enum Command {
     Status,
     /// The current action runs to its end, then nothing new starts.
     Pause,
-    /// Go on after a pause (re-arms for the next action).
+    /// Go on after a pause (re-arms for the next action), or after a fault stop that waits for the
+    /// operator (not an e-stop or a latching fault: those take `reset`).
     Resume,
     /// Emergency stop: neutral valves and `Disarm` at once, latched until `reset`.
     Estop,
-    /// Clear an e-stop (motion resumes through the arming handshake).
+    /// Clear an e-stop, a latching fault or any fault stop (motion resumes through the arming
+    /// handshake).
     Reset,
     /// End the session cleanly after the current action.
     Stop,
@@ -170,7 +174,7 @@ pub fn apply(node: &mut ControllerNode, cmd: Command, reason: &str, now_s: f64) 
         }
         Command::Resume => {
             tracing::warn!(reason, "operator resume");
-            node.set_paused(false);
+            node.resume();
         }
         Command::Stop => {
             tracing::warn!(
