@@ -60,6 +60,9 @@ pub const MAX_OVERFLOW: usize = 16;
 pub const OVERFLOW_TIMEOUT: Duration = Duration::from_millis(500);
 /// The socket file's mode: owner read and write only.
 pub const SOCKET_MODE: u32 = 0o600;
+/// The socket file's mode with a configured group ([`SocketAccess::group_gid`], the file's group):
+/// owner and group read and write (connecting needs write permission on the file).
+pub const GROUP_SOCKET_MODE: u32 = 0o660;
 /// A request the control loop has not answered in this long gets an error (the loop is gone).
 pub const REPLY_TIMEOUT: Duration = Duration::from_secs(2);
 
@@ -281,10 +284,12 @@ impl OperatorPort {
         self.listen_with(path, SocketAccess::default())
     }
 
-    /// [`Self::listen`] letting the members of `access`'s group connect too.
+    /// [`Self::listen`] letting the members of `access`'s group connect too: the socket file then
+    /// belongs to that group with [`GROUP_SOCKET_MODE`].
     ///
     /// # Errors
-    /// As [`Self::listen`], or the socket's mode cannot be set to [`SOCKET_MODE`].
+    /// As [`Self::listen`], or the socket's group or mode cannot be set ([`SOCKET_MODE`], or
+    /// [`GROUP_SOCKET_MODE`] with a group: the process must be a member of it).
     pub fn listen_with(
         &self,
         path: &Path,
@@ -301,17 +306,37 @@ impl OperatorPort {
             std::fs::remove_file(path)?;
         }
         let listener = UnixListener::bind(path)?;
-        // The bind created the file under the umask: set the mode and check it took. Until then a
-        // connection of another user is still refused by its credentials.
-        std::fs::set_permissions(path, std::fs::Permissions::from_mode(SOCKET_MODE))?;
+        // The bind created the file under the umask: set the group and the mode and check they
+        // took. Until then a connection of another user is still refused by its credentials.
+        let mode = match access.group_gid {
+            Some(gid) => {
+                std::os::unix::fs::chown(path, None, Some(gid)).map_err(|e| {
+                    std::io::Error::new(
+                        e.kind(),
+                        format!(
+                            "{}: cannot give the socket to group {gid} (is the controller a \
+                             member?): {e}",
+                            path.display()
+                        ),
+                    )
+                })?;
+                GROUP_SOCKET_MODE
+            }
+            None => SOCKET_MODE,
+        };
+        std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode))?;
         let meta = std::fs::metadata(path)?;
-        if meta.mode() & 0o777 != SOCKET_MODE {
+        if meta.mode() & 0o777 != mode || access.group_gid.is_some_and(|g| g != meta.gid()) {
             return Err(std::io::Error::new(
                 std::io::ErrorKind::PermissionDenied,
                 format!(
-                    "{}: mode {:o}, not {SOCKET_MODE:o}",
+                    "{}: mode {:o} group {}, not {mode:o}{}",
                     path.display(),
-                    meta.mode() & 0o777
+                    meta.mode() & 0o777,
+                    meta.gid(),
+                    access
+                        .group_gid
+                        .map_or(String::new(), |g| format!(" group {g}"))
                 ),
             ));
         }
