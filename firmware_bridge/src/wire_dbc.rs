@@ -261,8 +261,8 @@ impl WireDbc {
             let m = load_message(&dbc, msg)?;
             // One id, one meaning: a second message on an id would decode its frames as either.
             if let Some(other) = messages.iter().find(|o: &&WireMessage| o.id == m.id) {
-                let line = message_line(text, &m.name)
-                    .map_or(String::new(), |l| format!("line {l}: "));
+                let line =
+                    message_line(text, &m.name).map_or(String::new(), |l| format!("line {l}: "));
                 return Err(LoadError::Unsupported {
                     reason: format!(
                         "{line}CAN id {} is already message {}'s: an id must name one message",

@@ -227,7 +227,9 @@ fn a_bad_profile_names_the_quantity_and_line() {
 
     // #46 finding 9: a scale of 1e-300 read the boom as 0 rad forever; 1e308 overflows the wire.
     // The scale is a unit conversion, its magnitude 1e-6 to 1e6.
-    for bad in ["1e-300", "1e308", "0.0", "-1e-7", "2e6", "nan", "inf", "-inf"] {
+    for bad in [
+        "1e-300", "1e308", "0.0", "-1e-7", "2e6", "nan", "inf", "-inf",
+    ] {
         let edit = |t: &str| {
             t.replacen(
                 "BoomAngle = { signal = \"BoomDeg\", scale = 57.29577951308232 }",

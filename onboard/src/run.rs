@@ -567,7 +567,9 @@ pub fn check_link(args: &RunArgs) -> anyhow::Result<LinkStatus> {
 ///
 /// # Errors
 /// A group that does not exist, naming the option.
-pub fn socket_access(group: Option<&str>) -> anyhow::Result<controller::io::operator::SocketAccess> {
+pub fn socket_access(
+    group: Option<&str>,
+) -> anyhow::Result<controller::io::operator::SocketAccess> {
     let Some(group) = group else {
         return Ok(controller::io::operator::SocketAccess::default());
     };
@@ -576,8 +578,9 @@ pub fn socket_access(group: Option<&str>) -> anyhow::Result<controller::io::oper
     let gid = match by_name {
         Some(g) => g.gid.as_raw(),
         None => match group.parse::<u32>() {
-            Ok(gid) if nix::unistd::Group::from_gid(nix::unistd::Gid::from_raw(gid))
-                .is_ok_and(|g| g.is_some()) =>
+            Ok(gid)
+                if nix::unistd::Group::from_gid(nix::unistd::Gid::from_raw(gid))
+                    .is_ok_and(|g| g.is_some()) =>
             {
                 gid
             }
@@ -1173,7 +1176,9 @@ mod tests {
         let root = socket_access(a.control_socket_group.as_deref()).unwrap();
         assert_eq!(root.group_gid, Some(0));
         assert_eq!(socket_access(Some("0")).unwrap().group_gid, Some(0));
-        let e = socket_access(Some("no-such-group-46")).unwrap_err().to_string();
+        let e = socket_access(Some("no-such-group-46"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("--control-socket-group no-such-group-46"), "{e}");
         assert!(e.contains("no such group"), "{e}");
         assert!(socket_access(Some("4294967294")).is_err());
@@ -1211,7 +1216,9 @@ mod tests {
         };
         assert!(refuse_simulation_policy(&sim, &vcan).is_ok());
         for link in [&can, &unset] {
-            let e = refuse_simulation_policy(&sim, link).unwrap_err().to_string();
+            let e = refuse_simulation_policy(&sim, link)
+                .unwrap_err()
+                .to_string();
             assert!(e.contains("safety.auto_rearm") && e.contains("can0"), "{e}");
             assert!(refuse_simulation_policy(&controller::SafetyConfig::default(), link).is_ok());
         }

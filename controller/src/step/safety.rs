@@ -1029,8 +1029,7 @@ impl Safety {
                         Some(_) => None,
                     }
                     .filter(|counted| {
-                        !self.needs_reset
-                            && (!counted || self.rearms < self.config.max_auto_rearms)
+                        !self.needs_reset && (!counted || self.rearms < self.config.max_auto_rearms)
                     });
                     if self.acked || auto.is_some() {
                         if !self.acked && auto == Some(true) {
@@ -1852,7 +1851,10 @@ mod tests {
         // 60 s with the cause clear from the first period on.
         for _ in 0..6000 {
             let tick = rig.period(now, Some(ArmMode::Valve), false);
-            assert!(tick.motion.is_none(), "re-armed at {now} without the operator");
+            assert!(
+                tick.motion.is_none(),
+                "re-armed at {now} without the operator"
+            );
             assert!(
                 tick.heartbeat
                     .is_none_or(|h| h.mode == RequestedMode::Disarm),
@@ -1921,7 +1923,10 @@ mod tests {
         for f in transient {
             assert!(f.transient() && f.recovery() == Recovery::Transient, "{f}");
             assert!(resumes(sim, f), "{f} not recovered under auto_rearm");
-            assert!(!resumes(SafetyConfig::default(), f), "{f} re-armed by default");
+            assert!(
+                !resumes(SafetyConfig::default(), f),
+                "{f} re-armed by default"
+            );
         }
         for f in operator {
             assert!(!f.transient(), "{f}");
