@@ -89,3 +89,27 @@ async fn the_socket_is_owner_only_at_umask_000_and_idle_connections_do_not_lock_
     control.await.unwrap();
     server.abort();
 }
+
+/// With a configured group the socket file belongs to it, mode 660 (a member can open it; the peer
+/// check lets the group's members in), whatever the umask.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn with_a_group_the_socket_belongs_to_it_with_mode_660() {
+    use std::os::unix::fs::MetadataExt as _;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("control.sock");
+    let gid = nix::unistd::getegid().as_raw();
+    let port = operator::OperatorPort::new();
+    let old = nix::sys::stat::umask(nix::sys::stat::Mode::empty());
+    let listened = port.listen_with(
+        &path,
+        operator::SocketAccess {
+            group_gid: Some(gid),
+        },
+    );
+    nix::sys::stat::umask(old);
+    let server = listened.unwrap();
+    let meta = std::fs::metadata(&path).unwrap();
+    assert_eq!(meta.mode() & 0o777, operator::GROUP_SOCKET_MODE);
+    assert_eq!(meta.gid(), gid);
+    server.abort();
+}

@@ -232,6 +232,13 @@ struct Route {
 
 /// The longest period or timeout a profile may give, ms: slower than this no loop closes.
 pub const MAX_PERIOD_MS: u32 = 10_000;
+/// The longest watchdog (`timeouts.heartbeat_ms`, `timeouts.command_ms`), ms: they bound how long the
+/// machine moves on after the controller falls silent, at most ISO 11783-7's 100 ms.
+pub const MAX_TIMEOUT_MS: u32 = 100;
+/// The range of a signal's `scale` magnitude: a unit conversion between the canonical unit and the
+/// wire's (Pa to MPa is 1e-6, rad to mrad 1e3). Outside it a value rounds away on the wire (a scale
+/// of 1e-300 read every boom angle as 0 rad) or overflows it.
+pub const SCALE_RANGE: (f64, f64) = (1e-6, 1e6);
 
 /// The timing of the gateway a profile describes: the periods at which it sends its feedback and
 /// expects the controller's frames, and its watchdogs, ms (`docs/machine-profile.md`, "Rates and
@@ -644,11 +651,14 @@ impl Profile {
                             ));
                         }
                         used.push(windex);
-                        if !(scale.is_finite() && scale != 0.0 && offset.is_finite()) {
+                        let (lo, hi) = SCALE_RANGE;
+                        if !(scale.abs() >= lo && scale.abs() <= hi && offset.is_finite()) {
                             return Err(invalid(
                                 span,
                                 format!(
-                                    "{quantity}: scale must be finite and non-zero, offset finite"
+                                    "{quantity}: scale = {scale}, offset = {offset}: the scale's \
+                                     magnitude must be {lo:e} to {hi:e} (a unit conversion), the \
+                                     offset finite"
                                 ),
                             ));
                         }
@@ -994,13 +1004,16 @@ fn timing_of(
     let canonical = GatewayTiming::canonical();
     let timeout = |field: Option<&Spanned<i64>>, default: u32, key: &str| match field {
         None => Ok((default, None)),
-        Some(v) => period_in_range(*v.get_ref())
+        Some(v) => u32::try_from(*v.get_ref())
+            .ok()
+            .filter(|ms| (1..=MAX_TIMEOUT_MS).contains(ms))
             .map(|ms| (ms, Some(v.span())))
             .ok_or_else(|| {
                 invalid(
                     v.span(),
                     format!(
-                        "timeouts.{key} = {}: must be 1 to {MAX_PERIOD_MS} ms",
+                        "timeouts.{key} = {}: must be 1 to {MAX_TIMEOUT_MS} ms (ISO 11783-7: a \
+                         timeout that bounds motion after the controller falls silent)",
                         v.get_ref()
                     ),
                 )

@@ -238,19 +238,40 @@ fn bit_positions(start_bit: u64, len: u64, order: ByteOrder, size: usize) -> Opt
     Some(out)
 }
 
+/// The 1-based line of message `name`'s `BO_` definition in DBC `text`.
+fn message_line(text: &str, name: &str) -> Option<usize> {
+    let needle = format!(" {name}:");
+    text.lines()
+        .position(|l| l.trim_start().starts_with("BO_ ") && l.contains(&needle))
+        .map(|i| i + 1)
+}
+
 impl WireDbc {
     /// Parses DBC text.
     ///
     /// # Errors
     /// [`LoadError::Parse`] for text that is not a DBC, [`LoadError::Unsupported`] for a signal that
     /// leaves its message, has a length the codec cannot hold (0, above 64, a float that is not 32 or
-    /// 64 bits), a multiplexed signal without a multiplexor, extended multiplexing, or a message longer
-    /// than 8 bytes.
+    /// 64 bits), a multiplexed signal without a multiplexor, extended multiplexing, a message longer
+    /// than 8 bytes, or two messages with one CAN id (naming the second one's line).
     pub fn parse(text: &str) -> Result<Self, LoadError> {
         let dbc = Dbc::try_from(text).map_err(|e| LoadError::Parse(e.to_string()))?;
         let mut messages = Vec::with_capacity(dbc.messages.len());
         for msg in &dbc.messages {
-            messages.push(load_message(&dbc, msg)?);
+            let m = load_message(&dbc, msg)?;
+            // One id, one meaning: a second message on an id would decode its frames as either.
+            if let Some(other) = messages.iter().find(|o: &&WireMessage| o.id == m.id) {
+                let line =
+                    message_line(text, &m.name).map_or(String::new(), |l| format!("line {l}: "));
+                return Err(LoadError::Unsupported {
+                    reason: format!(
+                        "{line}CAN id {} is already message {}'s: an id must name one message",
+                        m.id, other.name
+                    ),
+                    message: m.name,
+                });
+            }
+            messages.push(m);
         }
         let j1939 = dbc.attribute_values_database.iter().any(|a| {
             a.name == "ProtocolType"

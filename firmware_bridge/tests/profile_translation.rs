@@ -225,6 +225,35 @@ fn a_bad_profile_names_the_quantity_and_line() {
     );
     assert_eq!(line, Some(line_of(lossy, "scale = 0.5")));
 
+    // #46 finding 9: a scale of 1e-300 read the boom as 0 rad forever; 1e308 overflows the wire.
+    // The scale is a unit conversion, its magnitude 1e-6 to 1e6.
+    for bad in [
+        "1e-300", "1e308", "0.0", "-1e-7", "2e6", "nan", "inf", "-inf",
+    ] {
+        let edit = |t: &str| {
+            t.replacen(
+                "BoomAngle = { signal = \"BoomDeg\", scale = 57.29577951308232 }",
+                &format!("BoomAngle = {{ signal = \"BoomDeg\", scale = {bad} }}"),
+                1,
+            )
+        };
+        let (message, line) = refused(edit);
+        assert!(
+            message.contains("JointAngles.BoomAngle") && message.contains("1e-6 to 1e6"),
+            "{bad}: {message}"
+        );
+        assert_eq!(line, Some(line_of(edit, "signal = \"BoomDeg\"")), "{bad}");
+    }
+    let offset = |t: &str| {
+        t.replacen(
+            "scale = 57.29577951308232 }",
+            "scale = 57.29577951308232, offset = inf }",
+            1,
+        )
+    };
+    let (message, _) = refused(offset);
+    assert!(message.contains("offset finite"), "{message}");
+
     let no_mux = |t: &str| t.replacen("mux = 0\n", "", 1);
     let (message, _) = refused(no_mux);
     assert!(
@@ -292,8 +321,8 @@ fn the_gateways_rates_and_timeouts_come_from_its_dbc_and_the_profile() {
             status_period_ms: 100,
             heartbeat_period_ms: 50,
             command_period_ms: 50,
-            heartbeat_timeout_ms: 200,
-            command_timeout_ms: 120,
+            heartbeat_timeout_ms: 100,
+            command_timeout_ms: 100,
         }
     );
 }
@@ -315,7 +344,7 @@ fn inconsistent_rates_and_timeouts_are_refused_naming_the_line() {
     );
     assert_eq!(line, Some(line_of(apart, "period_ms = 30")));
     // A watchdog shorter than two heartbeat periods.
-    let short = |t: &str| t.replacen("heartbeat_ms = 200", "heartbeat_ms = 90", 1);
+    let short = |t: &str| t.replacen("heartbeat_ms = 100", "heartbeat_ms = 90", 1);
     let (message, line) = refused(short);
     assert!(
         message.contains("timeouts.heartbeat_ms = 90") && message.contains("ControllerHeartbeat"),
@@ -324,7 +353,7 @@ fn inconsistent_rates_and_timeouts_are_refused_naming_the_line() {
     assert_eq!(line, Some(line_of(short, "heartbeat_ms = 90")));
     // The default command timeout (100 ms) cannot cover a 60 ms track command period.
     let slow = |t: &str| {
-        t.replacen("command_ms = 120\n", "", 1)
+        t.replacen("command_ms = 100\n", "", 1)
             .replacen("period_ms = 50", "period_ms = 60", 1)
     };
     let (message, line) = refused(slow);
@@ -342,6 +371,25 @@ fn inconsistent_rates_and_timeouts_are_refused_naming_the_line() {
             "{bad}: {message}"
         );
         assert_eq!(line, Some(line_of(edit, bad)));
+    }
+    // #46 finding 9: a watchdog of 10 s let the machine move on 10 s after the controller fell
+    // silent; every timeout that bounds motion is at most ISO 11783-7's 100 ms.
+    for bad in [
+        "heartbeat_ms = 10000",
+        "heartbeat_ms = 200",
+        "heartbeat_ms = 101",
+        "heartbeat_ms = 0",
+        "command_ms = 120",
+        "command_ms = -1",
+    ] {
+        let key = bad.split(' ').next().unwrap();
+        let edit = |t: &str| t.replacen(&format!("{key} = 100"), bad, 1);
+        let (message, line) = refused(edit);
+        assert!(
+            message.contains(&format!("timeouts.{bad}")) && message.contains("1 to 100 ms"),
+            "{bad}: {message}"
+        );
+        assert_eq!(line, Some(line_of(edit, bad)), "{bad}");
     }
     let float = |t: &str| t.replacen("period_ms = 50", "period_ms = nan", 1);
     let (_, line) = refused(float);
@@ -387,6 +435,32 @@ fn declared_addresses_must_be_the_ones_the_ids_carry() {
     });
     assert!(
         message.contains("11-bit id, which carries no address"),
+        "{message}"
+    );
+}
+
+/// #46 finding 9: a DBC with two messages on one CAN id was loaded (a frame meant either). Refused,
+/// naming the DBC file, the line of the second message and both names.
+#[test]
+fn a_dbc_with_a_duplicate_can_id_is_refused_naming_its_line() {
+    let text = std::fs::read_to_string(EXAMPLE).expect("example exists");
+    let dbc = std::fs::read_to_string(EXAMPLE_DBC).expect("example DBC exists");
+    // ArmRates (770) moved onto ArmAngles's id (769).
+    let dup = dbc.replacen("BO_ 770 ArmRates:", "BO_ 769 ArmRates:", 1);
+    let line = dup
+        .lines()
+        .position(|l| l.starts_with("BO_ 769 ArmRates:"))
+        .unwrap()
+        + 1;
+    let err = Profile::from_toml_str(&text, "gw.toml", Path::new("gw.dbc"), &dup)
+        .expect_err("a duplicate id was accepted");
+    let message = err.to_string();
+    assert!(
+        message.starts_with("gw.dbc:")
+            && message.contains(&format!("line {line}"))
+            && message.contains("ArmRates")
+            && message.contains("ArmAngles")
+            && message.contains("0x301"),
         "{message}"
     );
 }

@@ -25,8 +25,11 @@
 //!
 //! A fault is **detected** when the part that must notice it does ([`FaultKind::detection`]) and
 //! **recovered** when, after its end, the controller is armed again with the gateway confirming it and
-//! no fault active (motion is possible again). A controller that waits for an operator reset after a
-//! fault (too many automatic re-arms) gets one after [`OPERATOR_RESPONSE_S`], counted.
+//! no fault active (motion is possible again). A fault that stopped motion waits for the operator
+//! once its cause has cleared (the controller's safety layer, "Stops that stay stopped"): the
+//! simulated operator resumes it (`resume`, a `reset` where the stop latches) [`OPERATOR_RESPONSE_S`]
+//! after the controller starts waiting, counted. The shift's controller runs the default safety
+//! policy (no automatic re-arm after a transient fault).
 //!
 //! # Unsafe outputs
 //!
@@ -85,8 +88,9 @@ use onboard::resume::{RunRecords, RunState};
 pub const WARM_UP_S: f64 = 20.0;
 /// Time each fault's slot keeps after the fault's end for its recovery, s.
 pub const RECOVERY_ROOM_S: f64 = 25.0;
-/// The simulated operator's response to a controller waiting for a reset, s.
-pub const OPERATOR_RESPONSE_S: f64 = 30.0;
+/// The simulated operator's reaction to a controller waiting for them (the page and `ctl status`
+/// show it), s: noticing the stop, checking the machine and pressing resume.
+pub const OPERATOR_RESPONSE_S: f64 = 5.0;
 /// Garbage frames per control period.
 const GARBAGE_PER_PERIOD: usize = 2;
 /// Flood frames per control period (6000 frames/s, over the loop monitor's overload threshold).
@@ -352,7 +356,8 @@ pub struct ShiftTotals {
     pub weight_n: f64,
     /// Safety faults the controller reported (repeats included).
     pub controller_faults: u64,
-    /// Operator resets the controller asked for (beyond the e-stops' scheduled ones).
+    /// Operator actions (resume, or reset where the stop latches) the controller waited for after a
+    /// fault stopped motion (beyond the e-stops' scheduled resets).
     pub operator_resets: u64,
     /// Simulated time, s.
     pub sim_time_s: f64,
@@ -470,7 +475,7 @@ impl ShiftReport {
         }
         let _ = writeln!(
             m,
-            "| shift | actions | digs + cleanups | track backs | benches | weight (kN) | controller faults | operator resets | wall (s) |\n\
+            "| shift | actions | digs + cleanups | track backs | benches | weight (kN) | controller faults | operator resumes | wall (s) |\n\
              |---|---|---|---|---|---|---|---|---|\n\
              | fault-free | {} | {} | {} | {} | {:.0} | {} | {} | {:.0} |\n\
              | under faults | {} | {} | {} | {} | {:.0} | {} | {} | {:.0} |\n",
@@ -1171,7 +1176,9 @@ impl<'a> Shift<'a> {
         }
     }
 
-    /// The simulated operator: resets a controller that waits for a reset (not an e-stop in force).
+    /// The simulated operator: resumes (or resets, where the stop latches) a controller that waits
+    /// for them after a fault, [`OPERATOR_RESPONSE_S`] after it started waiting (not an e-stop in
+    /// force: its reset is the schedule's).
     fn operator(&mut self, t: f64) {
         let estop = self.monitor.estop_since_s.is_some();
         let Some(node) = self.h.node_mut() else {
@@ -1183,12 +1190,12 @@ impl<'a> Shift<'a> {
         }
         let since = *self.reset_wanted_since_s.get_or_insert(t);
         if t - since >= OPERATOR_RESPONSE_S {
-            operator::apply(
-                node,
-                Command::Reset,
-                "shift: the controller waits for a reset",
-                t,
-            );
+            let (cmd, reason) = if node.safety().needs_full_reset() {
+                (Command::Reset, "shift: the controller waits for a reset")
+            } else {
+                (Command::Resume, "shift: the controller waits for a resume")
+            };
+            operator::apply(node, cmd, reason, t);
             self.totals.operator_resets += 1;
             self.reset_wanted_since_s = None;
         }

@@ -155,8 +155,12 @@ fn sensor_dropout_mid_dig_neutralises_within_one_period_of_the_age_limit() {
     // The machine stops: the gateway is disarmed and drives nothing.
     l.step();
     assert_eq!(l.machine().node().valve_commands(), [0.0; 6]);
-    // Data back: the controller re-arms after the hold time and the dig goes on.
+    // Data back: the stop stays a stop (no motion without the operator), then the operator's
+    // resume re-arms and the dig goes on.
     l.forward = true;
+    assert!(!l.run_until(5.0, |l| has_motion(&l.last_out)));
+    assert!(l.node().safety().needs_reset());
+    l.node_mut().resume();
     assert!(l.run_until(5.0, |l| has_motion(&l.last_out)));
 }
 
@@ -183,7 +187,9 @@ fn garbage_frames_mid_dig_neutralise_in_the_same_period() {
         assert!(matches!(l.node().fault(), Some(Fault::Decode { .. })));
         l.step();
         assert_eq!(l.machine().node().valve_commands(), [0.0; 6]);
-        // Recovers and re-arms.
+        // Stays stopped until the operator's resume, then re-arms.
+        assert!(!l.run_until(5.0, |l| has_motion(&l.last_out)));
+        l.node_mut().resume();
         assert!(l.run_until(5.0, |l| has_motion(&l.last_out)));
     }
 }

@@ -136,6 +136,10 @@ pub struct RunArgs {
     /// folder, none without one).
     #[arg(long, value_name = "PATH")]
     pub control_socket: Option<PathBuf>,
+    /// A group whose members may use the control socket besides its owner and root (by name or
+    /// number; the socket file then belongs to it, mode 660). The controller must be a member.
+    #[arg(long, value_name = "GROUP")]
+    pub control_socket_group: Option<String>,
     /// The deployed configuration's folder (the package's /etc/excavator): machine.toml,
     /// autodig_maps.toml, controller.toml, site.toml, planner.toml, hardness_regression.toml, key
     /// and profile.toml, each used when present; a file given by its own option wins, a missing one is the
@@ -234,6 +238,7 @@ impl RunArgs {
             force: false,
             resume: None,
             control_socket: None,
+            control_socket_group: None,
             config_dir: None,
             profile: None,
         }
@@ -557,6 +562,56 @@ pub fn check_link(args: &RunArgs) -> anyhow::Result<LinkStatus> {
     Ok(link)
 }
 
+/// Who may use the control socket besides its owner and root: `--control-socket-group`, a group
+/// name or a numeric gid.
+///
+/// # Errors
+/// A group that does not exist, naming the option.
+pub fn socket_access(
+    group: Option<&str>,
+) -> anyhow::Result<controller::io::operator::SocketAccess> {
+    let Some(group) = group else {
+        return Ok(controller::io::operator::SocketAccess::default());
+    };
+    let by_name = nix::unistd::Group::from_name(group)
+        .with_context(|| format!("--control-socket-group {group}: reading the group database"))?;
+    let gid = match by_name {
+        Some(g) => g.gid.as_raw(),
+        None => match group.parse::<u32>() {
+            Ok(gid)
+                if nix::unistd::Group::from_gid(nix::unistd::Gid::from_raw(gid))
+                    .is_ok_and(|g| g.is_some()) =>
+            {
+                gid
+            }
+            _ => anyhow::bail!("--control-socket-group {group}: no such group"),
+        },
+    };
+    Ok(controller::io::operator::SocketAccess {
+        group_gid: Some(gid),
+    })
+}
+
+/// `safety.auto_rearm` (motion resumes after a transient fault without the operator) is a policy of
+/// simulation: refused on a link with a real CAN controller.
+///
+/// # Errors
+/// One line naming the key and the interface.
+pub fn refuse_simulation_policy(
+    safety: &controller::SafetyConfig,
+    link: &LinkStatus,
+) -> anyhow::Result<()> {
+    if safety.auto_rearm && !link.is_virtual() {
+        anyhow::bail!(
+            "safety.auto_rearm = true is for simulation only (a vcan or the in-process bus): {} is a \
+             CAN controller ({link}); after a fault that stopped motion the machine waits for the \
+             operator's resume or reset. Remove the key from the controller config",
+            link.iface
+        );
+    }
+    Ok(())
+}
+
 /// What `run` does besides the session: the operator's keys, the session log and the link.
 #[derive(Default)]
 pub struct RunConsole {
@@ -632,6 +687,9 @@ pub async fn run_on_observed<B: Bus>(
     let wall = Instant::now();
     let args = &crate::options::resumed(args.clone())?;
     let (mut node, mut driver, setup) = build(args)?;
+    if let Some(link) = &console.link {
+        refuse_simulation_policy(node.safety().config(), link)?;
+    }
     let out_dir = args.session_dir()?;
     let resumed = match &args.resume {
         Some(dir) => {
@@ -735,9 +793,10 @@ pub async fn run_on_observed<B: Bus>(
             .as_deref()
             .map(controller::io::operator::default_path)
     });
+    let access = socket_access(args.control_socket_group.as_deref())?;
     let socket_task = match &socket_path {
         Some(p) => {
-            let task = operator.listen(p).with_context(|| {
+            let task = operator.listen_with(p, access).with_context(|| {
                 format!(
                     "control socket {}: a Unix socket needs a local file system (not a network \
                      share) and a path under 108 bytes; give --control-socket PATH",
@@ -1106,6 +1165,63 @@ mod tests {
         let mut all = vec!["run", "--iface", "can0"];
         all.extend_from_slice(extra);
         Cmd::try_parse_from(all).unwrap().run
+    }
+
+    /// `--control-socket-group` by name or number resolves to the group's gid; an unknown one is
+    /// refused naming the option; without it only the owner and root may connect.
+    #[test]
+    fn the_control_socket_group_resolves_by_name_or_number() {
+        let a = args(&["--control-socket-group", "root"]);
+        assert_eq!(a.control_socket_group.as_deref(), Some("root"));
+        let root = socket_access(a.control_socket_group.as_deref()).unwrap();
+        assert_eq!(root.group_gid, Some(0));
+        assert_eq!(socket_access(Some("0")).unwrap().group_gid, Some(0));
+        let e = socket_access(Some("no-such-group-46"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("--control-socket-group no-such-group-46"), "{e}");
+        assert!(e.contains("no such group"), "{e}");
+        assert!(socket_access(Some("4294967294")).is_err());
+        assert_eq!(socket_access(None).unwrap().group_gid, None);
+    }
+
+    /// The simulation policy `safety.auto_rearm` is refused on a real CAN controller (bit timing and
+    /// a controller state), allowed on a vcan; without it any link is fine.
+    #[test]
+    fn auto_rearm_is_refused_on_a_real_can_controller() {
+        use firmware_bridge::transport::ControllerState;
+        let vcan = LinkStatus {
+            iface: "vcan0".into(),
+            up: true,
+            bitrate_bps: None,
+            state: None,
+            restart_ms: None,
+            listen_only: false,
+        };
+        let can = LinkStatus {
+            iface: "can0".into(),
+            bitrate_bps: Some(500_000),
+            state: Some(ControllerState::ErrorActive),
+            restart_ms: Some(100),
+            ..vcan.clone()
+        };
+        // A real controller before its bitrate is set still reports a state.
+        let unset = LinkStatus {
+            bitrate_bps: None,
+            ..can.clone()
+        };
+        let sim = controller::SafetyConfig {
+            auto_rearm: true,
+            ..controller::SafetyConfig::default()
+        };
+        assert!(refuse_simulation_policy(&sim, &vcan).is_ok());
+        for link in [&can, &unset] {
+            let e = refuse_simulation_policy(&sim, link)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("safety.auto_rearm") && e.contains("can0"), "{e}");
+            assert!(refuse_simulation_policy(&controller::SafetyConfig::default(), link).is_ok());
+        }
     }
 
     #[test]

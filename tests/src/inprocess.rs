@@ -107,6 +107,16 @@ impl Session {
             .unwrap_or_else(|| panic!("the controller was killed"))
     }
 
+    /// The controller, for the operator's commands (panics if killed).
+    ///
+    /// # Panics
+    /// After [`Self::kill_controller`].
+    pub fn node_mut(&mut self) -> &mut ControllerNode {
+        self.h
+            .node_mut()
+            .unwrap_or_else(|| panic!("the controller was killed"))
+    }
+
     /// Whether the controller is alive (not killed).
     pub fn controller_alive(&self) -> bool {
         self.h.node().is_some()

@@ -70,19 +70,32 @@ pub fn plan_config() -> ControllerConfig {
 /// a VM (appended to the plan by [`write_plan`] there). Natively the defaults apply.
 pub const VM_SAFETY_TOML: &str = include_str!("../../config/vm.toml");
 
+/// The simulation policy of the HIL sessions run natively (merged over the plan by [`write_plan`]
+/// outside the VM): they drive the simulator over vcan on a host shared with other tests, and check
+/// that a session rides through a transient fault (a spoofed frame, a false stale-sensor fault).
+/// `run` accepts `auto_rearm` on a virtual CAN only. What a real machine does after a fault (it
+/// waits for the operator) is checked by the controller's and the lab's tests.
+pub const SIM_SAFETY_TOML: &str = "[safety]\nauto_rearm = true\n";
+
 /// `plan` (a controller config file) with the keys of [`VM_SAFETY_TOML`] over its own, table by table.
 ///
 /// # Panics
 /// When either does not parse as TOML (a bug in this file or in `config/vm.toml`).
 pub fn with_vm_timing(plan: &str) -> String {
+    overlay(plan, "config/vm.toml", VM_SAFETY_TOML)
+}
+
+/// `plan` with the keys of `over` (named `name` in panics) over its own, table by table: appending
+/// the two files would repeat a table, which TOML refuses.
+fn overlay(plan: &str, name: &str, over: &str) -> String {
     let parse = |name: &str, text: &str| {
         text.parse::<toml::Table>()
             .unwrap_or_else(|e| panic!("{name} is not TOML: {e}"))
     };
     let mut merged = parse("the plan", plan);
-    for (section, keys) in parse("config/vm.toml", VM_SAFETY_TOML) {
+    for (section, keys) in parse(name, over) {
         let toml::Value::Table(keys) = keys else {
-            panic!("config/vm.toml: `{section}` is not a table")
+            panic!("{name}: `{section}` is not a table")
         };
         let entry = merged
             .entry(section)
@@ -95,7 +108,7 @@ pub fn with_vm_timing(plan: &str) -> String {
 }
 
 /// Writes the plan to `dir/plan.toml` (with [`VM_SAFETY_TOML`] and a longer move timeout inside the
-/// VM) and returns the path.
+/// VM, with [`SIM_SAFETY_TOML`] natively) and returns the path.
 ///
 /// # Panics
 /// When the file cannot be written.
@@ -104,7 +117,7 @@ pub fn write_plan(dir: &std::path::Path) -> std::path::PathBuf {
     let text = if crate::env::in_vm() {
         with_vm_timing(&PLAN_TOML.replace("move_timeout_s = 25.0", "move_timeout_s = 60.0"))
     } else {
-        PLAN_TOML.to_owned()
+        overlay(PLAN_TOML, "SIM_SAFETY_TOML", SIM_SAFETY_TOML)
     };
     std::fs::write(&path, text).unwrap_or_else(|e| panic!("cannot write {}: {e}", path.display()));
     path
@@ -141,6 +154,15 @@ mod tests {
         assert!((config.cycle.scan_timeout_s - 30.0).abs() < 1e-12);
         // The plan's own keys stay where the VM file says nothing.
         assert_eq!(config.cycle.max_digs, Some(4));
+        // The VM opts in to the simulation policy; so do the native sessions.
+        assert!(
+            config.safety.auto_rearm,
+            "config/vm.toml opts in to auto_rearm"
+        );
+        let native = super::overlay(super::PLAN_TOML, "sim", super::SIM_SAFETY_TOML);
+        let native = controller::ControllerConfig::from_toml_str(&native).unwrap();
+        assert!(native.safety.auto_rearm);
+        assert_eq!(native.cycle.max_digs, Some(4));
         // And the file alone, as `run --config config/vm.toml` reads it.
         assert!(controller::ControllerConfig::from_toml_str(super::VM_SAFETY_TOML).is_ok());
     }

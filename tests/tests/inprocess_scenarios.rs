@@ -211,12 +211,22 @@ fn malformed_and_spoofed_frames_are_counted_rejected_and_safe() {
         after.rejected_frames
     );
     // The controller saw frames it must not ignore (its own address, a protocol message from a
-    // stranger) and stopped; it re-arms and digs on.
+    // stranger) and stopped; it stays stopped until the operator's resume, then re-arms and digs on.
     let fault = s.node().last_fault();
     assert!(fault.is_some(), "the controller ignored the spoofs");
     assert!(
+        !s.run_until(10.0, |s| s.node().safety().motion().is_some()),
+        "re-armed after {fault:?} without the operator"
+    );
+    controller::io::operator::apply(
+        s.node_mut(),
+        controller::io::operator::Command::Resume,
+        "test",
+        0.0,
+    );
+    assert!(
         s.run_until(10.0, |s| s.node().safety().motion().is_some()),
-        "no re-arm after {fault:?}"
+        "no re-arm after {fault:?} and the operator's resume"
     );
 }
 

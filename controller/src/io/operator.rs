@@ -26,7 +26,9 @@
 //! The commands: `estop` (neutral valves and `Disarm` at once, latched until `reset`), `reset`
 //! (clears the e-stop; motion resumes through the arming handshake), `pause` (the current action
 //! runs to its end, then nothing new starts: the cycle holds neutral, disarmed), `resume` (goes on:
-//! the cycle re-arms for the next action), `stop` (the session ends cleanly after the current
+//! the cycle re-arms for the next action; after a fault that stopped motion, which waits for the
+//! operator, it acknowledges the stop, except an e-stop or a latching fault, which take `reset`),
+//! `stop` (the session ends cleanly after the current
 //! action: return home, neutral, disarm), `status`. Each is logged with the operator's reason;
 //! e-stop and pause show in `ControllerStatus` (`Faulted` with fault code 5, `Paused`).
 
@@ -58,6 +60,9 @@ pub const MAX_OVERFLOW: usize = 16;
 pub const OVERFLOW_TIMEOUT: Duration = Duration::from_millis(500);
 /// The socket file's mode: owner read and write only.
 pub const SOCKET_MODE: u32 = 0o600;
+/// The socket file's mode with a configured group ([`SocketAccess::group_gid`], the file's group):
+/// owner and group read and write (connecting needs write permission on the file).
+pub const GROUP_SOCKET_MODE: u32 = 0o660;
 /// A request the control loop has not answered in this long gets an error (the loop is gone).
 pub const REPLY_TIMEOUT: Duration = Duration::from_secs(2);
 
@@ -69,11 +74,13 @@ pub enum Command {
     Status,
     /// The current action runs to its end, then nothing new starts.
     Pause,
-    /// Go on after a pause (re-arms for the next action).
+    /// Go on after a pause (re-arms for the next action), or after a fault stop that waits for the
+    /// operator (not an e-stop or a latching fault: those take `reset`).
     Resume,
     /// Emergency stop: neutral valves and `Disarm` at once, latched until `reset`.
     Estop,
-    /// Clear an e-stop (motion resumes through the arming handshake).
+    /// Clear an e-stop, a latching fault or any fault stop (motion resumes through the arming
+    /// handshake).
     Reset,
     /// End the session cleanly after the current action.
     Stop,
@@ -170,7 +177,7 @@ pub fn apply(node: &mut ControllerNode, cmd: Command, reason: &str, now_s: f64) 
         }
         Command::Resume => {
             tracing::warn!(reason, "operator resume");
-            node.set_paused(false);
+            node.resume();
         }
         Command::Stop => {
             tracing::warn!(
@@ -277,10 +284,12 @@ impl OperatorPort {
         self.listen_with(path, SocketAccess::default())
     }
 
-    /// [`Self::listen`] letting the members of `access`'s group connect too.
+    /// [`Self::listen`] letting the members of `access`'s group connect too: the socket file then
+    /// belongs to that group with [`GROUP_SOCKET_MODE`].
     ///
     /// # Errors
-    /// As [`Self::listen`], or the socket's mode cannot be set to [`SOCKET_MODE`].
+    /// As [`Self::listen`], or the socket's group or mode cannot be set ([`SOCKET_MODE`], or
+    /// [`GROUP_SOCKET_MODE`] with a group: the process must be a member of it).
     pub fn listen_with(
         &self,
         path: &Path,
@@ -297,17 +306,37 @@ impl OperatorPort {
             std::fs::remove_file(path)?;
         }
         let listener = UnixListener::bind(path)?;
-        // The bind created the file under the umask: set the mode and check it took. Until then a
-        // connection of another user is still refused by its credentials.
-        std::fs::set_permissions(path, std::fs::Permissions::from_mode(SOCKET_MODE))?;
+        // The bind created the file under the umask: set the group and the mode and check they
+        // took. Until then a connection of another user is still refused by its credentials.
+        let mode = match access.group_gid {
+            Some(gid) => {
+                std::os::unix::fs::chown(path, None, Some(gid)).map_err(|e| {
+                    std::io::Error::new(
+                        e.kind(),
+                        format!(
+                            "{}: cannot give the socket to group {gid} (is the controller a \
+                             member?): {e}",
+                            path.display()
+                        ),
+                    )
+                })?;
+                GROUP_SOCKET_MODE
+            }
+            None => SOCKET_MODE,
+        };
+        std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode))?;
         let meta = std::fs::metadata(path)?;
-        if meta.mode() & 0o777 != SOCKET_MODE {
+        if meta.mode() & 0o777 != mode || access.group_gid.is_some_and(|g| g != meta.gid()) {
             return Err(std::io::Error::new(
                 std::io::ErrorKind::PermissionDenied,
                 format!(
-                    "{}: mode {:o}, not {SOCKET_MODE:o}",
+                    "{}: mode {:o} group {}, not {mode:o}{}",
                     path.display(),
-                    meta.mode() & 0o777
+                    meta.mode() & 0o777,
+                    meta.gid(),
+                    access
+                        .group_gid
+                        .map_or(String::new(), |g| format!(" group {g}"))
                 ),
             ));
         }

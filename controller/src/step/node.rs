@@ -375,6 +375,14 @@ impl ControllerNode {
         self.cycle.set_paused(paused);
     }
 
+    /// The operator's resume: the cycle goes on ([`WorkCycle::set_paused`]) and a fault stop that
+    /// waits for the operator is acknowledged ([`Safety::acknowledge`]; an e-stop or a latching fault
+    /// still needs [`Self::reset`]).
+    pub fn resume(&mut self) {
+        self.cycle.set_paused(false);
+        self.safety.acknowledge();
+    }
+
     /// The operator's stop after the current action (see [`WorkCycle::request_stop`]).
     pub fn request_stop(&mut self) {
         self.cycle.request_stop();

@@ -46,8 +46,25 @@
 //! armed mode) followed by a `Disarm` heartbeat, which also acknowledges a gateway fault. Motion resumes
 //! only through a fresh arming handshake, once the cause has cleared: sensors fresh, gateway status fresh
 //! and `Disarmed` without fault bits, joints inside their limits, and no new fault event for
-//! [`SafetyConfig::clear_hold_s`]. With [`SafetyConfig::auto_rearm`] off (and always after an e-stop or
-//! more than [`SafetyConfig::max_auto_rearms`] re-arms in a row) it waits for [`Safety::reset`].
+//! [`SafetyConfig::clear_hold_s`].
+//!
+//! # Stops that stay stopped
+//!
+//! A fault that stopped motion (raised while arming or armed) is not followed by a restart the
+//! operator did not ask for (ISO 13849-1, start/restart function): once its cause has cleared the layer waits for the
+//! operator's [`Safety::acknowledge`] (`resume`) or [`Safety::reset`] ([`Safety::needs_reset`]
+//! says so). An e-stop and the latching faults ([`Fault::latches`]) take a reset; a resume does not
+//! clear them. Two exceptions re-arm on their own, at most [`SafetyConfig::max_auto_rearms`] times
+//! without [`SafetyConfig::rearm_reset_s`] of clean armed time ([`Fault::recovery`]):
+//! - a fault of the work cycle ([`Fault::Control`]): the cycle's own controlled stop, its action
+//!   abandoned (the bucket raised and emptied) and the next one planned, as the cycle does after a
+//!   completed action;
+//! - opt-in, for simulation only ([`SafetyConfig::auto_rearm`], off by default, logged at `WARN`
+//!   when the layer starts and at each re-arm): the transient faults of a simulator on a loaded host
+//!   ([`Fault::transient`]: stale sensor data, a decode error, an unexpected frame, a CAN bus
+//!   fault); never after an e-stop, a joint limit or a gateway fault.
+//!
+//! A fault raised while disarmed stopped nothing: it holds off arming until its cause clears.
 
 use firmware_bridge::messages::{
     ControllerHeartbeat, DecodeError, GatewayFaults, GatewayMode, RequestedMode,
@@ -237,6 +254,50 @@ impl Fault {
         }
     }
 
+    /// The faults the simulation policy [`SafetyConfig::auto_rearm`] may recover from on its own:
+    /// stale sensor data, a decode error, an unexpected frame, a CAN bus fault, and a gateway fault
+    /// whose bits are all of its link's ([`Self::TRANSIENT_GATEWAY_FAULTS`]: a late or rejected
+    /// heartbeat or command). These are the false faults of a simulator on a loaded host (a VM's
+    /// scheduling gap trips the gateway's watchdog) and of an injected frame. Never an e-stop, a
+    /// joint limit, a gateway's e-stop, joint, setpoint, clock or address fault, a mode change, a
+    /// frozen status or missing confirmation, an address claim fault, a work-cycle fault (its own
+    /// rule, [`Fault::recovery`]) or a shutdown.
+    pub const fn transient(&self) -> bool {
+        match self {
+            Fault::StaleSensor { .. }
+            | Fault::Decode { .. }
+            | Fault::UnexpectedFrame { .. }
+            | Fault::Bus(_) => true,
+            Fault::GatewayFault(GatewayFaults(bits)) => {
+                *bits != 0 && *bits & !Self::TRANSIENT_GATEWAY_FAULTS == 0
+            }
+            _ => false,
+        }
+    }
+
+    /// The gateway's fault bits that concern its link to the controller only (the watchdog, a bad
+    /// checksum or alive counter, a stale command, a bus error, a frame that failed authentication):
+    /// the gateway fault bits [`Self::transient`] accepts.
+    pub const TRANSIENT_GATEWAY_FAULTS: u16 = GatewayFaults::WATCHDOG_TIMEOUT
+        | GatewayFaults::BAD_CHECKSUM
+        | GatewayFaults::BAD_ALIVE_COUNTER
+        | GatewayFaults::STALE_COMMAND
+        | GatewayFaults::BUS_ERROR
+        | GatewayFaults::AUTH_FAILURE;
+
+    /// How motion may resume after this fault stopped it (module docs, "Stops that stay stopped").
+    pub const fn recovery(&self) -> Recovery {
+        if self.latches() {
+            Recovery::Reset
+        } else if matches!(self, Fault::Control(_)) {
+            Recovery::WorkCycle
+        } else if self.transient() {
+            Recovery::Transient
+        } else {
+            Recovery::Operator
+        }
+    }
+
     /// Whether only [`Safety::reset`] clears it.
     pub const fn latches(&self) -> bool {
         matches!(
@@ -250,6 +311,22 @@ impl Fault {
                 }
         )
     }
+}
+
+/// How motion may resume after a fault stopped it, from the most lenient to the strictest (the
+/// strictest of the faults since the stop applies).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Recovery {
+    /// A work-cycle fault: re-armed once the cause has cleared (counted against
+    /// [`SafetyConfig::max_auto_rearms`]).
+    WorkCycle,
+    /// A transient fault: the operator's resume or reset, or on its own under the simulation policy
+    /// [`SafetyConfig::auto_rearm`] (counted the same way).
+    Transient,
+    /// The operator's resume or reset.
+    Operator,
+    /// The operator's reset only (an e-stop, a latching fault).
+    Reset,
 }
 
 /// How serious a bus condition is.
@@ -282,10 +359,14 @@ pub struct SafetyConfig {
     pub neutral_hold_s: f64,
     /// Tolerance beyond the configured joint limits, rad. Default 1 degree.
     pub joint_limit_margin_rad: f64,
-    /// Re-arm automatically once the cause of a fault has cleared. Default true.
+    /// Simulation only, opt-in: after a transient fault ([`Fault::transient`]) that stopped motion,
+    /// re-arm on its own once the cause has cleared instead of waiting for the operator's resume
+    /// (module docs, "Stops that stay stopped"). Default false; logged at `WARN` when the layer starts
+    /// and at each re-arm. `excavator-ctl run` refuses it on a CAN controller with bit timing (a real
+    /// bus), and the package's config leaves it off.
     pub auto_rearm: bool,
-    /// After this many automatic re-arms without `rearm_reset_s` of clean armed time, wait for
-    /// [`Safety::reset`]. Default 5.
+    /// After this many automatic re-arms (work-cycle faults, and transient ones under `auto_rearm`)
+    /// without `rearm_reset_s` of clean armed time, wait for the operator. Default 5.
     pub max_auto_rearms: u32,
     /// Armed time without a fault that resets the re-arm count, s. Default 10.
     pub rearm_reset_s: f64,
@@ -323,7 +404,12 @@ impl SafetyConfig {
     pub fn for_gateway(mut self, timing: GatewayTiming) -> Self {
         let was = self.gateway;
         let ratio = |now: u32, was: u32| f64::from(now) / f64::from(was);
-        self.sensor_max_age_s *= ratio(timing.sensor_period_ms, was.sensor_period_ms);
+        // The same number of periods, but never beyond that gateway's watchdog (the limit
+        // `validate` holds it to): a file at the project's widest age, 100 ms, stays valid for a
+        // gateway with a slower sensor period.
+        self.sensor_max_age_s = (self.sensor_max_age_s
+            * ratio(timing.sensor_period_ms, was.sensor_period_ms))
+        .min(GatewayTiming::secs(timing.heartbeat_timeout_ms));
         self.status_max_age_s *= ratio(timing.status_period_ms, was.status_period_ms);
         self.heartbeat_period_s *= ratio(timing.heartbeat_period_ms, was.heartbeat_period_ms);
         self.gateway = timing;
@@ -427,7 +513,7 @@ impl Default for SafetyConfig {
             clear_hold_s: 0.5,
             neutral_hold_s: 0.1,
             joint_limit_margin_rad: 1.0_f64.to_radians(),
-            auto_rearm: true,
+            auto_rearm: false,
             max_auto_rearms: 5,
             rearm_reset_s: 10.0,
             heartbeat_period_s: 0.05,
@@ -497,7 +583,13 @@ pub struct Safety {
     last_fault: Option<Fault>,
     fault_count: u64,
     rearms: u32,
+    /// A latching fault or an e-stop was reported: only [`Safety::reset`] clears it.
     needs_reset: bool,
+    /// The cause cleared and the stop waits for the operator's resume or reset.
+    waiting: bool,
+    /// The strictest recovery of the faults since motion stopped; `None`: the fault came while
+    /// disarmed (nothing stopped).
+    recovery: Option<Recovery>,
     acked: bool,
     estop: bool,
     /// After the operator reset an e-stop: `Some(first ResetEStop heartbeat time)` until a gateway
@@ -530,6 +622,14 @@ impl Safety {
                 });
             }
         }
+        if config.auto_rearm && !config.listen_only {
+            tracing::warn!(
+                max_auto_rearms = config.max_auto_rearms,
+                "safety.auto_rearm is on (simulation only): after a transient fault (stale sensor \
+                 data, decode error, unexpected frame, CAN bus fault) motion resumes without the \
+                 operator"
+            );
+        }
         Ok(Self {
             config,
             limits,
@@ -546,6 +646,8 @@ impl Safety {
             fault_count: 0,
             rearms: 0,
             needs_reset: false,
+            waiting: false,
+            recovery: None,
             acked: false,
             estop: false,
             estop_reset: None,
@@ -601,8 +703,15 @@ impl Safety {
         self.healthy
     }
 
-    /// Whether the safety layer waits for [`Self::reset`] before it re-arms.
+    /// Whether the safety layer waits for the operator (a [`Self::reset`], or for a stop that does
+    /// not latch also a [`Self::acknowledge`]) before it re-arms.
     pub fn needs_reset(&self) -> bool {
+        self.needs_reset || self.estop || self.waiting
+    }
+
+    /// Whether only [`Self::reset`] clears the stop (an e-stop or a latching fault): the operator's
+    /// resume ([`Self::acknowledge`]) does not.
+    pub fn needs_full_reset(&self) -> bool {
         self.needs_reset || self.estop
     }
 
@@ -617,6 +726,10 @@ impl Safety {
             // A reset given before this fault does not acknowledge it.
             self.needs_reset = true;
             self.acked = false;
+        }
+        if matches!(self.state, SafetyState::Faulted { .. }) {
+            // A further fault after the stop: the strictest one since decides how it resumes.
+            self.recovery = self.recovery.map(|r| r.max(fault.recovery()));
         }
         match self.state {
             SafetyState::ListenOnly => {
@@ -638,12 +751,14 @@ impl Safety {
             SafetyState::Armed { .. } | SafetyState::Arming { .. } => {
                 tracing::warn!(%fault, "fault: valves neutral, disarming");
                 self.enter_fault(now_s, fault);
+                self.recovery = Some(fault.recovery());
             }
             SafetyState::Disarmed => {
                 // Nothing moves; still hold off re-arming until the cause clears, and keep the
                 // reason visible.
                 tracing::warn!(%fault, "fault while disarmed");
                 self.enter_fault(now_s, fault);
+                self.recovery = None;
             }
         }
     }
@@ -677,8 +792,27 @@ impl Safety {
         }
         self.estop = false;
         self.needs_reset = false;
+        self.waiting = false;
         self.acked = true;
         self.rearms = 0;
+    }
+
+    /// The operator's resume: acknowledges a stop that does not latch, so motion resumes (through a
+    /// fresh arming handshake) once its cause has cleared. An e-stop or a latching fault still needs
+    /// [`Self::reset`]. Returns whether it acknowledged a stop.
+    pub fn acknowledge(&mut self) -> bool {
+        if self.state == SafetyState::Shutdown || self.active_fault().is_none() {
+            return false;
+        }
+        if self.needs_full_reset() {
+            tracing::warn!("resume: an e-stop or a latched fault needs the operator's reset");
+            return false;
+        }
+        tracing::info!("fault stop acknowledged by the operator (resume)");
+        self.waiting = false;
+        self.acked = true;
+        self.rearms = 0;
+        true
     }
 
     /// Shutdown: from now on neutral valves and `Disarm` heartbeats only.
@@ -908,19 +1042,38 @@ impl Safety {
                     && now_s - self.last_event_s >= self.config.clear_hold_s
                     && now_s - since_s >= self.config.clear_hold_s;
                 if cleared && !self.estop {
-                    let auto = self.config.auto_rearm
-                        && self.rearms < self.config.max_auto_rearms
-                        && !self.needs_reset;
-                    if self.acked || auto {
-                        if !self.acked {
+                    // None: the fault came while disarmed and stopped nothing.
+                    let auto = match self.recovery {
+                        None => Some(false),
+                        Some(Recovery::WorkCycle) => Some(true),
+                        Some(Recovery::Transient) if self.config.auto_rearm => Some(true),
+                        Some(_) => None,
+                    }
+                    .filter(|counted| {
+                        !self.needs_reset && (!counted || self.rearms < self.config.max_auto_rearms)
+                    });
+                    if self.acked || auto.is_some() {
+                        if !self.acked && auto == Some(true) {
                             self.rearms += 1;
+                            if self.recovery == Some(Recovery::Transient) {
+                                tracing::warn!(
+                                    %fault,
+                                    rearm = self.rearms,
+                                    "safety.auto_rearm (simulation only): re-arming without the \
+                                     operator"
+                                );
+                            }
                         }
                         self.acked = false;
+                        self.waiting = false;
                         tracing::info!(%fault, rearm = self.rearms, "cause cleared: re-arming allowed");
                         self.state = SafetyState::Disarmed;
-                    } else if !self.needs_reset {
-                        tracing::warn!(%fault, "cause cleared: waiting for an operator reset");
-                        self.needs_reset = true;
+                    } else if !self.waiting && !self.needs_reset {
+                        tracing::warn!(
+                            %fault,
+                            "cause cleared: motion stopped, waiting for the operator's resume or reset"
+                        );
+                        self.waiting = true;
                     }
                 }
                 SafetyTick {
@@ -1049,6 +1202,21 @@ mod tests {
         hb.heartbeat_period_s = 0.08;
         assert!(hb.validate().is_err());
         assert!(hb.for_gateway(slow).validate().is_ok());
+        // The widest age for the project's gateway (config/vm.toml's 100 ms) on a gateway with a
+        // 20 ms sensor period and a 100 ms watchdog (examples/other_gateway.toml): held to that
+        // watchdog, not doubled past it.
+        let wide = SafetyConfig {
+            sensor_max_age_s: 0.1,
+            ..d
+        };
+        let profile = GatewayTiming {
+            sensor_period_ms: 20,
+            heartbeat_timeout_ms: 100,
+            ..GatewayTiming::canonical()
+        };
+        let held = wide.for_gateway(profile);
+        assert!((held.sensor_max_age_s - 0.1).abs() < 1e-15, "{held:?}");
+        held.validate().unwrap();
     }
 
     /// `ControllerStatus.FaultReason`'s value table in `excavator.dbc` names each fault code by its
@@ -1326,9 +1494,14 @@ mod tests {
         ));
     }
 
+    /// Under the simulation policy (`auto_rearm`), a transient fault re-arms on its own once the
+    /// cause has cleared, through a fresh handshake.
     #[test]
     fn motion_resumes_only_after_the_cause_clears_and_a_new_handshake() {
-        let (mut rig, t) = Rig::armed(SafetyConfig::default());
+        let (mut rig, t) = Rig::armed(SafetyConfig {
+            auto_rearm: true,
+            ..SafetyConfig::default()
+        });
         rig.safety.report(
             t,
             Fault::Decode {
@@ -1603,7 +1776,10 @@ mod tests {
             rig.safety.health(),
             Err(Fault::GatewayFrozen { .. })
         ));
-        // Running again (the counter advances): it re-arms.
+        // Running again (the counter advances): it waits for the operator, then re-arms.
+        let (tick, now) = rig.run(now, 100, Some(ArmMode::Valve));
+        assert!(tick.motion.is_none() && rig.safety.needs_reset());
+        rig.safety.acknowledge();
         let (tick, _) = rig.run(now, 100, Some(ArmMode::Valve));
         assert_eq!(tick.motion, Some(ArmMode::Valve));
     }
@@ -1692,6 +1868,152 @@ mod tests {
         let tick = rig.safety.tick(t, Some(ArmMode::Valve));
         assert!(tick.heartbeat.is_none() && !tick.send_neutral);
         assert_eq!(rig.safety.last_fault(), Some(Fault::EStop));
+    }
+
+    /// #46 finding 7: one injected frame (a decode error) mid-motion stopped the machine and it
+    /// re-armed 0.5 s later with no operator action. By default it stays neutral and disarmed, however
+    /// long the cause has been clear, until the operator's resume.
+    #[test]
+    fn a_single_fault_mid_motion_stays_stopped_until_the_operators_resume() {
+        let (mut rig, t) = Rig::armed(SafetyConfig::default());
+        rig.safety.report(
+            t,
+            Fault::Decode {
+                id: 0x0CFF_5080,
+                error: DecodeError::RemoteFrame,
+            },
+        );
+        let mut now = t;
+        // 60 s with the cause clear from the first period on.
+        for _ in 0..6000 {
+            let tick = rig.period(now, Some(ArmMode::Valve), false);
+            assert!(
+                tick.motion.is_none(),
+                "re-armed at {now} without the operator"
+            );
+            assert!(
+                tick.heartbeat
+                    .is_none_or(|h| h.mode == RequestedMode::Disarm),
+                "{tick:?}"
+            );
+            now += PERIOD_S;
+        }
+        assert_eq!(rig.gateway_mode, GatewayMode::Disarmed);
+        assert!(rig.safety.needs_reset() && !rig.safety.needs_full_reset());
+        assert!(matches!(
+            rig.safety.active_fault(),
+            Some(Fault::Decode { .. })
+        ));
+        assert!(rig.safety.acknowledge());
+        let (tick, _) = rig.run(now, 10, Some(ArmMode::Valve));
+        assert_eq!(tick.motion, Some(ArmMode::Valve));
+    }
+
+    /// The simulation policy covers the stated transient faults only: after a joint limit, a gateway
+    /// fault beyond its link's (joint, clock), an arm timeout or an e-stop it waits for the operator
+    /// as well; a work-cycle fault
+    /// re-arms on its own by default, and every automatic re-arm is counted.
+    #[test]
+    fn the_simulation_policy_recovers_transient_faults_only() {
+        let sim = SafetyConfig {
+            auto_rearm: true,
+            ..SafetyConfig::default()
+        };
+        let transient = [
+            Fault::StaleSensor {
+                signal: Signal::JointAngles,
+                age_s: 0.05,
+            },
+            Fault::Decode {
+                id: 0x0CFF_5080,
+                error: DecodeError::RemoteFrame,
+            },
+            Fault::UnexpectedFrame {
+                id: 0x0CFF_5099,
+                source_address: 0x99,
+            },
+            Fault::Bus(BusFault::NoAck),
+            // The gateway's watchdog and a rejected frame (a VM's scheduling gap, a spoofed frame).
+            Fault::GatewayFault(GatewayFaults(GatewayFaults::WATCHDOG_TIMEOUT)),
+            Fault::GatewayFault(GatewayFaults(
+                GatewayFaults::WATCHDOG_TIMEOUT | GatewayFaults::AUTH_FAILURE,
+            )),
+        ];
+        let operator = [
+            Fault::JointLimit {
+                joint: Joint::Stick,
+                angle_rad: -3.0,
+            },
+            Fault::GatewayFault(GatewayFaults(GatewayFaults::JOINT_LIMIT)),
+            Fault::GatewayFault(GatewayFaults(
+                GatewayFaults::WATCHDOG_TIMEOUT | GatewayFaults::CLOCK_FAULT,
+            )),
+            Fault::GatewayFault(GatewayFaults(0)),
+            Fault::GatewayMode {
+                expected: GatewayMode::ArmedValve,
+                reported: GatewayMode::Disarmed,
+            },
+            Fault::GatewayFrozen {
+                alive_counter: 3,
+                frozen_s: 0.5,
+            },
+            Fault::ArmTimeout(ArmMode::Valve),
+            Fault::EStop,
+        ];
+        let resumes = |config: SafetyConfig, fault: Fault| {
+            let (mut rig, t) = Rig::armed(config);
+            rig.safety.report(t, fault);
+            let (tick, _) = rig.run(t, 300, Some(ArmMode::Valve));
+            tick.motion.is_some()
+        };
+        for f in transient {
+            assert!(f.transient() && f.recovery() == Recovery::Transient, "{f}");
+            assert!(resumes(sim, f), "{f} not recovered under auto_rearm");
+            assert!(
+                !resumes(SafetyConfig::default(), f),
+                "{f} re-armed by default"
+            );
+        }
+        for f in operator {
+            assert!(!f.transient(), "{f}");
+            assert!(!resumes(sim, f), "{f} re-armed under auto_rearm");
+        }
+        let control = Fault::Control(ControlFault::Timeout("test"));
+        assert_eq!(control.recovery(), Recovery::WorkCycle);
+        assert!(resumes(SafetyConfig::default(), control));
+        // A transient stop followed by a gateway's joint-limit fault while stopped: the stricter
+        // rule applies.
+        let (mut rig, t) = Rig::armed(sim);
+        rig.safety.report(t, transient[0]);
+        rig.safety.report(t + PERIOD_S, operator[1]);
+        let (tick, _) = rig.run(t, 300, Some(ArmMode::Valve));
+        assert!(tick.motion.is_none() && rig.safety.needs_reset());
+        // Counted: after max_auto_rearms in a row it waits for the operator.
+        let (mut rig, mut t) = Rig::armed(SafetyConfig {
+            max_auto_rearms: 2,
+            ..sim
+        });
+        for k in 0..3 {
+            rig.safety.report(t, transient[1]);
+            let (tick, t2) = rig.run(t, 100, Some(ArmMode::Valve));
+            assert_eq!(tick.motion.is_some(), k < 2, "re-arm {k}");
+            t = t2;
+        }
+        assert!(rig.safety.needs_reset());
+    }
+
+    /// The operator's resume acknowledges an ordinary stop but not an e-stop, which takes a reset.
+    #[test]
+    fn resume_does_not_clear_an_estop() {
+        let (mut rig, t) = Rig::armed(SafetyConfig::default());
+        rig.safety.request_estop(t);
+        let (_, t2) = rig.run(t, 100, Some(ArmMode::Valve));
+        assert!(!rig.safety.acknowledge());
+        let (tick, t3) = rig.run(t2, 100, Some(ArmMode::Valve));
+        assert!(tick.motion.is_none() && rig.safety.needs_full_reset());
+        rig.safety.reset();
+        let (tick, _) = rig.run(t3, 100, Some(ArmMode::Valve));
+        assert_eq!(tick.motion, Some(ArmMode::Valve));
     }
 
     #[test]

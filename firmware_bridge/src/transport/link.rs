@@ -133,6 +133,14 @@ impl LinkStatus {
         }
     }
 
+    /// Whether the interface is virtual (a `vcan`: no bit timing and no controller state), the bus
+    /// of a simulated machine; a real CAN controller reports its state even before its bitrate is
+    /// set.
+    #[must_use]
+    pub fn is_virtual(&self) -> bool {
+        self.bitrate_bps.is_none() && self.state.is_none()
+    }
+
     /// Whether a controller may start on this link: refused when it is down (or its device
     /// stopped), and when it is in listen-only mode unless `allow_listen_only` (the controller then
     /// never transmits).

@@ -28,7 +28,7 @@ mod trace_clock;
 
 pub use clock::{Clock, TimeScale, TimeScaleError, VirtualClock};
 pub use in_process::{FaultInjection, InProcessBus, InProcessNode};
-pub use link::{LinkRefusal, LinkStatus};
+pub use link::{ControllerState, LinkRefusal, LinkStatus};
 pub use profile_bus::{ProfileBus, ProfileLink, ProfileStats};
 pub use socketcan::{IdFilter, SendRetry, SocketCanBus, send_with_retry};
 pub use trace_clock::{TraceClock, TraceTimeBase, VIRTUAL_EPOCH_UNIX_NS};
