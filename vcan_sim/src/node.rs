@@ -299,6 +299,13 @@ impl MachineNode {
                 Err(_) => self.encode_errors += 1,
             }
         }
+        if transmit {
+            // J1939-73 DM1: the gateway core keeps its schedule (1 s, and on a change of the faults).
+            match self.gateway.dm1_frame::<CanFrame>() {
+                Ok(frame) => out.extend(frame),
+                Err(_) => self.encode_errors += 1,
+            }
+        }
         if self.steps.is_multiple_of(odometry) {
             let pose = self.plant.pose();
             let off_map = self
