@@ -1401,6 +1401,39 @@ start = { kind = \"tip\", x_m = inf, z_m = 2.4, bucket_abs_deg = -55.0 }
             assert!(n.address_lost().is_none() && n.fault().is_none());
         }
 
+        const DM1_ID: u32 = 0x18FE_CA27;
+
+        #[test]
+        fn dm1_goes_out_after_the_claim_every_second_and_on_a_change() {
+            let mut n = node();
+            let sent = run(&mut n, 0.0, 3.5, &[]);
+            let dm1: Vec<i64> = sent
+                .iter()
+                .filter(|(_, id)| *id == DM1_ID)
+                .map(|(t, _)| *t)
+                .collect();
+            assert!(dm1.first().is_some_and(|t| *t >= 250), "{dm1:?}");
+            assert!(dm1.len() >= 4, "{dm1:?}");
+            for w in dm1.windows(2) {
+                let gap = w[1] - w[0];
+                assert!((100..=1000).contains(&gap), "DM1 at {dm1:?}");
+            }
+        }
+
+        #[test]
+        fn another_nodes_dm1_is_ignored_not_a_fault() {
+            let mut n = node();
+            let dm1 = |source: u8| {
+                Message::Dm1(firmware_bridge::dm1::Dm1Reporter::new(&CONTROLLER_DTCS).current())
+                    .encode_from(source)
+                    .unwrap()
+            };
+            run(&mut n, 0.0, 0.3, &[(0.1, dm1(0x00)), (0.2, dm1(GATEWAY_ADDRESS))]);
+            assert_eq!(n.counters().faulty, 0);
+            run(&mut n, 0.3, 0.4, &[(0.35, dm1(CONTROLLER_ADDRESS))]);
+            assert_eq!(n.counters().faulty, 1, "our own address from someone else");
+        }
+
         #[test]
         fn a_competing_lower_name_wins_the_node_sends_cannot_claim_and_nothing_else() {
             let mut n = node();
