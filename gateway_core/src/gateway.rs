@@ -1295,6 +1295,33 @@ mod tests {
     }
 
     #[test]
+    fn an_e_stop_is_reported_in_dm1_at_once_with_the_red_stop_lamp() {
+        use crate::dm1::GATEWAY_DTCS;
+        use crate::messages::LampStatus;
+        let mut g = test_gateway();
+        let mut l = Link::default();
+        g.tick(0.0, None);
+        let first = g.dm1_due().expect("the first DM1 at the first tick");
+        assert_eq!(first.dtc, crate::messages::Dtc::NONE);
+        g.tick(0.05, None);
+        assert!(g.dm1_due().is_none(), "nothing changed: a second later");
+        g.on_frame(&l.hb(&g, RequestedMode::EStop, 0), 0.2);
+        g.tick(0.2, None);
+        let dm1 = g.dm1_due().expect("a change goes out at once");
+        assert_eq!(dm1.dtc.spn, GATEWAY_DTCS[4].spn);
+        assert_eq!(GATEWAY_DTCS[4].name, "EStop");
+        assert_eq!(dm1.dtc.occurrence_count, 1);
+        assert_eq!(dm1.lamps.red_stop.status, LampStatus::On);
+        // Frames are `Some` only once the claim stands.
+        let mut fresh = test_gateway();
+        fresh.tick(0.0, None);
+        assert_eq!(
+            fresh.may_transmit(),
+            fresh.dm1_frame::<CanFrame>().unwrap().is_some()
+        );
+    }
+
+    #[test]
     fn e_stop_latches_in_any_mode() {
         let mut g = test_gateway();
         let mut l = Link::default();

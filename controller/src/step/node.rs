@@ -1428,7 +1428,12 @@ start = { kind = \"tip\", x_m = inf, z_m = 2.4, bucket_abs_deg = -55.0 }
                     .encode_from(source)
                     .unwrap()
             };
-            run(&mut n, 0.0, 0.3, &[(0.1, dm1(0x00)), (0.2, dm1(GATEWAY_ADDRESS))]);
+            run(
+                &mut n,
+                0.0,
+                0.3,
+                &[(0.1, dm1(0x00)), (0.2, dm1(GATEWAY_ADDRESS))],
+            );
             assert_eq!(n.counters().faulty, 0);
             run(&mut n, 0.3, 0.4, &[(0.35, dm1(CONTROLLER_ADDRESS))]);
             assert_eq!(n.counters().faulty, 1, "our own address from someone else");
