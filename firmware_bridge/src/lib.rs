@@ -15,6 +15,7 @@
 //!   source of truth, and the generic signal codec.
 //! - [`messages`]: the typed [`Message`] enum (`Message::AuxValveCommand`, `Message::JointAngles`, ...)
 //!   with `encode` to and `decode` from frames, through the DBC descriptors only.
+//! - [`dm1`]: J1939-73 DM1, the SPN, FMI and lamp of every fault of the gateway and the controller.
 //! - [`secoc`]: freshness and authentication of the controller's control frames (session nonce,
 //!   per-id counters, truncated AES-CMAC): [`secoc::Sealer`] on the controller, [`secoc::Verifier`] in
 //!   the gateway.
@@ -54,7 +55,7 @@ pub mod trace;
 pub mod transport;
 pub mod wire_dbc;
 
-pub use gateway_core::{address_claim, bus, dbc, frame, gateway, id, messages, secoc, time};
+pub use gateway_core::{address_claim, bus, dbc, dm1, frame, gateway, id, messages, secoc, time};
 
 pub use frame::{CanFrame, CanId, FrameKind};
 pub use id::{CONTROLLER_ADDRESS, GATEWAY_ADDRESS, J1939Id};

@@ -39,21 +39,28 @@
 //!
 //! A canonical signal left out maps to the wire signal of the same name with no conversion. Every
 //! canonical message must be mapped, except J1939 network management (Address Claimed, Request:
-//! [`crate::address_claim::is_network_management`]), which is the same on every J1939 network and
-//! whose source address is part of its meaning (a Cannot Claim comes from `0xFE`, a claim from
-//! whoever claims): it may not be mapped. On a J1939 wire bus (the DBC's `ProtocolType` is `J1939`)
+//! [`crate::address_claim::is_network_management`]) and the J1939-73 DM1 ([`passes_through`]), which
+//! are the same on every J1939 network and whose source address is part of their meaning (a Cannot
+//! Claim comes from `0xFE`, a claim from whoever claims, a DM1 from the node whose faults it lists):
+//! they may not be mapped. On a J1939 wire bus (the DBC's `ProtocolType` is `J1939`)
 //! those frames pass through unchanged in both directions; on any other there is no address to claim,
 //! so they are not sent ([`TranslateError::NotOnThisBus`]) and not taken from it.
 //! `mux` picks the multiplexor value when the wire message is multiplexed. The format is documented
 //! in `docs/machine-profile.md`.
 
 use std::collections::BTreeMap;
+
+/// Whether frames of `pgn` pass through every profile unchanged on a J1939 wire bus instead of being
+/// mapped: J1939 network management ([`crate::address_claim::is_network_management`]) and DM1
+/// ([`crate::dm1::DM1_PGN`]), standard messages whose source address is part of their meaning.
+pub const fn passes_through(pgn: u32) -> bool {
+    crate::address_claim::is_network_management(pgn) || pgn == crate::dm1::DM1_PGN
+}
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::address_claim::is_network_management;
 use crate::dbc::{self, MessageDesc, SignalDesc};
 use crate::frame::{CanFrame, CanId, FrameKind};
 use crate::id::J1939Id;
@@ -105,7 +112,7 @@ pub enum TranslateError {
     Unmapped(CanId),
     /// J1939 network management (an address claim, a request) for a wire bus that is not a J1939
     /// network: there are no addresses to claim there, so it is not sent (not an error).
-    #[error("J1939 network management {0}: the wire bus is not J1939")]
+    #[error("J1939 network management or DM1 {0}: the wire bus is not J1939")]
     NotOnThisBus(CanId),
     /// A frame of a known id with the wrong length or kind.
     #[error("{message}: {actual} data bytes, expected {expected}")]
@@ -427,13 +434,14 @@ impl Profile {
         let entries = file.messages.get_ref();
         for (name, entry) in entries {
             if let Some(m) = dbc::MESSAGES.iter().find(|m| m.name == name)
-                && is_network_management(m.pgn)
+                && passes_through(m.pgn)
             {
                 return Err(invalid(
                     entry.span(),
                     format!(
-                        "[messages.{name}]: J1939 network management (PGN {:#06X}) passes through \
-                         every profile unchanged and is not mapped",
+                        "[messages.{name}]: a J1939 standard message (PGN {:#06X}: network \
+                         management or DM1) passes through every profile unchanged and is not \
+                         mapped",
                         m.pgn
                     ),
                 ));
@@ -454,10 +462,7 @@ impl Profile {
         }
         let mut routes = Vec::with_capacity(dbc::MESSAGES.len());
         let mut periods = Vec::with_capacity(dbc::MESSAGES.len());
-        for canonical in dbc::MESSAGES
-            .iter()
-            .filter(|m| !is_network_management(m.pgn))
-        {
+        for canonical in dbc::MESSAGES.iter().filter(|m| !passes_through(m.pgn)) {
             let Some(entry) = entries.get(canonical.name) else {
                 return Err(invalid(
                     file.messages.span(),
@@ -1059,12 +1064,12 @@ fn timing_of(
     Ok(timing)
 }
 
-/// Whether `frame` is a J1939 network-management data frame (29-bit id, Address Claimed or
-/// Request PGN), which every profile passes through unchanged.
+/// Whether `frame` is a data frame of a J1939 standard message (29-bit id, Address Claimed, Request
+/// or DM1: [`passes_through`]), which every profile passes through unchanged.
 fn network_management(frame: &CanFrame) -> bool {
     match frame.id() {
         CanId::Extended(raw) if frame.kind() == FrameKind::Data => {
-            J1939Id::from_raw(raw).is_ok_and(|id| is_network_management(id.pgn()))
+            J1939Id::from_raw(raw).is_ok_and(|id| passes_through(id.pgn()))
         }
         _ => false,
     }
@@ -1348,7 +1353,7 @@ mod tests {
         assert!(profile.is_identity());
         let mapped = dbc::MESSAGES
             .iter()
-            .filter(|m| !is_network_management(m.pgn))
+            .filter(|m| !passes_through(m.pgn))
             .count();
         assert_eq!(profile.routes.len(), mapped);
     }

@@ -8,7 +8,8 @@ use can_dbc::{AttributeValue, Dbc};
 use firmware_bridge::busload::SCHEDULE;
 use firmware_bridge::dbc::{self, DBC_TEXT};
 use firmware_bridge::messages::{
-    Activity, AutodigStageCode, FailSafeMode, GatewayMode, RequestedMode, ValveState,
+    Activity, AutodigStageCode, FailSafeMode, GatewayMode, LampFlash, LampStatus, RequestedMode,
+    ValveState,
 };
 use firmware_bridge::wire_dbc::WireDbc;
 
@@ -133,6 +134,18 @@ fn value_tables_are_the_typed_messages_states() {
         states(&dbc, "ControllerStatus", "AutodigStage"),
         named(AutodigStageCode::ALL, |v| v as i64, AutodigStageCode::name)
     );
+    let lamp = named(LampStatus::ALL, |v| v as i64, LampStatus::name);
+    let flash = named(LampFlash::ALL, |v| v as i64, LampFlash::name);
+    for msg in ["DM1", "DM1_Gateway"] {
+        for l in ["Protect", "AmberWarning", "RedStop", "MalfunctionIndicator"] {
+            assert_eq!(states(&dbc, msg, &format!("{l}LampStatus")), lamp, "{msg}");
+            assert_eq!(states(&dbc, msg, &format!("Flash{l}Lamp")), flash, "{msg}");
+        }
+        assert_eq!(
+            states(&dbc, msg, "OccurrenceCount"),
+            [(127, "NotAvailable".to_owned())]
+        );
+    }
     // The saturating counters name their saturated value.
     for counter in ["UnexpectedFrames", "RejectedFrames"] {
         assert_eq!(
@@ -152,7 +165,17 @@ fn priorities_are_the_ones_docs_protocol_md_lists() {
         .filter(|m| priority(m) == 6)
         .map(|m| m.name)
         .collect();
-    assert_eq!(six, ["ControllerStatus", "AddressClaimed", "RequestPgn"]);
+    assert_eq!(
+        six,
+        [
+            "ControllerStatus",
+            "AddressClaimed",
+            "AddressClaimed_Gateway",
+            "DM1",
+            "DM1_Gateway",
+            "RequestPgn"
+        ]
+    );
     assert!(
         dbc::MESSAGES
             .iter()
@@ -160,7 +183,7 @@ fn priorities_are_the_ones_docs_protocol_md_lists() {
     );
     let doc = include_str!("../../docs/protocol.md").replace("\n  ", " ");
     assert!(
-        doc.contains("priority 6 (J1939's default for information and network management) for `ControllerStatus`, `AddressClaimed` and `RequestPgn`"),
+        doc.contains("priority 6 (J1939's default for information and network management) for `ControllerStatus`, `AddressClaimed`, `AddressClaimed_Gateway`, `DM1`, `DM1_Gateway` and `RequestPgn`"),
         "docs/protocol.md names the priority-6 messages"
     );
 }

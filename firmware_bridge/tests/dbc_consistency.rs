@@ -67,8 +67,11 @@ fn every_dbc_message_has_a_typed_counterpart_that_round_trips() {
         .map(|m| m.id.raw() & 0x1FFF_FFFF)
         .collect();
     let mut typed_ids = BTreeSet::new();
-    for msg in common::sample_messages() {
-        let frame = msg.encode().expect("sample encodes");
+    let samples = common::sample_messages()
+        .into_iter()
+        .map(|m| (m, m.encode().expect("sample encodes")))
+        .chain(common::gateway_sourced_samples());
+    for (msg, frame) in samples {
         let CanId::Extended(id) = frame.id() else {
             panic!("J1939 frames are extended")
         };
@@ -85,7 +88,10 @@ fn every_dbc_message_has_a_typed_counterpart_that_round_trips() {
         assert_eq!(names, dbc_names, "{}", dbc_msg.name);
         let decoded = Message::decode(&frame).expect("decodes");
         assert_eq!(
-            decoded.message.encode().expect("re-encodes"),
+            decoded
+                .message
+                .encode_from(decoded.id.source_address())
+                .expect("re-encodes"),
             frame,
             "{}",
             dbc_msg.name

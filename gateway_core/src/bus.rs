@@ -8,6 +8,7 @@
 //!               let out = gateway.tick(now, resolvers.angles());   (watchdog, position loop)
 //!               valves.drive(out.valve_commands);
 //!               if let Some(f) = gateway.take_claim_frame() { can.transmit(&f) }  (address claim)
+//!               if let Some(f) = gateway.dm1_frame()? { can.transmit(&f) }   (DM1: 1 s, on a change)
 //! every 50 ms:  for f in gateway.status_frames()?.into_iter().flatten() { can.transmit(&f) }
 //!                                                   (status and session out, once the claim stands)
 //! ```
@@ -110,6 +111,23 @@ impl Gateway {
         let status = Message::GatewayStatus(self.next_status()).encode()?;
         let session = Message::GatewaySession(self.session()).encode()?;
         Ok(Some([to_frame(&status)?, to_frame(&session)?]))
+    }
+
+    /// The J1939-73 DM1 frame (PGN 65226) due now ([`Gateway::dm1_due`]): call it at every tick; it
+    /// is `Some` once per second and at a change of the fault bits. `None` while the address claim does
+    /// not stand.
+    ///
+    /// # Errors
+    /// [`StatusFrameError`].
+    pub fn dm1_frame<F: embedded_can::Frame>(&mut self) -> Result<Option<F>, StatusFrameError> {
+        if !self.may_transmit() {
+            return Ok(None);
+        }
+        let Some(dm1) = self.dm1_due() else {
+            return Ok(None);
+        };
+        let frame = Message::Dm1(dm1).encode_from(self.address_claim().address())?;
+        Ok(Some(to_frame(&frame)?))
     }
 }
 

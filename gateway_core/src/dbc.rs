@@ -367,6 +367,24 @@ pub fn message_by_pgn(pgn: u32) -> Option<&'static MessageDesc> {
     MESSAGES.iter().find(|m| m.pgn == pgn)
 }
 
+/// The index in [`MESSAGES`] of the DBC message a frame with the 29-bit `raw_id` is: the one of its
+/// PGN sent from its source address (`AddressClaimed` from `0x27`, `AddressClaimed_Gateway` from
+/// `0x80`; `DM1`, `DM1_Gateway`), else the first of its PGN (a message from another address).
+pub fn message_index_by_id(raw_id: u32) -> Option<usize> {
+    let id = crate::id::J1939Id::from_raw(raw_id).ok()?;
+    let pgn = id.pgn();
+    let of_pgn = || {
+        MESSAGES
+            .iter()
+            .enumerate()
+            .filter(move |(_, m)| m.pgn == pgn)
+    };
+    of_pgn()
+        .find(|(_, m)| m.default_id & 0xFF == u32::from(id.source_address()))
+        .or_else(|| of_pgn().next())
+        .map(|(i, _)| i)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -378,7 +396,7 @@ mod tests {
         assert_eq!(aux_valve_measured_boom::PGN, 65056);
         assert_eq!(joint_angles::PGN, 0xFF50);
         assert_eq!(controller_status::MESSAGE.default_id, 0x18FF_6227);
-        assert_eq!(MESSAGES.len(), 20);
+        assert_eq!(MESSAGES.len(), 23);
     }
 
     /// The `GenMsgCycleTime` of message `name`, ms, read from the DBC text itself (not through

@@ -89,11 +89,12 @@
 //! cylinder direction (`docs/ARCHITECTURE.md`: stick and bucket extension lowers their angles).
 
 use crate::address_claim::{AddressClaimer, ClaimEvent, Name};
+use crate::dm1::{Dm1Reporter, GATEWAY_DTCS};
 use crate::frame::CanFrame;
 use crate::id::CONTROLLER_ADDRESS;
 use crate::messages::{
-    DecodeError, GatewayFaults, GatewayMode, GatewaySession, GatewayStatus, Message, RequestedMode,
-    heartbeat_checksum, is_next_alive,
+    DecodeError, Dm1, GatewayFaults, GatewayMode, GatewaySession, GatewayStatus, Message,
+    RequestedMode, heartbeat_checksum, is_next_alive,
 };
 use crate::secoc::{NonceSource, SessionKey, SessionNonces, Verifier};
 use crate::time::{ClockReading, Instant, NANOS_PER_S, secs_to_nanos};
@@ -291,6 +292,8 @@ pub struct Gateway {
     ignored: u64,
     /// The J1939-81 address claim of the gateway's address.
     claim: AddressClaimer,
+    /// The fault bits as J1939-73 DM1 ([`crate::dm1::GATEWAY_DTCS`]).
+    dm1: Dm1Reporter<{ GATEWAY_DTCS.len() }>,
 }
 
 /// Outcome of handling one frame, for logs and tests.
@@ -369,6 +372,7 @@ impl Gateway {
             rejected: 0,
             ignored: 0,
             claim: AddressClaimer::gateway(),
+            dm1: Dm1Reporter::new(&GATEWAY_DTCS),
         }
     }
 
@@ -424,6 +428,14 @@ impl Gateway {
     /// The latched faults.
     pub fn faults(&self) -> GatewayFaults {
         self.faults
+    }
+
+    /// The DM1 to send now, if one is due ([`Dm1Reporter::poll`] at the last tick's time): its fault
+    /// bits as J1939-73 trouble codes. `None` before the first tick. Send it only while
+    /// [`Self::may_transmit`] ([`Gateway::dm1_frame`] checks it).
+    pub fn dm1_due(&mut self) -> Option<Dm1> {
+        let now = self.last_tick?;
+        self.dm1.poll(now)
     }
 
     /// Counts of unexpected and rejected frames.
@@ -625,6 +637,8 @@ impl Gateway {
             }
             // Sent for traces; the gateway is allowed to see it and has no use for it.
             Message::ControllerStatus(_) if from_controller => self.ignore(),
+            // Every J1939 node may broadcast its trouble codes; they are for service tools.
+            Message::Dm1(_) if decoded.id.source_address() != self.claim.address() => self.ignore(),
             // The gateway's own messages coming from someone else, or a stranger's controller status.
             _ => self.unexpected(),
         }
@@ -752,6 +766,7 @@ impl Gateway {
             }
         });
         // The alive counter is not touched here: it counts status frames (`next_status`), not ticks.
+        self.dm1.observe(u32::from(self.faults.0));
         GatewayOutputs {
             valve_commands: out,
             status: self.status(),
@@ -1277,6 +1292,33 @@ mod tests {
             FrameVerdict::Rejected
         );
         assert!(g.faults().contains(GatewayFaults::BAD_ALIVE_COUNTER));
+    }
+
+    #[test]
+    fn an_e_stop_is_reported_in_dm1_at_once_with_the_red_stop_lamp() {
+        use crate::dm1::GATEWAY_DTCS;
+        use crate::messages::LampStatus;
+        let mut g = test_gateway();
+        let mut l = Link::default();
+        g.tick(0.0, None);
+        let first = g.dm1_due().expect("the first DM1 at the first tick");
+        assert_eq!(first.dtc, crate::messages::Dtc::NONE);
+        g.tick(0.05, None);
+        assert!(g.dm1_due().is_none(), "nothing changed: a second later");
+        g.on_frame(&l.hb(&g, RequestedMode::EStop, 0), 0.2);
+        g.tick(0.2, None);
+        let dm1 = g.dm1_due().expect("a change goes out at once");
+        assert_eq!(dm1.dtc.spn, GATEWAY_DTCS[4].spn);
+        assert_eq!(GATEWAY_DTCS[4].name, "EStop");
+        assert_eq!(dm1.dtc.occurrence_count, 1);
+        assert_eq!(dm1.lamps.red_stop.status, LampStatus::On);
+        // Frames are `Some` only once the claim stands.
+        let mut fresh = test_gateway();
+        fresh.tick(0.0, None);
+        assert_eq!(
+            fresh.may_transmit(),
+            fresh.dm1_frame::<CanFrame>().unwrap().is_some()
+        );
     }
 
     #[test]

@@ -19,6 +19,8 @@
 //! - [`secoc`]: freshness and authentication of the controller's control frames (session nonce,
 //!   per-id counters, truncated AES-CMAC): [`secoc::Sealer`] on the controller, [`secoc::Verifier`] in
 //!   the gateway.
+//! - [`dm1`]: J1939-73 DM1, the table of every fault's SPN, FMI and lamp for the gateway and the
+//!   controller, and the schedule that reports them (1 s, and on a change).
 //! - [`time`]: [`Instant`], the gateway's integer clock (nanoseconds).
 //! - [`gateway`]: the firmware state machine (arming, e-stop latch, heartbeat watchdog with alive
 //!   counter and CRC, session freshness, fail-safe valve state, position mode, status, clock checks).
@@ -48,6 +50,7 @@ extern crate std;
 pub mod address_claim;
 pub mod bus;
 pub mod dbc;
+pub mod dm1;
 pub mod frame;
 pub mod gateway;
 pub mod id;

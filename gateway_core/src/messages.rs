@@ -587,6 +587,90 @@ pub struct RequestPgn {
     pub pgn: u32,
 }
 
+signal_enum! {
+    /// A J1939-73 lamp's status in DM1.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+    pub enum LampStatus {
+        /// Off.
+        Off = 0,
+        /// On.
+        On = 1,
+        /// Reserved (J1939-73).
+        Reserved = 2,
+        /// The node has no such lamp.
+        NotAvailable = 3,
+    }
+}
+
+signal_enum! {
+    /// A J1939-73 lamp's flash in DM1.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+    pub enum LampFlash {
+        /// Slow flash (1 Hz).
+        SlowFlash = 0,
+        /// Fast flash (2 Hz or faster).
+        FastFlash = 1,
+        /// Reserved (J1939-73).
+        Reserved = 2,
+        /// Do not flash (the project's nodes always send this).
+        DoNotFlash = 3,
+    }
+}
+
+/// One lamp of DM1: its status and flash.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct LampState {
+    /// On, off, not available.
+    pub status: LampStatus,
+    /// How it flashes.
+    pub flash: LampFlash,
+}
+
+/// The four lamps of DM1 (J1939-73).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Lamps {
+    /// Malfunction indicator lamp (emission-related faults).
+    pub malfunction_indicator: LampState,
+    /// Red stop lamp.
+    pub red_stop: LampState,
+    /// Amber warning lamp.
+    pub amber_warning: LampState,
+    /// Protect lamp (a non-electronic subsystem).
+    pub protect: LampState,
+}
+
+/// One diagnostic trouble code (J1939-73, conversion method 0: the SPN's 19 bits are bytes 3, 4 and
+/// the top 3 bits of byte 5, the DBC's `SpnLow` and `SpnHigh`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Dtc {
+    /// Suspect parameter number, 19 bits.
+    pub spn: u32,
+    /// Failure mode identifier, 5 bits.
+    pub fmi: u8,
+    /// Occurrence count, 7 bits (127 is "not available").
+    pub occurrence_count: u8,
+}
+
+impl Dtc {
+    /// The DTC of a DM1 with no active fault: all zeros (J1939-73).
+    pub const NONE: Self = Self {
+        spn: 0,
+        fmi: 0,
+        occurrence_count: 0,
+    };
+}
+
+/// J1939-73 DM1, active diagnostic trouble codes (PGN 65226 `0xFECA`, priority 6), one DTC in one
+/// frame: from the gateway (`DM1_Gateway` in the DBC) and from the controller (`DM1`). See
+/// [`crate::dm1`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Dm1 {
+    /// Lamp status.
+    pub lamps: Lamps,
+    /// The active DTC ([`Dtc::NONE`] when none is).
+    pub dtc: Dtc,
+}
+
 /// Every message of the protocol. Variant names are the names in `docs/protocol.md`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Message {
@@ -616,6 +700,8 @@ pub enum Message {
     AddressClaimed(AddressClaimed),
     /// J1939-21 Request.
     RequestPgn(RequestPgn),
+    /// J1939-73 DM1, active diagnostic trouble codes.
+    Dm1(Dm1),
 }
 
 /// A decoded frame: the J1939 id (so receivers can check the source address), the message, and the
@@ -632,9 +718,9 @@ pub struct Decoded {
     pub trailer: Option<Trailer>,
 }
 
-/// Most signals of one message (Address Claimed has ten: the NAME's fields); a test checks the DBC
-/// against it.
-pub const MAX_SIGNALS: usize = 10;
+/// Most signals of one message (DM1 has thirteen: four lamps, their flash, the DTC's SPN in two parts,
+/// FMI, occurrence count and conversion method); a test checks the DBC against it.
+pub const MAX_SIGNALS: usize = 13;
 
 /// A message's values by DBC signal name ([`Message::signal_values`]), held inline: at most
 /// [`MAX_SIGNALS`] pairs, no heap. Dereferences to the slice of pairs.
@@ -822,6 +908,9 @@ impl Message {
             Self::ControllerStatus(_) => &dbc::controller_status::MESSAGE,
             Self::AddressClaimed(_) => &dbc::address_claimed::MESSAGE,
             Self::RequestPgn(_) => &dbc::request_pgn::MESSAGE,
+            // Both nodes' DM1 have one layout (`tests::dm1_messages_share_one_layout`): the
+            // controller's descriptor, sent from either address with `encode_from`.
+            Self::Dm1(_) => &dbc::dm1::MESSAGE,
         }
     }
 
@@ -954,6 +1043,41 @@ impl Message {
             }
             Self::RequestPgn(m) => {
                 dbc::encode_raw(&dbc::request_pgn::REQUESTED_PGN, i64::from(m.pgn), d)?;
+            }
+            Self::Dm1(m) => {
+                use dbc::dm1 as s;
+                let lamps = [
+                    (
+                        &s::MALFUNCTION_INDICATOR_LAMP_STATUS,
+                        &s::FLASH_MALFUNCTION_INDICATOR_LAMP,
+                        m.lamps.malfunction_indicator,
+                    ),
+                    (
+                        &s::RED_STOP_LAMP_STATUS,
+                        &s::FLASH_RED_STOP_LAMP,
+                        m.lamps.red_stop,
+                    ),
+                    (
+                        &s::AMBER_WARNING_LAMP_STATUS,
+                        &s::FLASH_AMBER_WARNING_LAMP,
+                        m.lamps.amber_warning,
+                    ),
+                    (
+                        &s::PROTECT_LAMP_STATUS,
+                        &s::FLASH_PROTECT_LAMP,
+                        m.lamps.protect,
+                    ),
+                ];
+                for (status, flash, lamp) in lamps {
+                    dbc::encode_raw(status, lamp.status as i64, d)?;
+                    dbc::encode_raw(flash, lamp.flash as i64, d)?;
+                }
+                let spn = i64::from(m.dtc.spn);
+                dbc::encode_raw(&s::SPN_LOW, spn & 0xFFFF, d)?;
+                dbc::encode_raw(&s::SPN_HIGH, spn >> 16, d)?;
+                dbc::encode_raw(&s::FMI, i64::from(m.dtc.fmi), d)?;
+                dbc::encode_raw(&s::OCCURRENCE_COUNT, i64::from(m.dtc.occurrence_count), d)?;
+                dbc::encode_raw(&s::CONVERSION_METHOD, 0, d)?;
             }
         }
         Ok(())
@@ -1136,6 +1260,48 @@ impl Message {
                     })?,
                 })
             }
+            dbc::dm1::PGN => {
+                use dbc::dm1 as s;
+                let lamp =
+                    |status: &SignalDesc, flash: &SignalDesc| -> Result<LampState, DecodeError> {
+                        Ok(LampState {
+                            status: LampStatus::from_raw(raw(status, d)?),
+                            flash: LampFlash::from_raw(raw(flash, d)?),
+                        })
+                    };
+                // Conversion method 1 is the SPN layout of J1939-73's first editions: its SPN
+                // cannot be read as the one meant.
+                let cm = raw(&s::CONVERSION_METHOD, d)?;
+                if cm != 0 {
+                    return Err(DecodeError::OutOfRange {
+                        signal: s::CONVERSION_METHOD.name,
+                        raw: cm,
+                    });
+                }
+                let spn = raw(&s::SPN_LOW, d)? | (raw(&s::SPN_HIGH, d)? << 16);
+                Self::Dm1(Dm1 {
+                    lamps: Lamps {
+                        malfunction_indicator: lamp(
+                            &s::MALFUNCTION_INDICATOR_LAMP_STATUS,
+                            &s::FLASH_MALFUNCTION_INDICATOR_LAMP,
+                        )?,
+                        red_stop: lamp(&s::RED_STOP_LAMP_STATUS, &s::FLASH_RED_STOP_LAMP)?,
+                        amber_warning: lamp(
+                            &s::AMBER_WARNING_LAMP_STATUS,
+                            &s::FLASH_AMBER_WARNING_LAMP,
+                        )?,
+                        protect: lamp(&s::PROTECT_LAMP_STATUS, &s::FLASH_PROTECT_LAMP)?,
+                    },
+                    dtc: Dtc {
+                        spn: u32::try_from(spn).map_err(|_| DecodeError::OutOfRange {
+                            signal: s::SPN_LOW.name,
+                            raw: spn,
+                        })?,
+                        fmi: raw_u8(&s::FMI, d)?,
+                        occurrence_count: raw_u8(&s::OCCURRENCE_COUNT, d)?,
+                    },
+                })
+            }
             _ => return Err(unknown),
         })
     }
@@ -1246,6 +1412,32 @@ impl Message {
                 ])
             }
             Self::RequestPgn(m) => SignalValues::of(&[("RequestedPgn", f64::from(m.pgn))]),
+            Self::Dm1(m) => {
+                let l = &m.lamps;
+                let status = |s: LampState| f64::from(s.status as u8);
+                let flash = |s: LampState| f64::from(s.flash as u8);
+                SignalValues::of(&[
+                    ("ProtectLampStatus", status(l.protect)),
+                    ("AmberWarningLampStatus", status(l.amber_warning)),
+                    ("RedStopLampStatus", status(l.red_stop)),
+                    (
+                        "MalfunctionIndicatorLampStatus",
+                        status(l.malfunction_indicator),
+                    ),
+                    ("FlashProtectLamp", flash(l.protect)),
+                    ("FlashAmberWarningLamp", flash(l.amber_warning)),
+                    ("FlashRedStopLamp", flash(l.red_stop)),
+                    (
+                        "FlashMalfunctionIndicatorLamp",
+                        flash(l.malfunction_indicator),
+                    ),
+                    ("SpnLow", f64::from(m.dtc.spn & 0xFFFF)),
+                    ("Fmi", f64::from(m.dtc.fmi)),
+                    ("SpnHigh", f64::from(m.dtc.spn >> 16)),
+                    ("OccurrenceCount", f64::from(m.dtc.occurrence_count)),
+                    ("ConversionMethod", 0.0),
+                ])
+            }
         }
     }
 }
@@ -1402,6 +1594,91 @@ mod tests {
                 assert_eq!(a, b, "{} differs from {}", desc.name, group[0].name);
             }
         }
+    }
+
+    #[test]
+    fn dm1_messages_share_one_layout() {
+        let strip = |s: &SignalDesc| (s.start_bit, s.len, s.signed, s.raw_min, s.raw_max, s.name);
+        let a: Vec<_> = dbc::dm1::SIGNALS.iter().map(strip).collect();
+        let b: Vec<_> = dbc::dm1_gateway::SIGNALS.iter().map(strip).collect();
+        assert_eq!(a, b);
+        assert_eq!(dbc::dm1::PGN, crate::dm1::DM1_PGN);
+        assert_eq!(dbc::dm1_gateway::PGN, crate::dm1::DM1_PGN);
+        assert_eq!(dbc::dm1::MESSAGE.default_id, 0x18FE_CA27);
+        assert_eq!(dbc::dm1_gateway::MESSAGE.default_id, 0x18FE_CA80);
+    }
+
+    /// The gateway's e-stop as DM1 (docs/protocol.md): red stop lamp on, no flash, SPN 520196 =
+    /// `0x7F004` (bytes 3-4 `04 F0`, its top 3 bits 7 over FMI 31 in byte 5: `FF`), occurrence 1.
+    const GATEWAY_ESTOP_DM1: [u8; 8] = [0x10, 0xFF, 0x04, 0xF0, 0xFF, 0x01, 0xFF, 0xFF];
+    /// No active fault: lamps off, DTC all zeros (J1939-73).
+    const NO_FAULT_DM1: [u8; 8] = [0x00, 0xFF, 0x00, 0x00, 0x00, 0x00, 0xFF, 0xFF];
+
+    #[test]
+    fn dm1_matches_the_documented_bytes_and_round_trips() {
+        let off = LampState {
+            status: LampStatus::Off,
+            flash: LampFlash::DoNotFlash,
+        };
+        let estop = Dm1 {
+            lamps: Lamps {
+                malfunction_indicator: off,
+                red_stop: LampState {
+                    status: LampStatus::On,
+                    ..off
+                },
+                amber_warning: off,
+                protect: off,
+            },
+            dtc: Dtc {
+                spn: 520_196,
+                fmi: 31,
+                occurrence_count: 1,
+            },
+        };
+        let frame = Message::Dm1(estop)
+            .encode_from(crate::id::GATEWAY_ADDRESS)
+            .unwrap();
+        assert_eq!(frame.id(), CanId::Extended(0x18FE_CA80));
+        assert_eq!(frame.data(), &GATEWAY_ESTOP_DM1);
+        assert_eq!(
+            Message::decode(&frame).unwrap().message,
+            Message::Dm1(estop)
+        );
+        let none = Dm1 {
+            lamps: Lamps {
+                malfunction_indicator: off,
+                red_stop: off,
+                amber_warning: off,
+                protect: off,
+            },
+            dtc: Dtc::NONE,
+        };
+        let frame = Message::Dm1(none).encode().unwrap();
+        assert_eq!(frame.id(), CanId::Extended(0x18FE_CA27));
+        assert_eq!(frame.data(), &NO_FAULT_DM1);
+        // The SPN layout of conversion method 1 is not read as if it were the current one.
+        let mut old_layout = NO_FAULT_DM1;
+        old_layout[5] = 0x80;
+        let frame = CanFrame::new_extended(0x18FE_CA80, &old_layout).unwrap();
+        assert!(matches!(
+            Message::decode(&frame),
+            Err(DecodeError::OutOfRange {
+                signal: "ConversionMethod",
+                ..
+            })
+        ));
+    }
+
+    #[test]
+    fn a_frame_names_the_dbc_message_of_its_source_address() {
+        let name = |id: u32| dbc::MESSAGES[dbc::message_index_by_id(id).unwrap()].name;
+        assert_eq!(name(0x18EE_FF27), "AddressClaimed");
+        assert_eq!(name(0x18EE_FF80), "AddressClaimed_Gateway");
+        assert_eq!(name(0x18EE_FFFE), "AddressClaimed");
+        assert_eq!(name(0x18FE_CA27), "DM1");
+        assert_eq!(name(0x18FE_CA80), "DM1_Gateway");
+        assert_eq!(name(0x18FE_CA00), "DM1");
     }
 
     #[test]

@@ -289,8 +289,8 @@ pub fn json_schema(desc: &dbc::MessageDesc) -> String {
             sig.name.into(),
             serde_json::json!({"type": ["number", "null"], "description": description}),
         );
-        if signals::value_name(sig.name, sig.raw_min).is_some()
-            || signals::value_name(sig.name, sig.raw_max).is_some()
+        if signals::value_name_in(desc, sig.name, sig.raw_min).is_some()
+            || signals::value_name_in(desc, sig.name, sig.raw_max).is_some()
         {
             props.insert(
                 format!("{}_name", sig.name),
@@ -336,13 +336,13 @@ pub fn message_json(desc: &dbc::MessageDesc, frame: &CanFrame, out: &mut String)
         };
         let _ = write!(out, ",\"{}\":", sig.name);
         push_json_number(out, value.value());
-        let has_table = signals::value_name(sig.name, sig.raw_min).is_some()
-            || signals::value_name(sig.name, sig.raw_max).is_some();
+        let has_table = signals::value_name_in(desc, sig.name, sig.raw_min).is_some()
+            || signals::value_name_in(desc, sig.name, sig.raw_max).is_some();
         if has_table {
             let _ = write!(out, ",\"{}_name\":", sig.name);
             let name = dbc::decode_raw(sig, data)
                 .ok()
-                .and_then(|raw| signals::value_name(sig.name, raw));
+                .and_then(|raw| signals::value_name_in(desc, sig.name, raw));
             match name {
                 Some(n) => push_json_string(out, n),
                 None => out.push_str("null"),

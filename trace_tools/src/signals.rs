@@ -72,16 +72,29 @@ pub fn message_of(frame: &CanFrame) -> Option<(MessageIndex, &'static MessageDes
     }
 }
 
-/// Finds the DBC message of a 29-bit id by its PGN (any source address).
+/// Finds the DBC message of a 29-bit id by its PGN: the one sent from the id's source address where
+/// the DBC has one per node (`DM1_Gateway`, `AddressClaimed_Gateway`), else the first of the PGN.
 pub fn message_of_id(id: u32) -> Option<(MessageIndex, &'static MessageDesc)> {
-    let pgn = firmware_bridge::J1939Id::from_raw(id).ok()?.pgn();
-    dbc::MESSAGES.iter().enumerate().find(|(_, m)| m.pgn == pgn)
+    let i = dbc::message_index_by_id(id)?;
+    Some((i, dbc::MESSAGES.get(i)?))
 }
 
 /// The name of a raw value in the DBC's value table for the signal, if any.
 pub fn value_name(signal: &str, raw: i64) -> Option<&'static str> {
     value_tables()
+        .by_name
         .get(signal)
+        .and_then(|t| t.iter().find(|(v, _)| *v == raw).map(|(_, n)| *n))
+}
+
+/// The name of a raw value of `signal` of message `desc` in the DBC's value tables: the message's own
+/// table, else the signal name's ([`value_name`]).
+pub fn value_name_in(desc: &MessageDesc, signal: &str, raw: i64) -> Option<&'static str> {
+    let tables = value_tables();
+    tables
+        .by_message
+        .get(&(dbc_id(desc), signal))
+        .or_else(|| tables.by_name.get(signal))
         .and_then(|t| t.iter().find(|(v, _)| *v == raw).map(|(_, n)| *n))
 }
 
@@ -101,7 +114,13 @@ pub fn value_table(
                 .map(|m| {
                     m.signals
                         .iter()
-                        .map(|s| tables.get(s.name).map(Vec::as_slice))
+                        .map(|s| {
+                            tables
+                                .by_message
+                                .get(&(dbc_id(m), s.name))
+                                .or_else(|| tables.by_name.get(s.name))
+                                .map(Vec::as_slice)
+                        })
                         .collect()
                 })
                 .collect()
@@ -112,22 +131,35 @@ pub fn value_table(
         .flatten()
 }
 
-type ValueTables = HashMap<&'static str, Vec<(i64, &'static str)>>;
+type Table = Vec<(i64, &'static str)>;
+
+/// The `VAL_` tables by message id (as the DBC writes it) and signal, and by signal name (the first).
+#[derive(Default)]
+struct ValueTables {
+    by_message: HashMap<(u32, &'static str), Table>,
+    by_name: HashMap<&'static str, Table>,
+}
+
+/// A message's id as the DBC writes it (bit 31 set for a 29-bit id).
+fn dbc_id(m: &MessageDesc) -> u32 {
+    m.default_id | 0x8000_0000
+}
 
 fn value_tables() -> &'static ValueTables {
     static TABLES: OnceLock<ValueTables> = OnceLock::new();
     TABLES.get_or_init(|| parse_value_tables(DBC_TEXT))
 }
 
-/// Parses `VAL_ <id> <signal> <n> "<name>" ... ;` lines. The first table for a signal name wins.
+/// Parses `VAL_ <id> <signal> <n> "<name>" ... ;` lines. The first table for a signal name is its
+/// table by name.
 fn parse_value_tables(text: &'static str) -> ValueTables {
-    let mut tables = ValueTables::new();
+    let mut tables = ValueTables::default();
     for line in text.lines() {
         let Some(rest) = line.trim().strip_prefix("VAL_ ") else {
             continue;
         };
         let mut parts = rest.splitn(3, ' ');
-        let (Some(_id), Some(signal), Some(body)) = (parts.next(), parts.next(), parts.next())
+        let (Some(id), Some(signal), Some(body)) = (parts.next(), parts.next(), parts.next())
         else {
             continue;
         };
@@ -143,7 +175,10 @@ fn parse_value_tables(text: &'static str) -> ValueTables {
             rest = after.trim();
         }
         if !entries.is_empty() {
-            tables.entry(signal).or_insert(entries);
+            if let Ok(id) = id.parse::<u32>() {
+                tables.by_message.insert((id, signal), entries.clone());
+            }
+            tables.by_name.entry(signal).or_insert(entries);
         }
     }
     tables

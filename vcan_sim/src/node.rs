@@ -310,6 +310,13 @@ impl MachineNode {
                 Err(_) => self.encode_errors += 1,
             }
         }
+        if transmit {
+            // J1939-73 DM1: the gateway core keeps its schedule (1 s, and on a change of the faults).
+            match self.gateway.dm1_frame::<CanFrame>() {
+                Ok(frame) => out.extend(frame),
+                Err(_) => self.encode_errors += 1,
+            }
+        }
         if self.steps.is_multiple_of(odometry) {
             let pose = self.plant.pose();
             let off_map = self
@@ -568,6 +575,28 @@ mod tests {
 
     /// Regression (#20): consecutive status frames must carry consecutive alive counters
     /// (`excavator-ctl trace stats` counted 1554 errors in 1555 frames).
+    #[test]
+    fn the_gateway_sends_dm1_once_per_second_from_its_address() {
+        let mut node = claimed_node_at(0.0);
+        let mut out = Vec::new();
+        node.run_steps(3000, &mut out);
+        let dm1: Vec<_> = out
+            .iter()
+            .filter_map(|f| match Message::decode(f) {
+                Ok(d) => match d.message {
+                    Message::Dm1(m) => Some((d.id.source_address(), m)),
+                    _ => None,
+                },
+                Err(_) => None,
+            })
+            .collect();
+        assert_eq!(dm1.len(), 3, "{dm1:?}");
+        for (source, m) in dm1 {
+            assert_eq!(source, firmware_bridge::GATEWAY_ADDRESS);
+            assert_eq!(m.dtc, firmware_bridge::messages::Dtc::NONE);
+        }
+    }
+
     #[test]
     fn status_frames_carry_consecutive_alive_counters() {
         let mut node = claimed_node_at(0.0);

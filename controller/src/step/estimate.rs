@@ -452,7 +452,8 @@ impl Estimator {
             | Message::GatewaySession(_)
             | Message::ControllerStatus(_)
             | Message::AddressClaimed(_)
-            | Message::RequestPgn(_) => return false,
+            | Message::RequestPgn(_)
+            | Message::Dm1(_) => return false,
         };
         self.received_s[signal.slot()] = Some(time_s);
         true

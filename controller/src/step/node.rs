@@ -51,6 +51,7 @@
 use firmware_bridge::address_claim::{
     AddressClaimer, ClaimEvent, NULL_ADDRESS, Name, request_address_claimed,
 };
+use firmware_bridge::dm1::{CONTROLLER_DTCS, Dm1Reporter};
 use firmware_bridge::id::GLOBAL_ADDRESS;
 use firmware_bridge::messages::{
     Activity, AutodigStageCode, AuxValveCommand, ControllerStatus as StatusMessage, Message,
@@ -217,6 +218,8 @@ pub struct ControllerNode {
     reclaim_requested: bool,
     /// Rate limit of the intrusion log (every intrusion is counted and raised).
     intrusion_log: LogThrottle,
+    /// The active fault as J1939-73 DM1 ([`CONTROLLER_DTCS`], index = fault code - 1).
+    dm1: Dm1Reporter<{ CONTROLLER_DTCS.len() }>,
 }
 
 impl ControllerNode {
@@ -273,6 +276,7 @@ impl ControllerNode {
             last_motion: None,
             last_command: CycleCommand::Neutral,
             status_alive: 15,
+            dm1: Dm1Reporter::new(&CONTROLLER_DTCS),
             // The step's frames leave after its computation (and its logs): a period of margin
             // keeps the claim's 250 ms on the wire when a step is late.
             claim: AddressClaimer::controller_named(name).with_hold_margin(
@@ -591,6 +595,10 @@ impl ControllerNode {
                         ClaimEvent::Noted | ClaimEvent::Reclaimed { .. } | ClaimEvent::Answered => {
                         }
                     }
+                } else if matches!(decoded.message, Message::Dm1(_)) && sa != CONTROLLER_ADDRESS {
+                    // Trouble codes for service tools (the gateway's faults reach the safety layer
+                    // through its status); any J1939 node may broadcast them.
+                    self.counters.ignored += 1;
                 } else if let (GATEWAY_ADDRESS, Message::GatewaySession(session)) =
                     (sa, decoded.message)
                 {
@@ -789,6 +797,13 @@ impl ControllerNode {
             let status = self.status_message();
             self.push_message(Message::ControllerStatus(status));
         }
+        self.dm1.observe(dm1_active(self.safety.active_fault()));
+        if self.safety.state() != SafetyState::ListenOnly
+            && let Some(now) = Instant::from_secs_f64(now_s)
+            && let Some(dm1) = self.dm1.poll(now)
+        {
+            self.push_message(Message::Dm1(dm1));
+        }
         if let Some(hb) = tick.heartbeat {
             self.push_message(Message::ControllerHeartbeat(hb));
         }
@@ -915,6 +930,15 @@ impl ControllerNode {
             self.push_message(Message::ControllerHeartbeat(hb));
         }
         self.out
+    }
+}
+
+/// DM1's active set for the controller's `fault` (bit `code - 1`, [`CONTROLLER_DTCS`]; none when
+/// healthy).
+fn dm1_active(fault: Option<Fault>) -> u32 {
+    match fault.map(|f| f.code()) {
+        Some(code @ 1..=32) => 1 << (code - 1),
+        _ => 0,
     }
 }
 
@@ -1383,6 +1407,44 @@ start = { kind = \"tip\", x_m = inf, z_m = 2.4, bucket_abs_deg = -55.0 }
             assert!(first.0 >= 250, "first application frame at {} ms", first.0);
             assert!(app.iter().any(|(_, id)| *id == HEARTBEAT_ID));
             assert!(n.address_lost().is_none() && n.fault().is_none());
+        }
+
+        const DM1_ID: u32 = 0x18FE_CA27;
+
+        #[test]
+        fn dm1_goes_out_after_the_claim_every_second_and_on_a_change() {
+            let mut n = node();
+            let sent = run(&mut n, 0.0, 3.5, &[]);
+            let dm1: Vec<i64> = sent
+                .iter()
+                .filter(|(_, id)| *id == DM1_ID)
+                .map(|(t, _)| *t)
+                .collect();
+            assert!(dm1.first().is_some_and(|t| *t >= 250), "{dm1:?}");
+            assert!(dm1.len() >= 4, "{dm1:?}");
+            for w in dm1.windows(2) {
+                let gap = w[1] - w[0];
+                assert!((100..=1000).contains(&gap), "DM1 at {dm1:?}");
+            }
+        }
+
+        #[test]
+        fn another_nodes_dm1_is_ignored_not_a_fault() {
+            let mut n = node();
+            let dm1 = |source: u8| {
+                Message::Dm1(firmware_bridge::dm1::Dm1Reporter::new(&CONTROLLER_DTCS).current())
+                    .encode_from(source)
+                    .unwrap()
+            };
+            run(
+                &mut n,
+                0.0,
+                0.3,
+                &[(0.1, dm1(0x00)), (0.2, dm1(GATEWAY_ADDRESS))],
+            );
+            assert_eq!(n.counters().faulty, 0);
+            run(&mut n, 0.3, 0.4, &[(0.35, dm1(CONTROLLER_ADDRESS))]);
+            assert_eq!(n.counters().faulty, 1, "our own address from someone else");
         }
 
         #[test]

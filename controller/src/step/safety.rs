@@ -1277,8 +1277,17 @@ mod tests {
                 .chars()
                 .take_while(char::is_ascii_alphanumeric)
                 .collect();
+            // DM1 reports the fault code as the DTC of the same name (`gateway_core::dm1`).
+            let dtc = firmware_bridge::dm1::CONTROLLER_DTCS[usize::from(fault.code()) - 1];
+            assert_eq!(
+                dtc.name,
+                variant,
+                "DM1 entry of fault code {}",
+                fault.code()
+            );
             table.push((i64::from(fault.code()), variant));
         }
+        assert_eq!(table.len() - 1, firmware_bridge::dm1::CONTROLLER_DTCS.len());
         table.sort();
         assert_eq!(signal.value_table, table);
     }

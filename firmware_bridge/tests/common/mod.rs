@@ -95,7 +95,64 @@ pub fn sample_messages() -> Vec<Message> {
     out.push(Message::RequestPgn(RequestPgn {
         pgn: firmware_bridge::address_claim::ADDRESS_CLAIMED_PGN,
     }));
+    out.push(Message::Dm1(sample_dm1()));
     out
+}
+
+/// A DM1 with every lamp field different and a DTC of the controller's table.
+pub fn sample_dm1() -> Dm1 {
+    let dtc = firmware_bridge::dm1::CONTROLLER_DTCS[3];
+    Dm1 {
+        lamps: Lamps {
+            malfunction_indicator: LampState {
+                status: LampStatus::NotAvailable,
+                flash: LampFlash::DoNotFlash,
+            },
+            red_stop: LampState {
+                status: LampStatus::On,
+                flash: LampFlash::FastFlash,
+            },
+            amber_warning: LampState {
+                status: LampStatus::Off,
+                flash: LampFlash::SlowFlash,
+            },
+            protect: LampState {
+                status: LampStatus::Reserved,
+                flash: LampFlash::Reserved,
+            },
+        },
+        dtc: Dtc {
+            spn: dtc.spn,
+            fmi: dtc.fmi,
+            occurrence_count: 126,
+        },
+    }
+}
+
+/// The messages the DBC lists once per sender (`AddressClaimed_Gateway`, `DM1_Gateway`), as the
+/// gateway sends them from `0x80`.
+pub fn gateway_sourced_samples() -> Vec<(Message, firmware_bridge::CanFrame)> {
+    let gateway_dtc = firmware_bridge::dm1::GATEWAY_DTCS[4];
+    let dm1 = Message::Dm1(Dm1 {
+        dtc: Dtc {
+            spn: gateway_dtc.spn,
+            fmi: gateway_dtc.fmi,
+            occurrence_count: 1,
+        },
+        ..sample_dm1()
+    });
+    let claim = Message::AddressClaimed(AddressClaimed {
+        name: firmware_bridge::address_claim::GATEWAY_NAME,
+    });
+    [claim, dm1]
+        .into_iter()
+        .map(|m| {
+            let frame = m
+                .encode_from(firmware_bridge::GATEWAY_ADDRESS)
+                .expect("sample encodes");
+            (m, frame)
+        })
+        .collect()
 }
 
 /// True if the external tool can be used. If not: fails the test when `EXCAVATOR_REQUIRE_TOOLS=1`
