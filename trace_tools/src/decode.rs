@@ -252,7 +252,7 @@ impl Decoder {
                 out.push_str(": ");
                 match dbc::decode_raw(sig, data) {
                     Ok(raw) => signal_formats()[msg_index][sig_index].push(sig, raw, out),
-                    Err(_) => format_value(sig, signals::decode_signal(sig, data), out),
+                    Err(_) => format_value(desc, sig, signals::decode_signal(sig, data), out),
                 }
             }
             out.push(')');
@@ -285,9 +285,15 @@ fn push_frame(frame: &CanFrame, out: &mut String) {
     }
 }
 
-/// Appends a signal value with its unit or enum name.
-pub fn format_value(sig: &dbc::SignalDesc, value: SignalValue, out: &mut String) {
-    let name = |raw: i64| signals::value_name(sig.name, raw);
+/// Appends a value of signal `sig` of message `desc` with its unit or enum name (the message's own
+/// value table: the two DM1 messages name the same signal's values differently).
+pub fn format_value(
+    desc: &dbc::MessageDesc,
+    sig: &dbc::SignalDesc,
+    value: SignalValue,
+    out: &mut String,
+) {
+    let name = |raw: i64| signals::value_name_in(desc, sig.name, raw);
     format_value_inner(sig, &name, value, out);
 }
 
@@ -667,6 +673,7 @@ mod tests {
                     signal_formats()[m][i].push(sig, raw, &mut fast);
                     let mut reference = String::new();
                     format_value(
+                        desc,
                         sig,
                         SignalValue::Value(dbc::raw_to_physical(sig, raw)),
                         &mut reference,
