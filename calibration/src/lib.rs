@@ -2,9 +2,10 @@
 //! from the simulator and a seed, with a report of what each came from and how well it fits.
 //!
 //! The steps, in order (each uses the artefacts of the steps before it):
-//! 1. **Sessions**: planned `demo` sessions on the default bench (the sessions users run), fresh for
-//!    this seed: training sessions, fresh sessions to measure the networks on, and healthy sessions
-//!    for the grey-box calibration, each set with seeds of its own.
+//! 1. **Sessions**: `excavator-ctl demo`'s default sessions ([`DemoArgs::defaults`]: the planned
+//!    strategy on the extended bench, the sessions users run), fresh for this seed: training
+//!    sessions, fresh sessions to measure the networks on, and healthy sessions for the grey-box
+//!    calibration, each set with seeds of its own.
 //! 2. **Actuator networks** (`config/nominal_actuator.json`, thesis 4.2): `model train` with its
 //!    defaults (the shipped recipe) on every dig and cleanup of the training sessions, then their
 //!    free-running error on the fresh sessions' digs, per session.
@@ -155,6 +156,20 @@ pub struct SessionRecord {
     pub dir: PathBuf,
 }
 
+impl SessionRecord {
+    /// The session's `demo` arguments: `excavator-ctl demo`'s defaults ([`DemoArgs::defaults`],
+    /// the session users run) with this seed, dig count and folder, and no progress bar.
+    #[must_use]
+    pub fn demo_args(&self) -> DemoArgs {
+        DemoArgs {
+            digs: self.digs,
+            seed: Some(self.seed),
+            quiet: true,
+            ..DemoArgs::defaults(self.dir.clone())
+        }
+    }
+}
+
 /// The free-running error of the networks on one fresh session's digs, percent of peak speed.
 #[derive(Debug, Clone, Serialize)]
 pub struct NetworkError {
@@ -259,11 +274,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<CalibrationReport> {
     plans
         .par_iter()
         .map(|p| {
-            let mut demo = DemoArgs::new(p.dir.clone());
-            demo.digs = p.digs;
-            demo.seed = Some(p.seed);
-            demo.quiet = true;
-            run_session(&demo, &AtomicBool::new(false))
+            run_session(&p.demo_args(), &AtomicBool::new(false))
                 .with_context(|| format!("{} session, seed {}", p.set, p.seed))
                 .map(drop)
         })
@@ -447,8 +458,8 @@ fn calibrate_greybox(
         effects,
         format!(
             "nominal grey-box model: the machine file's values (GreyBoxParams::from_machine) with the \
-             Eq. 2 chamber balance, calibrated by `{made_by}` on {} healthy planned sessions, which \
-             named {named} (a transport delay folded into the model's)",
+             Eq. 2 chamber balance, calibrated by `{made_by}` on {} healthy default `demo` sessions \
+             (planned), which named {named} (a transport delay folded into the model's)",
             healthy.len()
         ),
     );
@@ -497,8 +508,8 @@ pub fn report_markdown(r: &CalibrationReport) -> String {
     let _ = writeln!(s, "# Calibration on plant {}\n", r.plant_version);
     let _ = writeln!(
         s,
-        "Made by `{}` on the default plant (soil contact `{}`): planned `demo` sessions on the \
-         default bench.\n",
+        "Made by `{}` on the default plant (soil contact `{}`): `excavator-ctl demo`'s default \
+         sessions (planned, extended bench).\n",
         r.command, r.soil_contact
     );
     let _ = writeln!(s, "| artefact | data | figures |\n|---|---|---|");
@@ -601,6 +612,47 @@ pub fn install(from: &Path, config: &Path) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `demo`'s options alone, as `excavator-ctl` flattens them.
+    #[derive(clap::Parser)]
+    #[command(name = "demo")]
+    struct Demo {
+        #[command(flatten)]
+        args: DemoArgs,
+    }
+
+    /// Every session `calibrate` makes is `excavator-ctl demo` with its defaults but for the
+    /// seed, the digs, the folder and the progress bar: calibrated on the sessions users run, not on
+    /// a library default (it was the fixed plan on config/bench.toml).
+    #[test]
+    fn calibrate_s_sessions_are_demo_s_defaults_but_for_seed_digs_out_and_quiet() {
+        use clap::Parser as _;
+        let record = SessionRecord {
+            set: SessionSet::Healthy.name(),
+            seed: SessionSet::Healthy.seed(1, 2),
+            digs: 16,
+            dir: PathBuf::from("out/calibration/sessions/healthy_1702"),
+        };
+        let cal = record.demo_args();
+        let out = record.dir.to_str().unwrap_or_default();
+        let cli = Demo::try_parse_from([
+            "demo", "--seed", "1702", "--digs", "16", "--out", out, "--quiet",
+        ])
+        .map(|d| d.args);
+        assert_eq!(cli.as_ref().ok(), Some(&cal));
+        assert_eq!(cal.strategy, lab::demo::DemoStrategy::Planned);
+        let defaults = Demo::try_parse_from(["demo"]).map(|d| d.args);
+        assert_eq!(
+            defaults.ok(),
+            Some(DemoArgs {
+                seed: None,
+                digs: 10,
+                out: PathBuf::from("out/demo"),
+                quiet: false,
+                ..cal
+            })
+        );
+    }
 
     /// Per cylinder, the median over the sessions (the mean of the middle two for an even count)
     /// and the largest; NaN for every cylinder without a session.

@@ -1,8 +1,8 @@
 //! The parameter checks every part's `validate()` shares: [`ParamError`] (the field and the rule it
-//! breaks), `Limits` (an interval only finite values lie in), `check`, `check_deg`, `check_count` and
-//! `toml_float` (a value as TOML spells it).
+//! breaks), `check`, `check_deg` (over `Limits`, the workspace's one finite-and-range check,
+//! [`firmware_bridge::range`]), `check_count` and `toml_float` (a value as TOML spells it).
 
-use std::fmt;
+pub(crate) use firmware_bridge::range::Limits;
 
 use crate::ControllerError;
 
@@ -66,93 +66,6 @@ impl From<ParamError> for ControllerError {
     }
 }
 
-/// An interval a parameter must lie in; only finite values lie in one.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct Limits {
-    lo: f64,
-    lo_open: bool,
-    hi: f64,
-    hi_open: bool,
-    unit: &'static str,
-}
-
-impl Limits {
-    /// `[lo, hi]`.
-    pub(crate) const fn closed(lo: f64, hi: f64, unit: &'static str) -> Self {
-        Self {
-            lo,
-            lo_open: false,
-            hi,
-            hi_open: false,
-            unit,
-        }
-    }
-
-    /// `(lo, hi)`.
-    pub(crate) const fn open(lo: f64, hi: f64, unit: &'static str) -> Self {
-        Self {
-            lo,
-            lo_open: true,
-            hi,
-            hi_open: true,
-            unit,
-        }
-    }
-
-    /// `(lo, hi]`.
-    pub(crate) const fn above(lo: f64, hi: f64, unit: &'static str) -> Self {
-        Self {
-            lo,
-            lo_open: true,
-            hi,
-            hi_open: false,
-            unit,
-        }
-    }
-
-    /// `[lo, hi)`.
-    pub(crate) const fn below(lo: f64, hi: f64, unit: &'static str) -> Self {
-        Self {
-            lo,
-            lo_open: false,
-            hi,
-            hi_open: true,
-            unit,
-        }
-    }
-
-    fn contains(&self, v: f64) -> bool {
-        let above_lo = if self.lo_open {
-            v > self.lo
-        } else {
-            v >= self.lo
-        };
-        let below_hi = if self.hi_open {
-            v < self.hi
-        } else {
-            v <= self.hi
-        };
-        v.is_finite() && above_lo && below_hi
-    }
-}
-
-impl fmt::Display for Limits {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "{}{}, {}{}",
-            if self.lo_open { '(' } else { '[' },
-            self.lo,
-            self.hi,
-            if self.hi_open { ')' } else { ']' }
-        )?;
-        if !self.unit.is_empty() {
-            write!(f, " {}", self.unit)?;
-        }
-        Ok(())
-    }
-}
-
 /// A value as TOML spells it (`nan`, `inf`, `1e308`, `0.25`).
 pub(crate) fn toml_float(v: f64) -> String {
     if v.is_nan() {
@@ -172,16 +85,9 @@ pub(crate) fn check(
     limits: Limits,
     why: &str,
 ) -> Result<(), ParamError> {
-    if limits.contains(v) {
-        return Ok(());
-    }
-    Err(out_of_range(
-        section,
-        key,
-        toml_float(v),
-        format!("must be finite and in {limits}"),
-        why,
-    ))
+    limits
+        .check(v)
+        .map_err(|e| out_of_range(section, key, toml_float(v), e.to_string(), why))
 }
 
 /// [`check`] for an angle held in radians and written in degrees (a `_deg` key); `limits` in

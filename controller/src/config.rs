@@ -88,7 +88,7 @@ impl J1939Config {
                     "j1939",
                     format!("{key}.{}", e.field),
                     Some(e.value.to_string()),
-                    e.rule,
+                    e.rule.to_string(),
                 )
             })
         };

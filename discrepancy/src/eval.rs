@@ -413,17 +413,19 @@ impl SessionPlan {
             case.push('_');
             case.push_str(strategy.name());
         }
-        // Nor sessions of an earlier plant version.
-        let mut demo = DemoArgs::new(
-            out.join("sessions")
-                .join(vcan_sim::PLANT_VERSION)
-                .join(&case),
-        );
-        demo.digs = digs;
-        demo.seed = Some(seed);
-        demo.quiet = true;
-        demo.soil_contact = soil_contact;
-        demo.strategy = strategy;
+        // Nor sessions of an earlier plant version. `demo`'s defaults but for what the case sets.
+        let demo = DemoArgs {
+            digs,
+            seed: Some(seed),
+            quiet: true,
+            soil_contact,
+            strategy,
+            ..DemoArgs::defaults(
+                out.join("sessions")
+                    .join(vcan_sim::PLANT_VERSION)
+                    .join(&case),
+            )
+        };
         Self { case, demo }
     }
 
@@ -1208,11 +1210,14 @@ pub fn bench_text(args: &BenchArgs) -> anyhow::Result<String> {
     let mut text = String::new();
     let generate = |dir: PathBuf, seed: u64, effects: Vec<String>| -> anyhow::Result<PathBuf> {
         if !session_complete(&dir)? {
-            let mut demo = DemoArgs::new(dir.clone());
-            demo.digs = args.digs;
-            demo.seed = Some(seed);
-            demo.quiet = true;
-            demo.effects = effects;
+            // A user's session, as the measurement says it times: `demo`'s defaults.
+            let demo = DemoArgs {
+                digs: args.digs,
+                seed: Some(seed),
+                quiet: true,
+                effects,
+                ..DemoArgs::defaults(dir.clone())
+            };
             run_session(&demo, &AtomicBool::new(false))
                 .with_context(|| format!("generating the bench session {}", dir.display()))?;
         }

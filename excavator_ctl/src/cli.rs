@@ -100,16 +100,49 @@ mod tests {
         Cli::command().debug_assert();
     }
 
+    /// `excavator-ctl demo ARGS...` as parsed.
+    fn demo_cmd(args: &[&str]) -> DemoCmd {
+        let mut all = vec!["excavator-ctl", "demo"];
+        all.extend_from_slice(args);
+        match Cli::try_parse_from(all).unwrap().command {
+            Command::Demo(d) => d,
+            _ => panic!("not demo"),
+        }
+    }
+
+    /// `DemoArgs::defaults`, which `calibrate` and `discrepancy eval` start from, is what
+    /// `excavator-ctl demo --out DIR` runs, and `calibrate`'s sessions differ from it only in the
+    /// seed, the digs, the folder and the progress bar.
+    #[test]
+    fn the_library_s_default_session_is_demo_s() {
+        let demo = |args: &[&str]| demo_cmd(args).session;
+        assert_eq!(
+            demo(&["--out", "s"]),
+            lab::demo::DemoArgs::defaults("s".into())
+        );
+        let record = calibration::SessionRecord {
+            set: "fresh",
+            seed: 1401,
+            digs: 12,
+            dir: "out/calibration/sessions/fresh_1401".into(),
+        };
+        assert_eq!(
+            demo(&[
+                "--seed",
+                "1401",
+                "--digs",
+                "12",
+                "--out",
+                "out/calibration/sessions/fresh_1401",
+                "--quiet"
+            ]),
+            record.demo_args()
+        );
+    }
+
     #[test]
     fn live_takes_an_optional_address() {
-        let live = |args: &[&str]| {
-            let mut all = vec!["excavator-ctl", "demo"];
-            all.extend_from_slice(args);
-            match Cli::try_parse_from(all).unwrap().command {
-                Command::Demo(d) => d.live,
-                _ => panic!("not demo"),
-            }
-        };
+        let live = |args: &[&str]| demo_cmd(args).live;
         assert_eq!(live(&[]).live, None);
         assert_eq!(live(&["--live"]).live.as_deref(), Some(live::DEFAULT_ADDR));
         let l = live(&["--live", "0.0.0.0:9000", "--pace", "2"]);

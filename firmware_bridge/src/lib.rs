@@ -21,6 +21,7 @@
 //!   the gateway.
 //! - [`gateway`]: the gateway firmware logic (modes, arming, watchdog), with its integer clock
 //!   [`time::Instant`].
+//! - [`range`]: the finite-and-range check ([`range::Limits`]) the configuration checks share.
 //!
 //! Host only, here:
 //!
@@ -55,7 +56,9 @@ pub mod trace;
 pub mod transport;
 pub mod wire_dbc;
 
-pub use gateway_core::{address_claim, bus, dbc, dm1, frame, gateway, id, messages, secoc, time};
+pub use gateway_core::{
+    address_claim, bus, dbc, dm1, frame, gateway, id, messages, range, secoc, time,
+};
 
 pub use frame::{CanFrame, CanId, FrameKind};
 pub use id::{CONTROLLER_ADDRESS, GATEWAY_ADDRESS, J1939Id};

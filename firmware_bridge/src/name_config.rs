@@ -14,153 +14,45 @@
 //! industry_group = 3           # 3 bits: construction
 //! arbitrary_address_capable = false  # the project's addresses are fixed
 //! ```
+//!
+//! The fields, their keys and their widths are [`crate::address_claim::NAME_FIELDS`], the one list;
+//! a [`NameConfig`] is [`crate::address_claim::NameFields`] (serde with `gateway_core`'s `std`
+//! feature) and [`NameConfig::name`] the checked NAME. A test holds the example above to that list.
 
-use serde::{Deserialize, Serialize};
-
-use crate::address_claim::{Name, NameFields};
-use crate::dbc::{SignalDesc, address_claimed as ac};
-
-/// A NAME as a config file spells it (see the module docs).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct NameConfig {
-    /// Serial number of the unit (21 bits).
-    pub identity_number: u32,
-    /// SAE-assigned manufacturer code (11 bits).
-    pub manufacturer_code: u16,
-    /// Which of several ECUs of one function (3 bits).
-    pub ecu_instance: u8,
-    /// Which of several instances of the function (5 bits).
-    pub function_instance: u8,
-    /// What the node does (8 bits).
-    pub function: u8,
-    /// The vehicle system it belongs to (7 bits).
-    pub vehicle_system: u8,
-    /// Which of several vehicle systems of that kind (4 bits).
-    pub vehicle_system_instance: u8,
-    /// Industry group (3 bits; 3 = construction equipment).
-    pub industry_group: u8,
-    /// Must be false: the project's nodes cannot move to another address after losing a claim.
-    pub arbitrary_address_capable: bool,
-}
-
-/// A NAME field that does not fit its width, or a NAME the project's nodes cannot use.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("{field} = {value}: {rule}")]
-pub struct NameConfigError {
-    /// The key as the file spells it (`identity_number`).
-    pub field: &'static str,
-    /// The value given.
-    pub value: u64,
-    /// What it breaks.
-    pub rule: String,
-}
-
-impl From<Name> for NameConfig {
-    fn from(name: Name) -> Self {
-        let f = name.fields();
-        Self {
-            identity_number: f.identity_number,
-            manufacturer_code: f.manufacturer_code,
-            ecu_instance: f.ecu_instance,
-            function_instance: f.function_instance,
-            function: f.function,
-            vehicle_system: f.vehicle_system,
-            vehicle_system_instance: f.vehicle_system_instance,
-            industry_group: f.industry_group,
-            arbitrary_address_capable: f.arbitrary_address_capable,
-        }
-    }
-}
-
-impl NameConfig {
-    /// The NAME.
-    ///
-    /// # Errors
-    /// [`NameConfigError`] naming the first field wider than its bits, or `arbitrary_address_capable`
-    /// set (the project's addresses are fixed: a node that says otherwise would be expected to move).
-    pub fn name(&self) -> Result<Name, NameConfigError> {
-        let widths: [(&'static str, u64, &SignalDesc); 8] = [
-            (
-                "identity_number",
-                u64::from(self.identity_number),
-                &ac::IDENTITY_NUMBER,
-            ),
-            (
-                "manufacturer_code",
-                u64::from(self.manufacturer_code),
-                &ac::MANUFACTURER_CODE,
-            ),
-            (
-                "ecu_instance",
-                u64::from(self.ecu_instance),
-                &ac::ECU_INSTANCE,
-            ),
-            (
-                "function_instance",
-                u64::from(self.function_instance),
-                &ac::FUNCTION_INSTANCE,
-            ),
-            ("function", u64::from(self.function), &ac::FUNCTION),
-            (
-                "vehicle_system",
-                u64::from(self.vehicle_system),
-                &ac::VEHICLE_SYSTEM,
-            ),
-            (
-                "vehicle_system_instance",
-                u64::from(self.vehicle_system_instance),
-                &ac::VEHICLE_SYSTEM_INSTANCE,
-            ),
-            (
-                "industry_group",
-                u64::from(self.industry_group),
-                &ac::INDUSTRY_GROUP,
-            ),
-        ];
-        for (field, value, sig) in widths {
-            let max = (1u64 << sig.len) - 1;
-            if value > max {
-                return Err(NameConfigError {
-                    field,
-                    value,
-                    rule: format!("must fit {} bits (0 to {max})", sig.len),
-                });
-            }
-        }
-        if self.arbitrary_address_capable {
-            return Err(NameConfigError {
-                field: "arbitrary_address_capable",
-                value: 1,
-                rule: "must be false: the controller (0x27) and the gateway (0x80) have fixed \
-                       addresses"
-                    .to_owned(),
-            });
-        }
-        let fields = NameFields {
-            identity_number: self.identity_number,
-            manufacturer_code: self.manufacturer_code,
-            ecu_instance: self.ecu_instance,
-            function_instance: self.function_instance,
-            function: self.function,
-            vehicle_system: self.vehicle_system,
-            vehicle_system_instance: self.vehicle_system_instance,
-            industry_group: self.industry_group,
-            arbitrary_address_capable: false,
-        };
-        // Every field was checked against its width above.
-        Name::from_fields(&fields).map_err(|e| NameConfigError {
-            field: "name",
-            value: 0,
-            rule: e.to_string(),
-        })
-    }
-}
+pub use crate::address_claim::{
+    NameFieldError as NameConfigError, NameFields as NameConfig, NameRule,
+};
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::address_claim::{CONTROLLER_NAME, GATEWAY_NAME};
+    use crate::address_claim::{CONTROLLER_NAME, GATEWAY_NAME, NAME_FIELDS, Name};
+
+    /// The example of the module docs names every field of [`NAME_FIELDS`] in order, each with its
+    /// width: the docs cannot drift from the DBC.
+    #[test]
+    fn the_documented_example_matches_the_field_list() {
+        let source = include_str!("name_config.rs");
+        let example: Vec<&str> = source
+            .lines()
+            .take_while(|l| l.starts_with("//!"))
+            .skip_while(|l| !l.contains("[j1939.name]"))
+            .skip(1)
+            .take_while(|l| !l.contains("```"))
+            .collect();
+        assert_eq!(example.len(), NAME_FIELDS.len(), "{example:?}");
+        for (line, field) in example.iter().zip(NAME_FIELDS) {
+            let line = line.trim_start_matches("//!").trim();
+            assert!(line.starts_with(&format!("{} = ", field.key)), "{line}");
+            if field.key != "arbitrary_address_capable" {
+                assert!(
+                    line.contains(&format!("# {} bits", field.signal.len)),
+                    "{line}: {} bits",
+                    field.signal.len
+                );
+            }
+        }
+    }
 
     #[test]
     fn the_default_names_round_trip() {

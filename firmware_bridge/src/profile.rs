@@ -1209,35 +1209,11 @@ fn field_target(
     })
 }
 
-/// The largest profile or DBC file read, bytes (the shipped ones are under 20 kB).
-pub const MAX_FILE_BYTES: u64 = 4 << 20;
-
-/// The text of the file at `path` read as untrusted input, as `planner::config_file::read_text`
-/// does (this crate sits below the planner): a regular file (not a FIFO, which would block, nor a
-/// device such as `/dev/zero`, which never ends) of at most [`MAX_FILE_BYTES`], read through a
-/// bounded reader.
+/// The text of the file at `path` read as untrusted input ([`gateway_core::file::read_text`], the
+/// workspace's one bounded reader: a regular file, not a FIFO, which would block, nor a device such
+/// as `/dev/zero`, which never ends, of at most [`gateway_core::file::MAX_CONFIG_BYTES`]).
 fn read_text(path: &Path) -> std::io::Result<String> {
-    use std::io::Read as _;
-    let bad = |why: String| std::io::Error::new(std::io::ErrorKind::InvalidData, why);
-    let mut options = std::fs::OpenOptions::new();
-    options.read(true);
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::OpenOptionsExt as _;
-        // O_NONBLOCK: opening a FIFO for reading returns at once instead of waiting for a writer.
-        options.custom_flags(0o4000);
-    }
-    let file = options.open(path)?;
-    let meta = file.metadata()?;
-    if !meta.is_file() {
-        return Err(bad("not a regular file".to_owned()));
-    }
-    let mut bytes = Vec::new();
-    file.take(MAX_FILE_BYTES + 1).read_to_end(&mut bytes)?;
-    if meta.len() > MAX_FILE_BYTES || bytes.len() as u64 > MAX_FILE_BYTES {
-        return Err(bad(format!("larger than the {MAX_FILE_BYTES}-byte limit")));
-    }
-    String::from_utf8(bytes).map_err(|e| bad(format!("not UTF-8 text: {e}")))
+    Ok(gateway_core::file::read_text(path)?)
 }
 
 #[cfg(test)]

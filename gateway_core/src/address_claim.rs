@@ -6,8 +6,9 @@
 //! [`Name`] is the 64-bit number a node is known by; [`NameFields`] its fields. The bit layout is the
 //! `AddressClaimed` message of `excavator.dbc` (J1939-81's: identity number bits 0-20, manufacturer
 //! code 21-31, ECU instance 32-34, function instance 35-39, function 40-47, reserved 48, vehicle
-//! system 49-55, vehicle system instance 56-59, industry group 60-62, arbitrary address capable 63),
-//! read and written through the generated descriptors. On the wire the NAME is the 8 data bytes,
+//! system 49-55, vehicle system instance 56-59, industry group 60-62, arbitrary address capable 63;
+//! a test holds the DBC to it), read and written through the generated descriptors; [`NAME_FIELDS`]
+//! is the one list of the fields, their keys and widths. On the wire the NAME is the 8 data bytes,
 //! least significant first. A lower NAME has priority.
 //!
 //! # The procedure ([`AddressClaimer`])
@@ -50,6 +51,8 @@
 //!
 //! No allocation, integer time ([`Instant`]): the gateway's firmware runs it on a microcontroller.
 
+use core::fmt;
+
 use crate::dbc::{self, EncodeError, SignalDesc, address_claimed as ac};
 use crate::frame::CanFrame;
 use crate::id::{CONTROLLER_ADDRESS, GATEWAY_ADDRESS, GLOBAL_ADDRESS, J1939Id};
@@ -76,7 +79,16 @@ pub const CLAIM_HOLD_NS: i64 = 250_000_000;
 pub struct Name(u64);
 
 /// The fields of a [`Name`] (J1939-81), each checked against its width when a NAME is built.
+///
+/// With the `std` feature it is also the NAME as a config file spells it (the controller's
+/// `[j1939.name]`, the simulator's machine file `[gateway_name]`): every field by its key in
+/// [`NAME_FIELDS`], every one required, no other key.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[cfg_attr(
+    feature = "std",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(deny_unknown_fields)
+)]
 pub struct NameFields {
     /// Serial number of the unit, unique for its manufacturer (21 bits).
     pub identity_number: u32,
@@ -94,22 +106,128 @@ pub struct NameFields {
     pub vehicle_system_instance: u8,
     /// Industry group (3 bits; 3 = construction equipment).
     pub industry_group: u8,
-    /// Whether the node can pick another address after losing a claim. The project's nodes cannot.
+    /// Whether the node can pick another address after losing a claim. The project's nodes cannot
+    /// ([`NameFields::name`] refuses it).
     pub arbitrary_address_capable: bool,
 }
 
-/// The NAME's signals, in the order of [`NameFields`] (the reserved bit stays 0).
-const FIELD_SIGNALS: [&SignalDesc; 9] = [
-    &ac::IDENTITY_NUMBER,
-    &ac::MANUFACTURER_CODE,
-    &ac::ECU_INSTANCE,
-    &ac::FUNCTION_INSTANCE,
-    &ac::FUNCTION,
-    &ac::VEHICLE_SYSTEM,
-    &ac::VEHICLE_SYSTEM_INSTANCE,
-    &ac::INDUSTRY_GROUP,
-    &ac::ARBITRARY_ADDRESS_CAPABLE,
+/// One field of the NAME: its key (as [`NameFields`] and config files spell it) and its signal in
+/// `excavator.dbc`'s `AddressClaimed` (position and width).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NameField {
+    /// The key (`identity_number`).
+    pub key: &'static str,
+    /// The DBC signal: start bit and width.
+    pub signal: &'static SignalDesc,
+}
+
+impl NameField {
+    const fn new(key: &'static str, signal: &'static SignalDesc) -> Self {
+        Self { key, signal }
+    }
+}
+
+/// The NAME's fields in the order of [`NameFields`] (the reserved bit 48 stays 0): the one list of
+/// the fields, their keys and (through the DBC) their widths that every NAME codec and check uses.
+pub const NAME_FIELDS: [NameField; 9] = [
+    NameField::new("identity_number", &ac::IDENTITY_NUMBER),
+    NameField::new("manufacturer_code", &ac::MANUFACTURER_CODE),
+    NameField::new("ecu_instance", &ac::ECU_INSTANCE),
+    NameField::new("function_instance", &ac::FUNCTION_INSTANCE),
+    NameField::new("function", &ac::FUNCTION),
+    NameField::new("vehicle_system", &ac::VEHICLE_SYSTEM),
+    NameField::new("vehicle_system_instance", &ac::VEHICLE_SYSTEM_INSTANCE),
+    NameField::new("industry_group", &ac::INDUSTRY_GROUP),
+    NameField::new("arbitrary_address_capable", &ac::ARBITRARY_ADDRESS_CAPABLE),
 ];
+
+/// Why a [`NameFields`] is not a NAME the project's nodes can claim with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NameRule {
+    /// The field is wider than its bits.
+    Width {
+        /// The field's width.
+        bits: u16,
+    },
+    /// `arbitrary_address_capable` is set, but the project's addresses are fixed: a node that says
+    /// otherwise would be expected to move.
+    FixedAddress,
+}
+
+impl fmt::Display for NameRule {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Self::Width { bits } => {
+                write!(f, "must fit {bits} bits (0 to {})", (1u64 << bits) - 1)
+            }
+            Self::FixedAddress => f.write_str(
+                "must be false: the controller (0x27) and the gateway (0x80) have fixed addresses",
+            ),
+        }
+    }
+}
+
+/// A NAME field that does not fit its width, or a NAME the project's nodes cannot use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("{field} = {value}: {rule}")]
+pub struct NameFieldError {
+    /// The key as the file spells it (`identity_number`).
+    pub field: &'static str,
+    /// The value given.
+    pub value: u64,
+    /// What it breaks.
+    pub rule: NameRule,
+}
+
+impl NameFields {
+    /// The values in [`NAME_FIELDS`] order.
+    pub const fn values(&self) -> [u64; 9] {
+        [
+            self.identity_number as u64,
+            self.manufacturer_code as u64,
+            self.ecu_instance as u64,
+            self.function_instance as u64,
+            self.function as u64,
+            self.vehicle_system as u64,
+            self.vehicle_system_instance as u64,
+            self.industry_group as u64,
+            self.arbitrary_address_capable as u64,
+        ]
+    }
+
+    /// The NAME the project's nodes claim with.
+    ///
+    /// # Errors
+    /// [`NameFieldError`] naming the first field wider than its bits, or `arbitrary_address_capable`
+    /// set (the project's addresses are fixed).
+    pub fn name(&self) -> Result<Name, NameFieldError> {
+        for (field, value) in NAME_FIELDS.iter().zip(self.values()) {
+            let bits = field.signal.len;
+            if value > (1u64 << bits) - 1 {
+                return Err(NameFieldError {
+                    field: field.key,
+                    value,
+                    rule: NameRule::Width { bits },
+                });
+            }
+        }
+        if self.arbitrary_address_capable {
+            return Err(NameFieldError {
+                field: "arbitrary_address_capable",
+                value: 1,
+                rule: NameRule::FixedAddress,
+            });
+        }
+        // Every field fits its width (checked above).
+        Ok(pack(self))
+    }
+}
+
+impl From<Name> for NameFields {
+    fn from(name: Name) -> Self {
+        name.fields()
+    }
+}
 
 impl Name {
     /// The NAME with this 64-bit value (every value is a NAME).
@@ -137,20 +255,10 @@ impl Name {
     /// # Errors
     /// [`EncodeError::OutOfRange`] naming the field that does not fit its width.
     pub fn from_fields(fields: &NameFields) -> Result<Self, EncodeError> {
-        let values = [
-            i64::from(fields.identity_number),
-            i64::from(fields.manufacturer_code),
-            i64::from(fields.ecu_instance),
-            i64::from(fields.function_instance),
-            i64::from(fields.function),
-            i64::from(fields.vehicle_system),
-            i64::from(fields.vehicle_system_instance),
-            i64::from(fields.industry_group),
-            i64::from(fields.arbitrary_address_capable),
-        ];
         let mut bytes = [0u8; 8];
-        for (sig, value) in FIELD_SIGNALS.into_iter().zip(values) {
-            dbc::encode_raw(sig, value, &mut bytes)?;
+        for (field, value) in NAME_FIELDS.iter().zip(fields.values()) {
+            // Every field is at most 21 bits wide: the value fits an i64.
+            dbc::encode_raw(field.signal, value as i64, &mut bytes)?;
         }
         Ok(Self::from_le_bytes(bytes))
     }
@@ -160,20 +268,28 @@ impl Name {
         let bytes = self.to_le_bytes();
         // Every signal fits 8 bytes and is unsigned and at most 21 bits wide, so the raw values are
         // non-negative and fit the field types; 0 is unreachable.
-        let field = |sig: &SignalDesc| {
-            u32::try_from(dbc::extract_raw(sig, &bytes).unwrap_or(0)).unwrap_or(0)
-        };
-        let narrow = |sig: &SignalDesc| u8::try_from(field(sig)).unwrap_or(0);
+        let [
+            identity_number,
+            manufacturer_code,
+            ecu_instance,
+            function_instance,
+            function,
+            vehicle_system,
+            vehicle_system_instance,
+            industry_group,
+            arbitrary_address_capable,
+        ] = NAME_FIELDS.map(|f| dbc::extract_raw(f.signal, &bytes).unwrap_or(0));
+        let narrow = |raw: i64| u8::try_from(raw).unwrap_or(0);
         NameFields {
-            identity_number: field(&ac::IDENTITY_NUMBER),
-            manufacturer_code: u16::try_from(field(&ac::MANUFACTURER_CODE)).unwrap_or(0),
-            ecu_instance: narrow(&ac::ECU_INSTANCE),
-            function_instance: narrow(&ac::FUNCTION_INSTANCE),
-            function: narrow(&ac::FUNCTION),
-            vehicle_system: narrow(&ac::VEHICLE_SYSTEM),
-            vehicle_system_instance: narrow(&ac::VEHICLE_SYSTEM_INSTANCE),
-            industry_group: narrow(&ac::INDUSTRY_GROUP),
-            arbitrary_address_capable: field(&ac::ARBITRARY_ADDRESS_CAPABLE) == 1,
+            identity_number: u32::try_from(identity_number).unwrap_or(0),
+            manufacturer_code: u16::try_from(manufacturer_code).unwrap_or(0),
+            ecu_instance: narrow(ecu_instance),
+            function_instance: narrow(function_instance),
+            function: narrow(function),
+            vehicle_system: narrow(vehicle_system),
+            vehicle_system_instance: narrow(vehicle_system_instance),
+            industry_group: narrow(industry_group),
+            arbitrary_address_capable: arbitrary_address_capable == 1,
         }
     }
 }
@@ -193,20 +309,18 @@ const PROJECT_NAME: NameFields = NameFields {
     arbitrary_address_capable: false,
 };
 
-/// `fields` packed without the range checks of [`Name::from_fields`], for the constants below
-/// (their fields fit; a test checks them against [`Name::from_fields`]).
+/// `fields` packed at the start bits of [`NAME_FIELDS`] without the range checks of
+/// [`Name::from_fields`], for the constants below and for [`NameFields::name`], which checks the
+/// widths first (a test checks it against [`Name::from_fields`]).
 const fn pack(f: &NameFields) -> Name {
-    Name(
-        f.identity_number as u64
-            | (f.manufacturer_code as u64) << 21
-            | (f.ecu_instance as u64) << 32
-            | (f.function_instance as u64) << 35
-            | (f.function as u64) << 40
-            | (f.vehicle_system as u64) << 49
-            | (f.vehicle_system_instance as u64) << 56
-            | (f.industry_group as u64) << 60
-            | (f.arbitrary_address_capable as u64) << 63,
-    )
+    let values = f.values();
+    let mut raw = 0u64;
+    let mut i = 0;
+    while i < NAME_FIELDS.len() {
+        raw |= values[i] << NAME_FIELDS[i].signal.start_bit;
+        i += 1;
+    }
+    Name(raw)
 }
 
 /// The controller's default NAME: function 130 (industry-group specific: the excavation

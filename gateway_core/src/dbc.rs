@@ -23,6 +23,26 @@ pub const DBC_TEXT: &str = include_str!("../excavator.dbc");
 pub const CONTROL_PERIOD: core::time::Duration =
     core::time::Duration::from_millis(aux_valve_command_boom::MESSAGE.cycle_time_ms as u64);
 
+/// The gateway's sensor period: the DBC's cycle time of `JointAngles` (`JointRates` and the three
+/// `AuxValveMeasured` have the same; the gateway samples its resolvers and transducers at this
+/// rate). The controller's staleness limits, the simulator's schedule and the tests' sample clock
+/// take it from here.
+pub const SENSOR_PERIOD: core::time::Duration =
+    core::time::Duration::from_millis(joint_angles::MESSAGE.cycle_time_ms as u64);
+
+/// The gateway's `PumpPressures` period (the DBC's cycle time).
+pub const PUMP_PERIOD: core::time::Duration =
+    core::time::Duration::from_millis(pump_pressures::MESSAGE.cycle_time_ms as u64);
+
+/// The gateway's `TrackOdometry` period (the DBC's cycle time).
+pub const ODOMETRY_PERIOD: core::time::Duration =
+    core::time::Duration::from_millis(track_odometry::MESSAGE.cycle_time_ms as u64);
+
+/// The gateway's status period: the DBC's cycle time of `GatewayStatus` (`GatewaySession` has the
+/// same).
+pub const STATUS_PERIOD: core::time::Duration =
+    core::time::Duration::from_millis(gateway_status::MESSAGE.cycle_time_ms as u64);
+
 /// Description of one signal, generated from the DBC.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SignalDesc {
@@ -439,6 +459,32 @@ mod tests {
             assert_eq!(ms, u64::from(m.cycle_time_ms), "{}", m.name);
             assert_eq!(ms % period_ms, 0, "{}: {ms} ms", m.name);
         }
+    }
+
+    #[test]
+    fn the_gateway_periods_are_the_dbc_cycle_times_of_its_messages() {
+        let ms = |d: core::time::Duration| u64::try_from(d.as_millis()).unwrap();
+        for (period, names) in [
+            (
+                SENSOR_PERIOD,
+                &[
+                    "JointAngles",
+                    "JointRates",
+                    "AuxValveMeasured_Boom",
+                    "AuxValveMeasured_Stick",
+                    "AuxValveMeasured_Bucket",
+                ][..],
+            ),
+            (PUMP_PERIOD, &["PumpPressures"][..]),
+            (ODOMETRY_PERIOD, &["TrackOdometry"][..]),
+            (STATUS_PERIOD, &["GatewayStatus", "GatewaySession"][..]),
+        ] {
+            for name in names {
+                assert_eq!(dbc_cycle_time_ms(name), ms(period), "{name}");
+            }
+        }
+        // The project's gateway senses at the controller's rate (docs/protocol.md: 100 Hz).
+        assert_eq!(SENSOR_PERIOD, CONTROL_PERIOD);
     }
 
     #[test]

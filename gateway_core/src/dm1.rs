@@ -93,7 +93,7 @@ pub const GATEWAY_DTCS: [DtcSpec; 11] = [
 ];
 
 /// The controller's DTCs (sent from `0x27`), index = its fault code - 1 (code 0 is healthy).
-pub const CONTROLLER_DTCS: [DtcSpec; 14] = [
+pub const CONTROLLER_DTCS: [DtcSpec; 15] = [
     spec("StaleSensor", 520_449, 9, Amber),
     spec("Decode", 520_450, 19, Amber),
     spec("UnexpectedFrame", 520_451, 19, Amber),
@@ -108,6 +108,7 @@ pub const CONTROLLER_DTCS: [DtcSpec; 14] = [
     spec("GatewayFrozen", 520_460, 12, Amber),
     spec("AddressLost", 520_461, 31, Red),
     spec("AddressIntrusion", 520_462, 19, Red),
+    spec("ImplausibleSensor", 520_463, 2, Red),
 ];
 
 /// The entry of `table` to report among the `active` ones (bit i = entry i): the first that lights the

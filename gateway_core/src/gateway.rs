@@ -96,6 +96,7 @@ use crate::messages::{
     DecodeError, Dm1, GatewayFaults, GatewayMode, GatewaySession, GatewayStatus, Message,
     RequestedMode, heartbeat_checksum, is_next_alive,
 };
+use crate::range::Limits;
 use crate::secoc::{NonceSource, SessionKey, SessionNonces, Verifier};
 use crate::time::{ClockReading, Instant, NANOS_PER_S, secs_to_nanos};
 
@@ -161,6 +162,14 @@ pub struct GatewayConfigError {
     pub reason: &'static str,
 }
 
+/// The ranges [`GatewayConfig::validate`] checks with the workspace's one finite-and-range check
+/// ([`crate::range`]), each with its rule as `range` states it (a `&'static str`: the error holds no
+/// allocation; a test checks the two agree).
+const GAIN_LIMITS: (Limits, &str) = (Limits::NON_NEGATIVE, "must be finite and >= 0");
+const MAX_COMMAND_LIMITS: (Limits, &str) =
+    (Limits::above(0.0, 1.0, ""), "must be finite and in (0, 1]");
+const RATE_LIMIT_LIMITS: (Limits, &str) = (Limits::POSITIVE, "must be finite and > 0");
+
 impl GatewayConfig {
     /// Checks every parameter.
     ///
@@ -178,7 +187,6 @@ impl GatewayConfig {
                 reason,
             })
         };
-        let positive = |v: f64| v.is_finite() && v > 0.0;
         // A duration the gateway's integer clock can hold: at least a nanosecond, under 292 years.
         let duration = |v: f64| secs_to_nanos(v).is_some_and(|ns| ns > 0);
         if !duration(self.heartbeat_timeout_s) {
@@ -203,18 +211,18 @@ impl GatewayConfig {
             );
         }
         for (field, gains) in [("kp", self.kp), ("ki", self.ki)] {
-            if let Some(&g) = gains.iter().find(|g| !(g.is_finite() && **g >= 0.0)) {
-                return err(field, g, "must be finite and >= 0");
+            if let Some(&g) = gains.iter().find(|&&g| !GAIN_LIMITS.0.contains(g)) {
+                return err(field, g, GAIN_LIMITS.1);
             }
         }
-        if !(self.max_command > 0.0 && self.max_command <= 1.0) {
-            return err("max_command", self.max_command, "must be in (0, 1]");
+        if !MAX_COMMAND_LIMITS.0.contains(self.max_command) {
+            return err("max_command", self.max_command, MAX_COMMAND_LIMITS.1);
         }
-        if !positive(self.rate_limit_per_s) {
+        if !RATE_LIMIT_LIMITS.0.contains(self.rate_limit_per_s) {
             return err(
                 "rate_limit_per_s",
                 self.rate_limit_per_s,
-                "must be finite and > 0",
+                RATE_LIMIT_LIMITS.1,
             );
         }
         if let Some(&s) = self.joint_sign.iter().find(|s| s.abs() != 1.0) {
@@ -908,6 +916,14 @@ mod tests {
         );
         assert_eq!(g.mode(), GatewayMode::ArmedValve);
         (g, l)
+    }
+
+    #[test]
+    fn the_config_reasons_state_the_range_rules() {
+        use std::string::ToString as _;
+        for (limits, rule) in [GAIN_LIMITS, MAX_COMMAND_LIMITS, RATE_LIMIT_LIMITS] {
+            assert_eq!(limits.check(f64::NAN).unwrap_err().to_string(), rule);
+        }
     }
 
     #[test]

@@ -22,6 +22,10 @@
 //! - [`dm1`]: J1939-73 DM1, the table of every fault's SPN, FMI and lamp for the gateway and the
 //!   controller, and the schedule that reports them (1 s, and on a change).
 //! - [`time`]: [`Instant`], the gateway's integer clock (nanoseconds).
+//! - `file` (the `std` feature): configuration and key files read as untrusted input (regular
+//!   files only, opened without blocking, bounded size).
+//! - [`range`]: the finite-and-range check ([`range::Limits`]) every configuration and input check of
+//!   the workspace states its rule with.
 //! - [`gateway`]: the firmware state machine (arming, e-stop latch, heartbeat watchdog with alive
 //!   counter and CRC, session freshness, fail-safe valve state, position mode, status, clock checks).
 //! - [`bus`]: the gateway on any bus with the [`embedded_can`] traits: frames in (`nb::Can::receive`),
@@ -39,8 +43,8 @@
 //!
 //! `#![no_std]` without `alloc`: nothing allocates, the periodic path (`on_frame`, `tick`) works on
 //! fixed-size values, and time is an integer ([`Instant`]). The `std` feature adds host conveniences
-//! only (key files, random keys, `serde` for keys). `scripts/build-mcu` builds the crate for
-//! `thumbv7em-none-eabihf`; `docs/gateway-core.md` says what runs where.
+//! only (key files and the bounded file reader, random keys, `serde` for keys and NAMEs).
+//! `scripts/build-mcu` builds the crate for `thumbv7em-none-eabihf`; `docs/gateway-core.md` says what runs where.
 
 #![no_std]
 
@@ -51,10 +55,13 @@ pub mod address_claim;
 pub mod bus;
 pub mod dbc;
 pub mod dm1;
+#[cfg(feature = "std")]
+pub mod file;
 pub mod frame;
 pub mod gateway;
 pub mod id;
 pub mod messages;
+pub mod range;
 pub mod secoc;
 pub mod time;
 

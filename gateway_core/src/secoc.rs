@@ -80,18 +80,7 @@ impl SessionKey {
         };
         // Opened without blocking (a FIFO as the key file would wait for a writer forever), then
         // checked to be a regular file before any read.
-        let mut options = std::fs::OpenOptions::new();
-        options.read(true);
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::OpenOptionsExt as _;
-            options.custom_flags(0o4000); // O_NONBLOCK
-        }
-        let file = options.open(path).map_err(|e| err(e.to_string()))?;
-        let meta = file.metadata().map_err(|e| err(e.to_string()))?;
-        if !meta.is_file() {
-            return Err(err("not a regular file".into()));
-        }
+        let (file, meta) = crate::file::open_regular(path).map_err(|e| err(e.to_string()))?;
         check_private(&meta).map_err(err)?;
         let mut text = String::new();
         file.take(257)

@@ -11,7 +11,8 @@
 //! - `predefined` (6.2): fixed start joints (the median of the planner's), swing stepped across the
 //!   regions, cleanups from the far reach, 1.3 m backups; same bench;
 //! - `fixed`: the fixed demo plan (digs across swing angles, a cleanup, a track back, repeated) or the
-//!   `--config` file's plan, on `config/bench.toml` (the library default of [`DemoArgs::new`]).
+//!   `--config` file's plan, on `config/bench.toml` ([`DemoArgs::fixed`] for library callers that
+//!   want it; [`DemoArgs::defaults`] is the command line's default session).
 //!
 //! Outputs:
 //!
@@ -82,7 +83,7 @@ const SIM_BUDGET_PER_DIG_S: f64 = 120.0;
 const TRACE_CLOCK: TraceClock = TraceClock::Virtual;
 
 /// Arguments of `excavator-ctl demo`.
-#[derive(Debug, Clone, Args)]
+#[derive(Debug, Clone, PartialEq, Args)]
 pub struct DemoArgs {
     /// Number of digs (dig and cleanup actions) in the session.
     #[arg(long, default_value_t = 10, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
@@ -163,40 +164,38 @@ pub struct DemoArgs {
 }
 
 impl DemoArgs {
-    /// The defaults of the command line with `out` as the output folder, except the strategy: the
-    /// fixed plan on config/bench.toml (what this constructor gave before the planner was wired, for
-    /// library callers); see [`Self::planned`].
-    pub fn new(out: PathBuf) -> Self {
-        Self {
-            digs: 10,
-            seed: None,
-            machine: None,
-            plant_machine: None,
-            bench: None,
-            effects: Vec::new(),
-            list_effects: false,
-            soil_contact: None,
-            out,
-            config: None,
-            maps: None,
-            quiet: true,
-            force: false,
-            strategy: DemoStrategy::Fixed,
-            planner: None,
-            hardness: None,
-            predefined_from: None,
-            bench_after: vec![12],
-            predefined_plain: false,
-            predefined_joints: None,
-            profile: None,
+    /// `excavator-ctl demo`'s arguments with nothing given but `--out`: the session a user runs
+    /// (the planned strategy on the extended-operation bench, 10 digs, the bench file's seed, the
+    /// progress bar on). The values are clap's own defaults, parsed from that command line, so this
+    /// cannot drift from the CLI; calibration, evaluation and every library caller that stands for
+    /// a user's session start here and change only what they say.
+    #[must_use]
+    pub fn defaults(out: PathBuf) -> Self {
+        /// `demo`'s options alone, as the CLI flattens them.
+        #[derive(clap::Parser)]
+        #[command(name = "demo")]
+        struct Demo {
+            #[command(flatten)]
+            args: DemoArgs,
         }
+        // No option is given, so only a broken default could fail to parse; `defaults_are_the_cli_s`
+        // parses the same line.
+        let mut args = <Demo as clap::Parser>::try_parse_from(["demo"])
+            .expect("demo's defaults parse")
+            .args;
+        args.out = out;
+        args
     }
 
-    /// The command line's defaults: the planned strategy on the extended-operation bench.
-    pub fn planned(out: PathBuf) -> Self {
+    /// The fixed demo plan on config/bench.toml ([`demo_plan`], `--strategy fixed`), quiet: for
+    /// tests and experiments that want the same short plan whatever the planner does. Not a user's
+    /// session: that is [`Self::defaults`].
+    #[must_use]
+    pub fn fixed(out: PathBuf) -> Self {
         Self {
-            strategy: DemoStrategy::Planned,
-            ..Self::new(out)
+            strategy: DemoStrategy::Fixed,
+            quiet: true,
+            ..Self::defaults(out)
         }
     }
 }
@@ -864,4 +863,36 @@ pub fn write_plots(
         )?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The output folder of the fixtures.
+    const OUT: &str = "out/x";
+
+    /// `defaults` is `demo`'s command line with nothing given: the planned strategy on the
+    /// extended bench, the progress bar on; `fixed` differs in the strategy and the bar only.
+    #[test]
+    fn defaults_are_the_cli_s() {
+        let d = DemoArgs::defaults(PathBuf::from(OUT));
+        assert_eq!(d.strategy, DemoStrategy::Planned);
+        assert_eq!(d.digs, 10);
+        assert_eq!(d.seed, None);
+        assert_eq!(d.bench, None);
+        assert!(!d.quiet);
+        assert_eq!(d.out, PathBuf::from(OUT));
+        let f = DemoArgs::fixed(PathBuf::from(OUT));
+        assert_eq!(f.strategy, DemoStrategy::Fixed);
+        assert!(f.quiet);
+        assert_eq!(
+            DemoArgs {
+                strategy: DemoStrategy::Planned,
+                quiet: false,
+                ..f
+            },
+            d
+        );
+    }
 }

@@ -705,7 +705,7 @@ struct Setup {
 
 impl Setup {
     fn new(args: &ShiftArgs) -> anyhow::Result<Self> {
-        let mut dargs = DemoArgs::planned(args.out.clone());
+        let mut dargs = DemoArgs::defaults(args.out.clone());
         dargs.seed = Some(args.seed);
         let (sim, mut config, maps) = demo::setup(&dargs)?;
         // The session runs until its bench is done.

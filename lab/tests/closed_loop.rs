@@ -195,6 +195,54 @@ fn garbage_frames_mid_dig_neutralise_in_the_same_period() {
 }
 
 #[test]
+fn a_forged_angle_stream_mid_dig_is_rejected_and_stops_the_machine_within_100_ms() {
+    use firmware_bridge::messages::{JointAngles, Message};
+    // Issue #46, item 3: after each of the gateway's JointAngles frames, one from the gateway's
+    // address with the angles frozen at the start of the dig, as a second node on the bus would send.
+    let mut l = Loop::new(default_sim(), one_dig());
+    run_to_stage(&mut l, Stage::Dig, 120.0);
+    assert!(has_motion(&l.last_out));
+    let state = l.node().state();
+    let frozen = Message::JointAngles(JointAngles {
+        boom_rad: state.joints.boom_rad,
+        stick_rad: state.joints.stick_rad,
+        bucket_rad: state.joints.bucket_rad,
+        swing_rad: state.swing_rad,
+    })
+    .encode()
+    .unwrap();
+    let start_s = l.time_s();
+    let mut stopped_at = None;
+    for _ in 0..20 {
+        let tf = TimestampedFrame {
+            timestamp_ns: l.h.clock.now_ns(),
+            frame: frozen,
+        };
+        let out = l.step_with(&[tf]);
+        if matches!(l.node().fault(), Some(Fault::ImplausibleSensor { .. })) {
+            assert!(!has_motion(&out));
+            assert!(has_all_neutral(&out));
+            assert_eq!(heartbeat_mode(&out), Some(RequestedMode::Disarm));
+            stopped_at = Some(l.time_s());
+            break;
+        }
+        assert!(l.node().fault().is_none(), "{:?}", l.node().fault());
+    }
+    let at = stopped_at.expect("the forged stream was not detected within 20 periods");
+    eprintln!(
+        "forged angles stopped the machine {:.3} s after they began",
+        at - start_s
+    );
+    assert!(at - start_s <= 0.1 + 1e-9);
+    l.step();
+    assert_eq!(l.machine().node().valve_commands(), [0.0; 6]);
+    // The forging stops: the stop stays a stop until the operator's resume, then the dig goes on.
+    assert!(!l.run_until(5.0, |l| has_motion(&l.last_out)));
+    l.node_mut().resume();
+    assert!(l.run_until(5.0, |l| has_motion(&l.last_out)));
+}
+
+#[test]
 fn shutdown_ends_with_neutral_valves_and_a_disarm() {
     let mut l = Loop::new(default_sim(), one_dig());
     run_to_stage(&mut l, Stage::PreDig, 120.0);

@@ -14,7 +14,7 @@ use lab::demo::{DemoArgs, DemoSummary, run_session, summary_markdown};
 #[test]
 fn demo_writes_all_outputs_with_the_documented_fields_for_two_digs() {
     let dir = tempfile::tempdir().unwrap();
-    let mut args = DemoArgs::new(dir.path().join("demo"));
+    let mut args = DemoArgs::fixed(dir.path().join("demo"));
     args.digs = 2;
     let summary = run_session(&args, &AtomicBool::new(false)).unwrap();
     assert!(summary.totals.finished, "{:?}", summary.totals);
@@ -182,7 +182,7 @@ fn demo_sessions_of_one_seed_are_byte_identical() {
     let dir = tempfile::tempdir().unwrap();
     let run = |name: &str| {
         let out = dir.path().join(name);
-        let mut args = DemoArgs::planned(out.clone());
+        let mut args = DemoArgs::defaults(out.clone());
         args.digs = 1;
         args.seed = Some(5);
         let summary = run_session(&args, &AtomicBool::new(false)).unwrap();
@@ -255,7 +255,7 @@ fn summary_of(path: &Path) -> DemoSummary {
 #[test]
 fn demo_rejects_unknown_effects() {
     let dir = tempfile::tempdir().unwrap();
-    let mut args = DemoArgs::new(dir.path().join("demo"));
+    let mut args = DemoArgs::fixed(dir.path().join("demo"));
     args.effects = vec!["no_such_effect=1".to_owned()];
     let err = run_session(&args, &AtomicBool::new(false)).unwrap_err();
     assert!(format!("{err:#}").contains("no_such_effect"), "{err:#}");
@@ -264,7 +264,7 @@ fn demo_rejects_unknown_effects() {
 #[test]
 fn demo_stops_cleanly_when_asked() {
     let dir = tempfile::tempdir().unwrap();
-    let args = DemoArgs::new(dir.path().join("demo"));
+    let args = DemoArgs::fixed(dir.path().join("demo"));
     let summary = run_session(&args, &AtomicBool::new(true)).unwrap();
     assert!(!summary.totals.finished);
     assert!(dir.path().join("demo/trace.log").exists());
@@ -285,7 +285,7 @@ fn demo_plant_machine_changes_the_plant_and_not_the_controller() {
     let plant_file = dir.path().join("plant.toml");
     std::fs::write(&plant_file, &text).unwrap();
 
-    let mut args = DemoArgs::new(dir.path().join("plant"));
+    let mut args = DemoArgs::fixed(dir.path().join("plant"));
     args.digs = 1;
     args.seed = Some(5);
     args.plant_machine = Some(plant_file.clone());
@@ -344,7 +344,7 @@ fn demo_speaks_a_machine_profile_on_the_bus() {
     let example = Path::new(root).join("examples/other_gateway.toml");
     let profile = firmware_bridge::profile::Profile::load(&example).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let mut args = DemoArgs::new(dir.path().join("other"));
+    let mut args = DemoArgs::fixed(dir.path().join("other"));
     args.digs = 1;
     args.profile = Some(example.clone());
     let summary = run_session(&args, &AtomicBool::new(false)).unwrap();
@@ -376,7 +376,7 @@ fn demo_speaks_a_machine_profile_on_the_bus() {
     assert!(heartbeats > 0);
 
     // The default profile is the identity: the same trace as no profile.
-    let mut plain = DemoArgs::new(dir.path().join("plain"));
+    let mut plain = DemoArgs::fixed(dir.path().join("plain"));
     plain.digs = 1;
     run_session(&plain, &AtomicBool::new(false)).unwrap();
     let mut default = plain.clone();

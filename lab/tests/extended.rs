@@ -28,7 +28,7 @@ fn planned_session_digs_and_backs_up() {
         .replace("height_m = 2.0", "height_m = 1.0")
         .replace("floor_elevation_m = -2.0", "floor_elevation_m = -1.0");
     std::fs::write(&bench, text).unwrap();
-    let mut args = DemoArgs::planned(dir.path().join("planned"));
+    let mut args = DemoArgs::defaults(dir.path().join("planned"));
     args.bench = Some(bench);
     args.digs = 25;
     let s = run_session(&args, &AtomicBool::new(false)).unwrap();
@@ -78,7 +78,7 @@ fn planned_session_digs_and_backs_up() {
 #[test]
 fn predefined_sequence_runs_from_fixed_joints() {
     let dir = tempfile::tempdir().unwrap();
-    let mut args = DemoArgs::planned(dir.path().join("predefined"));
+    let mut args = DemoArgs::defaults(dir.path().join("predefined"));
     args.strategy = DemoStrategy::Predefined;
     args.digs = 3;
     args.predefined_joints = Some(planner::kinematics::JointAngles {

@@ -74,7 +74,7 @@ async fn simulator_with(
     profile: Option<Arc<Profile>>,
 ) -> Simulator {
     let scan_addr = free_port();
-    let (sim, _, _) = lab::demo::setup(&DemoArgs::planned(out.to_path_buf())).unwrap();
+    let (sim, _, _) = lab::demo::setup(&DemoArgs::defaults(out.to_path_buf())).unwrap();
     let bus = InProcessBus::with_wall_clock("vcan0");
     let sim_node = bus.attach();
     let options = RealtimeOptions {
@@ -392,7 +392,7 @@ async fn a_controller_killed_mid_session_resumes_without_losing_or_repeating_an_
         serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
     assert_ne!(s.end, "stopped", "the session ran out of its budget: {s:?}");
     // An uninterrupted session of the same bench and seed (virtual time) does the same actions.
-    let mut reference_args = DemoArgs::planned(dir.path().join("reference"));
+    let mut reference_args = DemoArgs::defaults(dir.path().join("reference"));
     reference_args.digs = DIGS;
     reference_args.quiet = true;
     let reference =

@@ -126,7 +126,7 @@ fn numbers(lines: &[String], what: &str) -> Vec<u32> {
 #[test]
 fn digs_are_numbered_from_1_in_the_events_the_stream_the_page_and_the_summary() {
     let dir = tempfile::tempdir().unwrap();
-    let mut args = lab::demo::DemoArgs::planned(dir.path().join("demo"));
+    let mut args = lab::demo::DemoArgs::defaults(dir.path().join("demo"));
     args.digs = DIGS;
     let (sim, _, _) = lab::demo::setup(&args).unwrap();
     let stream = live::LiveStream::start(

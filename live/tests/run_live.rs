@@ -11,7 +11,7 @@ mod common;
 use std::time::Duration;
 
 use firmware_bridge::transport::{InProcessBus, TimeScale};
-use lab::demo::{DemoArgs, DemoStrategy};
+use lab::demo::DemoArgs;
 use onboard::run::RunArgs;
 use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
 use vcan_sim::node::MachineNode;
@@ -38,8 +38,7 @@ async fn post_command(addr: &str, body: &str) -> (u16, serde_json::Value) {
 #[ignore = "wall clock: scripts/test-all runs it alone, after the parallel tests"]
 fn run_serves_the_page_and_its_estop_reaches_the_run_loop() {
     let dir = tempfile::tempdir().unwrap();
-    let mut demo_args = DemoArgs::new(dir.path().join("sim"));
-    demo_args.strategy = DemoStrategy::Fixed;
+    let demo_args = DemoArgs::fixed(dir.path().join("sim"));
     let (sim, _, _) = lab::demo::setup(&demo_args).unwrap();
     // The safety timing of a simulated machine on a loaded host (`config/vm.toml`, as lab's wire
     // tests): the plumbing is under test.

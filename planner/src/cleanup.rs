@@ -139,7 +139,8 @@ impl InputError for CleanupError {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct CleanupConfig {
-    /// Waypoint period, s: one waypoint per control step. Default 0.01.
+    /// Waypoint period, s: one waypoint per control step. Default: the control period (10 ms,
+    /// `gateway_core::dbc::CONTROL_PERIOD`).
     pub period_s: f64,
     /// Tip speed at the first floor waypoints, m/s. Default 0.01.
     pub initial_speed_m_per_s: f64,
@@ -223,7 +224,7 @@ fn default_follow_clearance_m() -> f64 {
 impl Default for CleanupConfig {
     fn default() -> Self {
         Self {
-            period_s: 0.01,
+            period_s: gateway_core::dbc::CONTROL_PERIOD.as_secs_f64(),
             initial_speed_m_per_s: 0.01,
             ramp_accel_m_per_s2: 0.1,
             max_speed_m_per_s: 0.3,

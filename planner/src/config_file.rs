@@ -1,58 +1,22 @@
 //! Reading a configuration file as untrusted input: it must be a regular file (not a FIFO that
 //! never ends, a device such as `/dev/zero` that never ends either, or a folder) of at most
 //! [`MAX_CONFIG_BYTES`], read through a bounded reader so that memory stays bounded whatever the
-//! path names.
+//! path names. The reader is `gateway_core::file`'s, which the machine profiles and the key files
+//! use too (the planner cannot depend on `firmware_bridge`, which pulls tokio and socketcan).
 
-use std::io::Read as _;
 use std::path::Path;
 
 /// The largest configuration file read, bytes (the largest shipped file is under 100 kB).
-pub const MAX_CONFIG_BYTES: u64 = 4 << 20;
+pub use gateway_core::file::MAX_CONFIG_BYTES;
 
-/// The text of the configuration file at `path`.
+/// The text of the configuration file at `path`: [`gateway_core::file::read_text`], the workspace's
+/// one bounded reader.
 ///
 /// # Errors
 /// Why it cannot be used, one phrase without the path (the caller names the file): not a regular
 /// file, larger than [`MAX_CONFIG_BYTES`], unreadable, or not UTF-8.
 pub fn read_text(path: &Path) -> Result<String, String> {
-    // Opened without blocking on a FIFO (which has no writer), then checked before any read.
-    let file = open_nonblocking(path).map_err(|e| e.to_string())?;
-    let meta = file.metadata().map_err(|e| e.to_string())?;
-    if !meta.is_file() {
-        return Err("not a regular file".to_owned());
-    }
-    if meta.len() > MAX_CONFIG_BYTES {
-        return Err(format!(
-            "{} bytes: larger than the {MAX_CONFIG_BYTES}-byte limit of a configuration file",
-            meta.len()
-        ));
-    }
-    let mut bytes = Vec::new();
-    file.take(MAX_CONFIG_BYTES + 1)
-        .read_to_end(&mut bytes)
-        .map_err(|e| e.to_string())?;
-    if bytes.len() as u64 > MAX_CONFIG_BYTES {
-        return Err(format!(
-            "grew past the {MAX_CONFIG_BYTES}-byte limit of a configuration file while read"
-        ));
-    }
-    String::from_utf8(bytes).map_err(|e| format!("not UTF-8 text: {e}"))
-}
-
-#[cfg(unix)]
-fn open_nonblocking(path: &Path) -> std::io::Result<std::fs::File> {
-    use std::os::unix::fs::OpenOptionsExt as _;
-    // O_NONBLOCK: opening a FIFO for reading returns at once instead of waiting for a writer.
-    const O_NONBLOCK: i32 = 0o4000;
-    std::fs::OpenOptions::new()
-        .read(true)
-        .custom_flags(O_NONBLOCK)
-        .open(path)
-}
-
-#[cfg(not(unix))]
-fn open_nonblocking(path: &Path) -> std::io::Result<std::fs::File> {
-    std::fs::File::open(path)
+    gateway_core::file::read_text(path).map_err(|e| e.to_string())
 }
 
 #[cfg(test)]

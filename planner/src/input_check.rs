@@ -1,6 +1,9 @@
 //! Finite-and-range checks of one step's sensor inputs, shared by Autodig and cleanup.
 //!
-//! Each caller keeps its own error enum; [`InputError`] tells the checks how to build it.
+//! Each caller keeps its own error enum; [`InputError`] tells the checks how to build it. The
+//! predicate is the workspace's one finite-and-range check, [`gateway_core::range::Limits`].
+
+use gateway_core::range::Limits;
 
 /// Plausible pressure range (Pa): transducers may read slightly below zero; 100 MPa is far above relief.
 const MIN_PRESSURE_PA: f64 = -1.0e6;
@@ -29,13 +32,13 @@ pub(crate) trait InputError: Sized {
 
 /// `Ok` if `v` is finite and within `[lo, hi]`; otherwise the caller's error naming `input`.
 pub(crate) fn check<E: InputError>(input: &'static str, v: f64, lo: f64, hi: f64) -> Result<(), E> {
-    if !v.is_finite() {
-        Err(E::non_finite(input))
-    } else if v < lo || v > hi {
-        Err(E::out_of_range(input, v))
-    } else {
-        Ok(())
-    }
+    Limits::closed(lo, hi, "").check(v).map_err(|e| {
+        if e.is_finite() {
+            E::out_of_range(input, v)
+        } else {
+            E::non_finite(input)
+        }
+    })
 }
 
 /// Checks joint `j`'s head-port then rod-port pressure against the plausible pressure range.

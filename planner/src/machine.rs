@@ -10,7 +10,8 @@
 //! (`crate::linkage`), so a machine that loads is one the kinematics accepts.
 
 use crate::linkage::{FourBar, Linkage, LinkageError, Mount};
-use crate::toml_lines;
+use crate::toml_lines::{self, check_field, check_field_exp};
+use gateway_core::range::Limits;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -605,7 +606,7 @@ impl MachineConfig {
             checks.push((format!("masses.{name}.mass_kg"), m.mass_kg));
         }
         for (field, v) in checks {
-            positive(&field, v)?;
+            check_field(&field, v, Limits::POSITIVE)?;
         }
         let finite: [(&str, f64); 22] = [
             ("base.boom_foot_x_m", self.base.boom_foot_x_m),
@@ -680,9 +681,7 @@ impl MachineConfig {
             ("limits.boom_max_deg", self.limits.boom_max_rad),
         ];
         for (field, v) in finite {
-            if !v.is_finite() {
-                return Err((field.into(), format!("must be a finite number, got {v}")));
-            }
+            check_field(field, v, Limits::FINITE)?;
         }
         for (field, v) in [
             (
@@ -699,9 +698,7 @@ impl MachineConfig {
             ),
             ("sensor.radial_offset_m", self.sensor.radial_offset_m),
         ] {
-            if v < 0.0 {
-                return Err((field.into(), format!("must not be negative, got {v}")));
-            }
+            check_field(field, v, Limits::NON_NEGATIVE)?;
         }
         // Physical ranges, generous for the excavator class: a value beyond them is a typo or an
         // attack (relief at 1e308 Pa disables every 90 %-of-relief rule).
@@ -780,9 +777,7 @@ impl MachineConfig {
             ranges.push((format!("masses.{name}.mass_kg"), m.mass_kg, 1.0, 50e3));
         }
         for (field, v, lo, hi) in ranges {
-            if !(lo..=hi).contains(&v) {
-                return Err((field, format!("must lie in [{lo:e}, {hi:e}], got {v:e}")));
-            }
+            check_field_exp(&field, v, Limits::closed(lo, hi, ""))?;
         }
         if h.valve_bleed_area_m2 >= h.valve_max_area_m2 {
             return Err((
@@ -793,12 +788,11 @@ impl MachineConfig {
                 ),
             ));
         }
-        if !(0.0..=1.0).contains(&self.hydraulics.crossover_command) {
-            return Err((
-                "hydraulics.crossover_command".into(),
-                "must lie in [0, 1]".into(),
-            ));
-        }
+        check_field(
+            "hydraulics.crossover_command",
+            self.hydraulics.crossover_command,
+            Limits::closed(0.0, 1.0, ""),
+        )?;
         if self.hydraulics.tank_pressure_pa >= self.hydraulics.relief_pressure_pa {
             return Err((
                 "hydraulics.tank_pressure_pa".into(),
@@ -848,12 +842,11 @@ impl MachineConfig {
                 ));
             }
         }
-        if self.bucket.payload_centroid_distance_m < 0.0 {
-            return Err((
-                "bucket.payload_centroid_distance_m".into(),
-                "must not be negative".into(),
-            ));
-        }
+        check_field(
+            "bucket.payload_centroid_distance_m",
+            self.bucket.payload_centroid_distance_m,
+            Limits::NON_NEGATIVE,
+        )?;
         // The geometry: the strokes must reach the joint limits, the four-bar must assemble.
         self.linkage().stroke_ranges().map_err(|e| match e {
             LinkageError::Config { field, reason } => (field, reason),
@@ -907,17 +900,6 @@ impl MachineConfig {
     #[must_use]
     pub fn rated_payload_kg(&self) -> f64 {
         self.bucket.capacity_m3 * self.bucket.rated_density_kg_per_m3
-    }
-}
-
-fn positive(field: &str, v: f64) -> Result<(), (String, String)> {
-    if v.is_finite() && v > 0.0 {
-        Ok(())
-    } else {
-        Err((
-            field.to_string(),
-            format!("must be a positive finite number, got {v}"),
-        ))
     }
 }
 

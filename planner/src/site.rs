@@ -21,6 +21,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::machine::ConfigError;
 use crate::toml_lines;
+use gateway_core::range::Limits;
 
 /// The bundled site of the extended-operation bench (`config/site.toml`, the default of `run`).
 pub const EXTENDED_SITE_TOML: &str = include_str!("../../config/site.toml");
@@ -161,14 +162,7 @@ impl Site {
     /// `(field path, reason)` of the first problem.
     pub fn validate(&self) -> Result<(), (String, String)> {
         let within = |field: &str, v: f64, lo: f64, hi: f64| {
-            if v.is_finite() && (lo..=hi).contains(&v) {
-                Ok(())
-            } else {
-                Err((
-                    field.to_owned(),
-                    format!("must be in [{lo}, {hi}], got {v}"),
-                ))
-            }
+            toml_lines::check_field(field, v, Limits::closed(lo, hi, ""))
         };
         if self.name.trim().is_empty() || self.name.len() > 200 {
             return Err(("name".into(), "must be 1 to 200 characters".into()));

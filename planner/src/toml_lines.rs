@@ -3,7 +3,31 @@
 //!
 //! Fields are dotted paths through tables and array entries by index (`cycle.actions.2.start.x_m`).
 
+use gateway_core::range::Limits;
 use toml::de::{DeTable, DeValue};
+
+/// `Ok` if `v` is finite and within `limits` (the workspace's one finite-and-range check,
+/// [`gateway_core::range`]); otherwise `(field, reason)`, the form the file validators return before
+/// [`line_of_field`] adds the line: `must be finite and in [0, 20], got -2`.
+///
+/// # Errors
+/// `field` and the rule `v` breaks, with `v`.
+pub fn check_field(field: &str, v: f64, limits: Limits) -> Result<(), (String, String)> {
+    limits
+        .check(v)
+        .map_err(|e| (field.to_owned(), format!("{e}, got {v}")))
+}
+
+/// As [`check_field`] with the bounds and the value in exponent form (`[5e6, 5e7], got 1e308`), for
+/// quantities that span many decades (pressures, flows, masses).
+///
+/// # Errors
+/// As [`check_field`].
+pub fn check_field_exp(field: &str, v: f64, limits: Limits) -> Result<(), (String, String)> {
+    limits
+        .check(v)
+        .map_err(|e| (field.to_owned(), format!("{e:e}, got {v:e}")))
+}
 
 /// The 1-based line of byte `offset` in `text` (a parser span's start).
 #[must_use]

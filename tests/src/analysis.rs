@@ -454,8 +454,9 @@ pub fn decoded_joint_angles(text: &str) -> Result<Vec<(f64, [f64; 4])>, String> 
     Ok(out)
 }
 
-/// The simulator's sensor period, s: one resolver sample and one `JointAngles` frame per period.
-pub const SENSOR_PERIOD_S: f64 = 0.01;
+/// The simulator's sensor period, s: one resolver sample and one `JointAngles` frame per period
+/// ([`firmware_bridge::dbc::SENSOR_PERIOD`], the DBC's cycle time).
+pub const SENSOR_PERIOD_S: f64 = firmware_bridge::dbc::SENSOR_PERIOD.as_secs_f64();
 
 /// Puts decoded `JointAngles` on the simulator's clock by their order: the simulator samples the
 /// resolvers every [`SENSOR_PERIOD_S`] of simulation time and sends one frame per sample, so the

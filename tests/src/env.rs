@@ -42,8 +42,8 @@ pub fn binary(name: &str) -> PathBuf {
     let Some(dir) = std::env::var_os("EXCAVATOR_BIN_DIR") else {
         panic!(
             "EXCAVATOR_BIN_DIR is not set: it must name the directory with excavator-sim and \
-             excavator-ctl (scripts/test-all sets it after `cargo build --release -p vcan_sim -p \
-             controller`; by hand: EXCAVATOR_BIN_DIR=$CARGO_TARGET_DIR/release)"
+             excavator-ctl (scripts/test-all sets it to the `checked` profile's folder; by hand: \
+             EXCAVATOR_BIN_DIR=target/checked after `cargo build --profile checked`)"
         );
     };
     let path = PathBuf::from(dir).join(name);

@@ -310,6 +310,90 @@ fn malformed_and_spoofed_frames_are_counted_rejected_and_safe() {
     );
 }
 
+/// The controller must stop on a forged angle stream within this much bus time of its first frame
+/// (issue #46), with [`jitter_s`] on top in the VM.
+const FORGED_STOP_S: f64 = 0.1;
+
+#[test]
+#[ignore = "needs a vcan interface: run through scripts/test-all"]
+fn a_forged_joint_angle_stream_stops_the_controller_within_100_ms_and_nothing_moves() {
+    let mut s = common::Session::start("forged_angles", &[]);
+    wait_digging(&mut s);
+    std::thread::sleep(Duration::from_millis(300));
+    // After each of the gateway's JointAngles frames, one with the gateway's address and the angles
+    // of the first frame seen, for 2 s: a second node sending a frozen pose.
+    let socket = common::open_socket(&s.iface);
+    let is_angles = |f: &firmware_bridge::CanFrame| {
+        matches!(Message::decode(f), Ok(d) if d.id.source_address() == GATEWAY_ADDRESS
+            && matches!(d.message, Message::JointAngles(_)))
+    };
+    let mut frozen = None;
+    let mut forged = 0_u32;
+    let end = Instant::now() + Duration::from_secs(2);
+    while Instant::now() < end {
+        let Ok(f) = socket.read_frame() else { continue };
+        let Some(bf) = common::from_socketcan(&f) else {
+            continue;
+        };
+        if !is_angles(&bf) {
+            continue;
+        }
+        let copy = frozen.get_or_insert(f);
+        socket.write_frame(&*copy).unwrap();
+        forged += 1;
+    }
+    let frozen = common::from_socketcan(&frozen.expect("no JointAngles seen")).unwrap();
+    // The first forged frame is a copy of the gateway's frame it followed, so it is accepted; the
+    // real angles then part from the copies as the dig goes on.
+    std::thread::sleep(Duration::from_millis(500));
+    let log = s.ctl().log();
+    let exit = s.stop_controller();
+    s.stop_sim_and_candump();
+    assert!(exit.is_some_and(|e| e.success()), "{exit:?}\n{}", s.logs());
+    assert!(
+        log.contains("implausible joint angles"),
+        "the controller did not name the forged angles\n{}",
+        s.logs()
+    );
+
+    let (recs, _) = read_candump(&s.candump_log);
+    // The forged frames are the copies of the frozen pose after its original.
+    let mut copies = recs.iter().filter(|r| r.frame == frozen).map(|r| r.t_s);
+    let _original = copies.next();
+    let t_forged = copies
+        .next()
+        .unwrap_or_else(|| panic!("no forged frame on the bus\n{}", s.logs()));
+    let t_stop = heartbeats(&recs)
+        .into_iter()
+        .find(|(t, h)| *t >= t_forged && h.mode == firmware_bridge::messages::RequestedMode::Disarm)
+        .map(|(t, _)| t)
+        .unwrap_or_else(|| panic!("the controller never disarmed\n{}", s.logs()));
+    let reported = controller_statuses(&recs)
+        .into_iter()
+        .any(|(t, st)| t >= t_forged && st.fault_reason == 15);
+    eprintln!(
+        "{forged} forged frames; the controller disarmed {:.1} ms after the first; \
+         ImplausibleSensor on the bus: {reported}",
+        (t_stop - t_forged) * 1e3
+    );
+    assert!(reported, "no ControllerStatus with fault reason 15");
+    assert!(
+        t_stop - t_forged <= FORGED_STOP_S + jitter_s(),
+        "disarmed {} s after the first forged frame",
+        t_stop - t_forged
+    );
+    // Nothing moves from the stop on while the forging goes on: every valve blocked, as the gateway
+    // measures them (one period for the neutral command to reach the valves).
+    let t_end = recs.last().map_or(t_stop, |r| r.t_s);
+    let driven = driven_valves(&recs, t_stop + 0.010 + jitter_s(), t_end);
+    assert!(
+        driven.is_empty(),
+        "{} valve frames not blocked after the stop, the first {:?} s after it",
+        driven.len(),
+        driven.first().map(|t| t - t_stop)
+    );
+}
+
 #[test]
 #[ignore = "needs a vcan interface: run through scripts/test-all"]
 fn replayed_controller_trace_with_the_controller_dead_does_not_arm_the_gateway() {

@@ -36,7 +36,7 @@ use hil_tests::planned::{OPERATOR_SEED, PlannedSim, path_str, read_summary};
 use hil_tests::process::operator;
 use socketcan::Socket as _;
 
-/// Dig and cleanup actions of the session (at [`OPERATOR_SEED`]: dig, cleanup, dig and a track back).
+/// Dig and cleanup actions of the session (at [`OPERATOR_SEED`]: a dig and two cleanups).
 const DIGS: u32 = 3;
 /// The e-stop must latch (neutral valves, the heartbeat requesting EStop) within this long of the
 /// request, wall s: the request crosses the control socket and the connection task, which share

@@ -8,10 +8,10 @@
 //!
 //! Tolerances (the two sessions differ in timing: the bus, the planner's wall time while the
 //! machine holds, the sensor noise drawn at other instants, so the same planner may choose another
-//! action where two are close): the same dig and cleanup count (the dig count ends both); digs,
-//! cleanups and track backs each within one of demo's; the mean weight of the digs within 20 % of
-//! demo's; the session's mean weight (digs and cleanups) within what one action of the other kind
-//! changes (demo's dig mean minus its cleanup mean, over the action count) plus 10 %.
+//! action where two are close): the same dig and cleanup count (the dig count ends both); track
+//! backs within one of demo's; the mean weight of the digs within three standard deviations of
+//! the difference of two means of one to three digs each ([`DIG_WEIGHT_SD`]: 20 % for three digs
+//! against three, 30 % for one against two).
 
 #![allow(clippy::unwrap_used)]
 
@@ -20,13 +20,18 @@ use std::time::Duration;
 use hil_tests::env;
 use hil_tests::planned::{PlannedSim, path_str, read_summary};
 
-/// Dig and cleanup actions of the session: on the planned bench dig, cleanup, dig, dig, dig and a
-/// track back (`hil_tests::planned::bench_toml`): six actions.
+/// Dig and cleanup actions of the session: on the planned bench at its seed three cleanups, a track
+/// back and two digs (`hil_tests::planned::bench_toml`): six actions.
 const DIGS: u32 = 5;
 /// Far above the session's ~165 s in real time, for a TCG VM.
 const SESSION_TIMEOUT: Duration = Duration::from_secs(900);
-/// Largest relative difference of the mean dig weight.
-const DIG_WEIGHT_TOLERANCE: f64 = 0.2;
+/// Relative standard deviation of one dig's weight on the planned bench: `demo` with the test's
+/// bench and planner file, `--digs 5`, seeds 1 to 40, made 94 digs of 23.9 kN mean and 2.0 kN
+/// standard deviation (18.2 to 25.7 kN; the sessions' mean dig weights 18.5 to 25.3 kN).
+const DIG_WEIGHT_SD: f64 = 0.083;
+/// The two sessions' mean dig weights may differ by this many standard deviations of the
+/// difference of two means of that spread.
+const DIG_WEIGHT_SIGMAS: f64 = 3.0;
 
 #[test]
 #[ignore = "needs a vcan interface: run through scripts/test-all"]
@@ -87,9 +92,8 @@ fn the_planned_session_over_vcan_digs_cleans_up_tracks_back_and_matches_demo() {
     assert!(actions(&run) >= 6, "{} actions", actions(&run));
     assert!(t.dig_actions >= 1 && t.cleanup_actions >= 1, "{t:?}");
     assert!(run.backups >= 1, "no track back");
-    // The split of the actions into digs and cleanups is not compared: on the planned bench the
-    // planner's choice after the first cleanup depends on timing (demo on seeds 1-7: one to three
-    // cleanups in five actions; over the bus 2 digs and 3 cleanups against demo's 4 and 1).
+    // The split of the actions into digs and cleanups is not compared: on the planned bench it
+    // follows the sensor noise (demo on seeds 1-40: one to three digs in five actions).
     assert!(
         run.backups.abs_diff(demo.backups) <= 1,
         "{} vs {} track backs",
@@ -97,9 +101,16 @@ fn the_planned_session_over_vcan_digs_cleans_up_tracks_back_and_matches_demo() {
         demo.backups
     );
     let (rw, dw) = (run.stats.dig_mean_weight_n, demo.stats.dig_mean_weight_n);
+    let inverse = |n: usize| 1.0 / n.max(1) as f64;
+    let tolerance = DIG_WEIGHT_SIGMAS
+        * DIG_WEIGHT_SD
+        * (inverse(t.dig_actions) + inverse(d.dig_actions)).sqrt();
     assert!(
-        (rw - dw).abs() <= DIG_WEIGHT_TOLERANCE * dw,
-        "mean dig weight {rw:.0} vs {dw:.0} N"
+        (rw - dw).abs() <= tolerance * dw,
+        "mean dig weight {rw:.0} vs {dw:.0} N: more than {:.0} % apart ({} and {} digs)",
+        tolerance * 100.0,
+        t.dig_actions,
+        d.dig_actions
     );
     assert!(run.planning.cycles >= t.digs, "{:?}", run.planning);
     for f in [

@@ -26,10 +26,10 @@ use planner::machine::MachineConfig;
 
 /// Length of one synthetic work cycle, s.
 pub const CYCLE_S: f64 = 12.0;
-/// Control period, s.
-const PERIOD_S: f64 = 0.01;
+/// Control period, s ([`firmware_bridge::dbc::CONTROL_PERIOD`]).
+const PERIOD_S: f64 = firmware_bridge::dbc::CONTROL_PERIOD.as_secs_f64();
 /// Control periods per cycle.
-const STEPS_PER_CYCLE: usize = 1200;
+const STEPS_PER_CYCLE: usize = (CYCLE_S / PERIOD_S + 0.5) as usize;
 /// Nanoseconds between frames of one control period (a 131-160 bit frame takes 262-320 us at
 /// 500 kbit/s).
 const FRAME_SPACING_NS: u64 = 300_000;

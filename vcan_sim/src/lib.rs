@@ -168,18 +168,14 @@ fn effects_from_table(text: &str, origin: &str) -> Result<EffectSet> {
 fn check_transport_delay(cfg: &MachineConfig, text: &str, origin: &str) -> Result<()> {
     const FIELD: &str = "hydraulics.transport_delay_s";
     let delay = cfg.hydraulics.transport_delay_s;
-    if (0.0..=plant::MAX_TRANSPORT_DELAY_S).contains(&delay) {
-        return Ok(());
-    }
-    Err(SimError::Machine(ConfigError::Invalid {
-        origin: origin.to_owned(),
-        line: planner::toml_lines::line_of_field(text, FIELD),
-        field: FIELD.to_owned(),
-        reason: format!(
-            "{delay} s: must be finite and in [0, {}] s",
-            plant::MAX_TRANSPORT_DELAY_S
-        ),
-    }))
+    plant::TRANSPORT_DELAY_LIMITS.check(delay).map_err(|e| {
+        SimError::Machine(ConfigError::Invalid {
+            origin: origin.to_owned(),
+            line: planner::toml_lines::line_of_field(text, FIELD),
+            field: FIELD.to_owned(),
+            reason: format!("{delay} s: {e}"),
+        })
+    })
 }
 
 impl SimConfig {

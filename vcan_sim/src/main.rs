@@ -103,14 +103,10 @@ fn parse_bench_seconds(text: &str) -> std::result::Result<f64, String> {
         .trim()
         .parse()
         .map_err(|_| format!("`{text}` is not a number"))?;
-    if seconds.is_finite() && (0.01..=MAX_BENCH_SECONDS).contains(&seconds) {
-        Ok(seconds)
-    } else {
-        Err(format!(
-            "{} simulated seconds: must be finite and in [0.01, {MAX_BENCH_SECONDS}]",
-            text.trim()
-        ))
-    }
+    firmware_bridge::range::Limits::closed(0.01, MAX_BENCH_SECONDS, "")
+        .check(seconds)
+        .map(|()| seconds)
+        .map_err(|e| format!("{} simulated seconds: {e}", text.trim()))
 }
 
 /// CPU time this thread has run (ns), from `/proc/thread-self/schedstat` (Linux); `None` elsewhere.

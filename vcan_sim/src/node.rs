@@ -34,14 +34,22 @@ use firmware_bridge::time::Instant;
 use crate::plant::{PHYSICS_DT_S, PendingScan, Plant};
 use crate::sensors::{Scan, ScanCast, ScanRequest, SensorReadings};
 
-/// Steps between sensor frames (10 ms).
-pub const SENSOR_PERIOD_STEPS: u64 = 10;
-/// Steps between pump pressure frames (20 ms).
-pub const PUMP_PERIOD_STEPS: u64 = 20;
-/// Steps between odometry frames (50 ms); the off-map check runs at this rate too.
-pub const ODOMETRY_PERIOD_STEPS: u64 = 50;
-/// Steps between gateway status frames (50 ms).
-pub const STATUS_PERIOD_STEPS: u64 = 50;
+/// Physics steps in `period` (the DBC's cycle times are whole milliseconds, a whole number of steps:
+/// a test checks).
+const fn steps_of(period: std::time::Duration) -> u64 {
+    // Rounded to the nearest step (`f64::round` is not `const` at the crate's rust-version).
+    (period.as_secs_f64() / PHYSICS_DT_S + 0.5) as u64
+}
+
+/// Steps between sensor frames (10 ms, [`firmware_bridge::dbc::SENSOR_PERIOD`]).
+pub const SENSOR_PERIOD_STEPS: u64 = steps_of(firmware_bridge::dbc::SENSOR_PERIOD);
+/// Steps between pump pressure frames (20 ms, [`firmware_bridge::dbc::PUMP_PERIOD`]).
+pub const PUMP_PERIOD_STEPS: u64 = steps_of(firmware_bridge::dbc::PUMP_PERIOD);
+/// Steps between odometry frames (50 ms, [`firmware_bridge::dbc::ODOMETRY_PERIOD`]); the off-map
+/// check runs at this rate too.
+pub const ODOMETRY_PERIOD_STEPS: u64 = steps_of(firmware_bridge::dbc::ODOMETRY_PERIOD);
+/// Steps between gateway status frames (50 ms, [`firmware_bridge::dbc::STATUS_PERIOD`]).
+pub const STATUS_PERIOD_STEPS: u64 = steps_of(firmware_bridge::dbc::STATUS_PERIOD);
 
 /// The gateway's transmit periods, physics steps.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -337,7 +345,9 @@ impl MachineNode {
             if !transmit {
                 return;
             }
-            let odo = |v: f64| v.clamp(-199_999.0, 199_999.0);
+            // Inside the DBC's range (both tracks share it).
+            let range = firmware_bridge::dbc::track_odometry::LEFT_TRACK_TRAVEL;
+            let odo = |v: f64| v.clamp(range.min, range.max);
             self.push(
                 Message::TrackOdometry(TrackOdometry {
                     left_m: self.readings.map_or(0.0, |r| odo(r.odometry_m[0])),
@@ -452,6 +462,30 @@ pub fn steps_in(dt_s: f64) -> u64 {
 mod tests {
     use super::*;
     use crate::SimConfig;
+
+    #[test]
+    fn the_schedule_is_the_dbcs_cycle_times_in_whole_physics_steps() {
+        use firmware_bridge::dbc;
+        for (steps, period) in [
+            (SENSOR_PERIOD_STEPS, dbc::SENSOR_PERIOD),
+            (PUMP_PERIOD_STEPS, dbc::PUMP_PERIOD),
+            (ODOMETRY_PERIOD_STEPS, dbc::ODOMETRY_PERIOD),
+            (STATUS_PERIOD_STEPS, dbc::STATUS_PERIOD),
+        ] {
+            assert!(steps > 0, "{period:?}");
+            let back_s = steps as f64 * PHYSICS_DT_S;
+            assert!((back_s - period.as_secs_f64()).abs() < 1e-12, "{period:?}");
+        }
+        assert_eq!(
+            (
+                SENSOR_PERIOD_STEPS,
+                PUMP_PERIOD_STEPS,
+                ODOMETRY_PERIOD_STEPS,
+                STATUS_PERIOD_STEPS
+            ),
+            (10, 20, 50, 50)
+        );
+    }
 
     #[test]
     fn the_sensor_clamps_are_the_dbcs_ranges_of_every_joint() {

@@ -7,6 +7,7 @@
 
 use std::collections::VecDeque;
 
+use firmware_bridge::range::Limits;
 use planner::kinematics::{Joint, JointAngles, MachinePose, TipForce};
 use planner::machine::MachineConfig;
 use planner::terrain::TerrainGrid;
@@ -71,6 +72,10 @@ pub enum PlantError {
 /// `transport_delay` effect adds at most 0.3 s). The plant holds one queued command per 1 ms step of
 /// it, so an unbounded delay would be an unbounded allocation.
 pub const MAX_TRANSPORT_DELAY_S: f64 = 0.5;
+/// The range of a machine file's `hydraulics.transport_delay_s` the plant takes, 0 to
+/// [`MAX_TRANSPORT_DELAY_S`] s: the one rule of the plant's check and the loader's (which names the
+/// line).
+pub const TRANSPORT_DELAY_LIMITS: Limits = Limits::closed(0.0, MAX_TRANSPORT_DELAY_S, "s");
 
 /// Checks the machine and scenario values the plant's timing and memory depend on (the loaders check
 /// them too, with the file and line; this keeps plants built in code from skipping them).
@@ -82,13 +87,12 @@ pub fn check_config(cfg: &MachineConfig, scenario: &Scenario) -> Result<(), Plan
     cfg.validate().map_err(config)?;
     scenario.validate().map_err(config)?;
     let delay = cfg.hydraulics.transport_delay_s;
-    if !(0.0..=MAX_TRANSPORT_DELAY_S).contains(&delay) {
-        return Err(PlantError::Config {
+    TRANSPORT_DELAY_LIMITS
+        .check(delay)
+        .map_err(|e| PlantError::Config {
             field: "hydraulics.transport_delay_s".into(),
-            reason: format!("{delay} s: must be finite and in [0, {MAX_TRANSPORT_DELAY_S}] s"),
-        });
-    }
-    Ok(())
+            reason: format!("{delay} s: {e}"),
+        })
 }
 
 impl HydraulicParams {

@@ -11,7 +11,8 @@
 
 use std::path::Path;
 
-use planner::toml_lines::{field_at_offset, line_of_field, line_of_offset};
+use firmware_bridge::range::Limits;
+use planner::toml_lines::{check_field, field_at_offset, line_of_field, line_of_offset};
 use serde::Deserialize;
 
 use crate::effects::{EffectError, EffectSet};
@@ -432,11 +433,7 @@ impl Scenario {
     /// The first invalid field.
     pub fn validate(&self) -> std::result::Result<(), (String, String)> {
         fn positive(field: &str, v: f64) -> std::result::Result<(), (String, String)> {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err((field.to_owned(), format!("must be positive, got {v}")))
-            }
+            check_field(field, v, Limits::POSITIVE)
         }
         fn within(
             field: &str,
@@ -444,14 +441,7 @@ impl Scenario {
             lo: f64,
             hi: f64,
         ) -> std::result::Result<(), (String, String)> {
-            if v.is_finite() && (lo..=hi).contains(&v) {
-                Ok(())
-            } else {
-                Err((
-                    field.to_owned(),
-                    format!("must be in [{lo}, {hi}], got {v}"),
-                ))
-            }
+            check_field(field, v, Limits::closed(lo, hi, ""))
         }
         if let Some(k) = self.soil_force_factor {
             within("soil_force_factor", k, 0.0, 10.0)?;
@@ -665,7 +655,7 @@ mod tests {
                 origin: "b.toml".into(),
                 line: 5,
                 field: "bench.height_m".into(),
-                reason: "must be in [0, 20], got -2".into(),
+                reason: "must be finite and in [0, 20], got -2".into(),
             }
         );
         let text = "[effects]\nbogus = 1.0\n";

@@ -10,6 +10,7 @@ use std::fs::{self, File};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
+use firmware_bridge::range::Limits;
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
@@ -115,11 +116,9 @@ pub trait Validate {
 /// # Errors
 /// NaN or an infinity.
 pub fn finite(field: &str, value: f64) -> Result<(), FieldError> {
-    if value.is_finite() {
-        Ok(())
-    } else {
-        Err(FieldError::new(field, format!("{value} is not finite")))
-    }
+    Limits::FINITE
+        .check(value)
+        .map_err(|e| FieldError::new(field, format!("{value}: {e}")))
 }
 
 /// Every value of `values` (the field `field`) is finite; the error names the index.
@@ -127,12 +126,9 @@ pub fn finite(field: &str, value: f64) -> Result<(), FieldError> {
 /// # Errors
 /// The first NaN or infinity.
 pub fn all_finite(field: &str, values: &[f64]) -> Result<(), FieldError> {
-    match values.iter().position(|v| !v.is_finite()) {
+    match values.iter().position(|&v| !Limits::FINITE.contains(v)) {
         None => Ok(()),
-        Some(i) => Err(FieldError::new(
-            format!("{field}[{i}]"),
-            format!("{} is not finite", values[i]),
-        )),
+        Some(i) => finite(&format!("{field}[{i}]"), values[i]),
     }
 }
 

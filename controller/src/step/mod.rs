@@ -7,4 +7,5 @@ pub mod cycle;
 pub mod estimate;
 pub mod log_throttle;
 pub mod node;
+pub mod plausibility;
 pub mod safety;

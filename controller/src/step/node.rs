@@ -57,6 +57,7 @@ use firmware_bridge::messages::{
     Activity, AutodigStageCode, AuxValveCommand, ControllerStatus as StatusMessage, Message,
     PositionSetpoint, Valve,
 };
+use firmware_bridge::profile::GatewayTiming;
 use firmware_bridge::secoc::{SealError, Sealer, SessionKey};
 use firmware_bridge::time::Instant;
 use firmware_bridge::transport::BusFault;
@@ -73,6 +74,7 @@ use crate::config::ControllerConfig;
 use crate::step::cycle::{Action, CycleCommand, DigStats, Phase, WorkCycle};
 use crate::step::estimate::{Estimator, MachineState};
 use crate::step::log_throttle::LogThrottle;
+use crate::step::plausibility::AnglePlausibility;
 use crate::step::safety::{ArmMode, Fault, Safety, SafetyState, bus_fault_stops_motion};
 
 /// Most frames one step sends: six valve commands or a setpoint, neutral valves, and the heartbeat.
@@ -220,6 +222,8 @@ pub struct ControllerNode {
     intrusion_log: LogThrottle,
     /// The active fault as J1939-73 DM1 ([`CONTROLLER_DTCS`], index = fault code - 1).
     dm1: Dm1Reporter<{ CONTROLLER_DTCS.len() }>,
+    /// The last accepted joint angles, against which a new frame's are judged.
+    angles: AnglePlausibility,
 }
 
 impl ControllerNode {
@@ -277,6 +281,7 @@ impl ControllerNode {
             last_command: CycleCommand::Neutral,
             status_alive: 15,
             dm1: Dm1Reporter::new(&CONTROLLER_DTCS),
+            angles: AnglePlausibility::default(),
             // The step's frames leave after its computation (and its logs): a period of margin
             // keeps the claim's 250 ms on the wire when a step is late.
             claim: AddressClaimer::controller_named(name).with_hold_margin(
@@ -606,6 +611,24 @@ impl ControllerNode {
                         tracing::info!(session = session.session_id, "gateway session");
                     }
                     self.counters.consumed += 1;
+                } else if let (GATEWAY_ADDRESS, Message::JointAngles(a)) = (sa, &decoded.message)
+                    && let Err(e) = self.angles.check(
+                        [a.boom_rad, a.stick_rad, a.bucket_rad, a.swing_rad],
+                        time_s,
+                        &self.safety.config().max_joint_speed_rad_per_s,
+                        GatewayTiming::secs(self.safety.config().gateway.sensor_period_ms),
+                    )
+                {
+                    // Not used: the estimator keeps the last plausible angles.
+                    self.counters.faulty += 1;
+                    self.raise(
+                        time_s,
+                        Fault::ImplausibleSensor {
+                            joint: e.joint,
+                            jump_rad: e.jump_rad,
+                            allowed_rad: e.allowed_rad,
+                        },
+                    );
                 } else if sa == GATEWAY_ADDRESS && self.est.on_message(&decoded.message, time_s) {
                     self.counters.consumed += 1;
                 } else {

@@ -80,6 +80,7 @@ use crate::ControllerError;
 use crate::check::{Limits, ParamError, check, check_count};
 use crate::step::estimate::{Estimator, Signal, joint_angle};
 use crate::step::log_throttle::LogThrottle;
+use crate::step::plausibility::{JointSpeeds, SensedJoint};
 
 /// The gateway mode the controller arms for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -227,6 +228,21 @@ pub enum Fault {
         /// Whether the intruder's NAME wins over the owner's.
         owner_lost: bool,
     },
+    /// A joint-angle frame that puts a joint farther from the last accepted one than it can move in
+    /// the time between them (`step::plausibility`): a second sender of the angles on the bus or a
+    /// resolver fault. The frame is not used; the operator's resume or reset re-arms.
+    #[error(
+        "implausible joint angles: the {joint} moved {jump_rad:.4} rad between two frames, at most \
+         {allowed_rad:.4} rad is possible (a second sender of JointAngles, or a resolver fault)"
+    )]
+    ImplausibleSensor {
+        /// The joint.
+        joint: SensedJoint,
+        /// How far it moved since the last accepted frame, rad.
+        jump_rad: f64,
+        /// How far it could have moved, rad.
+        allowed_rad: f64,
+    },
 }
 
 impl Fault {
@@ -234,7 +250,7 @@ impl Fault {
     /// error, 3 unexpected frame, 4 joint limit, 5 e-stop, 6 gateway fault, 7 gateway mode, 8 arm
     /// timeout, 9 bus fault, 10 control, 11 shutdown, 12 gateway frozen, 13 address lost (on the bus
     /// only after the address was claimed again: the controller is silent meanwhile), 14 address
-    /// intrusion.
+    /// intrusion, 15 implausible sensor.
     pub const fn code(&self) -> u8 {
         match self {
             Fault::StaleSensor { .. } => 1,
@@ -251,6 +267,7 @@ impl Fault {
             Fault::GatewayFrozen { .. } => 12,
             Fault::AddressLost { .. } => 13,
             Fault::AddressIntrusion { .. } => 14,
+            Fault::ImplausibleSensor { .. } => 15,
         }
     }
 
@@ -370,6 +387,11 @@ pub struct SafetyConfig {
     pub max_auto_rearms: u32,
     /// Armed time without a fault that resets the re-arm count, s. Default 10.
     pub rearm_reset_s: f64,
+    /// The fastest each joint can turn (`[safety.max_joint_speed_rad_per_s]`, rad/s): a joint-angle
+    /// frame that moves a joint farther than this allows is rejected
+    /// ([`Fault::ImplausibleSensor`], `step::plausibility`). Defaults: boom, stick and swing 2.0,
+    /// bucket 8.0.
+    pub max_joint_speed_rad_per_s: JointSpeeds,
     /// Heartbeat period, s. Default 0.05 (20 Hz, the docs/protocol.md budget; the gateway's watchdog
     /// is 100 ms). A change of the requested mode (arm, disarm on a fault, e-stop) and every heartbeat
     /// after a shutdown are sent at once, whatever the period. [`SafetyConfig::validate`] refuses
@@ -382,10 +404,11 @@ pub struct SafetyConfig {
     pub gateway: GatewayTiming,
 }
 
-/// Period of the gateway's control signals (angles, rates, pressures), s: 100 Hz (docs/protocol.md).
-pub const SENSOR_PERIOD_S: f64 = 0.01;
-/// Period of the gateway status, s: 20 Hz (docs/protocol.md).
-pub const GATEWAY_STATUS_PERIOD_S: f64 = 0.05;
+/// Period of the gateway's control signals (angles, rates, pressures), s: 100 Hz (docs/protocol.md;
+/// [`firmware_bridge::dbc::SENSOR_PERIOD`], the DBC's cycle time).
+pub const SENSOR_PERIOD_S: f64 = firmware_bridge::dbc::SENSOR_PERIOD.as_secs_f64();
+/// Period of the gateway status, s: 20 Hz (docs/protocol.md; [`firmware_bridge::dbc::STATUS_PERIOD`]).
+pub const GATEWAY_STATUS_PERIOD_S: f64 = firmware_bridge::dbc::STATUS_PERIOD.as_secs_f64();
 /// The gateway's heartbeat watchdog and command timeout, s (`firmware_bridge::gateway::GatewayConfig`).
 pub const GATEWAY_WATCHDOG_S: f64 = 0.1;
 /// The longest gateway status age, in status periods (1 s at the project's 20 Hz).
@@ -490,6 +513,15 @@ impl SafetyConfig {
             Limits::above(0.0, 3600.0, "s"),
             "",
         )?;
+        for (joint, speed) in self.max_joint_speed_rad_per_s.by_joint() {
+            check(
+                "safety.max_joint_speed_rad_per_s",
+                joint.name(),
+                speed,
+                Limits::closed(0.1, 20.0, "rad/s"),
+                "the fastest the joint can turn",
+            )?;
+        }
         check(
             S,
             "heartbeat_period_s",
@@ -516,6 +548,7 @@ impl Default for SafetyConfig {
             auto_rearm: false,
             max_auto_rearms: 5,
             rearm_reset_s: 10.0,
+            max_joint_speed_rad_per_s: JointSpeeds::default(),
             heartbeat_period_s: 0.05,
             gateway: GatewayTiming::canonical(),
         }
@@ -626,8 +659,8 @@ impl Safety {
             tracing::warn!(
                 max_auto_rearms = config.max_auto_rearms,
                 "safety.auto_rearm is on (simulation only): after a transient fault (stale sensor \
-                 data, decode error, unexpected frame, CAN bus fault) motion resumes without the \
-                 operator"
+                 data, decode error, unexpected frame, CAN bus fault, a gateway fault of its link \
+                 alone) motion resumes without the operator"
             );
         }
         Ok(Self {
@@ -1268,6 +1301,11 @@ mod tests {
                 address: 0x80,
                 name: 0,
                 owner_lost: true,
+            },
+            Fault::ImplausibleSensor {
+                joint: SensedJoint::Boom,
+                jump_rad: 0.1,
+                allowed_rad: 0.03,
             },
         ];
         let mut table = vec![(0, "Healthy".to_owned())];

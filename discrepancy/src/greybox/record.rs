@@ -416,7 +416,7 @@ impl PreparedRecord {
             let spill_dt_s = record
                 .samples
                 .get(k + 1)
-                .map_or(0.01, |next| next.time_s - s.time_s);
+                .map_or(crate::PERIOD_S, |next| next.time_s - s.time_s);
             let spill = |c: &mut CutSection| {
                 let in_soil = s.stage != StageTag::Outside
                     && c.motion(tip, pose.bucket_abs_rad, tip_velocity)

@@ -28,7 +28,8 @@ pub fn extended(
     use crate::demo::{DemoArgs, DemoStrategy, dig_starts, run_session};
     use anyhow::Context as _;
     let stop = std::sync::atomic::AtomicBool::new(false);
-    let mut args = DemoArgs::planned(out.join("planned"));
+    let mut args = DemoArgs::defaults(out.join("planned"));
+    args.quiet = true;
     args.digs = digs;
     args.seed = seed;
     args.planner = planner.map(std::path::Path::to_path_buf);
@@ -36,7 +37,8 @@ pub fn extended(
     let planned = run_session(&args, &stop).context("planned session")?;
     let median = controller::session::planned::median_joints(&dig_starts(&planned.digs))
         .context("the planned session made no dig to take the median start of")?;
-    let mut args = DemoArgs::planned(out.join("predefined"));
+    let mut args = DemoArgs::defaults(out.join("predefined"));
+    args.quiet = true;
     args.strategy = DemoStrategy::Predefined;
     args.digs = digs;
     args.seed = seed;

@@ -11,10 +11,11 @@ use planner::origin::ArtefactOrigin;
 use super::evaluate::print_errors;
 use super::training_data::{ForceSource, VelocitySource, load_digs};
 
-/// The digs the shipped networks were trained on (`config/nominal_actuator.json`): 400 digs of
-/// `model generate-data`, split 260 / 60 / 80 (train / validation / test). Below
+/// The digs the shipped networks were trained on (`config/nominal_actuator.json`): the 403 digs and
+/// cleanups of `calibrate`'s four 100-dig default `demo` sessions, split 262 / 60 / 81 (train /
+/// validation / test). Below
 /// [`RECOMMENDED_MIN_DIGS`] `model train` warns that the data fall short.
-pub const SHIPPED_TRAINING_DIGS: usize = 400;
+pub const SHIPPED_TRAINING_DIGS: usize = 403;
 
 /// The fewest digs `model train` takes without a data-shortfall warning (docs/models.md, "How much
 /// data": on fresh planned sessions the recipe's error falls from about 10 / 3 / 9 % of peak with 12
@@ -196,8 +197,7 @@ pub fn data_shortfall(digs: usize) -> Option<String> {
         format!(
             "warning: {digs} digs is too little data for these networks: the shipped ones were trained \
              on {SHIPPED_TRAINING_DIGS} digs, and below {RECOMMENDED_MIN_DIGS} the free-running \
-             error rises (12 digs: about 10 % of peak, against 2-3 % from 100; docs/models.md, \
-             \"How much data\"). Record about \
+             error rises (docs/models.md, \"How much data\"). Record about \
              {} more digs (the `trace.log` of `demo --digs N`, `model generate-data`, or `run \
              --trace` on the machine) and train on all of them.",
             RECOMMENDED_MIN_DIGS - digs
@@ -211,7 +211,7 @@ fn train_config(a: &TrainArgs, machine: &planner::machine::MachineConfig) -> Tra
         seed: a.seed,
         hidden_units: a.hidden,
         delay_steps: a.delay.unwrap_or_else(|| {
-            (machine.hydraulics.transport_delay_s / 0.01)
+            (machine.hydraulics.transport_delay_s / crate::harness::PERIOD_S)
                 .round()
                 .max(0.0) as usize
         }),

@@ -125,7 +125,7 @@ impl FreeRunLoss {
 impl Default for TrainConfig {
     fn default() -> Self {
         Self {
-            dt_s: 0.01,
+            dt_s: gateway_core::dbc::CONTROL_PERIOD.as_secs_f64(),
             delay_steps: 3,
             hidden_units: 5,
             activation: Activation::Tanh,

@@ -53,6 +53,7 @@ use crate::estimate::EstimateError;
 use crate::kinematics::{Kinematics, KinematicsError, MachinePose};
 use crate::machine::MachineConfig;
 use crate::terrain::{TerrainError, TerrainGrid};
+use gateway_core::range::Limits;
 use serde::{Deserialize, Serialize};
 
 /// The shipped planner settings (`config/planner.toml`).
@@ -198,37 +199,25 @@ impl PlannerConfig {
     }
 }
 
+/// `Ok` if `v` is finite and within `limits` ([`gateway_core::range`]), else the config error naming
+/// `field`, the value and the rule.
+pub(crate) fn within(field: &'static str, v: f64, limits: Limits) -> Result<()> {
+    limits.check(v).map_err(|e| PlanError::Config {
+        field,
+        reason: format!("{v}: {e}"),
+    })
+}
+
 pub(crate) fn finite(field: &'static str, v: f64) -> Result<()> {
-    if v.is_finite() {
-        Ok(())
-    } else {
-        Err(PlanError::Config {
-            field,
-            reason: format!("{v}: must be finite"),
-        })
-    }
+    within(field, v, Limits::FINITE)
 }
 
 pub(crate) fn positive(field: &'static str, v: f64) -> Result<()> {
-    if v.is_finite() && v > 0.0 {
-        Ok(())
-    } else {
-        Err(PlanError::Config {
-            field,
-            reason: format!("{v}: must be finite and > 0"),
-        })
-    }
+    within(field, v, Limits::POSITIVE)
 }
 
 pub(crate) fn non_negative(field: &'static str, v: f64) -> Result<()> {
-    if v.is_finite() && v >= 0.0 {
-        Ok(())
-    } else {
-        Err(PlanError::Config {
-            field,
-            reason: format!("{v}: must be finite and >= 0"),
-        })
-    }
+    within(field, v, Limits::NON_NEGATIVE)
 }
 
 /// What persists between planning cycles.
