@@ -8,8 +8,9 @@ use std::process::{Command, Output, Stdio};
 
 use trace_tools::synth::{self, SynthConfig};
 
-/// Frames of the standard fixture: 2 s of the synthetic schedule (1170 frames/s).
-const FRAMES: u64 = 2340;
+/// Frames of the standard fixture: 2 s of the synthetic schedule (`synth::frames_in(2.0)`, checked
+/// by `the_fixture_is_two_seconds`).
+const FRAMES: u64 = 2384;
 
 fn exe() -> &'static str {
     env!("CARGO_BIN_EXE_excavator-ctl")
@@ -96,8 +97,8 @@ fn decode_filters() {
     let o = trace(&["decode", log, "--source-address", "0x80"]);
     let out = stdout(&o);
     assert!(out.lines().all(|l| l.contains("80#")), "{out}");
-    // 100 + 100 + 3 x 100 + 50 + 20 + 10 (status) + 10 (session) frames/s over 2 s.
-    assert_eq!(out.lines().count(), 2 * 590);
+    // 100 + 100 + 3 x 100 + 50 + 20 + 20 (status) + 20 (session) + 1 (DM1) frames/s over 2 s.
+    assert_eq!(out.lines().count(), 2 * 611);
     // Time window: [0.5, 1.0] s holds 50 or 51 periods of JointAngles.
     let o = trace(&[
         "decode",
@@ -202,7 +203,7 @@ fn truncated_file_is_read_up_to_the_damage() {
 #[test]
 fn stats_reports_rates_load_and_injected_faults() {
     let dir = tempfile::tempdir().unwrap();
-    let log = fixture(dir.path(), "dig.log", 11_700);
+    let log = fixture(dir.path(), "dig.log", synth::frames_in(10.0));
     let text = std::fs::read_to_string(&log).unwrap();
     // Drop 50 ms of JointAngles (a gap), corrupt one heartbeat checksum, add an unknown id and an
     // error frame.
@@ -281,7 +282,7 @@ fn stats_reports_rates_load_and_injected_faults() {
 fn plot_draws_signals_and_the_dig_preset() {
     let dir = tempfile::tempdir().unwrap();
     // One whole 12 s work cycle.
-    let log = fixture(dir.path(), "dig.log", 14_100);
+    let log = fixture(dir.path(), "dig.log", synth::frames_in(12.05));
     let svg = dir.path().join("dig.svg");
     let o = trace(&[
         "plot",
@@ -687,4 +688,148 @@ fn a_trace_without_one_frame_fails_naming_the_file_and_the_first_bad_line() {
             "{args:?}: {err}"
         );
     }
+}
+
+/// The docs' example traces in `dir` (`docs/trace-tools.md`): `dig.log`, 24 s of the synthetic
+/// schedule; `faulty.log`, the same with 5 `JointAngles` frames removed after 10 s, line 2000
+/// damaged and an error frame appended; `sim.log`, the same with the boom angle 0.03 rad higher from
+/// t = 6 s.
+fn docs_example_traces(dir: &Path) {
+    use firmware_bridge::Message;
+    let cfg = SynthConfig {
+        frames: synth::frames_in(24.0),
+        ..SynthConfig::default()
+    };
+    let mut dig = String::new();
+    let mut sim = String::new();
+    for (t, frame) in synth::SyntheticTrace::new(cfg.clone()) {
+        dig += &firmware_bridge::trace::format_line(t, &cfg.interface, &frame, None);
+        dig.push('\n');
+        let mut changed = frame;
+        if t >= cfg.start_ns + 6_000_000_000
+            && let Ok(Message::JointAngles(mut a)) = Message::decode(&frame).map(|d| d.message)
+        {
+            a.boom_rad += 0.03;
+            changed = Message::JointAngles(a).encode().unwrap();
+        }
+        sim += &firmware_bridge::trace::format_line(t, &cfg.interface, &changed, None);
+        sim.push('\n');
+    }
+    std::fs::write(dir.join("dig.log"), &dig).unwrap();
+    std::fs::write(dir.join("sim.log"), &sim).unwrap();
+    let mut lines: Vec<String> = Vec::new();
+    let mut angles = 0;
+    for line in dig.lines() {
+        if line.contains(" 0CFF5080#") {
+            angles += 1;
+            if (1001..=1005).contains(&angles) {
+                continue;
+            }
+        }
+        lines.push(line.to_string());
+    }
+    lines[1999] = lines[1999].replacen('.', "x", 1);
+    let stamp = lines.last().unwrap().split_once(' ').unwrap().0.to_string();
+    lines.push(format!("{stamp} vcan0 20000004#0004000000000000"));
+    std::fs::write(dir.join("faulty.log"), lines.join("\n") + "\n").unwrap();
+}
+
+/// One `$ excavator-ctl trace ...` line of a `console` block and the output the docs show for it.
+struct DocsSample {
+    command: String,
+    shown: String,
+}
+
+/// The `excavator-ctl trace` samples of `doc` that run without a CAN interface (not `replay`).
+fn docs_samples(doc: &str) -> Vec<DocsSample> {
+    let mut samples = Vec::new();
+    for block in doc.split("```console\n").skip(1) {
+        let block = block.split_once("```").unwrap().0;
+        let mut current: Option<DocsSample> = None;
+        for line in block.lines() {
+            if let Some(command) = line.strip_prefix("$ ") {
+                samples.extend(current.take());
+                current = (command.starts_with("excavator-ctl trace ")
+                    && !command.starts_with("excavator-ctl trace replay"))
+                .then(|| DocsSample {
+                    command: command.to_string(),
+                    shown: String::new(),
+                });
+            } else if let Some(sample) = current.as_mut() {
+                sample.shown += line;
+                sample.shown.push('\n');
+            }
+        }
+        samples.extend(current);
+    }
+    samples
+}
+
+/// Runs a sample's command line (`excavator-ctl trace ...`, optionally `| head -N`) in `dir`:
+/// stderr, then stdout.
+fn run_docs_sample(dir: &Path, command: &str) -> String {
+    let (command, head) = match command.split_once(" | head -") {
+        Some((c, n)) => (c, Some(n.trim().parse::<usize>().unwrap())),
+        None => (command, None),
+    };
+    let args: Vec<&str> = command.split_whitespace().skip(1).collect();
+    let o = Command::new(exe())
+        .current_dir(dir)
+        .args(&args)
+        .env("RUST_LOG", "warn")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{command}: {}", stderr(&o));
+    let out = stdout(&o);
+    let out = match head {
+        Some(n) => out.lines().take(n).map(|l| format!("{l}\n")).collect(),
+        None => out,
+    };
+    stderr(&o) + &out
+}
+
+/// Every `excavator-ctl trace` sample of `docs/trace-tools.md` prints what the page shows, on the
+/// traces the page describes. `EXCAVATOR_UPDATE_DOCS=1` writes what the commands print into the page.
+#[test]
+fn the_trace_tools_page_shows_what_the_commands_print() {
+    let page = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/trace-tools.md");
+    let doc = std::fs::read_to_string(&page).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    docs_example_traces(dir.path());
+    let normal = |s: &str| {
+        s.lines()
+            .map(str::trim_end)
+            .collect::<Vec<_>>()
+            .join("\n")
+            .trim()
+            .to_string()
+    };
+    let samples = docs_samples(&doc);
+    assert!(samples.len() >= 7, "{} samples", samples.len());
+    let mut updated = doc.clone();
+    let mut differing = Vec::new();
+    for sample in &samples {
+        let printed = run_docs_sample(dir.path(), &sample.command);
+        if normal(&printed) != normal(&sample.shown) {
+            let shown = format!("$ {}\n{}", sample.command, sample.shown);
+            let now = format!("$ {}\n{}\n", sample.command, normal(&printed));
+            updated = updated.replacen(&shown, &now, 1);
+            differing.push(format!("$ {}\n{printed}", sample.command));
+        }
+    }
+    if std::env::var_os("EXCAVATOR_UPDATE_DOCS").is_some() {
+        std::fs::write(&page, updated).unwrap();
+        return;
+    }
+    assert!(
+        differing.is_empty(),
+        "docs/trace-tools.md differs from what these commands print (EXCAVATOR_UPDATE_DOCS=1 \
+         cargo test -p excavator-ctl --test trace_cli writes them):\n{}",
+        differing.join("\n")
+    );
+}
+
+#[test]
+fn the_fixture_is_two_seconds() {
+    assert_eq!(FRAMES, synth::frames_in(2.0));
 }

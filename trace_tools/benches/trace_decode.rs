@@ -1,7 +1,7 @@
 //! Benchmark of `excavator-ctl trace decode` against `cantools decode` (figures printed, never
 //! asserted).
 //!
-//! Writes a 1,000,000-frame candump log of the full message schedule (`trace_tool::synth`: 1170
+//! Writes a 1,000,000-frame candump log of the full message schedule (`trace_tools::synth`: 1192
 //! frames/s, about 14 minutes of digging) to a temporary file, decodes it with the `trace decode`
 //! logic into /dev/null, and prints frames/s and the peak RSS (`VmHWM` of /proc/self/status: the file
 //! is streamed, so it stays at a few MB). Then, if cantools is installed, times
@@ -84,7 +84,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!(
         "trace_decode: wrote {frames} frames ({:.1} MB, {:.0} s of traffic) in {:.2} s",
         bytes as f64 / 1e6,
-        frames as f64 / 1170.0,
+        frames as f64 / synth::frames_in(1.0) as f64,
         start.elapsed().as_secs_f64()
     );
 

@@ -1,5 +1,6 @@
-//! Synthetic but realistic traces: the full message schedule (`busload::SCHEDULE`, 1170 frames/s)
-//! of a machine digging over and over, for the tests, the benchmark and the documentation examples.
+//! Synthetic but realistic traces: the full message schedule (`busload::SCHEDULE`, every periodic DBC
+//! message at its `GenMsgCycleTime`, 1192 frames/s) of a machine digging over and over, with no
+//! active fault, for the tests, the benchmark and the documentation examples.
 //!
 //! One work cycle lasts [`CYCLE_S`]: Autodig (boom down, pre-dig, dig, capture, done), then swing to
 //! dump, dump and return. The bucket tip follows a dig path in the x-z plane that is turned into joint
@@ -12,6 +13,8 @@
 
 use std::io::{self, Write};
 
+use firmware_bridge::dbc::{self, MessageDesc};
+use firmware_bridge::dm1::{CONTROLLER_DTCS, Dm1Reporter, GATEWAY_DTCS};
 use firmware_bridge::frame::CanFrame;
 use firmware_bridge::messages::{
     Activity, AutodigStageCode, AuxValveCommand, AuxValveMeasured, ControllerHeartbeat,
@@ -20,19 +23,36 @@ use firmware_bridge::messages::{
     ValveState,
 };
 use firmware_bridge::secoc::{Sealer, SessionKey};
-use firmware_bridge::{Message, trace};
+use firmware_bridge::{GATEWAY_ADDRESS, Message, trace};
 use planner::kinematics::{BucketPose, Kinematics};
 use planner::machine::MachineConfig;
 
 /// Length of one synthetic work cycle, s.
 pub const CYCLE_S: f64 = 12.0;
 /// Control period, s ([`firmware_bridge::dbc::CONTROL_PERIOD`]).
-const PERIOD_S: f64 = firmware_bridge::dbc::CONTROL_PERIOD.as_secs_f64();
+const PERIOD_S: f64 = dbc::CONTROL_PERIOD.as_secs_f64();
 /// Control periods per cycle.
 const STEPS_PER_CYCLE: usize = (CYCLE_S / PERIOD_S + 0.5) as usize;
+/// Whether a message of `desc` goes out in control period `step`: every `GenMsgCycleTime` of the
+/// DBC, rounded to whole control periods.
+fn due(desc: &MessageDesc, step: u64) -> bool {
+    let period_ns = dbc::CONTROL_PERIOD.as_nanos().max(1);
+    let every = (u128::from(desc.cycle_time_ms) * 1_000_000 / period_ns).max(1);
+    u128::from(step).is_multiple_of(every)
+}
+
 /// Nanoseconds between frames of one control period (a 131-160 bit frame takes 262-320 us at
 /// 500 kbit/s).
 const FRAME_SPACING_NS: u64 = 300_000;
+
+/// The number of frames of `seconds` of the schedule ([`firmware_bridge::busload::SCHEDULE`]).
+pub fn frames_in(seconds: f64) -> u64 {
+    let per_s: f64 = firmware_bridge::busload::SCHEDULE
+        .iter()
+        .map(|e| e.rate_hz)
+        .sum();
+    (seconds * per_s).round() as u64
+}
 
 /// Settings of a synthetic trace.
 #[derive(Debug, Clone, PartialEq)]
@@ -246,41 +266,40 @@ impl SyntheticTrace {
             AutodigStageCode::PreDig | AutodigStageCode::Dig | AutodigStageCode::Capture
         );
         let load_pa = if digging { 18e6 } else { 4e6 };
-        let every = |n: u64| step.is_multiple_of(n);
-        let mut out = Vec::with_capacity(17);
+        let mut out = Vec::with_capacity(20);
+        let mut push = |m: Message| {
+            if due(m.descriptor(), step) {
+                out.push(m);
+            }
+        };
         for (valve, cmd) in [Valve::Boom, Valve::Stick, Valve::Bucket, Valve::Swing]
             .into_iter()
             .zip(cmds)
         {
             if let Ok(c) = AuxValveCommand::from_fraction(valve, cmd) {
-                out.push(Message::AuxValveCommand(c));
+                push(Message::AuxValveCommand(c));
             }
         }
-        if every(5) {
-            out.push(Message::AuxValveCommand(AuxValveCommand::neutral(
-                Valve::LeftTrack,
-            )));
-            out.push(Message::AuxValveCommand(AuxValveCommand::neutral(
-                Valve::RightTrack,
-            )));
+        for track in [Valve::LeftTrack, Valve::RightTrack] {
+            push(Message::AuxValveCommand(AuxValveCommand::neutral(track)));
         }
-        out.push(Message::PositionSetpoint(PositionSetpoint {
+        push(Message::PositionSetpoint(PositionSetpoint {
             boom_rad: now.q[0],
             stick_rad: now.q[1],
             bucket_rad: now.q[2],
             swing_rad: now.swing_rad,
         }));
-        if every(5) {
-            out.push(Message::ControllerHeartbeat(self.heartbeat));
+        if due(&dbc::controller_heartbeat::MESSAGE, step) {
+            push(Message::ControllerHeartbeat(self.heartbeat));
             self.heartbeat = self.heartbeat.next(RequestedMode::ArmValve);
         }
-        out.push(Message::JointAngles(JointAngles {
+        push(Message::JointAngles(JointAngles {
             boom_rad: now.q[0],
             stick_rad: now.q[1],
             bucket_rad: now.q[2],
             swing_rad: now.swing_rad,
         }));
-        out.push(Message::JointRates(JointRates {
+        push(Message::JointRates(JointRates {
             boom_rad_per_s: rate(0).clamp(-30.0, 30.0),
             stick_rad_per_s: rate(1).clamp(-30.0, 30.0),
             bucket_rad_per_s: rate(2).clamp(-30.0, 30.0),
@@ -299,7 +318,7 @@ impl SyntheticTrace {
             let head = (load_pa * (1.0 + 0.2 * i as f64) + 2e6 * cmd.max(0.0)).min(34e6);
             let rod = (1.5e6 + 3e6 * (-cmd).max(0.0)).min(34e6);
             max_pa = max_pa.max(head).max(rod);
-            out.push(Message::AuxValveMeasured(AuxValveMeasured {
+            push(Message::AuxValveMeasured(AuxValveMeasured {
                 cylinder,
                 flow_percent: (cmd.abs() * 100.0).min(100.0),
                 state,
@@ -307,20 +326,16 @@ impl SyntheticTrace {
                 rod_pressure_pa: rod,
             }));
         }
-        if every(2) {
-            out.push(Message::PumpPressures(PumpPressures {
-                pump1_pa: (max_pa + 1e6).min(60e6),
-                pump2_pa: (max_pa + 0.5e6).min(60e6),
-            }));
-        }
-        if every(5) {
-            out.push(Message::TrackOdometry(TrackOdometry {
-                left_m: 0.0,
-                right_m: 0.0,
-            }));
-        }
-        if every(10) {
-            out.push(Message::GatewayStatus(GatewayStatus {
+        push(Message::PumpPressures(PumpPressures {
+            pump1_pa: (max_pa + 1e6).min(60e6),
+            pump2_pa: (max_pa + 0.5e6).min(60e6),
+        }));
+        push(Message::TrackOdometry(TrackOdometry {
+            left_m: 0.0,
+            right_m: 0.0,
+        }));
+        if due(&dbc::gateway_status::MESSAGE, step) {
+            push(Message::GatewayStatus(GatewayStatus {
                 mode: GatewayMode::ArmedValve,
                 faults: GatewayFaults(0),
                 alive_counter: self.gateway_alive,
@@ -328,18 +343,18 @@ impl SyntheticTrace {
                 rejected_frames: 0,
             }));
             self.gateway_alive = self.gateway_alive.wrapping_add(1);
-            out.push(Message::GatewaySession(GatewaySession {
-                session_id: SYNTH_SESSION_ID,
-            }));
         }
+        push(Message::GatewaySession(GatewaySession {
+            session_id: SYNTH_SESSION_ID,
+        }));
         if now.stage == AutodigStageCode::Dig {
             self.swept_m3 = (self.swept_m3 + 1.2 / 350.0).min(6.0);
         } else if now.stage == AutodigStageCode::BoomDown {
             self.swept_m3 = 0.0;
         }
-        if every(5) {
+        if due(&dbc::controller_status::MESSAGE, step) {
             let dig_index = (step / STEPS_PER_CYCLE as u64 + 1).min(64_255) as u16;
-            out.push(Message::ControllerStatus(ControllerStatus {
+            push(Message::ControllerStatus(ControllerStatus {
                 activity: now.activity,
                 stage: now.stage,
                 dig_index,
@@ -350,6 +365,7 @@ impl SyntheticTrace {
             }));
             self.status_alive = (self.status_alive + 1) % 16;
         }
+        push(Message::Dm1(Dm1Reporter::new(&CONTROLLER_DTCS).current()));
         out
     }
 
@@ -363,10 +379,17 @@ impl SyntheticTrace {
             .start_ns
             .saturating_add(step.saturating_mul((PERIOD_S * 1e9) as u64));
         let messages = self.period_messages(step);
-        for (i, msg) in messages.iter().enumerate() {
-            let Ok(frame) = self.sealer.seal(msg) else {
-                continue;
-            };
+        let mut frames: Vec<CanFrame> = messages
+            .iter()
+            .filter_map(|msg| self.sealer.seal(msg).ok())
+            .collect();
+        if due(&dbc::dm1_gateway::MESSAGE, step)
+            && let Ok(frame) =
+                Message::Dm1(Dm1Reporter::new(&GATEWAY_DTCS).current()).encode_from(GATEWAY_ADDRESS)
+        {
+            frames.push(frame);
+        }
+        for (i, frame) in frames.into_iter().enumerate() {
             let t = base + i as u64 * FRAME_SPACING_NS + self.jitter();
             self.pending.push((t, frame));
         }
@@ -412,16 +435,38 @@ mod tests {
 
     #[test]
     fn follows_the_schedule_rate() {
+        use firmware_bridge::busload::SCHEDULE;
+        let total_hz: f64 = SCHEDULE.iter().map(|e| e.rate_hz).sum();
+        assert!((total_hz - 1192.0).abs() < 1e-9, "{total_hz}");
+        // 10 s of the schedule.
+        let n = (10.0 * total_hz) as u64;
         let frames: Vec<_> = SyntheticTrace::new(SynthConfig {
-            frames: 11_700,
+            frames: n,
             ..SynthConfig::default()
         })
         .collect();
-        assert_eq!(frames.len(), 11_700);
+        assert_eq!(frames.len() as u64, n);
         let span_s = (frames[frames.len() - 1].0 - frames[0].0) as f64 * 1e-9;
         assert!((span_s - 10.0).abs() < 0.02, "{span_s}");
         assert!(frames.windows(2).all(|w| w[0].0 < w[1].0));
         assert!(frames.iter().all(|(_, f)| Message::decode(f).is_ok()));
+        // Every periodic message of the DBC at its rate, each from its sender.
+        for entry in SCHEDULE {
+            let desc = dbc::MESSAGES
+                .iter()
+                .find(|m| m.name == entry.message)
+                .unwrap();
+            let count = frames
+                .iter()
+                .filter(|(_, f)| f.id().raw() == desc.default_id)
+                .count() as f64;
+            assert!(
+                (count - 10.0 * entry.rate_hz).abs() <= 1.0,
+                "{}: {count} frames in 10 s, schedule {} Hz",
+                entry.message,
+                entry.rate_hz
+            );
+        }
     }
 
     #[test]

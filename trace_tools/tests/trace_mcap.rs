@@ -13,7 +13,8 @@ use std::process::Command;
 use trace_tools::convert;
 use trace_tools::synth::{self, SynthConfig};
 
-const FRAMES: u64 = 5850;
+/// 5 s of the schedule (`synth::frames_in(5.0)`, checked by `the_fixture_is_five_seconds`).
+const FRAMES: u64 = 5960;
 
 fn write_fixture(path: &Path) {
     let mut f = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
@@ -67,8 +68,8 @@ fn mcap_reads_back_with_the_mcap_crate() {
     let stats = summary.stats.as_ref().expect("statistics");
     // Every project frame decoded, the unknown id and the error frame raw, and the view.
     assert_eq!(stats.message_count, FRAMES + 2 + conv.view_written);
-    // 18 message channels + /can/raw + the view's 4.
-    assert_eq!(summary.channels.len(), 23);
+    // 20 message channels (the periodic DBC messages, DM1 of both nodes) + /can/raw + the view's 4.
+    assert_eq!(summary.channels.len(), 25);
     assert!(
         summary
             .chunk_indexes
@@ -131,7 +132,7 @@ fn mcap_reads_back_with_the_mcap_crate() {
     assert_eq!(per_topic["/can/raw"], 2);
     assert_eq!(per_topic["/can/JointAngles"], 500);
     assert_eq!(per_topic["/can/ControllerStatus"], 100);
-    assert_eq!(per_topic["/can/GatewayStatus"], 50);
+    assert_eq!(per_topic["/can/GatewayStatus"], 100);
     assert_eq!(per_topic["/tf"], 500);
     assert_eq!(per_topic["/signals"], 500);
     assert_eq!(last_time, 1_700_000_005_000_100_000);
@@ -253,4 +254,9 @@ fn mcap_has_chunk_and_message_indexes_and_a_size_bound_against_a_zstd_candump() 
         "MCAP {} bytes is {ratio:.2}x the zstd candump ({zstd_log} bytes)",
         bytes.len()
     );
+}
+
+#[test]
+fn the_fixture_is_five_seconds() {
+    assert_eq!(FRAMES, synth::frames_in(5.0));
 }

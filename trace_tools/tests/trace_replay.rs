@@ -79,7 +79,8 @@ fn all_frames(speed: f64) -> ReplayOptions {
 #[tokio::test(start_paused = true)]
 async fn replay_withholds_the_controllers_frames_unless_allowed() {
     let dir = tempfile::tempdir().unwrap();
-    let (path, frames) = fixture(dir.path(), 1170);
+    let one_second = synth::frames_in(1.0);
+    let (path, frames) = fixture(dir.path(), one_second);
     let bus = RecordingBus::new();
     let options = ReplayOptions {
         allow_control_frames: false,
@@ -94,7 +95,7 @@ async fn replay_withholds_the_controllers_frames_unless_allowed() {
         .count() as u64;
     assert!(control > 500, "the fixture has the controller's traffic");
     assert_eq!(summary.withheld_control, control);
-    assert_eq!(summary.sent, 1170 - control);
+    assert_eq!(summary.sent, one_second - control);
     let sent = bus.sent();
     assert!(sent.iter().all(|(_, f)| !replay::is_control_frame(f)));
     // Heartbeats from another address are withheld too: they are arming requests.
@@ -109,12 +110,13 @@ async fn replay_withholds_the_controllers_frames_unless_allowed() {
 #[tokio::test(start_paused = true)]
 async fn replay_keeps_the_recorded_spacing() {
     let dir = tempfile::tempdir().unwrap();
-    let (path, frames) = fixture(dir.path(), 1170);
+    let one_second = synth::frames_in(1.0);
+    let (path, frames) = fixture(dir.path(), one_second);
     let bus = RecordingBus::new();
     let summary = replay::replay_to(&bus, &path, &all_frames(1.0), std::future::pending())
         .await
         .unwrap();
-    assert_eq!(summary.sent, 1170);
+    assert_eq!(summary.sent, one_second);
     let sent = bus.sent();
     let t0 = frames[0].0;
     for ((at, frame), (t, original)) in sent.iter().zip(&frames) {
@@ -136,7 +138,8 @@ async fn replay_keeps_the_recorded_spacing() {
 #[tokio::test(start_paused = true)]
 async fn replay_speed_and_id_filter() {
     let dir = tempfile::tempdir().unwrap();
-    let (path, frames) = fixture(dir.path(), 1170);
+    let one_second = synth::frames_in(1.0);
+    let (path, frames) = fixture(dir.path(), one_second);
     let bus = RecordingBus::new();
     let options = ReplayOptions {
         ids: vec![0x0CFF_5080, 0x0CFF_6127],
@@ -147,7 +150,7 @@ async fn replay_speed_and_id_filter() {
         .unwrap();
     // One second: 100 JointAngles and 20 heartbeats.
     assert_eq!(summary.sent, 120);
-    assert_eq!(summary.filtered, 1050);
+    assert_eq!(summary.filtered, one_second - 120);
     let sent = bus.sent();
     let t0 = frames[0].0;
     let last_angles = frames

@@ -77,7 +77,7 @@ fn memory_does_not_grow_with_the_trace() {
         println!("skip: no /proc/self/status");
         return;
     };
-    // 200,000 frames: about 11 MB of candump text, 172 s of traffic.
+    // 200,000 frames: about 11 MB of candump text, 168 s of traffic.
     const FRAMES: u64 = 200_000;
     let summary = decode::decode_stream(
         io::BufReader::new(LiveTrace::new(FRAMES)),
