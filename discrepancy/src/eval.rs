@@ -527,16 +527,22 @@ fn run_case(
     digs: u32,
     reference: Option<&std::path::Path>,
 ) -> Vec<CaseResult> {
-    let paths: Vec<(EvalPath, Option<&std::path::Path>)> = std::iter::once((EvalPath::Default, None))
-        .chain(reference.map(|r| (EvalPath::Recorded, Some(r))))
-        .collect();
+    let paths: Vec<(EvalPath, Option<&std::path::Path>)> =
+        std::iter::once((EvalPath::Default, None))
+            .chain(reference.map(|r| (EvalPath::Recorded, Some(r))))
+            .collect();
     let session = match case_session(args, hidden, seed, digs) {
         Ok(s) => s,
         Err(e) => {
             return paths
                 .iter()
                 .map(|(p, _)| {
-                    CaseResult::failed(format!("{}_s{seed} ({e:#})", hidden.name()), hidden, seed, *p)
+                    CaseResult::failed(
+                        format!("{}_s{seed} ({e:#})", hidden.name()),
+                        hidden,
+                        seed,
+                        *p,
+                    )
                 })
                 .collect();
         }
@@ -545,7 +551,12 @@ fn run_case(
         .iter()
         .map(|(p, r)| {
             analyse_case(hidden, seed, &session, *p, *r, &args.out).unwrap_or_else(|e| {
-                CaseResult::failed(format!("{}_s{seed} ({e:#})", hidden.name()), hidden, seed, *p)
+                CaseResult::failed(
+                    format!("{}_s{seed} ({e:#})", hidden.name()),
+                    hidden,
+                    seed,
+                    *p,
+                )
             })
         })
         .collect()

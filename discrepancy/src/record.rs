@@ -100,15 +100,16 @@ pub fn run_record(args: &RecordReferenceArgs) -> anyhow::Result<crate::reference
     let sessions: Vec<PathBuf> = demos
         .par_iter()
         .map(|demo| {
-            run_session(demo, &AtomicBool::new(false))
-                .with_context(|| format!("generating the healthy session {}", demo.out.display()))?;
+            run_session(demo, &AtomicBool::new(false)).with_context(|| {
+                format!("generating the healthy session {}", demo.out.display())
+            })?;
             Ok(demo.out.clone())
         })
         .collect::<anyhow::Result<_>>()?;
     let machine = load_machine(None)?;
     let model = load_model(None)?;
-    let mut reference = load_reference(&sessions, &machine, &model)?
-        .context("no healthy sessions")?;
+    let mut reference =
+        load_reference(&sessions, &machine, &model)?.context("no healthy sessions")?;
     let seeds = args.seeds();
     reference.source = vec![format!(
         "{} healthy default `demo` sessions of {} digs on the simulated default machine, seeds {}-{}",

@@ -20,7 +20,8 @@ const CLEAN_SEEDS: [u64; 2] = [9351, 9352];
 
 /// The bound on the shipped networks' free-running error on one fresh default session, % of the
 /// peak speed, every cylinder: the 5 % target with a margin for one short session (the
-/// worst of 5 fresh 10-dig default sessions in docs/models.md is 5.75 % on the boom).
+/// worst of 5 fresh 10-dig default sessions in docs/models.md is 5.75 % on the boom; this one,
+/// seed 9353, gave 5.0 / 3.8 / 6.0 % boom / stick / bucket when the bound was set).
 const NETWORK_BOUND_PERCENT: f64 = 7.0;
 
 fn default_session(dir: &Path, seed: u64) -> PathBuf {
@@ -50,12 +51,11 @@ fn clean_default_sessions_analysed_without_reference_name_nothing() {
             a.result.named_effects,
             a.result.ambiguous
         );
-        let v = a.verdict.as_ref().expect("judged against the built-in reference");
-        assert!(
-            v.unexplained.is_empty(),
-            "seed {seed}: {:?}",
-            v.unexplained
-        );
+        let v = a
+            .verdict
+            .as_ref()
+            .expect("judged against the built-in reference");
+        assert!(v.unexplained.is_empty(), "seed {seed}: {:?}", v.unexplained);
         let summary = discrepancy::report::summary_text(&a);
         assert!(
             summary.contains("record-reference") && summary.contains("for a real machine"),
