@@ -41,9 +41,15 @@ pub struct AnalyseArgs {
     pub replay_csv: bool,
     /// What "expected" is: session folders of this machine declared healthy (repeatable), or one
     /// `reference.json` an earlier analysis wrote. Every signal's held-out residual is judged as a
-    /// ratio to its level there. Without it the residuals are not judged, only fitted.
+    /// ratio to its level there. Without it, the default machine with the shipped model is judged
+    /// against the built-in reference (config/nominal_reference.json, healthy simulated default
+    /// sessions); another machine or model is not judged, only fitted.
     #[arg(long, value_name = "DIR|FILE", num_args = 1..)]
     pub reference: Vec<PathBuf>,
+    /// Judge against no reference, not even the built-in one: every candidate is fitted and named
+    /// on its own held-out evidence.
+    #[arg(long, conflicts_with = "reference")]
+    pub no_reference: bool,
 }
 
 impl AnalyseArgs {
@@ -57,8 +63,52 @@ impl AnalyseArgs {
             quiet: true,
             replay_csv: false,
             reference: Vec::new(),
+            no_reference: false,
         }
     }
+}
+
+/// How to record a reference for a real machine (the report's advice when it judged against the
+/// built-in one of the simulated default machine, or against none).
+pub const RECORD_REFERENCE_ADVICE: &str = "for a real machine, record 3-4 sessions of 16 digs it \
+     does while declared healthy and pass them as `--reference DIR...`: the analysis calibrates the \
+     model on them and writes `reference.json`, which `--reference FILE` reads back";
+
+/// The reference an analysis judges against: `args.reference` when given; else, unless
+/// `args.no_reference`, the built-in reference of the default machine ([`Reference::builtin`])
+/// when the machine is the built-in one and the starting model the one it was recorded with (the
+/// shipped nominal model). With the second value, why none was used.
+///
+/// # Errors
+/// As [`load_reference`]; a built-in reference that does not parse.
+fn choose_reference(
+    args: &AnalyseArgs,
+    machine: &planner::machine::MachineConfig,
+    model: &AugmentedModel,
+) -> anyhow::Result<(Option<Reference>, Option<String>)> {
+    if !args.reference.is_empty() {
+        return Ok((load_reference(&args.reference, machine, model)?, None));
+    }
+    if args.no_reference {
+        return Ok((None, Some("--no-reference".to_string())));
+    }
+    if args.machine.is_some() {
+        return Ok((
+            None,
+            Some("the built-in reference is of the built-in machine file, not --machine's".into()),
+        ));
+    }
+    let builtin = Reference::builtin().context("the built-in reference")?;
+    if builtin.model != model.provenance {
+        return Ok((
+            None,
+            Some(format!(
+                "the built-in reference was recorded with another starting model ({})",
+                builtin.model
+            )),
+        ));
+    }
+    Ok((Some(builtin), None))
 }
 
 /// The explained share a candidate needs, on the samples where it acts, to be calibration of
@@ -238,7 +288,7 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
         tracing::warn!("session {} left out: {}", s.session.display(), s.reason);
     }
     let mut warnings = sufficiency::check_records(&records)?;
-    let reference = load_reference(&args.reference, &machine, &model)?;
+    let (reference, why_none) = choose_reference(args, &machine, &model)?;
     if let Some(r) = reference.as_ref().filter(|r| r.model != model.provenance) {
         warnings.push(format!(
             "the reference was made with another starting model ({}); its levels may not be this model's",
@@ -250,11 +300,12 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
         None => model,
     };
     if reference.is_none() {
-        warnings.push(
-            "no reference (--reference): the residuals are not judged against what a healthy \
-             machine gives, so a large residual no candidate explains goes unreported"
-                .to_string(),
-        );
+        warnings.push(format!(
+            "no reference ({}): the residuals are not judged against what a healthy machine \
+             gives, so a large residual no candidate explains goes unreported, and every \
+             candidate is named on its own evidence; {RECORD_REFERENCE_ADVICE}",
+            why_none.as_deref().unwrap_or("--reference")
+        ));
     }
     let mut config = AnalysisConfig {
         base: model.augmentation()?,
@@ -288,10 +339,23 @@ pub fn run_analysis(args: &AnalyseArgs) -> anyhow::Result<Analysis> {
         verdict::judge(result, &after, r)
     };
     if let Some(r) = &reference {
-        let (eligible, warning) = eligible_signals(&records, &model, &config, |p| judge(p, r))?;
+        let (eligible, warning, judged) =
+            eligible_signals(&records, &model, &config, |p| judge(p, r))?;
         config.eligible = eligible;
         config.ignored[crate::greybox::Signal::PayloadMass.index()] = warning.is_some();
         warnings.extend(warning);
+        // Naming is judged evidence: where the held-out digs leave no signal to judge against
+        // the reference, nothing is named.
+        if judged == 0 {
+            config.candidates.clear();
+            config.parameters = None;
+            warnings.push(format!(
+                "too few data to judge: no signal has {} held-out samples to compare with the \
+                 reference, so nothing is named; record more digs (at least {}, 16 recommended)",
+                crate::reference::MIN_JUDGED_SAMPLES,
+                sufficiency::RECOMMENDED_COMPLETED_DIGS
+            ));
+        }
     }
     let bar = (!args.quiet && std::io::IsTerminal::is_terminal(&std::io::stdout())).then(|| {
         let bar = indicatif::ProgressBar::new(1);
@@ -424,6 +488,7 @@ fn less_healthy_force_bias(
 /// mean residual outside the reference's band ([`crate::verdict::SignalVerdict::bias_beyond`]) is
 /// reported, not made eligible: a 20 % heavier stick shifts the weighed payload, and soil density
 /// then stands in for it.
+/// The third value is how many signals the reference judges at all (0: too few data to judge).
 /// When none is beyond: `None`, every signal, and a candidate is named on its own held-out evidence only
 /// (significance and explained share, as always). The RMS ratio to the reference is an omnibus
 /// test of every sample; a candidate's fit tests one physical hypothesis on the samples where it
@@ -447,7 +512,11 @@ fn eligible_signals(
     model: &AugmentedModel,
     config: &AnalysisConfig,
     judge: impl Fn(&crate::AnalysisResult) -> crate::verdict::Verdict,
-) -> anyhow::Result<(Option<[bool; crate::greybox::N_SIGNALS]>, Option<String>)> {
+) -> anyhow::Result<(
+    Option<[bool; crate::greybox::N_SIGNALS]>,
+    Option<String>,
+    usize,
+)> {
     use crate::greybox::Signal;
     let probe_config = AnalysisConfig {
         candidates: Vec::new(),
@@ -482,9 +551,14 @@ fn eligible_signals(
             links_biased.join(", ")
         )
     });
+    let judged = v
+        .signals
+        .iter()
+        .filter(|s| s.outcome != crate::verdict::Outcome::NotJudged)
+        .count();
     let nothing_beyond = v.nothing_beyond_before();
     if nothing_beyond && warning.is_none() {
-        return Ok((None, None));
+        return Ok((None, None, judged));
     }
     let mut eligible = [true; crate::greybox::N_SIGNALS];
     if !nothing_beyond {
@@ -496,7 +570,7 @@ fn eligible_signals(
     if warning.is_some() {
         eligible[Signal::PayloadMass.index()] = false;
     }
-    Ok((Some(eligible), warning))
+    Ok((Some(eligible), warning, judged))
 }
 
 #[cfg(test)]

@@ -6,6 +6,8 @@
 //!   (`report.md`, `report.json`, figures, `model.json`);
 //! - `eval` ([`crate::eval`]): the hidden-effect evaluation: sessions generated in-process with one
 //!   hidden simulator effect, analysed blind, and the confusion table;
+//! - `record-reference` ([`crate::record`]): a reference from healthy default sessions (the
+//!   built-in one, config/nominal_reference.json, is its output);
 //! - `bench`: the analysis time of N digs on one core.
 
 use clap::Subcommand;
@@ -22,6 +24,9 @@ pub enum DiscrepancyArgs {
     /// Hidden-effect evaluation: generate sessions with one hidden effect each (and effect-free ones),
     /// analyse them told nothing, print the confusion table.
     Eval(eval::EvalArgs),
+    /// Record a reference from healthy default `demo` sessions (the built-in reference,
+    /// config/nominal_reference.json, is `--out config/nominal_reference.json` with the defaults).
+    RecordReference(crate::record::RecordReferenceArgs),
     /// Time the analysis of N digs with the full effect library on one core.
     Bench(eval::BenchArgs),
 }
@@ -39,6 +44,16 @@ pub fn run(args: DiscrepancyArgs) -> anyhow::Result<()> {
             Ok(())
         }
         DiscrepancyArgs::Eval(a) => eval::run_eval(&a),
+        DiscrepancyArgs::RecordReference(a) => {
+            let r = crate::record::run_record(&a)?;
+            println!(
+                "reference of {} digs ({}) written to {}",
+                r.digs,
+                r.source.join(", "),
+                a.out.display()
+            );
+            Ok(())
+        }
         DiscrepancyArgs::Bench(a) => eval::run_bench(&a),
     }
 }

@@ -60,10 +60,15 @@ pub struct EvalArgs {
     /// `machine` or `bench` (repeatable; `default`: the built-in list of `crate::plant`).
     #[arg(long = "plant", value_name = "CHANGE")]
     pub plant: Vec<String>,
-    /// Healthy sessions generated at their own seeds (300, 301, ...) as the reference every case
-    /// is judged against (0: no reference, no verdicts; at most 1 with --quick).
+    /// Healthy sessions generated at their own seeds (300, 301, ...) as the recorded reference
+    /// every case is also judged against (0: the default path alone; at most 1 with --quick).
     #[arg(long, default_value_t = 2, value_name = "N")]
     pub reference_sessions: u64,
+    /// Added to every seed of the evaluation (the cases' 11, 100-, 200-, 400-, 600- and the
+    /// reference's 300-): another base is a fresh set of sessions. It must keep clear of the
+    /// built-in reference's seeds (8501-8504), which the default path judges against.
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    pub seed_base: u64,
     /// Leave out the effect-library cases (plant changes and effect-free sessions only).
     #[arg(long)]
     pub no_effects: bool,
@@ -91,6 +96,7 @@ impl EvalArgs {
             strategy: None,
             plant: Vec::new(),
             reference_sessions: 2,
+            seed_base: 0,
             no_effects: false,
             no_pairs: false,
             results: None,
@@ -288,6 +294,8 @@ fn pair_outcome(
 pub struct CaseResult {
     /// Case name (also the session folder name).
     pub case: String,
+    /// Which reference the analysis judged against ([`EvalPath::name`]).
+    pub path: &'static str,
     /// Hidden effect name, or `none`.
     pub hidden: String,
     /// Hidden magnitude (0 for none).
@@ -335,9 +343,10 @@ pub struct CaseResult {
 
 impl CaseResult {
     /// A case whose session could not be generated or analysed (counted as a miss, named `error`).
-    fn failed(case: String, hidden: &Hidden, seed: u64) -> Self {
+    fn failed(case: String, hidden: &Hidden, seed: u64, path: EvalPath) -> Self {
         Self {
             case,
+            path: path.name(),
             hidden: hidden.name(),
             hidden_magnitude: hidden.magnitude(),
             seed,
@@ -477,13 +486,89 @@ fn apply_plant(
     Ok(())
 }
 
+/// The two paths every case is analysed on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EvalPath {
+    /// `analyse` without `--reference`, as a user runs it first: the default machine is judged
+    /// against the built-in reference (`config/nominal_reference.json`).
+    Default,
+    /// `analyse --reference FILE` with the reference of the evaluation's own healthy sessions.
+    Recorded,
+}
+
+impl EvalPath {
+    /// Name in `eval.json` and the tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Default => "default",
+            Self::Recorded => "recorded",
+        }
+    }
+
+    fn title(self) -> &'static str {
+        match self {
+            Self::Default => {
+                "Default path: `analyse` without --reference (the built-in reference of the default machine)"
+            }
+            Self::Recorded => {
+                "With a recorded reference: `analyse --reference` the evaluation's healthy sessions"
+            }
+        }
+    }
+}
+
+/// Generates the case's session and analyses it on each path (`reference`: the recorded
+/// reference; without it, the default path alone). A path whose analysis fails counts as a
+/// miss, named `error`.
 fn run_case(
     args: &EvalArgs,
     hidden: &Hidden,
     seed: u64,
     digs: u32,
     reference: Option<&std::path::Path>,
-) -> anyhow::Result<CaseResult> {
+) -> Vec<CaseResult> {
+    let paths: Vec<(EvalPath, Option<&std::path::Path>)> =
+        std::iter::once((EvalPath::Default, None))
+            .chain(reference.map(|r| (EvalPath::Recorded, Some(r))))
+            .collect();
+    let session = match case_session(args, hidden, seed, digs) {
+        Ok(s) => s,
+        Err(e) => {
+            return paths
+                .iter()
+                .map(|(p, _)| {
+                    CaseResult::failed(
+                        format!("{}_s{seed} ({e:#})", hidden.name()),
+                        hidden,
+                        seed,
+                        *p,
+                    )
+                })
+                .collect();
+        }
+    };
+    paths
+        .iter()
+        .map(|(p, r)| {
+            analyse_case(hidden, seed, &session, *p, *r, &args.out).unwrap_or_else(|e| {
+                CaseResult::failed(
+                    format!("{}_s{seed} ({e:#})", hidden.name()),
+                    hidden,
+                    seed,
+                    *p,
+                )
+            })
+        })
+        .collect()
+}
+
+/// The case's session folder (generated unless a finished one is there) and its name.
+fn case_session(
+    args: &EvalArgs,
+    hidden: &Hidden,
+    seed: u64,
+    digs: u32,
+) -> anyhow::Result<(String, PathBuf)> {
     let out = &args.out;
     let base = match hidden {
         Hidden::Effect(c, v) => format!("{}_{v}_s{seed}", c.name()),
@@ -506,9 +591,23 @@ fn run_case(
         Hidden::None => {}
     }
     let session = plan.generate()?;
-    let case = plan.case;
+    Ok((plan.case, session))
+}
+
+fn analyse_case(
+    hidden: &Hidden,
+    seed: u64,
+    (case, session): &(String, PathBuf),
+    path: EvalPath,
+    reference: Option<&std::path::Path>,
+    out: &std::path::Path,
+) -> anyhow::Result<CaseResult> {
+    let case = case.clone();
     let t = Instant::now();
-    let mut analyse_args = AnalyseArgs::new(vec![session], out.join("reports").join(&case));
+    let mut analyse_args = AnalyseArgs::new(
+        vec![session.clone()],
+        out.join("reports").join(path.name()).join(&case),
+    );
     analyse_args.reference = reference.map(|r| vec![r.to_path_buf()]).unwrap_or_default();
     let analysis = run_analysis(&analyse_args).with_context(|| format!("analysing {case}"))?;
     let analysis_s = t.elapsed().as_secs_f64();
@@ -565,6 +664,7 @@ fn run_case(
     });
     Ok(CaseResult {
         case,
+        path: path.name(),
         hidden: hidden.name(),
         hidden_magnitude: hidden.magnitude(),
         seed,
@@ -1041,7 +1141,7 @@ pub fn cases(args: &EvalArgs) -> anyhow::Result<Vec<(Hidden, u64)>> {
             out.push((Hidden::Plant(p), 11));
         }
         out.push((Hidden::None, 11));
-        return Ok(out);
+        return Ok(based(out, args.seed_base));
     }
     for seed in 0..args.seeds {
         for c in &effects {
@@ -1061,7 +1161,54 @@ pub fn cases(args: &EvalArgs) -> anyhow::Result<Vec<(Hidden, u64)>> {
     for seed in 0..args.nominal_sessions {
         out.push((Hidden::None, 200 + seed));
     }
-    Ok(out)
+    Ok(based(out, args.seed_base))
+}
+
+/// The cases with `base` added to their seeds.
+fn based(cases: Vec<(Hidden, u64)>, base: u64) -> Vec<(Hidden, u64)> {
+    cases
+        .into_iter()
+        .map(|(h, seed)| (h, seed.saturating_add(base)))
+        .collect()
+}
+
+/// The seeds of the recorded reference's healthy sessions.
+fn reference_seeds(args: &EvalArgs) -> Vec<u64> {
+    let n = if args.quick {
+        args.reference_sessions.min(1)
+    } else {
+        args.reference_sessions
+    };
+    (0..n)
+        .map(|i| args.seed_base.saturating_add(300 + i))
+        .collect()
+}
+
+/// Refuses an evaluation whose sessions share a seed with the built-in reference's: the default
+/// path would judge sessions against themselves.
+///
+/// # Errors
+/// The seeds that overlap.
+fn check_seeds_clear_of_builtin(cases: &[(Hidden, u64)], reference: &[u64]) -> anyhow::Result<()> {
+    let builtin = crate::reference::Reference::builtin()?;
+    let Some(rec) = builtin.recording else {
+        return Ok(());
+    };
+    let mut clash: Vec<u64> = cases
+        .iter()
+        .map(|(_, s)| *s)
+        .chain(reference.iter().copied())
+        .filter(|s| rec.seeds.contains(s))
+        .collect();
+    clash.sort_unstable();
+    clash.dedup();
+    anyhow::ensure!(
+        clash.is_empty(),
+        "--seed-base {}: seeds {clash:?} are the built-in reference's ({:?}); choose another base",
+        cases.first().map_or(0, |c| c.1),
+        rec.seeds
+    );
+    Ok(())
 }
 
 /// Generates the reference sessions (healthy, at seeds 300, 301, ...) and writes their reference
@@ -1070,18 +1217,13 @@ pub fn cases(args: &EvalArgs) -> anyhow::Result<Vec<(Hidden, u64)>> {
 /// # Errors
 /// Generating or reading a session.
 fn reference_file(args: &EvalArgs, digs: u32) -> anyhow::Result<Option<PathBuf>> {
-    let n = if args.quick {
-        args.reference_sessions.min(1)
-    } else {
-        args.reference_sessions
-    };
-    if n == 0 {
+    let seeds = reference_seeds(args);
+    if seeds.is_empty() {
         return Ok(None);
     }
-    let sessions: Vec<PathBuf> = (0..n)
+    let sessions: Vec<PathBuf> = seeds
         .into_par_iter()
-        .map(|i| {
-            let seed = 300 + i;
+        .map(|seed| {
             SessionPlan::new(
                 &args.out,
                 &format!("reference_s{seed}"),
@@ -1110,6 +1252,7 @@ fn reference_file(args: &EvalArgs, digs: u32) -> anyhow::Result<Option<PathBuf>>
 pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
     let digs = args.digs.unwrap_or(if args.quick { 4 } else { 16 });
     let list = cases(args)?;
+    check_seeds_clear_of_builtin(&list, &reference_seeds(args))?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let t = Instant::now();
@@ -1120,24 +1263,35 @@ pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
     }
     let results: Vec<CaseResult> = list
         .par_iter()
-        .map(|(hidden, seed)| {
+        .flat_map_iter(|(hidden, seed)| {
             // A session that cannot be analysed (e.g. the hidden effect stopped the work cycle
             // after one dig) counts as a miss, named `error`, and the evaluation goes on.
-            let r = run_case(args, hidden, *seed, digs, reference.as_deref()).unwrap_or_else(|e| {
-                CaseResult::failed(format!("{}_s{seed} ({e:#})", hidden.name()), hidden, *seed)
-            });
+            let r = run_case(args, hidden, *seed, digs, reference.as_deref());
             bar.inc(1);
             r
         })
         .collect();
     bar.finish_and_clear();
-    let text = format!(
-        "{}{}{}{}",
-        confusion_text(&results),
-        pairs_text(&results),
-        outcome_text(&results),
-        twin_text(&results)
-    );
+    let text = [EvalPath::Default, EvalPath::Recorded]
+        .into_iter()
+        .filter_map(|path| {
+            let of_path: Vec<CaseResult> = results
+                .iter()
+                .filter(|r| r.path == path.name())
+                .cloned()
+                .collect();
+            (!of_path.is_empty()).then(|| {
+                format!(
+                    "=== {} ===\n\n{}{}{}{}\n",
+                    path.title(),
+                    confusion_text(&of_path),
+                    pairs_text(&of_path),
+                    outcome_text(&of_path),
+                    twin_text(&of_path)
+                )
+            })
+        })
+        .collect::<String>();
     print!("{text}");
     println!(
         "{} cases in {:.0} s (generation and analysis, {} rayon threads)",
@@ -1176,8 +1330,10 @@ fn results_page(command: &str, digs: u32, eval: &str, bench: &str) -> String {
         "Generated by `{command}`; do not edit.\n\n# Discrepancy workflow: results\n\n\
          Made on {} at commit {}, plant `{}`. Sessions generated fresh by the in-process demo \
          ({digs} digs each, the default planned bench unless the command says otherwise), each \
-         analysed from its folder against the `reference.json` of healthy sessions at seeds 300 \
-         and on; what the tables mean is in [discrepancy.md](discrepancy.md) (Evaluation).\n\n\
+         analysed from its folder twice: on the default path (`analyse` without `--reference`, \
+         judged against the built-in reference of the default machine) and against the \
+         `reference.json` of the evaluation's healthy sessions (seeds 300 and on, plus the \
+         command's `--seed-base`); what the tables mean is in [discrepancy.md](discrepancy.md) (Evaluation).\n\n\
          ## Evaluation\n\n```\n{eval}```\n\n## One analysis, timed (`discrepancy bench`)\n\n\
          ```\n{bench}```\n",
         provenance.date,
@@ -1325,7 +1481,7 @@ mod tests {
     #[test]
     fn the_twin_table_counts_the_cases_whose_gap_halved() {
         let case = |name: &str, written: &[&str], ratios: [f64; 3]| {
-            let mut c = CaseResult::failed(name.into(), &Hidden::None, 1);
+            let mut c = CaseResult::failed(name.into(), &Hidden::None, 1, EvalPath::Recorded);
             c.twin_written = written.iter().map(|w| (*w).to_string()).collect();
             c.twin_ratio = crate::twin::GAP_GROUPS
                 .iter()

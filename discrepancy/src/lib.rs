@@ -33,7 +33,8 @@
 //! - [`twin`]: the named effects and parameters as a simulator profile (machine file and effects),
 //!   and the simulator's gap to the held-out digs before and after;
 //! - [`report`]: `report.json`, `report.md`, the figures and `model.json` of an analysis;
-//! - [`analysis`], [`eval`], [`command`]: `excavator-ctl discrepancy analyse`, `eval` and `bench`, and
+//! - [`analysis`], [`record`], [`eval`], [`command`]: `excavator-ctl discrepancy analyse`,
+//!   `record-reference` (the built-in reference of the default machine), `eval` and `bench`, and
 //!   the subcommand dispatch.
 
 pub mod analysis;
@@ -46,6 +47,7 @@ pub mod model;
 pub mod parameters;
 pub mod plant;
 pub mod read;
+pub mod record;
 pub mod reference;
 pub mod report;
 pub mod session;

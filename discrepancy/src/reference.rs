@@ -22,6 +22,13 @@ use crate::{DiscrepancyError, Result, StageTag, stats};
 /// Format name of a reference file.
 pub const REFERENCE_FORMAT: &str = "excavator-discrepancy-reference";
 
+/// The built-in reference of the default machine (`config/nominal_reference.json`): healthy
+/// default `demo` sessions replayed through the shipped nominal model, recorded by
+/// `excavator-ctl discrepancy record-reference` ([`Recording`] says with which command and seeds).
+/// `analyse` without `--reference` judges against it when the machine and the starting model are
+/// the defaults.
+pub const BUILTIN_REFERENCE_JSON: &str = include_str!("../../config/nominal_reference.json");
+
 /// A ratio to the reference below this is never called beyond it, whatever the reference's own
 /// spread, for the signals whose level follows the session's work: the cylinder forces, the soil
 /// forces and the weighed payload. Healthy sessions of the same machine on different ground differ
@@ -299,6 +306,24 @@ pub struct Reference {
     pub digs: usize,
     /// Per signal, [`Signal::ALL`] order.
     pub signals: Vec<SignalStructure>,
+    /// How the reference's sessions were generated, for a reference recorded from simulated
+    /// default sessions (`discrepancy record-reference`, the built-in one); `None` for one made
+    /// from session folders a user declared healthy.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub recording: Option<Recording>,
+}
+
+/// How a recorded reference's healthy sessions were generated.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Recording {
+    /// The command that recorded it.
+    pub command: String,
+    /// The simulator seeds of its sessions (an evaluation judged against it keeps clear of them).
+    pub seeds: Vec<u64>,
+    /// Digs per session.
+    pub digs: u32,
+    /// The simulator's plant version ([`vcan_sim::PLANT_VERSION`] when it was recorded).
+    pub plant_version: String,
 }
 
 /// A machine-file parameter of the reference's calibration.
@@ -340,7 +365,16 @@ impl Reference {
             parameter_calibration,
             digs: records.len(),
             signals: structure(&refs, params, aug),
+            recording: None,
         })
+    }
+
+    /// The built-in reference of the default machine ([`BUILTIN_REFERENCE_JSON`]).
+    ///
+    /// # Errors
+    /// As [`Reference::from_json`] (not expected: a test parses the shipped file).
+    pub fn builtin() -> Result<Self> {
+        Self::from_json(BUILTIN_REFERENCE_JSON)
     }
 
     /// Parses a reference file written by [`Reference::to_json`].
@@ -508,6 +542,7 @@ impl Reference {
             parameter_calibration: Vec::new(),
             digs: 4,
             signals,
+            recording: None,
         }
     }
 }

@@ -127,6 +127,9 @@ pub fn summary_text(a: &Analysis) -> String {
     if let Some(v) = &a.verdict {
         s.push_str(&crate::verdict::verdict_text(v));
     }
+    if let Some(line) = recorded_reference_line(a) {
+        let _ = writeln!(s, "{line}");
+    }
     for w in &a.warnings {
         let _ = writeln!(s, "warning: {w}");
     }
@@ -177,6 +180,18 @@ pub fn summary_text(a: &Analysis) -> String {
     s
 }
 
+/// For a reference recorded from simulated sessions (the built-in one of the default machine):
+/// which, by what command, and how to record one for a real machine.
+fn recorded_reference_line(a: &Analysis) -> Option<String> {
+    let rec = a.reference.as_ref()?.recording.as_ref()?;
+    Some(format!(
+        "judged against a reference recorded from simulated healthy sessions (`{}`): the \
+         simulated default machine's, not yours; {}",
+        rec.command,
+        crate::analysis::RECORD_REFERENCE_ADVICE
+    ))
+}
+
 /// What to say when nothing is named: "no missing effect found" only when the residuals are within
 /// the reference.
 fn no_effect_line(a: &Analysis) -> &'static str {
@@ -185,7 +200,7 @@ fn no_effect_line(a: &Analysis) -> &'static str {
             "no missing effect found: no candidate is significant and every signal is within the reference"
         }
         Some(v) if v.unexplained.is_empty() => {
-            "no candidate is significant; the residuals could not be judged against the reference (too few samples)"
+            "too few data to judge: the residuals could not be judged against the reference (too few held-out samples), and nothing is named"
         }
         Some(_) => "no effect in the library explains the residuals beyond the reference (above)",
         None => "no candidate is significant (the residuals were not judged: no --reference)",
@@ -276,6 +291,9 @@ fn verdict_markdown(s: &mut String, a: &Analysis) {
         v.reference.join(", "),
         v.outcome.name()
     );
+    if let Some(line) = recorded_reference_line(a) {
+        let _ = writeln!(s, "{}.\n", upper_first(&line));
+    }
     let groups: [(&str, std::ops::RangeInclusive<usize>); 6] = [
         ("cylinder velocities", 0..=2),
         ("pump pressures", 3..=4),

@@ -151,8 +151,17 @@ fn quick_confusion_table() {
     let results: Vec<serde_json::Value> =
         serde_json::from_str(&std::fs::read_to_string(tmp.path().join("eval.json")).unwrap())
             .unwrap();
-    let with_effect: Vec<_> = results.iter().filter(|r| r["hidden"] != "none").collect();
-    let effect_free: Vec<_> = results.iter().filter(|r| r["hidden"] == "none").collect();
+    // Every case on both paths: the default one (the built-in reference of the default planned
+    // bench) and against the reference of the evaluation's own healthy session (of this fixed
+    // plan), which the targets are for.
+    assert_eq!(
+        results.iter().filter(|r| r["path"] == "default").count(),
+        results.iter().filter(|r| r["path"] == "recorded").count(),
+        "{results:?}"
+    );
+    let recorded: Vec<_> = results.iter().filter(|r| r["path"] == "recorded").collect();
+    let with_effect: Vec<_> = recorded.iter().filter(|r| r["hidden"] != "none").collect();
+    let effect_free: Vec<_> = recorded.iter().filter(|r| r["hidden"] == "none").collect();
     assert!(
         !with_effect.is_empty() && !effect_free.is_empty(),
         "{results:?}"
