@@ -252,7 +252,9 @@ fn the_pages_reset_from_a_foreign_host_is_refused_and_the_estop_stays() {
         .into_iter()
         .filter(|(t, _)| (stop_from_s..held_until_s).contains(t))
         .collect();
-    assert!(hb.len() >= 50, "only {} heartbeats while stopped", hb.len());
+    // Floors that only make sure the window was seen: in the TCG VM 70 heartbeats and 43 gateway
+    // statuses came in its 5.6 s (112 of each are due; the simulator falls behind wall time).
+    assert!(hb.len() >= 20, "only {} heartbeats while stopped", hb.len());
     let asked: Vec<_> = hb
         .iter()
         .filter(|(_, h)| !matches!(h.mode, RequestedMode::EStop | RequestedMode::Disarm))
@@ -267,7 +269,7 @@ fn the_pages_reset_from_a_foreign_host_is_refused_and_the_estop_stays() {
         .filter(|(t, _)| (stop_from_s..held_until_s).contains(t))
         .collect();
     assert!(
-        statuses.len() >= 40,
+        statuses.len() >= 15,
         "only {} gateway statuses",
         statuses.len()
     );
