@@ -5,6 +5,7 @@ use std::path::Path;
 
 use firmware_bridge::messages::{
     Activity, ControllerHeartbeat, ControllerStatus, GatewayStatus, JointAngles, Message,
+    ValveState,
 };
 use firmware_bridge::{CONTROLLER_ADDRESS, CanFrame, GATEWAY_ADDRESS};
 use serde::Deserialize;
@@ -89,6 +90,21 @@ pub fn joint_angles(recs: &[Rec]) -> Vec<(f64, [f64; 4])> {
                 bucket_rad,
                 swing_rad,
             }) => Some((t, [boom_rad, stick_rad, bucket_rad, swing_rad])),
+            _ => None,
+        })
+        .collect()
+}
+
+/// Times of the gateway's valve measurements (100 Hz) in `from_s..=to_s` that show a valve passing
+/// flow (a state other than Block): a driven valve.
+pub fn driven_valves(recs: &[Rec], from_s: f64, to_s: f64) -> Vec<f64> {
+    messages_from(recs, GATEWAY_ADDRESS)
+        .filter_map(|(t, m)| match m {
+            Message::AuxValveMeasured(v)
+                if t >= from_s && t <= to_s && v.state != ValveState::Block =>
+            {
+                Some(t)
+            }
             _ => None,
         })
         .collect()

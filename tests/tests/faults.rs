@@ -17,12 +17,12 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use firmware_bridge::messages::{
-    Activity, AutodigStageCode, GatewayFaults, GatewayMode, GatewayStatus, Message, ValveState,
+    Activity, AutodigStageCode, GatewayFaults, GatewayMode, GatewayStatus, Message,
 };
 use firmware_bridge::{CONTROLLER_ADDRESS, GATEWAY_ADDRESS, dbc};
 use hil_tests::analysis::{
-    controller_statuses, gateway_statuses, heartbeats, joint_angles, largest_motion_rad,
-    messages_from, read_candump,
+    controller_statuses, driven_valves, gateway_statuses, heartbeats, joint_angles,
+    largest_motion_rad, messages_from, read_candump,
 };
 use hil_tests::env;
 use hil_tests::process::Proc;
@@ -50,21 +50,6 @@ fn jitter_s() -> f64 {
     // simulation-time bound (the status count) is the exact check; this one only catches a gateway
     // that faults late on any clock.
     if env::in_vm() { 0.5 } else { 0.03 }
-}
-
-/// Times of the gateway's valve measurements (100 Hz) in `from_s..=to_s` that show a valve passing
-/// flow (a state other than Block): a driven valve.
-fn driven_valves(recs: &[hil_tests::analysis::Rec], from_s: f64, to_s: f64) -> Vec<f64> {
-    messages_from(recs, GATEWAY_ADDRESS)
-        .filter_map(|(t, m)| match m {
-            Message::AuxValveMeasured(v)
-                if t >= from_s && t <= to_s && v.state != ValveState::Block =>
-            {
-                Some(t)
-            }
-            _ => None,
-        })
-        .collect()
 }
 
 /// True for an armed mode (valves may be driven).

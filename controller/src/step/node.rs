@@ -621,14 +621,7 @@ impl ControllerNode {
                 {
                     // Not used: the estimator keeps the last plausible angles.
                     self.counters.faulty += 1;
-                    self.raise(
-                        time_s,
-                        Fault::ImplausibleSensor {
-                            joint: e.joint,
-                            jump_rad: e.jump_rad,
-                            allowed_rad: e.allowed_rad,
-                        },
-                    );
+                    self.raise(time_s, Fault::ImplausibleSensor(e));
                 } else if sa == GATEWAY_ADDRESS && self.est.on_message(&decoded.message, time_s) {
                     self.counters.consumed += 1;
                 } else {
@@ -1337,6 +1330,74 @@ start = { kind = \"tip\", x_m = inf, z_m = 2.4, bucket_abs_deg = -55.0 }
             err.to_string()
                 .starts_with("/nonexistent/plan.toml: cannot read"),
             "{err}"
+        );
+    }
+
+    /// The fault a joint-angle frame that jumps raises is the plausibility check's own finding
+    /// (`step::plausibility::Implausible`, one type for both): the same joint and figures, the
+    /// same text, fault code 15 and the DM1 code of the `ImplausibleSensor` DTC (SPN 520463, FMI 2).
+    #[test]
+    fn a_jumping_angle_frame_raises_the_checks_finding_with_its_text_and_dm1_code() {
+        use crate::step::plausibility::{AnglePlausibility, Implausible, SensedJoint};
+        use firmware_bridge::messages::JointAngles;
+        let mut n = ControllerNode::new(
+            &machine(),
+            AutodigMaps::builtin().unwrap(),
+            ControllerConfig::default(),
+        )
+        .unwrap();
+        let angles = |boom_rad: f64| [boom_rad, -1.6, -0.9, 0.0];
+        let frame = |time_s: f64, q: [f64; 4]| TimestampedFrame {
+            timestamp_ns: (time_s * 1e9).round() as u64,
+            frame: Message::JointAngles(JointAngles {
+                boom_rad: q[0],
+                stick_rad: q[1],
+                bucket_rad: q[2],
+                swing_rad: q[3],
+            })
+            .encode_from(GATEWAY_ADDRESS)
+            .unwrap(),
+        };
+        // The boom 0.5 rad away one sensor period later: at most 2 rad/s x 10 ms + 3 mrad is possible.
+        let _ = n.step(0.0, &[frame(0.0, angles(0.5))]);
+        assert_eq!(n.fault(), None);
+        let _ = n.step(0.01, &[frame(0.01, angles(1.0))]);
+
+        let config = ControllerConfig::default();
+        let mut check = AnglePlausibility::default();
+        let speeds = config.safety.max_joint_speed_rad_per_s;
+        let period_s = GatewayTiming::secs(config.safety.gateway.sensor_period_ms);
+        check.check(angles(0.5), 0.0, &speeds, period_s).unwrap();
+        let finding = check
+            .check(angles(1.0), 0.01, &speeds, period_s)
+            .unwrap_err();
+        assert_eq!(finding.joint, SensedJoint::Boom);
+        let fault = n.fault().expect("the jump raised no fault");
+        assert_eq!(fault, Fault::ImplausibleSensor(finding));
+        assert_eq!(fault, Fault::from(finding));
+        let Fault::ImplausibleSensor(Implausible {
+            jump_rad,
+            allowed_rad,
+            ..
+        }) = fault
+        else {
+            unreachable!("compared above")
+        };
+        assert!((jump_rad - 0.5).abs() < 1e-3, "{jump_rad}");
+        assert!((allowed_rad - 0.023).abs() < 1e-9, "{allowed_rad}");
+        assert_eq!(
+            fault.to_string(),
+            "implausible joint angles: the boom moved 0.5000 rad between two frames, at most \
+             0.0230 rad is possible (a second sender of JointAngles, or a resolver fault)"
+        );
+        assert_eq!(fault.to_string(), finding.to_string());
+        assert_eq!(fault.code(), 15);
+        let active = dm1_active(Some(fault));
+        let dtc = CONTROLLER_DTCS[active.trailing_zeros() as usize];
+        assert_eq!(active.count_ones(), 1);
+        assert_eq!(
+            (dtc.name, dtc.spn, dtc.fmi),
+            ("ImplausibleSensor", 520_463, 2)
         );
     }
 

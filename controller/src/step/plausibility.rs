@@ -97,8 +97,14 @@ impl JointSpeeds {
     }
 }
 
-/// A rejected frame: the joint that moved too far and by how much.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// A rejected frame: the joint that moved too far and by how much. Also the fault it raises
+/// ([`Fault::ImplausibleSensor`](crate::step::safety::Fault::ImplausibleSensor)), whose text is this
+/// one's.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[error(
+    "implausible joint angles: the {joint} moved {jump_rad:.4} rad between two frames, at most \
+     {allowed_rad:.4} rad is possible (a second sender of JointAngles, or a resolver fault)"
+)]
 pub struct Implausible {
     /// The joint.
     pub joint: SensedJoint,

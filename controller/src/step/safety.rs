@@ -80,7 +80,7 @@ use crate::ControllerError;
 use crate::check::{Limits, ParamError, check, check_count};
 use crate::step::estimate::{Estimator, Signal, joint_angle};
 use crate::step::log_throttle::LogThrottle;
-use crate::step::plausibility::{JointSpeeds, SensedJoint};
+use crate::step::plausibility::{Implausible, JointSpeeds};
 
 /// The gateway mode the controller arms for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -231,18 +231,8 @@ pub enum Fault {
     /// A joint-angle frame that puts a joint farther from the last accepted one than it can move in
     /// the time between them (`step::plausibility`): a second sender of the angles on the bus or a
     /// resolver fault. The frame is not used; the operator's resume or reset re-arms.
-    #[error(
-        "implausible joint angles: the {joint} moved {jump_rad:.4} rad between two frames, at most \
-         {allowed_rad:.4} rad is possible (a second sender of JointAngles, or a resolver fault)"
-    )]
-    ImplausibleSensor {
-        /// The joint.
-        joint: SensedJoint,
-        /// How far it moved since the last accepted frame, rad.
-        jump_rad: f64,
-        /// How far it could have moved, rad.
-        allowed_rad: f64,
-    },
+    #[error(transparent)]
+    ImplausibleSensor(#[from] Implausible),
 }
 
 impl Fault {
@@ -267,7 +257,7 @@ impl Fault {
             Fault::GatewayFrozen { .. } => 12,
             Fault::AddressLost { .. } => 13,
             Fault::AddressIntrusion { .. } => 14,
-            Fault::ImplausibleSensor { .. } => 15,
+            Fault::ImplausibleSensor(_) => 15,
         }
     }
 
@@ -1302,11 +1292,11 @@ mod tests {
                 name: 0,
                 owner_lost: true,
             },
-            Fault::ImplausibleSensor {
-                joint: SensedJoint::Boom,
+            Fault::ImplausibleSensor(Implausible {
+                joint: crate::step::plausibility::SensedJoint::Boom,
                 jump_rad: 0.1,
                 allowed_rad: 0.03,
-            },
+            }),
         ];
         let mut table = vec![(0, "Healthy".to_owned())];
         for fault in every_variant {

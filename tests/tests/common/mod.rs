@@ -125,6 +125,15 @@ impl Session {
 
     /// As [`Session::start`], with `sim_args` added to `excavator-sim`.
     pub fn start_with(test: &str, sim_args: &[&str], ctl_args: &[&str]) -> Self {
+        let mut s = Self::start_simulator(test, sim_args, ctl_args);
+        s.start_controller();
+        s.sim.assert_running();
+        s
+    }
+
+    /// Starts candump and the simulator (with `sim_args`), no controller yet; `ctl_args` are
+    /// kept for [`Session::start_controller`].
+    pub fn start_simulator(test: &str, sim_args: &[&str], ctl_args: &[&str]) -> Self {
         let iface = env::vcan_iface();
         let sim_bin = env::binary("excavator-sim");
         let dir = env::artifacts(test);
@@ -159,7 +168,7 @@ impl Session {
         );
 
         let ctl_trace = dir.join("ctl-trace.log");
-        let mut s = Self {
+        Self {
             dir,
             iface,
             candump,
@@ -174,10 +183,7 @@ impl Session {
             scan_addr,
             ctl_starts: 0,
             _key_dir: key_dir,
-        };
-        s.start_controller();
-        s.sim.assert_running();
-        s
+        }
     }
 
     /// Starts `excavator-ctl run` with the HIL plan, the session's key and the session's extra
@@ -187,6 +193,15 @@ impl Session {
     /// # Panics
     /// When a controller is running.
     pub fn start_controller(&mut self) {
+        self.spawn_controller(true);
+    }
+
+    /// As [`Session::start_controller`] without `--key-file`: a controller with no key provisioned.
+    pub fn start_controller_without_key(&mut self) {
+        self.spawn_controller(false);
+    }
+
+    fn spawn_controller(&mut self, keyed: bool) {
         assert!(self.ctl.is_none(), "a controller is running");
         let ctl_bin = env::binary("excavator-ctl");
         let plan = hil_tests::plan::write_plan(&self.dir);
@@ -208,9 +223,10 @@ impl Session {
             trace.to_str().unwrap(),
             "--scan-addr",
             &self.scan_addr,
-            "--key-file",
-            self.key_file.to_str().unwrap(),
         ];
+        if keyed {
+            args.extend(["--key-file", self.key_file.to_str().unwrap()]);
+        }
         args.extend(self.ctl_args.iter().map(String::as_str));
         self.ctl = Some(Proc::spawn("excavator-ctl", &ctl_bin, &args, &log));
     }
