@@ -88,6 +88,37 @@ function colour(z, lo, hi) {
   return `rgb(${r},${g},${b})`;
 }
 
+// The terrain map and its legend drawn once per map (tens of thousands of cells) into an offscreen
+// canvas, so that a state update, many a second, only copies it: redrawing every cell at each update
+// kept the browser's main thread busy and the page stopped answering.
+let layer = null;
+function terrainLayer(t, canvas, legendW, scale, px, py) {
+  if (layer && layer.terrain === t && layer.width === canvas.width && layer.height === canvas.height) {
+    return layer.canvas;
+  }
+  const off = document.createElement("canvas");
+  off.width = canvas.width;
+  off.height = canvas.height;
+  const ctx = off.getContext("2d");
+  let lo = Infinity, hi = -Infinity;
+  for (const z of t.z_m) {
+    if (z !== null) { lo = Math.min(lo, z); hi = Math.max(hi, z); }
+  }
+  if (lo > hi) { lo = 0; hi = 0; }
+  const [x0, y0] = t.origin_m;
+  const side = Math.ceil(t.cell_m * scale);
+  for (let j = 0; j < t.ny; j++) {
+    for (let i = 0; i < t.nx; i++) {
+      const z = t.z_m[j * t.nx + i];
+      ctx.fillStyle = z === null ? "#22272d" : colour(z, lo, hi);
+      ctx.fillRect(px(x0 + i * t.cell_m), py(y0 + (j + 1) * t.cell_m), side, side);
+    }
+  }
+  drawLegend(ctx, canvas.width - legendW + 14, 20, canvas.height - 40, lo, hi);
+  layer = { terrain: t, width: canvas.width, height: canvas.height, canvas: off };
+  return off;
+}
+
 function draw() {
   const canvas = $("map");
   const ctx = canvas.getContext("2d");
@@ -109,16 +140,7 @@ function draw() {
   const px = (x) => (x - x0) * scale;
   const py = (y) => canvas.height - (y - y0) * scale;
   if (t) {
-    const known = t.z_m.filter((z) => z !== null);
-    const lo = known.length ? Math.min(...known) : 0, hi = known.length ? Math.max(...known) : 0;
-    for (let j = 0; j < t.ny; j++) {
-      for (let i = 0; i < t.nx; i++) {
-        const z = t.z_m[j * t.nx + i];
-        ctx.fillStyle = z === null ? "#22272d" : colour(z, lo, hi);
-        ctx.fillRect(px(x0 + i * t.cell_m), py(y0 + (j + 1) * t.cell_m), Math.ceil(t.cell_m * scale), Math.ceil(t.cell_m * scale));
-      }
-    }
-    drawLegend(ctx, canvas.width - legendW + 14, 20, canvas.height - 40, lo, hi);
+    ctx.drawImage(terrainLayer(t, canvas, legendW, scale, px, py), 0, 0);
   }
   drawScaleBar(ctx, canvas.height, scale);
   if (!s) return;
