@@ -22,6 +22,7 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use common::unix_now_s;
+use controller::step::cycle::ActionKind;
 use firmware_bridge::messages::{
     Activity, AutodigStageCode, AuxValveCommand, Cylinder, GatewayFaults, GatewayMode, Message,
     RequestedMode, Valve,
@@ -442,22 +443,39 @@ fn planned_session_estop_holds_until_reset_and_a_killed_controller_resumes() {
             (b.index, b.time_s, b.weight_n)
         );
     }
-    // The interrupted action, as the planner planned it before the kill, is the one run next.
-    let next = saved.records.digs.len();
+    // The interrupted action, as the planner planned it before the kill, is the one run next: it is
+    // the last of the saved plan (pushed, not begun), and the finished session's plan holds it, and
+    // its prediction, at the same place. It may be a track back, which has no record of its own.
+    let interrupted_at = saved.driver.cycle.action_index;
     assert_eq!(
         saved.driver.cycle.actions.len(),
-        next + 1,
+        interrupted_at + 1,
         "the interrupted action is not saved"
     );
-    let interrupted = saved.driver.planned[next];
+    let interrupted = saved.driver.cycle.actions[interrupted_at];
+    let interrupted_plan = saved.driver.planned.get(interrupted_at).copied();
+    let end = saved_state(&out).expect("the finished session's state file");
     assert_eq!(
         (
-            s.digs[next].predicted_volume_m3,
-            s.digs[next].predicted_time_s
+            end.driver.cycle.actions.get(interrupted_at).copied(),
+            end.driver.planned.get(interrupted_at).copied()
         ),
-        (interrupted.volume_m3, interrupted.time_s),
+        (Some(interrupted), interrupted_plan),
         "the resumed session planned another action instead of re-running the interrupted one"
     );
+    if interrupted.kind() != ActionKind::TrackBack {
+        let next = saved.records.digs.len();
+        let planned = interrupted_plan.unwrap_or_default();
+        assert_eq!(
+            (
+                s.digs[next].predicted_volume_m3,
+                s.digs[next].predicted_time_s
+            ),
+            (planned.volume_m3, planned.time_s),
+            "the interrupted {:?}'s record does not carry its saved prediction",
+            interrupted.kind()
+        );
+    }
     let dig_index = |from: f64, to: f64| -> Vec<u16> {
         controller_statuses(&recs)
             .into_iter()
