@@ -243,6 +243,76 @@ fn a_forged_angle_stream_mid_dig_is_rejected_and_stops_the_machine_within_100_ms
 }
 
 #[test]
+fn frozen_angles_mid_dig_are_found_within_the_frozen_window_and_stop_the_machine() {
+    use controller::step::plausibility::{Implausible, OPEN_FRACTION};
+    use firmware_bridge::messages::{JointAngles, Message};
+    // A gateway (or a replay) repeating one JointAngles frame while the dig drives the valves: the
+    // resolvers' noise stops, the valves stay open. Every frame of the gateway's is replaced by
+    // the angles at the freeze.
+    let mut l = Loop::new(default_sim(), one_dig());
+    run_to_stage(&mut l, Stage::Dig, 120.0);
+    assert!(has_motion(&l.last_out));
+    let window_s = l.node().safety().config().frozen_sensor_s;
+    let at_freeze = l.node().state();
+    let frozen = Message::JointAngles(JointAngles {
+        boom_rad: at_freeze.joints.boom_rad,
+        stick_rad: at_freeze.joints.stick_rad,
+        bucket_rad: at_freeze.joints.bucket_rad,
+        swing_rad: at_freeze.swing_rad,
+    })
+    .encode_from(GATEWAY_ADDRESS)
+    .unwrap();
+    let start_s = l.time_s();
+    let mut found = None;
+    while l.time_s() < start_s + window_s + 1.0 {
+        let out = l
+            .h
+            .step_with(|inbox| {
+                for f in inbox.iter_mut() {
+                    if matches!(
+                        Message::decode(&f.frame).map(|d| d.message),
+                        Ok(Message::JointAngles(_))
+                    ) {
+                        f.frame = frozen;
+                    }
+                }
+            })
+            .unwrap();
+        l.h.answer_scan_request();
+        l.last_out = out;
+        if let Some(Fault::ImplausibleSensor(e)) = l.node().fault() {
+            assert!(!has_motion(&out));
+            assert!(has_all_neutral(&out));
+            assert_eq!(heartbeat_mode(&out), Some(RequestedMode::Disarm));
+            found = Some((l.time_s(), e));
+            break;
+        }
+        assert!(l.node().fault().is_none(), "{:?}", l.node().fault());
+    }
+    let (at, e) = found.expect("the frozen angles were not found");
+    let Implausible::Frozen {
+        for_s, min_fraction, ..
+    } = e
+    else {
+        panic!("another finding: {e}")
+    };
+    eprintln!(
+        "frozen angles stopped the machine {:.3} s after the freeze: {e}",
+        at - start_s
+    );
+    assert!(for_s >= window_s && min_fraction >= OPEN_FRACTION, "{e}");
+    // The window starts when the valve is open with the reading unchanged: within a period or two
+    // of the freeze mid-dig, and the stop comes with the finding.
+    assert!(at - start_s <= window_s + 0.1, "{:.3} s", at - start_s);
+    l.step();
+    assert_eq!(l.machine().node().valve_commands(), [0.0; 6]);
+    // The real angles again: the stop stays a stop until the operator's resume, then the dig goes on.
+    assert!(!l.run_until(5.0, |l| has_motion(&l.last_out)));
+    l.node_mut().resume();
+    assert!(l.run_until(5.0, |l| has_motion(&l.last_out)));
+}
+
+#[test]
 fn shutdown_ends_with_neutral_valves_and_a_disarm() {
     let mut l = Loop::new(default_sim(), one_dig());
     run_to_stage(&mut l, Stage::PreDig, 120.0);

@@ -74,7 +74,7 @@ use crate::config::ControllerConfig;
 use crate::step::cycle::{Action, CycleCommand, DigStats, Phase, WorkCycle};
 use crate::step::estimate::{Estimator, MachineState};
 use crate::step::log_throttle::LogThrottle;
-use crate::step::plausibility::AnglePlausibility;
+use crate::step::plausibility::{AnglePlausibility, FrozenAngles, Implausible};
 use crate::step::safety::{ArmMode, Fault, Safety, SafetyState, bus_fault_stops_motion};
 
 /// Most frames one step sends: six valve commands or a setpoint, neutral valves, and the heartbeat.
@@ -224,6 +224,7 @@ pub struct ControllerNode {
     dm1: Dm1Reporter<{ CONTROLLER_DTCS.len() }>,
     /// The last accepted joint angles, against which a new frame's are judged.
     angles: AnglePlausibility,
+    frozen: FrozenAngles,
 }
 
 impl ControllerNode {
@@ -282,6 +283,7 @@ impl ControllerNode {
             status_alive: 15,
             dm1: Dm1Reporter::new(&CONTROLLER_DTCS),
             angles: AnglePlausibility::default(),
+            frozen: FrozenAngles::default(),
             // The step's frames leave after its computation (and its logs): a period of margin
             // keeps the claim's 250 ms on the wire when a step is late.
             claim: AddressClaimer::controller_named(name).with_hold_margin(
@@ -441,6 +443,25 @@ impl ControllerNode {
     /// The command of the last step (for logs and plots).
     pub fn last_command(&self) -> CycleCommand {
         self.last_command
+    }
+
+    /// The plausibility checks of a `JointAngles` frame from the gateway (`step::plausibility`): no
+    /// joint farther from the last accepted frame than it can turn, none frozen while the valve
+    /// commands in force hold its valve open.
+    fn check_angles(&mut self, angles: [f64; 4], time_s: f64) -> Result<(), Implausible> {
+        let config = self.safety.config();
+        self.angles.check(
+            angles,
+            time_s,
+            &config.max_joint_speed_rad_per_s,
+            GatewayTiming::secs(config.gateway.sensor_period_ms),
+        )?;
+        let valves = match (self.last_motion, self.last_command) {
+            (Some(ArmMode::Valve), CycleCommand::Valves(v)) => Some([v[0], v[1], v[2], v[3]]),
+            _ => None,
+        };
+        self.frozen
+            .check(angles, time_s, valves, config.frozen_sensor_s)
     }
 
     /// Whether the plan is complete (the node then stays disarmed).
@@ -612,11 +633,9 @@ impl ControllerNode {
                     }
                     self.counters.consumed += 1;
                 } else if let (GATEWAY_ADDRESS, Message::JointAngles(a)) = (sa, &decoded.message)
-                    && let Err(e) = self.angles.check(
+                    && let Err(e) = self.check_angles(
                         [a.boom_rad, a.stick_rad, a.bucket_rad, a.swing_rad],
                         time_s,
-                        &self.safety.config().max_joint_speed_rad_per_s,
-                        GatewayTiming::secs(self.safety.config().gateway.sensor_period_ms),
                     )
                 {
                     // Not used: the estimator keeps the last plausible angles.
@@ -1074,7 +1093,7 @@ mod tests {
     /// Every float of `SafetyConfig` refuses NaN, infinities and negative values.
     #[test]
     fn safety_config_refuses_nan_negative_and_infinite_values() {
-        let fields: [Field<SafetyConfig>; 8] = [
+        let fields: [Field<SafetyConfig>; 9] = [
             ("sensor_max_age_s", |c| &mut c.sensor_max_age_s),
             ("status_max_age_s", |c| &mut c.status_max_age_s),
             ("arm_timeout_s", |c| &mut c.arm_timeout_s),
@@ -1083,6 +1102,7 @@ mod tests {
             ("joint_limit_margin_rad", |c| &mut c.joint_limit_margin_rad),
             ("rearm_reset_s", |c| &mut c.rearm_reset_s),
             ("heartbeat_period_s", |c| &mut c.heartbeat_period_s),
+            ("frozen_sensor_s", |c| &mut c.frozen_sensor_s),
         ];
         for (key, field) in fields {
             for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, -1.0, 1e308] {
@@ -1100,6 +1120,13 @@ mod tests {
             ..SafetyConfig::default()
         };
         assert_eq!(c.validate().unwrap_err().path(), "safety.max_auto_rearms");
+        // A frozen-signal window shorter than ten sensor periods would take the resolvers' noise
+        // for a fault.
+        let c = SafetyConfig {
+            frozen_sensor_s: 0.05,
+            ..SafetyConfig::default()
+        };
+        assert_eq!(c.validate().unwrap_err().path(), "safety.frozen_sensor_s");
         // The silent fallback for long heartbeat periods is now an error.
         let c = SafetyConfig {
             heartbeat_period_s: 0.1,
@@ -1371,11 +1398,11 @@ start = { kind = \"tip\", x_m = inf, z_m = 2.4, bucket_abs_deg = -55.0 }
         let finding = check
             .check(angles(1.0), 0.01, &speeds, period_s)
             .unwrap_err();
-        assert_eq!(finding.joint, SensedJoint::Boom);
+        assert_eq!(finding.joint(), SensedJoint::Boom);
         let fault = n.fault().expect("the jump raised no fault");
         assert_eq!(fault, Fault::ImplausibleSensor(finding));
         assert_eq!(fault, Fault::from(finding));
-        let Fault::ImplausibleSensor(Implausible {
+        let Fault::ImplausibleSensor(Implausible::Jump {
             jump_rad,
             allowed_rad,
             ..

@@ -382,6 +382,10 @@ pub struct SafetyConfig {
     /// ([`Fault::ImplausibleSensor`], `step::plausibility`). Defaults: boom, stick and swing 2.0,
     /// bucket 8.0.
     pub max_joint_speed_rad_per_s: JointSpeeds,
+    /// How long a joint's angle may stay bit-identical while the controller holds its valve open
+    /// (at least `step::plausibility::OPEN_FRACTION`) before it is a frozen signal
+    /// ([`Fault::ImplausibleSensor`]), s. Default 1.0.
+    pub frozen_sensor_s: f64,
     /// Heartbeat period, s. Default 0.05 (20 Hz, the docs/protocol.md budget; the gateway's watchdog
     /// is 100 ms). A change of the requested mode (arm, disarm on a fault, e-stop) and every heartbeat
     /// after a shutdown are sent at once, whatever the period. [`SafetyConfig::validate`] refuses
@@ -514,6 +518,13 @@ impl SafetyConfig {
         }
         check(
             S,
+            "frozen_sensor_s",
+            self.frozen_sensor_s,
+            Limits::closed(10.0 * secs(g.sensor_period_ms), 10.0, "s"),
+            "from ten sensor periods (the resolvers' noise must have had the time to show) to 10 s",
+        )?;
+        check(
+            S,
             "heartbeat_period_s",
             self.heartbeat_period_s,
             Limits::closed(CONTROL_PERIOD_S, secs(g.heartbeat_timeout_ms) / 2.0, "s"),
@@ -539,6 +550,7 @@ impl Default for SafetyConfig {
             max_auto_rearms: 5,
             rearm_reset_s: 10.0,
             max_joint_speed_rad_per_s: JointSpeeds::default(),
+            frozen_sensor_s: 1.0,
             heartbeat_period_s: 0.05,
             gateway: GatewayTiming::canonical(),
         }
@@ -1292,7 +1304,7 @@ mod tests {
                 name: 0,
                 owner_lost: true,
             },
-            Fault::ImplausibleSensor(Implausible {
+            Fault::ImplausibleSensor(Implausible::Jump {
                 joint: crate::step::plausibility::SensedJoint::Boom,
                 jump_rad: 0.1,
                 allowed_rad: 0.03,
