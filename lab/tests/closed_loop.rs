@@ -265,9 +265,8 @@ fn frozen_angles_mid_dig_are_found_within_the_frozen_window_and_stop_the_machine
     let start_s = l.time_s();
     let mut found = None;
     while l.time_s() < start_s + window_s + 1.0 {
-        let out = l
-            .h
-            .step_with(|inbox| {
+        let out =
+            l.h.step_with(|inbox| {
                 for f in inbox.iter_mut() {
                     if matches!(
                         Message::decode(&f.frame).map(|d| d.message),
@@ -291,7 +290,9 @@ fn frozen_angles_mid_dig_are_found_within_the_frozen_window_and_stop_the_machine
     }
     let (at, e) = found.expect("the frozen angles were not found");
     let Implausible::Frozen {
-        for_s, min_fraction, ..
+        for_s,
+        min_fraction,
+        ..
     } = e
     else {
         panic!("another finding: {e}")

@@ -633,10 +633,8 @@ impl ControllerNode {
                     }
                     self.counters.consumed += 1;
                 } else if let (GATEWAY_ADDRESS, Message::JointAngles(a)) = (sa, &decoded.message)
-                    && let Err(e) = self.check_angles(
-                        [a.boom_rad, a.stick_rad, a.bucket_rad, a.swing_rad],
-                        time_s,
-                    )
+                    && let Err(e) = self
+                        .check_angles([a.boom_rad, a.stick_rad, a.bucket_rad, a.swing_rad], time_s)
                 {
                     // Not used: the estimator keeps the last plausible angles.
                     self.counters.faulty += 1;
