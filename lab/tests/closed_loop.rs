@@ -194,23 +194,28 @@ fn garbage_frames_mid_dig_neutralise_in_the_same_period() {
     }
 }
 
-#[test]
-fn a_forged_angle_stream_mid_dig_is_rejected_and_stops_the_machine_within_100_ms() {
+/// A `JointAngles` frame from the gateway's address with the angles the controller holds now.
+fn angles_frame_now(l: &Loop) -> CanFrame {
     use firmware_bridge::messages::{JointAngles, Message};
-    // Issue #46, item 3: after each of the gateway's JointAngles frames, one from the gateway's
-    // address with the angles frozen at the start of the dig, as a second node on the bus would send.
-    let mut l = Loop::new(default_sim(), one_dig());
-    run_to_stage(&mut l, Stage::Dig, 120.0);
-    assert!(has_motion(&l.last_out));
     let state = l.node().state();
-    let frozen = Message::JointAngles(JointAngles {
+    Message::JointAngles(JointAngles {
         boom_rad: state.joints.boom_rad,
         stick_rad: state.joints.stick_rad,
         bucket_rad: state.joints.bucket_rad,
         swing_rad: state.swing_rad,
     })
-    .encode()
-    .unwrap();
+    .encode_from(GATEWAY_ADDRESS)
+    .unwrap()
+}
+
+#[test]
+fn a_forged_angle_stream_mid_dig_is_rejected_and_stops_the_machine_within_100_ms() {
+    // Issue #46, item 3: after each of the gateway's JointAngles frames, one from the gateway's
+    // address with the angles frozen at the start of the dig, as a second node on the bus would send.
+    let mut l = Loop::new(default_sim(), one_dig());
+    run_to_stage(&mut l, Stage::Dig, 120.0);
+    assert!(has_motion(&l.last_out));
+    let frozen = angles_frame_now(&l);
     let start_s = l.time_s();
     let mut stopped_at = None;
     for _ in 0..20 {
@@ -245,7 +250,7 @@ fn a_forged_angle_stream_mid_dig_is_rejected_and_stops_the_machine_within_100_ms
 #[test]
 fn frozen_angles_mid_dig_are_found_within_the_frozen_window_and_stop_the_machine() {
     use controller::step::plausibility::{Implausible, OPEN_FRACTION};
-    use firmware_bridge::messages::{JointAngles, Message};
+    use firmware_bridge::messages::Message;
     // A gateway (or a replay) repeating one JointAngles frame while the dig drives the valves: the
     // resolvers' noise stops, the valves stay open. Every frame of the gateway's is replaced by
     // the angles at the freeze.
@@ -253,15 +258,7 @@ fn frozen_angles_mid_dig_are_found_within_the_frozen_window_and_stop_the_machine
     run_to_stage(&mut l, Stage::Dig, 120.0);
     assert!(has_motion(&l.last_out));
     let window_s = l.node().safety().config().frozen_sensor_s;
-    let at_freeze = l.node().state();
-    let frozen = Message::JointAngles(JointAngles {
-        boom_rad: at_freeze.joints.boom_rad,
-        stick_rad: at_freeze.joints.stick_rad,
-        bucket_rad: at_freeze.joints.bucket_rad,
-        swing_rad: at_freeze.swing_rad,
-    })
-    .encode_from(GATEWAY_ADDRESS)
-    .unwrap();
+    let frozen = angles_frame_now(&l);
     let start_s = l.time_s();
     let mut found = None;
     while l.time_s() < start_s + window_s + 1.0 {
