@@ -224,6 +224,7 @@ pub struct ControllerNode {
     dm1: Dm1Reporter<{ CONTROLLER_DTCS.len() }>,
     /// The last accepted joint angles, against which a new frame's are judged.
     angles: AnglePlausibility,
+    /// Since when each joint's angle has stayed the same with its valve open.
     frozen: FrozenAngles,
 }
 
