@@ -6,6 +6,7 @@
 //!   (`report.md`, `report.json`, figures, `model.json`);
 //! - `eval` ([`crate::eval`]): the hidden-effect evaluation: sessions generated in-process with one
 //!   hidden simulator effect, analysed blind, and the confusion table;
+//! - `fleet` ([`crate::fleet`]): `analyse` of every machine of a fleet as a campaign, and one table;
 //! - `record-reference` ([`crate::record`]): a reference from healthy default sessions (the
 //!   built-in one, config/nominal_reference.json, is its output);
 //! - `bench`: the analysis time of N digs on one core.
@@ -24,6 +25,10 @@ pub enum DiscrepancyArgs {
     /// Hidden-effect evaluation: generate sessions with one hidden effect each (and effect-free ones),
     /// analyse them told nothing, print the confusion table.
     Eval(eval::EvalArgs),
+    /// Analyse every machine of a fleet (FLEET/NAME/sessions/*, each against its own reference)
+    /// as a campaign, in-process or on a Dask cluster: one table of what each machine shows
+    /// (fleet.md, fleet.json; docs/campaigns.md).
+    Fleet(crate::fleet::FleetArgs),
     /// Record a reference from healthy default `demo` sessions (the built-in reference,
     /// config/nominal_reference.json, is `--out config/nominal_reference.json` with the defaults).
     RecordReference(crate::record::RecordReferenceArgs),
@@ -44,6 +49,7 @@ pub fn run(args: DiscrepancyArgs) -> anyhow::Result<()> {
             Ok(())
         }
         DiscrepancyArgs::Eval(a) => eval::run_eval(&a),
+        DiscrepancyArgs::Fleet(a) => crate::fleet::run_fleet(&a).map(|_| ()),
         DiscrepancyArgs::RecordReference(a) => {
             let r = crate::record::run_record(&a)?;
             println!(

@@ -16,8 +16,7 @@ use crate::Candidate;
 use crate::effects::CandidateEffect as _;
 use anyhow::Context as _;
 use clap::Args;
-use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::analysis::{AnalyseArgs, load_reference, run_analysis};
 use crate::plant::{PlantChange, PlantFile, PlantOp, default_plant_changes};
@@ -80,6 +79,9 @@ pub struct EvalArgs {
     /// command line, the date and the commit.
     #[arg(long, value_name = "FILE")]
     pub results: Option<PathBuf>,
+    /// Where the sessions and analyses run (in-process or a Dask cluster; docs/campaigns.md).
+    #[command(flatten)]
+    pub campaign: lab::campaign::CampaignArgs,
 }
 
 impl EvalArgs {
@@ -100,6 +102,7 @@ impl EvalArgs {
             no_effects: false,
             no_pairs: false,
             results: None,
+            campaign: lab::campaign::CampaignArgs::default(),
         }
     }
 
@@ -237,7 +240,7 @@ pub const PAIRS: [[(Candidate, f64); 2]; 6] = [
 ];
 
 /// How a pair of hidden effects was reported.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum PairOutcome {
     /// Both named, each within 25 % of its magnitude.
@@ -290,12 +293,12 @@ fn pair_outcome(
 }
 
 /// One evaluation case and its outcome.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct CaseResult {
     /// Case name (also the session folder name).
     pub case: String,
     /// Which reference the analysis judged against ([`EvalPath::name`]).
-    pub path: &'static str,
+    pub path: String,
     /// Hidden effect name, or `none`.
     pub hidden: String,
     /// Hidden magnitude (0 for none).
@@ -307,6 +310,7 @@ pub struct CaseResult {
     /// First named effect, or `none`.
     pub named: String,
     /// Every named effect with magnitude and uncertainty.
+    #[serde(deserialize_with = "null_as_nan::triples")]
     pub named_all: Vec<(String, f64, f64)>,
     /// The ambiguous pairs the analysis reported (neither named).
     pub ambiguous: Vec<[String; 2]>,
@@ -318,8 +322,6 @@ pub struct CaseResult {
     pub best_signal: Option<String>,
     /// The same on the samples where the augmented model acts (`SignalRms::acted`), %.
     pub best_acted_rms_change_percent: Option<f64>,
-    /// Analysis wall time, s.
-    pub analysis_s: f64,
     /// `effect`, `plant` or `none`.
     pub kind: String,
     /// The verdict against the reference (`expected`, `named`, `partly_explained`,
@@ -338,7 +340,29 @@ pub struct CaseResult {
     pub twin_written: Vec<String>,
     /// The twin's free-air gap to the held-out digs over the nominal plant's, per group
     /// ([`crate::twin::GAP_GROUPS`]); empty without a twin re-run.
+    #[serde(deserialize_with = "null_as_nan::map")]
     pub twin_ratio: BTreeMap<String, f64>,
+}
+
+/// JSON writes a NaN as `null`: read back as NaN, so a case file holds what the case had.
+mod null_as_nan {
+    use std::collections::BTreeMap;
+
+    use serde::{Deserialize, Deserializer};
+
+    pub fn map<'de, D: Deserializer<'de>>(d: D) -> Result<BTreeMap<String, f64>, D::Error> {
+        let m = BTreeMap::<String, Option<f64>>::deserialize(d)?;
+        Ok(m.into_iter()
+            .map(|(k, v)| (k, v.unwrap_or(f64::NAN)))
+            .collect())
+    }
+
+    pub fn triples<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<(String, f64, f64)>, D::Error> {
+        let v = Vec::<(String, Option<f64>, Option<f64>)>::deserialize(d)?;
+        Ok(v.into_iter()
+            .map(|(n, a, b)| (n, a.unwrap_or(f64::NAN), b.unwrap_or(f64::NAN)))
+            .collect())
+    }
 }
 
 impl CaseResult {
@@ -346,7 +370,7 @@ impl CaseResult {
     fn failed(case: String, hidden: &Hidden, seed: u64, path: EvalPath) -> Self {
         Self {
             case,
-            path: path.name(),
+            path: path.name().into(),
             hidden: hidden.name(),
             hidden_magnitude: hidden.magnitude(),
             seed,
@@ -358,7 +382,6 @@ impl CaseResult {
             best_rms_change_percent: None,
             best_signal: None,
             best_acted_rms_change_percent: None,
-            analysis_s: 0.0,
             kind: hidden.kind().into(),
             outcome: None,
             unexplained: Vec::new(),
@@ -562,6 +585,18 @@ fn run_case(
         .collect()
 }
 
+/// The base name of a case's session folder.
+fn case_base(hidden: &Hidden, seed: u64) -> String {
+    match hidden {
+        Hidden::Effect(c, v) => format!("{}_{v}_s{seed}", c.name()),
+        Hidden::Pair([(a, va), (b, vb)]) => {
+            format!("{}_{va}+{}_{vb}_s{seed}", a.name(), b.name())
+        }
+        Hidden::Plant(p) => format!("plant_{}_s{seed}", p.slug()),
+        Hidden::None => format!("none_s{seed}"),
+    }
+}
+
 /// The case's session folder (generated unless a finished one is there) and its name.
 fn case_session(
     args: &EvalArgs,
@@ -570,14 +605,7 @@ fn case_session(
     digs: u32,
 ) -> anyhow::Result<(String, PathBuf)> {
     let out = &args.out;
-    let base = match hidden {
-        Hidden::Effect(c, v) => format!("{}_{v}_s{seed}", c.name()),
-        Hidden::Pair([(a, va), (b, vb)]) => {
-            format!("{}_{va}+{}_{vb}_s{seed}", a.name(), b.name())
-        }
-        Hidden::Plant(p) => format!("plant_{}_s{seed}", p.slug()),
-        Hidden::None => format!("none_s{seed}"),
-    };
+    let base = case_base(hidden, seed);
     let mut plan = SessionPlan::new(out, &base, seed, digs, args.soil_contact, args.strategy());
     match hidden {
         Hidden::Effect(c, v) => plan.demo.effects = vec![format!("{}={v}", c.name())],
@@ -603,14 +631,12 @@ fn analyse_case(
     out: &std::path::Path,
 ) -> anyhow::Result<CaseResult> {
     let case = case.clone();
-    let t = Instant::now();
     let mut analyse_args = AnalyseArgs::new(
         vec![session.clone()],
         out.join("reports").join(path.name()).join(&case),
     );
     analyse_args.reference = reference.map(|r| vec![r.to_path_buf()]).unwrap_or_default();
     let analysis = run_analysis(&analyse_args).with_context(|| format!("analysing {case}"))?;
-    let analysis_s = t.elapsed().as_secs_f64();
     let r = &analysis.result;
     let ambiguous: Vec<[String; 2]> = r
         .ambiguous
@@ -664,7 +690,7 @@ fn analyse_case(
     });
     Ok(CaseResult {
         case,
-        path: path.name(),
+        path: path.name().into(),
         hidden: hidden.name(),
         hidden_magnitude: hidden.magnitude(),
         seed,
@@ -680,7 +706,6 @@ fn analyse_case(
         best_rms_change_percent,
         best_signal,
         best_acted_rms_change_percent,
-        analysis_s,
         kind: hidden.kind().into(),
         outcome: verdict.map(|v| v.outcome),
         unexplained: verdict.map_or_else(Vec::new, |v| {
@@ -1089,13 +1114,13 @@ pub fn confusion_text(results: &[CaseResult]) -> String {
     let _ = writeln!(s, "\nper case:");
     let _ = writeln!(
         s,
-        "{:<40} {:>5} {:<24} {:>10} {:>12} {:>8} {:>8}",
-        "case", "digs", "named", "mag err %", "rms change %", "acted %", "time s"
+        "{:<40} {:>5} {:<24} {:>10} {:>12} {:>8}",
+        "case", "digs", "named", "mag err %", "rms change %", "acted %"
     );
     for c in results {
         let _ = writeln!(
             s,
-            "{:<40} {:>5} {:<24} {:>10} {:>12} {:>8} {:>8.1}",
+            "{:<40} {:>5} {:<24} {:>10} {:>12} {:>8}",
             c.case,
             c.digs,
             c.named,
@@ -1105,7 +1130,6 @@ pub fn confusion_text(results: &[CaseResult]) -> String {
                 .map_or("-".into(), |e| format!("{e:+.1}")),
             c.best_acted_rms_change_percent
                 .map_or("-".into(), |e| format!("{e:+.1}")),
-            c.analysis_s
         );
     }
     s
@@ -1211,67 +1235,279 @@ fn check_seeds_clear_of_builtin(cases: &[(Hidden, u64)], reference: &[u64]) -> a
     Ok(())
 }
 
-/// Generates the reference sessions (healthy, at seeds 300, 301, ...) and writes their reference
-/// to `out/reference.json`; `None` for no reference sessions.
-///
-/// # Errors
-/// Generating or reading a session.
-fn reference_file(args: &EvalArgs, digs: u32) -> anyhow::Result<Option<PathBuf>> {
-    let seeds = reference_seeds(args);
-    if seeds.is_empty() {
-        return Ok(None);
-    }
-    let sessions: Vec<PathBuf> = seeds
-        .into_par_iter()
-        .map(|seed| {
-            SessionPlan::new(
-                &args.out,
-                &format!("reference_s{seed}"),
-                seed,
-                digs,
-                args.soil_contact,
-                args.strategy(),
-            )
-            .generate()
-        })
-        .collect::<anyhow::Result<_>>()?;
-    let machine = load_machine(None)?;
-    let model = load_model(None)?;
-    let reference = load_reference(&sessions, &machine, &model)?
-        .ok_or_else(|| anyhow::anyhow!("no reference sessions"))?;
-    let path = args.out.join("reference.json");
-    std::fs::write(&path, reference.to_json()?)
-        .with_context(|| format!("writing {}", path.display()))?;
-    Ok(Some(path))
+/// The campaign kind of `discrepancy eval`'s plans (`excavator-ctl campaign job` runs their jobs
+/// with [`run_planned_job`]).
+pub const CAMPAIGN_KIND: &str = "discrepancy-eval";
+
+/// One job of the evaluation's campaign.
+#[derive(Debug, Clone)]
+enum EvalJob {
+    /// A healthy reference session at a seed.
+    ReferenceSession(u64),
+    /// The reference fitted on the reference sessions (`OUT/reference.json`).
+    Reference,
+    /// A case: its session generated and analysed on each path (`OUT/campaign/cases/ID.json`).
+    Case(Hidden, u64),
 }
 
-/// Runs the evaluation, prints the table, writes `eval.json` and `eval.md`.
+/// The reference sessions' plan at `seed`.
+fn reference_session(args: &EvalArgs, seed: u64, digs: u32) -> SessionPlan {
+    SessionPlan::new(
+        &args.out,
+        &format!("reference_s{seed}"),
+        seed,
+        digs,
+        args.soil_contact,
+        args.strategy(),
+    )
+}
+
+/// `OUT/reference.json`, the evaluation's recorded reference (when it has reference sessions).
+fn reference_path(args: &EvalArgs) -> Option<PathBuf> {
+    (!reference_seeds(args).is_empty()).then(|| args.out.join("reference.json"))
+}
+
+/// A job id of the case: its session's base name in file-name characters, after its index.
+fn case_id(index: usize, hidden: &Hidden, seed: u64) -> String {
+    let name: String = case_base(hidden, seed)
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "-_.+=".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    format!("case-{index:03}-{name}")
+}
+
+/// The evaluation's jobs with the campaign's description of each.
 ///
 /// # Errors
-/// A session that cannot be generated or analysed; writing the outputs.
-pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
-    let digs = args.digs.unwrap_or(if args.quick { 4 } else { 16 });
+/// A plant change that does not parse; seeds that overlap the built-in reference's.
+fn eval_jobs(args: &EvalArgs) -> anyhow::Result<Vec<(EvalJob, lab::campaign::Job)>> {
+    let digs = eval_digs(args);
     let list = cases(args)?;
-    check_seeds_clear_of_builtin(&list, &reference_seeds(args))?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
+    let ref_seeds = reference_seeds(args);
+    check_seeds_clear_of_builtin(&list, &ref_seeds)?;
+    let plan_file = lab::campaign::campaign_dir(&args.out).join("plan.json");
+    let job = |id: String, stage, inputs, outputs| lab::campaign::Job {
+        argv: [
+            "excavator-ctl",
+            "campaign",
+            "job",
+            "--plan",
+            &plan_file.to_string_lossy(),
+            "--job",
+            &id,
+        ]
+        .map(String::from)
+        .to_vec(),
+        id,
+        stage,
+        inputs,
+        outputs,
+    };
+    let mut jobs = Vec::new();
+    let mut ref_sessions = Vec::new();
+    for &seed in &ref_seeds {
+        let session = reference_session(args, seed, digs).demo.out;
+        ref_sessions.push(session.clone());
+        jobs.push((
+            EvalJob::ReferenceSession(seed),
+            job(format!("reference-s{seed}"), 0, vec![], vec![session]),
+        ));
+    }
+    let reference = reference_path(args);
+    if let Some(r) = &reference {
+        jobs.push((
+            EvalJob::Reference,
+            job("reference".into(), 1, ref_sessions, vec![r.clone()]),
+        ));
+    }
+    for (i, (hidden, seed)) in list.into_iter().enumerate() {
+        let id = case_id(i, &hidden, seed);
+        let outputs = vec![case_file(args, &id)];
+        let j = job(id, 2, reference.iter().cloned().collect(), outputs);
+        jobs.push((EvalJob::Case(hidden, seed), j));
+    }
+    Ok(jobs)
+}
+
+/// `OUT/campaign/cases/ID.json`: a case's results on each path.
+fn case_file(args: &EvalArgs, id: &str) -> PathBuf {
+    lab::campaign::campaign_dir(&args.out)
+        .join("cases")
+        .join(format!("{id}.json"))
+}
+
+/// Digs per session.
+fn eval_digs(args: &EvalArgs) -> u32 {
+    args.digs.unwrap_or(if args.quick { 4 } else { 16 })
+}
+
+/// Runs one job of the evaluation's campaign.
+///
+/// # Errors
+/// Generating a reference session or fitting the reference (a case never fails: a case whose
+/// session cannot be generated or analysed is a miss, named `error`); writing the outputs.
+fn run_eval_job(args: &EvalArgs, job: &EvalJob, id: &str) -> anyhow::Result<()> {
+    let digs = eval_digs(args);
+    match job {
+        EvalJob::ReferenceSession(seed) => {
+            reference_session(args, *seed, digs).generate().map(|_| ())
+        }
+        EvalJob::Reference => {
+            let sessions: Vec<PathBuf> = reference_seeds(args)
+                .into_iter()
+                .map(|seed| reference_session(args, seed, digs).generate())
+                .collect::<anyhow::Result<_>>()?;
+            let machine = load_machine(None)?;
+            let model = load_model(None)?;
+            let reference = load_reference(&sessions, &machine, &model)?
+                .ok_or_else(|| anyhow::anyhow!("no reference sessions"))?;
+            let path = args.out.join("reference.json");
+            lab::campaign::write_atomic(&path, &reference.to_json()?)
+        }
+        EvalJob::Case(hidden, seed) => {
+            let r = run_case(args, hidden, *seed, digs, reference_path(args).as_deref());
+            lab::campaign::write_atomic(&case_file(args, id), &serde_json::to_string(&r)?)
+        }
+    }
+}
+
+/// The arguments of `discrepancy eval` as its command line (without the campaign options, which
+/// do not change a job): the plan's `args`, which [`run_planned_job`] parses back.
+fn eval_argv(a: &EvalArgs) -> Vec<String> {
+    let mut v: Vec<String> = Vec::new();
+    let mut push = |k: &str, val: String| {
+        v.push(k.to_owned());
+        v.push(val);
+    };
+    push("--seeds", a.seeds.to_string());
+    push("--nominal-sessions", a.nominal_sessions.to_string());
+    if let Some(d) = a.digs {
+        push("--digs", d.to_string());
+    }
+    for o in &a.only {
+        push("--only", o.clone());
+    }
+    push("--out", a.out.to_string_lossy().into_owned());
+    if let Some(c) = a.soil_contact {
+        push("--soil-contact", value_name(c));
+    }
+    if let Some(st) = a.strategy {
+        push("--strategy", value_name(st));
+    }
+    for p in &a.plant {
+        push("--plant", p.clone());
+    }
+    push("--reference-sessions", a.reference_sessions.to_string());
+    push("--seed-base", a.seed_base.to_string());
+    if let Some(r) = &a.results {
+        push("--results", r.to_string_lossy().into_owned());
+    }
+    for (on, flag) in [
+        (a.quick, "--quick"),
+        (a.no_effects, "--no-effects"),
+        (a.no_pairs, "--no-pairs"),
+    ] {
+        if on {
+            v.push(flag.into());
+        }
+    }
+    v
+}
+
+/// A value's name on the command line.
+fn value_name(v: impl clap::ValueEnum) -> String {
+    v.to_possible_value()
+        .map(|p| p.get_name().to_owned())
+        .unwrap_or_default()
+}
+
+/// `discrepancy eval`'s arguments parsed from [`eval_argv`]'s words.
+#[derive(Debug, clap::Parser)]
+#[command(no_binary_name = true)]
+struct EvalCommandLine {
+    #[command(flatten)]
+    args: EvalArgs,
+}
+
+/// Runs the job `id` of a `discrepancy eval` plan (`excavator-ctl campaign job`): the arguments
+/// parsed from the plan, the job found among the ones they make.
+///
+/// # Errors
+/// Arguments that do not parse; a job the arguments do not make, or whose command line differs
+/// from the plan's (a plan of another version); the job's own errors.
+pub fn run_planned_job(plan: &lab::campaign::Plan, id: &str) -> anyhow::Result<()> {
+    use clap::Parser as _;
+    let args = EvalCommandLine::try_parse_from(&plan.args)
+        .with_context(|| format!("the plan's arguments {:?}", plan.args))?
+        .args;
+    let planned = plan.job(id)?;
+    let (job, spec) = eval_jobs(&args)?
+        .into_iter()
+        .find(|(_, j)| j.id == id)
+        .ok_or_else(|| anyhow::anyhow!("the plan's arguments make no job {id:?}"))?;
+    anyhow::ensure!(
+        &spec == planned,
+        "job {id:?}: the plan holds {planned:?}, this excavator-ctl makes {spec:?} (a plan of \
+         another version: make it again)"
+    );
+    run_eval_job(&args, &job, id)
+}
+
+/// Runs the evaluation as a campaign (in-process by default), prints the table, writes
+/// `eval.json` and `eval.md`.
+///
+/// # Errors
+/// A session that cannot be generated or analysed; a job that failed; writing the outputs.
+pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
+    let digs = eval_digs(args);
     let t = Instant::now();
-    let reference = reference_file(args, digs)?;
-    let bar = indicatif::ProgressBar::new(list.len() as u64);
+    let jobs = eval_jobs(args)?;
+    let plan = lab::campaign::Plan::new(
+        CAMPAIGN_KIND,
+        eval_argv(args),
+        &args.out,
+        jobs.iter().map(|(_, j)| j.clone()).collect(),
+    )?;
+    let bar = indicatif::ProgressBar::new(jobs.len() as u64);
     if !std::io::IsTerminal::is_terminal(&std::io::stdout()) {
         bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
     }
-    let results: Vec<CaseResult> = list
-        .par_iter()
-        .flat_map_iter(|(hidden, seed)| {
-            // A session that cannot be analysed (e.g. the hidden effect stopped the work cycle
-            // after one dig) counts as a miss, named `error`, and the evaluation goes on.
-            let r = run_case(args, hidden, *seed, digs, reference.as_deref());
-            bar.inc(1);
-            r
-        })
-        .collect();
+    let run = |spec: &lab::campaign::Job| {
+        let job = jobs
+            .iter()
+            .find(|(_, j)| j.id == spec.id)
+            .map(|(j, _)| j)
+            .ok_or_else(|| anyhow::anyhow!("no job {}", spec.id))?;
+        let r = run_eval_job(args, job, &spec.id);
+        bar.inc(1);
+        r
+    };
+    let report = lab::campaign::execute(&plan, &args.campaign, &run)?;
     bar.finish_and_clear();
+    let Some(report) = report else {
+        println!(
+            "plan of {} jobs written to {}",
+            plan.jobs.len(),
+            plan.path().display()
+        );
+        return Ok(());
+    };
+    println!("{}", report.line());
+    let mut results: Vec<CaseResult> = Vec::new();
+    for (_, j) in jobs.iter().filter(|(j, _)| matches!(j, EvalJob::Case(..))) {
+        let path = case_file(args, &j.id);
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("reading {}", path.display()))?;
+        let r: Vec<CaseResult> = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not a case's results", path.display()))?;
+        results.extend(r);
+    }
     let text = [EvalPath::Default, EvalPath::Recorded]
         .into_iter()
         .filter_map(|path| {
@@ -1294,10 +1530,14 @@ pub fn run_eval(args: &EvalArgs) -> anyhow::Result<()> {
         .collect::<String>();
     print!("{text}");
     println!(
-        "{} cases in {:.0} s (generation and analysis, {} rayon threads)",
+        "{} cases in {:.0} s (generation and analysis, {})",
         results.len(),
         t.elapsed().as_secs_f64(),
-        rayon::current_num_threads()
+        match &args.campaign.executor {
+            lab::campaign::Executor::Local =>
+                format!("in-process, {} rayon threads", rayon::current_num_threads()),
+            lab::campaign::Executor::Dask { address } => format!("on the Dask cluster {address}"),
+        }
     );
     std::fs::write(
         args.out.join("eval.json"),

@@ -42,6 +42,7 @@ pub mod command;
 pub mod effects;
 pub mod eval;
 pub mod fit;
+pub mod fleet;
 pub mod greybox;
 pub mod model;
 pub mod parameters;

@@ -35,7 +35,7 @@ const CORRELATION_MARGIN: f64 = 0.2;
 const WHITENESS_FACTOR: f64 = 2.0;
 
 /// The outcome for a signal or a session.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Outcome {
     /// Within what the reference expects; nothing named for it.

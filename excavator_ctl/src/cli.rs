@@ -50,6 +50,10 @@ pub enum Command {
     /// (docs/discrepancy.md).
     #[command(subcommand)]
     Discrepancy(discrepancy::command::DiscrepancyArgs),
+    /// Campaigns (docs/campaigns.md): run one job of a plan, as a cluster's worker does, or list a
+    /// plan's jobs with what is done.
+    #[command(subcommand)]
+    Campaign(CampaignCmd),
     /// Rebuild every shipped artefact fitted on the simulated plant (actuator networks, hardness
     /// regression, the discrepancy workflow's nominal model) from the simulator and a seed, with a
     /// calibration report; --install copies them into a config folder (docs/models.md,
@@ -58,6 +62,28 @@ pub enum Command {
     /// Write the manual pages and shell completions of this command line (scripts/package).
     #[command(hide = true)]
     GenerateDocs(crate::docs::DocsArgs),
+}
+
+/// Subcommands of `excavator-ctl campaign`.
+#[derive(Debug, Subcommand)]
+pub enum CampaignCmd {
+    /// Run one job of a campaign plan (OUT/campaign/plan.json), in the plan's work folder: what a
+    /// Dask worker runs for `--executor dask://`, and what another engine's job runs after
+    /// `--plan-only`.
+    Job {
+        /// The plan file.
+        #[arg(long, value_name = "FILE")]
+        plan: std::path::PathBuf,
+        /// The job's id.
+        #[arg(long, value_name = "ID")]
+        job: String,
+    },
+    /// List a plan's jobs: done (worker, attempts, CPU time) or pending.
+    Status {
+        /// The plan file.
+        #[arg(long, value_name = "FILE")]
+        plan: std::path::PathBuf,
+    },
 }
 
 /// Arguments of `excavator-ctl demo`: the session's and the live view's.

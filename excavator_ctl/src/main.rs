@@ -79,6 +79,26 @@ fn run(runtime: &tokio::runtime::Runtime, cmd: cli::RunCmd) -> anyhow::Result<()
     result
 }
 
+/// `campaign`: one job of a plan, by the plan's kind, or the plan's status.
+fn campaign(cmd: cli::CampaignCmd) -> anyhow::Result<()> {
+    match cmd {
+        cli::CampaignCmd::Job { plan, job } => {
+            let plan = lab::campaign::Plan::read(&plan)?;
+            match plan.kind.as_str() {
+                discrepancy::eval::CAMPAIGN_KIND => discrepancy::eval::run_planned_job(&plan, &job),
+                discrepancy::fleet::CAMPAIGN_KIND => {
+                    discrepancy::fleet::run_planned_job(&plan, &job)
+                }
+                other => anyhow::bail!("a plan of kind {other:?}: this excavator-ctl runs none"),
+            }
+        }
+        cli::CampaignCmd::Status { plan } => {
+            print!("{}", lab::campaign::Plan::read(&plan)?.status_text());
+            Ok(())
+        }
+    }
+}
+
 fn main() -> std::process::ExitCode {
     use tracing_subscriber::layer::SubscriberExt as _;
     use tracing_subscriber::util::SubscriberInitExt as _;
@@ -121,6 +141,7 @@ fn main() -> std::process::ExitCode {
         Command::Model { cmd } => lab::model::run(cmd),
         Command::Discrepancy(args) => discrepancy::command::run(args),
         Command::GenerateDocs(args) => docs::generate(&args),
+        Command::Campaign(cmd) => campaign(cmd),
         Command::Calibrate(args) => calibration::run(&args).map(|report| {
             println!("{}", calibration::report_markdown(&report));
             println!("wrote {}", args.out.display());

@@ -3,6 +3,8 @@
 //!
 //! # Layout
 //!
+//! - [`campaign`]: the independent jobs of a long command as data, run in-process or on a Dask
+//!   cluster and gathered into the same files (docs/campaigns.md).
 //! - [`autodig_maps_svg`]: the Autodig map figures of docs/autodig.md (Figs. 10-11).
 //! - [`demo`]: `excavator-ctl demo`, a whole autonomous session against the embedded simulator in
 //!   virtual time, and the session folder it writes (trace, scans, summary, plots).
@@ -27,6 +29,7 @@
 //! ```
 
 pub mod autodig_maps_svg;
+pub mod campaign;
 pub mod demo;
 pub mod experiment;
 pub mod harness;
