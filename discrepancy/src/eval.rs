@@ -1328,7 +1328,22 @@ fn eval_jobs(args: &EvalArgs) -> anyhow::Result<Vec<(EvalJob, lab::campaign::Job
     }
     for (i, (hidden, seed)) in list.into_iter().enumerate() {
         let id = case_id(i, &hidden, seed);
-        let outputs = vec![case_file(args, &id)];
+        let session = SessionPlan::new(
+            &args.out,
+            &case_base(&hidden, seed),
+            seed,
+            digs,
+            args.soil_contact,
+            args.strategy(),
+        );
+        let mut outputs = vec![case_file(args, &id), session.demo.out];
+        let mut paths = vec![EvalPath::Default];
+        paths.extend(reference.as_ref().map(|_| EvalPath::Recorded));
+        outputs.extend(
+            paths
+                .into_iter()
+                .map(|p| args.out.join("reports").join(p.name()).join(&session.case)),
+        );
         let j = job(id, 2, reference.iter().cloned().collect(), outputs);
         jobs.push((EvalJob::Case(hidden, seed), j));
     }
@@ -1712,9 +1727,39 @@ fn process_cpu_s() -> Option<f64> {
 mod tests {
     use super::*;
 
-    /// `eval` killed while generating (a closed pipe) left sessions with a trace cut short, which the
-    /// next `eval` reused and could not analyse ("no ControllerStatus frames"): a session without
-    /// `summary.json` is generated again; a finished one is kept.
+    /// A plan's arguments are the command's own: every option away from its default, written by
+    /// `eval_argv` and parsed back as `campaign job` does, gives the same arguments (the campaign
+    /// options aside, which change no job); the defaults write the defaults.
+    #[test]
+    fn a_plans_arguments_parse_back_to_the_commands() {
+        use clap::Parser as _;
+        let parse = |words: &[String]| EvalCommandLine::try_parse_from(words).unwrap().args;
+        let defaults = parse(&[]);
+        let plain = EvalArgs::new(defaults.out.clone());
+        assert_eq!(
+            format!("{:?}", parse(&eval_argv(&plain))),
+            format!("{plain:?}")
+        );
+        assert_eq!(format!("{defaults:?}"), format!("{plain:?}"));
+        let mut a = EvalArgs::new(PathBuf::from("/tmp/some eval"));
+        a.quick = true;
+        a.seeds = 3;
+        a.nominal_sessions = 9;
+        a.digs = Some(5);
+        a.only = vec!["hydraulic_lag".into(), "soil_density".into()];
+        a.soil_contact = Some(SoilContact::Held);
+        a.strategy = Some(DemoStrategy::Fixed);
+        a.plant = vec!["hydraulic_lag=0.05".into()];
+        a.reference_sessions = 4;
+        a.seed_base = 1000;
+        a.no_effects = true;
+        a.no_pairs = true;
+        a.results = Some(PathBuf::from("/tmp/results.md"));
+        let back = parse(&eval_argv(&a));
+        a.campaign = back.campaign.clone();
+        assert_eq!(format!("{back:?}"), format!("{a:?}"));
+    }
+
     /// The twin's table counts the cases whose profile acts in free air, and a case halves the gap
     /// when the mean of its groups' ratios is at most one half; a soil effect alone (not measured
     /// in free air) and a case without a re-run are left out.

@@ -351,6 +351,10 @@ pub struct CampaignReport {
     pub cpu_s: Vec<f64>,
     /// The largest peak memory of a job, KiB (cluster jobs).
     pub max_rss_kib: Option<u64>,
+    /// Bytes the jobs run now read (their inputs: what a worker fetches from the shared folder).
+    pub bytes_in: u64,
+    /// Bytes the jobs run now wrote (their outputs).
+    pub bytes_out: u64,
 }
 
 impl CampaignReport {
@@ -379,6 +383,13 @@ impl CampaignReport {
         }
         if let Some(m) = self.max_rss_kib {
             s.push_str(&format!(", peak memory {:.0} MiB", m as f64 / 1024.0));
+        }
+        if self.ran > 0 {
+            s.push_str(&format!(
+                "; {:.1} MB in, {:.1} MB out",
+                self.bytes_in as f64 / 1e6,
+                self.bytes_out as f64 / 1e6
+            ));
         }
         s
     }
@@ -437,6 +448,8 @@ pub fn execute(
             }
             report.cpu_s.extend(r.cpu_s);
             report.max_rss_kib = report.max_rss_kib.max(r.max_rss_kib);
+            report.bytes_in += bytes_under(&plan.workdir, &j.inputs);
+            report.bytes_out += bytes_under(&plan.workdir, &j.outputs);
         }
     }
     report.wall_s = t.elapsed().as_secs_f64();
@@ -575,6 +588,20 @@ mod tests {
             inputs: vec![],
             outputs: vec![PathBuf::from(format!("o/{id}"))],
         }
+    }
+
+    /// `CampaignArgs::default()` (what library callers get) is the command line's defaults.
+    #[test]
+    fn the_default_campaign_options_are_the_command_lines() {
+        use clap::Parser as _;
+        #[derive(clap::Parser)]
+        #[command(no_binary_name = true)]
+        struct Cli {
+            #[command(flatten)]
+            campaign: CampaignArgs,
+        }
+        let parsed = Cli::try_parse_from(Vec::<String>::new()).unwrap().campaign;
+        assert_eq!(parsed, CampaignArgs::default());
     }
 
     #[test]
